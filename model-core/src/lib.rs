@@ -4,3 +4,5 @@
 //! the link protocol. `no_std`, no allocation, no `unsafe`.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![forbid(unsafe_code)]
+
+pub mod link;
