@@ -128,7 +128,13 @@ pub fn setup() -> Result<()> {
         run_env(
             &root,
             "apt-get",
-            &["install", "-y", "-q", "--no-install-recommends", "qemu-system-arm"],
+            &[
+                "install",
+                "-y",
+                "-q",
+                "--no-install-recommends",
+                "qemu-system-arm",
+            ],
             &[("DEBIAN_FRONTEND", "noninteractive")],
         )?;
     }
@@ -151,7 +157,14 @@ fn test(args: &[String]) -> Result<()> {
     run(
         &root,
         "cargo",
-        &["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"],
+        &[
+            "clippy",
+            "--workspace",
+            "--all-targets",
+            "--",
+            "-D",
+            "warnings",
+        ],
     )?;
 
     // Host tests (model-core, host-tool, xtask).
@@ -198,7 +211,14 @@ fn test(args: &[String]) -> Result<()> {
     run(
         &fw,
         "cargo",
-        &["build", "--release", "-p", "trueaxis-board", "--target", THUMB],
+        &[
+            "build",
+            "--release",
+            "-p",
+            "trueaxis-board",
+            "--target",
+            THUMB,
+        ],
     )?;
 
     if !quick {

@@ -1,0 +1,8 @@
+//! The trueaxis host tool as a library: the binary (`src/main.rs`) only
+//! dispatches; benches and integration tests call these modules directly.
+//!
+//! - `data`: the measurement data set (CONTRACT.md §1) every command works on.
+//! - `cmd`: one module per subcommand.
+
+pub mod cmd;
+pub mod data;
