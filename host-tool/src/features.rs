@@ -1,0 +1,622 @@
+//! The vocabulary of linear compensation models: a `Feature` is one column of
+//! a design matrix (a monomial of the normalised positions, a sine of a lead
+//! screw's phase, a temperature rise times a position, …), a seed (`cubic19`,
+//! `kinematic`) is a set of monomials per target, and an `Effect` is what a
+//! user — or `diagnose` — adds with `fit --add "<effect>:<key>=<value>,…"`.
+//!
+//! Defined once here because fit, diagnose, compare and export must agree on
+//! what a column means: diagnose scores candidate columns, fit solves for
+//! their coefficients, export turns each feature into a model-core table term.
+//! Coefficients multiply a feature's value and give µm.
+
+use std::f64::consts::TAU;
+use std::fmt;
+
+use anyhow::{anyhow, bail, Context, Result};
+use serde::{Deserialize, Serialize};
+
+use crate::data::{Dataset, AXES, TARGETS};
+
+/// Position normalisation: u = (p − centre) / half_span ∈ [−1, 1] over the
+/// data's travel. Polynomials in u keep the least-squares columns of equal
+/// scale (a cubic in raw millimetres is ill-conditioned by 10⁸).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Norm {
+    /// Centre of the travel per axis, mm.
+    pub centre_mm: [f64; 3],
+    /// Half the travel per axis, mm (1 for an axis not in the data).
+    pub half_span_mm: [f64; 3],
+}
+
+impl Norm {
+    /// The normalisation spanning the data's positions.
+    pub fn from_data(data: &Dataset) -> Norm {
+        let mut centre_mm = [0.0; 3];
+        let mut half_span_mm = [1.0; 3];
+        for (axis, col) in data.pos_mm.iter().enumerate() {
+            let Some(col) = col else { continue };
+            let lo = col.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = col.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            if lo.is_finite() && hi.is_finite() {
+                centre_mm[axis] = 0.5 * (lo + hi);
+                // A single-position axis still needs a non-zero span.
+                half_span_mm[axis] = (0.5 * (hi - lo)).max(1e-3);
+            }
+        }
+        Norm {
+            centre_mm,
+            half_span_mm,
+        }
+    }
+
+    /// Normalised coordinate of `pos_mm` on `axis`.
+    pub fn u(&self, axis: usize, pos_mm: f64) -> f64 {
+        (pos_mm - self.centre_mm[axis]) / self.half_span_mm[axis]
+    }
+}
+
+/// Sine or cosine half of a periodic pair.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Phase {
+    /// sin(2πk·p/period)
+    Sin,
+    /// cos(2πk·p/period)
+    Cos,
+}
+
+/// One column of a design matrix. `exp` is the monomial u_x^a·u_y^b·u_z^c
+/// in normalised coordinates ([0, 0, 0] is the constant 1).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Feature {
+    /// u_x^a · u_y^b · u_z^c.
+    Monomial {
+        /// Exponents (a, b, c).
+        exp: [u8; 3],
+    },
+    /// sin or cos(2π·k·p_axis / period): cyclic lead-screw or scale error.
+    Periodic {
+        /// Axis index (0 = x).
+        axis: usize,
+        /// Period in mm (the screw lead, or the scale's pitch).
+        period_mm: f64,
+        /// Harmonic number k ≥ 1.
+        harmonic: u8,
+        /// Sine or cosine.
+        phase: Phase,
+    },
+    /// (T − T_ref) in K, optionally first-order lagged, times a monomial.
+    Thermal {
+        /// The channel name (`bed` for `T_bed_C`).
+        channel: String,
+        /// Reference temperature, °C (the column is zero there).
+        t_ref_c: f64,
+        /// First-order lag time constant in s applied along `t_s` within each
+        /// session (0 = the structure follows the sensor at once).
+        lag_s: f64,
+        /// Monomial multiplying the temperature rise.
+        exp: [u8; 3],
+    },
+    /// dir_axis (±1): the reversal (backlash) error is ±half the backlash.
+    Reversal {
+        /// Axis index.
+        axis: usize,
+    },
+    /// tool_mm × monomial: an angle (varying with position) times the Abbe arm.
+    Abbe {
+        /// Monomial giving the angle's shape along the travel.
+        exp: [u8; 3],
+    },
+    /// (t_s / 3600)^power: slow drift in time that temperature does not explain.
+    Drift {
+        /// Power ≥ 1.
+        power: u8,
+    },
+}
+
+fn mono_name(exp: [u8; 3]) -> String {
+    let parts: Vec<String> = (0..3)
+        .filter(|&a| exp[a] > 0)
+        .map(|a| match exp[a] {
+            1 => AXES[a].to_string(),
+            e => format!("{}^{e}", AXES[a]),
+        })
+        .collect();
+    if parts.is_empty() {
+        "1".into()
+    } else {
+        parts.join("·")
+    }
+}
+
+fn mono(exp: [u8; 3], u: [f64; 3]) -> f64 {
+    (0..3).map(|a| u[a].powi(i32::from(exp[a]))).product()
+}
+
+impl fmt::Display for Feature {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Feature::Monomial { exp } => write!(f, "{}", mono_name(*exp)),
+            Feature::Periodic {
+                axis,
+                period_mm,
+                harmonic,
+                phase,
+            } => {
+                let fun = match phase {
+                    Phase::Sin => "sin",
+                    Phase::Cos => "cos",
+                };
+                write!(f, "{fun}(2π·{harmonic}·{}/{period_mm}mm)", AXES[*axis])
+            }
+            Feature::Thermal {
+                channel,
+                lag_s,
+                exp,
+                ..
+            } => {
+                let lag = if *lag_s > 0.0 {
+                    format!("[lag {lag_s}s]")
+                } else {
+                    String::new()
+                };
+                match exp {
+                    [0, 0, 0] => write!(f, "ΔT_{channel}{lag}"),
+                    e => write!(f, "ΔT_{channel}{lag}·{}", mono_name(*e)),
+                }
+            }
+            Feature::Reversal { axis } => write!(f, "dir_{}", AXES[*axis]),
+            Feature::Abbe { exp } => match exp {
+                [0, 0, 0] => write!(f, "tool"),
+                e => write!(f, "tool·{}", mono_name(*e)),
+            },
+            Feature::Drift { power: 1 } => write!(f, "t"),
+            Feature::Drift { power } => write!(f, "t^{power}"),
+        }
+    }
+}
+
+impl Feature {
+    /// The column of this feature over every row of `data`, in the unit that
+    /// makes the coefficient µm: monomials are dimensionless, thermal columns
+    /// are in K (coefficient µm/K), Abbe in mm (µm/mm = mrad), drift in h^p.
+    ///
+    /// Fails with a message naming the missing column when the data lacks
+    /// what the feature needs (`dir_y`, `T_bed_C`, `tool_mm`, `t_s`).
+    pub fn column(&self, data: &Dataset, norm: &Norm) -> Result<Vec<f64>> {
+        let n = data.len();
+        let u = |row: usize| -> [f64; 3] {
+            [0, 1, 2].map(|a| match &data.pos_mm[a] {
+                Some(col) => norm.u(a, col[row]),
+                None => 0.0,
+            })
+        };
+        Ok(match self {
+            Feature::Monomial { exp } => (0..n).map(|r| mono(*exp, u(r))).collect(),
+            Feature::Periodic {
+                axis,
+                period_mm,
+                harmonic,
+                phase,
+            } => {
+                let pos = data.pos_mm[*axis].as_ref().ok_or_else(|| {
+                    anyhow!(
+                        "periodic term on {}: the data has no {}_mm column",
+                        AXES[*axis],
+                        AXES[*axis]
+                    )
+                })?;
+                let k = f64::from(*harmonic);
+                pos.iter()
+                    .map(|p| {
+                        let arg = TAU * k * p / period_mm;
+                        match phase {
+                            Phase::Sin => arg.sin(),
+                            Phase::Cos => arg.cos(),
+                        }
+                    })
+                    .collect()
+            }
+            Feature::Thermal {
+                channel,
+                t_ref_c,
+                lag_s,
+                exp,
+            } => {
+                let ch = data
+                    .temp(channel)
+                    .ok_or_else(|| anyhow!("thermal term: the data has no T_{channel}_C column"))?;
+                let temp = if *lag_s > 0.0 {
+                    let t_s = data.t_s.as_ref().ok_or_else(|| {
+                        anyhow!("thermal term with a lag: the data has no t_s column")
+                    })?;
+                    lagged(&ch.temp_c, t_s, data.session_id.as_deref(), *lag_s)
+                } else {
+                    ch.temp_c.clone()
+                };
+                (0..n)
+                    .map(|r| (temp[r] - t_ref_c) * mono(*exp, u(r)))
+                    .collect()
+            }
+            Feature::Reversal { axis } => {
+                let dir = data.dir[*axis].as_ref().ok_or_else(|| {
+                    anyhow!(
+                        "reversal term on {0}: the data has no dir_{0} column",
+                        AXES[*axis]
+                    )
+                })?;
+                dir.iter().map(|&d| f64::from(d)).collect()
+            }
+            Feature::Abbe { exp } => {
+                let arm = data
+                    .tool_mm
+                    .as_ref()
+                    .ok_or_else(|| anyhow!("abbe term: the data has no tool_mm column"))?;
+                (0..n).map(|r| arm[r] * mono(*exp, u(r))).collect()
+            }
+            Feature::Drift { power } => {
+                let t_s = data
+                    .t_s
+                    .as_ref()
+                    .ok_or_else(|| anyhow!("drift term: the data has no t_s column"))?;
+                t_s.iter()
+                    .map(|t| (t / 3600.0).powi(i32::from(*power)))
+                    .collect()
+            }
+        })
+    }
+}
+
+/// First-order lag of a temperature series along time, restarted at each
+/// session (a new session starts from the sensor's reading).
+pub fn lagged(temp_c: &[f64], t_s: &[f64], session: Option<&[i64]>, tau_s: f64) -> Vec<f64> {
+    let mut out = Vec::with_capacity(temp_c.len());
+    for i in 0..temp_c.len() {
+        let restart = i == 0 || session.is_some_and(|s| s[i] != s[i - 1]) || t_s[i] < t_s[i - 1];
+        if restart {
+            out.push(temp_c[i]);
+        } else {
+            let a = 1.0 - (-(t_s[i] - t_s[i - 1]) / tau_s).exp();
+            let prev = out[i - 1];
+            out.push(prev + a * (temp_c[i] - prev));
+        }
+    }
+    out
+}
+
+/// The seed's 19 monomials per error axis (SEEDS.md): 1, x, x², x³, y, y²,
+/// y³, z, z², z³, xy, xz, yz, xy², xz², yz², yx², zx², zy² — no xyz.
+pub const CUBIC19: [[u8; 3]; 19] = [
+    [0, 0, 0],
+    [1, 0, 0],
+    [2, 0, 0],
+    [3, 0, 0],
+    [0, 1, 0],
+    [0, 2, 0],
+    [0, 3, 0],
+    [0, 0, 1],
+    [0, 0, 2],
+    [0, 0, 3],
+    [1, 1, 0],
+    [1, 0, 1],
+    [0, 1, 1],
+    [1, 2, 0],
+    [1, 0, 2],
+    [0, 1, 2],
+    [2, 1, 0],
+    [2, 0, 1],
+    [0, 2, 1],
+];
+
+/// `kinematic` for target `t` (0 = ex): the own axis' cubic (1, a, a², a³)
+/// plus quadratic and cubic straightness along each other axis (b², b³) —
+/// no linear cross terms, so squareness is left for `diagnose` to find.
+pub fn kinematic(t: usize) -> Vec<[u8; 3]> {
+    let mut out = vec![[0, 0, 0]];
+    for axis in 0..3 {
+        let powers: &[u8] = if axis == t { &[1, 2, 3] } else { &[2, 3] };
+        for &p in powers {
+            let mut e = [0; 3];
+            e[axis] = p;
+            out.push(e);
+        }
+    }
+    out
+}
+
+/// Monomials of a seed spec for target `t`, restricted to the axes present
+/// (a monomial in an absent axis is constant and would duplicate `1`).
+pub fn seed_monomials(spec: &str, t: usize, axes: &[usize]) -> Result<Vec<[u8; 3]>> {
+    let all: Vec<[u8; 3]> = match spec {
+        "cubic19" => CUBIC19.to_vec(),
+        "kinematic" => kinematic(t),
+        other => bail!("unknown polynomial seed `{other}` (expected cubic19 or kinematic)"),
+    };
+    Ok(all
+        .into_iter()
+        .filter(|e| (0..3).all(|a| e[a] == 0 || axes.contains(&a)))
+        .collect())
+}
+
+/// A physical effect added to a model with `fit --add`, in the syntax
+/// `<family>:<key>=<value>,…` that `diagnose` prints in its `add` field.
+///
+/// | family | keys | columns added to `target` |
+/// | --- | --- | --- |
+/// | `periodic` | target, axis, period_mm, harmonics (1..4, default 1) | sin, cos(2πk·p/period), k = 1..harmonics |
+/// | `thermal` | target, channel, [times=x\|y\|z], [lag_s], [t_ref_c] | ΔT, or ΔT·u_axis |
+/// | `reversal` | target, axis | dir_axis |
+/// | `abbe` | target, [times=x\|y\|z] | tool_mm, or tool_mm·u_axis |
+/// | `drift` | target, [order=1..3] | (t/1 h)^p, p = 1..order |
+/// | `squareness` | target, axis | u_axis (linear cross term) |
+/// | `higher_order` | target, axis, degree (4..5) | u_axis^4 … u_axis^degree |
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Effect {
+    /// The family name (`periodic`, `thermal`, …).
+    pub family: String,
+    /// Target index (0 = ex).
+    pub target: usize,
+    /// The columns this effect adds to the target.
+    pub features: Vec<Feature>,
+    /// The string it was parsed from (canonical form).
+    pub spec: String,
+}
+
+/// Temperature reference used when an effect does not name one, °C (the
+/// ISO 1 reference temperature for dimensional metrology).
+pub const T_REF_C: f64 = 20.0;
+
+fn parse_axis(v: &str, key: &str) -> Result<usize> {
+    AXES.iter()
+        .position(|a| *a == v)
+        .ok_or_else(|| anyhow!("`{key}={v}`: expected x, y or z"))
+}
+
+fn parse_f64(v: &str, key: &str) -> Result<f64> {
+    let x: f64 = v
+        .parse()
+        .map_err(|_| anyhow!("`{key}={v}`: expected a number"))?;
+    if !x.is_finite() {
+        bail!("`{key}={v}`: expected a finite number");
+    }
+    Ok(x)
+}
+
+fn parse_u8(v: &str, key: &str, lo: u8, hi: u8) -> Result<u8> {
+    let x: u8 = v
+        .parse()
+        .map_err(|_| anyhow!("`{key}={v}`: expected an integer {lo}..={hi}"))?;
+    if !(lo..=hi).contains(&x) {
+        bail!("`{key}={v}`: expected an integer {lo}..={hi}");
+    }
+    Ok(x)
+}
+
+impl Effect {
+    /// Parses `--add` syntax. Errors say which key is missing or malformed
+    /// and what was expected.
+    pub fn parse(s: &str) -> Result<Effect> {
+        Self::parse_inner(s).with_context(|| format!("bad effect `{s}`"))
+    }
+
+    fn parse_inner(s: &str) -> Result<Effect> {
+        let (family, rest) = s.split_once(':').ok_or_else(|| {
+            anyhow!(
+                "expected `<family>:<key>=<value>,…`, e.g. `periodic:target=ey,axis=y,period_mm=5`"
+            )
+        })?;
+        let mut kv: Vec<(&str, &str)> = Vec::new();
+        for part in rest.split(',').filter(|p| !p.is_empty()) {
+            let (k, v) = part
+                .split_once('=')
+                .ok_or_else(|| anyhow!("`{part}`: expected key=value"))?;
+            if kv.iter().any(|(k2, _)| *k2 == k.trim()) {
+                bail!("key `{}` given twice", k.trim());
+            }
+            kv.push((k.trim(), v.trim()));
+        }
+        let get = |key: &str| kv.iter().find(|(k, _)| *k == key).map(|(_, v)| *v);
+        let need = |key: &str| get(key).ok_or_else(|| anyhow!("missing `{key}=`"));
+        let allowed: &[&str] = match family {
+            "periodic" => &["target", "axis", "period_mm", "harmonics"],
+            "thermal" => &["target", "channel", "times", "lag_s", "t_ref_c"],
+            "reversal" | "squareness" => &["target", "axis"],
+            "abbe" => &["target", "times"],
+            "drift" => &["target", "order"],
+            "higher_order" => &["target", "axis", "degree"],
+            other => bail!(
+                "unknown effect family `{other}` (expected periodic, thermal, reversal, abbe, drift, squareness or higher_order)"
+            ),
+        };
+        if let Some((k, _)) = kv.iter().find(|(k, _)| !allowed.contains(k)) {
+            bail!(
+                "unknown key `{k}` for `{family}` (expected {})",
+                allowed.join(", ")
+            );
+        }
+        let target = {
+            let v = need("target")?;
+            TARGETS
+                .iter()
+                .position(|t| *t == v)
+                .ok_or_else(|| anyhow!("`target={v}`: expected ex, ey or ez"))?
+        };
+        let times = |key: &str| -> Result<[u8; 3]> {
+            let mut e = [0; 3];
+            if let Some(v) = get(key) {
+                e[parse_axis(v, key)?] = 1;
+            }
+            Ok(e)
+        };
+        let features = match family {
+            "periodic" => {
+                let axis = parse_axis(need("axis")?, "axis")?;
+                let period_mm = parse_f64(need("period_mm")?, "period_mm")?;
+                if period_mm <= 0.0 {
+                    bail!("`period_mm={period_mm}`: expected a positive period");
+                }
+                let harmonics =
+                    get("harmonics").map_or(Ok(1), |v| parse_u8(v, "harmonics", 1, 4))?;
+                (1..=harmonics)
+                    .flat_map(|k| {
+                        [Phase::Sin, Phase::Cos].map(|phase| Feature::Periodic {
+                            axis,
+                            period_mm,
+                            harmonic: k,
+                            phase,
+                        })
+                    })
+                    .collect()
+            }
+            "thermal" => {
+                let channel = need("channel")?.to_string();
+                let lag_s = get("lag_s").map_or(Ok(0.0), |v| parse_f64(v, "lag_s"))?;
+                if lag_s < 0.0 {
+                    bail!("`lag_s={lag_s}`: expected ≥ 0");
+                }
+                let t_ref_c = get("t_ref_c").map_or(Ok(T_REF_C), |v| parse_f64(v, "t_ref_c"))?;
+                vec![Feature::Thermal {
+                    channel,
+                    t_ref_c,
+                    lag_s,
+                    exp: times("times")?,
+                }]
+            }
+            "reversal" => vec![Feature::Reversal {
+                axis: parse_axis(need("axis")?, "axis")?,
+            }],
+            "abbe" => vec![Feature::Abbe {
+                exp: times("times")?,
+            }],
+            "drift" => {
+                let order = get("order").map_or(Ok(1), |v| parse_u8(v, "order", 1, 3))?;
+                (1..=order).map(|power| Feature::Drift { power }).collect()
+            }
+            "squareness" => {
+                let axis = parse_axis(need("axis")?, "axis")?;
+                if axis == target {
+                    bail!("squareness of {} against itself: `axis` must differ from the target's axis", AXES[axis]);
+                }
+                let mut exp = [0; 3];
+                exp[axis] = 1;
+                vec![Feature::Monomial { exp }]
+            }
+            "higher_order" => {
+                let axis = parse_axis(need("axis")?, "axis")?;
+                let degree = parse_u8(need("degree")?, "degree", 4, 5)?;
+                (4..=degree)
+                    .map(|p| {
+                        let mut exp = [0; 3];
+                        exp[axis] = p;
+                        Feature::Monomial { exp }
+                    })
+                    .collect()
+            }
+            _ => unreachable!("family checked above"),
+        };
+        let spec = format!(
+            "{family}:{}",
+            kv.iter()
+                .map(|(k, v)| format!("{k}={v}"))
+                .collect::<Vec<_>>()
+                .join(",")
+        );
+        Ok(Effect {
+            family: family.to_string(),
+            target,
+            features,
+            spec,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cubic19_has_19_distinct_terms_and_no_xyz() {
+        let mut v = CUBIC19.to_vec();
+        v.sort();
+        v.dedup();
+        assert_eq!(v.len(), 19);
+        assert!(!v.contains(&[1, 1, 1]));
+        assert!(v.iter().all(|e| e.iter().sum::<u8>() <= 3));
+    }
+
+    #[test]
+    fn kinematic_has_no_linear_cross_terms() {
+        for t in 0..3 {
+            let k = kinematic(t);
+            assert_eq!(k.len(), 8);
+            for e in &k {
+                let nonzero = e.iter().filter(|&&p| p > 0).count();
+                assert!(nonzero <= 1, "{e:?} is a cross term");
+                for a in 0..3 {
+                    if a != t {
+                        assert_ne!(e[a], 1, "{e:?} is linear in another axis");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn seed_drops_absent_axes() {
+        let m = seed_monomials("cubic19", 0, &[0]).unwrap();
+        assert_eq!(m, vec![[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]]);
+    }
+
+    #[test]
+    fn effect_parsing() {
+        let e = Effect::parse("periodic:target=ey,axis=y,period_mm=5.08,harmonics=2").unwrap();
+        assert_eq!(e.target, 1);
+        assert_eq!(e.features.len(), 4);
+        assert_eq!(
+            e.features[2],
+            Feature::Periodic {
+                axis: 1,
+                period_mm: 5.08,
+                harmonic: 2,
+                phase: Phase::Sin
+            }
+        );
+        let e = Effect::parse("thermal:target=ex,channel=bed,times=x").unwrap();
+        assert_eq!(
+            e.features,
+            vec![Feature::Thermal {
+                channel: "bed".into(),
+                t_ref_c: 20.0,
+                lag_s: 0.0,
+                exp: [1, 0, 0]
+            }]
+        );
+        assert_eq!(Effect::parse(&e.spec).unwrap(), e);
+        for bad in [
+            "periodic",
+            "periodic:target=ey,axis=q,period_mm=5",
+            "periodic:target=ey,axis=y",
+            "periodic:target=ey,axis=y,period_mm=-1",
+            "periodic:target=ey,axis=y,period_mm=5,harmonics=9",
+            "wobble:target=ex",
+            "reversal:target=ex,axis=x,extra=1",
+            "squareness:target=ex,axis=x",
+            "drift:target=ex,target=ey",
+        ] {
+            let err = format!("{:#}", Effect::parse(bad).unwrap_err());
+            assert!(err.contains(bad), "{err}");
+        }
+    }
+
+    #[test]
+    fn lag_approaches_step() {
+        let t_s: Vec<f64> = (0..100).map(|i| f64::from(i) * 60.0).collect();
+        let temp: Vec<f64> = (0..100).map(|i| if i < 10 { 20.0 } else { 25.0 }).collect();
+        let lagged = lagged(&temp, &t_s, None, 600.0);
+        // The step is first seen at row 10 (t = 600 s); ten 60 s updates later
+        // (row 19, one time constant of exposure) it is 1 − 1/e of the way.
+        assert!((lagged[19] - (20.0 + 5.0 * (1.0 - (-1.0f64).exp()))).abs() < 1e-9);
+        assert!((lagged[99] - 25.0).abs() < 1e-3);
+    }
+}
