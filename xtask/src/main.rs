@@ -30,6 +30,7 @@ fn main() -> ExitCode {
         "test" => test(rest),
         "demo" => demo(rest),
         "bench-mcu" => setup().and_then(|()| qemu::bench_mcu(rest)),
+        "test-qemu" => setup().and_then(|()| qemu::test_all()),
         "-h" | "--help" | "help" => {
             println!("{USAGE}");
             Ok(())
@@ -54,6 +55,7 @@ tasks:
   setup       install what is missing (thumb target, qemu-system-arm, defmt-print)
   test        every test: fmt, clippy, host tests, no_std build, firmware, QEMU
   demo        the main job, end to end (writes into out/demo)
+  test-qemu   only the QEMU suites and the end-to-end run (part of `test`)
   bench-mcu   instruction counts per model update under QEMU (-icount shift=0)";
 
 /// The repository root (the parent of xtask/).

@@ -1,19 +1,72 @@
-//! QEMU tasks: the firmware's application core on an emulated STM32F405
-//! (`-M netduinoplus2`). Filled in by the QEMU work; until the images exist
-//! these say so instead of pretending to pass.
+//! QEMU tasks: the firmware's application core and model-core on an emulated
+//! STM32F405 (`qemu-system-arm -M netduinoplus2`), images from the
+//! `trueaxis-qemu` crate (tests/, a member of the firmware workspace).
+//!
+//! Every image logs with defmt over semihosting and ends with a semihosting
+//! exit, so QEMU's exit status is the verdict; `defmt-print` decodes the log.
+//! `-icount shift=0` makes every run deterministic (1 instruction = 1 ns of
+//! virtual time) and turns the STM32 timers into instruction counters, which
+//! is what `bench-mcu` reads. A wall-clock timeout turns a hang into a
+//! failure instead of a blocked CI job.
 
-use std::path::Path;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitStatus, Stdio};
+use std::thread;
+use std::time::{Duration, Instant};
 
-use crate::Result;
+use crate::{Result, THUMB};
+
+/// The QEMU test crate's package name (tests/Cargo.toml).
+const PACKAGE: &str = "trueaxis-qemu";
+
+/// How long one image may run (wall clock) before it counts as hung. The
+/// suites take well under a second each; QEMU's start-up dominates.
+const TIMEOUT: Duration = Duration::from_secs(60);
 
 /// Runs every QEMU test suite (defmt-test on target, host ↔ board end to end).
 pub fn test_all() -> Result<()> {
-    let images = crate::root().join("tests").join("Cargo.toml");
-    if !images.exists() {
-        eprintln!("\nxtask: no QEMU test crate yet (tests/Cargo.toml), skipping QEMU tests");
+    let root = crate::root();
+    if !root.join("tests").join("Cargo.toml").exists() {
+        eprintln!("\nxtask: no QEMU test crate (tests/Cargo.toml), skipping QEMU tests");
         return Ok(());
     }
-    Err("QEMU test crate exists but xtask does not run it yet".into())
+
+    // The harness first: a deliberately faulting image must fail with the
+    // fault report, or every verdict below would be worthless.
+    let fault = build_bin("fault", Profile::Dev)?;
+    let run = run_image(&fault, &QemuOpts::default())?;
+    if run.status.code() != Some(1) || !run.stderr.contains("HardFault") {
+        return Err(format!(
+            "the fault image should exit 1 with a HardFault report, got {} \n{}{}",
+            describe(&run.status),
+            run.log,
+            run.stderr
+        ));
+    }
+    eprintln!("qemu: fault image exits 1 with a HardFault report, as it must");
+
+    // defmt-test suites, one image per suite.
+    let suites = build_suites()?;
+    if suites.is_empty() {
+        return Err("no defmt-test suites were built".into());
+    }
+    let mut failed = Vec::new();
+    for (name, elf) in &suites {
+        eprintln!("\n$ qemu {name}");
+        let run = run_image(elf, &QemuOpts::default())?;
+        print!("{}", run.log);
+        eprint!("{}", run.stderr);
+        if !run.status.success() || !run.log.contains("all tests passed!") {
+            eprintln!("qemu: suite `{name}` FAILED ({})", describe(&run.status));
+            failed.push(name.clone());
+        }
+    }
+    if !failed.is_empty() {
+        return Err(format!("QEMU suites failed: {}", failed.join(", ")));
+    }
+    eprintln!("\nqemu: {} suites passed", suites.len());
+    Ok(())
 }
 
 /// Instruction counts per model update (CONTRACT.md §3).
@@ -25,4 +78,241 @@ pub fn bench_mcu(_args: &[String]) -> Result<()> {
 pub fn demo_board(_out: &Path) -> Result<()> {
     eprintln!("\nxtask demo: the QEMU board stage is not built yet");
     Ok(())
+}
+
+/// Cargo profile an image is built with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Profile {
+    /// opt-level "s" with overflow checks: the test suites.
+    Dev,
+    /// The firmware's release profile (fat LTO, opt-level 3): what is
+    /// benchmarked and what the board would run.
+    Release,
+}
+
+impl Profile {
+    fn dir(self) -> &'static str {
+        match self {
+            Profile::Dev => "debug",
+            Profile::Release => "release",
+        }
+    }
+}
+
+/// The firmware workspace, where cargo must run so that its
+/// .cargo/config.toml (thumb target, DEFMT_LOG) applies.
+fn firmware_dir() -> PathBuf {
+    crate::root().join("firmware")
+}
+
+/// The target directory cargo uses (honours CARGO_TARGET_DIR).
+fn target_dir() -> PathBuf {
+    match std::env::var_os("CARGO_TARGET_DIR") {
+        Some(d) => {
+            let d = PathBuf::from(d);
+            if d.is_absolute() {
+                d
+            } else {
+                firmware_dir().join(d)
+            }
+        }
+        None => firmware_dir().join("target"),
+    }
+}
+
+/// Builds one binary of the QEMU crate and returns the ELF's path.
+fn build_bin(bin: &str, profile: Profile) -> Result<PathBuf> {
+    let mut args = vec!["build", "-p", PACKAGE, "--target", THUMB, "--bin", bin];
+    if profile == Profile::Release {
+        args.push("--release");
+    }
+    crate::run(&firmware_dir(), "cargo", &args)?;
+    let elf = target_dir().join(THUMB).join(profile.dir()).join(bin);
+    if elf.exists() {
+        Ok(elf)
+    } else {
+        Err(format!(
+            "cargo built `{bin}` but {} is missing",
+            elf.display()
+        ))
+    }
+}
+
+/// Builds the defmt-test suites and returns (suite name, ELF) pairs, read
+/// from cargo's JSON messages (the test executables carry a hash).
+fn build_suites() -> Result<Vec<(String, PathBuf)>> {
+    let args = [
+        "test",
+        "-p",
+        PACKAGE,
+        "--target",
+        THUMB,
+        "--no-run",
+        "--message-format=json-render-diagnostics",
+    ];
+    eprintln!("\n$ cargo {}", args.join(" "));
+    let out = Command::new("cargo")
+        .args(args)
+        .current_dir(firmware_dir())
+        .stderr(Stdio::inherit())
+        .output()
+        .map_err(|e| format!("cannot start cargo: {e}"))?;
+    if !out.status.success() {
+        return Err(format!("building the QEMU suites failed ({})", out.status));
+    }
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let mut suites = Vec::new();
+    for line in stdout.lines() {
+        if !line.contains(r#""reason":"compiler-artifact""#) || !line.contains(r#""test":true"#) {
+            continue;
+        }
+        let (Some(name), Some(exe)) = (
+            line.find(r#""target":{"#)
+                .and_then(|i| json_str(&line[i..], "name")),
+            json_str(line, "executable"),
+        ) else {
+            continue;
+        };
+        suites.push((name, PathBuf::from(exe)));
+    }
+    suites.sort();
+    Ok(suites)
+}
+
+/// The string value of the first `"key":"…"` in a JSON text (cargo's
+/// messages; paths with escaped quotes or backslashes are not expected).
+fn json_str(json: &str, key: &str) -> Option<String> {
+    let pat = format!("\"{key}\":\"");
+    let start = json.find(&pat)? + pat.len();
+    let len = json[start..].find('"')?;
+    Some(json[start..start + len].replace("\\\\", "\\"))
+}
+
+/// Extra QEMU settings of one run.
+#[derive(Debug, Default, Clone)]
+struct QemuOpts {
+    /// `-serial` backend (USART1); `null` when not given.
+    serial: Option<String>,
+    /// Wall-clock limit; [`TIMEOUT`] when not given.
+    timeout: Option<Duration>,
+}
+
+/// What one image printed and how it ended.
+#[derive(Debug)]
+struct ImageRun {
+    status: ExitStatus,
+    /// The decoded defmt log (defmt-print's output).
+    log: String,
+    /// QEMU's stderr: the HardFault report, QEMU's own errors.
+    stderr: String,
+}
+
+/// Runs `elf` in QEMU with its semihosting output piped through
+/// `defmt-print`, and waits for it to exit (or kills it at the timeout).
+fn run_image(elf: &Path, opts: &QemuOpts) -> Result<ImageRun> {
+    let elf_s = elf.to_string_lossy().into_owned();
+    let serial = opts.serial.clone().unwrap_or_else(|| "null".into());
+    let mut qemu = Command::new("qemu-system-arm")
+        .args([
+            "-M",
+            "netduinoplus2",
+            "-nographic",
+            "-monitor",
+            "none",
+            "-serial",
+            &serial,
+            "-semihosting-config",
+            "enable=on,target=native",
+            "-icount",
+            "shift=0",
+            "-kernel",
+            &elf_s,
+        ])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|e| format!("cannot start qemu-system-arm (cargo xtask setup): {e}"))?;
+    let qemu_out = qemu.stdout.take().expect("stdout is piped");
+    let mut qemu_err = qemu.stderr.take().expect("stderr is piped");
+    let printer = Command::new("defmt-print")
+        .args(["-e", &elf_s, "stdin"])
+        .stdin(Stdio::from(qemu_out))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn();
+    let mut printer = match printer {
+        Ok(p) => p,
+        Err(e) => {
+            let _ = qemu.kill();
+            let _ = qemu.wait();
+            return Err(format!("cannot start defmt-print (cargo xtask setup): {e}"));
+        }
+    };
+    let mut printer_out = printer.stdout.take().expect("stdout is piped");
+    let log_reader = thread::spawn(move || {
+        let mut s = String::new();
+        let _ = printer_out.read_to_string(&mut s);
+        s
+    });
+    let err_reader = thread::spawn(move || {
+        let mut s = String::new();
+        let _ = qemu_err.read_to_string(&mut s);
+        s
+    });
+
+    let limit = opts.timeout.unwrap_or(TIMEOUT);
+    let started = Instant::now();
+    let status = loop {
+        match qemu.try_wait() {
+            Ok(Some(status)) => break Ok(status),
+            Ok(None) if started.elapsed() > limit => {
+                let _ = qemu.kill();
+                let _ = qemu.wait();
+                break Err(limit);
+            }
+            Ok(None) => thread::sleep(Duration::from_millis(20)),
+            Err(e) => return Err(format!("waiting for qemu: {e}")),
+        }
+    };
+    // QEMU's exit closes the pipe, so defmt-print ends by itself.
+    let _ = printer.wait();
+    let log = log_reader.join().unwrap_or_default();
+    let stderr = err_reader.join().unwrap_or_default();
+    match status {
+        Ok(status) => Ok(ImageRun {
+            status,
+            log,
+            stderr,
+        }),
+        Err(limit) => Err(format!(
+            "{} hung: killed after {} s\n{log}{stderr}",
+            elf.display(),
+            limit.as_secs()
+        )),
+    }
+}
+
+fn describe(status: &ExitStatus) -> String {
+    match status.code() {
+        Some(c) => format!("exit status {c}"),
+        None => "killed by a signal".into(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn json_str_reads_cargo_messages() {
+        let line = r#"{"reason":"compiler-artifact","package_id":"path+file:///x#trueaxis-qemu@0.1.0","target":{"kind":["test"],"crate_types":["bin"],"name":"infra","src_path":"/x/suites/infra.rs"},"profile":{"test":true},"executable":"/t/deps/infra-1ce9"}"#;
+        let target = &line[line.find(r#""target":{"#).unwrap()..];
+        assert_eq!(json_str(target, "name").as_deref(), Some("infra"));
+        assert_eq!(
+            json_str(line, "executable").as_deref(),
+            Some("/t/deps/infra-1ce9")
+        );
+        assert_eq!(json_str(line, "missing"), None);
+    }
 }

@@ -1,0 +1,56 @@
+//! QEMU support linked into every image of this crate (defmt-test suites, the
+//! bench image, the end-to-end board image) running on `qemu-system-arm -M
+//! netduinoplus2` (an STM32F405): the defmt logger over semihosting, exits
+//! through semihosting so QEMU's exit status is the test verdict (0 pass,
+//! 1 panic or fault), and an instruction counter.
+//!
+//! Why these choices: QEMU has no debug probe to notice a breakpoint or a
+//! lockup, so every way an image can end must become a semihosting exit, or a
+//! failure would look like a hang (xtask's timeout still catches real hangs).
+#![no_std]
+
+pub mod icount;
+
+use defmt_semihosting as _;
+
+/// Ends the emulation with `code` as QEMU's exit status.
+pub fn exit(code: i32) -> ! {
+    semihosting::process::exit(code)
+}
+
+/// A panic is a failed test: log it (defmt-print shows it) and exit 1.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    // Print the location through defmt's Display2Format; the message itself
+    // is formatted by core::fmt, which is fine on a failure path.
+    defmt::error!("panicked: {}", defmt::Display2Format(info));
+    exit(1)
+}
+
+// A fault must not hang QEMU: report the faulting PC and exit 1. defmt is not
+// used here because the fault may have hit inside the logger's critical
+// section (it would then panic re-entrantly); the semihosting stderr stream
+// is separate from the defmt frames on stdout.
+#[allow(unsafe_code)] // cortex-m-rt requires HardFault handlers to be `unsafe fn`
+#[cortex_m_rt::exception]
+unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    use core::fmt::Write as _;
+    if let Ok(mut err) = semihosting::io::stderr() {
+        let _ = writeln!(
+            FmtAdapter(&mut err),
+            "HardFault: pc={:#010x} lr={:#010x}",
+            frame.pc(),
+            frame.lr()
+        );
+    }
+    exit(1)
+}
+
+/// Adapts a semihosting writer to `core::fmt::Write`.
+struct FmtAdapter<'a, W>(&'a mut W);
+
+impl<W: semihosting::io::Write> core::fmt::Write for FmtAdapter<'_, W> {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        self.0.write_all(s.as_bytes()).map_err(|_| core::fmt::Error)
+    }
+}
