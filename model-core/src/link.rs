@@ -121,6 +121,10 @@ pub enum Request<'a> {
 pub struct Injection {
     /// Machine position per axis (X, Y, Z), nm.
     pub pos_nm: [i32; 3],
+    /// Reversal state per axis (model-core's `DirTracker` output, Q30:
+    /// −2^30 = last moved negative … +2^30 = positive), given explicitly so
+    /// the answer is a pure function of the injection.
+    pub rev_q30: [i32; 3],
     /// Temperatures, milli-degrees Celsius; channels the table does not use
     /// are ignored.
     pub temp_mc: [i32; LINK_TEMPS],
@@ -662,6 +666,7 @@ mod tests {
             (any::<[i32; 3]>(), any::<[i32; LINK_TEMPS]>(), any::<i32>()).prop_map(
                 |(pos_nm, temp_mc, tool_nm)| Request::Inject(Injection {
                     pos_nm,
+                    rev_q30: [1 << 30, -(1 << 30), 0],
                     temp_mc,
                     tool_nm
                 })
