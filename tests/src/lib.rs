@@ -9,7 +9,10 @@
 //! failure would look like a hang (xtask's timeout still catches real hangs).
 #![no_std]
 
+pub mod executor;
 pub mod icount;
+pub mod time_driver;
+pub mod usart;
 
 use defmt_semihosting as _;
 

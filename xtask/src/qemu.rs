@@ -9,7 +9,8 @@
 //! is what `bench-mcu` reads. A wall-clock timeout turns a hang into a
 //! failure instead of a blocked CI job.
 
-use std::io::Read;
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus, Stdio};
 use std::thread;
@@ -66,6 +67,8 @@ pub fn test_all() -> Result<()> {
         return Err(format!("QEMU suites failed: {}", failed.join(", ")));
     }
     eprintln!("\nqemu: {} suites passed", suites.len());
+
+    check_loopback()?;
     Ok(())
 }
 
@@ -210,6 +213,23 @@ struct ImageRun {
 /// Runs `elf` in QEMU with its semihosting output piped through
 /// `defmt-print`, and waits for it to exit (or kills it at the timeout).
 fn run_image(elf: &Path, opts: &QemuOpts) -> Result<ImageRun> {
+    start_image(elf, opts)?.wait()
+}
+
+/// An image running in QEMU, its log being decoded in the background.
+struct RunningImage {
+    elf: PathBuf,
+    qemu: std::process::Child,
+    printer: std::process::Child,
+    log_reader: thread::JoinHandle<String>,
+    err_reader: thread::JoinHandle<String>,
+    started: Instant,
+    limit: Duration,
+}
+
+/// Starts `elf` in QEMU (see [`run_image`]); the caller talks to it (TCP
+/// serial) and then calls [`RunningImage::wait`].
+fn start_image(elf: &Path, opts: &QemuOpts) -> Result<RunningImage> {
     let elf_s = elf.to_string_lossy().into_owned();
     let serial = opts.serial.clone().unwrap_or_else(|| "null".into());
     let mut qemu = Command::new("qemu-system-arm")
@@ -260,37 +280,170 @@ fn run_image(elf: &Path, opts: &QemuOpts) -> Result<ImageRun> {
         let _ = qemu_err.read_to_string(&mut s);
         s
     });
+    Ok(RunningImage {
+        elf: elf.to_path_buf(),
+        qemu,
+        printer,
+        log_reader,
+        err_reader,
+        started: Instant::now(),
+        limit: opts.timeout.unwrap_or(TIMEOUT),
+    })
+}
 
-    let limit = opts.timeout.unwrap_or(TIMEOUT);
-    let started = Instant::now();
-    let status = loop {
-        match qemu.try_wait() {
-            Ok(Some(status)) => break Ok(status),
-            Ok(None) if started.elapsed() > limit => {
-                let _ = qemu.kill();
-                let _ = qemu.wait();
-                break Err(limit);
+impl RunningImage {
+    /// Waits for QEMU to exit; kills it when the time limit (counted from
+    /// the start) runs out, which is an error.
+    fn wait(mut self) -> Result<ImageRun> {
+        let status = loop {
+            match self.qemu.try_wait() {
+                Ok(Some(status)) => break Some(status),
+                Ok(None) if self.started.elapsed() > self.limit => break None,
+                Ok(None) => thread::sleep(Duration::from_millis(20)),
+                Err(e) => {
+                    self.kill();
+                    return Err(format!("waiting for qemu: {e}"));
+                }
             }
-            Ok(None) => thread::sleep(Duration::from_millis(20)),
-            Err(e) => return Err(format!("waiting for qemu: {e}")),
+        };
+        if status.is_none() {
+            self.kill();
         }
-    };
-    // QEMU's exit closes the pipe, so defmt-print ends by itself.
-    let _ = printer.wait();
-    let log = log_reader.join().unwrap_or_default();
-    let stderr = err_reader.join().unwrap_or_default();
-    match status {
-        Ok(status) => Ok(ImageRun {
-            status,
-            log,
-            stderr,
-        }),
-        Err(limit) => Err(format!(
-            "{} hung: killed after {} s\n{log}{stderr}",
-            elf.display(),
-            limit.as_secs()
-        )),
+        // QEMU's exit closes the pipe, so defmt-print ends by itself.
+        let _ = self.printer.wait();
+        let log = self.log_reader.join().unwrap_or_default();
+        let stderr = self.err_reader.join().unwrap_or_default();
+        match status {
+            Some(status) => Ok(ImageRun {
+                status,
+                log,
+                stderr,
+            }),
+            None => Err(format!(
+                "{} hung: killed after {} s\n{log}{stderr}",
+                self.elf.display(),
+                self.limit.as_secs()
+            )),
+        }
     }
+
+    /// Stops QEMU now (a failed exchange); the log is still collected.
+    fn kill(&mut self) {
+        let _ = self.qemu.kill();
+        let _ = self.qemu.wait();
+    }
+
+    /// Stops QEMU and returns what it logged, for an error message.
+    fn abort(mut self) -> String {
+        self.kill();
+        self.wait()
+            .map(|r| format!("{}{}", r.log, r.stderr))
+            .unwrap_or_else(|e| e)
+    }
+}
+
+/// A free TCP port on 127.0.0.1 for QEMU's serial server. (Another process
+/// could take it between here and QEMU's bind; QEMU then fails to start
+/// and the caller retries with a new port.)
+fn free_port() -> Result<u16> {
+    let l = TcpListener::bind("127.0.0.1:0").map_err(|e| format!("bind 127.0.0.1:0: {e}"))?;
+    l.local_addr()
+        .map(|a| a.port())
+        .map_err(|e| format!("local_addr: {e}"))
+}
+
+/// Starts `elf` with USART1 on a TCP server socket and connects to it.
+fn start_with_serial(elf: &Path) -> Result<(RunningImage, TcpStream, u16)> {
+    let mut last_err = String::new();
+    for _attempt in 0..3 {
+        let port = free_port()?;
+        let opts = QemuOpts {
+            serial: Some(format!("tcp:127.0.0.1:{port},server=on,wait=on")),
+            timeout: None,
+        };
+        let mut image = start_image(elf, &opts)?;
+        // QEMU listens as soon as it has parsed its options and, with
+        // wait=on, starts the guest only once we are connected: nothing the
+        // image sends at boot can be lost.
+        let deadline = Instant::now() + Duration::from_secs(10);
+        loop {
+            match TcpStream::connect(("127.0.0.1", port)) {
+                Ok(stream) => return Ok((image, stream, port)),
+                Err(e) => {
+                    if let Ok(Some(status)) = image.qemu.try_wait() {
+                        last_err = format!("qemu exited ({status}) before listening on {port}");
+                        let _ = image.abort();
+                        break;
+                    }
+                    if Instant::now() > deadline {
+                        last_err = format!("cannot connect to QEMU's serial on {port}: {e}");
+                        let _ = image.abort();
+                        break;
+                    }
+                    thread::sleep(Duration::from_millis(20));
+                }
+            }
+        }
+    }
+    Err(last_err)
+}
+
+/// The transport under the link: the loopback image must echo a seeded
+/// pseudo-random stream (no 0xFF in it) byte for byte over QEMU's TCP
+/// serial, after announcing itself with `0xFF 'R'`, then quit on `0xFF 'Q'`.
+fn check_loopback() -> Result<()> {
+    let elf = build_bin("loopback", Profile::Dev)?;
+    let (image, mut stream, port) = start_with_serial(&elf)?;
+    eprintln!("\n$ qemu loopback (USART1 on 127.0.0.1:{port})");
+    let mut state: u32 = 0x2545_f491; // fixed seed: the same stream every run
+    let sent: Vec<u8> = (0..20_000)
+        .map(|_| {
+            // xorshift32; 0xFF is reserved for the quit sequence.
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            (state % 255) as u8
+        })
+        .collect();
+    let exchange = (|| -> std::io::Result<Vec<u8>> {
+        stream.set_read_timeout(Some(Duration::from_secs(20)))?;
+        // The image says when its USART is on (QEMU drops bytes before).
+        let mut ready = [0u8; 2];
+        stream.read_exact(&mut ready)?;
+        if ready != [0xFF, b'R'] {
+            return Err(std::io::Error::other(format!(
+                "bad ready marker {ready:02x?}"
+            )));
+        }
+        let mut writer = stream.try_clone()?;
+        let data = sent.clone();
+        let sender = thread::spawn(move || writer.write_all(&data));
+        let mut got = vec![0u8; sent.len()];
+        stream.read_exact(&mut got)?;
+        sender
+            .join()
+            .map_err(|_| std::io::Error::other("sender thread panicked"))??;
+        stream.write_all(&[0xFF, b'Q'])?;
+        Ok(got)
+    })();
+    let got = match exchange {
+        Ok(got) => got,
+        Err(e) => return Err(format!("loopback exchange failed: {e}\n{}", image.abort())),
+    };
+    let run = image.wait()?;
+    print!("{}", run.log);
+    eprint!("{}", run.stderr);
+    if let Some(i) = got.iter().zip(&sent).position(|(a, b)| a != b) {
+        return Err(format!(
+            "loopback: byte {i} came back as {:#04x}, sent {:#04x}",
+            got[i], sent[i]
+        ));
+    }
+    if !run.status.success() {
+        return Err(format!("loopback image failed ({})", describe(&run.status)));
+    }
+    eprintln!("qemu: loopback echoed {} bytes exactly", sent.len());
+    Ok(())
 }
 
 fn describe(status: &ExitStatus) -> String {
