@@ -64,6 +64,19 @@ pub struct Dataset {
     /// Source line number of each row (1-based), for messages; empty when
     /// the data did not come from a file.
     pub line: Vec<usize>,
+    /// Rows of the source that were left out, with the reason (CONTRACT §1:
+    /// nothing is silently skipped). Empty for simulated data.
+    #[serde(default)]
+    pub skipped: Vec<SkippedRow>,
+}
+
+/// A source row that was left out of the data set, and why.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SkippedRow {
+    /// 1-based line number in the source file.
+    pub line: usize,
+    /// Why the row was left out (`no error value on this row`, …).
+    pub reason: String,
 }
 
 impl Dataset {
@@ -109,5 +122,105 @@ impl Dataset {
     /// The temperature channel named `name` (without `T_` / `_C`).
     pub fn temp(&self, name: &str) -> Option<&TempChannel> {
         self.temps.iter().find(|c| c.name == name)
+    }
+
+    /// SHA-256 (hex) of the data set's canonical CSV (`import::write_csv`):
+    /// the same measurements give the same hash whatever file they came
+    /// from, so a MODEL.json can name the data it was fitted to.
+    pub fn content_hash(&self) -> String {
+        use sha2::{Digest, Sha256};
+        let mut buf = Vec::new();
+        // Writing to a Vec cannot fail.
+        crate::import::write_csv(self, &mut buf).expect("writing CSV to memory");
+        Sha256::digest(&buf)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect()
+    }
+
+    /// Checks the invariants listed at the top of this module: equal column
+    /// lengths, an axis and a target present, finite numbers, `dir` ±1.
+    /// Importers and `simulate` call it before handing a data set out.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        use anyhow::bail;
+        let n = self.len();
+        if self.axes().is_empty() {
+            bail!(
+                "{}: no position column (expected x_mm, y_mm or z_mm)",
+                self.source
+            );
+        }
+        if self.targets().is_empty() {
+            bail!(
+                "{}: no error column (expected ex_um, ey_um or ez_um)",
+                self.source
+            );
+        }
+        let mut lens: Vec<(String, usize)> = Vec::new();
+        for a in 0..3 {
+            if let Some(v) = &self.pos_mm[a] {
+                lens.push((format!("{}_mm", AXES[a]), v.len()));
+                if v.iter().any(|x| !x.is_finite()) {
+                    bail!("{}: {}_mm holds a non-finite value", self.source, AXES[a]);
+                }
+            }
+            if let Some(v) = &self.err_um[a] {
+                lens.push((format!("{}_um", TARGETS[a]), v.len()));
+                if v.iter().flatten().any(|x| !x.is_finite()) {
+                    bail!(
+                        "{}: {}_um holds a non-finite value",
+                        self.source,
+                        TARGETS[a]
+                    );
+                }
+            }
+            if let Some(v) = &self.dir[a] {
+                lens.push((format!("dir_{}", AXES[a]), v.len()));
+                if v.iter().any(|d| *d != 1 && *d != -1) {
+                    bail!(
+                        "{}: dir_{} holds a value other than -1/+1",
+                        self.source,
+                        AXES[a]
+                    );
+                }
+            }
+        }
+        let opt_f = [
+            ("t_s", &self.t_s),
+            ("tool_mm", &self.tool_mm),
+            ("u_um", &self.u_um),
+        ];
+        for (name, col) in opt_f {
+            if let Some(v) = col {
+                lens.push((name.to_string(), v.len()));
+                if v.iter().any(|x| !x.is_finite()) {
+                    bail!("{}: {name} holds a non-finite value", self.source);
+                }
+            }
+        }
+        for (name, col) in [("pass_id", &self.pass_id), ("session_id", &self.session_id)] {
+            if let Some(v) = col {
+                lens.push((name.to_string(), v.len()));
+            }
+        }
+        for c in &self.temps {
+            lens.push((format!("T_{}_C", c.name), c.temp_c.len()));
+            if c.temp_c.iter().any(|x| !x.is_finite()) {
+                bail!("{}: T_{}_C holds a non-finite value", self.source, c.name);
+            }
+        }
+        for c in &self.aux {
+            lens.push((c.name.clone(), c.cells.len()));
+        }
+        if !self.line.is_empty() {
+            lens.push(("line numbers".into(), self.line.len()));
+        }
+        if let Some((name, len)) = lens.iter().find(|(_, len)| *len != n) {
+            bail!(
+                "{}: column {name} has {len} rows, expected {n}",
+                self.source
+            );
+        }
+        Ok(())
     }
 }

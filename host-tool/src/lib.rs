@@ -7,3 +7,5 @@
 pub mod cmd;
 pub mod data;
 pub mod features;
+pub mod import;
+pub mod simulate;

@@ -1,0 +1,527 @@
+//! The measurement CSV of CONTRACT.md §1: reader with located errors, and a
+//! writer whose output the reader turns back into the same [`Dataset`].
+//!
+//! Columns are recognised by name. A name whose stem is a contract quantity
+//! but whose unit suffix is not the contract's (`x_in`, `ex_nm`, `T_bed_F`)
+//! is an error rather than an auxiliary channel: silently treating `ex_nm`
+//! as an unknown column would drop the errors the user meant to fit.
+
+use std::io::{Read, Write};
+
+use anyhow::Context;
+
+use super::ImportError;
+use crate::data::{AuxChannel, Dataset, SkippedRow, TempChannel, AXES, TARGETS};
+
+/// What a column means.
+#[derive(Clone, Debug, PartialEq)]
+enum Col {
+    Pos(usize),
+    Err(usize),
+    Time,
+    Dir(usize),
+    Temp(String),
+    Tool,
+    Pass,
+    Session,
+    U,
+    Aux,
+}
+
+/// Quantity stems and the one unit suffix the contract gives each.
+const STEMS: [(&str, &str); 9] = [
+    ("x", "mm"),
+    ("y", "mm"),
+    ("z", "mm"),
+    ("ex", "um"),
+    ("ey", "um"),
+    ("ez", "um"),
+    ("t", "s"),
+    ("tool", "mm"),
+    ("u", "um"),
+];
+
+/// Classifies a header cell; `Err` carries the message for a bad name.
+fn classify(name: &str) -> Result<Col, String> {
+    for a in 0..3 {
+        if name == format!("{}_mm", AXES[a]) {
+            return Ok(Col::Pos(a));
+        }
+        if name == format!("{}_um", TARGETS[a]) {
+            return Ok(Col::Err(a));
+        }
+        if name == format!("dir_{}", AXES[a]) {
+            return Ok(Col::Dir(a));
+        }
+    }
+    match name {
+        "t_s" => return Ok(Col::Time),
+        "tool_mm" => return Ok(Col::Tool),
+        "pass_id" => return Ok(Col::Pass),
+        "session_id" => return Ok(Col::Session),
+        "u_um" => return Ok(Col::U),
+        _ => {}
+    }
+    if let Some(rest) = name.strip_prefix("T_") {
+        if let Some(sensor) = rest.strip_suffix("_C") {
+            if sensor.is_empty() {
+                return Err(format!(
+                    "column `{name}`: expected a sensor name, as in `T_bed_C`"
+                ));
+            }
+            return Ok(Col::Temp(sensor.to_string()));
+        }
+        if let Some((sensor, unit)) = rest.rsplit_once('_') {
+            return Err(format!(
+                "column `{name}`: unknown unit suffix `_{unit}` for a temperature; expected `T_{sensor}_C` (°C)"
+            ));
+        }
+    }
+    let lower = name.to_ascii_lowercase();
+    for (stem, unit) in STEMS {
+        let canonical = format!("{stem}_{unit}");
+        if lower == canonical {
+            return Err(format!(
+                "column `{name}`: expected `{canonical}` (column names are case-sensitive)"
+            ));
+        }
+        if name == stem {
+            return Err(format!(
+                "column `{name}` has no unit suffix; expected `{canonical}`"
+            ));
+        }
+        if let Some(unit_found) = name.strip_prefix(stem).and_then(|r| r.strip_prefix('_')) {
+            return Err(format!(
+                "column `{name}`: unknown unit suffix `_{unit_found}`; expected `{canonical}`"
+            ));
+        }
+    }
+    Ok(Col::Aux)
+}
+
+/// Parses a finite number or says what was expected.
+fn parse_num(cell: &str, col_name: &str) -> Result<f64, String> {
+    let v: f64 = cell
+        .trim()
+        .parse()
+        .map_err(|_| format!("column `{col_name}`: expected a number, found `{cell}`"))?;
+    if !v.is_finite() {
+        return Err(format!(
+            "column `{col_name}`: expected a finite number, found `{cell}`"
+        ));
+    }
+    Ok(v)
+}
+
+/// Reads the measurement CSV from `reader`; `name` labels messages (the
+/// path, or e.g. `<stdin>`). Fails on the first bad cell with
+/// `name:line:column: what was expected`. The result has passed
+/// [`Dataset::validate`].
+pub fn read_csv<R: Read>(mut reader: R, name: &str) -> anyhow::Result<Dataset> {
+    let mut bytes = Vec::new();
+    reader
+        .read_to_end(&mut bytes)
+        .with_context(|| format!("cannot read {name}"))?;
+    let text = String::from_utf8(bytes).map_err(|e| {
+        let upto = &e.as_bytes()[..e.utf8_error().valid_up_to()];
+        let line = upto.iter().filter(|&&b| b == b'\n').count() + 1;
+        ImportError::at(name, line, None, "expected UTF-8 text")
+    })?;
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+    let ds = parse(text, name)?;
+    ds.validate()?;
+    Ok(ds)
+}
+
+fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
+    let mut ds = Dataset {
+        source: name.to_string(),
+        ..Dataset::default()
+    };
+    // Metadata: `#` lines (and blank lines) before the header.
+    let mut offset = 0;
+    let mut header_line = 1;
+    for raw in text.split_inclusive('\n') {
+        let line = raw.trim_end_matches(['\n', '\r']);
+        let trimmed = line.trim_start();
+        if let Some(meta) = trimmed.strip_prefix('#') {
+            let meta = meta.trim();
+            match meta.split_once(':') {
+                Some((k, v)) => ds
+                    .metadata
+                    .push((k.trim().to_string(), v.trim().to_string())),
+                None => ds.metadata.push((String::new(), meta.to_string())),
+            }
+        } else if !trimmed.is_empty() {
+            break;
+        }
+        offset += raw.len();
+        header_line += 1;
+    }
+    let body = &text[offset..];
+    if body.trim().is_empty() {
+        return Err(ImportError::at(
+            name,
+            header_line,
+            None,
+            "expected a header row (x_mm, ex_um, …), found end of file",
+        ));
+    }
+    let mut rdr = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .from_reader(body.as_bytes());
+    let mut records = rdr.records();
+    let file_line = |pos: Option<&csv::Position>| -> usize {
+        pos.map_or(header_line, |p| header_line + p.line() as usize - 1)
+    };
+    let csv_err = |e: csv::Error| {
+        let line = file_line(e.position());
+        ImportError::at(name, line, None, format!("malformed CSV: {e}"))
+    };
+    let header = match records.next() {
+        Some(r) => r.map_err(csv_err)?,
+        None => {
+            return Err(ImportError::at(
+                name,
+                header_line,
+                None,
+                "expected a header row",
+            ))
+        }
+    };
+    let names: Vec<String> = header.iter().map(|h| h.trim().to_string()).collect();
+    let mut cols = Vec::with_capacity(names.len());
+    for (i, h) in names.iter().enumerate() {
+        if let Some(first) = names[..i].iter().position(|p| p == h) {
+            return Err(ImportError::at(
+                name,
+                header_line,
+                Some(i + 1),
+                format!("duplicate column `{h}` (first at column {})", first + 1),
+            ));
+        }
+        if h.is_empty() {
+            return Err(ImportError::at(
+                name,
+                header_line,
+                Some(i + 1),
+                "empty column name; expected a name such as x_mm or ex_um",
+            ));
+        }
+        cols.push(classify(h).map_err(|m| ImportError::at(name, header_line, Some(i + 1), m))?);
+    }
+    if !cols.iter().any(|c| matches!(c, Col::Pos(_))) {
+        return Err(ImportError::at(
+            name,
+            header_line,
+            None,
+            "no position column; expected at least one of x_mm, y_mm, z_mm",
+        ));
+    }
+    if !cols.iter().any(|c| matches!(c, Col::Err(_))) {
+        return Err(ImportError::at(
+            name,
+            header_line,
+            None,
+            "no error column; expected at least one of ex_um, ey_um, ez_um",
+        ));
+    }
+
+    // Column storage, filled row by row.
+    let mut pos: [Option<Vec<f64>>; 3] = Default::default();
+    let mut err: [Option<Vec<Option<f64>>>; 3] = Default::default();
+    let mut dir: [Option<Vec<i8>>; 3] = Default::default();
+    let mut t_s = None::<Vec<f64>>;
+    let mut tool = None::<Vec<f64>>;
+    let mut u = None::<Vec<f64>>;
+    let mut pass = None::<Vec<i64>>;
+    let mut session = None::<Vec<i64>>;
+    let mut temps: Vec<TempChannel> = Vec::new();
+    let mut aux: Vec<AuxChannel> = Vec::new();
+    for (c, h) in cols.iter().zip(&names) {
+        match c {
+            Col::Pos(a) => pos[*a] = Some(Vec::new()),
+            Col::Err(a) => err[*a] = Some(Vec::new()),
+            Col::Dir(a) => dir[*a] = Some(Vec::new()),
+            Col::Time => t_s = Some(Vec::new()),
+            Col::Tool => tool = Some(Vec::new()),
+            Col::U => u = Some(Vec::new()),
+            Col::Pass => pass = Some(Vec::new()),
+            Col::Session => session = Some(Vec::new()),
+            Col::Temp(s) => temps.push(TempChannel {
+                name: s.clone(),
+                temp_c: Vec::new(),
+            }),
+            Col::Aux => aux.push(AuxChannel {
+                name: h.clone(),
+                cells: Vec::new(),
+            }),
+        }
+    }
+
+    /// One parsed cell, held until the whole row is known to be kept.
+    enum Cell {
+        F(f64),
+        OptF(Option<f64>),
+        D(i8),
+        I(i64),
+        S(String),
+    }
+    let mut row_cells: Vec<Cell> = Vec::with_capacity(cols.len());
+    for rec in records {
+        let rec = rec.map_err(csv_err)?;
+        let line = file_line(rec.position());
+        if rec.iter().all(|c| c.trim().is_empty()) {
+            ds.skipped.push(SkippedRow {
+                line,
+                reason: "empty row".into(),
+            });
+            continue;
+        }
+        if rec.get(0).is_some_and(|c| c.trim_start().starts_with('#')) {
+            ds.skipped.push(SkippedRow {
+                line,
+                reason: "comment line after the header".into(),
+            });
+            continue;
+        }
+        if rec.len() != cols.len() {
+            return Err(ImportError::at(
+                name,
+                line,
+                Some(rec.len().min(cols.len()) + 1),
+                format!(
+                    "expected {} cells as in the header, found {}",
+                    cols.len(),
+                    rec.len()
+                ),
+            ));
+        }
+        row_cells.clear();
+        let mut skip_reason: Option<String> = None;
+        for (i, (c, cell)) in cols.iter().zip(rec.iter()).enumerate() {
+            let at = |m: String| ImportError::at(name, line, Some(i + 1), m);
+            let h = &names[i];
+            let empty = cell.trim().is_empty();
+            let needs_value = !matches!(c, Col::Err(_) | Col::Aux);
+            if empty && needs_value {
+                skip_reason.get_or_insert_with(|| format!("empty `{h}` cell"));
+                row_cells.push(Cell::F(0.0));
+                continue;
+            }
+            row_cells.push(match c {
+                Col::Err(_) if empty => Cell::OptF(None),
+                Col::Err(_) => Cell::OptF(Some(parse_num(cell, h).map_err(at)?)),
+                Col::Dir(_) => {
+                    let v = cell.trim();
+                    match v {
+                        "1" | "+1" | "1.0" | "+1.0" => Cell::D(1),
+                        "-1" | "-1.0" => Cell::D(-1),
+                        _ => {
+                            return Err(at(format!(
+                                "column `{h}`: expected -1 or +1, found `{cell}`"
+                            )))
+                        }
+                    }
+                }
+                Col::Pass | Col::Session => Cell::I(cell.trim().parse().map_err(|_| {
+                    at(format!("column `{h}`: expected an integer, found `{cell}`"))
+                })?),
+                Col::U => {
+                    let v = parse_num(cell, h).map_err(at)?;
+                    if v <= 0.0 {
+                        return Err(at(format!(
+                            "column `{h}`: expected a positive uncertainty, found `{cell}`"
+                        )));
+                    }
+                    Cell::F(v)
+                }
+                Col::Aux => Cell::S(cell.to_string()),
+                Col::Pos(_) | Col::Time | Col::Tool | Col::Temp(_) => {
+                    Cell::F(parse_num(cell, h).map_err(at)?)
+                }
+            });
+        }
+        if skip_reason.is_none()
+            && cols
+                .iter()
+                .zip(&row_cells)
+                .all(|(c, v)| !matches!((c, v), (Col::Err(_), Cell::OptF(Some(_)))))
+        {
+            skip_reason = Some("no error value on this row".into());
+        }
+        if let Some(reason) = skip_reason {
+            ds.skipped.push(SkippedRow { line, reason });
+            continue;
+        }
+        let (mut ti, mut ai) = (0, 0);
+        for (c, v) in cols.iter().zip(row_cells.drain(..)) {
+            match (c, v) {
+                (Col::Pos(a), Cell::F(x)) => pos[*a].as_mut().map(|p| p.push(x)),
+                (Col::Err(a), Cell::OptF(x)) => err[*a].as_mut().map(|p| p.push(x)),
+                (Col::Dir(a), Cell::D(d)) => dir[*a].as_mut().map(|p| p.push(d)),
+                (Col::Time, Cell::F(x)) => t_s.as_mut().map(|p| p.push(x)),
+                (Col::Tool, Cell::F(x)) => tool.as_mut().map(|p| p.push(x)),
+                (Col::U, Cell::F(x)) => u.as_mut().map(|p| p.push(x)),
+                (Col::Pass, Cell::I(x)) => pass.as_mut().map(|p| p.push(x)),
+                (Col::Session, Cell::I(x)) => session.as_mut().map(|p| p.push(x)),
+                (Col::Temp(_), Cell::F(x)) => {
+                    temps[ti].temp_c.push(x);
+                    ti += 1;
+                    None
+                }
+                (Col::Aux, Cell::S(s)) => {
+                    aux[ai].cells.push(s);
+                    ai += 1;
+                    None
+                }
+                // Each column kind produces exactly its own cell kind above.
+                _ => unreachable!("cell kind matches its column"),
+            };
+        }
+        ds.line.push(line);
+    }
+    if ds.line.is_empty() {
+        let last = text.lines().count().max(header_line);
+        return Err(ImportError::at(
+            name,
+            last,
+            None,
+            format!(
+                "no data rows after the header ({} rows left out)",
+                ds.skipped.len()
+            ),
+        ));
+    }
+    ds.pos_mm = pos;
+    ds.err_um = err;
+    ds.dir = dir;
+    ds.t_s = t_s;
+    ds.tool_mm = tool;
+    ds.u_um = u;
+    ds.pass_id = pass;
+    ds.session_id = session;
+    ds.temps = temps;
+    ds.aux = aux;
+    Ok(ds)
+}
+
+/// Writes `data` as the measurement CSV: metadata lines, then the contract
+/// columns in a fixed order (positions, errors, t_s, dir_*, T_*_C, tool_mm,
+/// pass_id, session_id, u_um), then auxiliary channels. Numbers use Rust's
+/// shortest round-trip form, so reading the file back gives the same values
+/// bit for bit. Line endings are `\n`.
+// One column per axis/target index, named through AXES/TARGETS.
+#[allow(clippy::needless_range_loop)]
+pub fn write_csv<W: Write>(data: &Dataset, mut out: W) -> anyhow::Result<()> {
+    for (k, v) in &data.metadata {
+        if k.is_empty() {
+            writeln!(out, "# {v}")?;
+        } else {
+            writeln!(out, "# {k}: {v}")?;
+        }
+    }
+    let n = data.len();
+    let mut header: Vec<String> = Vec::new();
+    type Getter<'a> = Box<dyn Fn(usize) -> String + 'a>;
+    let mut getters: Vec<Getter<'_>> = Vec::new();
+    for a in 0..3 {
+        if let Some(v) = &data.pos_mm[a] {
+            header.push(format!("{}_mm", AXES[a]));
+            getters.push(Box::new(move |r| v[r].to_string()));
+        }
+    }
+    for t in 0..3 {
+        if let Some(v) = &data.err_um[t] {
+            header.push(format!("{}_um", TARGETS[t]));
+            getters.push(Box::new(move |r| {
+                v[r].map_or(String::new(), |x| x.to_string())
+            }));
+        }
+    }
+    if let Some(v) = &data.t_s {
+        header.push("t_s".into());
+        getters.push(Box::new(move |r| v[r].to_string()));
+    }
+    for a in 0..3 {
+        if let Some(v) = &data.dir[a] {
+            header.push(format!("dir_{}", AXES[a]));
+            getters.push(Box::new(move |r| v[r].to_string()));
+        }
+    }
+    for c in &data.temps {
+        header.push(format!("T_{}_C", c.name));
+        getters.push(Box::new(move |r| c.temp_c[r].to_string()));
+    }
+    if let Some(v) = &data.tool_mm {
+        header.push("tool_mm".into());
+        getters.push(Box::new(move |r| v[r].to_string()));
+    }
+    if let Some(v) = &data.pass_id {
+        header.push("pass_id".into());
+        getters.push(Box::new(move |r| v[r].to_string()));
+    }
+    if let Some(v) = &data.session_id {
+        header.push("session_id".into());
+        getters.push(Box::new(move |r| v[r].to_string()));
+    }
+    if let Some(v) = &data.u_um {
+        header.push("u_um".into());
+        getters.push(Box::new(move |r| v[r].to_string()));
+    }
+    for c in &data.aux {
+        header.push(c.name.clone());
+        getters.push(Box::new(move |r| c.cells[r].clone()));
+    }
+    let mut w = csv::WriterBuilder::new()
+        .terminator(csv::Terminator::Any(b'\n'))
+        .from_writer(out);
+    w.write_record(&header)?;
+    let mut row: Vec<String> = Vec::with_capacity(header.len());
+    for r in 0..n {
+        row.clear();
+        row.extend(getters.iter().map(|g| g(r)));
+        w.write_record(&row)?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn classify_names() {
+        assert_eq!(classify("x_mm"), Ok(Col::Pos(0)));
+        assert_eq!(classify("ez_um"), Ok(Col::Err(2)));
+        assert_eq!(classify("T_bed_C"), Ok(Col::Temp("bed".into())));
+        assert_eq!(classify("feed"), Ok(Col::Aux));
+        assert_eq!(classify("T_max"), Ok(Col::Aux));
+        assert!(classify("x_in")
+            .unwrap_err()
+            .contains("unknown unit suffix `_in`"));
+        assert!(classify("ex_nm").unwrap_err().contains("expected `ex_um`"));
+        assert!(classify("T_bed_F").unwrap_err().contains("T_bed_C"));
+        assert!(classify("X_mm").unwrap_err().contains("case-sensitive"));
+        assert!(classify("t").unwrap_err().contains("no unit suffix"));
+    }
+
+    #[test]
+    fn round_trip_keeps_everything() {
+        let text = "# machine: XHK-715\n# free note\nx_mm,ex_um,ey_um,feed,dir_x,T_bed_C\n\
+                    0,0.5,,\"a,b\",1,20.1\n10.25,-0.125,3,b,-1,20.2\n";
+        let a = parse(text, "a.csv").unwrap();
+        let mut buf = Vec::new();
+        write_csv(&a, &mut buf).unwrap();
+        let b = parse(std::str::from_utf8(&buf).unwrap(), "a.csv").unwrap();
+        assert_eq!(a.metadata, b.metadata);
+        assert_eq!(a.pos_mm, b.pos_mm);
+        assert_eq!(a.err_um, b.err_um);
+        assert_eq!(a.aux, b.aux);
+        assert_eq!(a.dir, b.dir);
+        assert_eq!(a.temps, b.temps);
+        assert_eq!(a.aux[0].cells[0], "a,b");
+    }
+}

@@ -1,0 +1,277 @@
+//! The synthetic 3-axis machine: the 21 geometric errors (per axis three
+//! translations — positioning and two straightnesses — and three rotations —
+//! roll, pitch, yaw — plus three squarenesses) and the volumetric error they
+//! give at the tool point.
+//!
+//! Kinematic chain and sign conventions (documented in docs/cli.md):
+//! a serial stack X → Y → Z → tool, the tool pointing along −Z with length
+//! `tool_mm` (the Abbe arm along the spindle). Each carriage k has a
+//! translation error δ_k(q_k) (µm) and a small rotation ε_k(q_k) (µrad,
+//! right-handed about +X, +Y, +Z) about its own reference point; the
+//! reference points are (x, 0, 0) for X, (x, y, 0) for Y and (x, y, z) for Z,
+//! so the arm from carriage k to the tool point is
+//! a_X = (0, y, z − L), a_Y = (0, 0, z − L), a_Z = (0, 0, −L).
+//! The first-order (small-angle) homogeneous-transform product, with the
+//! second-order products (ε·δ, ε·ε ~ 1e-10 relative) dropped, is
+//!
+//! e = Σ_k [δ_k(q_k) + ε_k(q_k) × a_k] + squareness,
+//!
+//! with squareness as tilted axis directions: Y runs along (−S_xy, 1, 0) and
+//! Z along (−S_xz, −S_yz, 1), i.e. a positive S_xy means the angle between
+//! +X and +Y is larger than 90°, and it gives e_x = −S_xy·y exactly.
+//!
+//! Each error function is a polynomial in the normalised position
+//! u = q / travel ∈ [0, 1] plus optional sine waves (smooth shapes that no
+//! low-order polynomial holds). With cubic translations and at most
+//! quadratic rotations (the `mill800` preset) every volumetric component is
+//! inside the span of the seed's `cubic19` terms, so a cubic19 fit of the
+//! plain preset reaches the noise floor — effects and `mill800-wavy` are
+//! what it cannot follow.
+
+use std::f64::consts::TAU;
+
+use anyhow::bail;
+use serde::{Deserialize, Serialize};
+
+/// A sine component of an error function.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Wave {
+    /// Amplitude (µm for translations, µrad for rotations).
+    pub amp: f64,
+    /// Period along the axis, mm.
+    pub period_mm: f64,
+    /// Phase at position 0, rad.
+    pub phase_rad: f64,
+}
+
+/// One error component of one axis as a function of that axis' position.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ErrorFn {
+    /// Coefficients of 1, u, u², … with u = position / travel (µm or µrad).
+    pub poly: Vec<f64>,
+    /// Smooth non-polynomial shapes added to the polynomial.
+    pub waves: Vec<Wave>,
+}
+
+impl ErrorFn {
+    /// A polynomial in u.
+    pub fn poly(coef: &[f64]) -> ErrorFn {
+        ErrorFn {
+            poly: coef.to_vec(),
+            waves: Vec::new(),
+        }
+    }
+
+    /// Value at position `pos_mm` on an axis of `travel_mm`.
+    pub fn eval(&self, pos_mm: f64, travel_mm: f64) -> f64 {
+        let u = pos_mm / travel_mm;
+        // Horner's rule.
+        let p = self.poly.iter().rev().fold(0.0, |acc, c| acc * u + c);
+        let w: f64 = self
+            .waves
+            .iter()
+            .map(|w| w.amp * (TAU * pos_mm / w.period_mm + w.phase_rad).sin())
+            .sum();
+        p + w
+    }
+}
+
+/// The six error motions of one carriage.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct AxisErrors {
+    /// Translation errors along X, Y, Z in µm (the component along the axis
+    /// itself is its positioning error, the other two its straightness).
+    pub trans_um: [ErrorFn; 3],
+    /// Rotations about X, Y, Z in µrad (roll, pitch, yaw for the X axis).
+    pub rot_urad: [ErrorFn; 3],
+}
+
+/// The three squareness errors, µrad (sign convention in the module doc).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Squareness {
+    /// Y against X: e_x = −xy·y.
+    pub xy_urad: f64,
+    /// Z against X: e_x = −xz·z.
+    pub xz_urad: f64,
+    /// Z against Y: e_y = −yz·z.
+    pub yz_urad: f64,
+}
+
+/// A 3-axis machine's geometry: travels and the 21 geometric errors.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Machine {
+    /// Preset name, for metadata (`mill800`, or `custom`).
+    pub name: String,
+    /// Travel of X, Y, Z in mm; positions run from 0 to the travel.
+    pub travel_mm: [f64; 3],
+    /// Error motions of the X, Y and Z carriages.
+    pub axes: [AxisErrors; 3],
+    /// Squareness errors.
+    pub squareness: Squareness,
+}
+
+/// Names accepted by [`Machine::preset`].
+pub const PRESETS: [&str; 3] = ["mill800", "mill800-wavy", "perfect800"];
+
+impl Machine {
+    /// A machine with the seed's travels (800 × 500 × 500 mm) and no error
+    /// at all: the base for tests that switch on one error at a time.
+    pub fn perfect(travel_mm: [f64; 3]) -> Machine {
+        Machine {
+            name: "custom".into(),
+            travel_mm,
+            ..Machine::default()
+        }
+    }
+
+    /// The named preset:
+    /// - `mill800`: the seed's vertical mill (X 800, Y 500, Z 500 mm) with
+    ///   all 21 errors at typical magnitudes (ARCHITECTURE.md: positioning a
+    ///   few µm, straightness ~5–10 µm over the travel, angles 10–30 µrad,
+    ///   squareness 20–30 µrad); cubic translations, quadratic angles.
+    /// - `mill800-wavy`: the same plus long-wave shapes (periods 180–320 mm,
+    ///   0.8–1.5 µm / 4 µrad) that a cubic cannot follow.
+    /// - `perfect800`: the same travels with no errors.
+    pub fn preset(name: &str) -> anyhow::Result<Machine> {
+        let p = ErrorFn::poly;
+        let mut m = match name {
+            "perfect800" => Machine::perfect([800.0, 500.0, 500.0]),
+            "mill800" | "mill800-wavy" => Machine {
+                name: name.into(),
+                travel_mm: [800.0, 500.0, 500.0],
+                axes: [
+                    AxisErrors {
+                        trans_um: [
+                            p(&[0.0, 6.0, -3.0, 2.0]),
+                            p(&[0.0, 4.0, -8.0, 3.0]),
+                            p(&[0.0, -3.0, 7.0, -2.5]),
+                        ],
+                        rot_urad: [
+                            p(&[0.0, 8.0, -10.0]),
+                            p(&[0.0, 15.0, -12.0]),
+                            p(&[0.0, -10.0, 14.0]),
+                        ],
+                    },
+                    AxisErrors {
+                        trans_um: [
+                            p(&[0.0, 2.5, -5.0, 1.5]),
+                            p(&[0.0, -4.5, 2.5, 1.5]),
+                            p(&[0.0, -2.0, 4.5, -1.0]),
+                        ],
+                        rot_urad: [
+                            p(&[0.0, 12.0, -8.0]),
+                            p(&[0.0, -6.0, 9.0]),
+                            p(&[0.0, 7.0, -5.0]),
+                        ],
+                    },
+                    AxisErrors {
+                        trans_um: [
+                            p(&[0.0, -3.0, 5.0, -1.0]),
+                            p(&[0.0, 2.0, -4.0, 1.5]),
+                            p(&[0.0, 5.0, -2.0, -1.5]),
+                        ],
+                        rot_urad: [
+                            p(&[0.0, 9.0, -7.0]),
+                            p(&[0.0, -8.0, 10.0]),
+                            p(&[0.0, 4.0, -3.0]),
+                        ],
+                    },
+                ],
+                squareness: Squareness {
+                    xy_urad: 25.0,
+                    xz_urad: -30.0,
+                    yz_urad: 20.0,
+                },
+            },
+            other => bail!("unknown preset `{other}` (expected {})", PRESETS.join(", ")),
+        };
+        if name == "mill800-wavy" {
+            let wave = |amp: f64, period_mm: f64, phase_rad: f64| Wave {
+                amp,
+                period_mm,
+                phase_rad,
+            };
+            m.axes[0].trans_um[1].waves.push(wave(1.5, 260.0, 0.4));
+            m.axes[0].trans_um[0].waves.push(wave(1.0, 320.0, 1.1));
+            m.axes[1].trans_um[1].waves.push(wave(1.0, 180.0, 2.0));
+            m.axes[2].trans_um[0].waves.push(wave(0.8, 210.0, -0.7));
+            m.axes[0].rot_urad[1].waves.push(wave(4.0, 300.0, 0.0));
+        }
+        Ok(m)
+    }
+
+    /// Volumetric error (actual − nominal tool-point position) in µm at the
+    /// nominal axis positions `pos_mm` with tool length `tool_mm`, from the
+    /// geometric errors alone (no effects, no noise).
+    pub fn error_um(&self, pos_mm: [f64; 3], tool_mm: f64) -> [f64; 3] {
+        let [_, y, z] = pos_mm;
+        let arms = [
+            [0.0, y, z - tool_mm],
+            [0.0, 0.0, z - tool_mm],
+            [0.0, 0.0, -tool_mm],
+        ];
+        let mut e = [0.0; 3];
+        for k in 0..3 {
+            let q = pos_mm[k];
+            let tr = self.travel_mm[k];
+            let ax = &self.axes[k];
+            let d = [0, 1, 2].map(|i| ax.trans_um[i].eval(q, tr));
+            let r = [0, 1, 2].map(|i| ax.rot_urad[i].eval(q, tr));
+            let a = arms[k];
+            // ε × a, µrad·mm = nm → ·1e-3 for µm.
+            let cross = [
+                r[1] * a[2] - r[2] * a[1],
+                r[2] * a[0] - r[0] * a[2],
+                r[0] * a[1] - r[1] * a[0],
+            ];
+            for i in 0..3 {
+                e[i] += d[i] + cross[i] * 1e-3;
+            }
+        }
+        let s = &self.squareness;
+        e[0] += -(s.xy_urad * y + s.xz_urad * z) * 1e-3;
+        e[1] += -s.yz_urad * z * 1e-3;
+        e
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn perfect_machine_has_no_error() {
+        let m = Machine::preset("perfect800").unwrap();
+        assert_eq!(m.error_um([400.0, 250.0, 100.0], 50.0), [0.0; 3]);
+    }
+
+    #[test]
+    fn pitch_of_x_times_arm() {
+        // A constant pitch ε_y = 10 µrad of the X carriage with the tool
+        // 100 mm below the spindle at z = 0: ε × a = (ε_y·a_z, 0, −ε_y·a_x)
+        // with a = (0, y, −100) → e_x = 10 µrad · −100 mm = −1 µm.
+        let mut m = Machine::perfect([800.0, 500.0, 500.0]);
+        m.axes[0].rot_urad[1] = ErrorFn::poly(&[10.0]);
+        let e = m.error_um([300.0, 200.0, 0.0], 100.0);
+        assert!((e[0] - -1.0).abs() < 1e-12, "{e:?}");
+        assert_eq!(e[1], 0.0);
+        assert_eq!(e[2], 0.0);
+    }
+
+    #[test]
+    fn preset_magnitudes_are_realistic() {
+        let m = Machine::preset("mill800").unwrap();
+        let mut max = 0.0f64;
+        for x in [0.0, 400.0, 800.0] {
+            for y in [0.0, 250.0, 500.0] {
+                for z in [0.0, 250.0, 500.0] {
+                    for v in m.error_um([x, y, z], 0.0) {
+                        max = max.max(v.abs());
+                    }
+                }
+            }
+        }
+        // A worn-but-usable mill: some µm to a few tens of µm over the volume.
+        assert!(max > 3.0 && max < 40.0, "max |e| = {max}");
+    }
+}
