@@ -5,7 +5,9 @@
 //! - `cmd`: one module per subcommand.
 
 pub mod cmd;
+pub mod compare;
 pub mod data;
 pub mod features;
 pub mod import;
+pub mod report;
 pub mod simulate;
