@@ -9,5 +9,6 @@ pub mod compare;
 pub mod data;
 pub mod features;
 pub mod import;
+pub mod iso230;
 pub mod report;
 pub mod simulate;

@@ -1,11 +1,59 @@
-//! `trueaxis iso230` — placeholder until its issue lands; fails loudly.
+//! `trueaxis iso230` — ISO 230-2 evaluation of bidirectional positioning
+//! runs (CONTRACT.md §2): the summary values, the per-target table, and with
+//! `--report DIR` an SVG plot of x̄↑ and x̄↓ with their ±2s bands.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+
+use crate::data::AXES;
+use crate::{import, iso230};
 
 /// Arguments of `trueaxis iso230`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Measurement data (.csv or .rtl) with bidirectional runs along one axis.
+    pub data: PathBuf,
+    /// The axis to evaluate (default: the only axis with position, error and
+    /// direction columns).
+    #[arg(long, value_parser = ["x", "y", "z"])]
+    pub axis: Option<String>,
+    /// Directory for the plot (`iso230_<axis>.svg`); created if missing.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Write one JSON document to stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
 
 impl Args {
-    pub fn run(self) -> anyhow::Result<()> {
-        anyhow::bail!("`trueaxis iso230` is not implemented yet")
+    pub fn run(self) -> Result<()> {
+        let data = import::load(&self.data)?;
+        let axis = match self.axis.as_deref() {
+            Some(a) => AXES.iter().position(|x| *x == a).context("axis")?,
+            None => iso230::default_axis(&data)?,
+        };
+        let res = iso230::evaluate(&data, axis)?;
+        let mut plot = None;
+        if let Some(dir) = &self.report {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
+            let path = dir.join(format!("iso230_{}.svg", res.axis));
+            res.plot_svg(&path)?;
+            plot = Some(path);
+        }
+        if self.json {
+            let mut v = serde_json::to_value(&res)?;
+            if let (Some(p), Some(obj)) = (&plot, v.as_object_mut()) {
+                obj.insert("plot".into(), p.display().to_string().into());
+            }
+            println!("{v}");
+        } else {
+            print!("{}", res.table());
+            if let Some(p) = plot {
+                println!("\nplot: {}", p.display());
+            }
+        }
+        Ok(())
     }
 }

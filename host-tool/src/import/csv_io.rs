@@ -407,6 +407,42 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
     Ok(ds)
 }
 
+/// The header `write_csv` writes for `data`, in order.
+pub fn column_names(data: &Dataset) -> Vec<String> {
+    let mut h = Vec::new();
+    h.extend(
+        (0..3)
+            .filter(|&a| data.pos_mm[a].is_some())
+            .map(|a| format!("{}_mm", AXES[a])),
+    );
+    h.extend(
+        (0..3)
+            .filter(|&t| data.err_um[t].is_some())
+            .map(|t| format!("{}_um", TARGETS[t])),
+    );
+    if data.t_s.is_some() {
+        h.push("t_s".into());
+    }
+    h.extend(
+        (0..3)
+            .filter(|&a| data.dir[a].is_some())
+            .map(|a| format!("dir_{}", AXES[a])),
+    );
+    h.extend(data.temps.iter().map(|c| format!("T_{}_C", c.name)));
+    for (present, name) in [
+        (data.tool_mm.is_some(), "tool_mm"),
+        (data.pass_id.is_some(), "pass_id"),
+        (data.session_id.is_some(), "session_id"),
+        (data.u_um.is_some(), "u_um"),
+    ] {
+        if present {
+            h.push(name.into());
+        }
+    }
+    h.extend(data.aux.iter().map(|c| c.name.clone()));
+    h
+}
+
 /// Writes `data` as the measurement CSV: metadata lines, then the contract
 /// columns in a fixed order (positions, errors, t_s, dir_*, T_*_C, tool_mm,
 /// pass_id, session_id, u_um), then auxiliary channels. Numbers use Rust's
@@ -477,6 +513,7 @@ pub fn write_csv<W: Write>(data: &Dataset, mut out: W) -> anyhow::Result<()> {
     let mut w = csv::WriterBuilder::new()
         .terminator(csv::Terminator::Any(b'\n'))
         .from_writer(out);
+    debug_assert_eq!(header, column_names(data));
     w.write_record(&header)?;
     let mut row: Vec<String> = Vec::with_capacity(header.len());
     for r in 0..n {

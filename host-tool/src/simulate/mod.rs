@@ -279,8 +279,12 @@ fn normal(rng: &mut impl RngCore) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (TAU * u2).cos()
 }
 
-fn round_to(v: f64, step: f64) -> f64 {
-    (v / step).round() * step
+/// Rounds to `decimals` places. Multiplying and dividing by the power of
+/// ten (rather than multiplying by 1e-4) gives the double nearest the
+/// decimal, so the CSV shows `0.1214`, not `0.12140000000000001`.
+fn round_dec(v: f64, decimals: i32) -> f64 {
+    let p = 10f64.powi(decimals);
+    (v * p).round() / p
 }
 
 /// Simulates the measurement. Call [`SimConfig::check`] first for a clear
@@ -386,7 +390,7 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
             rows_pos[a].push(v.pos_mm[a]);
             rows_dir[a].push(dir[a]);
         }
-        rows_t.push(round_to(t, 1e-3));
+        rows_t.push(round_dec(t, 3));
         rows_pass.push(*g as i64);
         rows_tool.push(match abbe_tools {
             Some(tools) => tools[*g % tools.len()],
@@ -416,7 +420,7 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
                     } else {
                         1.0
                     };
-                    round_to(start_c + rise_c * f, 1e-3)
+                    round_dec(start_c + rise_c * f, 3)
                 })
                 .collect();
             temps.push(TempChannel {
@@ -515,7 +519,7 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
             } else {
                 0.0
             };
-            col.push(Some(round_to(truth[i][r] + noise, 1e-4)));
+            col.push(Some(round_dec(truth[i][r] + noise, 4)));
         }
         *slot = Some(col);
     }

@@ -1,0 +1,201 @@
+//! End-to-end tests of `trueaxis import` on the contract CSV: every class of
+//! bad input in CONTRACT.md §1 exits 1 with `file:line:column` and what was
+//! expected; a good file keeps metadata, aux channels and says which rows
+//! were left out; writing and reading back gives the same data set.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+use trueaxis::import;
+
+fn data(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+fn trueaxis(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_trueaxis"))
+        .args(args)
+        .output()
+        .expect("run trueaxis")
+}
+
+/// Runs `import FILE --json`, expects exit 1 and a stderr message that
+/// starts with `<path>:<line>:<column>:` (or `<path>:<line>:` when `col` is
+/// None) and contains `expect`.
+fn fails_at(file: &str, line: usize, col: Option<usize>, expect: &str) {
+    let path = data(file);
+    let out = trueaxis(&["import", path.to_str().unwrap(), "--json"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{file}: stderr {stderr}");
+    assert!(out.stdout.is_empty(), "{file}: no JSON on failure");
+    let loc = match col {
+        Some(c) => format!("{}:{line}:{c}: ", path.display()),
+        None => format!("{}:{line}: ", path.display()),
+    };
+    assert!(
+        stderr.contains(&loc),
+        "{file}: expected `{loc}` in {stderr}"
+    );
+    assert!(
+        stderr.contains(expect),
+        "{file}: expected `{expect}` in {stderr}"
+    );
+}
+
+#[test]
+fn unknown_unit_suffix() {
+    fails_at(
+        "bad_unit.csv",
+        1,
+        Some(2),
+        "unknown unit suffix `_in`; expected `ex_um`",
+    );
+}
+
+#[test]
+fn non_numeric_cell() {
+    // Line 1 is metadata, 2 the header, 4 the bad row; column 2 is ex_um.
+    fails_at(
+        "bad_number.csv",
+        4,
+        Some(2),
+        "column `ex_um`: expected a number, found `abc`",
+    );
+}
+
+#[test]
+fn nan_and_inf() {
+    fails_at(
+        "bad_nan.csv",
+        4,
+        Some(2),
+        "expected a finite number, found `NaN`",
+    );
+    fails_at(
+        "bad_inf.csv",
+        3,
+        Some(2),
+        "expected a finite number, found `inf`",
+    );
+}
+
+#[test]
+fn dir_not_plus_minus_one() {
+    fails_at(
+        "bad_dir.csv",
+        3,
+        Some(3),
+        "column `dir_x`: expected -1 or +1, found `0`",
+    );
+}
+
+#[test]
+fn duplicate_columns() {
+    fails_at(
+        "dup_cols.csv",
+        1,
+        Some(3),
+        "duplicate column `x_mm` (first at column 1)",
+    );
+}
+
+#[test]
+fn no_error_column() {
+    fails_at(
+        "no_error.csv",
+        1,
+        None,
+        "no error column; expected at least one of ex_um, ey_um, ez_um",
+    );
+}
+
+#[test]
+fn no_position_column() {
+    fails_at("no_position.csv", 1, None, "no position column");
+}
+
+#[test]
+fn good_file_reports_rows_metadata_aux_and_skipped() {
+    let path = data("good.csv");
+    let out_csv = std::env::temp_dir().join(format!("trueaxis-import-{}.csv", std::process::id()));
+    let out = trueaxis(&[
+        "import",
+        path.to_str().unwrap(),
+        "-o",
+        out_csv.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON document");
+    assert_eq!(v["rows"], 3);
+    assert_eq!(
+        v["columns"],
+        serde_json::json!([
+            "x_mm", "y_mm", "ex_um", "ey_um", "t_s", "dir_x", "T_bed_C", "pass_id", "operator"
+        ])
+    );
+    assert_eq!(v["aux"], serde_json::json!(["operator"]));
+    assert_eq!(
+        v["metadata"][0],
+        serde_json::json!({"key": "machine", "value": "XHK-715"})
+    );
+    assert_eq!(v["skipped_count"], 3);
+    let skipped = &v["skipped"];
+    assert_eq!(
+        skipped[0],
+        serde_json::json!({"line": 6, "reason": "no error value on this row"})
+    );
+    assert_eq!(
+        skipped[1],
+        serde_json::json!({"line": 7, "reason": "comment line after the header"})
+    );
+    assert_eq!(
+        skipped[2],
+        serde_json::json!({"line": 8, "reason": "empty `T_bed_C` cell"})
+    );
+    assert_eq!(v["sha256"].as_str().map(str::len), Some(64));
+
+    // The written file reads back to the same data, aux cell with a comma
+    // and the empty ey cell included.
+    let a = import::load(&path).unwrap();
+    let b = import::load(&out_csv).unwrap();
+    assert_eq!(a.metadata, b.metadata);
+    assert_eq!(a.pos_mm, b.pos_mm);
+    assert_eq!(a.err_um, b.err_um);
+    assert_eq!(a.err_um[1].as_ref().unwrap()[1], None);
+    assert_eq!(a.aux, b.aux);
+    assert_eq!(a.aux[0].cells[0], "Lee, J.");
+    assert_eq!(a.temps, b.temps);
+    assert_eq!(a.content_hash(), b.content_hash());
+    assert_eq!(a.line, vec![4, 5, 9]);
+    let _ = std::fs::remove_file(out_csv);
+}
+
+#[test]
+fn read_csv_in_memory_and_bad_row_length() {
+    let ok = import::read_csv("x_mm,ex_um\n1,2\n".as_bytes(), "<mem>").unwrap();
+    assert_eq!(ok.len(), 1);
+    let e = import::read_csv("x_mm,ex_um\n1,2,3\n".as_bytes(), "<mem>").unwrap_err();
+    assert_eq!(
+        format!("{e}"),
+        "<mem>:2:3: expected 2 cells as in the header, found 3"
+    );
+    let e = import::read_csv("x_mm,ex_um\n,\n".as_bytes(), "<mem>").unwrap_err();
+    assert!(
+        format!("{e}").contains("no data rows after the header (1 rows left out)"),
+        "{e}"
+    );
+}
+
+#[test]
+fn usage_error_exits_2() {
+    let out = trueaxis(&["import"]);
+    assert_eq!(out.status.code(), Some(2));
+}

@@ -1,0 +1,121 @@
+//! Renishaw `.rtl` import: a hand-made file (CRLF, targets wrapped over two
+//! lines, backward runs in descending order) with known values, and broken
+//! files that must fail with the line number.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use trueaxis::import;
+
+fn data(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+#[test]
+fn hand_made_file_has_known_values() {
+    let path = data("iso_worked.rtl");
+    // The file really is CRLF (the .gitattributes keeps it so).
+    assert!(std::fs::read_to_string(&path).unwrap().contains("\r\n"));
+    let d = import::load(&path).unwrap();
+    assert_eq!(d.len(), 12);
+    assert_eq!(d.axes(), vec![0]);
+    assert_eq!(d.targets(), vec![0]);
+    let x = d.pos_mm[0].as_ref().unwrap();
+    let ex: Vec<f64> = d.err_um[0]
+        .as_ref()
+        .unwrap()
+        .iter()
+        .map(|v| v.unwrap())
+        .collect();
+    let dir = d.dir[0].as_ref().unwrap();
+    let pass = d.pass_id.as_ref().unwrap();
+    // Run 1 forward, run 2 backward (targets 3, 2, 1 → 200, 100, 0 mm).
+    assert_eq!(&x[..6], &[0.0, 100.0, 200.0, 200.0, 100.0, 0.0]);
+    assert_eq!(&ex[..6], &[1.0, 3.0, -1.0, -3.0, 2.0, -1.0]);
+    assert_eq!(&dir[..6], &[1, 1, 1, -1, -1, -1]);
+    assert_eq!(pass, &vec![1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4]);
+    // Source lines of the deviation rows (first at line 21).
+    assert_eq!(d.line[0], 21);
+    let meta = |k: &str| {
+        d.metadata
+            .iter()
+            .find(|(key, _)| key == k)
+            .map(|(_, v)| v.as_str())
+    };
+    assert_eq!(meta("Machine"), Some("VMC-1"));
+    assert_eq!(meta("Serial No"), Some("SN-42"));
+    assert_eq!(meta("Location"), Some("Bay 3"));
+    assert_eq!(meta("environment Air temp"), Some("20.1 C"));
+    assert_eq!(meta("equipment Laser"), Some("XL-80"));
+    assert_eq!(meta("axis"), Some("x"));
+}
+
+fn fails(file: &str, want: &str) {
+    let path = data(file);
+    let e = format!("{:#}", import::load(&path).unwrap_err());
+    let want = format!("{}:{want}", path.display());
+    assert!(e.contains(&want), "expected `{want}` in `{e}`");
+}
+
+#[test]
+fn broken_files_name_the_line() {
+    fails(
+        "bad_count.rtl",
+        "6: Target-count is 4 but `Targets :` lists 3 positions",
+    );
+    fails(
+        "bad_deviation.rtl",
+        "28:3: expected a finite deviation in µm, found `5,0x`",
+    );
+    fails(
+        "bad_order.rtl",
+        "25:2: run 2 is a backward run: expected targets in descending order, found 3 after 2",
+    );
+    fails("truncated.rtl", "30: expected `EOF::` (file truncated?)");
+    fails(
+        "bad_target.rtl",
+        "23:2: expected a target number 1..=3, found `7`",
+    );
+}
+
+#[test]
+fn cli_converts_rtl_to_contract_csv() {
+    let out_csv = std::env::temp_dir().join(format!("trueaxis-rtl-{}.csv", std::process::id()));
+    let out = Command::new(env!("CARGO_BIN_EXE_trueaxis"))
+        .args([
+            "import",
+            data("iso_worked.rtl").to_str().unwrap(),
+            "-o",
+            out_csv.to_str().unwrap(),
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["rows"], 12);
+    assert_eq!(
+        v["columns"],
+        serde_json::json!(["x_mm", "ex_um", "dir_x", "pass_id"])
+    );
+    assert_eq!(v["skipped_count"], 0);
+    let text = std::fs::read_to_string(&out_csv).unwrap();
+    assert!(
+        text.contains("x_mm,ex_um,dir_x,pass_id\n0,1,1,1\n100,3,1,1\n"),
+        "{text}"
+    );
+    // The contract CSV of the same values gives the same data.
+    let a = import::load(&out_csv).unwrap();
+    let b = import::load(&data("iso_worked.csv")).unwrap();
+    assert_eq!(a.pos_mm, b.pos_mm);
+    assert_eq!(a.err_um, b.err_um);
+    assert_eq!(a.dir, b.dir);
+    let _ = std::fs::remove_file(out_csv);
+}

@@ -1,0 +1,429 @@
+//! `simulate`: determinism (same seed → identical bytes, different seed →
+//! different), physics sanity (each effect alone on a perfect machine gives
+//! its formula), plan shapes (the seed's 17 × 11 × 11 grid, serpentine,
+//! ISO cycles, reference returns), noise level, and the CLI's JSON.
+
+// Rows are checked across several parallel columns; index loops read clearer.
+#![allow(clippy::needless_range_loop)]
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use trueaxis::data::Dataset;
+use trueaxis::import;
+use trueaxis::iso230;
+use trueaxis::simulate::{self, Effect, Machine, Plan, RefReturn, SimConfig};
+
+fn tmp(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("trueaxis-sim-{}-{name}", std::process::id()))
+}
+
+fn run(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_trueaxis"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// A perfect 800 × 500 × 500 machine, no noise, with `plans` and `effects`.
+fn perfect(plans: &[&str], effects: &[&str]) -> SimConfig {
+    let mut cfg = SimConfig::preset("perfect800").unwrap();
+    cfg.plans = plans.iter().map(|p| p.parse().unwrap()).collect();
+    cfg.effects = effects.iter().map(|e| e.parse().unwrap()).collect();
+    cfg.check().unwrap();
+    cfg
+}
+
+fn col(d: &Dataset, t: usize) -> Vec<f64> {
+    d.err_um[t]
+        .as_ref()
+        .unwrap()
+        .iter()
+        .map(|v| v.unwrap())
+        .collect()
+}
+
+/// Output is rounded to 0.1 nm.
+const RES: f64 = 0.5e-4 + 1e-12;
+
+#[test]
+fn same_seed_same_bytes_other_seed_other_bytes() {
+    let args = |seed: &str, out: &PathBuf| {
+        let o = run(&[
+            "simulate",
+            "--plan",
+            "grid:100",
+            "iso230:x",
+            "--effect",
+            "periodic:axis=y,period_mm=5.08,amp_um=3",
+            "--effect",
+            "thermal:channel=bed,rise_c=2,lag_s=600",
+            "--noise-um",
+            "0.3",
+            "--seed",
+            seed,
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(
+            o.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        std::fs::read(out).unwrap()
+    };
+    let (a, b, c) = (tmp("a.csv"), tmp("b.csv"), tmp("c.csv"));
+    let (ba, bb, bc) = (args("42", &a), args("42", &b), args("43", &c));
+    assert_eq!(ba, bb, "same seed, same bytes");
+    assert_ne!(ba, bc, "different seed, different noise");
+    for p in [a, b, c] {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
+#[test]
+fn written_file_reads_back_identically() {
+    let mut cfg = SimConfig::preset("mill800").unwrap();
+    cfg.plans = vec!["grid:100".parse().unwrap()];
+    cfg.effects = vec!["abbe:angle_urad=48.5,tools_mm=0/100".parse().unwrap()];
+    cfg.noise_um = 0.2;
+    let d = simulate::simulate(&cfg);
+    let mut buf = Vec::new();
+    import::write_csv(&d, &mut buf).unwrap();
+    let back = import::read_csv(buf.as_slice(), "mem").unwrap();
+    assert_eq!(back.pos_mm, d.pos_mm);
+    assert_eq!(back.err_um, d.err_um);
+    assert_eq!(back.t_s, d.t_s);
+    assert_eq!(back.dir, d.dir);
+    assert_eq!(back.tool_mm, d.tool_mm);
+    assert_eq!(back.pass_id, d.pass_id);
+    assert_eq!(back.metadata, d.metadata);
+    assert_eq!(back.content_hash(), d.content_hash());
+}
+
+#[test]
+fn seed_grid_is_17_by_11_by_11_serpentine() {
+    let d = simulate::simulate(&perfect(&["grid:50"], &[]));
+    assert_eq!(d.len(), 2057);
+    let pass = d.pass_id.as_ref().unwrap();
+    assert_eq!(*pass.last().unwrap(), 120, "one pass per x line: 11 × 11");
+    let x = d.pos_mm[0].as_ref().unwrap();
+    let dir_x = d.dir[0].as_ref().unwrap();
+    // First line forward, second line backward: serpentine.
+    assert_eq!(&x[..3], &[0.0, 50.0, 100.0]);
+    assert_eq!(&x[17..20], &[800.0, 750.0, 700.0]);
+    assert_eq!(dir_x[18], -1);
+    let t = d.t_s.as_ref().unwrap();
+    assert!(t.windows(2).all(|w| w[1] > w[0]), "time advances");
+}
+
+#[test]
+fn squareness_only_gives_minus_angle_times_position() {
+    let mut cfg = perfect(&["grid:100"], &[]);
+    cfg.machine = Machine::perfect([800.0, 500.0, 500.0]);
+    cfg.machine.squareness.xy_urad = 30.0;
+    cfg.machine.squareness.yz_urad = -20.0;
+    let d = simulate::simulate(&cfg);
+    let (ex, ey, ez) = (col(&d, 0), col(&d, 1), col(&d, 2));
+    for r in 0..d.len() {
+        let (y, z) = (d.pos(1, r), d.pos(2, r));
+        // ex = −S_xy·y, ey = −S_yz·z (µrad · mm · 1e-3 = µm).
+        assert!(
+            (ex[r] - (-30.0 * y * 1e-3)).abs() < RES,
+            "row {r}: {}",
+            ex[r]
+        );
+        assert!(
+            (ey[r] - (20.0 * z * 1e-3)).abs() < RES,
+            "row {r}: {}",
+            ey[r]
+        );
+        assert_eq!(ez[r], 0.0);
+    }
+    // And with the library's unrounded evaluation, exactly.
+    assert_eq!(
+        cfg.machine.error_um([100.0, 400.0, 0.0], 0.0)[0],
+        -30.0 * 400.0 * 1e-3
+    );
+}
+
+#[test]
+fn thermal_growth_is_cte_times_delta_t_times_position() {
+    let cfg = perfect(
+        &["line:x:50,runs=4"],
+        &["thermal:channel=bed,cte_um_per_m_k=11.5,start_c=20,rise_c=3,tau_s=120"],
+    );
+    let d = simulate::simulate(&cfg);
+    let temp = &d.temp("bed").expect("T_bed_C column").temp_c;
+    assert!(
+        temp[0] < 20.1 && *temp.last().unwrap() > 22.0,
+        "the sensor warms up"
+    );
+    let ex = col(&d, 0);
+    for r in 0..d.len() {
+        let want = 11.5 * (temp[r] - 20.0) * d.pos(0, r) * 1e-3;
+        assert!((ex[r] - want).abs() < RES, "row {r}: {} vs {want}", ex[r]);
+    }
+    // 800 mm at +3 K ≈ 27.6 µm: the realistic order of magnitude.
+    assert!(ex.iter().cloned().fold(0.0, f64::max) > 20.0);
+}
+
+#[test]
+fn thermal_lag_follows_features_lagged() {
+    let cfg = perfect(
+        &["line:x:50,runs=4"],
+        &["thermal:channel=bed,rise_c=3,tau_s=600,lag_s=900"],
+    );
+    let d = simulate::simulate(&cfg);
+    let temp = &d.temp("bed").unwrap().temp_c;
+    let lagged = trueaxis::features::lagged(temp, d.t_s.as_ref().unwrap(), None, 900.0);
+    let ex = col(&d, 0);
+    for r in 0..d.len() {
+        let want = 11.5 * (lagged[r] - 20.0) * d.pos(0, r) * 1e-3;
+        assert!((ex[r] - want).abs() < RES, "row {r}");
+    }
+    assert!(
+        lagged.last().unwrap() < temp.last().unwrap(),
+        "the structure lags the sensor"
+    );
+}
+
+#[test]
+fn periodic_error_has_the_given_period_and_amplitude() {
+    let d = simulate::simulate(&perfect(
+        &["line:y:0.5,x=400,z=250"],
+        &["periodic:axis=y,period_mm=5.08,amp_um=3"],
+    ));
+    assert_eq!(d.len(), 1001);
+    let ey = col(&d, 1);
+    for r in 0..d.len() {
+        let want = 3.0 * (std::f64::consts::TAU * d.pos(1, r) / 5.08).sin();
+        assert!((ey[r] - want).abs() < RES);
+    }
+    assert_eq!(col(&d, 0).iter().map(|v| v.abs()).fold(0.0, f64::max), 0.0);
+}
+
+#[test]
+fn reversal_shows_as_iso230_b() {
+    let d = simulate::simulate(&perfect(&["iso230:x"], &["reversal:axis=x,backlash_um=8"]));
+    assert_eq!(d.len(), 11 * 2 * 5, "11 targets, 5 bidirectional runs");
+    let r = iso230::evaluate(&d, 0).unwrap();
+    assert_eq!(r.targets, 11);
+    assert_eq!(r.runs, 5);
+    assert!(
+        (r.b_um - 8.0).abs() < 1e-9 && (r.b_mean_um - 8.0).abs() < 1e-9,
+        "{}",
+        r.b_um
+    );
+    assert!(r.r_up_um.abs() < 1e-9, "no noise, no repeatability spread");
+    // Irregular targets: not all gaps equal.
+    let p: Vec<f64> = r.per_target.iter().map(|t| t.pos_mm).collect();
+    let gaps: Vec<f64> = p.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(gaps.iter().any(|g| (g - gaps[0]).abs() > 1.0), "{gaps:?}");
+}
+
+#[test]
+fn abbe_and_drift() {
+    let d = simulate::simulate(&perfect(
+        &["line:x:100,runs=3"],
+        &[
+            "abbe:angle_urad=48.5,tools_mm=0/100/150,target=ey",
+            "drift:um_per_h=2,target=ez",
+        ],
+    ));
+    let tool = d.tool_mm.as_ref().expect("tool_mm column");
+    let pass = d.pass_id.as_ref().unwrap();
+    let (ey, ez) = (col(&d, 1), col(&d, 2));
+    let t = d.t_s.as_ref().unwrap();
+    for r in 0..d.len() {
+        assert_eq!(tool[r], [0.0, 100.0, 150.0][pass[r] as usize % 3]);
+        assert!((ey[r] - 48.5 * tool[r] * 1e-3).abs() < RES);
+        assert!((ez[r] - 2.0 * t[r] / 3600.0).abs() < RES);
+    }
+    assert!(ey.contains(&4.85), "48.5 µrad × 100 mm = 4.85 µm");
+}
+
+#[test]
+fn reference_returns_and_noise_level() {
+    let mut cfg = SimConfig::preset("mill800").unwrap();
+    cfg.plans = vec![Plan::Raster {
+        axes: vec![0, 1, 2],
+        step_mm: 50.0,
+        at_mm: [None; 3],
+        bidir: false,
+        runs: 1,
+    }];
+    cfg.noise_um = 0.5;
+    cfg.seed = 9;
+    cfg.reference = Some(RefReturn {
+        pos_mm: [0.0, 0.0, 0.0],
+        every_passes: 11,
+    });
+    cfg.check().unwrap();
+    let out = simulate::simulate_detailed(&cfg);
+    let d = &out.data;
+    // 121 lines, a reference visit before every 11th line (11) and at the end.
+    assert_eq!(d.len(), 2057 + 11 + 1);
+    let mut sum2 = 0.0;
+    let mut n = 0;
+    for t in 0..3 {
+        for (r, v) in col(d, t).iter().enumerate() {
+            sum2 += (v - out.truth_um[t][r]).powi(2);
+            n += 1;
+        }
+    }
+    let sigma = (sum2 / n as f64).sqrt();
+    assert!((sigma - 0.5).abs() < 0.03, "noise σ = {sigma}");
+}
+
+#[test]
+fn one_direction_reversal_is_flagged() {
+    let d = simulate::simulate(&perfect(
+        &["line:x:100"],
+        &["reversal:axis=x,backlash_um=5"],
+    ));
+    assert!(d
+        .metadata
+        .iter()
+        .any(|(k, v)| k == "warning" && v.contains("one direction")));
+}
+
+#[test]
+fn cli_json_shape_and_bad_specs() {
+    let out_csv = tmp("cli.csv");
+    let o = run(&[
+        "simulate",
+        "--plan",
+        "grid:50",
+        "--seed",
+        "3",
+        "-o",
+        out_csv.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["rows"], 2057);
+    assert_eq!(v["passes"], 121);
+    assert_eq!(v["preset"], "mill800");
+    assert_eq!(v["plans"], serde_json::json!(["grid:50"]));
+    assert_eq!(v["noise_um"], 0.2);
+    assert_eq!(
+        v["columns"],
+        serde_json::json!([
+            "x_mm", "y_mm", "z_mm", "ex_um", "ey_um", "ez_um", "t_s", "dir_x", "dir_y", "dir_z",
+            "pass_id"
+        ])
+    );
+    let d = import::load(&out_csv).unwrap();
+    assert_eq!(v["sha256"].as_str().unwrap(), d.content_hash());
+    let _ = std::fs::remove_file(&out_csv);
+
+    let bad = run(&[
+        "simulate",
+        "--plan",
+        "grid:50",
+        "--effect",
+        "periodic:axis=w,period_mm=5,amp_um=1",
+        "-o",
+        out_csv.to_str().unwrap(),
+    ]);
+    assert_eq!(bad.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("`axis=w`: expected x, y or z"));
+    let bad = run(&[
+        "simulate",
+        "--plan",
+        "line:y:1,x=900",
+        "-o",
+        out_csv.to_str().unwrap(),
+    ]);
+    assert_eq!(bad.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("outside the travel"));
+}
+
+#[test]
+fn effects_are_constructible_from_rust() {
+    let mut cfg = perfect(&["line:x:10"], &[]);
+    cfg.effects.push(Effect::Periodic {
+        target: 0,
+        axis: 0,
+        period_mm: 20.0,
+        amp_um: 1.0,
+        harmonics: 2,
+        phase_deg: 0.0,
+    });
+    let d = simulate::simulate(&cfg);
+    let ex = col(&d, 0);
+    // x = 5: sin(π/2) + ½·sin(π) = 1.
+    let want = |x: f64| {
+        let a = std::f64::consts::TAU * x / 20.0;
+        a.sin() + 0.5 * (2.0 * a).sin()
+    };
+    for r in 0..d.len() {
+        assert!((ex[r] - want(d.pos(0, r))).abs() < RES);
+    }
+    assert!(d
+        .metadata
+        .iter()
+        .any(|(k, v)| k == "effect" && v.starts_with("periodic:axis=x,period_mm=20")));
+}
+
+/// Residual RMS of the least-squares projection of `y` onto `cols`
+/// (modified Gram–Schmidt, twice for stability).
+fn residual_rms(cols: &[Vec<f64>], y: &[f64]) -> f64 {
+    let mut q: Vec<Vec<f64>> = Vec::new();
+    for c in cols {
+        let mut v = c.clone();
+        for _ in 0..2 {
+            for qk in &q {
+                let d: f64 = qk.iter().zip(&v).map(|(a, b)| a * b).sum();
+                v.iter_mut().zip(qk).for_each(|(vi, qi)| *vi -= d * qi);
+            }
+        }
+        let n = v.iter().map(|a| a * a).sum::<f64>().sqrt();
+        if n > 1e-9 {
+            q.push(v.into_iter().map(|a| a / n).collect());
+        }
+    }
+    let mut r = y.to_vec();
+    for qk in &q {
+        let d: f64 = qk.iter().zip(&r).map(|(a, b)| a * b).sum();
+        r.iter_mut().zip(qk).for_each(|(ri, qi)| *ri -= d * qi);
+    }
+    (r.iter().map(|a| a * a).sum::<f64>() / r.len() as f64).sqrt()
+}
+
+#[test]
+fn plain_preset_is_inside_cubic19_and_wavy_is_not() {
+    // The module doc promises: cubic translations and quadratic angles keep
+    // every component in the span of the seed's 19 terms, so the plain
+    // preset fits to the output rounding; the wavy preset does not.
+    let rms = |preset: &str| -> f64 {
+        let mut cfg = SimConfig::preset(preset).unwrap();
+        cfg.plans = vec!["grid:50".parse().unwrap()];
+        cfg.tool_mm = 120.0;
+        let d = simulate::simulate(&cfg);
+        let u = |a: usize, r: usize| d.pos(a, r) / cfg.machine.travel_mm[a];
+        let cols: Vec<Vec<f64>> = trueaxis::features::CUBIC19
+            .iter()
+            .map(|e| {
+                (0..d.len())
+                    .map(|r| (0..3).map(|a| u(a, r).powi(e[a] as i32)).product())
+                    .collect()
+            })
+            .collect();
+        (0..3)
+            .map(|t| residual_rms(&cols, &col(&d, t)))
+            .fold(0.0, f64::max)
+    };
+    let plain = rms("mill800");
+    assert!(plain < 1e-4, "mill800 cubic19 residual {plain} µm");
+    let wavy = rms("mill800-wavy");
+    assert!(wavy > 0.1, "mill800-wavy cubic19 residual {wavy} µm");
+}
