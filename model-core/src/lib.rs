@@ -2,7 +2,30 @@
 //! two sides must agree on bit for bit — model evaluation (f32 and fixed
 //! point, plus the f64 reference on the host), the binary table format and
 //! the link protocol. `no_std`, no allocation, no `unsafe`.
+//!
+//! - [`table`]: format v1, [`table::parse`] (zero-copy, fully validated).
+//! - [`eval`]: the prepared [`Model`] with `eval_f32` / `eval_fixed`,
+//!   [`Inputs`], [`Outputs`], [`Flags`], [`DirTracker`].
+//! - [`monomials`]: the named polynomial sets (`cubic19`, `kinematic`).
+//! - `spec` (feature `std`): [`TableSpec`] — the host's owned description,
+//!   `encode` and the f64 reference `eval_f64`.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![forbid(unsafe_code)]
 
+pub mod eval;
 pub mod link;
+pub mod math;
+pub mod monomials;
+#[cfg(feature = "std")]
+pub mod spec;
+pub mod table;
+
+pub use eval::{
+    DirTracker, Flags, Inputs, LargeModel, LoadError, Model, ModelCap, Outputs, MAX_TEMPS,
+};
+#[cfg(feature = "std")]
+pub use spec::{
+    EncodeError, GridAxisSpec, GridSpec, InputsF64, LayerSpec, MlpInputSpec, MlpSource, MlpSpec,
+    TableSpec, TermSpec,
+};
+pub use table::{parse, Envelope, InputScaling, Table, TableError, FORMAT_VERSION};

@@ -1,0 +1,1349 @@
+//! Evaluation of a prepared model: the RAM-resident [`Model`] the firmware
+//! runs every cycle, in f32 ([`ModelCap::eval_f32`]) and in integer-only fixed
+//! point ([`ModelCap::eval_fixed`], bit-exact between the host and
+//! thumbv7em because it is the same integer code), plus the per-axis
+//! reversal tracker [`DirTracker`].
+//!
+//! Why a prepared model: decoding little-endian f64 fields with bounds checks
+//! per coefficient would blow the MCU budget (~300 instructions for a 3-output
+//! cubic19 update), so [`ModelCap::load`] converts a validated table once into
+//! fixed-size arrays: a dense coefficient block over the graded monomial list
+//! (so the monomials are computed once per update and shared by the three
+//! outputs and by every thermal/Abbe polynomial), per-term parameters in
+//! parameter pools, and grid values in Q8 nm. Loading also does the
+//! fixed-point range analysis: every coefficient set gets its own binary
+//! scale q chosen so that Σ|c|·2^q < 2^31, which guarantees that the i64
+//! accumulations below cannot overflow for any input inside the envelope.
+//!
+//! Fixed-point formats: positions nm (i32); normalised positions and
+//! monomials Q30 (|u| ≤ 1 is guaranteed by the table validation); sin/cos,
+//! tanh and the reversal state Q30; corrections are accumulated in i64 Q16 nm
+//! and rounded to nm at the end.
+
+// Index loops over parallel fixed arrays mirror the equations (and keep the
+// hot loops' shape obvious in the disassembly); iterator chains would not help.
+#![allow(clippy::needless_range_loop)]
+
+use heapless::Vec;
+
+use crate::math::{sincos_q30, tanh_f32, tanh_q30, ONE_Q30, TANH_IN_FRAC};
+use crate::table::{
+    Envelope, Table, TermView, MAX_HIDDEN_LAYERS, MAX_HIDDEN_UNITS, MAX_MLP_INPUTS, MAX_MONOMIALS,
+};
+
+/// Temperature channels an input carries.
+pub const MAX_TEMPS: usize = 4;
+
+/// What the firmware feeds the model each cycle.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Inputs {
+    /// x, y, z machine position, nm (encoder counts × scale).
+    pub pos_nm: [i32; 3],
+    /// Reversal state per axis, Q1.30: −2^30 = fully after a negative move,
+    /// +2^30 fully after a positive one, 0 unknown / mid-transition.
+    pub rev_q30: [i32; 3],
+    /// Temperature channels, m°C, indexed as the table's channel list.
+    pub temp_mc: [i32; MAX_TEMPS],
+    /// Abbe arm (tool length / probe offset), nm.
+    pub tool_nm: i32,
+}
+
+/// Flags raised by one evaluation (a small hand-rolled bitset).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Flags(u16);
+
+impl Flags {
+    /// x was outside the travel and was held at the edge.
+    pub const OUT_OF_TRAVEL_X: Flags = Flags(1 << 0);
+    /// y was outside the travel and was held at the edge.
+    pub const OUT_OF_TRAVEL_Y: Flags = Flags(1 << 1);
+    /// z was outside the travel and was held at the edge.
+    pub const OUT_OF_TRAVEL_Z: Flags = Flags(1 << 2);
+    /// A correction was limited to the envelope's max |correction|.
+    pub const CLAMPED: Flags = Flags(1 << 3);
+    /// A temperature was outside its channel's range and was held at the edge.
+    pub const TEMP_OUT_OF_RANGE: Flags = Flags(1 << 4);
+    /// The f32 evaluation produced NaN/inf; that output was forced to 0.
+    pub const NOT_FINITE: Flags = Flags(1 << 5);
+    /// The tool arm was outside its range and was held at the edge.
+    pub const TOOL_OUT_OF_RANGE: Flags = Flags(1 << 6);
+
+    /// No flag.
+    pub const fn empty() -> Flags {
+        Flags(0)
+    }
+    /// The raw bits.
+    pub const fn bits(self) -> u16 {
+        self.0
+    }
+    /// From raw bits (unknown bits kept).
+    pub const fn from_bits(bits: u16) -> Flags {
+        Flags(bits)
+    }
+    /// Whether every bit of `other` is set.
+    pub const fn contains(self, other: Flags) -> bool {
+        self.0 & other.0 == other.0
+    }
+    /// Whether no bit is set.
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+    /// Set the bits of `other`.
+    pub fn insert(&mut self, other: Flags) {
+        self.0 |= other.0;
+    }
+    /// The out-of-travel flag of `axis`.
+    pub const fn out_of_travel(axis: usize) -> Flags {
+        Flags(1 << (axis & 3))
+    }
+}
+
+impl core::ops::BitOr for Flags {
+    type Output = Flags;
+    fn bitor(self, rhs: Flags) -> Flags {
+        Flags(self.0 | rhs.0)
+    }
+}
+
+/// The result of one evaluation.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Outputs {
+    /// Corrections for ex, ey, ez, nm (0 where the table has no such output).
+    pub corr_nm: [i32; 3],
+    /// What happened on the way.
+    pub flags: Flags,
+}
+
+/// Reversal state of one axis, integer-only.
+///
+/// The state moves linearly from −1 to +1 (Q30) over `transition_nm` of
+/// travel in the positive direction (and back over the same distance in the
+/// negative one), so a reversal term's correction ramps instead of stepping.
+/// The first update only records the position (state 0 = unknown).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DirTracker {
+    last_pos_nm: i32,
+    rev_q30: i32,
+    started: bool,
+}
+
+impl DirTracker {
+    /// A tracker in the unknown state.
+    pub const fn new() -> Self {
+        DirTracker {
+            last_pos_nm: 0,
+            rev_q30: 0,
+            started: false,
+        }
+    }
+    /// The current state, Q30.
+    pub fn rev_q30(&self) -> i32 {
+        self.rev_q30
+    }
+    /// Feed the new position; returns the reversal state in Q30.
+    /// `transition_nm` ≤ 0 means an immediate switch.
+    pub fn update(&mut self, pos_nm: i32, transition_nm: i32) -> i32 {
+        if !self.started {
+            self.started = true;
+            self.last_pos_nm = pos_nm;
+            return self.rev_q30;
+        }
+        let delta = pos_nm as i64 - self.last_pos_nm as i64;
+        self.last_pos_nm = pos_nm;
+        if delta == 0 {
+            return self.rev_q30;
+        }
+        let one = ONE_Q30 as i64;
+        let next = if transition_nm <= 0 {
+            if delta > 0 {
+                one
+            } else {
+                -one
+            }
+        } else {
+            let t = transition_nm as i64;
+            // A full swing (2.0 = 2^31 in Q30) per transition_nm; clamping the
+            // move first keeps the product inside i64.
+            let d = delta.clamp(-t, t);
+            self.rev_q30 as i64 + d * (1i64 << 31) / t
+        };
+        self.rev_q30 = next.clamp(-one, one) as i32;
+        self.rev_q30
+    }
+}
+
+/// Why a valid table cannot become a [`Model`] of this capacity.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LoadError {
+    /// More terms than [`MAX_TERMS`].
+    TooManyTerms { count: u32 },
+    /// The parameter pool (coefficients, weights) is too small.
+    ParamCapacity { needed: u32, capacity: u32 },
+    /// The grid value store is too small (use a larger-capacity alias such as [`LargeModel`]).
+    GridCapacity { needed: u32, capacity: u32 },
+    /// More MLP inputs in total than [`MAX_MLP_INPUTS_TOTAL`].
+    MlpInputCapacity,
+    /// A term's coefficients are too large for the fixed-point representation (Σ|c| ≥ 2^31 in its units).
+    CoefficientRange { term: u32 },
+    /// A grid value exceeds the Q8 nm range (±8.3 mm).
+    GridValueRange { term: u32 },
+    /// An MLP's input min-max maps the envelope beyond ±7 (the fixed-point input range).
+    MlpInputRange { term: u32 },
+}
+
+impl core::fmt::Display for LoadError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            Self::TooManyTerms { count } => {
+                write!(f, "{count} terms exceed the model capacity of {MAX_TERMS}")
+            }
+            Self::ParamCapacity { needed, capacity } => {
+                write!(f, "model needs {needed} parameters, capacity is {capacity}")
+            }
+            Self::GridCapacity { needed, capacity } => {
+                write!(
+                    f,
+                    "model needs {needed} grid values, capacity is {capacity}"
+                )
+            }
+            Self::MlpInputCapacity => write!(f, "too many MLP inputs in total"),
+            Self::CoefficientRange { term } => {
+                write!(f, "coefficients of term {term} too large for fixed point")
+            }
+            Self::GridValueRange { term } => write!(f, "grid value of term {term} exceeds ±8.3 mm"),
+            Self::MlpInputRange { term } => {
+                write!(
+                    f,
+                    "MLP term {term}: the envelope maps outside ±7 of the input scaling"
+                )
+            }
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for LoadError {}
+
+/// Most terms in a model.
+pub const MAX_TERMS: usize = 24;
+/// Most MLP inputs over all MLP terms of a model.
+pub const MAX_MLP_INPUTS_TOTAL: usize = 16;
+/// Parameter pool capacity of [`Model`].
+pub const DEFAULT_PARAMS: usize = 1536;
+/// Grid value capacity of [`Model`] (e.g. one 17×11×11 grid, or three 2-D grids).
+pub const DEFAULT_GRID: usize = 2048;
+/// Grid value capacity of [`LargeModel`] (three 17×11×11 grids = 6171 values).
+pub const LARGE_GRID: usize = 6400;
+
+/// The default model (about 26 KiB of RAM).
+pub type Model = ModelCap<DEFAULT_PARAMS, DEFAULT_GRID>;
+/// A model for full 3-axis grids on all outputs (about 43 KiB of RAM).
+pub type LargeModel = ModelCap<DEFAULT_PARAMS, LARGE_GRID>;
+
+// ---------------------------------------------------------------------------
+// Graded monomial ordering, built at compile time: 1; x, y, z; x², xy, xz,
+// y², yz, z²; … up to degree 5. Every monomial i ≥ 1 is its parent times one
+// normalised coordinate, so the whole vector costs one multiply per entry.
+
+const fn build_monos() -> (
+    [[u8; 3]; MAX_MONOMIALS],
+    [u8; MAX_MONOMIALS],
+    [u8; MAX_MONOMIALS],
+) {
+    let mut exps = [[0u8; 3]; MAX_MONOMIALS];
+    let mut parent = [0u8; MAX_MONOMIALS];
+    let mut axis = [0u8; MAX_MONOMIALS];
+    let mut n = 0;
+    let mut deg = 0u8;
+    while deg <= 5 {
+        let mut a = deg as i32;
+        while a >= 0 {
+            let mut b = deg as i32 - a;
+            while b >= 0 {
+                let c = deg as i32 - a - b;
+                exps[n] = [a as u8, b as u8, c as u8];
+                if n > 0 {
+                    let ax = if a > 0 {
+                        0
+                    } else if b > 0 {
+                        1
+                    } else {
+                        2
+                    };
+                    let mut p = exps[n];
+                    p[ax] -= 1;
+                    let mut j = 0;
+                    while j < n {
+                        if exps[j][0] == p[0] && exps[j][1] == p[1] && exps[j][2] == p[2] {
+                            parent[n] = j as u8;
+                        }
+                        j += 1;
+                    }
+                    axis[n] = ax as u8;
+                }
+                n += 1;
+                b -= 1;
+            }
+            a -= 1;
+        }
+        deg += 1;
+    }
+    (exps, parent, axis)
+}
+
+const MONOS: (
+    [[u8; 3]; MAX_MONOMIALS],
+    [u8; MAX_MONOMIALS],
+    [u8; MAX_MONOMIALS],
+) = build_monos();
+/// Exponents of the graded monomial list.
+pub const MONO_EXPS: [[u8; 3]; MAX_MONOMIALS] = MONOS.0;
+const MONO_PARENT: [u8; MAX_MONOMIALS] = MONOS.1;
+const MONO_AXIS: [u8; MAX_MONOMIALS] = MONOS.2;
+/// Number of monomials of total degree ≤ d, for d = 0..=5.
+const MONOS_UP_TO: [usize; 6] = [1, 4, 10, 20, 35, 56];
+
+/// Index of a monomial in the graded list.
+pub fn mono_index(m: [u8; 3]) -> Option<usize> {
+    MONO_EXPS.iter().position(|&e| e == m)
+}
+
+// ---------------------------------------------------------------------------
+// Load-time helpers (f64 arithmetic is fine here: building may be slow, and
+// IEEE basic operations give the same bits on the host and on the MCU's
+// soft-float, so a model loaded on either side is identical).
+
+fn pow2(q: i32) -> f64 {
+    f64::from_bits(((1023 + q) as u64) << 52)
+}
+
+fn round_i64(x: f64) -> i64 {
+    if x >= 0.0 {
+        (x + 0.5) as i64
+    } else {
+        (x - 0.5) as i64
+    }
+}
+
+const Q_MAX: i32 = 48;
+const SUM_LIMIT: f64 = 2_147_483_647.0;
+
+/// Largest q ≤ Q_MAX with sum_abs · 2^q ≤ 2^31 − 1, or None below `q_min`.
+fn choose_q(sum_abs: f64, q_min: i32) -> Option<i32> {
+    let mut q = Q_MAX;
+    while sum_abs * pow2(q) > SUM_LIMIT {
+        q -= 1;
+        if q < q_min {
+            return None;
+        }
+    }
+    Some(q)
+}
+
+fn to_q(c: f64, q: i32) -> i32 {
+    round_i64(c * pow2(q)).clamp(i32::MIN as i64, i32::MAX as i64) as i32
+}
+
+/// x ↦ round(x · factor · 2^frac) as (x·mul) >> shift, for |x| < 2^32.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Scale {
+    mul: i64,
+    shift: u32,
+}
+
+impl Scale {
+    fn new(factor: f64, frac: i32) -> Scale {
+        // Normalise mul into [2^29, 2^30) so that |x| < 2^32 keeps x·mul < 2^62.
+        let mut shift = 0i32;
+        let target = factor * pow2(frac);
+        while target * pow2(shift) < (1u64 << 29) as f64 && shift < 62 {
+            shift += 1;
+        }
+        Scale {
+            mul: round_i64(target * pow2(shift)),
+            shift: shift as u32,
+        }
+    }
+    #[inline(always)]
+    fn apply(self, x: i64) -> i64 {
+        rshr(x * self.mul, self.shift)
+    }
+}
+
+/// Rounding arithmetic shift right.
+#[inline(always)]
+fn rshr(x: i64, s: u32) -> i64 {
+    if s == 0 {
+        x
+    } else {
+        (x + (1i64 << (s - 1))) >> s
+    }
+}
+
+// ---------------------------------------------------------------------------
+// The prepared model.
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Factor {
+    Temp { ch: u8, t_ref_mc: i32 },
+    Tool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct GridAxis {
+    nodes: u16,
+    origin_nm: i32,
+    step_nm: i32,
+    inv_step_f32: f32,
+    t_scale: Scale,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct MlpInput {
+    src: u8,
+    mid: i32,
+    k_f32: f32,
+    k_q28: Scale,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Term {
+    /// factor × Σ c·monomial; pool [start, start+len) holds c (nm per factor unit) and the monomial indices.
+    Factored {
+        output: u8,
+        factor: Factor,
+        start: u16,
+        len: u16,
+        shift: u32,
+    },
+    /// Σ a_k sin + b_k cos; pool holds (a, b) pairs (f32 pre-scaled by 2^-30).
+    Periodic {
+        output: u8,
+        axis: u8,
+        harmonics: u8,
+        period_nm: i32,
+        turns: Scale,
+        start: u16,
+        shift: u32,
+    },
+    /// amplitude × rev.
+    Reversal {
+        output: u8,
+        axis: u8,
+        transition_nm: i32,
+        amp_f32: f32,
+        amp_q: i32,
+        shift: u32,
+    },
+    /// MLP: inputs in `mlp_in[in_start..]`, weights in the pool from `start`.
+    Mlp {
+        outputs: u8,
+        n_in: u8,
+        n_layers: u8,
+        widths: [u8; MAX_HIDDEN_LAYERS],
+        n_out: u8,
+        in_start: u8,
+        start: u16,
+        q: [u8; 3],
+    },
+    /// Grid on up to three axes, values (Q8 nm) in `grid[start..]`.
+    Grid {
+        output: u8,
+        axes: [GridAxis; 3],
+        start: u32,
+    },
+}
+
+/// A prepared, RAM-resident model with capacity `P` parameters and `G` grid
+/// values. Use the aliases [`Model`] and [`LargeModel`].
+#[derive(Clone, Debug)]
+pub struct ModelCap<const P: usize, const G: usize> {
+    env: Envelope,
+    outputs: u8,
+    n_channels: u8,
+    centre_nm: [i32; 3],
+    inv_half_f32: [f32; 3],
+    u_scale: [Scale; 3],
+    /// Number of graded monomials needed (0 = no polynomial at all).
+    n_monos: u8,
+    block_f32: [[f32; 3]; MAX_MONOMIALS],
+    block_q: [[i32; 3]; MAX_MONOMIALS],
+    block_shift: [u32; 3],
+    has_block: bool,
+    terms: Vec<Term, MAX_TERMS>,
+    pf: Vec<f32, P>,
+    pq: Vec<i32, P>,
+    pidx: Vec<u8, P>,
+    mlp_in: Vec<MlpInput, MAX_MLP_INPUTS_TOTAL>,
+    grid: Vec<i32, G>,
+}
+
+struct Pools<'m, const P: usize> {
+    pf: &'m mut Vec<f32, P>,
+    pq: &'m mut Vec<i32, P>,
+    pidx: &'m mut Vec<u8, P>,
+    needed: usize,
+}
+
+impl<const P: usize> Pools<'_, P> {
+    fn push(&mut self, f: f32, q: i32, idx: u8) {
+        self.needed += 1;
+        // Capacity is checked once at the end (so the error reports the total).
+        let _ = self.pf.push(f);
+        let _ = self.pq.push(q);
+        let _ = self.pidx.push(idx);
+    }
+}
+
+impl<const P: usize, const G: usize> ModelCap<P, G> {
+    /// Prepare a model from a validated table.
+    pub fn load(table: &Table<'_>) -> Result<Self, LoadError> {
+        let env = table.envelope();
+        let sc = table.scaling();
+        let mut m = ModelCap {
+            env,
+            outputs: table.outputs_mask(),
+            n_channels: table.channel_count() as u8,
+            centre_nm: sc.centre_nm,
+            inv_half_f32: [0.0; 3],
+            u_scale: [Scale::default(); 3],
+            n_monos: 0,
+            block_f32: [[0.0; 3]; MAX_MONOMIALS],
+            block_q: [[0; 3]; MAX_MONOMIALS],
+            block_shift: [0; 3],
+            has_block: false,
+            terms: Vec::new(),
+            pf: Vec::new(),
+            pq: Vec::new(),
+            pidx: Vec::new(),
+            mlp_in: Vec::new(),
+            grid: Vec::new(),
+        };
+        if table.term_count() > MAX_TERMS {
+            return Err(LoadError::TooManyTerms {
+                count: table.term_count() as u32,
+            });
+        }
+        for a in 0..3 {
+            let h = sc.half_span_nm[a] as f64;
+            m.inv_half_f32[a] = (1.0 / h) as f32;
+            m.u_scale[a] = Scale::new(1.0 / h, 30);
+        }
+        // Pass 1: the shared polynomial block (all plain polynomial terms) and
+        // the highest degree any polynomial needs.
+        let mut block = [[0.0f64; 3]; MAX_MONOMIALS];
+        let mut max_deg = 0usize;
+        let mut any_poly = false;
+        for t in table.terms() {
+            let coefs = match t.view() {
+                TermView::Poly { output, coefs } => {
+                    m.has_block = true;
+                    for (mono, c) in coefs.iter() {
+                        if let Some(i) = mono_index(mono) {
+                            block[i][output] += c;
+                        }
+                    }
+                    coefs
+                }
+                TermView::Thermal { coefs, .. } | TermView::Abbe { coefs, .. } => coefs,
+                _ => continue,
+            };
+            any_poly = true;
+            for (mono, _) in coefs.iter() {
+                max_deg = max_deg.max(mono.iter().map(|&e| e as usize).sum());
+            }
+        }
+        if any_poly {
+            m.n_monos = MONOS_UP_TO[max_deg.min(5)] as u8;
+        }
+        for o in 0..3 {
+            let sum: f64 = block.iter().map(|r| r[o].abs()).sum();
+            let q = choose_q(sum, 0).ok_or(LoadError::CoefficientRange { term: 0 })?;
+            m.block_shift[o] = (q + 14) as u32;
+            for i in 0..MAX_MONOMIALS {
+                m.block_f32[i][o] = block[i][o] as f32;
+                m.block_q[i][o] = to_q(block[i][o], q);
+            }
+        }
+        // Pass 2: the other terms.
+        let mut pools = Pools {
+            pf: &mut m.pf,
+            pq: &mut m.pq,
+            pidx: &mut m.pidx,
+            needed: 0,
+        };
+        let mut grid_needed = 0usize;
+        for (ti, t) in table.terms().enumerate() {
+            let range_err = LoadError::CoefficientRange { term: ti as u32 };
+            let start = pools.needed.min(u16::MAX as usize) as u16;
+            let term = match t.view() {
+                TermView::Poly { .. } => continue,
+                TermView::Thermal {
+                    output,
+                    channel,
+                    t_ref_mc,
+                    coefs,
+                } => {
+                    // Coefficients per m°C, so the factor is the integer ΔT in m°C.
+                    let sum: f64 = coefs.iter().map(|(_, c)| (c / 1000.0).abs()).sum();
+                    let q = choose_q(sum, 16).ok_or(range_err)?;
+                    for (mono, c) in coefs.iter() {
+                        let idx = mono_index(mono).unwrap_or(0) as u8;
+                        pools.push((c / 1000.0) as f32, to_q(c / 1000.0, q), idx);
+                    }
+                    Term::Factored {
+                        output: output as u8,
+                        factor: Factor::Temp {
+                            ch: channel as u8,
+                            t_ref_mc,
+                        },
+                        start,
+                        len: coefs.len() as u16,
+                        shift: (q - 16) as u32,
+                    }
+                }
+                TermView::Abbe { output, coefs } => {
+                    let sum: f64 = coefs.iter().map(|(_, c)| c.abs()).sum();
+                    let q = choose_q(sum, 16).ok_or(range_err)?;
+                    for (mono, c) in coefs.iter() {
+                        let idx = mono_index(mono).unwrap_or(0) as u8;
+                        pools.push(c as f32, to_q(c, q), idx);
+                    }
+                    Term::Factored {
+                        output: output as u8,
+                        factor: Factor::Tool,
+                        start,
+                        len: coefs.len() as u16,
+                        shift: (q - 16) as u32,
+                    }
+                }
+                TermView::Periodic {
+                    output,
+                    axis,
+                    period_nm,
+                    harmonics,
+                    ..
+                } => {
+                    let view = t.view();
+                    let mut sum = 0.0;
+                    for k in 1..=harmonics {
+                        let (a, b) = view.harmonic(k);
+                        sum += a.abs() + b.abs();
+                    }
+                    let q = choose_q(sum, 0).ok_or(range_err)?;
+                    let s30 = pow2(-30);
+                    for k in 1..=harmonics {
+                        let (a, b) = view.harmonic(k);
+                        pools.push((a * s30) as f32, to_q(a, q), 0);
+                        pools.push((b * s30) as f32, to_q(b, q), 0);
+                    }
+                    Term::Periodic {
+                        output: output as u8,
+                        axis: axis as u8,
+                        harmonics: harmonics as u8,
+                        period_nm,
+                        turns: Scale::new(1.0 / period_nm as f64, 32),
+                        start,
+                        shift: (q + 14) as u32,
+                    }
+                }
+                TermView::Reversal {
+                    output,
+                    axis,
+                    transition_nm,
+                    amplitude_nm,
+                } => {
+                    let q = choose_q(amplitude_nm.abs(), 0).ok_or(range_err)?;
+                    Term::Reversal {
+                        output: output as u8,
+                        axis: axis as u8,
+                        transition_nm,
+                        amp_f32: (amplitude_nm * pow2(-30)) as f32,
+                        amp_q: to_q(amplitude_nm, q),
+                        shift: (q + 14) as u32,
+                    }
+                }
+                TermView::Grid { output, grid } => {
+                    let mut axes = [GridAxis {
+                        nodes: 1,
+                        origin_nm: 0,
+                        step_nm: 1,
+                        inv_step_f32: 1.0,
+                        t_scale: Scale::default(),
+                    }; 3];
+                    for (a, ax) in axes.iter_mut().enumerate() {
+                        let g = grid.axis(a);
+                        *ax = GridAxis {
+                            nodes: g.nodes,
+                            origin_nm: g.origin_nm,
+                            step_nm: g.step_nm,
+                            inv_step_f32: (1.0 / g.step_nm as f64) as f32,
+                            t_scale: Scale::new(1.0 / g.step_nm as f64, 30),
+                        };
+                    }
+                    let gstart = grid_needed as u32;
+                    grid_needed += grid.len();
+                    for i in 0..grid.len() {
+                        let v = grid.value(i) * 256.0;
+                        if v.abs() > i32::MAX as f64 / 2.0 {
+                            return Err(LoadError::GridValueRange { term: ti as u32 });
+                        }
+                        let _ = m.grid.push(round_i64(v) as i32);
+                    }
+                    Term::Grid {
+                        output: output as u8,
+                        axes,
+                        start: gstart,
+                    }
+                }
+                TermView::Mlp { outputs, net } => {
+                    let shape = net.shape();
+                    let in_start = m.mlp_in.len();
+                    if in_start + shape.n_in > MAX_MLP_INPUTS_TOTAL {
+                        return Err(LoadError::MlpInputCapacity);
+                    }
+                    // Inputs: x_s = (v − mid)·k + e with an integer mid; e is
+                    // folded into the first layer's biases below.
+                    let mut e = [0.0f64; MAX_MLP_INPUTS];
+                    for i in 0..shape.n_in {
+                        let inp = net.input(i);
+                        let mid_true = (inp.min + inp.max) / 2.0;
+                        let mid =
+                            round_i64(mid_true).clamp(i32::MIN as i64, i32::MAX as i64) as i32;
+                        let k = 2.0 / (inp.max - inp.min);
+                        e[i] = (mid as f64 - mid_true) * k;
+                        // Range of the scaled input over the envelope.
+                        let (lo, hi) = match inp.source {
+                            s @ 0..=2 => {
+                                (env.travel_min_nm[s as usize], env.travel_max_nm[s as usize])
+                            }
+                            s => {
+                                let ch = (s - 3) as usize;
+                                (env.temp_min_mc[ch], env.temp_max_mc[ch])
+                            }
+                        };
+                        let xs_lo = (lo as f64 - mid as f64) * k;
+                        let xs_hi = (hi as f64 - mid as f64) * k;
+                        if xs_lo.abs() > 7.0 || xs_hi.abs() > 7.0 {
+                            return Err(LoadError::MlpInputRange { term: ti as u32 });
+                        }
+                        let _ = m.mlp_in.push(MlpInput {
+                            src: inp.source,
+                            mid,
+                            k_f32: k as f32,
+                            k_q28: Scale::new(k, 28),
+                        });
+                    }
+                    let mut qs = [0u8; 3];
+                    let mut prev = shape.n_in;
+                    let mut k = 0usize;
+                    let n_layers = shape.n_layers;
+                    for layer in 0..=n_layers {
+                        let is_out = layer == n_layers;
+                        let width = if is_out {
+                            shape.n_out
+                        } else {
+                            shape.hidden[layer]
+                        };
+                        let w_at = |k0: usize, j: usize, l: usize| net.param(k0 + j * prev + l);
+                        let b_at = |k0: usize, j: usize| net.param(k0 + width * prev + j);
+                        // Effective (folded) weights and biases.
+                        let eff = |j: usize, l: Option<usize>| -> f64 {
+                            let (s, off) = if is_out {
+                                let (lo, hi) = net.output_range(j);
+                                ((hi - lo) / 2.0, (hi + lo) / 2.0)
+                            } else {
+                                (1.0, 0.0)
+                            };
+                            match l {
+                                Some(l) => w_at(k, j, l) * s,
+                                None => {
+                                    let mut b = b_at(k, j);
+                                    if layer == 0 {
+                                        for (l, el) in e.iter().enumerate().take(prev) {
+                                            b += w_at(k, j, l) * el;
+                                        }
+                                    }
+                                    b * s + off
+                                }
+                            }
+                        };
+                        let mut worst = 0.0f64;
+                        for j in 0..width {
+                            let mut s = eff(j, None).abs();
+                            for l in 0..prev {
+                                s += eff(j, Some(l)).abs();
+                            }
+                            worst = worst.max(s);
+                        }
+                        let q = choose_q(worst, 0).ok_or(range_err)?;
+                        qs[layer.min(2)] = q as u8;
+                        for j in 0..width {
+                            for l in 0..prev {
+                                let w = eff(j, Some(l));
+                                pools.push(w as f32, to_q(w, q), 0);
+                            }
+                        }
+                        for j in 0..width {
+                            let b = eff(j, None);
+                            pools.push(b as f32, to_q(b, q), 0);
+                        }
+                        k += width * prev + width;
+                        prev = width;
+                    }
+                    let mut widths = [0u8; MAX_HIDDEN_LAYERS];
+                    for (i, w) in widths.iter_mut().enumerate() {
+                        *w = shape.hidden[i] as u8;
+                    }
+                    // Output layer q goes last so the evaluators find it at index n_layers.
+                    if n_layers == 1 {
+                        qs[2] = qs[1];
+                    }
+                    Term::Mlp {
+                        outputs,
+                        n_in: shape.n_in as u8,
+                        n_layers: n_layers as u8,
+                        widths,
+                        n_out: shape.n_out as u8,
+                        in_start: in_start as u8,
+                        start,
+                        q: qs,
+                    }
+                }
+            };
+            let _ = m.terms.push(term);
+        }
+        if pools.needed > P || pools.needed > u16::MAX as usize {
+            return Err(LoadError::ParamCapacity {
+                needed: pools.needed as u32,
+                capacity: P as u32,
+            });
+        }
+        if grid_needed > G {
+            return Err(LoadError::GridCapacity {
+                needed: grid_needed as u32,
+                capacity: G as u32,
+            });
+        }
+        Ok(m)
+    }
+
+    /// The table's envelope (travel, max |correction|, slew limit for the engine).
+    pub fn envelope(&self) -> &Envelope {
+        &self.env
+    }
+
+    /// Outputs present: bit 0 ex, 1 ey, 2 ez.
+    pub fn outputs_mask(&self) -> u8 {
+        self.outputs
+    }
+
+    /// The transition length of the first reversal term on `axis`, for the
+    /// firmware's [`DirTracker`] (None if no reversal term uses that axis).
+    pub fn reversal_transition_nm(&self, axis: usize) -> Option<i32> {
+        self.terms.iter().find_map(|t| match *t {
+            Term::Reversal {
+                axis: a,
+                transition_nm,
+                ..
+            } if a as usize == axis => Some(transition_nm),
+            _ => None,
+        })
+    }
+
+    /// Clamp the inputs to the envelope, raising flags.
+    #[inline(always)]
+    fn clamp_inputs(
+        &self,
+        inp: &Inputs,
+        flags: &mut Flags,
+    ) -> ([i32; 3], [i32; 3], [i32; MAX_TEMPS], i32) {
+        let mut pos = inp.pos_nm;
+        for (a, p) in pos.iter_mut().enumerate() {
+            let (lo, hi) = (self.env.travel_min_nm[a], self.env.travel_max_nm[a]);
+            if *p < lo || *p > hi {
+                *p = (*p).clamp(lo, hi);
+                flags.insert(Flags::out_of_travel(a));
+            }
+        }
+        let mut temp = inp.temp_mc;
+        for (ch, t) in temp.iter_mut().enumerate().take(self.n_channels as usize) {
+            let (lo, hi) = (self.env.temp_min_mc[ch], self.env.temp_max_mc[ch]);
+            if *t < lo || *t > hi {
+                *t = (*t).clamp(lo, hi);
+                flags.insert(Flags::TEMP_OUT_OF_RANGE);
+            }
+        }
+        let mut tool = inp.tool_nm;
+        if tool < self.env.tool_min_nm || tool > self.env.tool_max_nm {
+            tool = tool.clamp(self.env.tool_min_nm, self.env.tool_max_nm);
+            flags.insert(Flags::TOOL_OUT_OF_RANGE);
+        }
+        let mut rev = inp.rev_q30;
+        for r in rev.iter_mut() {
+            *r = (*r).clamp(-ONE_Q30, ONE_Q30);
+        }
+        (pos, rev, temp, tool)
+    }
+
+    /// Evaluate in f32 (the fast path on the Cortex-M4F).
+    pub fn eval_f32(&self, inp: &Inputs) -> Outputs {
+        let mut flags = Flags::empty();
+        let (pos, rev, temp, tool) = self.clamp_inputs(inp, &mut flags);
+        let mut out = [0.0f32; 3];
+        let n = self.n_monos as usize;
+        let mut mv = [0.0f32; MAX_MONOMIALS];
+        if n > 0 {
+            // |p − c| ≤ half-span < 2^31 (validated), so the wrapping i32
+            // difference is exact.
+            let u = [
+                pos[0].wrapping_sub(self.centre_nm[0]) as f32 * self.inv_half_f32[0],
+                pos[1].wrapping_sub(self.centre_nm[1]) as f32 * self.inv_half_f32[1],
+                pos[2].wrapping_sub(self.centre_nm[2]) as f32 * self.inv_half_f32[2],
+            ];
+            mv[0] = 1.0;
+            for i in 1..n {
+                mv[i] = mv[MONO_PARENT[i] as usize] * u[MONO_AXIS[i] as usize];
+            }
+            if self.has_block {
+                let (mut a0, mut a1, mut a2) = (0.0f32, 0.0f32, 0.0f32);
+                for (m, c) in mv[..n].iter().zip(self.block_f32[..n].iter()) {
+                    a0 += c[0] * m;
+                    a1 += c[1] * m;
+                    a2 += c[2] * m;
+                }
+                out = [a0, a1, a2];
+            }
+        }
+        for t in self.terms.iter() {
+            match *t {
+                Term::Factored {
+                    output,
+                    factor,
+                    start,
+                    len,
+                    ..
+                } => {
+                    let (s, e) = (start as usize, start as usize + len as usize);
+                    let mut v = 0.0f32;
+                    for (c, &i) in self.pf[s..e].iter().zip(self.pidx[s..e].iter()) {
+                        v += c * mv[i as usize];
+                    }
+                    let f = match factor {
+                        Factor::Temp { ch, t_ref_mc } => {
+                            temp[ch as usize & 3].wrapping_sub(t_ref_mc) as f32
+                        }
+                        Factor::Tool => tool as f32,
+                    };
+                    out[output as usize % 3] += v * f;
+                }
+                Term::Periodic {
+                    output,
+                    axis,
+                    harmonics,
+                    period_nm,
+                    turns,
+                    start,
+                    ..
+                } => {
+                    let theta = phase_turns(pos[axis as usize], period_nm, turns);
+                    let mut v = 0.0f32;
+                    let s = start as usize;
+                    for k in 0..harmonics as usize {
+                        let (sn, cs) = sincos_q30(theta.wrapping_mul(k as u32 + 1));
+                        v += self.pf[s + 2 * k] * sn as f32 + self.pf[s + 2 * k + 1] * cs as f32;
+                    }
+                    out[output as usize % 3] += v;
+                }
+                Term::Reversal {
+                    output,
+                    axis,
+                    amp_f32,
+                    ..
+                } => {
+                    out[output as usize % 3] += amp_f32 * rev[axis as usize % 3] as f32;
+                }
+                Term::Grid {
+                    output,
+                    ref axes,
+                    start,
+                } => {
+                    out[output as usize % 3] += self.grid_f32(axes, start as usize, &pos);
+                }
+                Term::Mlp {
+                    outputs,
+                    n_in,
+                    n_layers,
+                    widths,
+                    n_out,
+                    in_start,
+                    start,
+                    ..
+                } => {
+                    let mut x = [0.0f32; MAX_HIDDEN_UNITS];
+                    for i in 0..n_in as usize {
+                        let mi = self.mlp_in[in_start as usize + i];
+                        let v = mlp_source(mi.src, &pos, &temp);
+                        x[i] = (v as i64 - mi.mid as i64) as f32 * mi.k_f32;
+                    }
+                    let mut prev = n_in as usize;
+                    let mut k = start as usize;
+                    for layer in 0..=n_layers as usize {
+                        let is_out = layer == n_layers as usize;
+                        let width = if is_out {
+                            n_out as usize
+                        } else {
+                            widths[layer] as usize
+                        };
+                        let w = &self.pf[k..k + width * prev];
+                        let b = &self.pf[k + width * prev..k + width * prev + width];
+                        let mut y = [0.0f32; MAX_HIDDEN_UNITS];
+                        for j in 0..width {
+                            let mut z = b[j];
+                            for (wl, xl) in w[j * prev..(j + 1) * prev].iter().zip(x.iter()) {
+                                z += wl * xl;
+                            }
+                            y[j] = if is_out { z } else { tanh_f32(z) };
+                        }
+                        k += width * prev + width;
+                        prev = width;
+                        x = y;
+                    }
+                    let mut j = 0;
+                    for o in 0..3 {
+                        if outputs & (1 << o) != 0 {
+                            out[o] += x[j];
+                            j += 1;
+                        }
+                    }
+                }
+            }
+        }
+        let mut corr = [0i32; 3];
+        for o in 0..3 {
+            if self.outputs & (1 << o) == 0 {
+                continue;
+            }
+            let v = out[o];
+            if !v.is_finite() {
+                flags.insert(Flags::NOT_FINITE);
+                continue;
+            }
+            let max = self.env.max_corr_nm[o] as f32;
+            let c = if v > max {
+                flags.insert(Flags::CLAMPED);
+                max
+            } else if v < -max {
+                flags.insert(Flags::CLAMPED);
+                -max
+            } else {
+                v
+            };
+            // Round half away from zero; `as` saturates.
+            corr[o] = if c >= 0.0 {
+                (c + 0.5) as i32
+            } else {
+                (c - 0.5) as i32
+            };
+            corr[o] = corr[o].clamp(-self.env.max_corr_nm[o], self.env.max_corr_nm[o]);
+        }
+        Outputs {
+            corr_nm: corr,
+            flags,
+        }
+    }
+
+    fn grid_f32(&self, axes: &[GridAxis; 3], start: usize, pos: &[i32; 3]) -> f32 {
+        let mut idx = [0usize; 3];
+        let mut nxt = [0usize; 3];
+        let mut t = [0.0f32; 3];
+        for a in 0..3 {
+            let (i, frac) = grid_cell(&axes[a], pos[a]);
+            idx[a] = i;
+            nxt[a] = if (i + 1) < axes[a].nodes as usize {
+                i + 1
+            } else {
+                i
+            };
+            t[a] = frac as f32 * axes[a].inv_step_f32;
+        }
+        let nx = axes[0].nodes as usize;
+        let nxy = nx * axes[1].nodes as usize;
+        let g = |x: usize, y: usize, z: usize| {
+            self.grid
+                .get(start + x + nx * y + nxy * z)
+                .copied()
+                .unwrap_or(0) as f32
+        };
+        let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+        let c00 = lerp(g(idx[0], idx[1], idx[2]), g(nxt[0], idx[1], idx[2]), t[0]);
+        let c10 = lerp(g(idx[0], nxt[1], idx[2]), g(nxt[0], nxt[1], idx[2]), t[0]);
+        let c01 = lerp(g(idx[0], idx[1], nxt[2]), g(nxt[0], idx[1], nxt[2]), t[0]);
+        let c11 = lerp(g(idx[0], nxt[1], nxt[2]), g(nxt[0], nxt[1], nxt[2]), t[0]);
+        let c0 = lerp(c00, c10, t[1]);
+        let c1 = lerp(c01, c11, t[1]);
+        lerp(c0, c1, t[2]) * (1.0 / 256.0)
+    }
+
+    fn grid_fixed(&self, axes: &[GridAxis; 3], start: usize, pos: &[i32; 3]) -> i64 {
+        let mut idx = [0usize; 3];
+        let mut nxt = [0usize; 3];
+        let mut t = [0i64; 3];
+        for a in 0..3 {
+            let (i, frac) = grid_cell(&axes[a], pos[a]);
+            idx[a] = i;
+            nxt[a] = if (i + 1) < axes[a].nodes as usize {
+                i + 1
+            } else {
+                i
+            };
+            t[a] = axes[a].t_scale.apply(frac as i64);
+        }
+        let nx = axes[0].nodes as usize;
+        let nxy = nx * axes[1].nodes as usize;
+        // Values in Q8 nm; widen to Q16 before interpolating to keep precision.
+        let g = |x: usize, y: usize, z: usize| {
+            (self
+                .grid
+                .get(start + x + nx * y + nxy * z)
+                .copied()
+                .unwrap_or(0) as i64)
+                << 8
+        };
+        let lerp = |a: i64, b: i64, t: i64| a + rshr((b - a) * t, 30);
+        let c00 = lerp(g(idx[0], idx[1], idx[2]), g(nxt[0], idx[1], idx[2]), t[0]);
+        let c10 = lerp(g(idx[0], nxt[1], idx[2]), g(nxt[0], nxt[1], idx[2]), t[0]);
+        let c01 = lerp(g(idx[0], idx[1], nxt[2]), g(nxt[0], idx[1], nxt[2]), t[0]);
+        let c11 = lerp(g(idx[0], nxt[1], nxt[2]), g(nxt[0], nxt[1], nxt[2]), t[0]);
+        let c0 = lerp(c00, c10, t[1]);
+        let c1 = lerp(c01, c11, t[1]);
+        lerp(c0, c1, t[2])
+    }
+
+    /// Evaluate in integer-only fixed point (bit-exact on every target).
+    pub fn eval_fixed(&self, inp: &Inputs) -> Outputs {
+        let mut flags = Flags::empty();
+        let (pos, rev, temp, tool) = self.clamp_inputs(inp, &mut flags);
+        let mut out = [0i64; 3]; // Q16 nm
+        let n = self.n_monos as usize;
+        let mut mv = [0i32; MAX_MONOMIALS];
+        if n > 0 {
+            let u = [
+                self.u_scale[0].apply(pos[0].wrapping_sub(self.centre_nm[0]) as i64),
+                self.u_scale[1].apply(pos[1].wrapping_sub(self.centre_nm[1]) as i64),
+                self.u_scale[2].apply(pos[2].wrapping_sub(self.centre_nm[2]) as i64),
+            ];
+            mv[0] = ONE_Q30;
+            for i in 1..n {
+                mv[i] = rshr(
+                    mv[MONO_PARENT[i] as usize] as i64 * u[MONO_AXIS[i] as usize],
+                    30,
+                ) as i32;
+            }
+            if self.has_block {
+                let (mut a0, mut a1, mut a2) = (0i64, 0i64, 0i64);
+                for (&m, c) in mv[..n].iter().zip(self.block_q[..n].iter()) {
+                    a0 += c[0] as i64 * m as i64;
+                    a1 += c[1] as i64 * m as i64;
+                    a2 += c[2] as i64 * m as i64;
+                }
+                out = [
+                    rshr(a0, self.block_shift[0]),
+                    rshr(a1, self.block_shift[1]),
+                    rshr(a2, self.block_shift[2]),
+                ];
+            }
+        }
+        for t in self.terms.iter() {
+            match *t {
+                Term::Factored {
+                    output,
+                    factor,
+                    start,
+                    len,
+                    shift,
+                } => {
+                    let (s, e) = (start as usize, start as usize + len as usize);
+                    let mut v = 0i64;
+                    for (&c, &i) in self.pq[s..e].iter().zip(self.pidx[s..e].iter()) {
+                        v += c as i64 * mv[i as usize] as i64;
+                    }
+                    let f = match factor {
+                        Factor::Temp { ch, t_ref_mc } => {
+                            temp[ch as usize & 3] as i64 - t_ref_mc as i64
+                        }
+                        Factor::Tool => tool as i64,
+                    };
+                    let o = output as usize % 3;
+                    out[o] = out[o].saturating_add(rshr(rshr(v, 30) * f, shift));
+                }
+                Term::Periodic {
+                    output,
+                    axis,
+                    harmonics,
+                    period_nm,
+                    turns,
+                    start,
+                    shift,
+                } => {
+                    let theta = phase_turns(pos[axis as usize], period_nm, turns);
+                    let mut v = 0i64;
+                    let s = start as usize;
+                    for k in 0..harmonics as usize {
+                        let (sn, cs) = sincos_q30(theta.wrapping_mul(k as u32 + 1));
+                        v += self.pq[s + 2 * k] as i64 * sn as i64
+                            + self.pq[s + 2 * k + 1] as i64 * cs as i64;
+                    }
+                    let o = output as usize % 3;
+                    out[o] = out[o].saturating_add(rshr(v, shift));
+                }
+                Term::Reversal {
+                    output,
+                    axis,
+                    amp_q,
+                    shift,
+                    ..
+                } => {
+                    let o = output as usize % 3;
+                    out[o] = out[o]
+                        .saturating_add(rshr(amp_q as i64 * rev[axis as usize % 3] as i64, shift));
+                }
+                Term::Grid {
+                    output,
+                    ref axes,
+                    start,
+                } => {
+                    let o = output as usize % 3;
+                    out[o] = out[o].saturating_add(self.grid_fixed(axes, start as usize, &pos));
+                }
+                Term::Mlp {
+                    outputs,
+                    n_in,
+                    n_layers,
+                    widths,
+                    n_out,
+                    in_start,
+                    start,
+                    q,
+                } => {
+                    // Layer-1 inputs in Q28 (|x| ≤ 7 checked at load), later ones Q30.
+                    let mut x = [0i32; MAX_HIDDEN_UNITS];
+                    for i in 0..n_in as usize {
+                        let mi = self.mlp_in[in_start as usize + i];
+                        let v = mlp_source(mi.src, &pos, &temp);
+                        x[i] = mi
+                            .k_q28
+                            .apply(v as i64 - mi.mid as i64)
+                            .clamp(i32::MIN as i64, i32::MAX as i64)
+                            as i32;
+                    }
+                    let mut in_frac = 28u32;
+                    let mut prev = n_in as usize;
+                    let mut k = start as usize;
+                    let mut res = [0i64; 3];
+                    for layer in 0..=n_layers as usize {
+                        let is_out = layer == n_layers as usize;
+                        let width = if is_out {
+                            n_out as usize
+                        } else {
+                            widths[layer] as usize
+                        };
+                        let ql = if is_out { q[2] } else { q[layer] } as u32;
+                        let w = &self.pq[k..k + width * prev];
+                        let b = &self.pq[k + width * prev..k + width * prev + width];
+                        let mut y = [0i32; MAX_HIDDEN_UNITS];
+                        for j in 0..width {
+                            let mut z = (b[j] as i64) << in_frac;
+                            for (&wl, &xl) in w[j * prev..(j + 1) * prev].iter().zip(x.iter()) {
+                                z += wl as i64 * xl as i64;
+                            }
+                            // z is Q(q + in_frac).
+                            if is_out {
+                                if j < 3 {
+                                    res[j] = rshr(z, ql + in_frac - 16);
+                                }
+                            } else {
+                                let z26 = rshr(z, ql + in_frac - TANH_IN_FRAC);
+                                y[j] = tanh_q30(
+                                    z26.clamp(-(16 << TANH_IN_FRAC), 16 << TANH_IN_FRAC) as i32,
+                                );
+                            }
+                        }
+                        k += width * prev + width;
+                        prev = width;
+                        x = y;
+                        in_frac = 30;
+                    }
+                    let mut j = 0;
+                    for (o, acc) in out.iter_mut().enumerate() {
+                        if outputs & (1 << o) != 0 {
+                            *acc = acc.saturating_add(res[j.min(2)]);
+                            j += 1;
+                        }
+                    }
+                }
+            }
+        }
+        let mut corr = [0i32; 3];
+        for o in 0..3 {
+            if self.outputs & (1 << o) == 0 {
+                continue;
+            }
+            let max = self.env.max_corr_nm[o] as i64;
+            let v = rshr(out[o], 16);
+            corr[o] = if v > max {
+                flags.insert(Flags::CLAMPED);
+                max
+            } else if v < -max {
+                flags.insert(Flags::CLAMPED);
+                -max
+            } else {
+                v
+            } as i32;
+        }
+        Outputs {
+            corr_nm: corr,
+            flags,
+        }
+    }
+}
+
+/// Phase of `pos` along a period as a fraction of a turn (2^32 = one turn),
+/// computed in integers so it stays exact at any position.
+#[inline(always)]
+fn phase_turns(pos_nm: i32, period_nm: i32, turns: Scale) -> u32 {
+    let r = pos_nm.rem_euclid(period_nm);
+    turns.apply(r as i64) as u32
+}
+
+#[inline(always)]
+fn mlp_source(src: u8, pos: &[i32; 3], temp: &[i32; MAX_TEMPS]) -> i32 {
+    match src {
+        0..=2 => pos[src as usize],
+        s => temp[(s as usize - 3) & 3],
+    }
+}
+
+/// Cell index and offset (nm) of `p` on a grid axis, held at the grid's edges.
+#[inline(always)]
+fn grid_cell(ax: &GridAxis, p: i32) -> (usize, i32) {
+    if ax.nodes < 2 {
+        return (0, 0);
+    }
+    // The validated grid ends at or below i32::MAX, so the span and the offset
+    // fit in u32 and the division is the hardware's 32-bit UDIV.
+    let span = (ax.nodes as i64 - 1) * ax.step_nm as i64;
+    let d = (p as i64 - ax.origin_nm as i64).clamp(0, span) as u32;
+    let step = ax.step_nm as u32;
+    let i = d / step;
+    if i as usize >= ax.nodes as usize - 1 {
+        (ax.nodes as usize - 2, ax.step_nm)
+    } else {
+        (i as usize, (d - i * step) as i32)
+    }
+}

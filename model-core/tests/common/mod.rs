@@ -1,0 +1,281 @@
+//! Shared test fixtures: a tiny deterministic RNG (SplitMix64, so generated
+//! models are identical on every run and every machine) and generators of
+//! realistic random table specs and inputs — corrections up to ±200 µm,
+//! travel up to ±1 m, temperatures 10–40 °C — used by the accuracy
+//! proptests, the golden files and the replay vectors.
+#![allow(dead_code)]
+
+use model_core::monomials::{kinematic, CUBIC19};
+use model_core::spec::PolyCoef;
+use model_core::{
+    Envelope, GridAxisSpec, GridSpec, InputScaling, Inputs, LayerSpec, MlpInputSpec, MlpSource,
+    MlpSpec, TableSpec, TermSpec, MAX_TEMPS,
+};
+
+/// SplitMix64.
+#[derive(Clone, Debug)]
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    pub fn unit(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.unit()
+    }
+    pub fn int(&mut self, lo: i64, hi_incl: i64) -> i64 {
+        lo + (self.next_u64() % (hi_incl - lo + 1) as u64) as i64
+    }
+    pub fn sym(&mut self, a: f64) -> f64 {
+        self.range(-a, a)
+    }
+}
+
+/// Which term kinds a generated spec contains.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    Cubic19,
+    Kinematic,
+    Degree5,
+    Periodic,
+    Thermal,
+    Reversal,
+    Abbe,
+    Mlp,
+    Grid,
+}
+
+pub const ALL_KINDS: [Kind; 9] = [
+    Kind::Cubic19,
+    Kind::Kinematic,
+    Kind::Degree5,
+    Kind::Periodic,
+    Kind::Thermal,
+    Kind::Reversal,
+    Kind::Abbe,
+    Kind::Mlp,
+    Kind::Grid,
+];
+
+/// A random realistic envelope (max correction set generously: the accuracy
+/// tests compare unclamped values).
+pub fn base_spec(rng: &mut Rng, n_channels: usize) -> TableSpec {
+    let mut env = Envelope::default();
+    let mut sc = InputScaling::default();
+    for a in 0..3 {
+        let half = rng.range(50e6, 1000e6) as i32; // 50 mm … 1 m
+        let centre = rng.sym(200e6) as i32;
+        sc.centre_nm[a] = centre;
+        sc.half_span_nm[a] = half;
+        env.travel_min_nm[a] = centre - half;
+        env.travel_max_nm[a] = centre + half;
+        env.max_corr_nm[a] = 5_000_000;
+    }
+    env.max_slew_nm_per_ms = 1000;
+    for ch in 0..n_channels {
+        env.temp_min_mc[ch] = 10_000;
+        env.temp_max_mc[ch] = 40_000;
+    }
+    env.tool_min_nm = 0;
+    env.tool_max_nm = 300_000_000;
+    TableSpec {
+        created_unix_s: 1_763_769_600,
+        source_hash: [0x5a; 32],
+        channels: (0..n_channels)
+            .map(|i| ["bed", "air", "spindle", "column"][i].to_string())
+            .collect(),
+        envelope: env,
+        scaling: sc,
+        outputs: [true, true, true],
+        terms: Vec::new(),
+    }
+}
+
+fn poly(rng: &mut Rng, set: &[[u8; 3]], amp: f64) -> Vec<PolyCoef> {
+    set.iter().map(|&m| (m, rng.sym(amp))).collect()
+}
+
+/// Add one term (or one per output) of `kind`.
+pub fn add_kind(rng: &mut Rng, spec: &mut TableSpec, kind: Kind) {
+    let nch = spec.channels.len();
+    match kind {
+        Kind::Cubic19 => {
+            for o in 0..3 {
+                spec.terms.push(TermSpec::Poly {
+                    output: o,
+                    coefs: poly(rng, &CUBIC19, 10_000.0),
+                });
+            }
+        }
+        Kind::Kinematic => {
+            for o in 0..3 {
+                spec.terms.push(TermSpec::Poly {
+                    output: o,
+                    coefs: poly(rng, kinematic(o as usize), 20_000.0),
+                });
+            }
+        }
+        Kind::Degree5 => {
+            let o = rng.int(0, 2) as u8;
+            let set = model_core::monomials::up_to_degree(5);
+            spec.terms.push(TermSpec::Poly {
+                output: o,
+                coefs: poly(rng, set, 3_000.0),
+            });
+        }
+        Kind::Periodic => {
+            let h = rng.int(1, 4) as usize;
+            spec.terms.push(TermSpec::Periodic {
+                output: rng.int(0, 2) as u8,
+                axis: rng.int(0, 2) as u8,
+                period_nm: rng.range(2e6, 40e6) as i32,
+                sin_nm: (0..h).map(|_| rng.sym(8000.0)).collect(),
+                cos_nm: (0..h).map(|_| rng.sym(8000.0)).collect(),
+            });
+        }
+        Kind::Thermal => {
+            if nch == 0 {
+                return;
+            }
+            let ch = rng.int(0, nch as i64 - 1) as u8;
+            // Alone, or times a linear/quadratic position polynomial.
+            let set: &[[u8; 3]] = if rng.unit() < 0.5 {
+                &[[0, 0, 0]]
+            } else {
+                &[[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0]]
+            };
+            spec.terms.push(TermSpec::Thermal {
+                output: rng.int(0, 2) as u8,
+                channel: ch,
+                t_ref_mc: 20_000,
+                coefs_nm_per_k: poly(rng, set, 2_500.0),
+            });
+        }
+        Kind::Reversal => spec.terms.push(TermSpec::Reversal {
+            output: rng.int(0, 2) as u8,
+            axis: rng.int(0, 2) as u8,
+            transition_nm: rng.range(5e3, 100e3) as i32,
+            amplitude_nm: rng.sym(25_000.0),
+        }),
+        Kind::Abbe => spec.terms.push(TermSpec::Abbe {
+            output: rng.int(0, 2) as u8,
+            coefs: poly(rng, &[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], 5e-5),
+        }),
+        Kind::Mlp => {
+            let mut inputs: Vec<MlpInputSpec> = (0..3)
+                .map(|a| MlpInputSpec {
+                    source: MlpSource::Pos(a),
+                    min: spec.envelope.travel_min_nm[a as usize] as f64 + 1000.5,
+                    max: spec.envelope.travel_max_nm[a as usize] as f64 - 333.25,
+                })
+                .collect();
+            if nch > 0 && rng.unit() < 0.5 {
+                inputs.push(MlpInputSpec {
+                    source: MlpSource::Temp(0),
+                    min: 15_000.0,
+                    max: 35_000.0,
+                });
+            }
+            let n_layers = if rng.unit() < 0.7 { 1 } else { 2 };
+            let mut prev = inputs.len();
+            let mut hidden = Vec::new();
+            for _ in 0..n_layers {
+                let units = rng.int(4, 16) as usize;
+                hidden.push(LayerSpec {
+                    weights: (0..units * prev).map(|_| rng.sym(1.5)).collect(),
+                    bias: (0..units).map(|_| rng.sym(1.0)).collect(),
+                });
+                prev = units;
+            }
+            let outputs: Vec<u8> = vec![0, 1, 2];
+            let output = LayerSpec {
+                weights: (0..3 * prev)
+                    .map(|_| rng.sym(1.0 / (prev as f64).sqrt()))
+                    .collect(),
+                bias: (0..3).map(|_| rng.sym(0.3)).collect(),
+            };
+            spec.terms.push(TermSpec::Mlp(MlpSpec {
+                outputs,
+                inputs,
+                hidden,
+                output,
+                out_min_nm: (0..3).map(|_| -rng.range(10e3, 50e3)).collect(),
+                out_max_nm: (0..3).map(|_| rng.range(10e3, 50e3)).collect(),
+            }));
+        }
+        Kind::Grid => {
+            let mut axes = [GridAxisSpec {
+                nodes: 1,
+                origin_nm: 0,
+                step_nm: 1,
+            }; 3];
+            let used = rng.int(1, 3);
+            let first = rng.int(0, 2) as usize;
+            for k in 0..used as usize {
+                let a = (first + k) % 3;
+                let nodes = rng.int(2, [17, 11, 11][a]) as u16;
+                let (lo, hi) = (
+                    spec.envelope.travel_min_nm[a] as f64,
+                    spec.envelope.travel_max_nm[a] as f64,
+                );
+                // Grid slightly inside the travel so the edge hold is exercised too.
+                let origin = lo + 0.05 * (hi - lo);
+                let step = (0.9 * (hi - lo) / (nodes - 1) as f64).floor();
+                axes[a] = GridAxisSpec {
+                    nodes,
+                    origin_nm: origin as i32,
+                    step_nm: step as i32,
+                };
+            }
+            let n: usize = axes.iter().map(|a| a.nodes as usize).product();
+            spec.terms.push(TermSpec::Grid(GridSpec {
+                output: rng.int(0, 2) as u8,
+                axes,
+                values_nm: (0..n).map(|_| rng.sym(20_000.0)).collect(),
+            }));
+        }
+    }
+}
+
+/// A random spec with the given kinds.
+pub fn random_spec(seed: u64, kinds: &[Kind]) -> TableSpec {
+    let mut rng = Rng(seed);
+    let nch = rng.int(1, MAX_TEMPS as i64) as usize;
+    let mut spec = base_spec(&mut rng, nch);
+    for &k in kinds {
+        add_kind(&mut rng, &mut spec, k);
+    }
+    spec
+}
+
+/// Random inputs inside the envelope (plus, with `outside`, sometimes beyond it).
+pub fn random_inputs(rng: &mut Rng, spec: &TableSpec, outside: bool) -> Inputs {
+    let env = &spec.envelope;
+    let mut i = Inputs::default();
+    for a in 0..3 {
+        let (lo, hi) = (env.travel_min_nm[a] as i64, env.travel_max_nm[a] as i64);
+        i.pos_nm[a] = if outside && rng.unit() < 0.3 {
+            rng.int(i32::MIN as i64, i32::MAX as i64) as i32
+        } else {
+            rng.int(lo, hi) as i32
+        };
+        i.rev_q30[a] = rng.int(-(1 << 30), 1 << 30) as i32;
+    }
+    for ch in 0..spec.channels.len() {
+        i.temp_mc[ch] = if outside && rng.unit() < 0.2 {
+            rng.int(-100_000, 100_000) as i32
+        } else {
+            rng.int(env.temp_min_mc[ch] as i64, env.temp_max_mc[ch] as i64) as i32
+        };
+    }
+    i.tool_nm = rng.int(env.tool_min_nm as i64, env.tool_max_nm as i64) as i32;
+    i
+}
