@@ -345,6 +345,16 @@ fn cli_json_shape_and_bad_specs() {
     ]);
     assert_eq!(bad.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("outside the travel"));
+    // A 1 mm grid of the preset would be 2·10⁸ rows: refused, not attempted.
+    let bad = run(&[
+        "simulate",
+        "--plan",
+        "grid:1",
+        "-o",
+        out_csv.to_str().unwrap(),
+    ]);
+    assert_eq!(bad.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("coarser step"));
 }
 
 #[test]

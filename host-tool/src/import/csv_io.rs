@@ -41,6 +41,14 @@ const STEMS: [(&str, &str); 9] = [
     ("u", "um"),
 ];
 
+/// Unit suffixes recognised as units (lower case), so that `t_min` or
+/// `tool_in` is reported as a wrong unit rather than kept as an unknown
+/// column.
+const UNITS: [&str; 22] = [
+    "m", "dm", "cm", "mm", "um", "µm", "nm", "in", "inch", "mil", "ft", "s", "ms", "min", "h",
+    "hr", "us", "mrad", "urad", "rad", "deg", "arcsec",
+];
+
 /// Classifies a header cell; `Err` carries the message for a bad name.
 fn classify(name: &str) -> Result<Col, String> {
     for a in 0..3 {
@@ -91,9 +99,15 @@ fn classify(name: &str) -> Result<Col, String> {
             ));
         }
         if let Some(unit_found) = name.strip_prefix(stem).and_then(|r| r.strip_prefix('_')) {
-            return Err(format!(
-                "column `{name}`: unknown unit suffix `_{unit_found}`; expected `{canonical}`"
-            ));
+            // Positions and errors: any suffix is a unit mistake (`x_in`,
+            // `ex_nm`, `x_ref`…). For `t`, `tool` and `u` only a suffix that
+            // is a unit is, so that `t_start` or `u_raw` stay auxiliary.
+            let strict = matches!(stem, "x" | "y" | "z" | "ex" | "ey" | "ez");
+            if strict || UNITS.contains(&unit_found.to_ascii_lowercase().as_str()) {
+                return Err(format!(
+                    "column `{name}`: unknown unit suffix `_{unit_found}`; expected `{canonical}`"
+                ));
+            }
         }
     }
     Ok(Col::Aux)
@@ -543,6 +557,13 @@ mod tests {
         assert!(classify("T_bed_F").unwrap_err().contains("T_bed_C"));
         assert!(classify("X_mm").unwrap_err().contains("case-sensitive"));
         assert!(classify("t").unwrap_err().contains("no unit suffix"));
+        assert!(classify("t_min").unwrap_err().contains("expected `t_s`"));
+        assert!(classify("tool_in")
+            .unwrap_err()
+            .contains("expected `tool_mm`"));
+        assert_eq!(classify("t_start"), Ok(Col::Aux));
+        assert_eq!(classify("u_raw"), Ok(Col::Aux));
+        assert!(classify("x_ref").is_err(), "position stems are strict");
     }
 
     #[test]

@@ -250,11 +250,50 @@ impl SimConfig {
                 bail!("reference every 0 passes: expected ≥ 1");
             }
         }
-        for e in &self.effects {
-            if let Effect::Abbe { tools_mm, .. } = e {
-                if tools_mm.is_empty() {
-                    bail!("effect `{e}`: expected at least one tool length");
+        if !(tr.iter().all(|t| t.is_finite() && *t > 0.0)) {
+            bail!("machine travels {tr:?} mm: expected positive values");
+        }
+        if !(self.timing.feed_mm_s > 0.0 && self.timing.dwell_s >= 0.0) {
+            bail!("timing: expected feed > 0 mm/s and dwell ≥ 0 s");
+        }
+        // Rows the plans would generate: refuse sizes that would only
+        // exhaust memory (a 1 mm grid of the preset is 2·10⁸ points).
+        let mut rows = 0.0f64;
+        for p in &self.plans {
+            rows += match p {
+                Plan::Raster {
+                    axes,
+                    step_mm,
+                    bidir,
+                    runs,
+                    ..
+                } => {
+                    let per: f64 = axes
+                        .iter()
+                        .map(|&a| (tr[a] / step_mm).floor() + 1.0)
+                        .product();
+                    per * *runs as f64 * if *bidir { 2.0 } else { 1.0 }
                 }
+                Plan::Iso230 { targets, runs, .. } => (*targets * *runs * 2) as f64,
+                Plan::Point { repeats, .. } => *repeats as f64,
+            };
+        }
+        if rows > 5e6 {
+            bail!("the plans would make {rows:.0} rows; expected at most 5 000 000 (use a coarser step)");
+        }
+        for e in &self.effects {
+            let ok = match e {
+                Effect::Abbe { tools_mm, .. } => !tools_mm.is_empty(),
+                Effect::Periodic {
+                    period_mm,
+                    harmonics,
+                    ..
+                } => *period_mm > 0.0 && *harmonics >= 1,
+                Effect::Thermal { tau_s, lag_s, .. } => *tau_s >= 0.0 && *lag_s >= 0.0,
+                Effect::Reversal { .. } | Effect::Drift { .. } => true,
+            };
+            if !ok {
+                bail!("effect `{e}`: expected tools_mm not empty, period_mm > 0, harmonics ≥ 1, tau_s and lag_s ≥ 0");
             }
         }
         Ok(())
@@ -393,8 +432,8 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
         rows_t.push(round_dec(t, 3));
         rows_pass.push(*g as i64);
         rows_tool.push(match abbe_tools {
-            Some(tools) => tools[*g % tools.len()],
-            None => cfg.tool_mm,
+            Some(tools) if !tools.is_empty() => tools[*g % tools.len()],
+            _ => cfg.tool_mm,
         });
     }
 
