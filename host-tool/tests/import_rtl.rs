@@ -119,3 +119,42 @@ fn cli_converts_rtl_to_contract_csv() {
     assert_eq!(a.dir, b.dir);
     let _ = std::fs::remove_file(out_csv);
 }
+
+#[test]
+fn mutated_files_never_panic_and_errors_are_located() {
+    use rand_chacha::rand_core::{RngCore, SeedableRng};
+    let base = std::fs::read_to_string(data("iso_worked.rtl")).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let specials = [":", "::", " ", "\r\n", "-", "9", "x", "", "1 1 1.0\r\n"];
+    let mut errors = 0;
+    for _ in 0..3000 {
+        let mut v = base.clone();
+        for _ in 0..1 + rng.next_u32() % 3 {
+            let mut i = rng.next_u32() as usize % (v.len() + 1);
+            while !v.is_char_boundary(i) {
+                i -= 1;
+            }
+            let s = specials[rng.next_u32() as usize % specials.len()];
+            match rng.next_u32() % 3 {
+                0 => v.insert_str(i, s),
+                1 => v.truncate(i),
+                _ => {
+                    let j = (i + 1 + rng.next_u32() as usize % 8).min(v.len());
+                    let mut j2 = j;
+                    while !v.is_char_boundary(j2) {
+                        j2 += 1;
+                    }
+                    v.replace_range(i..j2, s);
+                }
+            }
+        }
+        match import::read_rtl(&v, "m.rtl", None) {
+            Ok(d) => d.validate().unwrap(),
+            Err(e) => {
+                errors += 1;
+                assert!(e.to_string().starts_with("m.rtl:"), "unlocated: {e}");
+            }
+        }
+    }
+    assert!(errors > 300, "only {errors} of 3000 mutations failed");
+}
