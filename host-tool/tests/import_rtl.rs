@@ -158,3 +158,13 @@ fn mutated_files_never_panic_and_errors_are_located() {
     }
     assert!(errors > 300, "only {errors} of 3000 mutations failed");
 }
+
+#[test]
+fn label_in_front_of_every_row_is_read_the_same() {
+    let a = import::load(&data("iso_worked.rtl")).unwrap();
+    let b = import::load(&data("label_per_row.rtl")).unwrap();
+    assert_eq!(a.pos_mm, b.pos_mm);
+    assert_eq!(a.err_um, b.err_um);
+    assert_eq!(a.dir, b.dir);
+    assert_eq!(a.pass_id, b.pass_id);
+}

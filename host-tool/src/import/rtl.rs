@@ -10,6 +10,7 @@
 //! USER-TEXT::         Machine:, Serial No:, Date:, By:, Axis:, Location:
 //! RUNS::              Run-count: M (both directions counted)
 //! DEVIATIONS::        Run Target Data: then rows `run target deviation_um`
+//!                     (the label may also prefix every row)
 //! EQUIPMENT::         optional, kept as metadata
 //! ENVIRONMENT::       optional, kept as metadata
 //! EOF::
@@ -203,13 +204,20 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                 }
             }
             Section::Deviations => {
+                // `Run Target Data:` opens the rows; some writers repeat it
+                // in front of every row (`Run Target Data: 1 1 0.5`), so
+                // the text after it, if any, is a row too.
+                let mut line = line;
                 if line
                     .to_ascii_lowercase()
                     .replace(' ', "")
                     .starts_with("runtargetdata:")
                 {
                     seen_rtd = true;
-                    continue;
+                    line = line.split_once(':').map_or("", |(_, rest)| rest.trim());
+                    if line.is_empty() {
+                        continue;
+                    }
                 }
                 if !seen_rtd {
                     return Err(err(
