@@ -3,6 +3,9 @@
 //!
 //! - `data`: the measurement data set (CONTRACT.md §1) every command works on.
 //! - `cmd`: one module per subcommand.
+//! - `import`: measurement files in (contract CSV, Renishaw .rtl) and the CSV out.
+//! - `simulate`: the synthetic machine (21 geometric errors, effects, plans, noise).
+//! - `iso230`: ISO 230-2 evaluation of bidirectional positioning runs.
 
 pub mod cmd;
 pub mod compare;
