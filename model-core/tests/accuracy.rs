@@ -1,0 +1,199 @@
+//! The evaluation guarantees, proptested over random models of realistic
+//! size (every term kind, mixtures of them) and the whole envelope:
+//! - f32 and fixed point within 1 nm of the f64 reference (`TableSpec::eval_f64`);
+//! - outside the travel the position is held at the edge and flagged;
+//! - no panic, no NaN, no overflow for any i32 inputs; corrections never
+//!   exceed the envelope's max and are flagged when limited.
+mod common;
+
+use common::*;
+use model_core::{parse, Flags, Inputs, InputsF64, LargeModel, Model, TableSpec};
+use proptest::prelude::*;
+
+fn load(spec: &TableSpec) -> LargeModel {
+    let bytes = spec.encode().expect("encode");
+    LargeModel::load(&parse(&bytes).expect("parse")).expect("load")
+}
+
+fn kinds_strategy() -> impl Strategy<Value = Vec<Kind>> {
+    prop::collection::vec(prop::sample::select(ALL_KINDS.to_vec()), 1..5)
+}
+
+/// Worst |eval − reference| over `n` random inputs inside the envelope.
+fn worst_errors(spec: &TableSpec, model: &LargeModel, seed: u64, n: usize) -> (f64, f64) {
+    let mut rng = Rng(seed);
+    let mut worst = (0.0f64, 0.0f64);
+    for _ in 0..n {
+        let inp = random_inputs(&mut rng, spec, false);
+        let r = spec.eval_f64(&InputsF64::from(&inp));
+        let f = model.eval_f32(&inp);
+        let q = model.eval_fixed(&inp);
+        assert!(f.flags.is_empty() && q.flags.is_empty(), "flags inside the envelope: {f:?} {q:?}");
+        for o in 0..3 {
+            worst.0 = worst.0.max((f.corr_nm[o] as f64 - r[o]).abs());
+            worst.1 = worst.1.max((q.corr_nm[o] as f64 - r[o]).abs());
+        }
+    }
+    worst
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    #[test]
+    fn f32_and_fixed_within_1nm_of_f64(seed in any::<u64>(), kinds in kinds_strategy(), in_seed in any::<u64>()) {
+        let spec = random_spec(seed, &kinds);
+        let model = load(&spec);
+        let (wf, wq) = worst_errors(&spec, &model, in_seed, 300);
+        prop_assert!(wf <= 1.0, "f32 off by {wf} nm for {kinds:?}");
+        prop_assert!(wq <= 1.0, "fixed off by {wq} nm for {kinds:?}");
+    }
+
+    #[test]
+    fn held_at_edge_and_flagged_outside_travel(seed in any::<u64>(), kinds in kinds_strategy(), in_seed in any::<u64>()) {
+        let spec = random_spec(seed, &kinds);
+        let model = load(&spec);
+        let env = spec.envelope;
+        let mut rng = Rng(in_seed);
+        for _ in 0..100 {
+            let inp = random_inputs(&mut rng, &spec, true);
+            let mut held = inp;
+            let mut expect = Flags::empty();
+            for a in 0..3 {
+                let c = inp.pos_nm[a].clamp(env.travel_min_nm[a], env.travel_max_nm[a]);
+                if c != inp.pos_nm[a] {
+                    expect.insert(Flags::out_of_travel(a));
+                }
+                held.pos_nm[a] = c;
+            }
+            for ch in 0..spec.channels.len() {
+                let c = inp.temp_mc[ch].clamp(env.temp_min_mc[ch], env.temp_max_mc[ch]);
+                if c != inp.temp_mc[ch] {
+                    expect.insert(Flags::TEMP_OUT_OF_RANGE);
+                }
+                held.temp_mc[ch] = c;
+            }
+            for (out, out_held) in [(model.eval_f32(&inp), model.eval_f32(&held)), (model.eval_fixed(&inp), model.eval_fixed(&held))] {
+                prop_assert_eq!(out.corr_nm, out_held.corr_nm);
+                prop_assert!(out.flags.contains(expect), "{:?} lacks {:?}", out.flags, expect);
+                prop_assert!(out_held.flags.is_empty());
+            }
+        }
+    }
+
+    #[test]
+    fn any_inputs_no_panic_and_bounded(seed in any::<u64>(), kinds in kinds_strategy(),
+                                      pos in any::<[i32; 3]>(), rev in any::<[i32; 3]>(),
+                                      temp in any::<[i32; 4]>(), tool in any::<i32>(), max_corr in 0i32..300_000) {
+        let mut spec = random_spec(seed, &kinds);
+        spec.envelope.max_corr_nm = [max_corr; 3];
+        let model = load(&spec);
+        let inp = Inputs { pos_nm: pos, rev_q30: rev, temp_mc: temp, tool_nm: tool };
+        for out in [model.eval_f32(&inp), model.eval_fixed(&inp)] {
+            for o in 0..3 {
+                prop_assert!(out.corr_nm[o].abs() <= max_corr);
+            }
+        }
+    }
+}
+
+/// Deterministic, larger sweep per kind (fixed seeds): the same bound on
+/// 20 000 inputs each, so a regression in one kind shows by name.
+#[test]
+fn per_kind_sweep_within_1nm() {
+    for (n, kind) in ALL_KINDS.iter().enumerate() {
+        for s in 0..4u64 {
+            let spec = random_spec(0xACC0 + 16 * n as u64 + s, &[*kind]);
+            let model = load(&spec);
+            let (wf, wq) = worst_errors(&spec, &model, 99 + s, 5000);
+            assert!(wf <= 1.0 && wq <= 1.0, "{kind:?} seed {s}: f32 {wf} nm, fixed {wq} nm");
+        }
+    }
+}
+
+#[test]
+fn clamped_and_flagged_at_max_correction() {
+    let mut spec = random_spec(5, &[Kind::Cubic19]);
+    spec.envelope.max_corr_nm = [10, 10, 10];
+    let model = load(&spec);
+    let mut rng = Rng(1);
+    let mut seen = false;
+    for _ in 0..200 {
+        let inp = random_inputs(&mut rng, &spec, false);
+        let r = spec.eval_f64(&InputsF64::from(&inp));
+        for out in [model.eval_f32(&inp), model.eval_fixed(&inp)] {
+            for o in 0..3 {
+                assert!(out.corr_nm[o].abs() <= 10);
+                if r[o].abs() > 11.0 {
+                    assert!(out.flags.contains(Flags::CLAMPED));
+                    assert_eq!(out.corr_nm[o], 10 * r[o].signum() as i32);
+                    seen = true;
+                }
+            }
+        }
+    }
+    assert!(seen);
+}
+
+#[test]
+fn nan_coefficients_are_rejected_and_huge_ones_are_typed_errors() {
+    let mut spec = random_spec(3, &[Kind::Cubic19]);
+    if let model_core::TermSpec::Poly { coefs, .. } = &mut spec.terms[0] {
+        coefs[0].1 = f64::NAN;
+    }
+    assert!(matches!(spec.encode(), Err(model_core::EncodeError::Invalid(model_core::TableError::NotFinite { .. }))));
+    let mut spec = random_spec(3, &[Kind::Cubic19]);
+    if let model_core::TermSpec::Poly { coefs, .. } = &mut spec.terms[0] {
+        coefs[0].1 = 1e12;
+    }
+    let bytes = spec.encode().unwrap();
+    assert!(matches!(Model::load(&parse(&bytes).unwrap()), Err(model_core::LoadError::CoefficientRange { .. })));
+}
+
+#[test]
+fn capacity_exceeded_is_a_typed_error_and_large_alias_fits_17x11x11x3() {
+    let mut rng = Rng(11);
+    let mut spec = base_spec(&mut rng, 1);
+    for o in 0..3u8 {
+        let axes = [
+            model_core::GridAxisSpec { nodes: 17, origin_nm: spec.envelope.travel_min_nm[0], step_nm: 1_000_000 },
+            model_core::GridAxisSpec { nodes: 11, origin_nm: spec.envelope.travel_min_nm[1], step_nm: 1_000_000 },
+            model_core::GridAxisSpec { nodes: 11, origin_nm: spec.envelope.travel_min_nm[2], step_nm: 1_000_000 },
+        ];
+        spec.terms.push(model_core::TermSpec::Grid(model_core::GridSpec {
+            output: o,
+            axes,
+            values_nm: (0..17 * 11 * 11).map(|_| rng.sym(20_000.0)).collect(),
+        }));
+    }
+    let bytes = spec.encode().unwrap();
+    let table = parse(&bytes).unwrap();
+    assert!(matches!(Model::load(&table), Err(model_core::LoadError::GridCapacity { needed: 6171, .. })));
+    assert!(LargeModel::load(&table).is_ok());
+    // The default model stays small enough for the MCU's 128 KiB of RAM.
+    assert!(core::mem::size_of::<Model>() <= 40 * 1024, "Model is {} bytes", core::mem::size_of::<Model>());
+    assert!(core::mem::size_of::<LargeModel>() <= 48 * 1024, "LargeModel is {} bytes", core::mem::size_of::<LargeModel>());
+}
+
+#[test]
+fn dir_tracker_ramps_without_steps() {
+    let mut t = model_core::DirTracker::new();
+    assert_eq!(t.update(0, 1000), 0);
+    // 250 nm forward from unknown: a quarter of a full swing → 0.5.
+    assert_eq!(t.update(250, 1000), 1 << 29);
+    assert_eq!(t.update(1000, 1000), 1 << 30); // saturated at +1
+    assert_eq!(t.update(500, 1000), 0); // 500 back: half a swing
+    assert_eq!(t.update(-10_000_000, 1000), -(1 << 30));
+    // Extreme moves never overflow.
+    assert_eq!(t.update(i32::MAX, 1), 1 << 30);
+    assert_eq!(t.update(i32::MIN, i32::MAX), -(1 << 30));
+    // Small steps: the change per step is bounded by the step's share of the swing.
+    let mut t = model_core::DirTracker::new();
+    t.update(0, 5000);
+    let mut prev = 0i64;
+    for p in 1..20_000 {
+        let r = t.update(p, 5000) as i64;
+        assert!((r - prev).abs() <= (1i64 << 31) / 5000 + 1);
+        prev = r;
+    }
+}
