@@ -437,3 +437,40 @@ fn plain_preset_is_inside_cubic19_and_wavy_is_not() {
     let wavy = rms("mill800-wavy");
     assert!(wavy > 0.1, "mill800-wavy cubic19 residual {wavy} µm");
 }
+
+#[test]
+fn pauses_and_new_sessions_restart_time_and_temperature() {
+    let d = simulate::simulate(&perfect(
+        &[
+            "line:x:100",
+            "pause:1800",
+            "line:x:100",
+            "pause:0,new_session",
+            "line:x:100",
+        ],
+        &["thermal:channel=bed,rise_c=4,tau_s=900,lag_s=300"],
+    ));
+    assert_eq!(d.len(), 27);
+    let t = d.t_s.as_ref().unwrap();
+    let session = d
+        .session_id
+        .as_ref()
+        .expect("session_id column with a new session");
+    assert_eq!(&session[..], &[[1; 18].as_slice(), &[2; 9]].concat()[..]);
+    // The idle half hour shows in t_s; the new session starts again at 0.
+    assert!(t[9] - t[8] > 1800.0);
+    // (35 s: the 800 mm move back to x = 0 at 25 mm/s, then the 3 s read.)
+    assert!(t[18] < t[17] && (t[18] - 35.0).abs() < 1e-9, "{}", t[18]);
+    let temp = &d.temp("bed").unwrap().temp_c;
+    assert!(
+        temp[17] > 23.0 && temp[18] < 20.2,
+        "cold start each session"
+    );
+    // The structure's lag restarts with the session, as fit models it.
+    let lagged = trueaxis::features::lagged(temp, t, Some(session), 300.0);
+    let ex = col(&d, 0);
+    for r in 0..d.len() {
+        let want = 11.5 * (lagged[r] - 20.0) * d.pos(0, r) * 1e-3;
+        assert!((ex[r] - want).abs() < RES, "row {r}");
+    }
+}

@@ -236,6 +236,11 @@ impl SimConfig {
                     }
                     inside(at_mm, &format!("plan `{p}`"))?;
                 }
+                Plan::Pause { duration_s, .. } => {
+                    if !(duration_s.is_finite() && *duration_s >= 0.0) {
+                        bail!("plan `{p}`: expected a duration ≥ 0 s");
+                    }
+                }
                 Plan::Point { pos_mm, repeats } => {
                     if *repeats == 0 {
                         bail!("plan `{p}`: expected repeats ≥ 1");
@@ -276,6 +281,7 @@ impl SimConfig {
                 }
                 Plan::Iso230 { targets, runs, .. } => (*targets * *runs * 2) as f64,
                 Plan::Point { repeats, .. } => *repeats as f64,
+                Plan::Pause { .. } => 0.0,
             };
         }
         if rows > 5e6 {
@@ -348,9 +354,19 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
     // is a pass of its own, before the first pass and then after every
     // `every_passes` passes, and once more at the end.
     let mut visits: Vec<(Visit, usize)> = Vec::new(); // (visit, global pass)
+                                                      // Pauses before visit index i: (idle s, starts a new session).
+    let mut pauses: Vec<(usize, f64, bool)> = Vec::new();
     let mut next_pass = 0usize;
     let mut since_ref: Option<usize> = None; // None: not visited yet
     for p in &cfg.plans {
+        if let Plan::Pause {
+            duration_s,
+            new_session,
+        } = p
+        {
+            pauses.push((visits.len(), *duration_s, *new_session));
+            continue;
+        }
         let mut cur: Option<(usize, usize)> = None; // (local pass, global pass)
         for v in p.visits(cfg.machine.travel_mm, &mut rng_plan) {
             if cur.map(|c| c.0) != Some(v.pass) {
@@ -407,6 +423,8 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
     let mut rows_t = Vec::with_capacity(n);
     let mut rows_pass = Vec::with_capacity(n);
     let mut rows_tool = Vec::with_capacity(n);
+    let mut rows_session = Vec::with_capacity(n);
+    let mut session = 1i64;
     let go = |to: [f64; 3], pos: &mut [f64; 3], dir: &mut [i8; 3], t: &mut f64| {
         let mut dist = 0.0f64;
         for a in 0..3 {
@@ -419,7 +437,14 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
         *t += dist / cfg.timing.feed_mm_s;
         *pos = to;
     };
-    for (v, g) in &visits {
+    for (i, (v, g)) in visits.iter().enumerate() {
+        for &(_, idle_s, new_session) in pauses.iter().filter(|p| p.0 == i) {
+            t += idle_s;
+            if new_session {
+                session += 1;
+                t = 0.0;
+            }
+        }
         if let Some(via) = v.via_mm {
             go(via, &mut pos, &mut dir, &mut t);
         }
@@ -431,6 +456,7 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
         }
         rows_t.push(round_dec(t, 3));
         rows_pass.push(*g as i64);
+        rows_session.push(session);
         rows_tool.push(match abbe_tools {
             Some(tools) if !tools.is_empty() => tools[*g % tools.len()],
             _ => cfg.tool_mm,
@@ -516,7 +542,7 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
                     .expect("channel made above")
                     .temp_c;
                 let structure = if *lag_s > 0.0 {
-                    crate::features::lagged(sensor, &rows_t, None, *lag_s)
+                    crate::features::lagged(sensor, &rows_t, Some(&rows_session), *lag_s)
                 } else {
                     sensor.clone()
                 };
@@ -601,7 +627,19 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
         temps,
         tool_mm: abbe_tools.map(|_| rows_tool.clone()),
         pass_id: Some(rows_pass),
-        session_id: None,
+        session_id: cfg
+            .plans
+            .iter()
+            .any(|p| {
+                matches!(
+                    p,
+                    Plan::Pause {
+                        new_session: true,
+                        ..
+                    }
+                )
+            })
+            .then_some(rows_session),
         u_um: None,
         aux: Vec::new(),
         line: Vec::new(),

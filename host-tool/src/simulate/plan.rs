@@ -6,7 +6,8 @@
 //! `grid:<step_mm>`, `plane:<ab>:<step_mm>`, `line:<a>:<step_mm>` with
 //! optional `,x=…,y=…,z=…` (fixed positions, default mid-travel), `,bidir`
 //! (every line forward then backward) and `,runs=N`; `iso230:<a>` with
-//! `,targets=N,runs=N,overrun_mm=…`; `point:x=…,y=…,z=…[,repeats=N]`.
+//! `,targets=N,runs=N,overrun_mm=…`; `point:x=…,y=…,z=…[,repeats=N]`;
+//! `pause:<s>[,new_session]`.
 
 use rand_chacha::rand_core::RngCore;
 use serde::{Deserialize, Serialize};
@@ -52,6 +53,17 @@ pub enum Plan {
         pos_mm: [f64; 3],
         /// Number of readings.
         repeats: usize,
+    },
+    /// The machine idles for `duration_s` (temperatures and drift go on);
+    /// with `new_session` a new measurement session starts afterwards:
+    /// `session_id` increments and `t_s` restarts at 0 (the contract's
+    /// "time since the start of the session"), and so do the thermal
+    /// sensor trajectories (a cold start, e.g. the next morning).
+    Pause {
+        /// Idle time, s.
+        duration_s: f64,
+        /// Start a new session after the pause.
+        new_session: bool,
     },
 }
 
@@ -185,6 +197,8 @@ impl Plan {
                     pass += 1;
                 }
             }
+            // Time and sessions are handled by `simulate`; no points.
+            Plan::Pause { .. } => {}
             Plan::Point { pos_mm, repeats } => {
                 for _ in 0..*repeats {
                     out.push(Visit {

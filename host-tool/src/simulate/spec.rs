@@ -137,7 +137,7 @@ impl FromStr for Plan {
 
 fn parse_plan(s: &str) -> Result<Plan> {
     let (kind, rest) = s.split_once(':').ok_or_else(|| {
-        anyhow!("expected grid:<step_mm>, plane:<ab>:<step_mm>, line:<a>:<step_mm>, iso230:<a> or point:x=…,y=…,z=…")
+        anyhow!("expected grid:<step_mm>, plane:<ab>:<step_mm>, line:<a>:<step_mm>, iso230:<a>, point:x=…,y=…,z=… or pause:<s>")
     })?;
     let raster_keys = "x, y, z, bidir, runs";
     match kind {
@@ -209,7 +209,25 @@ fn parse_plan(s: &str) -> Result<Plan> {
             kv.finish("x, y, z, repeats")?;
             Ok(Plan::Point { pos_mm: p, repeats })
         }
-        other => bail!("unknown plan `{other}` (expected grid, plane, line, iso230 or point)"),
+        "pause" => {
+            let (d, opts) = rest.split_once(',').unwrap_or((rest, ""));
+            let duration_s = d
+                .trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite() && *v >= 0.0)
+                .ok_or_else(|| anyhow!("pause `{d}`: expected a duration in s ≥ 0"))?;
+            let mut kv = Kv::parse(opts)?;
+            let new_session = kv.flag("new_session")?;
+            kv.finish("new_session")?;
+            Ok(Plan::Pause {
+                duration_s,
+                new_session,
+            })
+        }
+        other => {
+            bail!("unknown plan `{other}` (expected grid, plane, line, iso230, point or pause)")
+        }
     }
 }
 
@@ -261,6 +279,16 @@ impl fmt::Display for Plan {
                     AXES[*axis]
                 )?;
                 write_at(f, at_mm)
+            }
+            Plan::Pause {
+                duration_s,
+                new_session,
+            } => {
+                write!(f, "pause:{duration_s}")?;
+                if *new_session {
+                    write!(f, ",new_session")?;
+                }
+                Ok(())
             }
             Plan::Point { pos_mm, repeats } => {
                 write!(f, "point:x={},y={},z={}", pos_mm[0], pos_mm[1], pos_mm[2])?;
@@ -449,6 +477,8 @@ mod tests {
             "line:y:0.5,x=400,z=250,bidir,runs=3",
             "iso230:x,targets=11,runs=5,overrun_mm=5",
             "point:x=0,y=0,z=0,repeats=3",
+            "pause:600",
+            "pause:0,new_session",
         ] {
             let p: Plan = s.parse().unwrap();
             assert_eq!(p.to_string(), s);
