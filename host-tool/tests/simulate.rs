@@ -474,3 +474,21 @@ fn pauses_and_new_sessions_restart_time_and_temperature() {
         assert!((ex[r] - want).abs() < RES, "row {r}");
     }
 }
+
+#[test]
+fn thermal_swing_makes_temperature_go_up_and_down() {
+    let d = simulate::simulate(&perfect(
+        &["line:x:10,runs=6"],
+        &["thermal:channel=air,rise_c=0,swing_c=0.5,swing_period_s=600"],
+    ));
+    let temp = &d.temp("air").unwrap().temp_c;
+    let t = d.t_s.as_ref().unwrap();
+    for r in 0..d.len() {
+        let want = 20.0 + 0.5 * (std::f64::consts::TAU * t[r] / 600.0).sin();
+        assert!((temp[r] - want).abs() <= 0.0005 + 1e-12, "row {r}");
+    }
+    let (lo, hi) = temp
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+    assert!(lo < 19.55 && hi > 20.45, "a full swing: {lo}..{hi}");
+}

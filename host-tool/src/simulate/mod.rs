@@ -51,7 +51,8 @@ pub enum Effect {
     },
     /// Thermal growth following a temperature that is recorded on the
     /// channel `T_<channel>_C`: the sensor follows
-    /// start_c + rise_c·(1 − e^(−t/tau_s)); the structure follows the sensor
+    /// start_c + rise_c·(1 − e^(−t/tau_s)) + swing_c·sin(2π·t/swing_period_s);
+    /// the structure follows the sensor
     /// with a first-order lag `lag_s` (updated per reading, as
     /// `features::lagged` models it); the error on `target` is
     /// (T_struct − t_ref_c)·(cte_um_per_m_k·1e-3·q_times + offset_um_per_k).
@@ -77,6 +78,12 @@ pub enum Effect {
         tau_s: f64,
         /// Lag of the structure behind the sensor, s (0 = none).
         lag_s: f64,
+        /// Amplitude of a periodic swing added to the sensor (an air
+        /// conditioner's cycle), K; 0 = none. A swing lets drift (which
+        /// follows time only) be told apart from a monotonic warm-up.
+        swing_c: f64,
+        /// Period of the swing, s.
+        swing_period_s: f64,
     },
     /// Reversal (backlash) on `axis`: ±backlash_um/2 on `target` by the
     /// direction of the last approach, so x̄↑ − x̄↓ = backlash_um.
@@ -295,11 +302,16 @@ impl SimConfig {
                     harmonics,
                     ..
                 } => *period_mm > 0.0 && *harmonics >= 1,
-                Effect::Thermal { tau_s, lag_s, .. } => *tau_s >= 0.0 && *lag_s >= 0.0,
+                Effect::Thermal {
+                    tau_s,
+                    lag_s,
+                    swing_period_s,
+                    ..
+                } => *tau_s >= 0.0 && *lag_s >= 0.0 && *swing_period_s > 0.0,
                 Effect::Reversal { .. } | Effect::Drift { .. } => true,
             };
             if !ok {
-                bail!("effect `{e}`: expected tools_mm not empty, period_mm > 0, harmonics ≥ 1, tau_s and lag_s ≥ 0");
+                bail!("effect `{e}`: expected tools_mm not empty, period_mm > 0, harmonics ≥ 1, tau_s and lag_s ≥ 0, swing_period_s > 0");
             }
         }
         Ok(())
@@ -471,6 +483,8 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
             start_c,
             rise_c,
             tau_s,
+            swing_c,
+            swing_period_s,
             ..
         } = e
         {
@@ -485,7 +499,8 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
                     } else {
                         1.0
                     };
-                    round_dec(start_c + rise_c * f, 3)
+                    let swing = swing_c * (TAU * t / swing_period_s).sin();
+                    round_dec(start_c + rise_c * f + swing, 3)
                 })
                 .collect();
             temps.push(TempChannel {

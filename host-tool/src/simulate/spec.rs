@@ -366,8 +366,13 @@ fn parse_effect(s: &str) -> Result<Effect> {
                 rise_c: kv.f64("rise_c")?.unwrap_or(3.0),
                 tau_s: nonneg(kv.f64("tau_s")?.unwrap_or(3600.0), "tau_s")?,
                 lag_s: nonneg(kv.f64("lag_s")?.unwrap_or(0.0), "lag_s")?,
+                swing_c: kv.f64("swing_c")?.unwrap_or(0.0),
+                swing_period_s: match kv.f64("swing_period_s")?.unwrap_or(1800.0) {
+                    p if p > 0.0 => p,
+                    p => bail!("`swing_period_s={p}`: expected a positive period"),
+                },
             };
-            kv.finish("channel, target, times, cte_um_per_m_k, offset_um_per_k, t_ref_c, start_c, rise_c, tau_s, lag_s")?;
+            kv.finish("channel, target, times, cte_um_per_m_k, offset_um_per_k, t_ref_c, start_c, rise_c, tau_s, lag_s, swing_c, swing_period_s")?;
             e
         }
         "reversal" => {
@@ -438,9 +443,11 @@ impl fmt::Display for Effect {
                 rise_c,
                 tau_s,
                 lag_s,
+                swing_c,
+                swing_period_s,
             } => write!(
                 f,
-                "thermal:channel={channel},target={},times={},cte_um_per_m_k={cte_um_per_m_k},offset_um_per_k={offset_um_per_k},t_ref_c={t_ref_c},start_c={start_c},rise_c={rise_c},tau_s={tau_s},lag_s={lag_s}",
+                "thermal:channel={channel},target={},times={},cte_um_per_m_k={cte_um_per_m_k},offset_um_per_k={offset_um_per_k},t_ref_c={t_ref_c},start_c={start_c},rise_c={rise_c},tau_s={tau_s},lag_s={lag_s},swing_c={swing_c},swing_period_s={swing_period_s}",
                 TARGETS[*target],
                 times.map_or("none", |a| AXES[a])
             ),
@@ -491,6 +498,7 @@ mod tests {
         for s in [
             "periodic:axis=y,period_mm=5.08,amp_um=3",
             "thermal:channel=bed,cte_um_per_m_k=11.5,rise_c=2,lag_s=600",
+            "thermal:channel=air,rise_c=0,swing_c=0.5,swing_period_s=2400",
             "thermal:channel=spindle,target=ez,times=none,cte_um_per_m_k=0,offset_um_per_k=-1.5",
             "reversal:axis=x,backlash_um=8",
             "abbe:angle_urad=48.5,tools_mm=0/50/100",
