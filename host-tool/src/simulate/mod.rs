@@ -618,6 +618,24 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
     for p in &cfg.plans {
         metadata.push(("plan".into(), p.to_string()));
     }
+    // Everything else that shapes the file, so the metadata alone can
+    // reproduce it.
+    metadata.push((
+        "timing".into(),
+        format!(
+            "feed_mm_s={},dwell_s={},tool_mm={}",
+            cfg.timing.feed_mm_s, cfg.timing.dwell_s, cfg.tool_mm
+        ),
+    ));
+    if let Some(r) = &cfg.reference {
+        metadata.push((
+            "reference".into(),
+            format!(
+                "x={},y={},z={},every_passes={}",
+                r.pos_mm[0], r.pos_mm[1], r.pos_mm[2], r.every_passes
+            ),
+        ));
+    }
     for e in &cfg.effects {
         metadata.push(("effect".into(), e.to_string()));
         if let Effect::Reversal { axis, .. } = e {
