@@ -4,6 +4,7 @@
 //! - outside the travel the position is held at the edge and flagged;
 //! - no panic, no NaN, no overflow for any i32 inputs; corrections never
 //!   exceed the envelope's max and are flagged when limited.
+#![allow(clippy::needless_range_loop)] // per-output index loops mirror [ex, ey, ez]
 mod common;
 
 use common::*;
@@ -28,7 +29,10 @@ fn worst_errors(spec: &TableSpec, model: &LargeModel, seed: u64, n: usize) -> (f
         let r = spec.eval_f64(&InputsF64::from(&inp));
         let f = model.eval_f32(&inp);
         let q = model.eval_fixed(&inp);
-        assert!(f.flags.is_empty() && q.flags.is_empty(), "flags inside the envelope: {f:?} {q:?}");
+        assert!(
+            f.flags.is_empty() && q.flags.is_empty(),
+            "flags inside the envelope: {f:?} {q:?}"
+        );
         for o in 0..3 {
             worst.0 = worst.0.max((f.corr_nm[o] as f64 - r[o]).abs());
             worst.1 = worst.1.max((q.corr_nm[o] as f64 - r[o]).abs());
@@ -106,7 +110,10 @@ fn per_kind_sweep_within_1nm() {
             let spec = random_spec(0xACC0 + 16 * n as u64 + s, &[*kind]);
             let model = load(&spec);
             let (wf, wq) = worst_errors(&spec, &model, 99 + s, 5000);
-            assert!(wf <= 1.0 && wq <= 1.0, "{kind:?} seed {s}: f32 {wf} nm, fixed {wq} nm");
+            assert!(
+                wf <= 1.0 && wq <= 1.0,
+                "{kind:?} seed {s}: f32 {wf} nm, fixed {wq} nm"
+            );
         }
     }
 }
@@ -141,13 +148,21 @@ fn nan_coefficients_are_rejected_and_huge_ones_are_typed_errors() {
     if let model_core::TermSpec::Poly { coefs, .. } = &mut spec.terms[0] {
         coefs[0].1 = f64::NAN;
     }
-    assert!(matches!(spec.encode(), Err(model_core::EncodeError::Invalid(model_core::TableError::NotFinite { .. }))));
+    assert!(matches!(
+        spec.encode(),
+        Err(model_core::EncodeError::Invalid(
+            model_core::TableError::NotFinite { .. }
+        ))
+    ));
     let mut spec = random_spec(3, &[Kind::Cubic19]);
     if let model_core::TermSpec::Poly { coefs, .. } = &mut spec.terms[0] {
         coefs[0].1 = 1e12;
     }
     let bytes = spec.encode().unwrap();
-    assert!(matches!(Model::load(&parse(&bytes).unwrap()), Err(model_core::LoadError::CoefficientRange { .. })));
+    assert!(matches!(
+        Model::load(&parse(&bytes).unwrap()),
+        Err(model_core::LoadError::CoefficientRange { .. })
+    ));
 }
 
 #[test]
@@ -156,23 +171,47 @@ fn capacity_exceeded_is_a_typed_error_and_large_alias_fits_17x11x11x3() {
     let mut spec = base_spec(&mut rng, 1);
     for o in 0..3u8 {
         let axes = [
-            model_core::GridAxisSpec { nodes: 17, origin_nm: spec.envelope.travel_min_nm[0], step_nm: 1_000_000 },
-            model_core::GridAxisSpec { nodes: 11, origin_nm: spec.envelope.travel_min_nm[1], step_nm: 1_000_000 },
-            model_core::GridAxisSpec { nodes: 11, origin_nm: spec.envelope.travel_min_nm[2], step_nm: 1_000_000 },
+            model_core::GridAxisSpec {
+                nodes: 17,
+                origin_nm: spec.envelope.travel_min_nm[0],
+                step_nm: 1_000_000,
+            },
+            model_core::GridAxisSpec {
+                nodes: 11,
+                origin_nm: spec.envelope.travel_min_nm[1],
+                step_nm: 1_000_000,
+            },
+            model_core::GridAxisSpec {
+                nodes: 11,
+                origin_nm: spec.envelope.travel_min_nm[2],
+                step_nm: 1_000_000,
+            },
         ];
-        spec.terms.push(model_core::TermSpec::Grid(model_core::GridSpec {
-            output: o,
-            axes,
-            values_nm: (0..17 * 11 * 11).map(|_| rng.sym(20_000.0)).collect(),
-        }));
+        spec.terms
+            .push(model_core::TermSpec::Grid(model_core::GridSpec {
+                output: o,
+                axes,
+                values_nm: (0..17 * 11 * 11).map(|_| rng.sym(20_000.0)).collect(),
+            }));
     }
     let bytes = spec.encode().unwrap();
     let table = parse(&bytes).unwrap();
-    assert!(matches!(Model::load(&table), Err(model_core::LoadError::GridCapacity { needed: 6171, .. })));
+    assert!(matches!(
+        Model::load(&table),
+        Err(model_core::LoadError::GridCapacity { needed: 6171, .. })
+    ));
     assert!(LargeModel::load(&table).is_ok());
     // The default model stays small enough for the MCU's 128 KiB of RAM.
-    assert!(core::mem::size_of::<Model>() <= 40 * 1024, "Model is {} bytes", core::mem::size_of::<Model>());
-    assert!(core::mem::size_of::<LargeModel>() <= 48 * 1024, "LargeModel is {} bytes", core::mem::size_of::<LargeModel>());
+    assert!(
+        core::mem::size_of::<Model>() <= 40 * 1024,
+        "Model is {} bytes",
+        core::mem::size_of::<Model>()
+    );
+    assert!(
+        core::mem::size_of::<LargeModel>() <= 48 * 1024,
+        "LargeModel is {} bytes",
+        core::mem::size_of::<LargeModel>()
+    );
 }
 
 #[test]
@@ -196,4 +235,93 @@ fn dir_tracker_ramps_without_steps() {
         assert!((r - prev).abs() <= (1i64 << 31) / 5000 + 1);
         prev = r;
     }
+}
+
+/// Tables at the edges of what load accepts (huge grid values, coefficient
+/// sums just under the fixed-point limit, large amplitudes, steep MLPs):
+/// evaluating them with any inputs must not overflow (this test is meant to
+/// run in debug, where integer overflow panics).
+#[test]
+fn extreme_but_valid_models_never_overflow() {
+    use model_core::TermSpec;
+    let mut rng = Rng(4242);
+    let mut loaded = 0;
+    for round in 0..40 {
+        let mut spec = random_spec(900 + round, &ALL_KINDS);
+        spec.envelope.max_corr_nm = [model_core::table::MAX_CORR_LIMIT_NM; 3];
+        let scale = [1.0, 10.0, 100.0, 500.0][round as usize % 4];
+        for t in spec.terms.iter_mut() {
+            match t {
+                TermSpec::Poly { coefs, .. } => {
+                    let n = coefs.len() as f64;
+                    for c in coefs.iter_mut() {
+                        c.1 = rng.sym(6.0e8 / n);
+                    }
+                }
+                TermSpec::Grid(g) => {
+                    for v in g.values_nm.iter_mut() {
+                        *v = rng.sym(4.1e6);
+                    }
+                }
+                TermSpec::Reversal { amplitude_nm, .. } => *amplitude_nm = rng.sym(2.0e9),
+                TermSpec::Periodic { sin_nm, cos_nm, .. } => {
+                    for v in sin_nm.iter_mut().chain(cos_nm.iter_mut()) {
+                        *v = rng.sym(2.0e8);
+                    }
+                }
+                TermSpec::Thermal { coefs_nm_per_k, .. } => {
+                    for c in coefs_nm_per_k.iter_mut() {
+                        c.1 = rng.sym(1e4 * scale);
+                    }
+                }
+                TermSpec::Abbe { coefs, .. } => {
+                    for c in coefs.iter_mut() {
+                        c.1 = rng.sym(1e-3 * scale);
+                    }
+                }
+                TermSpec::Mlp(m) => {
+                    for l in m.hidden.iter_mut().chain(std::iter::once(&mut m.output)) {
+                        for w in l.weights.iter_mut().chain(l.bias.iter_mut()) {
+                            *w *= scale.sqrt();
+                        }
+                    }
+                    for v in m.out_max_nm.iter_mut() {
+                        *v = 5e6;
+                    }
+                }
+            }
+        }
+        let bytes = match spec.encode() {
+            Ok(b) => b,
+            Err(e) => {
+                eprintln!("round {round}: {e}");
+                continue;
+            }
+        };
+        let table = parse(&bytes).unwrap();
+        let model = match LargeModel::load(&table) {
+            Ok(m) => m,
+            Err(e) => {
+                eprintln!("round {round}: {e}");
+                continue;
+            }
+        };
+        loaded += 1;
+        for _ in 0..200 {
+            let inp = random_inputs(&mut rng, &spec, true);
+            let _ = model.eval_f32(&inp);
+            let _ = model.eval_fixed(&inp);
+        }
+        for v in [i32::MIN, -1, 0, 1, i32::MAX] {
+            let inp = Inputs {
+                pos_nm: [v; 3],
+                rev_q30: [v; 3],
+                temp_mc: [v; 4],
+                tool_nm: v,
+            };
+            let _ = model.eval_f32(&inp);
+            let _ = model.eval_fixed(&inp);
+        }
+    }
+    assert!(loaded >= 20, "only {loaded} of 40 extreme models loaded");
 }

@@ -1,5 +1,6 @@
 //! A quick end-to-end check of every term kind: spec → encode → parse →
 //! load → eval (f32 and fixed) against the f64 reference.
+#![allow(clippy::needless_range_loop)] // per-output index loops mirror [ex, ey, ez]
 mod common;
 
 use common::*;

@@ -284,7 +284,10 @@ pub fn random_inputs(rng: &mut Rng, spec: &TableSpec, outside: bool) -> Inputs {
 pub fn mill_spec(n_channels: usize) -> TableSpec {
     let mut env = Envelope::default();
     let mut sc = InputScaling::default();
-    for (a, half) in [400_000_000, 250_000_000, 250_000_000].into_iter().enumerate() {
+    for (a, half) in [400_000_000, 250_000_000, 250_000_000]
+        .into_iter()
+        .enumerate()
+    {
         sc.half_span_nm[a] = half;
         env.travel_min_nm[a] = -half;
         env.travel_max_nm[a] = half;
@@ -300,7 +303,10 @@ pub fn mill_spec(n_channels: usize) -> TableSpec {
     TableSpec {
         created_unix_s: 1_763_769_600, // 2025-11-22T00:00:00Z
         source_hash: core::array::from_fn(|i| (i as u8).wrapping_mul(37)),
-        channels: ["bed", "air", "spindle", "column"][..n_channels].iter().map(|s| s.to_string()).collect(),
+        channels: ["bed", "air", "spindle", "column"][..n_channels]
+            .iter()
+            .map(|s| s.to_string())
+            .collect(),
         envelope: env,
         scaling: sc,
         outputs: [true, true, true],
@@ -317,7 +323,11 @@ fn mlp_3x16x3(rng: &mut Rng, spec: &TableSpec, with_temp: bool, layers: usize) -
         })
         .collect();
     if with_temp {
-        inputs.push(MlpInputSpec { source: MlpSource::Temp(0), min: 15_000.0, max: 30_000.0 });
+        inputs.push(MlpInputSpec {
+            source: MlpSource::Temp(0),
+            min: 15_000.0,
+            max: 30_000.0,
+        });
     }
     let mut prev = inputs.len();
     let mut hidden = Vec::new();
@@ -332,7 +342,10 @@ fn mlp_3x16x3(rng: &mut Rng, spec: &TableSpec, with_temp: bool, layers: usize) -
         outputs: vec![0, 1, 2],
         inputs,
         hidden,
-        output: LayerSpec { weights: (0..3 * 16).map(|_| rng.sym(0.25)).collect(), bias: vec![0.01, -0.02, 0.03] },
+        output: LayerSpec {
+            weights: (0..3 * 16).map(|_| rng.sym(0.25)).collect(),
+            bias: vec![0.01, -0.02, 0.03],
+        },
         out_min_nm: vec![-40_000.0, -30_000.0, -20_000.0],
         out_max_nm: vec![40_000.0, 30_000.0, 20_000.0],
     })
@@ -347,7 +360,10 @@ pub fn golden_specs() -> Vec<(&'static str, TableSpec)> {
     let mut rng = Rng(19);
     let mut cubic = mill_spec(1);
     for o in 0..3 {
-        cubic.terms.push(TermSpec::Poly { output: o, coefs: poly(&mut rng, &CUBIC19, 8_000.0) });
+        cubic.terms.push(TermSpec::Poly {
+            output: o,
+            coefs: poly(&mut rng, &CUBIC19, 8_000.0),
+        });
     }
     out.push(("cubic19", cubic.clone()));
 
@@ -365,7 +381,12 @@ pub fn golden_specs() -> Vec<(&'static str, TableSpec)> {
         t_ref_mc: 20_000,
         coefs_nm_per_k: vec![([0, 0, 0], 4_600.0), ([1, 0, 0], 4_600.0)],
     });
-    full.terms.push(TermSpec::Reversal { output: 0, axis: 0, transition_nm: 20_000, amplitude_nm: 6_000.0 });
+    full.terms.push(TermSpec::Reversal {
+        output: 0,
+        axis: 0,
+        transition_nm: 20_000,
+        amplitude_nm: 6_000.0,
+    });
     out.push(("full", full));
 
     let mut nn = mill_spec(1);
@@ -380,18 +401,42 @@ pub fn golden_specs() -> Vec<(&'static str, TableSpec)> {
     grid.terms.push(TermSpec::Grid(GridSpec {
         output: 0,
         axes: [
-            GridAxisSpec { nodes: 17, origin_nm: -400_000_000, step_nm: 50_000_000 },
-            GridAxisSpec { nodes: 11, origin_nm: -250_000_000, step_nm: 50_000_000 },
-            GridAxisSpec { nodes: 1, origin_nm: 0, step_nm: 1 },
+            GridAxisSpec {
+                nodes: 17,
+                origin_nm: -400_000_000,
+                step_nm: 50_000_000,
+            },
+            GridAxisSpec {
+                nodes: 11,
+                origin_nm: -250_000_000,
+                step_nm: 50_000_000,
+            },
+            GridAxisSpec {
+                nodes: 1,
+                origin_nm: 0,
+                step_nm: 1,
+            },
         ],
         values_nm: (0..17 * 11).map(|_| rng.sym(15_000.0)).collect(),
     }));
     grid.terms.push(TermSpec::Grid(GridSpec {
         output: 2,
         axes: [
-            GridAxisSpec { nodes: 1, origin_nm: 0, step_nm: 1 },
-            GridAxisSpec { nodes: 1, origin_nm: 0, step_nm: 1 },
-            GridAxisSpec { nodes: 11, origin_nm: -250_000_000, step_nm: 50_000_000 },
+            GridAxisSpec {
+                nodes: 1,
+                origin_nm: 0,
+                step_nm: 1,
+            },
+            GridAxisSpec {
+                nodes: 1,
+                origin_nm: 0,
+                step_nm: 1,
+            },
+            GridAxisSpec {
+                nodes: 11,
+                origin_nm: -250_000_000,
+                step_nm: 50_000_000,
+            },
         ],
         values_nm: (0..11).map(|_| rng.sym(5_000.0)).collect(),
     }));
@@ -400,11 +445,18 @@ pub fn golden_specs() -> Vec<(&'static str, TableSpec)> {
     let mut all = mill_spec(2);
     let mut rng = Rng(777);
     for o in 0..3 {
-        all.terms.push(TermSpec::Poly { output: o, coefs: poly(&mut rng, kinematic(o as usize), 10_000.0) });
+        all.terms.push(TermSpec::Poly {
+            output: o,
+            coefs: poly(&mut rng, kinematic(o as usize), 10_000.0),
+        });
     }
     all.terms.push(TermSpec::Poly {
         output: 2,
-        coefs: poly(&mut rng, &[[5, 0, 0], [0, 4, 1], [1, 1, 1], [2, 2, 1]], 2_000.0),
+        coefs: poly(
+            &mut rng,
+            &[[5, 0, 0], [0, 4, 1], [1, 1, 1], [2, 2, 1]],
+            2_000.0,
+        ),
     });
     all.terms.push(TermSpec::Periodic {
         output: 0,
@@ -413,17 +465,42 @@ pub fn golden_specs() -> Vec<(&'static str, TableSpec)> {
         sin_nm: vec![2_000.0, 500.0, -250.0, 100.0],
         cos_nm: vec![-700.0, 300.0, 120.0, -50.0],
     });
-    all.terms.push(TermSpec::Thermal { output: 2, channel: 1, t_ref_mc: 20_000, coefs_nm_per_k: vec![([0, 0, 0], -1_500.0)] });
-    all.terms.push(TermSpec::Reversal { output: 1, axis: 1, transition_nm: 10_000, amplitude_nm: -3_500.0 });
-    all.terms.push(TermSpec::Abbe { output: 1, coefs: vec![([0, 0, 0], 48.5e-6), ([1, 0, 0], -10e-6)] });
+    all.terms.push(TermSpec::Thermal {
+        output: 2,
+        channel: 1,
+        t_ref_mc: 20_000,
+        coefs_nm_per_k: vec![([0, 0, 0], -1_500.0)],
+    });
+    all.terms.push(TermSpec::Reversal {
+        output: 1,
+        axis: 1,
+        transition_nm: 10_000,
+        amplitude_nm: -3_500.0,
+    });
+    all.terms.push(TermSpec::Abbe {
+        output: 1,
+        coefs: vec![([0, 0, 0], 48.5e-6), ([1, 0, 0], -10e-6)],
+    });
     let t = mlp_3x16x3(&mut rng, &all, true, 2);
     all.terms.push(t);
     all.terms.push(TermSpec::Grid(GridSpec {
         output: 0,
         axes: [
-            GridAxisSpec { nodes: 5, origin_nm: -400_000_000, step_nm: 200_000_000 },
-            GridAxisSpec { nodes: 3, origin_nm: -250_000_000, step_nm: 250_000_000 },
-            GridAxisSpec { nodes: 3, origin_nm: -250_000_000, step_nm: 250_000_000 },
+            GridAxisSpec {
+                nodes: 5,
+                origin_nm: -400_000_000,
+                step_nm: 200_000_000,
+            },
+            GridAxisSpec {
+                nodes: 3,
+                origin_nm: -250_000_000,
+                step_nm: 250_000_000,
+            },
+            GridAxisSpec {
+                nodes: 3,
+                origin_nm: -250_000_000,
+                step_nm: 250_000_000,
+            },
         ],
         values_nm: (0..45).map(|_| rng.sym(3_000.0)).collect(),
     }));

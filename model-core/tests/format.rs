@@ -1,0 +1,539 @@
+//! Table format robustness: random and mutated bytes never panic and every
+//! corruption is a typed error. The CRC catches almost every random change,
+//! so the structural validators are exercised separately by corrupting a
+//! field and then re-computing a *correct* CRC.
+#![allow(clippy::needless_range_loop)] // per-output index loops mirror [ex, ey, ez]
+mod common;
+
+use common::*;
+use model_core::table::{layout, CRC32, CRC_LEN, FIXED_LEN};
+use model_core::{parse, Inputs, LargeModel, TableError};
+use proptest::prelude::*;
+
+fn golden(name: &str) -> Vec<u8> {
+    golden_specs()
+        .into_iter()
+        .find(|(n, _)| *n == name)
+        .unwrap()
+        .1
+        .encode()
+        .unwrap()
+}
+
+fn all_golden() -> Vec<Vec<u8>> {
+    golden_specs()
+        .into_iter()
+        .map(|(_, s)| s.encode().unwrap())
+        .collect()
+}
+
+/// Re-seal: write a correct CRC for the (modified) bytes.
+fn reseal(b: &mut [u8]) {
+    let n = b.len();
+    let crc = CRC32.checksum(&b[..n - CRC_LEN]);
+    b[n - CRC_LEN..].copy_from_slice(&crc.to_le_bytes());
+}
+
+/// Parse; if valid, load and evaluate with hostile inputs: nothing may panic.
+fn exercise(b: &[u8]) -> Result<(), TableError> {
+    let t = parse(b)?;
+    for term in t.terms() {
+        // Decode every view accessor the firmware or host might call.
+        match term.view() {
+            model_core::table::TermView::Mlp { net, .. } => {
+                for i in 0..net.n_inputs() {
+                    let _ = net.input(i);
+                }
+            }
+            model_core::table::TermView::Grid { grid, .. } => {
+                let _ = (0..grid.len()).map(|i| grid.value(i)).sum::<f64>();
+            }
+            v => {
+                let _ = v.harmonic(1);
+            }
+        }
+    }
+    if let Ok(m) = LargeModel::load(&t) {
+        for inp in [
+            Inputs::default(),
+            Inputs {
+                pos_nm: [i32::MAX; 3],
+                rev_q30: [i32::MIN; 3],
+                temp_mc: [i32::MAX; 4],
+                tool_nm: i32::MIN,
+            },
+            Inputs {
+                pos_nm: [i32::MIN; 3],
+                rev_q30: [i32::MAX; 3],
+                temp_mc: [i32::MIN; 4],
+                tool_nm: i32::MAX,
+            },
+        ] {
+            let _ = m.eval_f32(&inp);
+            let _ = m.eval_fixed(&inp);
+        }
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 512, ..ProptestConfig::default() })]
+
+    #[test]
+    fn random_bytes_are_typed_errors(bytes in prop::collection::vec(any::<u8>(), 0..2048)) {
+        prop_assert!(exercise(&bytes).is_err());
+    }
+
+    #[test]
+    fn random_bytes_with_valid_header_and_crc_never_panic(
+        which in 0usize..5, body in prop::collection::vec(any::<u8>(), 0..1024)) {
+        // A plausible header, random rest, correct length and CRC.
+        let g = &all_golden()[which];
+        let mut b = g[..FIXED_LEN.min(g.len())].to_vec();
+        b.extend_from_slice(&body);
+        b.extend_from_slice(&[0; CRC_LEN]);
+        let n = b.len() as u32;
+        b[layout::TOTAL_LEN..layout::TOTAL_LEN + 4].copy_from_slice(&n.to_le_bytes());
+        reseal(&mut b);
+        let _ = exercise(&b);
+    }
+
+    #[test]
+    fn single_bit_flips_are_caught(which in 0usize..5, bit in any::<prop::sample::Index>()) {
+        let mut b = all_golden()[which].clone();
+        let i = bit.index(b.len() * 8);
+        b[i / 8] ^= 1 << (i % 8);
+        prop_assert!(exercise(&b).is_err());
+    }
+
+    #[test]
+    fn multi_byte_mutations_are_caught(which in 0usize..5,
+        edits in prop::collection::vec((any::<prop::sample::Index>(), 1u8..=255), 1..8)) {
+        let mut b = all_golden()[which].clone();
+        for (at, x) in edits {
+            let i = at.index(b.len());
+            b[i] ^= x;
+        }
+        prop_assert!(exercise(&b).is_err());
+    }
+
+    #[test]
+    fn truncations_and_extensions_are_caught(which in 0usize..5, cut in any::<prop::sample::Index>(), extra in prop::collection::vec(any::<u8>(), 1..64)) {
+        let g = &all_golden()[which];
+        let n = cut.index(g.len());
+        prop_assert!(exercise(&g[..n]).is_err());
+        let mut longer = g.clone();
+        longer.extend_from_slice(&extra);
+        prop_assert!(exercise(&longer).is_err());
+    }
+
+    #[test]
+    fn length_field_changes_are_caught(which in 0usize..5, len in any::<u32>()) {
+        let mut b = all_golden()[which].clone();
+        prop_assume!(len as usize != b.len());
+        b[layout::TOTAL_LEN..layout::TOTAL_LEN + 4].copy_from_slice(&len.to_le_bytes());
+        prop_assert!(exercise(&b).is_err());
+        // Even with a re-computed CRC.
+        reseal(&mut b);
+        prop_assert!(exercise(&b).is_err());
+    }
+
+    /// Structural fuzzing past the CRC: mutate, re-seal, and require that
+    /// parse → load → eval never panics (the result may be valid or a typed error).
+    #[test]
+    fn resealed_mutations_never_panic(which in 0usize..5,
+        edits in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6)) {
+        let mut b = all_golden()[which].clone();
+        let n = b.len();
+        for (at, x) in edits {
+            b[at.index(n - CRC_LEN)] = x;
+        }
+        reseal(&mut b);
+        let _ = exercise(&b);
+    }
+}
+
+fn set_u8(b: &mut [u8], off: usize, v: u8) {
+    b[off] = v;
+}
+fn set_i32(b: &mut [u8], off: usize, v: i32) {
+    b[off..off + 4].copy_from_slice(&v.to_le_bytes());
+}
+fn set_f64(b: &mut [u8], off: usize, v: f64) {
+    b[off..off + 8].copy_from_slice(&v.to_le_bytes());
+}
+
+/// Apply `edit`, re-seal, and return the parse error.
+fn invalid(name: &str, edit: impl FnOnce(&mut Vec<u8>)) -> TableError {
+    let mut b = golden(name);
+    edit(&mut b);
+    reseal(&mut b);
+    match parse(&b) {
+        Ok(_) => panic!("edit was accepted"),
+        Err(e) => e,
+    }
+}
+
+const T0: usize = layout::TERMS; // first term header
+const B0: usize = layout::TERMS + 8; // first term body
+
+#[test]
+fn structurally_invalid_tables_with_correct_crc() {
+    use TableError as E;
+    assert_eq!(invalid("cubic19", |b| b[0] = b'X'), E::BadMagic);
+    assert_eq!(
+        invalid("cubic19", |b| b[layout::VERSION] = 2),
+        E::UnsupportedVersion { version: 2 }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| b[layout::RESERVED0] = 1),
+        E::ReservedNonZero { offset: 6 }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_u8(b, layout::UNITS, 1)),
+        E::UnsupportedUnits { code: 1 }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_u8(b, layout::CHANNEL_COUNT, 5)),
+        E::BadChannelCount { count: 5 }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_u8(b, layout::CHANNEL_COUNT, 2)),
+        E::BadChannelName { channel: 1 }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| b[layout::CHANNEL_NAMES] = 0xFF),
+        E::BadChannelName { channel: 0 }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| b[layout::CHANNEL_NAMES + 5] = b'x'),
+        E::BadChannelName { channel: 0 }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_i32(b, layout::TRAVEL_MIN, 500_000_000)),
+        E::BadEnvelope {
+            offset: layout::TRAVEL_MIN as u32
+        }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_i32(b, layout::MAX_CORR + 4, -1)),
+        E::BadEnvelope {
+            offset: layout::MAX_CORR as u32 + 4
+        }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_i32(b, layout::MAX_SLEW, 0)),
+        E::BadEnvelope {
+            offset: layout::MAX_SLEW as u32
+        }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_i32(b, layout::TEMP_MIN, 50_000)),
+        E::BadEnvelope {
+            offset: layout::TEMP_MIN as u32
+        }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_i32(b, layout::TEMP_MIN + 8, 1)),
+        E::BadEnvelope {
+            offset: layout::TEMP_MIN as u32 + 8
+        }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_i32(b, layout::TOOL_MIN, i32::MAX)),
+        E::BadEnvelope {
+            offset: layout::TOOL_MIN as u32
+        }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_i32(b, layout::HALF_SPAN + 4, 0)),
+        E::BadScaling { axis: 1 }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_i32(b, layout::HALF_SPAN, 1000)),
+        E::TravelOutsideScaling { axis: 0 }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_i32(b, layout::CENTRE + 8, 1)),
+        E::TravelOutsideScaling { axis: 2 }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_u8(b, layout::OUTPUTS, 0x0F)),
+        E::BadOutputs {
+            offset: layout::OUTPUTS as u32
+        }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_u8(b, layout::RESERVED1 + 2, 9)),
+        E::ReservedNonZero {
+            offset: layout::RESERVED1 as u32 + 2
+        }
+    );
+    // Terms.
+    assert_eq!(
+        invalid("cubic19", |b| b[T0] = 99),
+        E::UnknownTermKind {
+            offset: T0 as u32,
+            kind: 99
+        }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| b[T0 + 1] = 0b011),
+        E::BadTermOutputs {
+            offset: T0 as u32 + 1
+        }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| b[T0 + 1] = 0),
+        E::BadTermOutputs {
+            offset: T0 as u32 + 1
+        }
+    );
+    assert_eq!(
+        invalid("grid_17x11", |b| b[T0 + 1] = 0b010),
+        E::BadTermOutputs {
+            offset: T0 as u32 + 1
+        }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| b[T0 + 2] = 1),
+        E::BadTermField {
+            offset: T0 as u32 + 2
+        }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| b[T0 + 3] = 1),
+        E::ReservedNonZero {
+            offset: T0 as u32 + 3
+        }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_i32(b, T0 + 4, 1 << 20)),
+        E::TermTruncated { offset: T0 as u32 }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_i32(b, T0 + 4, 4)),
+        E::TermLengthMismatch { offset: B0 as u32 }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| b[B0] = 0),
+        E::BadTermField { offset: B0 as u32 }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| b[B0] = 57),
+        E::BadTermField { offset: B0 as u32 }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| b[B0] = 18),
+        E::TermLengthMismatch { offset: B0 as u32 }
+    );
+    // Monomial 0 is [0,0,0]; make it degree 6, then a duplicate of monomial 1 ([1,0,0]).
+    assert_eq!(
+        invalid("cubic19", |b| b[B0 + 4] = 6),
+        E::BadTermField {
+            offset: B0 as u32 + 4
+        }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| b[B0 + 4 + 12] = 0),
+        E::DuplicateMonomial {
+            offset: B0 as u32 + 16
+        }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_f64(b, B0 + 8, f64::NAN)),
+        E::NotFinite {
+            offset: B0 as u32 + 8
+        }
+    );
+    assert_eq!(
+        invalid("cubic19", |b| set_f64(b, B0 + 8, f64::INFINITY)),
+        E::NotFinite {
+            offset: B0 as u32 + 8
+        }
+    );
+    // Term count vs. bytes.
+    assert_eq!(
+        invalid("cubic19", |b| b[layout::TERM_COUNT] = 2),
+        E::TrailingBytes { offset: 0 }.with_offset_of(&golden("cubic19"), 2)
+    );
+    assert!(matches!(
+        invalid("cubic19", |b| b[layout::TERM_COUNT] = 4),
+        E::TermTruncated { .. }
+    ));
+}
+
+trait WithOffset {
+    fn with_offset_of(self, b: &[u8], after_terms: usize) -> Self;
+}
+impl WithOffset for TableError {
+    /// The TrailingBytes offset expected after `after_terms` terms of `b`.
+    fn with_offset_of(self, b: &[u8], after_terms: usize) -> Self {
+        let mut off = layout::TERMS;
+        for _ in 0..after_terms {
+            off += 8 + u32::from_le_bytes(b[off + 4..off + 8].try_into().unwrap()) as usize;
+        }
+        TableError::TrailingBytes { offset: off as u32 }
+    }
+}
+
+/// Kind-specific validators, located through the table's own term iterator.
+#[test]
+fn term_kind_validators_with_correct_crc() {
+    use TableError as E;
+    let b = golden("all_kinds");
+    let t = parse(&b).unwrap();
+    let find =
+        |kind: model_core::table::TermKind| t.terms().find(|x| x.kind == kind).unwrap().offset;
+    use model_core::table::TermKind as K;
+    let per = find(K::Periodic);
+    let th = find(K::Thermal);
+    let rev = find(K::Reversal);
+    let mlp = find(K::Mlp);
+    let grid = find(K::Grid);
+    let abbe = find(K::Abbe);
+    assert_eq!(
+        invalid("all_kinds", |b| b[per + 2] = 3),
+        E::BadTermField {
+            offset: per as u32 + 2
+        }
+    );
+    assert_eq!(
+        invalid("all_kinds", |b| set_i32(b, per + 8, 0)),
+        E::BadTermField {
+            offset: per as u32 + 8
+        }
+    );
+    assert_eq!(
+        invalid("all_kinds", |b| b[per + 12] = 5),
+        E::BadTermField {
+            offset: per as u32 + 12
+        }
+    );
+    assert_eq!(
+        invalid("all_kinds", |b| b[per + 12] = 3),
+        E::TermLengthMismatch { offset: per as u32 }
+    );
+    assert_eq!(
+        invalid("all_kinds", |b| b[th + 2] = 2),
+        E::BadTermField {
+            offset: th as u32 + 2
+        }
+    );
+    assert_eq!(
+        invalid("all_kinds", |b| set_i32(b, th + 8, 300_000)),
+        E::BadTermField {
+            offset: th as u32 + 8
+        }
+    );
+    assert_eq!(
+        invalid("all_kinds", |b| b[rev + 2] = 7),
+        E::BadTermField {
+            offset: rev as u32 + 2
+        }
+    );
+    assert_eq!(
+        invalid("all_kinds", |b| set_i32(b, rev + 8, -5)),
+        E::BadTermField {
+            offset: rev as u32 + 8
+        }
+    );
+    assert_eq!(
+        invalid("all_kinds", |b| set_f64(b, rev + 16, f64::NAN)),
+        E::NotFinite {
+            offset: rev as u32 + 16
+        }
+    );
+    assert_eq!(
+        invalid("all_kinds", |b| b[abbe + 2] = 1),
+        E::BadTermField {
+            offset: abbe as u32 + 2
+        }
+    );
+    // MLP body: n_in, n_layers, h1, h2.
+    assert_eq!(
+        invalid("all_kinds", |b| b[mlp + 8] = 0),
+        E::BadTermField {
+            offset: mlp as u32 + 8
+        }
+    );
+    assert_eq!(
+        invalid("all_kinds", |b| b[mlp + 9] = 3),
+        E::BadTermField {
+            offset: mlp as u32 + 9
+        }
+    );
+    assert_eq!(
+        invalid("all_kinds", |b| b[mlp + 10] = 33),
+        E::BadTermField {
+            offset: mlp as u32 + 10
+        }
+    );
+    assert_eq!(
+        invalid("all_kinds", |b| b[mlp + 10] = 15),
+        E::TermLengthMismatch {
+            offset: mlp as u32 + 8
+        }
+    );
+    // Input 3 is the temperature channel 0 (source 3); channel 9 does not exist.
+    assert_eq!(
+        invalid("all_kinds", |b| b[mlp + 12 + 60] = 12),
+        E::BadTermField {
+            offset: mlp as u32 + 72
+        }
+    );
+    // Input 0: min ≥ max.
+    assert_eq!(
+        invalid("all_kinds", |b| set_f64(b, mlp + 16, 1e9)),
+        E::BadTermField {
+            offset: mlp as u32 + 16
+        }
+    );
+    // Grid: nodes 0, step 0, value NaN.
+    assert_eq!(
+        invalid("all_kinds", |b| b[grid + 8] = 0),
+        E::BadTermField {
+            offset: grid as u32 + 8
+        }
+    );
+    assert_eq!(
+        invalid("all_kinds", |b| set_i32(b, grid + 16, 0)),
+        E::BadTermField {
+            offset: grid as u32 + 16
+        }
+    );
+    assert_eq!(
+        invalid("all_kinds", |b| set_f64(b, grid + 44, f64::NAN)),
+        E::NotFinite {
+            offset: grid as u32 + 44
+        }
+    );
+    assert_eq!(
+        invalid("all_kinds", |b| b[grid + 8] = 6),
+        E::TermLengthMismatch {
+            offset: grid as u32
+        }
+    );
+}
+
+#[test]
+fn parse_prefix_reads_a_table_at_the_start_of_a_slot() {
+    let g = golden("full");
+    let mut slot = g.clone();
+    slot.resize(128 * 1024, 0xFF); // erased flash after the table
+    let t = model_core::table::parse_prefix(&slot).unwrap();
+    assert_eq!(t.bytes(), &g[..]);
+    assert!(model_core::table::parse_prefix(&[0xFF; 4096]).is_err());
+    assert!(model_core::table::parse_prefix(&[]).is_err());
+}
+
+#[test]
+fn errors_display_something_useful() {
+    let e = parse(&[0u8; 10]).unwrap_err();
+    assert_eq!(e, TableError::TooShort { len: 10 });
+    assert!(e.to_string().contains("10 bytes"));
+    let mut g = golden("cubic19");
+    g[100] ^= 1;
+    assert!(matches!(parse(&g), Err(TableError::CrcMismatch { .. })));
+    assert!(parse(&g).unwrap_err().to_string().contains("CRC32"));
+}
