@@ -1,11 +1,134 @@
-//! `trueaxis fit` — placeholder until its issue lands; fails loudly.
+//! `trueaxis fit` — fit a compensation model to measurements and write
+//! MODEL.json. The work is in `crate::fit`; this file maps the command line
+//! onto it and prints the result (text, or CONTRACT §2's JSON with `--json`).
+//! Warnings (ill-conditioning, unmeasured grid nodes, epoch limit) go to
+//! stderr in both modes and into the JSON's `warnings`.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+
+use crate::features::Effect;
+use crate::fit::{self, nn::NnOptions, FitOptions};
+use crate::import;
 
 /// Arguments of `trueaxis fit`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// The measurement file (contract CSV or Renishaw .rtl).
+    pub data: PathBuf,
+    /// Model spec: cubic19, kinematic, nn:<hidden> or grid:<step_mm>.
+    #[arg(long)]
+    pub model: String,
+    /// Add a physical effect (`periodic:target=ey,axis=y,period_mm=5`, as
+    /// printed by `diagnose`); repeatable.
+    #[arg(long = "add", value_name = "EFFECT")]
+    pub add: Vec<String>,
+    /// Fit the seed's local polynomials (cuboid between measured planes,
+    /// plane, or line) instead of one global polynomial.
+    #[arg(long)]
+    pub local: bool,
+    /// Where to write the model (default: `<data>.model.json` beside the data).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Number of hold-out blocks (whole passes or spatial slabs) for the held-out RMS.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u16).range(2..=100))]
+    pub blocks: u16,
+    /// Network training: maximum epochs (nn only).
+    #[arg(long, default_value_t = 1000)]
+    pub max_epochs: usize,
+    /// Network training: RNG seed of the initial weights (nn only).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Write one JSON document to stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `<data>.model.json` beside the data file.
+pub fn default_model_path(data: &std::path::Path) -> PathBuf {
+    let mut name = data
+        .file_name()
+        .map(|n| n.to_os_string())
+        .unwrap_or_default();
+    name.push(".model.json");
+    data.with_file_name(name)
+}
 
 impl Args {
-    pub fn run(self) -> anyhow::Result<()> {
-        anyhow::bail!("`trueaxis fit` is not implemented yet")
+    pub fn run(self) -> Result<()> {
+        // Parse everything that can be wrong with the command before reading data.
+        fit::Seed::parse(&self.model)?;
+        let adds = self
+            .add
+            .iter()
+            .map(|s| Effect::parse(s))
+            .collect::<Result<Vec<_>>>()?;
+        let data = import::load(&self.data)?;
+        if !data.skipped.is_empty() {
+            eprintln!(
+                "note: {} rows of {} were left out on import (run `trueaxis import` to list them)",
+                data.skipped.len(),
+                self.data.display()
+            );
+        }
+        let opts = FitOptions {
+            blocks: usize::from(self.blocks),
+            local: self.local,
+            nn: NnOptions {
+                max_epochs: self.max_epochs.max(1),
+                seed: self.seed,
+                ..NnOptions::default()
+            },
+            progress: !self.json,
+        };
+        let model = fit::fit(&data, &self.model, &adds, &opts)?;
+        let out = self
+            .output
+            .clone()
+            .unwrap_or_else(|| default_model_path(&self.data));
+        model.save(&out)?;
+        for w in &model.stats.warnings {
+            eprintln!("warning: {w}");
+        }
+        if self.json {
+            println!("{}", model.summary_json(Some(&out)));
+            return Ok(());
+        }
+        let s = &model.stats;
+        println!(
+            "{}: {} on {} rows, {} terms per target",
+            self.data.display(),
+            model.spec(),
+            data.len(),
+            s.terms
+        );
+        println!(
+            "  {:<4} {:>7} {:>12} {:>16} {:>12} {:>10}",
+            "", "rows", "rms µm", "held-out rms µm", "max |e| µm", "cond"
+        );
+        for (t, rms) in &s.rms_um {
+            let opt = |m: &std::collections::BTreeMap<String, f64>, prec: usize| {
+                m.get(t).map_or("—".to_string(), |v| {
+                    if prec == 0 {
+                        format!("{v:.2e}")
+                    } else {
+                        format!("{v:.prec$}")
+                    }
+                })
+            };
+            println!(
+                "  {:<4} {:>7} {:>12.4} {:>16} {:>12.4} {:>10}",
+                t,
+                s.rows.get(t).copied().unwrap_or(0),
+                rms,
+                opt(&s.held_out_rms_um, 4),
+                s.max_abs_um.get(t).copied().unwrap_or(0.0),
+                opt(&s.condition_number, 0),
+            );
+        }
+        println!("  hold-out: {}", s.holdout);
+        println!("  model written to {}", out.display());
+        Ok(())
     }
 }

@@ -1,0 +1,150 @@
+//! Fitting a compensation model to measurements: the one entry point
+//! [`fit`] that `trueaxis fit`, `diagnose`, `improve` and `demo` call, and
+//! the model kinds behind it —
+//!
+//! - `linear`: weighted least squares of a term set (`cubic19`, `kinematic`,
+//!   plus `--add` effects), one fit per target;
+//! - `local`: the seed's local polynomials on the cuboid between two
+//!   measured planes / the plane / the line (`--local`);
+//! - `grid`: a table with (bi/tri)linear interpolation (`grid:<step_mm>`);
+//! - `nn`: a tanh MLP trained by Levenberg–Marquardt (`nn:<hidden>`).
+
+pub mod bench_data;
+pub mod grid;
+pub mod linear;
+pub mod local;
+pub mod nn;
+
+use anyhow::{bail, Result};
+
+use crate::data::{Dataset, TARGETS};
+use crate::features::Effect;
+use crate::holdout;
+use crate::model::{DataRef, ModelFile, MODEL_FORMAT};
+
+/// Options of a fit beyond the model spec.
+#[derive(Clone, Debug)]
+pub struct FitOptions {
+    /// Hold-out blocks (≥ 2) for the held-out RMS.
+    pub blocks: usize,
+    /// Fit the seed's local polynomials instead of one global polynomial.
+    pub local: bool,
+    /// Neural-network training options.
+    pub nn: nn::NnOptions,
+    /// Show a progress bar on stderr (network training).
+    pub progress: bool,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            blocks: holdout::DEFAULT_BLOCKS,
+            local: false,
+            nn: nn::NnOptions::default(),
+            progress: false,
+        }
+    }
+}
+
+/// What a seed spec asks for.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Seed {
+    /// A polynomial seed (`cubic19`, `kinematic`).
+    Poly(String),
+    /// `nn:<hidden>`.
+    Nn(usize),
+    /// `grid:<step_mm>`.
+    Grid(f64),
+}
+
+impl Seed {
+    /// Parses a `--model` spec.
+    pub fn parse(spec: &str) -> Result<Seed> {
+        let expected = "expected cubic19, kinematic, nn:<hidden> or grid:<step_mm>";
+        if let Some(h) = spec.strip_prefix("nn:") {
+            let h: usize = h.parse().map_err(|_| {
+                anyhow::anyhow!(
+                    "model `{spec}`: hidden neurons must be a whole number ({expected})"
+                )
+            })?;
+            if !(1..=256).contains(&h) {
+                bail!("model `{spec}`: hidden neurons must be 1..=256");
+            }
+            return Ok(Seed::Nn(h));
+        }
+        if let Some(s) = spec.strip_prefix("grid:") {
+            let s: f64 = s.parse().map_err(|_| {
+                anyhow::anyhow!("model `{spec}`: grid step must be a number of mm ({expected})")
+            })?;
+            if !(s.is_finite() && s > 0.0) {
+                bail!("model `{spec}`: grid step must be a positive number of mm");
+            }
+            return Ok(Seed::Grid(s));
+        }
+        match spec {
+            "cubic19" | "kinematic" => Ok(Seed::Poly(spec.to_string())),
+            other => bail!("unknown model `{other}` ({expected})"),
+        }
+    }
+}
+
+/// Fits the model `seed` (+ `adds`) to `data` and returns the complete
+/// MODEL.json content, statistics included. Bad input (unknown seed, an
+/// effect on a target or channel the data lacks, fewer distinct points than
+/// terms, collinear columns, u_um ≤ 0) is an error with a message for the user.
+pub fn fit(data: &Dataset, seed: &str, adds: &[Effect], opts: &FitOptions) -> Result<ModelFile> {
+    let parsed = Seed::parse(seed)?;
+    if data.is_empty() {
+        bail!("{}: no data rows", data.source);
+    }
+    for e in adds {
+        if data.err_um[e.target].is_none() {
+            bail!(
+                "effect `{}` is for {} but the data has no {}_um column",
+                e.spec,
+                TARGETS[e.target],
+                TARGETS[e.target]
+            );
+        }
+    }
+    let blocks = opts.blocks.max(2);
+    let (model, stats, seed_name) = match parsed {
+        Seed::Poly(name) if opts.local => {
+            if !adds.is_empty() {
+                bail!("--add is not supported with --local (the local patches use the seed's own terms)");
+            }
+            let (m, s) = local::fit(data, blocks)?;
+            (m, s, format!("{name} --local"))
+        }
+        Seed::Poly(name) => {
+            let (m, s) = linear::fit(data, &name, adds, blocks)?;
+            (m, s, name)
+        }
+        Seed::Nn(h) => {
+            if opts.local || !adds.is_empty() {
+                bail!("--local and --add apply to the polynomial seeds (cubic19, kinematic), not to {seed}");
+            }
+            let (m, s) = nn::fit(data, h, &opts.nn, opts.progress, blocks)?;
+            (m, s, seed.to_string())
+        }
+        Seed::Grid(step) => {
+            if opts.local || !adds.is_empty() {
+                bail!("--local and --add apply to the polynomial seeds (cubic19, kinematic), not to {seed}");
+            }
+            let (m, s) = grid::fit(data, step, blocks)?;
+            (m, s, seed.to_string())
+        }
+    };
+    Ok(ModelFile {
+        format: MODEL_FORMAT.to_string(),
+        seed: seed_name,
+        adds: adds.iter().map(|e| e.spec.clone()).collect(),
+        data: DataRef {
+            source: data.source.clone(),
+            sha256: data.content_hash(),
+            rows: data.len(),
+        },
+        model,
+        stats,
+    })
+}

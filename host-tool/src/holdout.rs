@@ -1,0 +1,390 @@
+//! Block hold-out: how well a model predicts measurements it was not fitted
+//! to. Machine errors are smooth and neighbouring points share their noise
+//! (drift, a pass's thermal state), so leaving out random single points
+//! flatters every model — its neighbours are still in the fit. We leave out
+//! whole blocks instead:
+//!
+//! - **Whole passes** when the data has `pass_id` with at least two passes:
+//!   the sorted pass ids are dealt round-robin into `k` blocks (pass i →
+//!   block i mod k), so every block holds complete traverses.
+//! - **Spatial blocks** otherwise, along the axis with the longest travel:
+//!   the distinct positions on that axis (a measured plane or line shares one)
+//!   are cut, in order, into min(#positions, 4k) contiguous chunks of about
+//!   equal row counts, and chunk c goes to block c mod k. Each block is thus
+//!   a few contiguous slabs spread over the travel: whole planes are never
+//!   split, and most held-out slabs are interpolated rather than
+//!   extrapolated (holding out one end fifth of the travel would measure a
+//!   cubic's extrapolation, not the model).
+//!
+//! The held-out RMS is the RMS over all rows of the prediction of each block
+//! by the model refitted without it (unweighted: it is the error a user sees).
+
+// Numerical code indexes several parallel arrays by the same index;
+// index loops read closer to the formulas than zipped iterators.
+#![allow(clippy::needless_range_loop)]
+
+use std::collections::BTreeMap;
+
+use anyhow::{bail, Result};
+use nalgebra::DVector;
+
+use crate::data::{Dataset, AXES, TARGETS};
+use crate::features::{Feature, Norm};
+use crate::lsq;
+
+/// Number of hold-out blocks unless the caller asks otherwise.
+pub const DEFAULT_BLOCKS: usize = 5;
+
+/// How the rows were split, for reports (`"5 blocks of whole passes"`).
+pub fn describe(data: &Dataset, rows: &[usize], k: usize) -> String {
+    let b = blocks(data, rows, k);
+    match block_kind(data, rows) {
+        BlockKind::Passes => format!("{} blocks of whole passes (pass_id)", b.len()),
+        BlockKind::Spatial(axis) => format!(
+            "{} spatial blocks along {} (contiguous slabs dealt round-robin)",
+            b.len(),
+            AXES[axis]
+        ),
+        BlockKind::None => "no hold-out possible (a single position)".into(),
+    }
+}
+
+enum BlockKind {
+    Passes,
+    Spatial(usize),
+    None,
+}
+
+fn block_kind(data: &Dataset, rows: &[usize]) -> BlockKind {
+    if let Some(pass) = &data.pass_id {
+        let mut ids: Vec<i64> = rows.iter().map(|&r| pass[r]).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        if ids.len() >= 2 {
+            return BlockKind::Passes;
+        }
+    }
+    let span = |a: usize| -> f64 {
+        data.pos_mm[a].as_ref().map_or(0.0, |col| {
+            let (lo, hi) = rows
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &r| {
+                    (lo.min(col[r]), hi.max(col[r]))
+                });
+            if rows.is_empty() {
+                0.0
+            } else {
+                hi - lo
+            }
+        })
+    };
+    let best = (0..3).max_by(|&a, &b| span(a).total_cmp(&span(b)).then(b.cmp(&a)));
+    match best {
+        Some(a) if span(a) > 0.0 => BlockKind::Spatial(a),
+        _ => BlockKind::None,
+    }
+}
+
+/// Splits `rows` into at most `k` hold-out blocks (see the module docs):
+/// whole passes when `pass_id` is present, else spatial slabs along the
+/// longest axis — never random points. Empty blocks are dropped; a single
+/// block comes back when nothing can be held out (one position, one pass).
+pub fn blocks(data: &Dataset, rows: &[usize], k: usize) -> Vec<Vec<usize>> {
+    let k = k.max(2);
+    let mut out: Vec<Vec<usize>> = vec![Vec::new(); k];
+    match block_kind(data, rows) {
+        BlockKind::Passes => {
+            let pass = data.pass_id.as_ref().expect("checked by block_kind");
+            let mut ids: Vec<i64> = rows.iter().map(|&r| pass[r]).collect();
+            ids.sort_unstable();
+            ids.dedup();
+            let block_of: BTreeMap<i64, usize> =
+                ids.iter().enumerate().map(|(i, &id)| (id, i % k)).collect();
+            for &r in rows {
+                out[block_of[&pass[r]]].push(r);
+            }
+        }
+        BlockKind::Spatial(axis) => {
+            let col = data.pos_mm[axis].as_ref().expect("checked by block_kind");
+            // Group rows by position (to 1 nm: a plane measured twice is one plane).
+            let mut groups: BTreeMap<i64, Vec<usize>> = BTreeMap::new();
+            for &r in rows {
+                groups
+                    .entry((col[r] * 1e6).round() as i64)
+                    .or_default()
+                    .push(r);
+            }
+            let n_chunks = groups.len().min(4 * k);
+            let total = rows.len() as f64;
+            let mut seen = 0usize;
+            for g in groups.values() {
+                // Chunk by the cumulative row count at the group's middle, so
+                // chunks hold about equal numbers of rows.
+                let mid = seen as f64 + 0.5 * g.len() as f64;
+                let chunk = ((mid / total) * n_chunks as f64).floor() as usize;
+                out[chunk.min(n_chunks - 1) % k].extend_from_slice(g);
+                seen += g.len();
+            }
+        }
+        BlockKind::None => out[0].extend_from_slice(rows),
+    }
+    out.retain(|b| !b.is_empty());
+    out
+}
+
+/// Weights 1/u² for `rows`, or None when the data has no `u_um`.
+pub fn weights(data: &Dataset, rows: &[usize]) -> Result<Option<DVector<f64>>> {
+    let Some(u) = &data.u_um else { return Ok(None) };
+    let mut w = DVector::zeros(rows.len());
+    for (i, &r) in rows.iter().enumerate() {
+        let ur = u[r];
+        if !(ur.is_finite() && ur > 0.0) {
+            let line = data
+                .line
+                .get(r)
+                .map_or(String::new(), |l| format!(" (line {l})"));
+            bail!(
+                "{}: u_um = {ur} on row {}{line}: an uncertainty must be a positive number",
+                data.source,
+                r + 1
+            );
+        }
+        w[i] = 1.0 / (ur * ur);
+    }
+    Ok(Some(w))
+}
+
+/// Held-out residuals (measured − predicted, µm) of the linear model
+/// `features` for `target`, one per row of `rows` where the target is
+/// measured, as (row, residual): each block predicted by the model refitted
+/// on the other blocks (weighted by `u_um` like the fit itself).
+pub fn held_out_residuals(
+    data: &Dataset,
+    rows: &[usize],
+    features: &[Feature],
+    target: usize,
+    norm: &Norm,
+    k: usize,
+) -> Result<Vec<(usize, f64)>> {
+    let Some(err) = &data.err_um[target] else {
+        bail!("the data has no {}_um column", TARGETS[target]);
+    };
+    let rows: Vec<usize> = rows.iter().copied().filter(|&r| err[r].is_some()).collect();
+    let bl = blocks(data, &rows, k);
+    if bl.len() < 2 {
+        bail!(
+            "{}: cannot hold out blocks — every measured point lies at one position and in one pass",
+            TARGETS[target]
+        );
+    }
+    let a = lsq::design_matrix(data, norm, features, &rows)?;
+    let b = DVector::from_iterator(rows.len(), rows.iter().map(|&r| err[r].unwrap_or(0.0)));
+    let w = weights(data, &rows)?;
+    let index: BTreeMap<usize, usize> = rows.iter().enumerate().map(|(i, &r)| (r, i)).collect();
+    let mut out = Vec::with_capacity(rows.len());
+    for block in &bl {
+        let held: std::collections::HashSet<usize> = block.iter().map(|r| index[r]).collect();
+        let train: Vec<usize> = (0..rows.len()).filter(|i| !held.contains(i)).collect();
+        let a_tr = a.select_rows(train.iter());
+        let b_tr = b.select_rows(train.iter());
+        let w_tr = w.as_ref().map(|w| w.select_rows(train.iter()));
+        let sol = lsq::solve_min_norm(&a_tr, &b_tr, w_tr.as_ref())?;
+        for &r in block {
+            let i = index[&r];
+            let pred = a.row(i).transpose().dot(&sol.coef);
+            out.push((r, b[i] - pred));
+        }
+    }
+    out.sort_by_key(|(r, _)| *r);
+    Ok(out)
+}
+
+/// Block-held-out RMS (µm) of the linear model `features` for `target` on
+/// `rows` (those without a value for the target are ignored), with
+/// [`DEFAULT_BLOCKS`] blocks.
+pub fn held_out_rms(
+    data: &Dataset,
+    rows: &[usize],
+    features: &[Feature],
+    target: usize,
+    norm: &Norm,
+) -> Result<f64> {
+    held_out_rms_k(data, rows, features, target, norm, DEFAULT_BLOCKS)
+}
+
+/// [`held_out_rms`] with `k` blocks.
+pub fn held_out_rms_k(
+    data: &Dataset,
+    rows: &[usize],
+    features: &[Feature],
+    target: usize,
+    norm: &Norm,
+    k: usize,
+) -> Result<f64> {
+    let res = held_out_residuals(data, rows, features, target, norm, k)?;
+    Ok(rms(res.iter().map(|(_, e)| *e)))
+}
+
+/// Root mean square of the values (0 for none).
+pub fn rms(values: impl Iterator<Item = f64>) -> f64 {
+    let (n, ss) = values.fold((0usize, 0.0), |(n, ss), v| (n + 1, ss + v * v));
+    if n == 0 {
+        0.0
+    } else {
+        (ss / n as f64).sqrt()
+    }
+}
+
+/// The rows of `data` listed in `rows`, as a data set of their own (every
+/// per-row column sliced; metadata and channel names kept). Used to refit
+/// non-linear models (grid, local) without a block.
+pub fn subset(data: &Dataset, rows: &[usize]) -> Dataset {
+    fn pick<T: Clone>(v: &[T], rows: &[usize]) -> Vec<T> {
+        rows.iter().map(|&r| v[r].clone()).collect()
+    }
+    let mut out = data.clone();
+    out.pos_mm = data.pos_mm.clone().map(|c| c.map(|v| pick(&v, rows)));
+    out.err_um = data.err_um.clone().map(|c| c.map(|v| pick(&v, rows)));
+    out.dir = data.dir.clone().map(|c| c.map(|v| pick(&v, rows)));
+    out.t_s = data.t_s.as_ref().map(|v| pick(v, rows));
+    out.tool_mm = data.tool_mm.as_ref().map(|v| pick(v, rows));
+    out.pass_id = data.pass_id.as_ref().map(|v| pick(v, rows));
+    out.session_id = data.session_id.as_ref().map(|v| pick(v, rows));
+    out.u_um = data.u_um.as_ref().map(|v| pick(v, rows));
+    for t in &mut out.temps {
+        t.temp_c = pick(&t.temp_c, rows);
+    }
+    for c in &mut out.aux {
+        c.cells = pick(&c.cells, rows);
+    }
+    if !data.line.is_empty() {
+        out.line = pick(&data.line, rows);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line(n: usize, pass: Option<Vec<i64>>) -> Dataset {
+        Dataset {
+            source: "test".into(),
+            pos_mm: [Some((0..n).map(|i| i as f64 * 10.0).collect()), None, None],
+            err_um: [
+                Some((0..n).map(|i| Some((i as f64 * 0.3).sin())).collect()),
+                None,
+                None,
+            ],
+            pass_id: pass,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn blocks_are_whole_passes() {
+        // 6 passes of 10 rows, interleaved in row order (serpentine-like).
+        let pass: Vec<i64> = (0..60).map(|i| (i % 6) as i64 + 100).collect();
+        let d = line(60, Some(pass.clone()));
+        let rows: Vec<usize> = (0..60).collect();
+        let b = blocks(&d, &rows, 4);
+        assert_eq!(b.len(), 4);
+        let mut all: Vec<usize> = b.concat();
+        all.sort_unstable();
+        assert_eq!(all, rows);
+        for block in &b {
+            // Every pass appearing in a block appears there completely.
+            let ids: std::collections::BTreeSet<i64> = block.iter().map(|&r| pass[r]).collect();
+            for id in ids {
+                let whole = (0..60).filter(|&r| pass[r] == id).count();
+                assert_eq!(block.iter().filter(|&&r| pass[r] == id).count(), whole);
+            }
+        }
+        // 6 passes into 4 blocks: passes 0,4 | 1,5 | 2 | 3.
+        assert_eq!(b[0].len(), 20);
+        assert_eq!(b[2].len(), 10);
+    }
+
+    #[test]
+    fn spatial_blocks_keep_planes_whole_and_spread() {
+        // A 3-D grid 9 × 3 × 2: x is the longest axis; blocks are x-planes.
+        let mut x = Vec::new();
+        let mut y = Vec::new();
+        let mut z = Vec::new();
+        for i in 0..9 {
+            for j in 0..3 {
+                for k in 0..2 {
+                    x.push(i as f64 * 100.0);
+                    y.push(j as f64 * 50.0);
+                    z.push(k as f64 * 50.0);
+                }
+            }
+        }
+        let n = x.len();
+        let d = Dataset {
+            source: "grid".into(),
+            pos_mm: [Some(x.clone()), Some(y), Some(z)],
+            err_um: [Some(vec![Some(0.0); n]), None, None],
+            ..Default::default()
+        };
+        let rows: Vec<usize> = (0..n).collect();
+        let b = blocks(&d, &rows, 3);
+        assert_eq!(b.len(), 3);
+        for block in &b {
+            let planes: std::collections::BTreeSet<i64> =
+                block.iter().map(|&r| x[r] as i64).collect();
+            // Planes i, i+3, i+6: spread over the travel, each plane whole (6 rows).
+            assert_eq!(planes.len(), 3);
+            assert_eq!(block.len(), 18);
+        }
+    }
+
+    #[test]
+    fn dense_line_gets_contiguous_chunks() {
+        let d = line(1000, None);
+        let rows: Vec<usize> = (0..1000).collect();
+        let b = blocks(&d, &rows, 5);
+        assert_eq!(b.len(), 5);
+        // 20 chunks of 50 contiguous points, 4 per block.
+        let mut runs = 1;
+        for w in b[0].windows(2) {
+            if w[1] != w[0] + 1 {
+                runs += 1;
+            }
+        }
+        assert_eq!(runs, 4);
+        assert_eq!(b[0].len(), 200);
+    }
+
+    #[test]
+    fn held_out_of_exact_model_is_zero_and_of_bad_model_is_not() {
+        let n = 50;
+        let mut d = line(n, None);
+        d.err_um[0] = Some(
+            (0..n)
+                .map(|i| {
+                    let u = -1.0 + 2.0 * i as f64 / (n - 1) as f64;
+                    Some(1.0 + 2.0 * u - 0.5 * u * u * u)
+                })
+                .collect(),
+        );
+        let norm = Norm::from_data(&d);
+        let rows: Vec<usize> = (0..n).collect();
+        let cubic: Vec<Feature> = (0..4)
+            .map(|p| Feature::Monomial { exp: [p, 0, 0] })
+            .collect();
+        let h = held_out_rms(&d, &rows, &cubic, 0, &norm).unwrap();
+        assert!(h < 1e-9, "{h}");
+        let h = held_out_rms(&d, &rows, &cubic[..2], 0, &norm).unwrap();
+        assert!(h > 0.05, "{h}");
+    }
+
+    #[test]
+    fn subset_slices_every_column() {
+        let d = line(10, Some((0..10).collect()));
+        let s = subset(&d, &[2, 5]);
+        assert_eq!(s.len(), 2);
+        assert_eq!(s.pos_mm[0], Some(vec![20.0, 50.0]));
+        assert_eq!(s.pass_id, Some(vec![2, 5]));
+    }
+}
