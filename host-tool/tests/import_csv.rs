@@ -305,3 +305,23 @@ fn random_datasets_round_trip_bit_for_bit() {
         assert_eq!(back.aux, d.aux);
     }
 }
+
+#[test]
+fn crlf_bom_and_other_separators() {
+    let text = "\u{feff}# machine: m\r\nx_mm,ex_um\r\n0,1.5\r\n10,2\r\n";
+    let d = import::read_csv(text.as_bytes(), "crlf.csv").unwrap();
+    assert_eq!(d.metadata, vec![("machine".to_string(), "m".to_string())]);
+    assert_eq!(d.err_um[0].as_ref().unwrap(), &vec![Some(1.5), Some(2.0)]);
+    assert_eq!(d.line, vec![3, 4]);
+    // Blank lines between rows do not shift the numbers, with either ending.
+    for nl in ["\n", "\r\n"] {
+        let text = ["x_mm,ex_um", "0,1", "", "", "10,abc", ""].join(nl);
+        let e = import::read_csv(text.as_bytes(), "b.csv").unwrap_err();
+        assert!(e.to_string().starts_with("b.csv:5:2: "), "{nl:?}: {e}");
+    }
+    let e = import::read_csv("x_mm;ex_um\n0;1\n".as_bytes(), "semi.csv").unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "semi.csv:1:1: expected comma-separated columns; this header is separated by `;`"
+    );
+}

@@ -186,8 +186,25 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
         .flexible(true)
         .from_reader(body.as_bytes());
     let mut records = rdr.records();
+    // The file line of a record from its byte offset. csv's own line count
+    // lags by one after a CRLF (the record is cut at `\r`, the `\n` is
+    // consumed later), so count newlines instead; an offset that sits on
+    // the `\n` of a CRLF belongs to the next line.
+    let newlines: Vec<usize> = body
+        .bytes()
+        .enumerate()
+        .filter(|(_, b)| *b == b'\n')
+        .map(|(i, _)| i)
+        .collect();
+    let bytes = body.as_bytes();
     let file_line = |pos: Option<&csv::Position>| -> usize {
-        pos.map_or(header_line, |p| header_line + p.line() as usize - 1)
+        pos.map_or(header_line, |p| {
+            let mut at = p.byte() as usize;
+            while at < bytes.len() && (bytes[at] == b'\n' || bytes[at] == b'\r') {
+                at += 1;
+            }
+            header_line + newlines.partition_point(|&nl| nl < at)
+        })
     };
     let csv_err = |e: csv::Error| {
         let line = file_line(e.position());
@@ -205,6 +222,23 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
         }
     };
     let names: Vec<String> = header.iter().map(|h| h.trim().to_string()).collect();
+    if names.len() == 1 {
+        // A header with one cell that holds `;` or tabs is a file in another
+        // dialect; say so instead of complaining about a strange name.
+        if let Some(sep) = [';', '\t'].into_iter().find(|c| names[0].contains(*c)) {
+            let shown = if sep == '\t' {
+                "tab".to_string()
+            } else {
+                format!("`{sep}`")
+            };
+            return Err(ImportError::at(
+                name,
+                header_line,
+                Some(1),
+                format!("expected comma-separated columns; this header is separated by {shown}"),
+            ));
+        }
+    }
     let mut cols = Vec::with_capacity(names.len());
     for (i, h) in names.iter().enumerate() {
         if let Some(first) = names[..i].iter().position(|p| p == h) {
