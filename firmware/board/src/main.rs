@@ -1,12 +1,154 @@
-//! Board binary placeholder (replaced by the embassy-stm32 board).
+//! trueaxis compensation board firmware (STM32F405RG). `main` only wires
+//! things up: clocks and peripherals (board.rs), the shared state
+//! (shared.rs), then one task per concern:
+//!
+//! - `correction` — on the high-priority interrupt executor, every 50 µs:
+//!   encoders → model → envelope/slew → step pulses (trueaxis_app::engine);
+//! - `usb_device`, `usb_link`, `uart_link` — the link protocol on USB
+//!   CDC-ACM and USART1 (trueaxis_app::server);
+//! - `thermistors` — ADC readings → m°C, 10 Hz;
+//! - `watchdog` — pets the IWDG while the correction loop is alive.
+//!
+//! Boot: the table store scans both flash slots and the newest valid table
+//! becomes the active model before the loop starts.
 #![no_std]
 #![no_main]
 
-use panic_halt as _;
+mod board;
+mod link;
+mod shared;
+
+use core::cell::RefCell;
+use core::sync::atomic::Ordering;
+
+use defmt::{info, unwrap};
+use embassy_executor::Executor;
+use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
+use embassy_sync::mutex::Mutex;
+use embassy_time::{Duration, Instant, Ticker, Timer};
+use static_cell::StaticCell;
+use {defmt_rtt as _, panic_probe as _};
+
+use model_core::link::LINK_TEMPS;
+use trueaxis_app::engine::Engine;
+use trueaxis_app::hw::{Clock, TemperatureSource};
+use trueaxis_app::model::ModelBuf;
+use trueaxis_app::server::{Server, ServerConfig};
+use trueaxis_app::store::TableStore;
+
+use crate::shared::SharedEngine;
+
+/// How long the axes must stand still before a flash erase (see
+/// trueaxis_app::server on the single-bank policy).
+const QUIET_MS: u32 = 500;
 
 #[cortex_m_rt::entry]
 fn main() -> ! {
+    let p = embassy_stm32::init(board::clocks());
+    info!("trueaxis board {}", trueaxis_app::FIRMWARE_VERSION);
+    let parts = board::take(p);
+
+    let engine = shared::ENGINE.init(SharedEngine(BlockingMutex::new(RefCell::new(unwrap!(
+        Engine::new(board::ENGINE)
+    )))));
+    let store = unwrap!(TableStore::new(parts.flash, board::LAYOUT));
+    let mut server = Server::new(
+        store,
+        shared::STAGE.init([0; shared::STAGE_BYTES]),
+        [
+            shared::MODEL_A.init(ModelBuf::new()),
+            shared::MODEL_B.init(ModelBuf::new()),
+        ],
+        ServerConfig {
+            firmware: trueaxis_app::FIRMWARE_VERSION,
+            quiet_ms: QUIET_MS,
+        },
+    );
+    match server.boot(engine) {
+        Some(t) => info!(
+            "active table: slot {} seq {} crc {=u32:#x}",
+            t.slot, t.seq, t.crc32
+        ),
+        None => info!("no valid table: correction stays at zero"),
+    }
+    let server = shared::SERVER.init(Mutex::new(server));
+
+    let high = board::start_high();
+    high.spawn(unwrap!(correction(engine, parts.encoders, parts.steps)));
+
+    static EXECUTOR: StaticCell<Executor> = StaticCell::new();
+    EXECUTOR.init(Executor::new()).run(|spawner| {
+        let (device, usb_class) = link::usb(parts.usb);
+        spawner.spawn(unwrap!(link::usb_device(device)));
+        spawner.spawn(unwrap!(link::usb_link(usb_class, server, engine)));
+        spawner.spawn(unwrap!(link::uart_link(parts.uart, server, engine)));
+        spawner.spawn(unwrap!(thermistors(parts.thermistors)));
+        spawner.spawn(unwrap!(watchdog(parts.iwdg)));
+    })
+}
+
+/// embassy-time as the engine's clock.
+struct BoardClock;
+
+impl Clock for BoardClock {
+    fn now_us(&self) -> u64 {
+        Instant::now().as_micros()
+    }
+}
+
+/// The thermistor temperatures published by the thermistor task.
+struct SharedTemps;
+
+impl TemperatureSource for SharedTemps {
+    fn read_temps_mc(&mut self) -> [i32; LINK_TEMPS] {
+        core::array::from_fn(|i| shared::TEMPS_MC[i].load(Ordering::Relaxed))
+    }
+}
+
+#[embassy_executor::task]
+async fn correction(
+    engine: &'static SharedEngine,
+    mut encoders: board::BoardEncoders,
+    mut steps: board::StepDir,
+) {
+    let mut ticker = Ticker::every(Duration::from_hz(board::LOOP_HZ));
+    let mut temps = SharedTemps;
     loop {
-        cortex_m::asm::wfi();
+        ticker.next().await;
+        engine.0.lock(|e| {
+            e.borrow_mut()
+                .tick(&BoardClock, &mut encoders, &mut temps, &mut steps)
+        });
+        shared::TICKS.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+#[embassy_executor::task]
+async fn thermistors(mut t: board::Thermistors) {
+    loop {
+        let raw = t.read_raw();
+        for (i, r) in raw.into_iter().enumerate() {
+            shared::TEMPS_MC[i].store(board::NTC.temp_mc(r), Ordering::Relaxed);
+        }
+        Timer::after_millis(100).await;
+    }
+}
+
+/// Pets the watchdog only while the correction loop makes progress: a
+/// stuck loop (or a stuck thread executor, which runs this task) resets
+/// the board.
+#[embassy_executor::task]
+async fn watchdog(
+    mut iwdg: embassy_stm32::wdg::IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
+) {
+    iwdg.unleash();
+    let mut last = shared::TICKS.load(Ordering::Relaxed);
+    loop {
+        Timer::after_millis(250).await;
+        let now = shared::TICKS.load(Ordering::Relaxed);
+        if now != last {
+            iwdg.pet();
+        }
+        last = now;
     }
 }

@@ -1,0 +1,521 @@
+//! The correction engine: one `tick` per period of the fixed-rate loop.
+//!
+//! Each tick reads the encoders (counts → nm by a per-axis scale) and the
+//! temperatures, tracks the approach direction of each axis, evaluates the
+//! active model (fixed point: bit-exact with the host's evaluation of the
+//! same table), limits the slew of the output, and turns the output into
+//! step pulses.
+//!
+//! **No drift.** The output correction is kept as an integer in milli-nm
+//! and the pulses as an integer count of steps emitted; each tick emits
+//! `round(corr_nm / pulse_nm) − steps_emitted` pulses (bounded per tick).
+//! Nothing is accumulated in floating point and nothing is incremental, so
+//! after any number of ticks the pulses emitted equal
+//! `round(corr_nm / pulse_nm)` exactly. The configuration is checked so
+//! that the slew per tick never needs more pulses than one tick may emit,
+//! which makes that equality hold at the end of *every* tick.
+//!
+//! **Faults ramp to zero.** No table, a temperature outside the plausible
+//! range, an encoder jump, a model output that is not finite, or a missed
+//! period: the target becomes zero and the output ramps there at the
+//! configured fault ramp rate. Conditions that come and go (no table,
+//! sensor range) are live; events (overrun, encoder jump, non-finite
+//! output, bad table) stay active until the host clears them — a glitch
+//! that was bad enough to happen once is worth a look by a person.
+
+use model_core::link::{Correction, Faults, Injection, SlotInfo, Telemetry, LINK_TEMPS};
+
+use crate::hw::{Clock, Encoders, StepOutput, TemperatureSource};
+use crate::model::{self, ModelBuf, ModelInputs};
+
+/// Per-axis configuration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AxisConfig {
+    /// Encoder scale, picometres per count (a 0.1 µm scale read in
+    /// quadrature: 25 000 pm). Negative flips the direction.
+    pub pm_per_count: i64,
+    /// Machine position at count 0, nm.
+    pub origin_nm: i32,
+    /// Displacement of one correction step pulse at the drive, nm (> 0).
+    pub pulse_nm: i32,
+    /// Fastest the axis can travel, nm/ms (= mm/s · 1000); a larger jump
+    /// between two ticks is an encoder fault. 0 disables the check.
+    pub max_speed_nm_per_ms: i32,
+}
+
+/// Engine configuration (from the board; fixed at build time).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EngineConfig {
+    /// X, Y, Z.
+    pub axes: [AxisConfig; 3],
+    /// Nominal tick period, µs.
+    pub period_us: u32,
+    /// Most pulses one tick emits per axis.
+    pub max_steps_per_tick: i32,
+    /// Temperature channels fitted (checked against the range below).
+    pub temps_used: usize,
+    /// Plausible temperature range, m°C; outside is a sensor fault (open or
+    /// shorted thermistor).
+    pub temp_min_mc: i32,
+    /// See `temp_min_mc`.
+    pub temp_max_mc: i32,
+    /// Rate at which a fault ramps the correction to zero, nm/ms.
+    pub fault_ramp_nm_per_ms: i32,
+    /// Tool length used when nothing else sets it, nm.
+    pub tool_nm: i32,
+}
+
+/// Why a configuration is refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ConfigError {
+    /// A pulse size ≤ 0, period 0, or steps per tick ≤ 0.
+    NonPositive,
+    /// More temperature channels than the link carries.
+    TooManyTemps,
+    /// The fault ramp needs more pulses per tick than allowed on that axis
+    /// (the pulse count would lag the correction).
+    RampTooFast {
+        /// Axis index.
+        axis: usize,
+    },
+}
+
+impl EngineConfig {
+    /// Checks the invariants the no-drift guarantee rests on.
+    pub fn check(&self) -> Result<(), ConfigError> {
+        if self.period_us == 0 || self.max_steps_per_tick <= 0 || self.fault_ramp_nm_per_ms < 0 {
+            return Err(ConfigError::NonPositive);
+        }
+        if self.temps_used > LINK_TEMPS {
+            return Err(ConfigError::TooManyTemps);
+        }
+        for (axis, a) in self.axes.iter().enumerate() {
+            if a.pulse_nm <= 0 {
+                return Err(ConfigError::NonPositive);
+            }
+            if self.max_step_nm_per_tick(self.fault_ramp_nm_per_ms) > self.step_budget_nm(axis) {
+                return Err(ConfigError::RampTooFast { axis });
+            }
+        }
+        Ok(())
+    }
+
+    /// Largest change of the output in one tick at `rate_nm_per_ms`, nm
+    /// (rounded up: one nm more for the rounding of the output).
+    fn max_step_nm_per_tick(&self, rate_nm_per_ms: i32) -> i64 {
+        (rate_nm_per_ms as i64 * self.period_us as i64 + 999) / 1000 + 1
+    }
+
+    /// What the pulses of one tick can follow on `axis`, nm: one pulse is
+    /// kept back for rounding.
+    fn step_budget_nm(&self, axis: usize) -> i64 {
+        (self.max_steps_per_tick as i64 - 1) * self.axes[axis].pulse_nm as i64
+    }
+
+    /// Slew limit actually applied for a table's `slew_nm_per_ms`: the
+    /// table's, reduced if the pulse budget of an axis cannot follow it.
+    fn effective_slew(&self, table_slew_nm_per_ms: i32) -> i32 {
+        let mut s = table_slew_nm_per_ms.max(0);
+        for axis in 0..3 {
+            while s > 0 && self.max_step_nm_per_tick(s) > self.step_budget_nm(axis) {
+                // Scale down rather than step by one: converges in a few
+                // iterations for any budget.
+                s = s * 7 / 8;
+            }
+        }
+        s
+    }
+}
+
+/// What a tick did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TickReport {
+    /// Pulses emitted per axis this tick.
+    pub steps: [i32; 3],
+    /// Faults active after the tick.
+    pub faults: Faults,
+}
+
+/// The correction engine. Holds the active model by reference to a
+/// RAM buffer (the correction never reads flash, which matters while a
+/// commit erases it; see `model` for why it is a reference).
+#[derive(Debug)]
+pub struct Engine<'m> {
+    cfg: EngineConfig,
+    slew_nm_per_ms: i32,
+    model: Option<&'m mut ModelBuf>,
+    active: Option<SlotInfo>,
+    dirs: model::DirTrackers,
+    inject: Option<Injection>,
+
+    last_counts: Option<[i32; 3]>,
+    pos_nm: [i32; 3],
+    rev_q30: [i32; 3],
+    temp_mc: [i32; LINK_TEMPS],
+    model_corr_nm: [i32; 3],
+    model_flags: u16,
+    /// Output correction, milli-nm (exact slew arithmetic: nm/ms × µs).
+    out_mnm: [i64; 3],
+    steps: [i64; 3],
+
+    live: Faults,
+    sticky: Faults,
+    latched: Faults,
+
+    last_tick_us: Option<u64>,
+    last_motion_us: Option<u64>,
+    now_us: u64,
+    ticks: u64,
+    worst_loop_us: u32,
+    worst_tick_us: u32,
+    overruns: u32,
+}
+
+impl<'m> Engine<'m> {
+    /// An engine without a table (it outputs zero and reports `NO_TABLE`).
+    pub fn new(cfg: EngineConfig) -> Result<Self, ConfigError> {
+        cfg.check()?;
+        Ok(Self {
+            cfg,
+            slew_nm_per_ms: 0,
+            model: None,
+            active: None,
+            dirs: model::DirTrackers::default(),
+            inject: None,
+            last_counts: None,
+            pos_nm: [0; 3],
+            rev_q30: [0; 3],
+            temp_mc: [0; LINK_TEMPS],
+            model_corr_nm: [0; 3],
+            model_flags: 0,
+            out_mnm: [0; 3],
+            steps: [0; 3],
+            live: Faults::NO_TABLE,
+            sticky: Faults::NONE,
+            latched: Faults::NO_TABLE,
+            last_tick_us: None,
+            last_motion_us: None,
+            now_us: 0,
+            ticks: 0,
+            worst_loop_us: 0,
+            worst_tick_us: 0,
+            overruns: 0,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &EngineConfig {
+        &self.cfg
+    }
+
+    /// Switches to `model` (validated and loaded by the caller from the
+    /// table in `info`) and hands back the buffer of the previous one. O(1):
+    /// a reference swap. The output slews from where it is to the new
+    /// model's correction, it does not jump. Clears `BAD_TABLE`.
+    /// An empty `model` buffer is the same as [`clear_model`](Self::clear_model).
+    pub fn set_model(
+        &mut self,
+        model: &'m mut ModelBuf,
+        info: SlotInfo,
+    ) -> Option<&'m mut ModelBuf> {
+        let Some(m) = model.get() else {
+            let old = self.clear_model(false);
+            self.model = Some(model);
+            return old;
+        };
+        self.slew_nm_per_ms = self.cfg.effective_slew(model::slew_nm_per_ms(m));
+        self.dirs = model::DirTrackers::for_model(m);
+        self.active = Some(info);
+        self.sticky = Faults(self.sticky.0 & !Faults::BAD_TABLE.0);
+        self.model.replace(model)
+    }
+
+    /// Drops the model (the output ramps to zero) and hands its buffer
+    /// back; `bad` also raises `BAD_TABLE` (the stored table could not be
+    /// loaded).
+    pub fn clear_model(&mut self, bad: bool) -> Option<&'m mut ModelBuf> {
+        self.active = None;
+        if bad {
+            self.sticky = self.sticky.union(Faults::BAD_TABLE);
+            self.latched = self.latched.union(Faults::BAD_TABLE);
+        }
+        self.model.take()
+    }
+
+    /// The table the correction runs on.
+    pub fn active(&self) -> Option<SlotInfo> {
+        self.active
+    }
+
+    /// The slew limit in force, nm/ms (the table's, possibly reduced to
+    /// what the pulse budget can follow).
+    pub fn slew_nm_per_ms(&self) -> i32 {
+        self.slew_nm_per_ms
+    }
+
+    /// Replaces the sensor readings by `inj` from the next tick on (or goes
+    /// back to the sensors with `None`).
+    pub fn set_injection(&mut self, inj: Option<Injection>) {
+        self.inject = inj;
+    }
+
+    /// Clears the sticky and latched faults; live conditions come back at
+    /// the next tick if their cause is still there.
+    pub fn clear_faults(&mut self) {
+        self.sticky = Faults::NONE;
+        self.latched = self.live;
+    }
+
+    /// Faults active now.
+    pub fn faults(&self) -> Faults {
+        self.live.union(self.sticky)
+    }
+
+    /// How long the axes have stood still (encoder counts unchanged) at
+    /// `now_us`, µs; `u64::MAX` if they never moved since boot.
+    pub fn quiet_for_us(&self, now_us: u64) -> u64 {
+        match self.last_motion_us {
+            None => u64::MAX,
+            Some(t) => now_us.saturating_sub(t),
+        }
+    }
+
+    /// Forgets the time of the last tick, so the next one is not counted as
+    /// an overrun. Called after an operation that stalls the CPU on purpose
+    /// (a flash erase, only allowed while the axes stand still).
+    pub fn resync_clock(&mut self) {
+        self.last_tick_us = None;
+    }
+
+    /// The model's correction for `inj`, evaluated now (no slew limit), and
+    /// the output as it is.
+    pub fn evaluate_injection(&self, inj: &Injection) -> Correction {
+        let (model_corr_nm, model_flags) = match self.model.as_deref().and_then(ModelBuf::get) {
+            Some(m) => {
+                let r = model::evaluate(m, &inputs_of(inj));
+                (r.corr_nm, r.flags)
+            }
+            None => ([0; 3], 0),
+        };
+        Correction {
+            pos_nm: inj.pos_nm,
+            model_corr_nm,
+            corr_nm: self.corr_nm(),
+            model_flags,
+            faults: self.faults(),
+        }
+    }
+
+    /// The output correction now, nm.
+    pub fn corr_nm(&self) -> [i32; 3] {
+        self.out_mnm.map(|m| round_div(m, 1000) as i32)
+    }
+
+    /// What [`Request::ReadCorrection`](model_core::link::Request) answers.
+    pub fn correction(&self) -> Correction {
+        Correction {
+            pos_nm: self.pos_nm,
+            model_corr_nm: self.model_corr_nm,
+            corr_nm: self.corr_nm(),
+            model_flags: self.model_flags,
+            faults: self.faults(),
+        }
+    }
+
+    /// Net pulses emitted per axis since boot.
+    pub fn steps(&self) -> [i64; 3] {
+        self.steps
+    }
+
+    /// Telemetry (the link server adds its own counters).
+    pub fn telemetry(&self) -> Telemetry {
+        Telemetry {
+            uptime_us: self.now_us,
+            ticks: self.ticks,
+            period_us: self.cfg.period_us,
+            worst_loop_us: self.worst_loop_us,
+            worst_tick_us: self.worst_tick_us,
+            overruns: self.overruns,
+            pos_nm: self.pos_nm,
+            temp_mc: self.temp_mc,
+            model_corr_nm: self.model_corr_nm,
+            corr_nm: self.corr_nm(),
+            steps: self.steps,
+            model_flags: self.model_flags,
+            faults: self.faults(),
+            faults_latched: self.latched,
+            injecting: self.inject.is_some(),
+            active: self.active,
+            rx_bad_frames: 0,
+        }
+    }
+
+    /// One period of the correction loop.
+    pub fn tick<C, E, T, S>(
+        &mut self,
+        clock: &C,
+        enc: &mut E,
+        temps: &mut T,
+        out: &mut S,
+    ) -> TickReport
+    where
+        C: Clock,
+        E: Encoders,
+        T: TemperatureSource,
+        S: StepOutput,
+    {
+        let start_us = clock.now_us();
+        self.now_us = start_us;
+        let mut events = Faults::NONE;
+
+        // Timing: the gap since the previous tick. Missing a whole period
+        // (gap ≥ 2 periods) is an overrun; jitter below that is not.
+        if let Some(prev) = self.last_tick_us {
+            let gap = start_us.saturating_sub(prev);
+            self.worst_loop_us = self.worst_loop_us.max(gap.min(u32::MAX as u64) as u32);
+            if gap >= 2 * self.cfg.period_us as u64 {
+                self.overruns = self.overruns.saturating_add(1);
+                events = events.union(Faults::LOOP_OVERRUN);
+            }
+        }
+        self.last_tick_us = Some(start_us);
+        self.ticks += 1;
+
+        // Sensors (always read, so a stuck sensor shows in telemetry even
+        // while injecting).
+        let counts = enc.read_counts();
+        let temps_mc = temps.read_temps_mc();
+        let mut live = Faults::NONE;
+        let moved = self.last_counts.is_some_and(|c| c != counts);
+        if moved {
+            self.last_motion_us = Some(start_us);
+        }
+        let enc_pos_nm = core::array::from_fn(|i| {
+            let a = &self.cfg.axes[i];
+            let nm = counts[i] as i64 * a.pm_per_count / 1000 + a.origin_nm as i64;
+            nm.clamp(i32::MIN as i64, i32::MAX as i64) as i32
+        });
+        if let Some(prev) = self.last_counts {
+            for (i, a) in self.cfg.axes.iter().enumerate() {
+                if a.max_speed_nm_per_ms <= 0 {
+                    continue;
+                }
+                let d_counts = counts[i].wrapping_sub(prev[i]) as i64;
+                let d_nm = (d_counts * a.pm_per_count / 1000).abs();
+                // Twice the distance at full speed in one period: margin
+                // for a late tick.
+                let max_nm = 2 * a.max_speed_nm_per_ms as i64 * self.cfg.period_us as i64 / 1000;
+                if d_nm > max_nm.max(1) {
+                    events = events.union(Faults::ENCODER_JUMP);
+                }
+            }
+        }
+        self.last_counts = Some(counts);
+
+        let inputs = match &self.inject {
+            Some(inj) => {
+                self.pos_nm = inj.pos_nm;
+                self.rev_q30 = inj.rev_q30;
+                self.temp_mc = inj.temp_mc;
+                inputs_of(inj)
+            }
+            None => {
+                self.pos_nm = enc_pos_nm;
+                self.temp_mc = temps_mc;
+                self.rev_q30 = self.dirs.update(enc_pos_nm);
+                let t = &self.temp_mc[..self.cfg.temps_used];
+                if t.iter()
+                    .any(|&t| t < self.cfg.temp_min_mc || t > self.cfg.temp_max_mc)
+                {
+                    live = live.union(Faults::SENSOR_RANGE);
+                }
+                ModelInputs {
+                    pos_nm: self.pos_nm,
+                    rev_q30: self.rev_q30,
+                    temp_mc: self.temp_mc,
+                    tool_nm: self.cfg.tool_nm,
+                }
+            }
+        };
+
+        // The model.
+        match self.model.as_deref().and_then(ModelBuf::get) {
+            Some(m) => {
+                let r = model::evaluate(m, &inputs);
+                self.model_flags = r.flags;
+                if r.not_finite {
+                    events = events.union(Faults::NOT_FINITE);
+                    self.model_corr_nm = [0; 3];
+                } else {
+                    self.model_corr_nm = r.corr_nm;
+                }
+            }
+            None => {
+                live = live.union(Faults::NO_TABLE);
+                self.model_flags = 0;
+                self.model_corr_nm = [0; 3];
+            }
+        }
+
+        self.live = live;
+        self.sticky = self.sticky.union(events);
+        self.latched = self.latched.union(live).union(events);
+        let faults = self.faults();
+
+        // Slew-limited output: towards the model, or to zero on a fault.
+        let (target_nm, rate) = if faults.is_empty() {
+            (self.model_corr_nm, self.slew_nm_per_ms)
+        } else {
+            ([0; 3], self.cfg.fault_ramp_nm_per_ms)
+        };
+        let max_d_mnm = rate as i64 * self.cfg.period_us as i64;
+        let mut report = TickReport {
+            steps: [0; 3],
+            faults,
+        };
+        for (axis, &target) in target_nm.iter().enumerate() {
+            let target_mnm = target as i64 * 1000;
+            let d = (target_mnm - self.out_mnm[axis]).clamp(-max_d_mnm, max_d_mnm);
+            self.out_mnm[axis] += d;
+
+            // Pulses: absolute, so they can never drift from the output.
+            let corr_nm = round_div(self.out_mnm[axis], 1000);
+            let want = round_div(corr_nm, self.cfg.axes[axis].pulse_nm as i64);
+            let lim = self.cfg.max_steps_per_tick as i64;
+            let n = (want - self.steps[axis]).clamp(-lim, lim) as i32;
+            if n != 0 {
+                out.pulses(axis, n);
+                self.steps[axis] += n as i64;
+            }
+            report.steps[axis] = n;
+        }
+
+        let took = clock.now_us().saturating_sub(start_us);
+        self.worst_tick_us = self.worst_tick_us.max(took.min(u32::MAX as u64) as u32);
+        report
+    }
+}
+
+fn inputs_of(inj: &Injection) -> ModelInputs {
+    ModelInputs {
+        pos_nm: inj.pos_nm,
+        rev_q30: inj.rev_q30,
+        temp_mc: inj.temp_mc,
+        tool_nm: inj.tool_nm,
+    }
+}
+
+/// `a / b` rounded to nearest, halves away from zero (b > 0). The pulse
+/// count's definition of "round".
+pub fn round_div(a: i64, b: i64) -> i64 {
+    let h = b / 2;
+    if a >= 0 {
+        (a + h) / b
+    } else {
+        (a - h) / b
+    }
+}

@@ -1,0 +1,130 @@
+//! The one place the application core touches model-core's evaluation API:
+//! load a table into a RAM-resident model, evaluate it in fixed point, read
+//! its envelope, track directions. Keeping it in one file keeps the engine
+//! readable and makes a model-core API change a one-file change.
+//!
+//! A [`Model`] is large (≈ 26 KiB: fixed-capacity coefficient pools), so it
+//! is never moved around: the board owns two buffers, the link server loads
+//! a table into the spare one *outside* the engine's lock, and activation
+//! swaps two references inside it — O(1) in the correction loop's critical
+//! section instead of a 26 KiB copy that would cost a period.
+
+use model_core::link::LINK_TEMPS;
+use model_core::{DirTracker, Flags, Inputs, MAX_TEMPS};
+
+pub use model_core::{Model, FORMAT_VERSION};
+
+/// Why a table cannot become the active model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum InvalidTable {
+    /// model-core's `parse` refused it (format, version, CRC, envelope).
+    Format(model_core::TableError),
+    /// Valid, but it does not fit the firmware's model capacity.
+    Load(model_core::LoadError),
+}
+
+/// Everything the model is evaluated on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ModelInputs {
+    /// Position per axis, nm.
+    pub pos_nm: [i32; 3],
+    /// Reversal state per axis, Q30.
+    pub rev_q30: [i32; 3],
+    /// Temperatures, m°C (the link's channel count; the model reads the
+    /// first `MAX_TEMPS`).
+    pub temp_mc: [i32; LINK_TEMPS],
+    /// Tool length, nm.
+    pub tool_nm: i32,
+}
+
+/// One evaluation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Evaluation {
+    /// Correction per axis, nm (model-core applied the envelope: held at
+    /// the travel edge, clamped to the max |correction|).
+    pub corr_nm: [i32; 3],
+    /// model-core's flags, raw bits.
+    pub flags: u16,
+    /// The model reports a non-finite result (forced to 0 by model-core).
+    pub not_finite: bool,
+}
+
+// The link must carry at least the channels a model reads.
+const _: () = assert!(LINK_TEMPS >= MAX_TEMPS);
+
+/// A RAM buffer for one prepared model, empty until a table is loaded
+/// (`const`-constructible, so the board can put it in a `static`).
+#[derive(Debug, Default)]
+pub struct ModelBuf(Option<Model>);
+
+impl ModelBuf {
+    /// An empty buffer.
+    pub const fn new() -> Self {
+        Self(None)
+    }
+
+    /// The model, if one is loaded.
+    pub fn get(&self) -> Option<&Model> {
+        self.0.as_ref()
+    }
+}
+
+/// Validates `bytes` fully (format, version, CRC, envelope) and prepares
+/// the model in `dst` (emptied first, so a refused table leaves it empty).
+pub fn load_into(bytes: &[u8], dst: &mut ModelBuf) -> Result<(), InvalidTable> {
+    dst.0 = None;
+    let t = model_core::parse(bytes).map_err(InvalidTable::Format)?;
+    dst.0 = Some(Model::load(&t).map_err(InvalidTable::Load)?);
+    Ok(())
+}
+
+/// The model-core inputs for `i`.
+pub fn inputs(i: &ModelInputs) -> Inputs {
+    let mut temp_mc = [0; MAX_TEMPS];
+    temp_mc.copy_from_slice(&i.temp_mc[..MAX_TEMPS]);
+    Inputs {
+        pos_nm: i.pos_nm,
+        rev_q30: i.rev_q30,
+        temp_mc,
+        tool_nm: i.tool_nm,
+    }
+}
+
+/// Fixed-point evaluation (bit-exact with the host's `eval_fixed`).
+pub fn evaluate(m: &Model, i: &ModelInputs) -> Evaluation {
+    let o = m.eval_fixed(&inputs(i));
+    Evaluation {
+        corr_nm: o.corr_nm,
+        flags: o.flags.bits(),
+        not_finite: o.flags.contains(Flags::NOT_FINITE),
+    }
+}
+
+/// The table's slew limit, nm/ms.
+pub fn slew_nm_per_ms(m: &Model) -> i32 {
+    m.envelope().max_slew_nm_per_ms()
+}
+
+/// Direction trackers for the three axes.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct DirTrackers {
+    t: [DirTracker; 3],
+    transition_nm: [i32; 3],
+}
+
+impl DirTrackers {
+    /// Trackers with the model's reversal transition lengths (0: switch at
+    /// once, for axes without a reversal term).
+    pub fn for_model(m: &Model) -> Self {
+        Self {
+            t: [DirTracker::new(); 3],
+            transition_nm: core::array::from_fn(|a| m.reversal_transition_nm(a).unwrap_or(0)),
+        }
+    }
+
+    /// Feeds the positions of one tick; returns the reversal state per axis.
+    pub fn update(&mut self, pos_nm: [i32; 3]) -> [i32; 3] {
+        core::array::from_fn(|a| self.t[a].update(pos_nm[a], self.transition_nm[a]))
+    }
+}

@@ -1,0 +1,395 @@
+//! The link server: bytes in, bytes out, whatever the transport (USB
+//! CDC-ACM and USART on the board, a TCP socket in QEMU and in the host's
+//! end-to-end tests). Frames and messages are model-core's `link` module;
+//! this file is what the board *does* with each request.
+//!
+//! One [`Server`] owns the table store and the upload staging buffer; each
+//! transport has its own [`Port`] (a frame decoder) so two links can be
+//! served at once without mixing their bytes. The engine is reached through
+//! [`EngineAccess`] because on the board it lives behind a critical-section
+//! mutex shared with the high-priority correction loop; the server never
+//! holds that lock across a flash operation.
+//!
+//! **Single-bank flash policy.** The STM32F405 has one flash bank: while a
+//! sector is erased (a 128 KiB slot: 1–2 s) every instruction fetch from
+//! flash stalls, the correction loop included. The active model lives in
+//! RAM, but the code does not, so the loop *does* stop for the erase. A
+//! commit (and a rollback, whose one-word program stalls too) is therefore
+//! refused with [`LinkError::AxesMoving`] unless the encoders have not
+//! changed for `quiet_ms`; a machine at rest needs no new correction while
+//! the CPU waits. After the flash operation the engine's clock is resynced
+//! so the stall is not reported as a loop overrun.
+
+use core::cell::RefCell;
+
+use model_core::link::{
+    decode_message, encode_frame, FrameDecoder, Identity, LinkError, Packet, Request, Response,
+    SlotInfo, MAX_CHUNK_BYTES, MAX_FRAME_BYTES, PROTOCOL_VERSION,
+};
+
+use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
+
+use crate::engine::Engine;
+use crate::model::{self, ModelBuf};
+use crate::store::{StoreError, TableStore};
+
+/// Access to the engine shared with the correction loop.
+pub trait EngineAccess<'m> {
+    /// Runs `f` with exclusive access to the engine (keep it short: the
+    /// correction loop waits).
+    fn with_engine<R>(&self, f: impl FnOnce(&mut Engine<'m>) -> R) -> R;
+}
+
+impl<'m> EngineAccess<'m> for RefCell<Engine<'m>> {
+    fn with_engine<R>(&self, f: impl FnOnce(&mut Engine<'m>) -> R) -> R {
+        f(&mut self.borrow_mut())
+    }
+}
+
+/// Server settings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ServerConfig {
+    /// Firmware version reported by `Identify`.
+    pub firmware: [u16; 3],
+    /// How long the axes must stand still before a flash erase, ms.
+    pub quiet_ms: u32,
+}
+
+/// One transport's receive state.
+#[derive(Debug, Default)]
+pub struct Port {
+    decoder: FrameDecoder<MAX_FRAME_BYTES>,
+}
+
+impl Port {
+    /// A port with an empty decoder.
+    pub const fn new() -> Self {
+        Self {
+            decoder: FrameDecoder::new(),
+        }
+    }
+
+    /// Drops a half-received frame (after a link reset or timeout).
+    pub fn reset(&mut self) {
+        self.decoder.reset();
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Upload {
+    size: u32,
+    crc32: u32,
+    received: u32,
+}
+
+/// The link server.
+#[derive(Debug)]
+pub struct Server<'b, 'm, F> {
+    store: TableStore<F>,
+    stage: &'b mut [u8],
+    /// Model buffers not in use by the engine (at least one once booted).
+    spares: [Option<&'m mut ModelBuf>; 2],
+    upload: Option<Upload>,
+    cfg: ServerConfig,
+    rx_bad_frames: u32,
+}
+
+impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
+    /// A server over `store`, staging uploads in `stage` (its length is the
+    /// largest table accepted), with two model buffers: one for the engine,
+    /// one to load the next table into.
+    pub fn new(
+        store: TableStore<F>,
+        stage: &'b mut [u8],
+        models: [&'m mut ModelBuf; 2],
+        cfg: ServerConfig,
+    ) -> Self {
+        let [a, b] = models;
+        Self {
+            store,
+            stage,
+            spares: [Some(a), Some(b)],
+            upload: None,
+            cfg,
+            rx_bad_frames: 0,
+        }
+    }
+
+    /// Boot: scans both slots and activates the newest valid table (or
+    /// leaves the engine without one: it reports `NO_TABLE`).
+    pub fn boot(&mut self, engine: &impl EngineAccess<'m>) -> Option<SlotInfo> {
+        let spare = spare(&mut self.spares);
+        self.store
+            .scan(self.stage, |b| model::load_into(b, spare).is_ok());
+        self.activate_newest(engine).ok()
+    }
+
+    fn give_back(&mut self, m: Option<&'m mut ModelBuf>) {
+        if let Some(m) = m {
+            if let Some(free) = self.spares.iter_mut().find(|s| s.is_none()) {
+                *free = Some(m);
+            }
+        }
+    }
+
+    /// The store (tests inspect it).
+    pub fn store(&self) -> &TableStore<F> {
+        &self.store
+    }
+
+    /// Gives the store back.
+    pub fn into_store(self) -> TableStore<F> {
+        self.store
+    }
+
+    /// Largest table accepted, bytes.
+    pub fn max_table_bytes(&self) -> u32 {
+        (self.stage.len() as u32).min(self.store.layout().max_table_bytes())
+    }
+
+    /// Frames dropped so far.
+    pub fn rx_bad_frames(&self) -> u32 {
+        self.rx_bad_frames
+    }
+
+    /// Feeds received bytes; every complete request is answered through
+    /// `send` (one call per response frame). `now_us` is the board clock.
+    pub fn handle_bytes(
+        &mut self,
+        port: &mut Port,
+        mut input: &[u8],
+        now_us: u64,
+        engine: &impl EngineAccess<'m>,
+        mut send: impl FnMut(&[u8]),
+    ) {
+        while let Some(frame) = port.decoder.feed(&mut input) {
+            let packet = frame.and_then(decode_message::<Packet<Request<'_>>>);
+            let Ok(packet) = packet else {
+                self.rx_bad_frames = self.rx_bad_frames.saturating_add(1);
+                continue;
+            };
+            let msg = self.handle(packet.msg, now_us, engine);
+            let mut out = [0u8; MAX_FRAME_BYTES];
+            // Every response fits a frame (tested in model-core); if one
+            // ever did not, dropping it makes the host retry rather than
+            // the board panic.
+            if let Ok(n) = encode_frame(
+                &Packet {
+                    seq: packet.seq,
+                    msg,
+                },
+                &mut out,
+            ) {
+                send(&out[..n]);
+            }
+        }
+    }
+
+    /// Answers one request.
+    pub fn handle(
+        &mut self,
+        req: Request<'_>,
+        now_us: u64,
+        engine: &impl EngineAccess<'m>,
+    ) -> Response {
+        match self.dispatch(req, now_us, engine) {
+            Ok(r) => r,
+            Err(e) => Response::Error(e),
+        }
+    }
+
+    fn dispatch(
+        &mut self,
+        req: Request<'_>,
+        now_us: u64,
+        engine: &impl EngineAccess<'m>,
+    ) -> Result<Response, LinkError> {
+        Ok(match req {
+            Request::Identify => {
+                let active = engine.with_engine(|e| e.active());
+                let standby = self
+                    .store
+                    .valid_slots()
+                    .into_iter()
+                    .flatten()
+                    .find(|s| Some(s.slot) != active.map(|a| a.slot));
+                Response::Identity(Identity {
+                    firmware: self.cfg.firmware,
+                    protocol: PROTOCOL_VERSION,
+                    table_format: model::FORMAT_VERSION,
+                    max_table_bytes: self.max_table_bytes(),
+                    active,
+                    standby,
+                })
+            }
+            Request::Status => {
+                let mut t = engine.with_engine(|e| e.telemetry());
+                t.rx_bad_frames = self.rx_bad_frames;
+                Response::Status(t)
+            }
+            Request::UploadBegin { size, crc32 } => {
+                let max = self.max_table_bytes();
+                if size > max {
+                    return Err(LinkError::TooLarge { max_bytes: max });
+                }
+                if size == 0 {
+                    return Err(LinkError::BadChunk);
+                }
+                match self.upload {
+                    // Same table: resume where we are.
+                    Some(u) if u.size == size && u.crc32 == crc32 => {}
+                    _ => {
+                        self.upload = Some(Upload {
+                            size,
+                            crc32,
+                            received: 0,
+                        })
+                    }
+                }
+                Response::UploadAck {
+                    next_offset: self.upload.map_or(0, |u| u.received),
+                }
+            }
+            Request::UploadChunk { offset, data } => {
+                let u = self.upload.as_mut().ok_or(LinkError::NoUpload)?;
+                let end = offset as u64 + data.len() as u64;
+                if data.len() > MAX_CHUNK_BYTES || end > u.size as u64 || data.is_empty() {
+                    return Err(LinkError::BadChunk);
+                }
+                if end <= u.received as u64 {
+                    // A retry of a chunk we have: acknowledge again.
+                } else if offset != u.received {
+                    return Err(LinkError::BadOffset {
+                        expected: u.received,
+                    });
+                } else {
+                    self.stage[offset as usize..end as usize].copy_from_slice(data);
+                    u.received = end as u32;
+                }
+                Response::UploadAck {
+                    next_offset: u.received,
+                }
+            }
+            Request::Commit => {
+                let u = self.upload.ok_or(LinkError::NoUpload)?;
+                if u.received < u.size {
+                    return Err(LinkError::Incomplete {
+                        received: u.received,
+                        size: u.size,
+                    });
+                }
+                if model_core::link::FRAME_CRC.checksum(&self.stage[..u.size as usize]) != u.crc32 {
+                    return Err(LinkError::CrcMismatch);
+                }
+                self.require_quiet(now_us, engine)?;
+                let spare = spare(&mut self.spares);
+                let table = &self.stage[..u.size as usize];
+                let r = self
+                    .store
+                    .commit(table, |b| model::load_into(b, spare).is_ok());
+                engine.with_engine(|e| e.resync_clock());
+                let info = r.map_err(store_error)?;
+                self.upload = None;
+                Response::Committed(info)
+            }
+            Request::Activate => Response::Activated(self.activate_newest(engine)?),
+            Request::Rollback => {
+                self.require_quiet(now_us, engine)?;
+                let r = self.store.rollback();
+                engine.with_engine(|e| e.resync_clock());
+                r.map_err(store_error)?;
+                Response::RolledBack(self.activate_newest(engine)?)
+            }
+            Request::ClearFaults => {
+                engine.with_engine(|e| e.clear_faults());
+                Response::Ok
+            }
+            Request::Inject(inj) => Response::Correction(engine.with_engine(|e| {
+                e.set_injection(Some(inj));
+                e.evaluate_injection(&inj)
+            })),
+            Request::EndInject => {
+                engine.with_engine(|e| e.set_injection(None));
+                Response::Ok
+            }
+            Request::ReadCorrection => Response::Correction(engine.with_engine(|e| e.correction())),
+        })
+    }
+
+    fn require_quiet(&self, now_us: u64, engine: &impl EngineAccess<'m>) -> Result<(), LinkError> {
+        let quiet_us = engine.with_engine(|e| e.quiet_for_us(now_us));
+        if quiet_us < self.cfg.quiet_ms as u64 * 1000 {
+            return Err(LinkError::AxesMoving {
+                quiet_ms: self.cfg.quiet_ms,
+            });
+        }
+        Ok(())
+    }
+
+    /// Loads the newest valid stored table into the engine. Uses the
+    /// staging buffer, so an upload in progress is dropped.
+    fn activate_newest(&mut self, engine: &impl EngineAccess<'m>) -> Result<SlotInfo, LinkError> {
+        let Some(info) = self.store.active() else {
+            let old = engine.with_engine(|e| e.clear_model(false));
+            self.give_back(old);
+            return Err(LinkError::NothingToActivate);
+        };
+        self.upload = None;
+        let slot = self
+            .spares
+            .iter()
+            .position(|s| s.is_some())
+            .unwrap_or_default();
+        let loaded = match (
+            self.store.read_table(info, self.stage),
+            &mut self.spares[slot],
+        ) {
+            (Ok(bytes), Some(m)) => model::load_into(bytes, m).map_err(|_| LinkError::InvalidTable),
+            (Err(e), _) => Err(store_error(e)),
+            (_, None) => Err(LinkError::InvalidTable),
+        };
+        match loaded {
+            Ok(()) => {
+                let m = self.spares[slot].take();
+                if let Some(m) = m {
+                    let old = engine.with_engine(|e| e.set_model(m, info));
+                    self.give_back(old);
+                }
+                Ok(info)
+            }
+            Err(e) => {
+                // A running model stays (it was valid when loaded, and it is
+                // in RAM); only a board without one reports the bad table.
+                let old = engine.with_engine(|en| {
+                    if en.active().is_none() {
+                        en.clear_model(true)
+                    } else {
+                        None
+                    }
+                });
+                self.give_back(old);
+                Err(e)
+            }
+        }
+    }
+}
+
+/// A model buffer the engine does not use: there are two and the engine
+/// holds at most one.
+fn spare<'a>(spares: &'a mut [Option<&mut ModelBuf>; 2]) -> &'a mut ModelBuf {
+    match spares {
+        [Some(m), _] | [None, Some(m)] => m,
+        [None, None] => unreachable!("both model buffers in use"),
+    }
+}
+
+fn store_error(e: StoreError) -> LinkError {
+    match e {
+        StoreError::Flash | StoreError::BadLayout => LinkError::FlashWrite,
+        StoreError::Verify => LinkError::FlashVerify,
+        StoreError::TooLarge => LinkError::TooLarge { max_bytes: 0 },
+        StoreError::InvalidTable => LinkError::InvalidTable,
+        StoreError::NothingToRollBackTo | StoreError::Empty => LinkError::NothingToRollBackTo,
+    }
+}

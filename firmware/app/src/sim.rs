@@ -1,0 +1,325 @@
+//! The simulated board (feature `std`): the application core with fake
+//! encoders, thermistors, step outputs, clock and a RAM flash, served over
+//! TCP. The host tool's end-to-end tests run `trueaxis upload/status/
+//! monitor` against it (`--port tcp://127.0.0.1:PORT`), and the `sim-board`
+//! binary runs it by hand. Also the sample tables the tests upload.
+//!
+//! Time is simulated: the board ticks at its configured period, as many
+//! ticks as wall-clock time has passed (capped per poll, so a slow test
+//! machine is not reported as loop overruns — the engine sees simulated
+//! time only).
+
+use std::boxed::Box;
+use std::io::{ErrorKind, Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use std::vec;
+use std::vec::Vec;
+
+use core::cell::{Cell, RefCell};
+
+use model_core::link::LINK_TEMPS;
+use model_core::spec::{PolyCoef, TableSpec, TermSpec};
+use model_core::{Envelope, InputScaling};
+
+use crate::engine::{AxisConfig, Engine, EngineConfig};
+use crate::hw::{Clock, Encoders, StepOutput, TemperatureSource};
+use crate::memflash::MemFlash;
+use crate::model::ModelBuf;
+use crate::server::{Port, Server, ServerConfig};
+use crate::store::{Layout, TableStore};
+
+/// The RAM flash of the simulated board: two 64 KiB slots, 4-byte writes,
+/// 4 KiB erase units.
+pub type SimFlash = MemFlash<Vec<u8>, 4, 4096>;
+
+/// Slot size of the simulated board.
+pub const SIM_SLOT_BYTES: u32 = 64 * 1024;
+
+/// Layout of [`SimFlash`].
+pub const SIM_LAYOUT: Layout = Layout {
+    slot_offset: [0, SIM_SLOT_BYTES],
+    slot_bytes: SIM_SLOT_BYTES,
+};
+
+/// A plausible configuration: 1 kHz ticks (the simulation does not need
+/// 20 kHz), 0.1 µm quadrature scales, 100 nm correction pulses.
+pub fn sim_engine_config() -> EngineConfig {
+    let axis = AxisConfig {
+        pm_per_count: 100_000,
+        origin_nm: 0,
+        pulse_nm: 100,
+        max_speed_nm_per_ms: 0,
+    };
+    EngineConfig {
+        axes: [axis; 3],
+        period_us: 1000,
+        max_steps_per_tick: 64,
+        temps_used: 2,
+        temp_min_mc: -20_000,
+        temp_max_mc: 80_000,
+        fault_ramp_nm_per_ms: 1000,
+        tool_nm: 0,
+    }
+}
+
+/// A sample table: a cubic-ish polynomial in x, y and z on each output, a
+/// reversal on x and a thermal term on channel 0; `variant` changes the
+/// coefficients (so two uploads differ). Travel ±400 mm, |corr| ≤ 60 µm,
+/// slew 500 nm/ms.
+pub fn sample_table(variant: u32) -> Vec<u8> {
+    sample_spec(variant).encode().expect("sample table encodes")
+}
+
+/// The [`TableSpec`] behind [`sample_table`].
+pub fn sample_spec(variant: u32) -> TableSpec {
+    let k = 1.0 + variant as f64 * 0.25;
+    let poly = |output: u8, c: [f64; 4]| {
+        let coefs: Vec<PolyCoef> = vec![
+            ([0, 0, 0], c[0] * k),
+            ([1, 0, 0], c[1] * k),
+            ([0, 1, 0], c[2] * k),
+            ([1, 1, 0], c[3]),
+            ([3, 0, 0], -c[1] * 0.5),
+            ([0, 0, 1], c[3] * 0.5),
+        ];
+        TermSpec::Poly { output, coefs }
+    };
+    let travel = 400_000_000;
+    TableSpec {
+        created_unix_s: 1_700_000_000 + variant as i64,
+        source_hash: [variant as u8; 32],
+        channels: vec!["bed".into(), "air".into()],
+        envelope: Envelope {
+            travel_min_nm: [-travel; 3],
+            travel_max_nm: [travel; 3],
+            max_corr_nm: [60_000; 3],
+            max_slew_nm_per_ms: 500,
+            temp_min_mc: [0, 0, 0, 0],
+            temp_max_mc: [50_000, 50_000, 0, 0],
+            tool_min_nm: 0,
+            tool_max_nm: 300_000_000,
+        },
+        scaling: InputScaling {
+            centre_nm: [0; 3],
+            half_span_nm: [travel; 3],
+        },
+        outputs: [true, true, true],
+        terms: vec![
+            poly(0, [1500.0, 8000.0, -2000.0, 1200.0]),
+            poly(1, [-700.0, 3000.0, 6000.0, -900.0]),
+            poly(2, [300.0, -2500.0, 1000.0, 700.0]),
+            TermSpec::Reversal {
+                output: 0,
+                axis: 0,
+                transition_nm: 20_000,
+                amplitude_nm: 2500.0,
+            },
+            TermSpec::Thermal {
+                output: 1,
+                channel: 0,
+                t_ref_mc: 20_000,
+                coefs_nm_per_k: vec![([0, 0, 0], 900.0), ([0, 1, 0], 400.0)],
+            },
+        ],
+    }
+}
+
+/// Sensor values and emitted pulses of the simulated board, shared with
+/// the test that drives it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SimIo {
+    /// Encoder counts per axis.
+    pub counts: [i32; 3],
+    /// Thermistor readings, m°C.
+    pub temps_mc: [i32; LINK_TEMPS],
+    /// Net pulses emitted per axis.
+    pub pulses: [i64; 3],
+}
+
+impl SimIo {
+    /// Room temperature everywhere, axes at 0.
+    pub fn at_rest() -> Self {
+        Self {
+            temps_mc: [20_000; LINK_TEMPS],
+            ..Self::default()
+        }
+    }
+}
+
+struct SharedIo(Arc<Mutex<SimIo>>);
+
+impl Encoders for SharedIo {
+    fn read_counts(&mut self) -> [i32; 3] {
+        self.0.lock().map(|io| io.counts).unwrap_or_default()
+    }
+}
+
+impl TemperatureSource for SharedIo {
+    fn read_temps_mc(&mut self) -> [i32; LINK_TEMPS] {
+        self.0.lock().map(|io| io.temps_mc).unwrap_or_default()
+    }
+}
+
+impl StepOutput for SharedIo {
+    fn pulses(&mut self, axis: usize, steps: i32) {
+        if let Ok(mut io) = self.0.lock() {
+            io.pulses[axis] += steps as i64;
+        }
+    }
+}
+
+/// A clock the simulation advances by hand.
+#[derive(Debug, Default)]
+pub struct SimClock(pub Cell<u64>);
+
+impl Clock for SimClock {
+    fn now_us(&self) -> u64 {
+        self.0.get()
+    }
+}
+
+/// The simulated board: application core + fakes, served over TCP by
+/// [`SimBoard::serve`]. Its flash survives [`SimBoard::into_flash`] for a
+/// "reboot" on the same contents.
+pub struct SimBoard {
+    /// Sensor values and pulses.
+    pub io: Arc<Mutex<SimIo>>,
+    engine: &'static RefCell<Engine<'static>>,
+    server: Server<'static, 'static, SimFlash>,
+    clock: SimClock,
+}
+
+impl core::fmt::Debug for SimBoard {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("SimBoard").finish_non_exhaustive()
+    }
+}
+
+impl SimBoard {
+    /// A board with erased flash (no table).
+    pub fn new() -> Self {
+        Self::with_flash(SimFlash::new_erased(vec![0; 2 * SIM_SLOT_BYTES as usize]))
+    }
+
+    /// A board booting from `flash`. The model buffers and the engine are
+    /// leaked (≈ 60 KiB per board; test processes create a handful).
+    pub fn with_flash(flash: SimFlash) -> Self {
+        let store = TableStore::new(flash, SIM_LAYOUT).expect("sim layout fits");
+        let stage: &'static mut [u8] = Box::leak(vec![0u8; 48 * 1024].into_boxed_slice());
+        let m1: &'static mut ModelBuf = Box::leak(Box::default());
+        let m2: &'static mut ModelBuf = Box::leak(Box::default());
+        let engine = Box::leak(Box::new(RefCell::new(
+            Engine::new(sim_engine_config()).expect("sim config is valid"),
+        )));
+        let mut server = Server::new(
+            store,
+            stage,
+            [m1, m2],
+            ServerConfig {
+                firmware: crate::FIRMWARE_VERSION,
+                quiet_ms: 200,
+            },
+        );
+        server.boot(&*engine);
+        Self {
+            io: Arc::new(Mutex::new(SimIo::at_rest())),
+            engine,
+            server,
+            clock: SimClock::default(),
+        }
+    }
+
+    /// Simulated time, µs.
+    pub fn now_us(&self) -> u64 {
+        self.clock.0.get()
+    }
+
+    /// Runs `n` ticks of the correction loop.
+    pub fn tick(&mut self, n: u64) {
+        let period = self.engine.borrow().config().period_us as u64;
+        let mut io = SharedIo(self.io.clone());
+        let mut io2 = SharedIo(self.io.clone());
+        let mut io3 = SharedIo(self.io.clone());
+        for _ in 0..n {
+            self.clock.0.set(self.clock.0.get() + period);
+            self.engine
+                .borrow_mut()
+                .tick(&self.clock, &mut io, &mut io2, &mut io3);
+        }
+    }
+
+    /// Feeds bytes from a link; returns the response bytes.
+    pub fn receive(&mut self, port: &mut Port, bytes: &[u8]) -> Vec<u8> {
+        let mut out = Vec::new();
+        let now = self.now_us();
+        self.server
+            .handle_bytes(port, bytes, now, self.engine, |f| out.extend_from_slice(f));
+        out
+    }
+
+    /// The engine (for assertions).
+    pub fn engine(&self) -> std::cell::Ref<'_, Engine<'static>> {
+        self.engine.borrow()
+    }
+
+    /// Power off: the flash contents, to boot another board on.
+    pub fn into_flash(self) -> SimFlash {
+        self.server.into_store().into_flash()
+    }
+
+    /// Serves TCP connections on `listener` (one at a time) until `stop`
+    /// is set, ticking in step with wall-clock time. Returns the board.
+    pub fn serve(mut self, listener: TcpListener, stop: Arc<AtomicBool>) -> Self {
+        let _ = listener.set_nonblocking(true);
+        let period = Duration::from_micros(self.engine.borrow().config().period_us as u64);
+        let mut last = Instant::now();
+        let mut conn: Option<(TcpStream, Port)> = None;
+        let mut buf = [0u8; 1024];
+        while !stop.load(Ordering::Relaxed) {
+            if conn.is_none() {
+                if let Ok((s, _)) = listener.accept() {
+                    let _ = s.set_nonblocking(false);
+                    let _ = s.set_read_timeout(Some(Duration::from_millis(1)));
+                    let _ = s.set_nodelay(true);
+                    conn = Some((s, Port::new()));
+                }
+            }
+            let mut drop_conn = false;
+            if let Some((s, port)) = conn.as_mut() {
+                match s.read(&mut buf) {
+                    Ok(0) => drop_conn = true,
+                    Ok(n) => {
+                        let out = self.receive(port, &buf[..n]);
+                        if s.write_all(&out).is_err() {
+                            drop_conn = true;
+                        }
+                    }
+                    Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
+                    Err(_) => drop_conn = true,
+                }
+            } else {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            if drop_conn {
+                conn = None;
+            }
+            // Simulated time follows the wall clock, at most 50 ticks per
+            // poll.
+            let due = (last.elapsed().as_micros() / period.as_micros().max(1)) as u64;
+            if due > 0 {
+                self.tick(due.min(50));
+                last += period * due as u32;
+            }
+        }
+        self
+    }
+}
+
+impl Default for SimBoard {
+    fn default() -> Self {
+        Self::new()
+    }
+}

@@ -1,0 +1,347 @@
+//! The correction engine with fake encoders, thermistors, step output and
+//! clock: pulses never drift from the correction over a simulated hour,
+//! the output follows model-core's fixed-point evaluation, the slew limit
+//! holds, every fault ramps the output to zero and is reported.
+
+use std::cell::Cell;
+
+use model_core::link::{Faults, Slot, SlotInfo, LINK_TEMPS};
+use model_core::{DirTracker, Inputs, Model};
+use trueaxis_app::engine::{round_div, ConfigError, Engine, EngineConfig};
+use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
+use trueaxis_app::model::{load_into, ModelBuf};
+use trueaxis_app::sim::{sample_table, sim_engine_config};
+
+struct Fake {
+    counts: [i32; 3],
+    temps: [i32; LINK_TEMPS],
+    pulses: [i64; 3],
+    max_pulses_per_call: i32,
+}
+
+impl Fake {
+    fn new() -> Self {
+        Self {
+            counts: [0; 3],
+            temps: [20_000; LINK_TEMPS],
+            pulses: [0; 3],
+            max_pulses_per_call: 0,
+        }
+    }
+}
+
+impl Encoders for Fake {
+    fn read_counts(&mut self) -> [i32; 3] {
+        self.counts
+    }
+}
+impl TemperatureSource for Fake {
+    fn read_temps_mc(&mut self) -> [i32; LINK_TEMPS] {
+        self.temps
+    }
+}
+impl StepOutput for Fake {
+    fn pulses(&mut self, axis: usize, steps: i32) {
+        self.pulses[axis] += steps as i64;
+        self.max_pulses_per_call = self.max_pulses_per_call.max(steps.abs());
+    }
+}
+
+struct FakeClock(Cell<u64>);
+impl Clock for FakeClock {
+    fn now_us(&self) -> u64 {
+        self.0.get()
+    }
+}
+
+/// Deterministic xorshift, so the random walk is the same on every run.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+    fn range(&mut self, lo: i64, hi: i64) -> i64 {
+        lo + (self.next() % (hi - lo + 1) as u64) as i64
+    }
+}
+
+fn info(table: &[u8]) -> SlotInfo {
+    SlotInfo {
+        slot: Slot::A,
+        seq: 1,
+        len: table.len() as u32,
+        crc32: model_core::link::FRAME_CRC.checksum(table),
+    }
+}
+
+fn loaded(table: &[u8]) -> &'static mut ModelBuf {
+    let m: &'static mut ModelBuf = Box::leak(Box::default());
+    load_into(table, m).unwrap();
+    m
+}
+
+/// Ticks `n` times at the nominal period.
+fn run(e: &mut Engine<'_>, clock: &FakeClock, io: &mut Fake, n: u64) {
+    let period = e.config().period_us as u64;
+    for _ in 0..n {
+        clock.0.set(clock.0.get() + period);
+        let mut enc = Fake { ..*io };
+        let mut t = Fake { ..*io };
+        e.tick(clock, &mut enc, &mut t, io);
+    }
+}
+
+#[test]
+fn an_hour_of_random_motion_pulses_equal_the_rounded_correction_every_tick() {
+    let table = sample_table(0);
+    let mut e = Engine::new(sim_engine_config()).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    let mut rng = Rng(0x1234_5678_9abc_def1);
+    let pulse_nm = sim_engine_config().axes.map(|a| a.pulse_nm as i64);
+    // One simulated hour at 1 kHz: 3.6 M ticks.
+    let ticks = 3_600_000u64;
+    let period = e.config().period_us as u64;
+    let mut max_err = 0i64;
+    for k in 0..ticks {
+        // Axes wander (up to ±2 mm/s in 0.1 µm counts), temperature drifts.
+        for c in io.counts.iter_mut() {
+            *c = (*c as i64 + rng.range(-20, 20)).clamp(-3_000_000, 3_000_000) as i32;
+        }
+        if k % 1000 == 0 {
+            io.temps[0] = (io.temps[0] as i64 + rng.range(-50, 50)).clamp(10_000, 40_000) as i32;
+        }
+        clock.0.set(clock.0.get() + period);
+        let mut enc = Fake { ..io };
+        let mut t = Fake { ..io };
+        e.tick(&clock, &mut enc, &mut t, &mut io);
+        let corr = e.corr_nm();
+        for a in 0..3 {
+            let want = round_div(corr[a] as i64, pulse_nm[a]);
+            max_err = max_err.max((io.pulses[a] - want).abs());
+        }
+    }
+    assert_eq!(max_err, 0, "pulses lagged the correction");
+    assert_eq!(io.pulses, e.steps());
+    assert!(e.faults().is_empty(), "{:?}", e.faults());
+    assert_eq!(e.telemetry().ticks, ticks);
+    // And the correction is the model's at the final position once it
+    // has settled.
+    run(&mut e, &clock, &mut io, 500);
+    assert_eq!(e.corr_nm(), e.telemetry().model_corr_nm);
+}
+
+#[test]
+fn output_equals_model_core_fixed_point_and_tracks_reversal() {
+    let table = sample_table(1);
+    let m = Model::load(&model_core::parse(&table).unwrap()).unwrap();
+    let mut e = Engine::new(sim_engine_config()).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    io.temps[0] = 31_000;
+    let mut dir = DirTracker::new();
+    let transition = m.reversal_transition_nm(0).unwrap();
+    // Move x forward, then back, stopping at several points.
+    for &target_counts in &[0, 1_000_000, 1_500_000, 1_200_000, -2_000_000] {
+        while io.counts[0] != target_counts {
+            let d = (target_counts - io.counts[0]).clamp(-2000, 2000);
+            io.counts[0] += d;
+            run(&mut e, &clock, &mut io, 1);
+            dir.update(io.counts[0] * 100, transition);
+        }
+        run(&mut e, &clock, &mut io, 300);
+        let mut temp_mc = [0; model_core::MAX_TEMPS];
+        temp_mc.copy_from_slice(&io.temps[..model_core::MAX_TEMPS]);
+        let rev = [dir.rev_q30(), 0, 0];
+        let want = m.eval_fixed(&Inputs {
+            pos_nm: [io.counts[0] * 100, 0, 0],
+            rev_q30: rev,
+            temp_mc,
+            tool_nm: 0,
+        });
+        assert_eq!(
+            e.telemetry().model_corr_nm,
+            want.corr_nm,
+            "at {target_counts}"
+        );
+        assert_eq!(e.corr_nm(), want.corr_nm);
+    }
+}
+
+#[test]
+fn slew_limit_holds_on_a_table_switch() {
+    let (t1, t2) = (sample_table(0), sample_table(3));
+    let mut e = Engine::new(sim_engine_config()).unwrap();
+    e.set_model(loaded(&t1), info(&t1));
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    io.counts = [3_000_000, -2_500_000, 1_000_000];
+    run(&mut e, &clock, &mut io, 1000);
+    let before = e.corr_nm();
+    e.set_model(loaded(&t2), info(&t2));
+    let slew = e.slew_nm_per_ms() as i64; // 500 nm/ms, 1 ms ticks
+    assert_eq!(slew, 500);
+    let mut prev = before;
+    let mut moved = false;
+    for _ in 0..1000 {
+        run(&mut e, &clock, &mut io, 1);
+        let now = e.corr_nm();
+        for a in 0..3 {
+            assert!(
+                (now[a] - prev[a]).abs() as i64 <= slew + 1,
+                "{prev:?} -> {now:?}"
+            );
+        }
+        moved |= now != prev;
+        prev = now;
+    }
+    assert!(moved);
+    assert_eq!(e.corr_nm(), e.telemetry().model_corr_nm);
+    assert!(io.max_pulses_per_call <= e.config().max_steps_per_tick);
+}
+
+/// Runs to a steady non-zero correction, injects a fault, checks the ramp
+/// to zero (at the fault ramp rate, pulses following) and the report.
+fn fault_ramps_to_zero(
+    make_fault: impl FnOnce(&mut Engine<'_>, &FakeClock, &mut Fake),
+    expect: Faults,
+) -> (Engine<'static>, FakeClock, Fake) {
+    let table = sample_table(0);
+    let mut e = Engine::new(sim_engine_config()).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    io.counts = [3_900_000, 3_900_000, 3_900_000];
+    run(&mut e, &clock, &mut io, 1000);
+    let start = e.corr_nm();
+    assert!(start.iter().any(|&c| c.abs() > 5000), "{start:?}");
+    make_fault(&mut e, &clock, &mut io);
+    let ramp = e.config().fault_ramp_nm_per_ms as i64;
+    let mut prev = e.corr_nm();
+    for _ in 0..200 {
+        run(&mut e, &clock, &mut io, 1);
+        let now = e.corr_nm();
+        for a in 0..3 {
+            assert!((now[a] - prev[a]).abs() as i64 <= ramp + 1);
+            assert!(now[a].abs() <= prev[a].abs());
+        }
+        prev = now;
+    }
+    assert_eq!(e.corr_nm(), [0; 3]);
+    assert_eq!(e.steps(), [0; 3]);
+    assert!(e.faults().contains(expect), "{:?}", e.faults());
+    assert!(e.telemetry().faults_latched.contains(expect));
+    (e, clock, io)
+}
+
+#[test]
+fn sensor_out_of_range_ramps_to_zero_and_recovers_when_back() {
+    let (mut e, clock, mut io) = fault_ramps_to_zero(
+        |_, _, io| io.temps[1] = -100_000, // open thermistor
+        Faults::SENSOR_RANGE,
+    );
+    io.temps[1] = 21_000;
+    run(&mut e, &clock, &mut io, 300);
+    assert!(e.faults().is_empty());
+    assert_ne!(e.corr_nm(), [0; 3]);
+    // Still latched for the operator until cleared.
+    assert!(e.telemetry().faults_latched.contains(Faults::SENSOR_RANGE));
+    e.clear_faults();
+    assert!(e.telemetry().faults_latched.is_empty());
+}
+
+#[test]
+fn loop_overrun_is_sticky_until_cleared() {
+    let (mut e, clock, mut io) = fault_ramps_to_zero(
+        |e, clock, io| {
+            // The next tick comes three periods late.
+            clock.0.set(clock.0.get() + 2 * e.config().period_us as u64);
+            run(e, clock, io, 1);
+        },
+        Faults::LOOP_OVERRUN,
+    );
+    assert_eq!(e.telemetry().overruns, 1);
+    assert_eq!(e.telemetry().worst_loop_us, 3 * e.config().period_us);
+    e.clear_faults();
+    run(&mut e, &clock, &mut io, 300);
+    assert!(e.faults().is_empty());
+    assert_ne!(e.corr_nm(), [0; 3]);
+}
+
+#[test]
+fn a_stall_announced_by_resync_is_not_an_overrun() {
+    let table = sample_table(0);
+    let mut e = Engine::new(sim_engine_config()).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    run(&mut e, &clock, &mut io, 10);
+    clock.0.set(clock.0.get() + 1_500_000); // a 1.5 s flash erase
+    e.resync_clock();
+    run(&mut e, &clock, &mut io, 10);
+    assert!(e.faults().is_empty());
+    assert_eq!(e.telemetry().overruns, 0);
+}
+
+#[test]
+fn encoder_jump_is_a_fault() {
+    let mut cfg = sim_engine_config();
+    for a in cfg.axes.iter_mut() {
+        a.max_speed_nm_per_ms = 100_000; // 100 mm/s
+    }
+    let table = sample_table(0);
+    let mut e = Engine::new(cfg).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    run(&mut e, &clock, &mut io, 10);
+    // 100 mm/s for 1 ms = 0.1 mm = 1000 counts: fine.
+    io.counts[2] += 1000;
+    run(&mut e, &clock, &mut io, 1);
+    assert!(e.faults().is_empty());
+    // 10 mm in one tick: a glitch.
+    io.counts[2] += 100_000;
+    run(&mut e, &clock, &mut io, 1);
+    assert!(e.faults().contains(Faults::ENCODER_JUMP));
+}
+
+#[test]
+fn without_a_table_the_output_is_zero_and_says_why() {
+    let mut e = Engine::new(sim_engine_config()).unwrap();
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    io.counts = [1_000_000; 3];
+    run(&mut e, &clock, &mut io, 10);
+    assert_eq!(e.corr_nm(), [0; 3]);
+    assert!(e.faults().contains(Faults::NO_TABLE));
+}
+
+#[test]
+fn configurations_the_pulse_budget_cannot_follow_are_refused() {
+    let mut cfg: EngineConfig = sim_engine_config();
+    cfg.fault_ramp_nm_per_ms = 1_000_000; // 1 mm/ms: 10 000 pulses per tick
+    assert_eq!(
+        Engine::new(cfg).err(),
+        Some(ConfigError::RampTooFast { axis: 0 })
+    );
+    let mut cfg = sim_engine_config();
+    cfg.axes[1].pulse_nm = 0;
+    assert_eq!(Engine::new(cfg).err(), Some(ConfigError::NonPositive));
+    // A table slew beyond the budget is reduced, not trusted.
+    let mut cfg = sim_engine_config();
+    cfg.max_steps_per_tick = 3; // 200 nm per 1 ms tick
+    cfg.fault_ramp_nm_per_ms = 150;
+    let table = sample_table(0);
+    let mut e = Engine::new(cfg).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    assert!(
+        e.slew_nm_per_ms() < 500 && e.slew_nm_per_ms() > 100,
+        "{}",
+        e.slew_nm_per_ms()
+    );
+}

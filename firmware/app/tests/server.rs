@@ -1,0 +1,461 @@
+//! The link server end to end inside one process: the simulated board
+//! (application core, RAM flash, fake sensors) fed with real frames.
+//! Upload/resume/commit/activate/rollback, every refusal the protocol
+//! defines, corrections equal to model-core's own evaluation, garbage on
+//! the line, and fuzzed input.
+
+mod common;
+
+use common::{call, decode_all, install};
+use model_core::link::{
+    encode_frame, Faults, Injection, LinkError, Packet, Request, Response, Slot, FRAME_CRC,
+    LINK_TEMPS, MAX_FRAME_BYTES,
+};
+use model_core::{parse, Inputs, Model};
+use proptest::prelude::*;
+use trueaxis_app::server::Port;
+use trueaxis_app::sim::{sample_table, SimBoard};
+
+fn injection(pos_nm: [i32; 3]) -> Injection {
+    let mut temp_mc = [20_000; LINK_TEMPS];
+    temp_mc[0] = 27_500;
+    Injection {
+        pos_nm,
+        rev_q30: [1 << 30, -(1 << 30), 0],
+        temp_mc,
+        tool_nm: 50_000_000,
+    }
+}
+
+fn host_eval(table: &[u8], inj: &Injection) -> [i32; 3] {
+    let m = Model::load(&parse(table).unwrap()).unwrap();
+    let mut temp_mc = [0; model_core::MAX_TEMPS];
+    temp_mc.copy_from_slice(&inj.temp_mc[..model_core::MAX_TEMPS]);
+    m.eval_fixed(&Inputs {
+        pos_nm: inj.pos_nm,
+        rev_q30: inj.rev_q30,
+        temp_mc,
+        tool_nm: inj.tool_nm,
+    })
+    .corr_nm
+}
+
+#[test]
+fn empty_board_identifies_and_reports_no_table() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    let Response::Identity(id) = call(&mut b, &mut p, 9, Request::Identify) else {
+        panic!()
+    };
+    assert_eq!(id.active, None);
+    assert_eq!(id.protocol, model_core::link::PROTOCOL_VERSION);
+    assert_eq!(id.table_format, model_core::FORMAT_VERSION);
+    b.tick(3);
+    let Response::Status(t) = call(&mut b, &mut p, 10, Request::Status) else {
+        panic!()
+    };
+    assert!(t.faults.contains(Faults::NO_TABLE));
+    assert_eq!(t.corr_nm, [0; 3]);
+    assert_eq!(
+        call(&mut b, &mut p, 11, Request::Activate),
+        Response::Error(LinkError::NothingToActivate)
+    );
+}
+
+#[test]
+fn install_inject_and_read_back_equals_model_core() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    let table = sample_table(0);
+    let r = install(&mut b, &mut p, &table);
+    let Response::Activated(info) = r else {
+        panic!("{r:?}")
+    };
+    assert_eq!(info.crc32, FRAME_CRC.checksum(&table));
+    assert_eq!((info.slot, info.seq), (Slot::A, 1));
+
+    for (k, pos) in [
+        [0, 0, 0],
+        [123_456_789, -98_765_432, 5_000_000],
+        [-399_000_000, 399_000_000, 0],
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let inj = injection(pos);
+        let want = host_eval(&table, &inj);
+        let Response::Correction(c) = call(&mut b, &mut p, 20 + k as u16, Request::Inject(inj))
+        else {
+            panic!()
+        };
+        assert_eq!(c.model_corr_nm, want, "at {pos:?}");
+        // The output slews there: 500 nm/ms, 1 ms ticks, |corr| ≤ 60 µm.
+        b.tick(200);
+        let Response::Correction(c) = call(&mut b, &mut p, 30, Request::ReadCorrection) else {
+            panic!()
+        };
+        assert_eq!(c.corr_nm, want);
+        assert!(c.faults.is_empty(), "{:?}", c.faults);
+        // Pulses follow: round(corr / 100 nm).
+        let pulses = b.io.lock().unwrap().pulses;
+        for a in 0..3 {
+            assert_eq!(
+                pulses[a],
+                trueaxis_app::engine::round_div(want[a] as i64, 100)
+            );
+        }
+    }
+    assert_eq!(call(&mut b, &mut p, 40, Request::EndInject), Response::Ok);
+}
+
+#[test]
+fn upload_resumes_after_a_dropped_link() {
+    let mut b = SimBoard::new();
+    let table = sample_table(1);
+    let crc32 = FRAME_CRC.checksum(&table);
+    let size = table.len() as u32;
+    let mut p = Port::new();
+    call(&mut b, &mut p, 1, Request::UploadBegin { size, crc32 });
+    call(
+        &mut b,
+        &mut p,
+        2,
+        Request::UploadChunk {
+            offset: 0,
+            data: &table[..100],
+        },
+    );
+    // Half a frame, then the link drops.
+    let mut buf = [0u8; MAX_FRAME_BYTES];
+    let n = encode_frame(
+        &Packet {
+            seq: 3,
+            msg: Request::UploadChunk {
+                offset: 100,
+                data: &table[100..200],
+            },
+        },
+        &mut buf,
+    )
+    .unwrap();
+    assert!(b.receive(&mut p, &buf[..n / 2]).is_empty());
+    let mut p = Port::new();
+    // Same size and CRC: resume at 100.
+    assert_eq!(
+        call(&mut b, &mut p, 4, Request::UploadBegin { size, crc32 }),
+        Response::UploadAck { next_offset: 100 }
+    );
+    // A chunk at the wrong offset is refused and says where to go on.
+    assert_eq!(
+        call(
+            &mut b,
+            &mut p,
+            5,
+            Request::UploadChunk {
+                offset: 150,
+                data: &table[150..160]
+            }
+        ),
+        Response::Error(LinkError::BadOffset { expected: 100 })
+    );
+    // A retried chunk is acknowledged again.
+    assert_eq!(
+        call(
+            &mut b,
+            &mut p,
+            6,
+            Request::UploadChunk {
+                offset: 0,
+                data: &table[..100]
+            }
+        ),
+        Response::UploadAck { next_offset: 100 }
+    );
+    assert_eq!(
+        call(&mut b, &mut p, 7, Request::Commit),
+        Response::Error(LinkError::Incomplete {
+            received: 100,
+            size
+        })
+    );
+    let mut off = 100;
+    while off < table.len() {
+        let end = (off + 256).min(table.len());
+        call(
+            &mut b,
+            &mut p,
+            8,
+            Request::UploadChunk {
+                offset: off as u32,
+                data: &table[off..end],
+            },
+        );
+        off = end;
+    }
+    assert!(matches!(
+        call(&mut b, &mut p, 9, Request::Commit),
+        Response::Committed(_)
+    ));
+    assert!(matches!(
+        call(&mut b, &mut p, 10, Request::Activate),
+        Response::Activated(_)
+    ));
+}
+
+#[test]
+fn refusals() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    assert_eq!(
+        call(&mut b, &mut p, 1, Request::Commit),
+        Response::Error(LinkError::NoUpload)
+    );
+    assert_eq!(
+        call(
+            &mut b,
+            &mut p,
+            1,
+            Request::UploadChunk {
+                offset: 0,
+                data: &[1]
+            }
+        ),
+        Response::Error(LinkError::NoUpload)
+    );
+    assert!(matches!(
+        call(
+            &mut b,
+            &mut p,
+            1,
+            Request::UploadBegin {
+                size: 10_000_000,
+                crc32: 0
+            }
+        ),
+        Response::Error(LinkError::TooLarge { .. })
+    ));
+
+    // Announced CRC does not match the bytes.
+    let table = sample_table(0);
+    call(
+        &mut b,
+        &mut p,
+        2,
+        Request::UploadBegin {
+            size: table.len() as u32,
+            crc32: 1,
+        },
+    );
+    for (i, c) in table.chunks(256).enumerate() {
+        call(
+            &mut b,
+            &mut p,
+            3,
+            Request::UploadChunk {
+                offset: (i * 256) as u32,
+                data: c,
+            },
+        );
+    }
+    assert_eq!(
+        call(&mut b, &mut p, 4, Request::Commit),
+        Response::Error(LinkError::CrcMismatch)
+    );
+
+    // Bytes that match their announced CRC but are not a valid table.
+    let mut bad = table.clone();
+    bad[300] ^= 0x40;
+    let crc32 = FRAME_CRC.checksum(&bad);
+    call(
+        &mut b,
+        &mut p,
+        5,
+        Request::UploadBegin {
+            size: bad.len() as u32,
+            crc32,
+        },
+    );
+    for (i, c) in bad.chunks(256).enumerate() {
+        call(
+            &mut b,
+            &mut p,
+            6,
+            Request::UploadChunk {
+                offset: (i * 256) as u32,
+                data: c,
+            },
+        );
+    }
+    assert_eq!(
+        call(&mut b, &mut p, 7, Request::Commit),
+        Response::Error(LinkError::InvalidTable)
+    );
+    assert_eq!(
+        call(&mut b, &mut p, 8, Request::Rollback),
+        Response::Error(LinkError::NothingToRollBackTo)
+    );
+}
+
+#[test]
+fn commit_is_refused_while_axes_move() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    install(&mut b, &mut p, &sample_table(0));
+    let t2 = sample_table(1);
+    let crc32 = FRAME_CRC.checksum(&t2);
+    call(
+        &mut b,
+        &mut p,
+        1,
+        Request::UploadBegin {
+            size: t2.len() as u32,
+            crc32,
+        },
+    );
+    for (i, c) in t2.chunks(256).enumerate() {
+        call(
+            &mut b,
+            &mut p,
+            2,
+            Request::UploadChunk {
+                offset: (i * 256) as u32,
+                data: c,
+            },
+        );
+    }
+    b.tick(5);
+    b.io.lock().unwrap().counts[1] += 1000;
+    b.tick(5);
+    assert_eq!(
+        call(&mut b, &mut p, 3, Request::Commit),
+        Response::Error(LinkError::AxesMoving { quiet_ms: 200 })
+    );
+    // Standing still for the quiet time makes it go through (the upload
+    // is kept meanwhile).
+    b.tick(200);
+    assert!(matches!(
+        call(&mut b, &mut p, 4, Request::Commit),
+        Response::Committed(_)
+    ));
+}
+
+#[test]
+fn rollback_and_reboot_pick_the_right_table() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    let (t1, t2) = (sample_table(0), sample_table(1));
+    install(&mut b, &mut p, &t1);
+    let Response::Activated(i2) = install(&mut b, &mut p, &t2) else {
+        panic!()
+    };
+    assert_eq!((i2.slot, i2.seq), (Slot::B, 2));
+    let Response::Identity(id) = call(&mut b, &mut p, 1, Request::Identify) else {
+        panic!()
+    };
+    assert_eq!(id.active, Some(i2));
+    assert_eq!(id.standby.map(|s| s.seq), Some(1));
+
+    // Reboot: the newest boots.
+    let mut b = SimBoard::with_flash(b.into_flash());
+    assert_eq!(b.engine().active(), Some(i2));
+
+    let Response::RolledBack(i1) = call(&mut b, &mut p, 2, Request::Rollback) else {
+        panic!()
+    };
+    assert_eq!(i1.crc32, FRAME_CRC.checksum(&t1));
+    assert_eq!(b.engine().active(), Some(i1));
+    let b = SimBoard::with_flash(b.into_flash());
+    assert_eq!(b.engine().active(), Some(i1));
+}
+
+#[test]
+fn an_interrupted_upload_keeps_the_running_table() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    let t1 = sample_table(0);
+    let Response::Activated(i1) = install(&mut b, &mut p, &t1) else {
+        panic!()
+    };
+    let t2 = sample_table(2);
+    call(
+        &mut b,
+        &mut p,
+        1,
+        Request::UploadBegin {
+            size: t2.len() as u32,
+            crc32: FRAME_CRC.checksum(&t2),
+        },
+    );
+    call(
+        &mut b,
+        &mut p,
+        2,
+        Request::UploadChunk {
+            offset: 0,
+            data: &t2[..256],
+        },
+    );
+    // The host goes away. The board keeps correcting with t1, and after a
+    // reboot still boots t1.
+    b.tick(10);
+    assert_eq!(b.engine().active(), Some(i1));
+    let b = SimBoard::with_flash(b.into_flash());
+    assert_eq!(b.engine().active(), Some(i1));
+}
+
+#[test]
+fn garbage_and_cut_frames_between_requests() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    let mut buf = [0u8; MAX_FRAME_BYTES];
+    let mut stream = vec![0x13u8, 0x37, 0x00, 0xFF, 0xFF, 0x01];
+    let n = encode_frame(
+        &Packet {
+            seq: 1,
+            msg: Request::Identify,
+        },
+        &mut buf,
+    )
+    .unwrap();
+    stream.extend_from_slice(&buf[..n - 3]); // cut
+    stream.extend_from_slice(&[0xAA; 700]); // overflow
+    let n = encode_frame(
+        &Packet {
+            seq: 2,
+            msg: Request::Status,
+        },
+        &mut buf,
+    )
+    .unwrap();
+    stream.extend_from_slice(&buf[..n]);
+    let out = b.receive(&mut p, &stream);
+    let answers = decode_all(&out);
+    assert_eq!(answers.len(), 1);
+    assert_eq!(answers[0].seq, 2);
+    let Response::Status(t) = &answers[0].msg else {
+        panic!()
+    };
+    assert!(t.rx_bad_frames >= 2, "{}", t.rx_bad_frames);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig {
+        cases: 256,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(0x5eed),
+        ..ProptestConfig::default()
+    })]
+
+    /// Random bytes, then a valid request: the board never panics, and the
+    /// request is answered.
+    #[test]
+    fn fuzzed_input_never_sticks(junk in proptest::collection::vec(any::<u8>(), 0..3000)) {
+        let mut b = SimBoard::new();
+        let mut p = Port::new();
+        b.receive(&mut p, &junk);
+        let mut buf = [0u8; MAX_FRAME_BYTES];
+        let n = encode_frame(&Packet { seq: 77, msg: Request::Identify }, &mut buf).unwrap();
+        let out = b.receive(&mut p, &buf[..n]);
+        let answers = decode_all(&out);
+        prop_assert!(answers.iter().any(|a| a.seq == 77));
+    }
+}

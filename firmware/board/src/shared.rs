@@ -1,0 +1,63 @@
+//! Every static that more than one task touches, with who writes and who
+//! reads it. Nothing else in the firmware is shared.
+//!
+//! | static | written by | read by |
+//! | --- | --- | --- |
+//! | [`ENGINE`] | correction task (every tick); link tasks through the server (model swap, injection, clear faults) | the same |
+//! | [`SERVER`] | link tasks (USB and UART, one request at a time) | the same |
+//! | [`TEMPS_MC`] | thermistor task (10 Hz) | correction task |
+//! | [`TICKS`] | correction task | watchdog task |
+//!
+//! The engine is behind a critical-section mutex: the correction task runs
+//! at interrupt priority, so the link tasks' short accesses must not be
+//! preempted by it half-way; each access is a few µs (the model swap is a
+//! reference swap, see trueaxis_app::model). The server is behind an async
+//! mutex on the thread executor (the two link tasks take turns); it owns
+//! the flash and the staging buffer, so they need no lock of their own.
+
+use core::cell::RefCell;
+use core::sync::atomic::{AtomicI32, AtomicU32};
+
+use embassy_stm32::flash::{Blocking, Flash};
+use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, ThreadModeRawMutex};
+use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
+use embassy_sync::mutex::Mutex;
+use model_core::link::LINK_TEMPS;
+use static_cell::StaticCell;
+use trueaxis_app::engine::Engine;
+use trueaxis_app::model::ModelBuf;
+use trueaxis_app::server::{EngineAccess, Server};
+
+/// The engine, shared between the correction loop and the link server.
+pub struct SharedEngine(pub BlockingMutex<CriticalSectionRawMutex, RefCell<Engine<'static>>>);
+
+impl EngineAccess<'static> for SharedEngine {
+    fn with_engine<R>(&self, f: impl FnOnce(&mut Engine<'static>) -> R) -> R {
+        self.0.lock(|e| f(&mut e.borrow_mut()))
+    }
+}
+
+/// The link server type of the board.
+pub type BoardServer = Server<'static, 'static, Flash<'static, Blocking>>;
+
+/// Largest table the board accepts over the link, bytes (the staging
+/// buffer; a slot could hold 128 KiB, RAM cannot).
+pub const STAGE_BYTES: usize = 24 * 1024;
+
+/// See the table above.
+pub static ENGINE: StaticCell<SharedEngine> = StaticCell::new();
+/// See the table above.
+pub static SERVER: StaticCell<Mutex<ThreadModeRawMutex, BoardServer>> = StaticCell::new();
+/// See the table above. `i32::MIN` until the first reading (a sensor
+/// fault for the engine, so the correction waits for real temperatures).
+pub static TEMPS_MC: [AtomicI32; LINK_TEMPS] = [const { AtomicI32::new(i32::MIN) }; LINK_TEMPS];
+/// See the table above.
+pub static TICKS: AtomicU32 = AtomicU32::new(0);
+
+/// The two model buffers (≈ 26 KiB each): one runs, one receives the next
+/// table. Owned by the server and the engine in turn, never shared.
+pub static MODEL_A: StaticCell<ModelBuf> = StaticCell::new();
+/// See [`MODEL_A`].
+pub static MODEL_B: StaticCell<ModelBuf> = StaticCell::new();
+/// Upload staging buffer (owned by the server).
+pub static STAGE: StaticCell<[u8; STAGE_BYTES]> = StaticCell::new();
