@@ -190,7 +190,7 @@ pub enum LoadError {
     MlpInputCapacity,
     /// A term's coefficients are too large for the fixed-point representation (Σ|c| ≥ 2^31 in its units).
     CoefficientRange { term: u32 },
-    /// A grid value exceeds the Q8 nm range (±8.3 mm).
+    /// A grid value exceeds ±4.1 mm (the Q8 nm range with interpolation headroom).
     GridValueRange { term: u32 },
     /// An MLP's input min-max maps the envelope beyond ±7 (the fixed-point input range).
     MlpInputRange { term: u32 },
@@ -215,7 +215,7 @@ impl core::fmt::Display for LoadError {
             Self::CoefficientRange { term } => {
                 write!(f, "coefficients of term {term} too large for fixed point")
             }
-            Self::GridValueRange { term } => write!(f, "grid value of term {term} exceeds ±8.3 mm"),
+            Self::GridValueRange { term } => write!(f, "grid value of term {term} exceeds ±4.1 mm"),
             Self::MlpInputRange { term } => {
                 write!(
                     f,
@@ -895,30 +895,42 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     pub fn eval_f32(&self, inp: &Inputs) -> Outputs {
         let mut flags = Flags::empty();
         let (pos, rev, temp, tool) = self.clamp_inputs(inp, &mut flags);
+        // |p − c| ≤ half-span < 2^31 (validated), so the wrapping i32
+        // difference is exact.
+        let u = [
+            pos[0].wrapping_sub(self.centre_nm[0]) as f32 * self.inv_half_f32[0],
+            pos[1].wrapping_sub(self.centre_nm[1]) as f32 * self.inv_half_f32[1],
+            pos[2].wrapping_sub(self.centre_nm[2]) as f32 * self.inv_half_f32[2],
+        ];
+        // Monomials up to degree 3 (the common case) are one straight-line
+        // expression; the block loop then has a constant trip count.
+        match self.n_monos {
+            0 => self.finish_f32(&[1.0], pos, rev, temp, tool, flags),
+            1..=20 => self.finish_f32(&mono20_f32(u), pos, rev, temp, tool, flags),
+            _ => self.finish_f32(&mono56_f32(u), pos, rev, temp, tool, flags),
+        }
+    }
+
+    #[inline(always)]
+    fn finish_f32<const N: usize>(
+        &self,
+        mv: &[f32; N],
+        pos: [i32; 3],
+        rev: [i32; 3],
+        temp: [i32; MAX_TEMPS],
+        tool: i32,
+        mut flags: Flags,
+    ) -> Outputs {
         let mut out = [0.0f32; 3];
-        let n = self.n_monos as usize;
-        let mut mv = [0.0f32; MAX_MONOMIALS];
-        if n > 0 {
-            // |p − c| ≤ half-span < 2^31 (validated), so the wrapping i32
-            // difference is exact.
-            let u = [
-                pos[0].wrapping_sub(self.centre_nm[0]) as f32 * self.inv_half_f32[0],
-                pos[1].wrapping_sub(self.centre_nm[1]) as f32 * self.inv_half_f32[1],
-                pos[2].wrapping_sub(self.centre_nm[2]) as f32 * self.inv_half_f32[2],
-            ];
-            mv[0] = 1.0;
-            for i in 1..n {
-                mv[i] = mv[MONO_PARENT[i] as usize] * u[MONO_AXIS[i] as usize];
+        if self.has_block {
+            let (mut a0, mut a1, mut a2) = (0.0f32, 0.0f32, 0.0f32);
+            for i in 0..N {
+                let (m, c) = (mv[i], self.block_f32[i]);
+                a0 += c[0] * m;
+                a1 += c[1] * m;
+                a2 += c[2] * m;
             }
-            if self.has_block {
-                let (mut a0, mut a1, mut a2) = (0.0f32, 0.0f32, 0.0f32);
-                for (m, c) in mv[..n].iter().zip(self.block_f32[..n].iter()) {
-                    a0 += c[0] * m;
-                    a1 += c[1] * m;
-                    a2 += c[2] * m;
-                }
-                out = [a0, a1, a2];
-            }
+            out = [a0, a1, a2];
         }
         for t in self.terms.iter() {
             match *t {
@@ -932,7 +944,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     let (s, e) = (start as usize, start as usize + len as usize);
                     let mut v = 0.0f32;
                     for (c, &i) in self.pf[s..e].iter().zip(self.pidx[s..e].iter()) {
-                        v += c * mv[i as usize];
+                        v += c * mv.get(i as usize).copied().unwrap_or(0.0);
                     }
                     let f = match factor {
                         Factor::Temp { ch, t_ref_mc } => {
@@ -1127,35 +1139,43 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     pub fn eval_fixed(&self, inp: &Inputs) -> Outputs {
         let mut flags = Flags::empty();
         let (pos, rev, temp, tool) = self.clamp_inputs(inp, &mut flags);
+        let u = [
+            self.u_scale[0].apply(pos[0].wrapping_sub(self.centre_nm[0]) as i64),
+            self.u_scale[1].apply(pos[1].wrapping_sub(self.centre_nm[1]) as i64),
+            self.u_scale[2].apply(pos[2].wrapping_sub(self.centre_nm[2]) as i64),
+        ];
+        match self.n_monos {
+            0 => self.finish_fixed(&[ONE_Q30], pos, rev, temp, tool, flags),
+            1..=20 => self.finish_fixed(&mono20_q30(u), pos, rev, temp, tool, flags),
+            _ => self.finish_fixed(&mono56_q30(u), pos, rev, temp, tool, flags),
+        }
+    }
+
+    #[inline(always)]
+    fn finish_fixed<const N: usize>(
+        &self,
+        mv: &[i32; N],
+        pos: [i32; 3],
+        rev: [i32; 3],
+        temp: [i32; MAX_TEMPS],
+        tool: i32,
+        mut flags: Flags,
+    ) -> Outputs {
         let mut out = [0i64; 3]; // Q16 nm
-        let n = self.n_monos as usize;
-        let mut mv = [0i32; MAX_MONOMIALS];
-        if n > 0 {
-            let u = [
-                self.u_scale[0].apply(pos[0].wrapping_sub(self.centre_nm[0]) as i64),
-                self.u_scale[1].apply(pos[1].wrapping_sub(self.centre_nm[1]) as i64),
-                self.u_scale[2].apply(pos[2].wrapping_sub(self.centre_nm[2]) as i64),
+        if self.has_block {
+            // Σ|c_q| ≤ 2^31 and |m| ≤ 2^30: each sum stays below 2^61.
+            let (mut a0, mut a1, mut a2) = (0i64, 0i64, 0i64);
+            for i in 0..N {
+                let (m, c) = (mv[i] as i64, self.block_q[i]);
+                a0 += c[0] as i64 * m;
+                a1 += c[1] as i64 * m;
+                a2 += c[2] as i64 * m;
+            }
+            out = [
+                rshr(a0, self.block_shift[0]),
+                rshr(a1, self.block_shift[1]),
+                rshr(a2, self.block_shift[2]),
             ];
-            mv[0] = ONE_Q30;
-            for i in 1..n {
-                mv[i] = rshr(
-                    mv[MONO_PARENT[i] as usize] as i64 * u[MONO_AXIS[i] as usize],
-                    30,
-                ) as i32;
-            }
-            if self.has_block {
-                let (mut a0, mut a1, mut a2) = (0i64, 0i64, 0i64);
-                for (&m, c) in mv[..n].iter().zip(self.block_q[..n].iter()) {
-                    a0 += c[0] as i64 * m as i64;
-                    a1 += c[1] as i64 * m as i64;
-                    a2 += c[2] as i64 * m as i64;
-                }
-                out = [
-                    rshr(a0, self.block_shift[0]),
-                    rshr(a1, self.block_shift[1]),
-                    rshr(a2, self.block_shift[2]),
-                ];
-            }
         }
         for t in self.terms.iter() {
             match *t {
@@ -1169,7 +1189,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     let (s, e) = (start as usize, start as usize + len as usize);
                     let mut v = 0i64;
                     for (&c, &i) in self.pq[s..e].iter().zip(self.pidx[s..e].iter()) {
-                        v += c as i64 * mv[i as usize] as i64;
+                        v += c as i64 * mv.get(i as usize).copied().unwrap_or(0) as i64;
                     }
                     let f = match factor {
                         Factor::Temp { ch, t_ref_mc } => {
@@ -1311,6 +1331,92 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     }
 }
 
+/// The 20 graded monomials of degree ≤ 3 (order of [`MONO_EXPS`]), f32.
+#[inline(always)]
+fn mono20_f32(u: [f32; 3]) -> [f32; 20] {
+    let [x, y, z] = u;
+    let (x2, y2, z2) = (x * x, y * y, z * z);
+    let xy = x * y;
+    [
+        1.0,
+        x,
+        y,
+        z,
+        x2,
+        xy,
+        x * z,
+        y2,
+        y * z,
+        z2,
+        x2 * x,
+        x2 * y,
+        x2 * z,
+        x * y2,
+        xy * z,
+        x * z2,
+        y2 * y,
+        y2 * z,
+        y * z2,
+        z2 * z,
+    ]
+}
+
+/// All 56 graded monomials (degree ≤ 5), f32.
+fn mono56_f32(u: [f32; 3]) -> [f32; MAX_MONOMIALS] {
+    let mut mv = [0.0f32; MAX_MONOMIALS];
+    mv[0] = 1.0;
+    for i in 1..MAX_MONOMIALS {
+        mv[i] = mv[MONO_PARENT[i] as usize] * u[MONO_AXIS[i] as usize];
+    }
+    mv
+}
+
+#[inline(always)]
+fn mul_q30(a: i64, b: i64) -> i64 {
+    rshr(a * b, 30)
+}
+
+/// The 20 graded monomials of degree ≤ 3, Q30 (same rounding as [`mono56_q30`]).
+#[inline(always)]
+fn mono20_q30(u: [i64; 3]) -> [i32; 20] {
+    let [x, y, z] = u;
+    let (x2, y2, z2) = (mul_q30(x, x), mul_q30(y, y), mul_q30(z, z));
+    let (xy, xz, yz) = (mul_q30(x, y), mul_q30(x, z), mul_q30(y, z));
+    [
+        ONE_Q30 as i64,
+        x,
+        y,
+        z,
+        x2,
+        xy,
+        xz,
+        y2,
+        yz,
+        z2,
+        mul_q30(x2, x),
+        mul_q30(x2, y),
+        mul_q30(x2, z),
+        mul_q30(xy, y),
+        mul_q30(xy, z),
+        mul_q30(xz, z),
+        mul_q30(y2, y),
+        mul_q30(y2, z),
+        mul_q30(yz, z),
+        mul_q30(z2, z),
+    ]
+    .map(|v| v as i32)
+}
+
+/// All 56 graded monomials (degree ≤ 5), Q30.
+fn mono56_q30(u: [i64; 3]) -> [i32; MAX_MONOMIALS] {
+    let mut mv = [0i32; MAX_MONOMIALS];
+    mv[0] = ONE_Q30;
+    for i in 1..MAX_MONOMIALS {
+        mv[i] = mul_q30(mv[MONO_PARENT[i] as usize] as i64, u[MONO_AXIS[i] as usize]) as i32;
+    }
+    mv
+}
+
 /// Phase of `pos` along a period as a fraction of a turn (2^32 = one turn),
 /// computed in integers so it stays exact at any position.
 #[inline(always)]
@@ -1343,5 +1449,52 @@ fn grid_cell(ax: &GridAxis, p: i32) -> (usize, i32) {
         (ax.nodes as usize - 2, ax.step_nm)
     } else {
         (i as usize, (d - i * step) as i32)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn graded_order_and_parents() {
+        assert_eq!(
+            &MONO_EXPS[..4],
+            &[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]
+        );
+        for i in 1..MAX_MONOMIALS {
+            let mut p = MONO_EXPS[i];
+            p[MONO_AXIS[i] as usize] -= 1;
+            assert_eq!(MONO_EXPS[MONO_PARENT[i] as usize], p);
+            assert!((MONO_PARENT[i] as usize) < i);
+        }
+        assert_eq!(MONO_EXPS[55], [0, 0, 5]);
+    }
+
+    #[test]
+    fn straight_line_monomials_match_the_table() {
+        for (k, u) in [[0.3f64, -0.7, 0.99], [-1.0, 1.0, -1.0], [0.0, 0.5, -0.25]]
+            .iter()
+            .enumerate()
+        {
+            let uf = u.map(|v| v as f32);
+            let uq = u.map(|v| (v * (1u64 << 30) as f64) as i64);
+            let (a, b) = (mono20_f32(uf), mono56_f32(uf));
+            let (c, d) = (mono20_q30(uq), mono56_q30(uq));
+            for i in 0..20 {
+                let exact: f64 = (0..3)
+                    .map(|ax| u[ax].powi(MONO_EXPS[i][ax] as i32))
+                    .product();
+                assert!(
+                    (a[i] as f64 - exact).abs() < 1e-6 && (b[i] as f64 - exact).abs() < 1e-6,
+                    "{k} {i}"
+                );
+                assert!((c[i] - d[i]).abs() <= 2, "{k} {i}");
+                assert!(
+                    (c[i] as f64 / (1u64 << 30) as f64 - exact).abs() < 4e-9,
+                    "{k} {i}"
+                );
+            }
+        }
     }
 }
