@@ -501,17 +501,25 @@ impl<const P: usize> Pools<'_, P> {
 }
 
 impl<const P: usize, const G: usize> ModelCap<P, G> {
-    /// Prepare a model from a validated table.
-    pub fn load(table: &Table<'_>) -> Result<Self, LoadError> {
-        let env = table.envelope();
-        let sc = table.scaling();
-        let mut m = ModelCap {
-            env,
-            outputs: table.outputs_mask(),
-            n_channels: table.channel_count() as u8,
-            centre_nm: sc.centre_nm,
+    /// An empty model (no outputs: every evaluation returns zeros). `const`,
+    /// so it can initialise a `static` that [`ModelCap::load_into`] fills.
+    pub const fn empty() -> Self {
+        ModelCap {
+            env: Envelope {
+                travel_min_nm: [0; 3],
+                travel_max_nm: [0; 3],
+                max_corr_nm: [0; 3],
+                max_slew_nm_per_ms: 0,
+                temp_min_mc: [0; MAX_TEMPS],
+                temp_max_mc: [0; MAX_TEMPS],
+                tool_min_nm: 0,
+                tool_max_nm: 0,
+            },
+            outputs: 0,
+            n_channels: 0,
+            centre_nm: [0; 3],
             inv_half_f32: [0.0; 3],
-            u_scale: [Scale::default(); 3],
+            u_scale: [Scale { mul: 0, shift: 0 }; 3],
             n_monos: 0,
             block_f32: [[0.0; 3]; MAX_MONOMIALS],
             block_q: [[0; 3]; MAX_MONOMIALS],
@@ -523,7 +531,50 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             pidx: Vec::new(),
             mlp_in: Vec::new(),
             grid: Vec::new(),
-        };
+        }
+    }
+
+    /// Prepare a model from a validated table.
+    ///
+    /// This returns the model by value (tens of KiB); on the MCU prefer
+    /// [`ModelCap::load_into`] on a `static`, which needs no stack copy.
+    pub fn load(table: &Table<'_>) -> Result<Self, LoadError> {
+        let mut m = Self::empty();
+        m.load_into(table)?;
+        Ok(m)
+    }
+
+    /// Prepare the model in place (no large stack temporaries). On error the
+    /// model is left empty (every evaluation returns zeros), never half-loaded.
+    pub fn load_into(&mut self, table: &Table<'_>) -> Result<(), LoadError> {
+        let r = self.load_inner(table);
+        if r.is_err() {
+            self.clear();
+        }
+        r
+    }
+
+    fn clear(&mut self) {
+        self.outputs = 0;
+        self.n_monos = 0;
+        self.has_block = false;
+        self.terms.clear();
+        self.pf.clear();
+        self.pq.clear();
+        self.pidx.clear();
+        self.mlp_in.clear();
+        self.grid.clear();
+    }
+
+    fn load_inner(&mut self, table: &Table<'_>) -> Result<(), LoadError> {
+        self.clear();
+        let env = table.envelope();
+        let sc = table.scaling();
+        let m = self;
+        m.env = env;
+        m.outputs = table.outputs_mask();
+        m.n_channels = table.channel_count() as u8;
+        m.centre_nm = sc.centre_nm;
         if table.term_count() > MAX_TERMS {
             return Err(LoadError::TooManyTerms {
                 count: table.term_count() as u32,
@@ -830,7 +881,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                 capacity: G as u32,
             });
         }
-        Ok(m)
+        Ok(())
     }
 
     /// The table's envelope (travel, max |correction|, slew limit for the engine).

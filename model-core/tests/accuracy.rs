@@ -325,3 +325,33 @@ fn extreme_but_valid_models_never_overflow() {
     }
     assert!(loaded >= 20, "only {loaded} of 40 extreme models loaded");
 }
+
+#[test]
+fn load_into_reuses_a_static_and_a_failed_load_leaves_it_empty() {
+    static EMPTY: Model = Model::empty();
+    let mut m = EMPTY.clone();
+    let spec = random_spec(8, &[Kind::Cubic19, Kind::Periodic]);
+    let bytes = spec.encode().unwrap();
+    m.load_into(&parse(&bytes).unwrap()).unwrap();
+    let inp = random_inputs(&mut Rng(3), &spec, false);
+    let reference = LargeModel::load(&parse(&bytes).unwrap()).unwrap();
+    assert_eq!(m.eval_fixed(&inp), reference.eval_fixed(&inp));
+    // A table that does not fit: typed error, and the model is empty, not half-loaded.
+    let mut big = random_spec(9, &[Kind::Grid]);
+    if let model_core::TermSpec::Grid(g) = &mut big.terms[0] {
+        g.axes = [model_core::GridAxisSpec {
+            nodes: 20,
+            origin_nm: 0,
+            step_nm: 1000,
+        }; 3];
+        g.values_nm = vec![1.0; 8000];
+    }
+    let bytes = big.encode().unwrap();
+    assert!(matches!(
+        m.load_into(&parse(&bytes).unwrap()),
+        Err(model_core::LoadError::GridCapacity { .. })
+    ));
+    assert_eq!(m.outputs_mask(), 0);
+    assert_eq!(m.eval_fixed(&inp).corr_nm, [0; 3]);
+    assert_eq!(m.eval_f32(&inp).corr_nm, [0; 3]);
+}
