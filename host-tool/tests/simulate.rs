@@ -521,3 +521,25 @@ fn golden_hash_pins_the_random_stream_and_the_format() {
 /// between platforms; the 0.1 nm output rounding hides that except at exact
 /// rounding ties.)
 const GOLDEN: &str = "60ce91aa07a1bfee3b7a55bb681beaa4d4d2b8f7a108585cab13dbd21c937be1";
+
+#[test]
+fn two_thermal_effects_share_one_sensor() {
+    let d = simulate::simulate(&perfect(
+        &["line:x:100,runs=3"],
+        &[
+            "thermal:channel=bed,rise_c=2,tau_s=300",
+            // Spindle growth in z from the same sensor; its own trajectory
+            // keys are ignored because `bed` is already defined.
+            "thermal:channel=bed,target=ez,times=none,cte_um_per_m_k=0,offset_um_per_k=-1.5,rise_c=9",
+        ],
+    ));
+    assert_eq!(d.temps.len(), 1);
+    let temp = &d.temp("bed").unwrap().temp_c;
+    let (ex, ez) = (col(&d, 0), col(&d, 2));
+    for r in 0..d.len() {
+        let dt = temp[r] - 20.0;
+        assert!((ex[r] - 11.5e-3 * dt * d.pos(0, r)).abs() < RES);
+        assert!((ez[r] - -1.5 * dt).abs() < RES);
+    }
+    assert!(*temp.last().unwrap() < 22.0, "the first effect's 2 K rise");
+}
