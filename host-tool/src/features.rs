@@ -345,7 +345,7 @@ pub fn seed_monomials(spec: &str, t: usize, axes: &[usize]) -> Result<Vec<[u8; 3
 /// | family | keys | columns added to `target` |
 /// | --- | --- | --- |
 /// | `periodic` | target, axis, period_mm, harmonics (1..4, default 1) | sin, cos(2πk·p/period), k = 1..harmonics |
-/// | `thermal` | target, channel, [times=x\|y\|z], [lag_s], [t_ref_c] | ΔT, or ΔT·u_axis |
+/// | `thermal` | target, channel, [times=x\|y\|z], [offset=0\|1], [lag_s], [t_ref_c] | ΔT, or ΔT·u_axis (and ΔT with offset=1: expansion about an unknown fixed point) |
 /// | `reversal` | target, axis | dir_axis |
 /// | `abbe` | target, [times=x\|y\|z] | tool_mm, or tool_mm·u_axis |
 /// | `drift` | target, [order=1..3] | (t/1 h)^p, p = 1..order |
@@ -420,7 +420,7 @@ impl Effect {
         let need = |key: &str| get(key).ok_or_else(|| anyhow!("missing `{key}=`"));
         let allowed: &[&str] = match family {
             "periodic" => &["target", "axis", "period_mm", "harmonics"],
-            "thermal" => &["target", "channel", "times", "lag_s", "t_ref_c"],
+            "thermal" => &["target", "channel", "times", "offset", "lag_s", "t_ref_c"],
             "reversal" | "squareness" => &["target", "axis"],
             "abbe" => &["target", "times"],
             "drift" => &["target", "order"],
@@ -476,12 +476,26 @@ impl Effect {
                     bail!("`lag_s={lag_s}`: expected ≥ 0");
                 }
                 let t_ref_c = get("t_ref_c").map_or(Ok(T_REF_C), |v| parse_f64(v, "t_ref_c"))?;
-                vec![Feature::Thermal {
-                    channel,
+                let exp = times("times")?;
+                // A screw or scale expands about its fixed end, which is
+                // rarely the travel's centre: `offset=1` adds the plain ΔT
+                // column so that the fixed point is fitted too.
+                let offset = get("offset").map_or(Ok(0), |v| parse_u8(v, "offset", 0, 1))?;
+                let mut f = vec![Feature::Thermal {
+                    channel: channel.clone(),
                     t_ref_c,
                     lag_s,
-                    exp: times("times")?,
-                }]
+                    exp,
+                }];
+                if offset == 1 && exp != [0, 0, 0] {
+                    f.push(Feature::Thermal {
+                        channel,
+                        t_ref_c,
+                        lag_s,
+                        exp: [0, 0, 0],
+                    });
+                }
+                f
             }
             "reversal" => vec![Feature::Reversal {
                 axis: parse_axis(need("axis")?, "axis")?,

@@ -10,8 +10,10 @@
 pub mod cmd;
 pub mod compare;
 pub mod data;
+pub mod diagnose;
 pub mod features;
 pub mod fit;
+pub mod history;
 pub mod holdout;
 pub mod import;
 pub mod iso230;

@@ -1,0 +1,339 @@
+//! The least-squares building blocks of the diagnosis: an orthonormal basis
+//! of the current model's columns (to measure how much of a candidate lies
+//! outside it, and to partial the model out — Frisch–Waugh–Lovell), small
+//! dense solves for the candidate's own coefficients, and block hold-out
+//! refits done with per-fold Gram sums so that scoring dozens of candidates
+//! costs one pass over the rows each instead of one SVD per fold.
+//!
+//! Columns are scaled to unit RMS before any matrix is formed: a thermal
+//! column in K, an Abbe column in mm and a monomial in [−1, 1] would
+//! otherwise differ by 10⁴ in scale and the rank tolerance would mean
+//! nothing.
+
+use nalgebra::{DMatrix, DVector, SymmetricEigen};
+
+/// Relative singular-value tolerance below which a direction counts as
+/// absent (the span of a rank-deficient model).
+const RANK_TOL: f64 = 1e-9;
+
+fn rms(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+}
+
+/// Dot product.
+pub fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// An orthonormal basis (n × r) of the span of a set of columns, stored as
+/// plain column vectors: projections are the inner loop of every candidate
+/// search, and plain slices keep them fast in unoptimised test builds too.
+#[derive(Clone, Debug)]
+pub struct Basis {
+    u: Vec<Vec<f64>>,
+}
+
+impl Basis {
+    /// The basis of the span of `cols` (each of length `n`); zero columns and
+    /// exactly dependent ones add nothing.
+    pub fn new(cols: &[Vec<f64>], n: usize) -> Basis {
+        let keep: Vec<(usize, f64)> = cols
+            .iter()
+            .enumerate()
+            .map(|(j, c)| (j, rms(c)))
+            .filter(|(_, s)| *s > 0.0 && s.is_finite())
+            .collect();
+        if keep.is_empty() || n == 0 {
+            return Basis { u: Vec::new() };
+        }
+        let m = DMatrix::from_fn(n, keep.len(), |i, j| cols[keep[j].0][i] / keep[j].1);
+        let svd = m.svd(true, false);
+        let u = svd.u.expect("SVD asked for U");
+        let smax = svd.singular_values.max();
+        let u = (0..svd.singular_values.len())
+            .filter(|&k| svd.singular_values[k] > RANK_TOL * smax)
+            .map(|k| u.column(k).iter().copied().collect())
+            .collect();
+        Basis { u }
+    }
+
+    /// Dimension of the span.
+    pub fn rank(&self) -> usize {
+        self.u.len()
+    }
+
+    /// v − P v: the part of `v` orthogonal to the span.
+    pub fn residual(&self, v: &[f64]) -> Vec<f64> {
+        let mut r = v.to_vec();
+        for u in &self.u {
+            let c = dot(u, v);
+            for (ri, ui) in r.iter_mut().zip(u) {
+                *ri -= c * ui;
+            }
+        }
+        r
+    }
+}
+
+/// Least squares of `y` on a few columns: coefficients, residual sum of
+/// squares and (XᵀX)⁻¹ (the coefficient covariance up to σ²).
+#[derive(Clone, Debug)]
+pub struct SmallFit {
+    /// Coefficients in the columns' own units.
+    pub beta: Vec<f64>,
+    /// Residual sum of squares.
+    pub rss: f64,
+    /// (XᵀX)⁺ in the columns' own units.
+    pub xtx_inv: DMatrix<f64>,
+    /// Numerical rank of the columns.
+    pub rank: usize,
+}
+
+/// Pseudo-inverse of a symmetric positive semi-definite matrix, with its rank.
+fn pinv_sym(g: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
+    let k = g.nrows();
+    if k == 0 {
+        return (DMatrix::zeros(0, 0), 0);
+    }
+    let eig = SymmetricEigen::new(g.clone());
+    let emax = eig.eigenvalues.iter().copied().fold(0.0f64, f64::max);
+    let mut inv = DMatrix::zeros(k, k);
+    let mut rank = 0;
+    for (i, &e) in eig.eigenvalues.iter().enumerate() {
+        // Eigenvalues of a Gram matrix are squared singular values.
+        if e > RANK_TOL * RANK_TOL * 1e2 * emax && e > 0.0 {
+            rank += 1;
+            let v = eig.eigenvectors.column(i);
+            inv += (v * v.transpose()) / e;
+        }
+    }
+    (inv, rank)
+}
+
+/// Least squares of `y` on `cols` (all of length `y.len()`).
+pub fn small_fit(cols: &[Vec<f64>], y: &[f64]) -> SmallFit {
+    let k = cols.len();
+    let scale: Vec<f64> = cols
+        .iter()
+        .map(|c| {
+            let s = rms(c);
+            if s > 0.0 {
+                s
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let g = DMatrix::from_fn(k, k, |i, j| dot(&cols[i], &cols[j]) / (scale[i] * scale[j]));
+    let b = DVector::from_fn(k, |i, _| dot(&cols[i], y) / scale[i]);
+    let (inv, rank) = pinv_sym(&g);
+    let beta_s = &inv * b;
+    let beta: Vec<f64> = (0..k).map(|i| beta_s[i] / scale[i]).collect();
+    let mut rss = 0.0;
+    for (r, yv) in y.iter().enumerate() {
+        let f: f64 = (0..k).map(|i| beta[i] * cols[i][r]).sum();
+        rss += (yv - f).powi(2);
+    }
+    let xtx_inv = DMatrix::from_fn(k, k, |i, j| inv[(i, j)] / (scale[i] * scale[j]));
+    SmallFit {
+        beta,
+        rss,
+        xtx_inv,
+        rank,
+    }
+}
+
+/// Block hold-out refits of a fixed model plus a few extra columns. The
+/// model's per-fold Gram sums are computed once; each candidate adds only
+/// its own cross products.
+#[derive(Clone, Debug)]
+pub struct HoldOut {
+    fold: Vec<usize>,
+    nfolds: usize,
+    /// Model columns scaled to unit RMS.
+    cols: Vec<Vec<f64>>,
+    y: Vec<f64>,
+    /// Per-fold Σ x xᵀ over the fold's rows (model columns).
+    gram: Vec<DMatrix<f64>>,
+    /// Per-fold Σ x y.
+    xy: Vec<DVector<f64>>,
+}
+
+impl HoldOut {
+    /// Prepares the model `cols` for hold-out refits with `fold[row]` ∈
+    /// 0..nfolds giving each row's block.
+    pub fn new(cols: &[Vec<f64>], y: &[f64], fold: &[usize], nfolds: usize) -> HoldOut {
+        let cols: Vec<Vec<f64>> = cols
+            .iter()
+            .filter_map(|c| {
+                let s = rms(c);
+                (s > 0.0).then(|| c.iter().map(|v| v / s).collect())
+            })
+            .collect();
+        let p = cols.len();
+        let mut g_raw = vec![0.0; nfolds * p * p];
+        let mut xy_raw = vec![0.0; nfolds * p];
+        let mut x = vec![0.0; p];
+        for (r, &f) in fold.iter().enumerate() {
+            for j in 0..p {
+                x[j] = cols[j][r];
+            }
+            let g = &mut g_raw[f * p * p..(f + 1) * p * p];
+            for i in 0..p {
+                for j in 0..p {
+                    g[i * p + j] += x[i] * x[j];
+                }
+                xy_raw[f * p + i] += x[i] * y[r];
+            }
+        }
+        let gram = (0..nfolds)
+            .map(|f| DMatrix::from_row_slice(p, p, &g_raw[f * p * p..(f + 1) * p * p]))
+            .collect();
+        let xy = (0..nfolds)
+            .map(|f| DVector::from_column_slice(&xy_raw[f * p..(f + 1) * p]))
+            .collect();
+        HoldOut {
+            fold: fold.to_vec(),
+            nfolds,
+            cols,
+            y: y.to_vec(),
+            gram,
+            xy,
+        }
+    }
+
+    /// RMS of the held-out residuals (each block predicted by a fit to the
+    /// others) of the model plus `extra` columns. `None` when a block cannot
+    /// be predicted (no rows left to fit).
+    pub fn rms(&self, extra: &[Vec<f64>]) -> Option<f64> {
+        let p = self.cols.len();
+        let extra: Vec<Vec<f64>> = extra
+            .iter()
+            .filter_map(|c| {
+                let s = rms(c);
+                (s > 0.0).then(|| c.iter().map(|v| v / s).collect())
+            })
+            .collect();
+        let k = extra.len();
+        let q = p + k;
+        let nf = self.nfolds;
+        // Per-fold cross products of the extra columns, accumulated in plain
+        // arrays (row-major p×k, k×k, k per fold) and converted once.
+        let mut mc_raw = vec![0.0; nf * p * k];
+        let mut cc_raw = vec![0.0; nf * k * k];
+        let mut cy_raw = vec![0.0; nf * k];
+        for (r, &f) in self.fold.iter().enumerate() {
+            for a in 0..k {
+                let ca = extra[a][r];
+                if ca == 0.0 {
+                    continue;
+                }
+                let mc = &mut mc_raw[f * p * k..(f + 1) * p * k];
+                for j in 0..p {
+                    mc[j * k + a] += self.cols[j][r] * ca;
+                }
+                for b in 0..k {
+                    cc_raw[f * k * k + a * k + b] += ca * extra[b][r];
+                }
+                cy_raw[f * k + a] += ca * self.y[r];
+            }
+        }
+        let g_mc: Vec<DMatrix<f64>> = (0..nf)
+            .map(|f| DMatrix::from_row_slice(p, k, &mc_raw[f * p * k..(f + 1) * p * k]))
+            .collect();
+        let g_cc: Vec<DMatrix<f64>> = (0..nf)
+            .map(|f| DMatrix::from_row_slice(k, k, &cc_raw[f * k * k..(f + 1) * k * k]))
+            .collect();
+        let cy: Vec<DVector<f64>> = (0..nf)
+            .map(|f| DVector::from_column_slice(&cy_raw[f * k..(f + 1) * k]))
+            .collect();
+        let sum_m = |v: &Vec<DMatrix<f64>>| {
+            v.iter()
+                .fold(DMatrix::zeros(v[0].nrows(), v[0].ncols()), |acc, m| acc + m)
+        };
+        let tot_mm = sum_m(&self.gram);
+        let tot_mc = sum_m(&g_mc);
+        let tot_cc = sum_m(&g_cc);
+        let tot_my = self.xy.iter().fold(DVector::zeros(p), |a, v| a + v);
+        let tot_cy = cy.iter().fold(DVector::zeros(k), |a, v| a + v);
+        let mut betas = Vec::with_capacity(nf);
+        for f in 0..nf {
+            let mut g = DMatrix::zeros(q, q);
+            let mut b = DVector::zeros(q);
+            g.view_mut((0, 0), (p, p))
+                .copy_from(&(&tot_mm - &self.gram[f]));
+            let mc = &tot_mc - &g_mc[f];
+            g.view_mut((0, p), (p, k)).copy_from(&mc);
+            g.view_mut((p, 0), (k, p)).copy_from(&mc.transpose());
+            g.view_mut((p, p), (k, k)).copy_from(&(&tot_cc - &g_cc[f]));
+            b.rows_mut(0, p).copy_from(&(&tot_my - &self.xy[f]));
+            b.rows_mut(p, k).copy_from(&(&tot_cy - &cy[f]));
+            if g.diagonal().iter().all(|d| *d == 0.0) {
+                return None;
+            }
+            let (inv, _) = pinv_sym(&g);
+            betas.push(inv * b);
+        }
+        let betas: Vec<Vec<f64>> = betas.iter().map(|b| b.iter().copied().collect()).collect();
+        let mut ss = 0.0;
+        let n = self.fold.len();
+        for (r, &f) in self.fold.iter().enumerate() {
+            let beta = &betas[f];
+            let mut pred = 0.0;
+            for (b, c) in beta.iter().zip(self.cols.iter().chain(&extra)) {
+                pred += b * c[r];
+            }
+            ss += (self.y[r] - pred).powi(2);
+        }
+        (n > 0).then(|| (ss / n as f64).sqrt())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn basis_removes_span_and_keeps_the_rest() {
+        let n = 50;
+        let x: Vec<f64> = (0..n).map(|i| i as f64 / n as f64).collect();
+        let one = vec![1.0; n];
+        let x2: Vec<f64> = x.iter().map(|v| v * v).collect();
+        // A duplicated column must not raise the rank.
+        let b = Basis::new(&[one.clone(), x.clone(), x.clone()], n);
+        assert_eq!(b.rank(), 2);
+        let r = b.residual(&x.iter().map(|v| 3.0 * v + 1.0).collect::<Vec<_>>());
+        assert!(r.iter().all(|v| v.abs() < 1e-9));
+        let r2 = b.residual(&x2);
+        assert!(dot(&r2, &r2) > 1e-3);
+    }
+
+    #[test]
+    fn small_fit_recovers_coefficients() {
+        let n = 40;
+        let a: Vec<f64> = (0..n).map(|i| (i as f64 * 0.3).sin()).collect();
+        let c: Vec<f64> = (0..n).map(|i| 1000.0 * (i as f64 * 0.17).cos()).collect();
+        let y: Vec<f64> = (0..n).map(|i| 2.0 * a[i] - 0.004 * c[i]).collect();
+        let f = small_fit(&[a, c], &y);
+        assert!((f.beta[0] - 2.0).abs() < 1e-9 && (f.beta[1] + 0.004).abs() < 1e-12);
+        assert!(f.rss < 1e-18);
+    }
+
+    #[test]
+    fn hold_out_of_exact_model_is_zero_and_detects_missing_column() {
+        let n = 60;
+        let x: Vec<f64> = (0..n).map(|i| i as f64 / 10.0).collect();
+        let one = vec![1.0; n];
+        let s: Vec<f64> = x.iter().map(|v| (3.0 * v).sin()).collect();
+        let y: Vec<f64> = (0..n).map(|i| 1.0 + 0.5 * x[i] + s[i]).collect();
+        let fold: Vec<usize> = (0..n).map(|i| (i / 6) % 5).collect();
+        let h = HoldOut::new(&[one, x], &y, &fold, 5);
+        let without = h.rms(&[]).unwrap();
+        let with = h.rms(&[s]).unwrap();
+        assert!(without > 0.3, "{without}");
+        assert!(with < 1e-9, "{with}");
+    }
+}

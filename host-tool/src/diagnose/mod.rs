@@ -1,0 +1,1292 @@
+//! `diagnose`: where does the model fail, and which physical effect is it
+//! missing? Works on data with a hidden effect nobody told the tool about.
+//!
+//! For each target (ex, ey, ez) the current model (a seed such as cubic19
+//! plus any effects already added) is fitted by least squares. A library of
+//! named candidate effects is built over every axis and channel present:
+//! `periodic` (period from a Lomb–Scargle periodogram of the residuals on
+//! dense lines, harmonics by BIC), `thermal` (per `T_*` channel, alone or
+//! times a position, lag by a 1-D search), `reversal` (`dir_*`), `abbe`
+//! (`tool_mm` × position), `drift` (`t_s`), `squareness` (linear cross
+//! terms) and `higher_order` (degree 4–5 along an axis). Each candidate is
+//! first checked for identifiability (the share of its columns outside the
+//! model's span: ≈0 → `in_model_span`; mostly inside the span of model plus
+//! another candidate → `confounded`), then the model is partialled out
+//! (Frisch–Waugh–Lovell) and the candidate scored: ΔBIC, the gain in
+//! block-held-out RMS, and its physical parameter with a 95 % interval and a
+//! plausibility check. A candidate is significant only with ΔBIC < −10, a
+//! held-out gain ≥ 10 % and a ΔBIC at least 10 better than the best
+//! competing (overlapping) candidate; otherwise the verdict is
+//! `at_noise_floor`. Several missing effects are found by a BIC-ordered
+//! forward path per target that stops when no candidate passes (so when the
+//! block-held-out RMS stops improving by 10 %).
+//!
+//! The JSON form of [`Diagnosis`] is CONTRACT.md §2 `diagnose --json`.
+
+pub mod linalg;
+pub mod noise;
+pub mod periodogram;
+pub mod report;
+pub mod synth;
+
+use std::collections::BTreeMap;
+
+use anyhow::{bail, Result};
+use serde::Serialize;
+
+use crate::data::{Dataset, AXES, TARGETS};
+use crate::features::{seed_monomials, Effect, Feature, Norm};
+
+use linalg::{small_fit, Basis, HoldOut};
+use noise::{noise_floor, NoiseFloor, NoiseMethod};
+use periodogram::{dense_lines, periodogram, Periodogram};
+
+/// ΔBIC a candidate must beat to count (Kass & Raftery: "very strong").
+pub const DBIC_SIGNIFICANT: f64 = -10.0;
+/// Relative gain in block-held-out RMS a candidate must reach.
+pub const MIN_HELD_OUT_GAIN: f64 = 0.10;
+/// ΔBIC margin over the best competing candidate.
+pub const MIN_GAP_DBIC: f64 = 10.0;
+/// Out-of-span share below which a candidate is in the model's span.
+pub const IN_SPAN_SHARE: f64 = 1e-6;
+/// Overlap (share of one candidate's new directions explained by another)
+/// from which two candidates are reported as confounded.
+pub const CONFOUNDED_OVERLAP: f64 = 0.9;
+/// Overlap from which two candidates compete for the same signal (the
+/// runner-up of the "clear gap" rule).
+pub const COMPETING_OVERLAP: f64 = 0.3;
+/// Densest spacing along an axis above which short periods cannot be seen,
+/// mm (twice it must stay below the shortest common lead, 2 mm).
+pub const ALIASING_SPACING_MM: f64 = 1.0;
+/// Temperature range below which a channel counts as constant, K.
+pub const CONSTANT_TEMPERATURE_K: f64 = 0.2;
+/// Most effects the path adds per target.
+pub const MAX_PATH_STEPS: usize = 6;
+
+/// What to diagnose.
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// Seed model (`cubic19`, `kinematic`).
+    pub seed: String,
+    /// Effects already in the model (`fit --add` strings).
+    pub adds: Vec<String>,
+    /// Follow the BIC-ordered path past the first effect (several missing
+    /// effects). `improve` turns it off: it refits between steps itself.
+    pub follow_path: bool,
+}
+
+impl Options {
+    /// The seed alone, with the path.
+    pub fn seed(seed: &str) -> Options {
+        Options {
+            seed: seed.to_string(),
+            adds: Vec::new(),
+            follow_path: true,
+        }
+    }
+}
+
+/// `at_noise_floor` or `missing_effect` (CONTRACT §2).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// At least one candidate is significant.
+    MissingEffect,
+    /// No candidate is significant.
+    AtNoiseFloor,
+}
+
+/// A physical parameter of a candidate with its 95 % interval.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Physical {
+    /// What it is (`cte`, `backlash`, `amplitude`, …).
+    pub name: String,
+    /// Its unit.
+    pub unit: String,
+    /// Estimate.
+    pub value: f64,
+    /// 95 % confidence interval (±1.96 standard errors).
+    pub ci95: [f64; 2],
+    /// Whether the value is physically plausible for a machine tool.
+    pub plausible: bool,
+    /// The range taken as plausible, in words.
+    pub expected: String,
+}
+
+/// One scored candidate effect (CONTRACT §2; fields after `evidence` are
+/// extensions).
+#[derive(Clone, Debug, Serialize)]
+pub struct Candidate {
+    /// Family: periodic, thermal, reversal, abbe, drift, squareness, higher_order.
+    pub effect: String,
+    /// Target error column (`ex`, …).
+    pub target: String,
+    /// Axis the effect runs along, if any.
+    pub axis: Option<String>,
+    /// Data channel it follows (`T_bed_C`, `dir_x`, `tool_mm`, `t_s`), if any.
+    pub channel: Option<String>,
+    /// Its parameters (period, lag, …) and fitted magnitudes.
+    pub params: BTreeMap<String, f64>,
+    /// The string `fit --add` accepts.
+    pub add: String,
+    /// Block-held-out RMS of the target with the effect added, µm (null when
+    /// not identifiable).
+    pub held_out_rms_um_after: Option<f64>,
+    /// 1 − held-out RMS after / before.
+    pub gain: Option<f64>,
+    /// False when the effect lies in the model's span.
+    pub identifiable: bool,
+    /// Why it ranks where it does, in words.
+    pub evidence: String,
+    /// BIC(model + effect) − BIC(model).
+    pub delta_bic: Option<f64>,
+    /// In-sample RMS of the target with the effect added, µm.
+    pub rms_um_after: Option<f64>,
+    /// Smallest share of one of its columns outside the model's span.
+    pub out_of_span_share: f64,
+    /// Passes every acceptance rule (at most one per target, and only the
+    /// best of its target).
+    pub significant: bool,
+    /// The physical parameter and its plausibility.
+    pub physical: Option<Physical>,
+    /// `add` strings of candidates it cannot be told from.
+    pub confounded_with: Vec<String>,
+}
+
+/// One step of the BIC-ordered path.
+#[derive(Clone, Debug, Serialize)]
+pub struct PathStep {
+    /// Target.
+    pub target: String,
+    /// The effect added (`fit --add` string).
+    pub add: String,
+    /// Its ΔBIC at that step.
+    pub delta_bic: f64,
+    /// In-sample RMS after the step, µm.
+    pub rms_um: f64,
+    /// Block-held-out RMS after the step, µm.
+    pub held_out_rms_um: f64,
+}
+
+/// Where the residual concentrates.
+#[derive(Clone, Debug, Serialize)]
+pub struct Region {
+    /// Target.
+    pub target: String,
+    /// Bounding box per axis present, mm: `{"x": [lo, hi], …}`.
+    pub bbox_mm: BTreeMap<String, [f64; 2]>,
+    /// Residual RMS inside, µm.
+    pub rms_um: f64,
+    /// Rows inside.
+    pub points: usize,
+}
+
+/// A measurement-design or identifiability warning, with the measurement
+/// that would fix it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Warning {
+    /// `aliasing`, `one_direction`, `constant_temperature`, `in_model_span`, `confounded`.
+    pub code: String,
+    /// What is wrong and what to measure.
+    pub detail: String,
+}
+
+/// Plot material for `--report` (not part of the JSON).
+#[derive(Clone, Debug, Default)]
+pub struct Evidence {
+    /// Per target: (axis, periodogram, rows used) of the periodic search.
+    pub periodograms: Vec<(usize, usize, Periodogram)>,
+    /// Per target: data rows and residual before any path step.
+    pub resid_before: Vec<(usize, Vec<usize>, Vec<f64>)>,
+    /// Per target: residual after the whole path.
+    pub resid_after: Vec<(usize, Vec<usize>, Vec<f64>)>,
+    /// Per target with a significant top candidate: its fitted component on
+    /// the target's rows (for component + residual plots).
+    pub components: Vec<(usize, String, Vec<f64>)>,
+}
+
+/// The result of `diagnose` (CONTRACT §2 plus extensions).
+#[derive(Clone, Debug, Serialize)]
+pub struct Diagnosis {
+    /// The model diagnosed (seed, plus ` + <effect>` for each added effect).
+    pub model: String,
+    /// In-sample residual RMS per target, µm.
+    pub rms_um: BTreeMap<String, f64>,
+    /// Block-held-out RMS per target, µm.
+    pub held_out_rms_um: BTreeMap<String, f64>,
+    /// Noise floor per target, µm (null when the data allows no estimate).
+    pub noise_floor_um: BTreeMap<String, Option<f64>>,
+    /// How each noise floor was estimated.
+    pub noise_method: BTreeMap<String, Option<NoiseMethod>>,
+    /// `missing_effect` or `at_noise_floor`.
+    pub verdict: Verdict,
+    /// Candidates, best first.
+    pub candidates: Vec<Candidate>,
+    /// The BIC-ordered path of effects that pass, per target in order.
+    pub path: Vec<PathStep>,
+    /// Cells where the residual concentrates, per target.
+    pub worst_regions: Vec<Region>,
+    /// Design and identifiability warnings.
+    pub warnings: Vec<Warning>,
+    /// How hold-out blocks were formed (`pass_id` or `spatial cells`).
+    pub hold_out: String,
+    /// Plot material.
+    #[serde(skip)]
+    pub evidence: Evidence,
+}
+
+impl Diagnosis {
+    /// The best significant candidate, if any.
+    pub fn best(&self) -> Option<&Candidate> {
+        self.candidates.iter().find(|c| c.significant)
+    }
+}
+
+/// One target's rows, values and hold-out blocks.
+struct TargetData<'a> {
+    data: &'a Dataset,
+    norm: Norm,
+    t: usize,
+    rows: Vec<usize>,
+    y: Vec<f64>,
+    fold: Vec<usize>,
+    nfolds: usize,
+}
+
+impl TargetData<'_> {
+    fn col(&self, f: &Feature) -> Result<Vec<f64>> {
+        let full = f.column(self.data, &self.norm)?;
+        Ok(self.rows.iter().map(|&r| full[r]).collect())
+    }
+}
+
+/// The fitted current model of one target.
+struct State {
+    adds: Vec<String>,
+    basis: Basis,
+    resid: Vec<f64>,
+    rss: f64,
+    holdout: HoldOut,
+    held_out_rms: f64,
+}
+
+impl State {
+    fn new(td: &TargetData, seed: &str, adds: &[String]) -> Result<State> {
+        let axes = td.data.axes();
+        let mut cols = Vec::new();
+        for exp in seed_monomials(seed, td.t, &axes)? {
+            cols.push(td.col(&Feature::Monomial { exp })?);
+        }
+        for a in adds {
+            let e = Effect::parse(a)?;
+            if e.target == td.t {
+                for f in &e.features {
+                    cols.push(td.col(f)?);
+                }
+            }
+        }
+        let n = td.rows.len();
+        let basis = Basis::new(&cols, n);
+        if n < basis.rank() + 3 {
+            bail!(
+                "{}: {} has {} measured rows, too few for a model with {} independent terms",
+                td.data.source,
+                TARGETS[td.t],
+                n,
+                basis.rank()
+            );
+        }
+        let resid = basis.residual(&td.y);
+        let rss = linalg::dot(&resid, &resid);
+        let holdout = HoldOut::new(&cols, &td.y, &td.fold, td.nfolds);
+        let held_out_rms = holdout.rms(&[]).unwrap_or(f64::NAN);
+        Ok(State {
+            adds: adds.to_vec(),
+            basis,
+            resid,
+            rss,
+            holdout,
+            held_out_rms,
+        })
+    }
+
+    fn rms(&self) -> f64 {
+        (self.rss / self.resid.len() as f64).sqrt()
+    }
+}
+
+/// A candidate before scoring: its spec and what the search learned.
+#[derive(Clone, Debug)]
+struct Proposal {
+    family: &'static str,
+    spec: String,
+    axis: Option<usize>,
+    channel: Option<String>,
+    /// Nonlinear parameters searched for (period, lag): each costs ln n.
+    searched: usize,
+    note: String,
+}
+
+/// A candidate's in-sample FWL fit.
+struct FwlFit {
+    cols: Vec<Vec<f64>>,
+    partialled: Vec<Vec<f64>>,
+    share: f64,
+    fit: linalg::SmallFit,
+    dbic: f64,
+}
+
+fn fwl(td: &TargetData, st: &State, spec: &str, searched: usize) -> Result<FwlFit> {
+    let e = Effect::parse(spec)?;
+    let cols: Vec<Vec<f64>> = e
+        .features
+        .iter()
+        .map(|f| td.col(f))
+        .collect::<Result<_>>()?;
+    let partialled: Vec<Vec<f64>> = cols.iter().map(|c| st.basis.residual(c)).collect();
+    let share = cols
+        .iter()
+        .zip(&partialled)
+        .map(|(c, p)| {
+            let cc = linalg::dot(c, c);
+            if cc > 0.0 {
+                linalg::dot(p, p) / cc
+            } else {
+                0.0
+            }
+        })
+        .fold(f64::INFINITY, f64::min);
+    let fit = small_fit(&partialled, &st.resid);
+    let n = td.rows.len() as f64;
+    let k = (fit.rank + searched) as f64;
+    let dbic = n * (fit.rss.max(1e-300) / st.rss.max(1e-300)).ln() + k * n.ln();
+    Ok(FwlFit {
+        cols,
+        partialled,
+        share,
+        fit,
+        dbic,
+    })
+}
+
+fn fmt_num(v: f64, decimals: usize) -> String {
+    let s = format!("{v:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+/// Thermal lags tried, s.
+const LAGS_S: [f64; 11] = [
+    0.0, 120.0, 300.0, 600.0, 900.0, 1200.0, 1800.0, 2400.0, 3600.0, 5400.0, 7200.0,
+];
+
+/// Builds the candidate library for one target at the current model.
+fn propose(td: &TargetData, st: &State, ev: &mut Evidence) -> Vec<Proposal> {
+    let data = td.data;
+    let tn = TARGETS[td.t];
+    let axes = data.axes();
+    let mut out = Vec::new();
+    // Local index of each data row, for the periodogram's subset.
+    let mut local = vec![usize::MAX; data.len()];
+    for (i, &r) in td.rows.iter().enumerate() {
+        local[r] = i;
+    }
+    // periodic: Lomb–Scargle along each axis on the densest lines.
+    for &a in &axes {
+        let Some(dl) = dense_lines(data, a, &td.rows) else {
+            continue;
+        };
+        let min_p = (2.0 * dl.spacing_mm).max(0.5);
+        let max_p = dl.span_mm / 2.0;
+        if max_p <= 2.0 * min_p || dl.rows.len() < 16 {
+            continue;
+        }
+        let pos: Vec<f64> = dl.rows.iter().map(|&r| data.pos(a, r)).collect();
+        let res: Vec<f64> = dl.rows.iter().map(|&r| st.resid[local[r]]).collect();
+        let pg = periodogram(&pos, &res, min_p, max_p);
+        let Some(k) = pg.peak() else { continue };
+        let f0 = pg.freq_per_mm[k];
+        let df = 1.0 / (5.0 * dl.span_mm.max(1e-9));
+        // Refine the peak on all rows of the target by the FWL fit.
+        let spec_at = |f: f64, h: u8| {
+            format!(
+                "periodic:target={tn},axis={},period_mm={}{}",
+                AXES[a],
+                fmt_num(1.0 / f, 5),
+                if h > 1 {
+                    format!(",harmonics={h}")
+                } else {
+                    String::new()
+                }
+            )
+        };
+        let mut best = (f64::INFINITY, f0);
+        for i in 0..=40 {
+            let f = f0 + df * (i as f64 - 20.0) / 20.0;
+            if f <= 0.0 {
+                continue;
+            }
+            if let Ok(ff) = fwl(td, st, &spec_at(f, 1), 1) {
+                if ff.fit.rss < best.0 {
+                    best = (ff.fit.rss, f);
+                }
+            }
+        }
+        let f = best.1;
+        // Harmonics while each one buys ΔBIC < −10.
+        let mut h = 1u8;
+        let mut dbic = fwl(td, st, &spec_at(f, 1), 1).map_or(f64::INFINITY, |x| x.dbic);
+        while h < 4 && 2.0 * (h as f64 + 1.0) * f <= 1.0 / dl.spacing_mm {
+            let next = fwl(td, st, &spec_at(f, h + 1), 1).map_or(f64::INFINITY, |x| x.dbic);
+            if next < dbic + DBIC_SIGNIFICANT {
+                h += 1;
+                dbic = next;
+            } else {
+                break;
+            }
+        }
+        let ratio = pg.power[k] / pg.median_power().max(1e-12);
+        let note = format!(
+            "periodogram of the {tn} residual along {} ({} points on {} line(s), spacing {} mm): peak at {} mm, {:.0}x the median power{}",
+            AXES[a],
+            dl.rows.len(),
+            dl.lines.max(1),
+            fmt_num(dl.spacing_mm, 3),
+            fmt_num(1.0 / f, 3),
+            ratio,
+            if h > 1 { format!(", {h} harmonics") } else { String::new() }
+        );
+        ev.periodograms.push((td.t, a, pg));
+        out.push(Proposal {
+            family: "periodic",
+            spec: spec_at(f, h),
+            axis: Some(a),
+            channel: None,
+            searched: 1,
+            note,
+        });
+    }
+    // thermal: per channel that varies, alone or times each axis; lag searched.
+    for ch in &data.temps {
+        let lo = ch.temp_c.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = ch.temp_c.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if hi - lo < CONSTANT_TEMPERATURE_K {
+            continue;
+        }
+        let times: Vec<Option<usize>> = std::iter::once(None)
+            .chain(axes.iter().map(|&a| Some(a)))
+            .collect();
+        for tm in times {
+            let spec_at = |lag: f64| {
+                let mut s = format!("thermal:target={tn},channel={}", ch.name);
+                if let Some(a) = tm {
+                    s.push_str(&format!(",times={},offset=1", AXES[a]));
+                }
+                if lag > 0.0 {
+                    s.push_str(&format!(",lag_s={}", fmt_num(lag, 0)));
+                }
+                s
+            };
+            let lags: &[f64] = if data.t_s.is_some() {
+                &LAGS_S
+            } else {
+                &LAGS_S[..1]
+            };
+            let mut best = (f64::INFINITY, 0.0);
+            for &lag in lags {
+                if let Ok(ff) = fwl(td, st, &spec_at(lag), 0) {
+                    if ff.fit.rss < best.0 {
+                        best = (ff.fit.rss, lag);
+                    }
+                }
+            }
+            if !best.0.is_finite() {
+                continue;
+            }
+            let note = if data.t_s.is_some() {
+                format!(
+                    "the {tn} residual follows T_{}_C{} (range {:.2} K), lag {} s found by search",
+                    ch.name,
+                    tm.map_or(String::new(), |a| format!(" × {}", AXES[a])),
+                    hi - lo,
+                    fmt_num(best.1, 0)
+                )
+            } else {
+                format!(
+                    "the {tn} residual follows T_{}_C{} (range {:.2} K)",
+                    ch.name,
+                    tm.map_or(String::new(), |a| format!(" × {}", AXES[a])),
+                    hi - lo
+                )
+            };
+            out.push(Proposal {
+                family: "thermal",
+                spec: spec_at(best.1),
+                axis: tm,
+                channel: Some(format!("T_{}_C", ch.name)),
+                searched: usize::from(data.t_s.is_some()),
+                note,
+            });
+        }
+    }
+    // reversal: each axis approached from both sides.
+    for &a in &axes {
+        let Some(d) = &data.dir[a] else { continue };
+        let (mut up, mut down) = (0, 0);
+        for &r in &td.rows {
+            if d[r] > 0 {
+                up += 1;
+            } else {
+                down += 1;
+            }
+        }
+        if up == 0 || down == 0 {
+            continue;
+        }
+        let (mut su, mut sd) = (0.0, 0.0);
+        for (i, &r) in td.rows.iter().enumerate() {
+            if d[r] > 0 {
+                su += st.resid[i];
+            } else {
+                sd += st.resid[i];
+            }
+        }
+        out.push(Proposal {
+            family: "reversal",
+            spec: format!("reversal:target={tn},axis={}", AXES[a]),
+            axis: Some(a),
+            channel: Some(format!("dir_{}", AXES[a])),
+            searched: 0,
+            note: format!(
+                "forward/backward split on {}: mean residual {:+.2} µm ({up} points approached from −) vs {:+.2} µm ({down} from +)",
+                AXES[a],
+                su / up as f64,
+                sd / down as f64
+            ),
+        });
+    }
+    // abbe: tool_mm times a constant or a position.
+    if let Some(tool) = &data.tool_mm {
+        let lo = tool.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = tool.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        for tm in std::iter::once(None).chain(axes.iter().map(|&a| Some(a))) {
+            let mut spec = format!("abbe:target={tn}");
+            if let Some(a) = tm {
+                spec.push_str(&format!(",times={}", AXES[a]));
+            }
+            out.push(Proposal {
+                family: "abbe",
+                spec,
+                axis: tm,
+                channel: Some("tool_mm".into()),
+                searched: 0,
+                note: format!(
+                    "the {tn} residual grows with the Abbe arm tool_mm ({} to {} mm){}",
+                    fmt_num(lo, 1),
+                    fmt_num(hi, 1),
+                    tm.map_or(String::new(), |a| format!(
+                        ", angle varying along {}",
+                        AXES[a]
+                    ))
+                ),
+            });
+        }
+    }
+    // drift: time, order by BIC.
+    if data.t_s.is_some() {
+        let spec_at = |o: u8| {
+            if o == 1 {
+                format!("drift:target={tn}")
+            } else {
+                format!("drift:target={tn},order={o}")
+            }
+        };
+        let mut o = 1u8;
+        let mut dbic = fwl(td, st, &spec_at(1), 0).map_or(f64::INFINITY, |x| x.dbic);
+        while o < 3 {
+            let next = fwl(td, st, &spec_at(o + 1), 0).map_or(f64::INFINITY, |x| x.dbic);
+            if next < dbic + DBIC_SIGNIFICANT {
+                o += 1;
+                dbic = next;
+            } else {
+                break;
+            }
+        }
+        out.push(Proposal {
+            family: "drift",
+            spec: spec_at(o),
+            axis: None,
+            channel: Some("t_s".into()),
+            searched: 0,
+            note: format!("the {tn} residual follows time t_s (order {o})"),
+        });
+    }
+    // squareness: linear cross terms.
+    for &a in &axes {
+        if a == td.t {
+            continue;
+        }
+        out.push(Proposal {
+            family: "squareness",
+            spec: format!("squareness:target={tn},axis={}", AXES[a]),
+            axis: Some(a),
+            channel: None,
+            searched: 0,
+            note: format!("the {tn} residual is linear in {}", AXES[a]),
+        });
+    }
+    // higher_order: degree 4, or 5 when it buys ΔBIC < −10.
+    for &a in &axes {
+        let spec_at = |d: u8| format!("higher_order:target={tn},axis={},degree={d}", AXES[a]);
+        let d4 = fwl(td, st, &spec_at(4), 0).map_or(f64::INFINITY, |x| x.dbic);
+        let d5 = fwl(td, st, &spec_at(5), 0).map_or(f64::INFINITY, |x| x.dbic);
+        let d = if d5 < d4 + DBIC_SIGNIFICANT { 5 } else { 4 };
+        out.push(Proposal {
+            family: "higher_order",
+            spec: spec_at(d),
+            axis: Some(a),
+            channel: None,
+            searched: 0,
+            note: format!("the {tn} residual needs degree {d} along {}", AXES[a]),
+        });
+    }
+    out
+}
+
+fn physical(td: &TargetData, p: &Proposal, ff: &FwlFit, sigma2: f64) -> Option<Physical> {
+    let beta = &ff.fit.beta;
+    let cov = |i: usize, j: usize| sigma2 * ff.fit.xtx_inv[(i, j)];
+    let lin = |scale: f64, name: &str, unit: &str, max_abs: f64, expected: &str| {
+        let v = beta[0] * scale;
+        let se = cov(0, 0).max(0.0).sqrt() * scale.abs();
+        Some(Physical {
+            name: name.into(),
+            unit: unit.into(),
+            value: v,
+            ci95: [v - 1.96 * se, v + 1.96 * se],
+            plausible: v.abs() <= max_abs,
+            expected: expected.into(),
+        })
+    };
+    let half = |a: usize| td.norm.half_span_mm[a];
+    match p.family {
+        "periodic" => {
+            let (a, b) = (beta[0], beta[1]);
+            let amp = (a * a + b * b).sqrt();
+            let se = if amp > 0.0 {
+                ((a * a * cov(0, 0) + b * b * cov(1, 1) + 2.0 * a * b * cov(0, 1)) / (amp * amp))
+                    .max(0.0)
+                    .sqrt()
+            } else {
+                0.0
+            };
+            let e = Effect::parse(&p.spec).ok()?;
+            let period = match e.features.first()? {
+                Feature::Periodic { period_mm, .. } => *period_mm,
+                _ => return None,
+            };
+            Some(Physical {
+                name: "amplitude".into(),
+                unit: "µm".into(),
+                value: amp,
+                ci95: [amp - 1.96 * se, amp + 1.96 * se],
+                plausible: (0.5..=100.0).contains(&period) && amp <= 20.0,
+                expected: "periods 0.5–100 mm (leads 2–40 mm), amplitude up to ~8 µm".into(),
+            })
+        }
+        "thermal" => match p.axis {
+            Some(a) => lin(
+                1000.0 / half(a),
+                "cte",
+                "µm/m/K",
+                30.0,
+                "|CTE| ≤ 30 µm/m/K (steel 11.5, cast iron 10, aluminium 23)",
+            ),
+            None => lin(1.0, "offset_per_kelvin", "µm/K", 20.0, "≤ 20 µm/K"),
+        },
+        "reversal" => lin(2.0, "backlash", "µm", 60.0, "backlash 1–50 µm"),
+        "abbe" => {
+            let scale = 1000.0;
+            lin(scale, "angle", "µrad", 300.0, "angular errors 10–60 µrad")
+        }
+        "drift" => lin(1.0, "rate", "µm/h", 30.0, "≤ 30 µm/h"),
+        "squareness" => {
+            let a = p.axis?;
+            lin(
+                1000.0 / half(a),
+                "angle",
+                "µrad",
+                300.0,
+                "squareness 20–40 µrad",
+            )
+        }
+        "higher_order" => {
+            let n = td.rows.len() as f64;
+            let comp: f64 = (0..td.rows.len())
+                .map(|r| {
+                    let v: f64 = ff.partialled.iter().zip(beta).map(|(c, b)| c[r] * b).sum();
+                    v * v
+                })
+                .sum();
+            let amp = (comp / n).sqrt();
+            Some(Physical {
+                name: "component_rms".into(),
+                unit: "µm".into(),
+                value: amp,
+                ci95: [amp, amp],
+                plausible: true,
+                expected: "any".into(),
+            })
+        }
+        _ => None,
+    }
+}
+
+/// The scored candidates of one target, with the data needed for overlaps.
+struct Scored {
+    cand: Candidate,
+    partialled: Vec<Vec<f64>>,
+    cols: Vec<Vec<f64>>,
+    beta: Vec<f64>,
+}
+
+fn score(
+    td: &TargetData,
+    st: &State,
+    props: Vec<Proposal>,
+    seed_name: &str,
+    warnings: &mut Vec<Warning>,
+) -> Vec<Scored> {
+    let n = td.rows.len();
+    let tn = TARGETS[td.t];
+    let mut out = Vec::new();
+    for p in props {
+        let Ok(ff) = fwl(td, st, &p.spec, p.searched) else {
+            continue;
+        };
+        let mut params = BTreeMap::new();
+        if let Ok(e) = Effect::parse(&p.spec) {
+            match e.features.first() {
+                Some(Feature::Periodic { period_mm, .. }) => {
+                    params.insert("period_mm".into(), *period_mm);
+                    params.insert("harmonics".into(), (e.features.len() / 2) as f64);
+                }
+                Some(Feature::Thermal { lag_s, .. }) => {
+                    params.insert("lag_s".into(), *lag_s);
+                }
+                Some(Feature::Drift { .. }) => {
+                    params.insert("order".into(), e.features.len() as f64);
+                }
+                Some(Feature::Monomial { exp }) if p.family == "higher_order" => {
+                    params.insert(
+                        "degree".into(),
+                        f64::from(exp.iter().sum::<u8>() + e.features.len() as u8 - 1),
+                    );
+                }
+                _ => {}
+            }
+        }
+        let base = Candidate {
+            effect: p.family.to_string(),
+            target: tn.to_string(),
+            axis: p.axis.map(|a| AXES[a].to_string()),
+            channel: p.channel.clone(),
+            params,
+            add: p.spec.clone(),
+            held_out_rms_um_after: None,
+            gain: None,
+            identifiable: false,
+            evidence: String::new(),
+            delta_bic: None,
+            rms_um_after: None,
+            out_of_span_share: ff.share,
+            significant: false,
+            physical: None,
+            confounded_with: Vec::new(),
+        };
+        if ff.share < IN_SPAN_SHARE || ff.fit.rank == 0 {
+            let cols = Effect::parse(&p.spec)
+                .map(|e| {
+                    e.features
+                        .iter()
+                        .map(ToString::to_string)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                })
+                .unwrap_or_default();
+            let detail = format!(
+                "{seed_name} already contains the column(s) {cols} for {tn} (up to a combination of its terms), so `{}` cannot be told from it{}",
+                p.spec,
+                match p.family {
+                    "abbe" => "; measure with two or more tool lengths (tool_mm) to separate an Abbe error",
+                    "squareness" => "; use a seed without linear cross terms (kinematic) to estimate squareness",
+                    _ => "",
+                }
+            );
+            warnings.push(Warning {
+                code: "in_model_span".into(),
+                detail: detail.clone(),
+            });
+            out.push(Scored {
+                cand: Candidate {
+                    evidence: detail,
+                    ..base
+                },
+                partialled: ff.partialled,
+                cols: ff.cols,
+                beta: ff.fit.beta,
+            });
+            continue;
+        }
+        let held = st.holdout.rms(&ff.cols);
+        let gain = held.map(|h| 1.0 - h / st.held_out_rms);
+        let dof = n.saturating_sub(st.basis.rank() + ff.fit.rank).max(1) as f64;
+        let sigma2 = ff.fit.rss / dof;
+        let phys = physical(td, &p, &ff, sigma2);
+        let rms_after = (ff.fit.rss / n as f64).sqrt();
+        let mut evidence = format!(
+            "{}; ΔBIC {:.0}; block-held-out RMS {:.3} → {} µm (gain {})",
+            p.note,
+            ff.dbic,
+            st.held_out_rms,
+            held.map_or("?".into(), |h| format!("{h:.3}")),
+            gain.map_or("?".into(), |g| format!("{:.0} %", 100.0 * g))
+        );
+        if let Some(ph) = &phys {
+            evidence.push_str(&format!(
+                "; {} {:.3} {} (95 % {:.3} … {:.3}){}",
+                ph.name,
+                ph.value,
+                ph.unit,
+                ph.ci95[0],
+                ph.ci95[1],
+                if ph.plausible {
+                    String::new()
+                } else {
+                    format!(" — NOT plausible (expected {})", ph.expected)
+                }
+            ));
+        }
+        if ff.share < 0.05 {
+            evidence.push_str(&format!(
+                "; only {:.1} % of it lies outside the model's span",
+                100.0 * ff.share
+            ));
+        }
+        out.push(Scored {
+            cand: Candidate {
+                held_out_rms_um_after: held,
+                gain,
+                identifiable: true,
+                evidence,
+                delta_bic: Some(ff.dbic),
+                rms_um_after: Some(rms_after),
+                physical: phys,
+                ..base
+            },
+            partialled: ff.partialled,
+            cols: ff.cols,
+            beta: ff.fit.beta,
+        });
+    }
+    out
+}
+
+/// Share of `a`'s (partialled) directions explained by `b`'s: the largest
+/// over `a`'s columns of 1 − ‖a − P_b a‖² / ‖a‖².
+fn overlap(a: &[Vec<f64>], b: &[Vec<f64>], n: usize) -> f64 {
+    let bb = Basis::new(b, n);
+    if bb.rank() == 0 {
+        return 0.0;
+    }
+    a.iter()
+        .map(|c| {
+            let cc = linalg::dot(c, c);
+            if cc <= 0.0 {
+                return 0.0;
+            }
+            let r = bb.residual(c);
+            1.0 - linalg::dot(&r, &r) / cc
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Scores one target at one model state; marks confounding and the best
+/// candidate's significance. Returns the scored list sorted best first.
+fn rank_target(
+    td: &TargetData,
+    st: &State,
+    seed_name: &str,
+    warnings: &mut Vec<Warning>,
+    ev: &mut Evidence,
+) -> Vec<Scored> {
+    let props = propose(td, st, ev);
+    let mut sc = score(td, st, props, seed_name, warnings);
+    sc.sort_by(|a, b| {
+        let ka = a.cand.delta_bic.unwrap_or(f64::INFINITY);
+        let kb = b.cand.delta_bic.unwrap_or(f64::INFINITY);
+        ka.total_cmp(&kb)
+    });
+    let n = td.rows.len();
+    // Overlaps among the plausible contenders (ΔBIC < 0), best first.
+    let top: Vec<usize> = (0..sc.len())
+        .filter(|&i| sc[i].cand.identifiable && sc[i].cand.delta_bic.is_some_and(|d| d < 0.0))
+        .take(12)
+        .collect();
+    let mut competing_best: Option<f64> = None;
+    for (ii, &i) in top.iter().enumerate() {
+        for &j in &top[ii + 1..] {
+            let ov = overlap(&sc[i].partialled, &sc[j].partialled, n).max(overlap(
+                &sc[j].partialled,
+                &sc[i].partialled,
+                n,
+            ));
+            if ii == 0 && ov >= COMPETING_OVERLAP && competing_best.is_none() {
+                competing_best = sc[j].cand.delta_bic;
+            }
+            if ov >= CONFOUNDED_OVERLAP && sc[i].cand.effect != sc[j].cand.effect {
+                let (ai, aj) = (sc[i].cand.add.clone(), sc[j].cand.add.clone());
+                sc[i].cand.confounded_with.push(aj.clone());
+                sc[j].cand.confounded_with.push(ai.clone());
+                let fix = if [sc[i].cand.effect.as_str(), sc[j].cand.effect.as_str()]
+                    .contains(&"drift")
+                {
+                    "; measure with temperature varying independently of time (a cool-down as well as a warm-up, or a second session)"
+                } else {
+                    "; vary the two channels independently in the next measurement"
+                };
+                warnings.push(Warning {
+                    code: "confounded".into(),
+                    detail: format!(
+                        "`{ai}` and `{aj}` cannot be told apart on these data ({:.0} % of the new directions of one lie in the other){fix}",
+                        100.0 * ov
+                    ),
+                });
+            }
+        }
+    }
+    if let Some(&b) = top.first() {
+        let c = &sc[b].cand;
+        let dbic = c.delta_bic.unwrap_or(f64::INFINITY);
+        let gain = c.gain.unwrap_or(0.0);
+        let gap_ok = competing_best.is_none_or(|r| dbic <= r - MIN_GAP_DBIC);
+        let plausible = c.physical.as_ref().is_none_or(|p| p.plausible);
+        let ok = dbic < DBIC_SIGNIFICANT && gain >= MIN_HELD_OUT_GAIN && gap_ok;
+        let why = if ok {
+            if plausible {
+                "significant".to_string()
+            } else {
+                "significant, but its physical parameter is implausible: check the data".to_string()
+            }
+        } else {
+            let mut r = Vec::new();
+            if dbic >= DBIC_SIGNIFICANT {
+                r.push(format!("ΔBIC {dbic:.0} ≥ {DBIC_SIGNIFICANT}"));
+            }
+            if gain < MIN_HELD_OUT_GAIN {
+                r.push(format!(
+                    "held-out gain {:.0} % < {:.0} %",
+                    100.0 * gain,
+                    100.0 * MIN_HELD_OUT_GAIN
+                ));
+            }
+            if !gap_ok {
+                r.push(format!(
+                    "no clear gap to the competing candidate (ΔBIC {:.0})",
+                    competing_best.unwrap_or(0.0)
+                ));
+            }
+            format!("not significant: {}", r.join(", "))
+        };
+        sc[b].cand.significant = ok;
+        sc[b].cand.evidence.push_str(&format!(" — {why}"));
+    }
+    sc
+}
+
+fn hold_out_blocks(data: &Dataset, rows: &[usize], norm: &Norm) -> (Vec<usize>, usize, String) {
+    const K: usize = 5;
+    if let Some(pass) = &data.pass_id {
+        let mut ids: Vec<i64> = rows.iter().map(|&r| pass[r]).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        if ids.len() >= K {
+            let fold = rows
+                .iter()
+                .map(|&r| ids.binary_search(&pass[r]).unwrap_or(0) % K)
+                .collect();
+            return (
+                fold,
+                K,
+                format!("whole passes (pass_id, {} passes in {K} folds)", ids.len()),
+            );
+        }
+    }
+    // Spatial cells, 6 per axis, assigned to folds by a pattern that keeps
+    // neighbouring cells in different folds.
+    const CELLS: f64 = 6.0;
+    let fold = rows
+        .iter()
+        .map(|&r| {
+            let mut id = 0usize;
+            for (i, a) in data.axes().into_iter().enumerate() {
+                let u = norm.u(a, data.pos(a, r));
+                let c = (((u + 1.0) / 2.0 * CELLS).floor()).clamp(0.0, CELLS - 1.0) as usize;
+                id += c * [1, 2, 3][i];
+            }
+            id % K
+        })
+        .collect();
+    (fold, K, "spatial cells (6 per axis) in 5 folds".into())
+}
+
+fn worst_regions(td: &TargetData, resid: &[f64]) -> Vec<Region> {
+    const CELLS: f64 = 4.0;
+    let axes = td.data.axes();
+    let mut cells: BTreeMap<Vec<usize>, (f64, usize)> = BTreeMap::new();
+    for (i, &r) in td.rows.iter().enumerate() {
+        let key: Vec<usize> = axes
+            .iter()
+            .map(|&a| {
+                let u = td.norm.u(a, td.data.pos(a, r));
+                (((u + 1.0) / 2.0 * CELLS).floor()).clamp(0.0, CELLS - 1.0) as usize
+            })
+            .collect();
+        let e = cells.entry(key).or_insert((0.0, 0));
+        e.0 += resid[i] * resid[i];
+        e.1 += 1;
+    }
+    let mut v: Vec<(Vec<usize>, f64, usize)> = cells
+        .into_iter()
+        .filter(|(_, (_, n))| *n >= 5)
+        .map(|(k, (ss, n))| (k, (ss / n as f64).sqrt(), n))
+        .collect();
+    v.sort_by(|a, b| b.1.total_cmp(&a.1));
+    v.into_iter()
+        .take(2)
+        .map(|(k, rms, n)| {
+            let bbox = axes
+                .iter()
+                .zip(&k)
+                .map(|(&a, &c)| {
+                    let lo = td.norm.centre_mm[a]
+                        + td.norm.half_span_mm[a] * (2.0 * c as f64 / CELLS - 1.0);
+                    let hi = lo + 2.0 * td.norm.half_span_mm[a] / CELLS;
+                    (AXES[a].to_string(), [lo, hi])
+                })
+                .collect();
+            Region {
+                target: TARGETS[td.t].into(),
+                bbox_mm: bbox,
+                rms_um: rms,
+                points: n,
+            }
+        })
+        .collect()
+}
+
+fn design_warnings(data: &Dataset) -> Vec<Warning> {
+    let mut w = Vec::new();
+    let all: Vec<usize> = (0..data.len()).collect();
+    let norm = Norm::from_data(data);
+    let axes = data.axes();
+    for &a in &axes {
+        let Some(dl) = dense_lines(data, a, &all) else {
+            continue;
+        };
+        if dl.spacing_mm > ALIASING_SPACING_MM {
+            let lo = norm.centre_mm[a] - norm.half_span_mm[a];
+            let hi = norm.centre_mm[a] + norm.half_span_mm[a];
+            let at: Vec<String> = axes
+                .iter()
+                .filter(|&&o| o != a)
+                .map(|&o| format!("{}={}", AXES[o], fmt_num(norm.centre_mm[o], 1)))
+                .collect();
+            w.push(Warning {
+                code: "aliasing".into(),
+                detail: format!(
+                    "the densest sampling along {ax} is every {sp} mm, so periods below {p2} mm (ball-screw leads are 2–40 mm) are invisible or aliased; add a dense line along {ax}: {ax} from {lo} to {hi} mm every 0.5 mm{at}, forward and backward",
+                    ax = AXES[a],
+                    sp = fmt_num(dl.spacing_mm, 3),
+                    p2 = fmt_num(2.0 * dl.spacing_mm, 3),
+                    lo = fmt_num(lo, 1),
+                    hi = fmt_num(hi, 1),
+                    at = if at.is_empty() { String::new() } else { format!(" at {}", at.join(", ")) }
+                ),
+            });
+        }
+    }
+    for &a in &axes {
+        let fix = "measure bidirectionally (ISO 230-2: at least 5 runs each way) and record the approach direction";
+        match &data.dir[a] {
+            None => w.push(Warning {
+                code: "one_direction".into(),
+                detail: format!(
+                    "no dir_{0} column: reversal (backlash) on {0} cannot be identified; {fix} in dir_{0}",
+                    AXES[a]
+                ),
+            }),
+            Some(d) => {
+                let first = d.first().copied().unwrap_or(1);
+                if d.iter().all(|&v| v == first) {
+                    w.push(Warning {
+                        code: "one_direction".into(),
+                        detail: format!(
+                            "every point on {} is approached from {}: reversal (backlash) cannot be identified; {fix}",
+                            AXES[a],
+                            if first > 0 { "below (+)" } else { "above (−)" }
+                        ),
+                    });
+                }
+            }
+        }
+    }
+    for ch in &data.temps {
+        let lo = ch.temp_c.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = ch.temp_c.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if hi - lo < CONSTANT_TEMPERATURE_K {
+            w.push(Warning {
+                code: "constant_temperature".into(),
+                detail: format!(
+                    "T_{}_C spans only {:.3} K: thermal effects cannot be identified; measure through a warm-up or over a day so that it changes by 2 K or more",
+                    ch.name,
+                    hi - lo
+                ),
+            });
+        }
+    }
+    w
+}
+
+/// Runs the diagnosis of `data` with the model of `opts`.
+pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
+    let norm = Norm::from_data(data);
+    for a in &opts.adds {
+        Effect::parse(a)?;
+    }
+    let model = std::iter::once(opts.seed.clone())
+        .chain(opts.adds.iter().cloned())
+        .collect::<Vec<_>>()
+        .join(" + ");
+    let mut warnings = design_warnings(data);
+    let mut ev = Evidence::default();
+    let mut rms_um = BTreeMap::new();
+    let mut held_out_rms_um = BTreeMap::new();
+    let mut noise_floor_um = BTreeMap::new();
+    let mut noise_method = BTreeMap::new();
+    let mut candidates = Vec::new();
+    let mut path = Vec::new();
+    let mut regions = Vec::new();
+    let mut hold_out = String::new();
+    for t in data.targets() {
+        let (rows, y): (Vec<usize>, Vec<f64>) = data.measured(t).unzip();
+        let (fold, nfolds, how) = hold_out_blocks(data, &rows, &norm);
+        hold_out = how;
+        let td = TargetData {
+            data,
+            norm,
+            t,
+            rows,
+            y,
+            fold,
+            nfolds,
+        };
+        let tn = TARGETS[t].to_string();
+        let st0 = State::new(&td, &opts.seed, &opts.adds)?;
+        rms_um.insert(tn.clone(), st0.rms());
+        held_out_rms_um.insert(tn.clone(), st0.held_out_rms);
+        regions.extend(worst_regions(&td, &st0.resid));
+        ev.resid_before
+            .push((t, td.rows.clone(), st0.resid.clone()));
+        let scored = rank_target(&td, &st0, &opts.seed, &mut warnings, &mut ev);
+        // The path: add the significant best and look again.
+        let mut st = st0;
+        let mut first = true;
+        let mut cur = scored;
+        for _ in 0..MAX_PATH_STEPS {
+            let Some(best) = cur.iter().find(|s| s.cand.significant) else {
+                break;
+            };
+            if first {
+                let comp: Vec<f64> = (0..td.rows.len())
+                    .map(|r| {
+                        best.cols
+                            .iter()
+                            .zip(&best.beta)
+                            .map(|(c, b)| c[r] * b)
+                            .sum()
+                    })
+                    .collect();
+                ev.components.push((t, best.cand.add.clone(), comp));
+            }
+            let mut adds = st.adds.clone();
+            adds.push(best.cand.add.clone());
+            let next = State::new(&td, &opts.seed, &adds)?;
+            if next.held_out_rms.is_nan() || next.held_out_rms >= st.held_out_rms {
+                break;
+            }
+            path.push(PathStep {
+                target: tn.clone(),
+                add: best.cand.add.clone(),
+                delta_bic: best.cand.delta_bic.unwrap_or(0.0),
+                rms_um: next.rms(),
+                held_out_rms_um: next.held_out_rms,
+            });
+            if first {
+                candidates.extend(cur.drain(..).map(|s| s.cand));
+                first = false;
+            }
+            st = next;
+            if !opts.follow_path {
+                break;
+            }
+            let mut scratch = Vec::new();
+            cur = rank_target(&td, &st, &opts.seed, &mut scratch, &mut Evidence::default());
+        }
+        if first {
+            candidates.extend(cur.into_iter().map(|s| s.cand));
+        }
+        let nf = noise_floor(data, &td.rows, &st.resid);
+        noise_floor_um.insert(tn.clone(), nf.map(|n: NoiseFloor| n.sigma_um));
+        noise_method.insert(tn.clone(), nf.map(|n| n.method));
+        ev.resid_after.push((t, td.rows.clone(), st.resid.clone()));
+    }
+    candidates.sort_by(|a, b| {
+        b.significant
+            .cmp(&a.significant)
+            .then(b.identifiable.cmp(&a.identifiable))
+            .then(
+                a.delta_bic
+                    .unwrap_or(f64::INFINITY)
+                    .total_cmp(&b.delta_bic.unwrap_or(f64::INFINITY)),
+            )
+    });
+    let verdict = if candidates.iter().any(|c| c.significant) {
+        Verdict::MissingEffect
+    } else {
+        Verdict::AtNoiseFloor
+    };
+    dedup_warnings(&mut warnings);
+    Ok(Diagnosis {
+        model,
+        rms_um,
+        held_out_rms_um,
+        noise_floor_um,
+        noise_method,
+        verdict,
+        candidates,
+        path,
+        worst_regions: regions,
+        warnings,
+        hold_out,
+        evidence: ev,
+    })
+}
+
+fn dedup_warnings(w: &mut Vec<Warning>) {
+    let mut seen = std::collections::BTreeSet::new();
+    w.retain(|x| seen.insert((x.code.clone(), x.detail.clone())));
+}
