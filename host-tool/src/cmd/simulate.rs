@@ -20,7 +20,8 @@ pub struct Args {
     #[arg(long, default_value = "mill800")]
     pub preset: String,
     /// Measurement plan(s), run in order: grid:<step_mm>,
-    /// plane:<ab>:<step_mm>, line:<a>:<step_mm>, iso230:<a>, point:x=,y=,z=
+    /// plane:<ab>:<step_mm>, line:<a>:<step_mm>, iso230:<a>, point:x=,y=,z=,
+    /// pause:<s>[,new_session]
     /// (options after commas, see docs/cli.md).
     #[arg(long, required = true, num_args = 1..)]
     pub plan: Vec<String>,
