@@ -33,18 +33,30 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 // A fault must not hang QEMU: report the faulting PC and exit 1. defmt is not
 // used here because the fault may have hit inside the logger's critical
 // section (it would then panic re-entrantly); the semihosting stderr stream
-// is separate from the defmt frames on stdout.
+// is separate from the defmt frames on stdout. (A stack overflow does not get
+// here: the exception frame cannot be pushed below RAM, see qemu.x, and QEMU
+// stops with a lockup instead — also a failed run.)
 #[allow(unsafe_code)] // cortex-m-rt requires HardFault handlers to be `unsafe fn`
 #[cortex_m_rt::exception]
 unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
     use core::fmt::Write as _;
+    let at = frame as *const cortex_m_rt::ExceptionFrame as usize;
+    let readable = (0x2000_0000..0x2002_0000 - 32).contains(&at);
     if let Ok(mut err) = semihosting::io::stderr() {
-        let _ = writeln!(
-            FmtAdapter(&mut err),
-            "HardFault: pc={:#010x} lr={:#010x}",
-            frame.pc(),
-            frame.lr()
-        );
+        let mut w = FmtAdapter(&mut err);
+        let _ = if readable {
+            writeln!(
+                w,
+                "HardFault: pc={:#010x} lr={:#010x}",
+                frame.pc(),
+                frame.lr()
+            )
+        } else {
+            writeln!(
+                w,
+                "HardFault: exception frame at {at:#010x} (stack overflow?)"
+            )
+        };
     }
     exit(1)
 }

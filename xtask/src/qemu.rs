@@ -46,6 +46,19 @@ pub fn test_all() -> Result<()> {
         ));
     }
     eprintln!("qemu: fault image exits 1 with a HardFault report, as it must");
+    // And a stack overflow must stop the run (the stack sits below the
+    // statics, tests/qemu.x): QEMU ends in a lockup, never a clean exit.
+    let overflow = build_bin("overflow", Profile::Dev)?;
+    let run = run_image(&overflow, &QemuOpts::default())?;
+    if run.status.success() || !run.stderr.contains("Lockup") {
+        return Err(format!(
+            "the overflow image should lock the core up, got {}\n{}{}",
+            describe(&run.status),
+            run.log,
+            run.stderr
+        ));
+    }
+    eprintln!("qemu: stack overflow image stops with a lockup, as it must");
 
     // defmt-test suites, one image per suite.
     let suites = build_suites()?;
@@ -72,9 +85,92 @@ pub fn test_all() -> Result<()> {
     Ok(())
 }
 
-/// Instruction counts per model update (CONTRACT.md §3).
-pub fn bench_mcu(_args: &[String]) -> Result<()> {
-    Err("bench-mcu: the QEMU benchmark image is not built yet".into())
+/// Instruction counts per model update (CONTRACT.md §3): one JSON line per
+/// model kind on stdout, `{"bench": "cubic19_f32", "instructions_per_update":
+/// N, "outputs": 3}`, a human summary with the loop rate each allows at
+/// 168 MHz on stderr.
+pub fn bench_mcu(args: &[String]) -> Result<()> {
+    if let Some(a) = args.first() {
+        return Err(format!("bench-mcu takes no arguments (got `{a}`)"));
+    }
+    let elf = build_bin("bench", Profile::Release)?;
+    eprintln!("\n$ qemu bench (-icount shift=0)");
+    let run = run_image(&elf, &QemuOpts::default())?;
+    if !run.status.success() {
+        return Err(format!(
+            "the bench image failed ({})\n{}{}",
+            describe(&run.status),
+            run.log,
+            run.stderr
+        ));
+    }
+    let results = parse_bench_log(&run.log)?;
+    for r in &results {
+        println!(
+            "{{\"bench\": \"{}\", \"instructions_per_update\": {}, \"outputs\": 3}}",
+            r.name, r.per_update
+        );
+    }
+    eprintln!(
+        "\n{:<18} {:>12} {:>10} {:>10}",
+        "model", "instr/update", "min..max", "kHz@168MHz"
+    );
+    for r in &results {
+        eprintln!(
+            "{:<18} {:>12} {:>10} {:>10.0}",
+            r.name,
+            r.per_update,
+            format!("{}..{}", r.min, r.max),
+            168_000.0 / r.per_update as f64
+        );
+    }
+    eprintln!("(instructions, not cycles: a loop rate is an upper bound on the real chip)");
+    Ok(())
+}
+
+/// One model kind's figures from the bench image.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct BenchResult {
+    name: String,
+    /// Mean instructions per call, rounded to nearest.
+    per_update: u64,
+    min: u64,
+    max: u64,
+}
+
+/// Reads the bench image's `BENCH <name> total=T calls=C min=A max=B` lines.
+fn parse_bench_log(log: &str) -> Result<Vec<BenchResult>> {
+    let mut out = Vec::new();
+    for line in log.lines() {
+        let Some(rest) = line.split("BENCH ").nth(1) else {
+            continue;
+        };
+        let mut words = rest.split_whitespace();
+        let name = words
+            .next()
+            .ok_or_else(|| format!("bad BENCH line: {line}"))?;
+        let field = |key: &str| -> Result<u64> {
+            rest.split_whitespace()
+                .find_map(|w| w.strip_prefix(key)?.strip_prefix('='))
+                .ok_or_else(|| format!("BENCH line without {key}: {line}"))?
+                .parse::<u64>()
+                .map_err(|e| format!("BENCH {key}: {e} in {line}"))
+        };
+        let (total, calls) = (field("total")?, field("calls")?);
+        if calls == 0 {
+            return Err(format!("BENCH line with no calls: {line}"));
+        }
+        out.push(BenchResult {
+            name: name.to_owned(),
+            per_update: (total + calls / 2) / calls,
+            min: field("min")?,
+            max: field("max")?,
+        });
+    }
+    if out.is_empty() {
+        return Err(format!("the bench image printed no BENCH line:\n{log}"));
+    }
+    Ok(out)
 }
 
 /// The end of `cargo xtask demo`: the board image in QEMU with the fitted table.
@@ -456,6 +552,21 @@ fn describe(status: &ExitStatus) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bench_lines_become_means() {
+        let log = "INFO  BENCH cubic19_f32 total=42433 calls=64 min=663 max=664\n\
+                   INFO  unrelated\n\
+                   INFO  BENCH nn_fixed total=10 calls=4 min=2 max=3\n";
+        let r = parse_bench_log(log).unwrap();
+        assert_eq!(r.len(), 2);
+        assert_eq!(r[0].name, "cubic19_f32");
+        assert_eq!(r[0].per_update, 663); // 663.02 rounds down
+        assert_eq!((r[0].min, r[0].max), (663, 664));
+        assert_eq!(r[1].per_update, 3); // 2.5 rounds half up
+        assert!(parse_bench_log("INFO  BENCH x total=1 calls=0 min=0 max=0").is_err());
+        assert!(parse_bench_log("INFO  nothing").is_err());
+    }
 
     #[test]
     fn json_str_reads_cargo_messages() {

@@ -1,0 +1,439 @@
+//! The end-to-end scenarios against the board image (see main.rs).
+//!
+//! Every expectation is computed on the host from the table bytes with
+//! model-core (`parse` + `Model::load` + `eval_fixed`), the very code the
+//! board runs, so "equal" means bit for bit.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use model_core::link::{
+    Correction, Injection, LinkError, Request, Response, SlotInfo, FRAME_CRC, LINK_TEMPS,
+    MAX_CHUNK_BYTES,
+};
+use model_core::{Inputs, Model, MAX_TEMPS};
+
+use crate::link::LinkClient;
+use crate::Cli;
+
+/// A table file with its host-side model.
+struct HostTable {
+    name: String,
+    bytes: Vec<u8>,
+    crc32: u32,
+    model: Box<Model>,
+}
+
+impl HostTable {
+    fn read(path: &Path) -> Result<Self, String> {
+        let bytes = std::fs::read(path).map_err(|e| format!("read {}: {e}", path.display()))?;
+        Self::from_bytes(path.display().to_string(), bytes)
+    }
+
+    fn from_bytes(name: String, bytes: Vec<u8>) -> Result<Self, String> {
+        let table = model_core::parse(&bytes).map_err(|e| format!("{name}: {e}"))?;
+        let model =
+            Box::new(Model::load(&table).map_err(|e| format!("{name}: cannot load: {e:?}"))?);
+        Ok(Self {
+            name,
+            crc32: FRAME_CRC.checksum(&bytes),
+            bytes,
+            model,
+        })
+    }
+
+    /// The host's fixed-point evaluation of an injection.
+    fn expect(&self, inj: &Injection) -> ([i32; 3], u16) {
+        let mut temp_mc = [0; MAX_TEMPS];
+        temp_mc.copy_from_slice(&inj.temp_mc[..MAX_TEMPS]);
+        let out = self.model.eval_fixed(&Inputs {
+            pos_nm: inj.pos_nm,
+            rev_q30: inj.rev_q30,
+            temp_mc,
+            tool_nm: inj.tool_nm,
+        });
+        (out.corr_nm, out.flags.bits())
+    }
+}
+
+/// splitmix64 with a fixed seed: the same trajectory and garbage every run.
+struct Rng(u64);
+
+impl Rng {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    fn unit(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// A trajectory through the table's envelope: a zig-zag raster with the
+/// reversal state following the direction of travel, the bed temperature
+/// drifting, and a few points beyond the travel (the board must hold the
+/// correction at the edge and flag it exactly as the host does).
+fn trajectory(t: &HostTable, points: usize) -> Vec<Injection> {
+    let env = t.model.envelope();
+    let mut rng = Rng(0x7EA1_0000_E2E0_0001);
+    let lo = env.travel_min_nm.map(f64::from);
+    let hi = env.travel_max_nm.map(f64::from);
+    let mut prev = lo;
+    (0..points)
+        .map(|i| {
+            let s = i as f64 / points as f64;
+            // X sweeps back and forth 5 times, Y climbs, Z wobbles.
+            let fx = ((s * 5.0).fract() * 2.0 - 1.0).abs();
+            let fy = s;
+            let fz = 0.5 + 0.45 * (s * 17.0).sin();
+            let mut pos = [fx, fy, fz];
+            if i % 50 == 49 {
+                // Beyond the travel by up to 2 %.
+                pos[i % 3] = if rng.unit() < 0.5 { -0.02 } else { 1.02 } * rng.unit().max(0.5);
+            }
+            let pos_nm: [i32; 3] =
+                std::array::from_fn(|a| (lo[a] + (hi[a] - lo[a]) * pos[a]).round() as i32);
+            let rev_q30 = std::array::from_fn(|a| {
+                let p = f64::from(pos_nm[a]);
+                let r = if p >= prev[a] { 1 << 30 } else { -(1 << 30) };
+                prev[a] = p;
+                r
+            });
+            let mut temp_mc = [0; LINK_TEMPS];
+            temp_mc[0] = 20_000 + (4_000.0 * s) as i32 + (rng.unit() * 200.0) as i32;
+            Injection {
+                pos_nm,
+                rev_q30,
+                temp_mc,
+                tool_nm: (env.tool_min_nm as f64
+                    + (env.tool_max_nm as f64 - env.tool_min_nm as f64) * rng.unit())
+                    as i32,
+            }
+        })
+        .collect()
+}
+
+fn err<T>(what: &str, resp: Response) -> Result<T, String> {
+    Err(format!("{what}: unexpected answer {resp:?}"))
+}
+
+fn req(link: &mut LinkClient, r: &Request<'_>) -> Result<Response, String> {
+    link.request(r).map_err(|e| e.to_string())
+}
+
+/// Connects and waits until the board answers `Identify`.
+fn connect(port: u16) -> Result<LinkClient, String> {
+    let mut link = LinkClient::connect(port).map_err(|e| e.to_string())?;
+    match req(&mut link, &Request::Identify)? {
+        Response::Identity(_) => Ok(link),
+        other => err("Identify", other),
+    }
+}
+
+/// The active and standby slots.
+fn slots(link: &mut LinkClient) -> Result<(Option<SlotInfo>, Option<SlotInfo>), String> {
+    match req(link, &Request::Identify)? {
+        Response::Identity(id) => Ok((id.active, id.standby)),
+        other => err("Identify", other),
+    }
+}
+
+/// Sends a request that may be refused while the axes are not quiet
+/// (injections count as motion): waits and retries.
+fn req_when_quiet(link: &mut LinkClient, r: &Request<'_>) -> Result<Response, String> {
+    for _ in 0..50 {
+        match req(link, r)? {
+            Response::Error(LinkError::AxesMoving { quiet_ms }) => {
+                std::thread::sleep(Duration::from_millis(u64::from(quiet_ms) + 10));
+            }
+            other => return Ok(other),
+        }
+    }
+    Err(format!("{r:?}: the board kept saying the axes move"))
+}
+
+/// Uploads `bytes` announced with `crc32`, the first `send` bytes only
+/// (`None`: all). Returns the next offset the board wants.
+fn upload_bytes(
+    link: &mut LinkClient,
+    bytes: &[u8],
+    crc32: u32,
+    send: Option<usize>,
+) -> Result<u32, String> {
+    let size = bytes.len() as u32;
+    let mut next = match req(link, &Request::UploadBegin { size, crc32 })? {
+        Response::UploadAck { next_offset } => next_offset,
+        other => return err("UploadBegin", other),
+    };
+    let end = send.unwrap_or(bytes.len()).min(bytes.len());
+    while (next as usize) < end {
+        let from = next as usize;
+        let to = (from + MAX_CHUNK_BYTES).min(end);
+        match req(
+            link,
+            &Request::UploadChunk {
+                offset: next,
+                data: &bytes[from..to],
+            },
+        )? {
+            Response::UploadAck { next_offset } if next_offset as usize == to => next = next_offset,
+            other => return err("UploadChunk", other),
+        }
+    }
+    Ok(next)
+}
+
+/// Upload, commit and activate with our own client.
+fn upload_activate(link: &mut LinkClient, t: &HostTable) -> Result<SlotInfo, String> {
+    upload_bytes(link, &t.bytes, t.crc32, None)?;
+    match req_when_quiet(link, &Request::Commit)? {
+        Response::Committed(info) if info.crc32 == t.crc32 => {}
+        other => return err("Commit", other),
+    }
+    match req_when_quiet(link, &Request::Activate)? {
+        Response::Activated(info) if info.crc32 == t.crc32 => Ok(info),
+        other => err("Activate", other),
+    }
+}
+
+/// `trueaxis upload` (the host tool, as a user runs it) against the board.
+fn upload_with_trueaxis(bin: &Path, port: u16, table: &Path) -> Result<(), String> {
+    let port_arg = format!("tcp:127.0.0.1:{port}");
+    let table_s = table.to_string_lossy();
+    let args = ["upload", &table_s, "--port", &port_arg, "--json"];
+    eprintln!("e2e: $ {} {}", bin.display(), args.join(" "));
+    let out = Command::new(bin)
+        .args(args)
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", bin.display()))?;
+    eprint!("{}", String::from_utf8_lossy(&out.stderr));
+    println!("{}", String::from_utf8_lossy(&out.stdout).trim_end());
+    if !out.status.success() {
+        return Err(format!("`trueaxis upload` failed ({})", out.status));
+    }
+    Ok(())
+}
+
+/// Injects every point and compares with the host; returns how many points
+/// were flagged by the model (clamps exercised).
+fn compare_trajectory(
+    link: &mut LinkClient,
+    t: &HostTable,
+    points: &[Injection],
+) -> Result<usize, String> {
+    let mut flagged = 0;
+    for (i, inj) in points.iter().enumerate() {
+        let c: Correction = match req(link, &Request::Inject(*inj))? {
+            Response::Correction(c) => c,
+            other => return err("Inject", other),
+        };
+        let (want_nm, want_flags) = t.expect(inj);
+        if c.model_corr_nm != want_nm || c.model_flags != want_flags {
+            return Err(format!(
+                "point {i} {inj:?}: board {:?} flags {:#x}, host ({}) {want_nm:?} flags {want_flags:#x}",
+                c.model_corr_nm, c.model_flags, t.name
+            ));
+        }
+        flagged += usize::from(want_flags != 0);
+    }
+    Ok(flagged)
+}
+
+/// The end-to-end test.
+pub fn check(cli: &Cli) -> Result<(), String> {
+    let t = HostTable::read(&cli.table)?;
+    let o = match &cli.other {
+        Some(p) => HostTable::read(p)?,
+        None => HostTable::from_bytes(
+            "build/tables.rs full".into(),
+            crate::tables::full(0x0E2E).map_err(|e| e.to_string())?,
+        )?,
+    };
+    if t.bytes == o.bytes {
+        return Err("--table and --other must differ".into());
+    }
+
+    let mut link = connect(cli.port)?;
+    let (active, _) = slots(&mut link)?;
+    if active.is_some() {
+        return Err(format!(
+            "a fresh board should have no table, has {active:?}"
+        ));
+    }
+    eprintln!("e2e: board up, no table");
+
+    // 1. Garbage on the line: seeded random bytes (zeros included, so they
+    // form many bad frames), then a frame cut in half. The next request
+    // must be answered and the bad frames counted.
+    let mut rng = Rng(0x6A2B_A6E0_0000_0001);
+    let garbage: Vec<u8> = (0..4096).map(|_| rng.next_u64() as u8).collect();
+    link.send_raw(&garbage).map_err(|e| e.to_string())?;
+    let mut half = vec![0u8; model_core::link::MAX_FRAME_BYTES];
+    let n = model_core::link::encode_frame(
+        &model_core::link::Packet {
+            seq: 7,
+            msg: Request::Status,
+        },
+        &mut half,
+    )
+    .map_err(|e| e.to_string())?;
+    link.send_raw(&half[..n / 2]).map_err(|e| e.to_string())?;
+    let bad = match req(&mut link, &Request::Status)? {
+        Response::Status(s) => s.rx_bad_frames,
+        other => return err("Status after garbage", other),
+    };
+    if bad == 0 {
+        return Err("garbage was sent but the board counted no bad frame".into());
+    }
+    eprintln!("e2e: garbage survived ({bad} bad frames dropped by the board)");
+
+    // 2. `trueaxis upload` of the fitted table, as a user would run it.
+    drop(link);
+    let mut link = match &cli.trueaxis {
+        Some(bin) => {
+            upload_with_trueaxis(bin, cli.port, &cli.table)?;
+            connect(cli.port)?
+        }
+        None => {
+            eprintln!("e2e: NOTE no --trueaxis given: uploading with this program's own client");
+            let mut link = connect(cli.port)?;
+            upload_activate(&mut link, &t)?;
+            link
+        }
+    };
+    let (active, _) = slots(&mut link)?;
+    match active {
+        Some(info) if info.crc32 == t.crc32 && info.len as usize == t.bytes.len() => {}
+        other => {
+            return Err(format!(
+                "after `trueaxis upload` the active table is {other:?}"
+            ))
+        }
+    }
+    eprintln!(
+        "e2e: `trueaxis upload` activated {} ({:#010x})",
+        t.name, t.crc32
+    );
+
+    // 3. A trajectory: the board's corrections equal the host's, bit for bit.
+    let points = trajectory(&t, 600);
+    let started = std::time::Instant::now();
+    let flagged = compare_trajectory(&mut link, &t, &points)?;
+    eprintln!(
+        "e2e: {:.1} ms per injection round trip",
+        started.elapsed().as_secs_f64() * 1e3 / points.len() as f64
+    );
+    if flagged == 0 {
+        return Err("no trajectory point reached the envelope's edges".into());
+    }
+    eprintln!(
+        "e2e: {} injected points, board == host (fixed point, bit exact; {flagged} flagged at the edges)",
+        points.len()
+    );
+
+    // 4. A cut upload: half of another table, then the connection drops.
+    // The board must keep the old table active, and refuse to commit.
+    upload_bytes(&mut link, &o.bytes, o.crc32, Some(o.bytes.len() / 2))?;
+    drop(link);
+    let mut link = connect(cli.port)?;
+    match req_when_quiet(&mut link, &Request::Commit)? {
+        Response::Error(LinkError::Incomplete { .. } | LinkError::NoUpload) => {}
+        other => return err("Commit of a cut upload", other),
+    }
+    let (active, _) = slots(&mut link)?;
+    if active.map(|a| a.crc32) != Some(t.crc32) {
+        return Err(format!("after a cut upload the active table is {active:?}"));
+    }
+    compare_trajectory(&mut link, &t, &points[..50])?;
+    eprintln!("e2e: cut upload refused, old table still active and correcting");
+
+    // 5. Bytes that do not match the announced CRC: refused.
+    // The flipped byte is in the second half, so it is sent whether the
+    // board resumes the cut upload above (same size and CRC) or starts over.
+    let mut flipped = o.bytes.clone();
+    flipped[o.bytes.len() * 3 / 4] ^= 0x10;
+    upload_bytes(&mut link, &flipped, o.crc32, None)?;
+    match req_when_quiet(&mut link, &Request::Commit)? {
+        Response::Error(LinkError::CrcMismatch | LinkError::InvalidTable) => {}
+        other => return err("Commit of a corrupted upload", other),
+    }
+    if slots(&mut link)?.0.map(|a| a.crc32) != Some(t.crc32) {
+        return Err("a corrupted upload changed the active table".into());
+    }
+    eprintln!("e2e: corrupted upload refused");
+
+    // 6. The other table for real, then a rollback to the first.
+    upload_activate(&mut link, &o)?;
+    compare_trajectory(&mut link, &o, &points[..100])?;
+    match req_when_quiet(&mut link, &Request::Rollback)? {
+        Response::RolledBack(info) if info.crc32 == t.crc32 => {}
+        other => return err("Rollback", other),
+    }
+    compare_trajectory(&mut link, &t, &points[..100])?;
+    eprintln!("e2e: second table activated and rolled back, corrections follow each");
+
+    match req(&mut link, &Request::EndInject)? {
+        Response::Ok => {}
+        other => return err("EndInject", other),
+    }
+    eprintln!("e2e: all checks passed");
+    Ok(())
+}
+
+/// Uploads the demo's table and prints the board's corrections beside the
+/// host's along a short path.
+pub fn show(cli: &Cli) -> Result<(), String> {
+    let t = HostTable::read(&cli.table)?;
+    let mut link = connect(cli.port)?;
+    match &cli.trueaxis {
+        Some(bin) => {
+            drop(link);
+            upload_with_trueaxis(bin, cli.port, &cli.table)?;
+            link = connect(cli.port)?;
+        }
+        None => {
+            upload_activate(&mut link, &t)?;
+        }
+    }
+    let points = trajectory(&t, 400);
+    println!(
+        "\n{:>10} {:>10} {:>10} | {:>27} | {:>27} | same",
+        "x_mm", "y_mm", "z_mm", "board corr_nm (ex ey ez)", "host corr_nm (ex ey ez)"
+    );
+    let mut all_same = true;
+    for inj in points.iter().step_by(40) {
+        let c = match req(&mut link, &Request::Inject(*inj))? {
+            Response::Correction(c) => c,
+            other => return err("Inject", other),
+        };
+        let (want, _) = t.expect(inj);
+        let same = c.model_corr_nm == want;
+        all_same &= same;
+        let mm = inj.pos_nm.map(|p| f64::from(p) / 1e6);
+        println!(
+            "{:>10.3} {:>10.3} {:>10.3} | {:>8} {:>8} {:>9} | {:>8} {:>8} {:>9} | {}",
+            mm[0],
+            mm[1],
+            mm[2],
+            c.model_corr_nm[0],
+            c.model_corr_nm[1],
+            c.model_corr_nm[2],
+            want[0],
+            want[1],
+            want[2],
+            if same { "yes" } else { "NO" }
+        );
+    }
+    let _ = req(&mut link, &Request::EndInject);
+    if all_same {
+        println!("board (QEMU, fixed point) and host agree bit for bit");
+        Ok(())
+    } else {
+        Err("the board's corrections differ from the host's".into())
+    }
+}
