@@ -373,6 +373,13 @@ impl Scale {
     fn apply(self, x: i64) -> i64 {
         rshr(x * self.mul, self.shift)
     }
+    /// `apply` for an i32 argument and a result known to fit i32 (normalised
+    /// positions, grid fractions): i32 × i32 products are one SMULL on the M4.
+    /// `mul` < 2^31 holds for every scale whose factor·2^frac ≤ 2^30.
+    #[inline(always)]
+    fn apply32(self, x: i32) -> i32 {
+        rshr(x as i64 * (self.mul as i32) as i64, self.shift) as i32
+    }
 }
 
 /// Rounding arithmetic shift right.
@@ -1165,7 +1172,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             } else {
                 i
             };
-            t[a] = axes[a].t_scale.apply(frac as i64);
+            t[a] = axes[a].t_scale.apply32(frac) as i64;
         }
         let nx = axes[0].nodes as usize;
         let nxy = nx * axes[1].nodes as usize;
@@ -1190,10 +1197,11 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     pub fn eval_fixed(&self, inp: &Inputs) -> Outputs {
         let mut flags = Flags::empty();
         let (pos, rev, temp, tool) = self.clamp_inputs(inp, &mut flags);
+        // |p − c| ≤ half-span, so |u| ≤ 2^30 (+1 from rounding) fits i32.
         let u = [
-            self.u_scale[0].apply(pos[0].wrapping_sub(self.centre_nm[0]) as i64),
-            self.u_scale[1].apply(pos[1].wrapping_sub(self.centre_nm[1]) as i64),
-            self.u_scale[2].apply(pos[2].wrapping_sub(self.centre_nm[2]) as i64),
+            self.u_scale[0].apply32(pos[0].wrapping_sub(self.centre_nm[0])),
+            self.u_scale[1].apply32(pos[1].wrapping_sub(self.centre_nm[1])),
+            self.u_scale[2].apply32(pos[2].wrapping_sub(self.centre_nm[2])),
         ];
         match self.n_monos {
             0 => self.finish_fixed(&[ONE_Q30], pos, rev, temp, tool, flags),
@@ -1422,19 +1430,21 @@ fn mono56_f32(u: [f32; 3]) -> [f32; MAX_MONOMIALS] {
     mv
 }
 
+/// Q30 × Q30 → Q30, rounded. Operands are i32 (|v| ≤ 2^30) so the product
+/// is a single SMULL on the Cortex-M4.
 #[inline(always)]
-fn mul_q30(a: i64, b: i64) -> i64 {
-    rshr(a * b, 30)
+fn mul_q30(a: i32, b: i32) -> i32 {
+    ((a as i64 * b as i64 + (1 << 29)) >> 30) as i32
 }
 
 /// The 20 graded monomials of degree ≤ 3, Q30 (same rounding as [`mono56_q30`]).
 #[inline(always)]
-fn mono20_q30(u: [i64; 3]) -> [i32; 20] {
+fn mono20_q30(u: [i32; 3]) -> [i32; 20] {
     let [x, y, z] = u;
     let (x2, y2, z2) = (mul_q30(x, x), mul_q30(y, y), mul_q30(z, z));
     let (xy, xz, yz) = (mul_q30(x, y), mul_q30(x, z), mul_q30(y, z));
     [
-        ONE_Q30 as i64,
+        ONE_Q30,
         x,
         y,
         z,
@@ -1455,15 +1465,14 @@ fn mono20_q30(u: [i64; 3]) -> [i32; 20] {
         mul_q30(yz, z),
         mul_q30(z2, z),
     ]
-    .map(|v| v as i32)
 }
 
 /// All 56 graded monomials (degree ≤ 5), Q30.
-fn mono56_q30(u: [i64; 3]) -> [i32; MAX_MONOMIALS] {
+fn mono56_q30(u: [i32; 3]) -> [i32; MAX_MONOMIALS] {
     let mut mv = [0i32; MAX_MONOMIALS];
     mv[0] = ONE_Q30;
     for i in 1..MAX_MONOMIALS {
-        mv[i] = mul_q30(mv[MONO_PARENT[i] as usize] as i64, u[MONO_AXIS[i] as usize]) as i32;
+        mv[i] = mul_q30(mv[MONO_PARENT[i] as usize], u[MONO_AXIS[i] as usize]);
     }
     mv
 }
@@ -1529,7 +1538,7 @@ mod tests {
             .enumerate()
         {
             let uf = u.map(|v| v as f32);
-            let uq = u.map(|v| (v * (1u64 << 30) as f64) as i64);
+            let uq = u.map(|v| (v * (1u64 << 30) as f64) as i32);
             let (a, b) = (mono20_f32(uf), mono56_f32(uf));
             let (c, d) = (mono20_q30(uq), mono56_q30(uq));
             for i in 0..20 {
