@@ -482,6 +482,9 @@ pub struct ModelCap<const P: usize, const G: usize> {
     block_q: [[i32; 3]; MAX_MONOMIALS],
     block_shift: [u32; 3],
     has_block: bool,
+    /// Some term reads temperatures / the tool arm (so they are held and flagged).
+    reads_temp: bool,
+    reads_tool: bool,
     terms: Vec<Term, MAX_TERMS>,
     pf: Vec<f32, P>,
     pq: Vec<i32, P>,
@@ -532,6 +535,8 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             block_q: [[0; 3]; MAX_MONOMIALS],
             block_shift: [0; 3],
             has_block: false,
+            reads_temp: false,
+            reads_tool: false,
             terms: Vec::new(),
             pf: Vec::new(),
             pq: Vec::new(),
@@ -565,6 +570,8 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         self.outputs = 0;
         self.n_monos = 0;
         self.has_block = false;
+        self.reads_temp = false;
+        self.reads_tool = false;
         self.terms.clear();
         self.pf.clear();
         self.pq.clear();
@@ -648,6 +655,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     coefs,
                 } => {
                     // Coefficients per m°C, so the factor is the integer ΔT in m°C.
+                    m.reads_temp = true;
                     let sum: f64 = coefs.iter().map(|(_, c)| (c / 1000.0).abs()).sum();
                     let q = choose_q(sum, 16).ok_or(range_err)?;
                     for (mono, c) in coefs.iter() {
@@ -666,6 +674,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     }
                 }
                 TermView::Abbe { output, coefs } => {
+                    m.reads_tool = true;
                     let sum: f64 = coefs.iter().map(|(_, c)| c.abs()).sum();
                     let q = choose_q(sum, 16).ok_or(range_err)?;
                     for (mono, c) in coefs.iter() {
@@ -790,6 +799,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                         if xs_lo.abs() > 7.0 || xs_hi.abs() > 7.0 {
                             return Err(LoadError::MlpInputRange { term: ti as u32 });
                         }
+                        m.reads_temp |= inp.source >= 3;
                         let _ = m.mlp_in.push(MlpInput {
                             src: inp.source,
                             mid,
@@ -914,45 +924,61 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         })
     }
 
-    /// Clamp the inputs to the envelope, raising flags.
+    /// Hold the positions inside the travel, raising the per-axis flags.
     #[inline(always)]
-    fn clamp_inputs(
-        &self,
-        inp: &Inputs,
-        flags: &mut Flags,
-    ) -> ([i32; 3], [i32; 3], [i32; MAX_TEMPS], i32) {
-        let mut pos = inp.pos_nm;
-        for (a, p) in pos.iter_mut().enumerate() {
-            let (lo, hi) = (self.env.travel_min_nm[a], self.env.travel_max_nm[a]);
-            if *p < lo || *p > hi {
-                *p = (*p).clamp(lo, hi);
-                flags.insert(Flags::out_of_travel(a));
-            }
+    fn hold_pos(&self, p: [i32; 3], flags: &mut Flags) -> [i32; 3] {
+        let mut pos = p;
+        for a in 0..3 {
+            pos[a] = hold(
+                p[a],
+                self.env.travel_min_nm[a],
+                self.env.travel_max_nm[a],
+                flags,
+                Flags::out_of_travel(a),
+            );
         }
+        pos
+    }
+
+    /// Hold the auxiliary inputs (temperatures, tool, reversal state) the
+    /// terms read. Temperature and tool flags are raised only when the table
+    /// reads them.
+    #[inline(always)]
+    fn hold_aux(&self, inp: &Inputs, flags: &mut Flags) -> ([i32; 3], [i32; MAX_TEMPS], i32) {
         let mut temp = inp.temp_mc;
-        for (ch, t) in temp.iter_mut().enumerate().take(self.n_channels as usize) {
-            let (lo, hi) = (self.env.temp_min_mc[ch], self.env.temp_max_mc[ch]);
-            if *t < lo || *t > hi {
-                *t = (*t).clamp(lo, hi);
-                flags.insert(Flags::TEMP_OUT_OF_RANGE);
+        if self.reads_temp {
+            for ch in 0..(self.n_channels as usize).min(MAX_TEMPS) {
+                temp[ch] = hold(
+                    temp[ch],
+                    self.env.temp_min_mc[ch],
+                    self.env.temp_max_mc[ch],
+                    flags,
+                    Flags::TEMP_OUT_OF_RANGE,
+                );
             }
         }
-        let mut tool = inp.tool_nm;
-        if tool < self.env.tool_min_nm || tool > self.env.tool_max_nm {
-            tool = tool.clamp(self.env.tool_min_nm, self.env.tool_max_nm);
-            flags.insert(Flags::TOOL_OUT_OF_RANGE);
-        }
-        let mut rev = inp.rev_q30;
-        for r in rev.iter_mut() {
-            *r = (*r).clamp(-ONE_Q30, ONE_Q30);
-        }
-        (pos, rev, temp, tool)
+        let tool = if self.reads_tool {
+            hold(
+                inp.tool_nm,
+                self.env.tool_min_nm,
+                self.env.tool_max_nm,
+                flags,
+                Flags::TOOL_OUT_OF_RANGE,
+            )
+        } else {
+            inp.tool_nm
+        };
+        let mut none = Flags::empty();
+        let rev = inp
+            .rev_q30
+            .map(|r| hold(r, -ONE_Q30, ONE_Q30, &mut none, Flags::empty()));
+        (rev, temp, tool)
     }
 
     /// Evaluate in f32 (the fast path on the Cortex-M4F).
     pub fn eval_f32(&self, inp: &Inputs) -> Outputs {
         let mut flags = Flags::empty();
-        let (pos, rev, temp, tool) = self.clamp_inputs(inp, &mut flags);
+        let pos = self.hold_pos(inp.pos_nm, &mut flags);
         // |p − c| ≤ half-span < 2^31 (validated), so the wrapping i32
         // difference is exact.
         let u = [
@@ -961,35 +987,89 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             pos[2].wrapping_sub(self.centre_nm[2]) as f32 * self.inv_half_f32[2],
         ];
         // Monomials up to degree 3 (the common case) are one straight-line
-        // expression; the block loop then has a constant trip count.
-        match self.n_monos {
-            0 => self.finish_f32(&[1.0], pos, rev, temp, tool, flags),
-            1..=20 => self.finish_f32(&mono20_f32(u), pos, rev, temp, tool, flags),
-            _ => self.finish_f32(&mono56_f32(u), pos, rev, temp, tool, flags),
+        // expression and the block loop has a constant trip count; all other
+        // terms are evaluated out of line so they cost the polynomial path
+        // nothing (registers, stack) when a table has none.
+        let out = match self.n_monos {
+            0 => {
+                let mut out = [0.0f32; 3];
+                if !self.terms.is_empty() {
+                    self.terms_f32(&[], &pos, inp, &mut flags, &mut out);
+                }
+                out
+            }
+            1..=20 => {
+                let mv = mono20_f32(u);
+                let mut out = self.block_f32(&mv);
+                if !self.terms.is_empty() {
+                    self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
+                }
+                out
+            }
+            _ => {
+                let mv = mono56_f32(u);
+                let mut out = self.block_f32(&mv);
+                if !self.terms.is_empty() {
+                    self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
+                }
+                out
+            }
+        };
+        let mut corr = [0i32; 3];
+        for o in 0..3 {
+            // Absent outputs have no coefficients and no terms: they are 0.
+            let v = out[o];
+            let max = self.env.max_corr_nm[o] as f32; // exact: ≤ 10^7 < 2^24
+            let c = if v > max {
+                flags.insert(Flags::CLAMPED);
+                max
+            } else if v < -max {
+                flags.insert(Flags::CLAMPED);
+                -max
+            } else if !v.is_nan() {
+                v
+            } else {
+                flags.insert(Flags::NOT_FINITE);
+                0.0
+            };
+            // Round half away from zero; |c| ≤ max, so no overflow.
+            corr[o] = if c >= 0.0 {
+                (c + 0.5) as i32
+            } else {
+                (c - 0.5) as i32
+            };
+        }
+        Outputs {
+            corr_nm: corr,
+            flags,
         }
     }
 
     #[inline(always)]
-    fn finish_f32<const N: usize>(
-        &self,
-        mv: &[f32; N],
-        pos: [i32; 3],
-        rev: [i32; 3],
-        temp: [i32; MAX_TEMPS],
-        tool: i32,
-        mut flags: Flags,
-    ) -> Outputs {
-        let mut out = [0.0f32; 3];
-        if self.has_block {
-            let (mut a0, mut a1, mut a2) = (0.0f32, 0.0f32, 0.0f32);
-            for i in 0..N {
-                let (m, c) = (mv[i], self.block_f32[i]);
-                a0 += c[0] * m;
-                a1 += c[1] * m;
-                a2 += c[2] * m;
-            }
-            out = [a0, a1, a2];
+    fn block_f32<const N: usize>(&self, mv: &[f32; N]) -> [f32; 3] {
+        if !self.has_block {
+            return [0.0; 3];
         }
+        let (mut a0, mut a1, mut a2) = (0.0f32, 0.0f32, 0.0f32);
+        for i in 0..N.min(MAX_MONOMIALS) {
+            let (m, c) = (mv[i], self.block_f32[i]);
+            a0 += c[0] * m;
+            a1 += c[1] * m;
+            a2 += c[2] * m;
+        }
+        [a0, a1, a2]
+    }
+
+    #[inline(never)]
+    fn terms_f32(
+        &self,
+        mv: &[f32],
+        pos: &[i32; 3],
+        inp: &Inputs,
+        flags: &mut Flags,
+        out: &mut [f32; 3],
+    ) {
+        let (rev, temp, tool) = self.hold_aux(inp, flags);
         for t in self.terms.iter() {
             match *t {
                 Term::Factored {
@@ -1021,12 +1101,12 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     start,
                     ..
                 } => {
-                    let theta = phase_turns(pos[axis as usize], period_nm, turns);
+                    let theta = phase_turns(pos[axis as usize % 3], period_nm, turns);
                     let mut v = 0.0f32;
-                    let s = start as usize;
-                    for k in 0..harmonics as usize {
+                    let c = &self.pf[start as usize..start as usize + 2 * harmonics as usize];
+                    for (k, ab) in c.chunks_exact(2).enumerate() {
                         let (sn, cs) = sincos_q30(theta.wrapping_mul(k as u32 + 1));
-                        v += self.pf[s + 2 * k] * sn as f32 + self.pf[s + 2 * k + 1] * cs as f32;
+                        v += ab[0] * sn as f32 + ab[1] * cs as f32;
                     }
                     out[output as usize % 3] += v;
                 }
@@ -1043,7 +1123,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     ref axes,
                     start,
                 } => {
-                    out[output as usize % 3] += self.grid_f32(axes, start as usize, &pos);
+                    out[output as usize % 3] += self.grid_f32(axes, start as usize, pos);
                 }
                 Term::Mlp {
                     outputs,
@@ -1055,76 +1135,57 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     start,
                     ..
                 } => {
-                    let mut x = [0.0f32; MAX_HIDDEN_UNITS];
-                    for i in 0..n_in as usize {
-                        let mi = self.mlp_in[in_start as usize + i];
-                        let v = mlp_source(mi.src, &pos, &temp);
-                        x[i] = (v as i64 - mi.mid as i64) as f32 * mi.k_f32;
+                    // Two activation buffers used alternately (no copies).
+                    let mut buf = [[0.0f32; MAX_HIDDEN_UNITS]; 2];
+                    let n_in = (n_in as usize).min(MAX_MLP_INPUTS);
+                    for (i, mi) in self.mlp_in[in_start as usize..in_start as usize + n_in]
+                        .iter()
+                        .enumerate()
+                    {
+                        let v = mlp_source(mi.src, pos, &temp);
+                        buf[0][i] = (v as i64 - mi.mid as i64) as f32 * mi.k_f32;
                     }
-                    let mut prev = n_in as usize;
+                    let mut prev = n_in;
                     let mut k = start as usize;
-                    for layer in 0..=n_layers as usize {
-                        let is_out = layer == n_layers as usize;
+                    let n_layers = n_layers as usize;
+                    for layer in 0..=n_layers {
+                        let is_out = layer == n_layers;
                         let width = if is_out {
                             n_out as usize
                         } else {
-                            widths[layer] as usize
+                            widths[layer % 2] as usize
+                        }
+                        .min(MAX_HIDDEN_UNITS);
+                        let (w, rest) = self.pf[k..].split_at(width * prev);
+                        let b = &rest[..width];
+                        let (src, dst) = if layer % 2 == 0 {
+                            let (a, b) = buf.split_at_mut(1);
+                            (&a[0], &mut b[0])
+                        } else {
+                            let (a, b) = buf.split_at_mut(1);
+                            (&b[0], &mut a[0])
                         };
-                        let w = &self.pf[k..k + width * prev];
-                        let b = &self.pf[k + width * prev..k + width * prev + width];
-                        let mut y = [0.0f32; MAX_HIDDEN_UNITS];
-                        for j in 0..width {
-                            let mut z = b[j];
-                            for (wl, xl) in w[j * prev..(j + 1) * prev].iter().zip(x.iter()) {
+                        let x = &src[..prev];
+                        for ((row, &bj), y) in w.chunks_exact(prev).zip(b).zip(dst.iter_mut()) {
+                            let mut z = bj;
+                            for (wl, xl) in row.iter().zip(x) {
                                 z += wl * xl;
                             }
-                            y[j] = if is_out { z } else { tanh_f32(z) };
+                            *y = if is_out { z } else { tanh_f32(z) };
                         }
                         k += width * prev + width;
                         prev = width;
-                        x = y;
                     }
+                    let res = &buf[(n_layers + 1) % 2];
                     let mut j = 0;
                     for o in 0..3 {
                         if outputs & (1 << o) != 0 {
-                            out[o] += x[j];
+                            out[o] += res[j % MAX_HIDDEN_UNITS];
                             j += 1;
                         }
                     }
                 }
             }
-        }
-        let mut corr = [0i32; 3];
-        for o in 0..3 {
-            if self.outputs & (1 << o) == 0 {
-                continue;
-            }
-            let v = out[o];
-            if !v.is_finite() {
-                flags.insert(Flags::NOT_FINITE);
-                continue;
-            }
-            let max = self.env.max_corr_nm[o] as f32;
-            let c = if v > max {
-                flags.insert(Flags::CLAMPED);
-                max
-            } else if v < -max {
-                flags.insert(Flags::CLAMPED);
-                -max
-            } else {
-                v
-            };
-            // Round half away from zero; `as` saturates.
-            corr[o] = if c >= 0.0 {
-                (c + 0.5) as i32
-            } else {
-                (c - 0.5) as i32
-            };
-            corr[o] = corr[o].clamp(-self.env.max_corr_nm[o], self.env.max_corr_nm[o]);
-        }
-        Outputs {
-            corr_nm: corr,
-            flags,
         }
     }
 
@@ -1196,46 +1257,89 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     /// Evaluate in integer-only fixed point (bit-exact on every target).
     pub fn eval_fixed(&self, inp: &Inputs) -> Outputs {
         let mut flags = Flags::empty();
-        let (pos, rev, temp, tool) = self.clamp_inputs(inp, &mut flags);
+        let pos = self.hold_pos(inp.pos_nm, &mut flags);
         // |p − c| ≤ half-span, so |u| ≤ 2^30 (+1 from rounding) fits i32.
         let u = [
             self.u_scale[0].apply32(pos[0].wrapping_sub(self.centre_nm[0])),
             self.u_scale[1].apply32(pos[1].wrapping_sub(self.centre_nm[1])),
             self.u_scale[2].apply32(pos[2].wrapping_sub(self.centre_nm[2])),
         ];
-        match self.n_monos {
-            0 => self.finish_fixed(&[ONE_Q30], pos, rev, temp, tool, flags),
-            1..=20 => self.finish_fixed(&mono20_q30(u), pos, rev, temp, tool, flags),
-            _ => self.finish_fixed(&mono56_q30(u), pos, rev, temp, tool, flags),
+        let out = match self.n_monos {
+            0 => {
+                let mut out = [0i64; 3];
+                if !self.terms.is_empty() {
+                    self.terms_fixed(&[], &pos, inp, &mut flags, &mut out);
+                }
+                out
+            }
+            1..=20 => {
+                let mv = mono20_q30(u);
+                let mut out = self.block_fixed(&mv);
+                if !self.terms.is_empty() {
+                    self.terms_fixed(&mv, &pos, inp, &mut flags, &mut out);
+                }
+                out
+            }
+            _ => {
+                let mv = mono56_q30(u);
+                let mut out = self.block_fixed(&mv);
+                if !self.terms.is_empty() {
+                    self.terms_fixed(&mv, &pos, inp, &mut flags, &mut out);
+                }
+                out
+            }
+        };
+        let mut corr = [0i32; 3];
+        for o in 0..3 {
+            let max = self.env.max_corr_nm[o] as i64;
+            let v = rshr(out[o], 16);
+            corr[o] = if v > max {
+                flags.insert(Flags::CLAMPED);
+                max
+            } else if v < -max {
+                flags.insert(Flags::CLAMPED);
+                -max
+            } else {
+                v
+            } as i32;
+        }
+        Outputs {
+            corr_nm: corr,
+            flags,
         }
     }
 
+    /// The shared polynomial block, Q16 nm.
     #[inline(always)]
-    fn finish_fixed<const N: usize>(
-        &self,
-        mv: &[i32; N],
-        pos: [i32; 3],
-        rev: [i32; 3],
-        temp: [i32; MAX_TEMPS],
-        tool: i32,
-        mut flags: Flags,
-    ) -> Outputs {
-        let mut out = [0i64; 3]; // Q16 nm
-        if self.has_block {
-            // Σ|c_q| ≤ 2^31 and |m| ≤ 2^30: each sum stays below 2^61.
-            let (mut a0, mut a1, mut a2) = (0i64, 0i64, 0i64);
-            for i in 0..N {
-                let (m, c) = (mv[i] as i64, self.block_q[i]);
-                a0 += c[0] as i64 * m;
-                a1 += c[1] as i64 * m;
-                a2 += c[2] as i64 * m;
-            }
-            out = [
-                rshr(a0, self.block_shift[0]),
-                rshr(a1, self.block_shift[1]),
-                rshr(a2, self.block_shift[2]),
-            ];
+    fn block_fixed<const N: usize>(&self, mv: &[i32; N]) -> [i64; 3] {
+        if !self.has_block {
+            return [0; 3];
         }
+        // Σ|c_q| ≤ 2^31 and |m| ≤ 2^30: each sum stays below 2^61.
+        let (mut a0, mut a1, mut a2) = (0i64, 0i64, 0i64);
+        for i in 0..N.min(MAX_MONOMIALS) {
+            let (m, c) = (mv[i] as i64, self.block_q[i]);
+            a0 += c[0] as i64 * m;
+            a1 += c[1] as i64 * m;
+            a2 += c[2] as i64 * m;
+        }
+        [
+            rshr(a0, self.block_shift[0]),
+            rshr(a1, self.block_shift[1]),
+            rshr(a2, self.block_shift[2]),
+        ]
+    }
+
+    #[inline(never)]
+    fn terms_fixed(
+        &self,
+        mv: &[i32],
+        pos: &[i32; 3],
+        inp: &Inputs,
+        flags: &mut Flags,
+        out: &mut [i64; 3],
+    ) {
+        let (rev, temp, tool) = self.hold_aux(inp, flags);
         for t in self.terms.iter() {
             match *t {
                 Term::Factored {
@@ -1268,13 +1372,12 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     start,
                     shift,
                 } => {
-                    let theta = phase_turns(pos[axis as usize], period_nm, turns);
+                    let theta = phase_turns(pos[axis as usize % 3], period_nm, turns);
                     let mut v = 0i64;
-                    let s = start as usize;
-                    for k in 0..harmonics as usize {
+                    let c = &self.pq[start as usize..start as usize + 2 * harmonics as usize];
+                    for (k, ab) in c.chunks_exact(2).enumerate() {
                         let (sn, cs) = sincos_q30(theta.wrapping_mul(k as u32 + 1));
-                        v += self.pq[s + 2 * k] as i64 * sn as i64
-                            + self.pq[s + 2 * k + 1] as i64 * cs as i64;
+                        v += ab[0] as i64 * sn as i64 + ab[1] as i64 * cs as i64;
                     }
                     let o = output as usize % 3;
                     out[o] = out[o].saturating_add(rshr(v, shift));
@@ -1296,7 +1399,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     start,
                 } => {
                     let o = output as usize % 3;
-                    out[o] = out[o].saturating_add(self.grid_fixed(axes, start as usize, &pos));
+                    out[o] = out[o].saturating_add(self.grid_fixed(axes, start as usize, pos));
                 }
                 Term::Mlp {
                     outputs,
@@ -1309,84 +1412,86 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     q,
                 } => {
                     // Layer-1 inputs in Q28 (|x| ≤ 7 checked at load), later ones Q30.
-                    let mut x = [0i32; MAX_HIDDEN_UNITS];
-                    for i in 0..n_in as usize {
-                        let mi = self.mlp_in[in_start as usize + i];
-                        let v = mlp_source(mi.src, &pos, &temp);
-                        x[i] = mi
+                    let mut buf = [[0i32; MAX_HIDDEN_UNITS]; 2];
+                    let n_in = (n_in as usize).min(MAX_MLP_INPUTS);
+                    for (i, mi) in self.mlp_in[in_start as usize..in_start as usize + n_in]
+                        .iter()
+                        .enumerate()
+                    {
+                        let v = mlp_source(mi.src, pos, &temp);
+                        buf[0][i] = mi
                             .k_q28
                             .apply(v as i64 - mi.mid as i64)
                             .clamp(i32::MIN as i64, i32::MAX as i64)
                             as i32;
                     }
                     let mut in_frac = 28u32;
-                    let mut prev = n_in as usize;
+                    let mut prev = n_in;
                     let mut k = start as usize;
                     let mut res = [0i64; 3];
-                    for layer in 0..=n_layers as usize {
-                        let is_out = layer == n_layers as usize;
+                    let n_layers = n_layers as usize;
+                    for layer in 0..=n_layers {
+                        let is_out = layer == n_layers;
                         let width = if is_out {
                             n_out as usize
                         } else {
-                            widths[layer] as usize
+                            widths[layer % 2] as usize
+                        }
+                        .min(MAX_HIDDEN_UNITS);
+                        let ql = if is_out { q[2] } else { q[layer % 2] } as u32;
+                        let (w, rest) = self.pq[k..].split_at(width * prev);
+                        let b = &rest[..width];
+                        let (src, dst) = if layer % 2 == 0 {
+                            let (a, b) = buf.split_at_mut(1);
+                            (&a[0], &mut b[0])
+                        } else {
+                            let (a, b) = buf.split_at_mut(1);
+                            (&b[0], &mut a[0])
                         };
-                        let ql = if is_out { q[2] } else { q[layer] } as u32;
-                        let w = &self.pq[k..k + width * prev];
-                        let b = &self.pq[k + width * prev..k + width * prev + width];
-                        let mut y = [0i32; MAX_HIDDEN_UNITS];
-                        for j in 0..width {
-                            let mut z = (b[j] as i64) << in_frac;
-                            for (&wl, &xl) in w[j * prev..(j + 1) * prev].iter().zip(x.iter()) {
+                        let x = &src[..prev];
+                        for (j, (row, &bj)) in w.chunks_exact(prev).zip(b).enumerate() {
+                            let mut z = (bj as i64) << in_frac;
+                            for (&wl, &xl) in row.iter().zip(x) {
                                 z += wl as i64 * xl as i64;
                             }
                             // z is Q(q + in_frac).
                             if is_out {
-                                if j < 3 {
-                                    res[j] = rshr(z, ql + in_frac - 16);
-                                }
+                                res[j % 3] = rshr(z, ql + in_frac - 16);
                             } else {
                                 let z26 = rshr(z, ql + in_frac - TANH_IN_FRAC);
-                                y[j] = tanh_q30(
+                                dst[j] = tanh_q30(
                                     z26.clamp(-(16 << TANH_IN_FRAC), 16 << TANH_IN_FRAC) as i32,
                                 );
                             }
                         }
                         k += width * prev + width;
                         prev = width;
-                        x = y;
                         in_frac = 30;
                     }
                     let mut j = 0;
                     for (o, acc) in out.iter_mut().enumerate() {
                         if outputs & (1 << o) != 0 {
-                            *acc = acc.saturating_add(res[j.min(2)]);
+                            *acc = acc.saturating_add(res[j % 3]);
                             j += 1;
                         }
                     }
                 }
             }
         }
-        let mut corr = [0i32; 3];
-        for o in 0..3 {
-            if self.outputs & (1 << o) == 0 {
-                continue;
-            }
-            let max = self.env.max_corr_nm[o] as i64;
-            let v = rshr(out[o], 16);
-            corr[o] = if v > max {
-                flags.insert(Flags::CLAMPED);
-                max
-            } else if v < -max {
-                flags.insert(Flags::CLAMPED);
-                -max
-            } else {
-                v
-            } as i32;
-        }
-        Outputs {
-            corr_nm: corr,
-            flags,
-        }
+    }
+}
+
+/// `v` held inside [lo, hi] (lo ≤ hi is validated), raising `f` when it was outside.
+#[inline(always)]
+fn hold(v: i32, lo: i32, hi: i32, flags: &mut Flags, f: Flags) -> i32 {
+    if v < lo {
+        flags.insert(f);
+        lo
+    } else if v > hi {
+        flags.insert(f);
+        hi
+    } else {
+        v
     }
 }
 

@@ -70,9 +70,15 @@ proptest! {
                 }
                 held.pos_nm[a] = c;
             }
+            // Temperatures are held and flagged only when the table reads them.
+            let reads_temp = spec.terms.iter().any(|t| match t {
+                model_core::TermSpec::Thermal { .. } => true,
+                model_core::TermSpec::Mlp(m) => m.inputs.iter().any(|i| matches!(i.source, model_core::MlpSource::Temp(_))),
+                _ => false,
+            });
             for ch in 0..spec.channels.len() {
                 let c = inp.temp_mc[ch].clamp(env.temp_min_mc[ch], env.temp_max_mc[ch]);
-                if c != inp.temp_mc[ch] {
+                if c != inp.temp_mc[ch] && reads_temp {
                     expect.insert(Flags::TEMP_OUT_OF_RANGE);
                 }
                 held.temp_mc[ch] = c;
