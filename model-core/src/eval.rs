@@ -485,6 +485,10 @@ pub struct ModelCap<const P: usize, const G: usize> {
     /// Some term reads temperatures / the tool arm (so they are held and flagged).
     reads_temp: bool,
     reads_tool: bool,
+    /// Some term is a thermal/Abbe polynomial (needs the monomials).
+    has_factored: bool,
+    /// max |correction| per output as f32 (exact: ≤ MAX_CORR_LIMIT_NM < 2^22).
+    max_corr_f32: [f32; 3],
     terms: Vec<Term, MAX_TERMS>,
     pf: Vec<f32, P>,
     pq: Vec<i32, P>,
@@ -537,6 +541,8 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             has_block: false,
             reads_temp: false,
             reads_tool: false,
+            has_factored: false,
+            max_corr_f32: [0.0; 3],
             terms: Vec::new(),
             pf: Vec::new(),
             pq: Vec::new(),
@@ -572,6 +578,8 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         self.has_block = false;
         self.reads_temp = false;
         self.reads_tool = false;
+        self.has_factored = false;
+        self.max_corr_f32 = [0.0; 3];
         self.terms.clear();
         self.pf.clear();
         self.pq.clear();
@@ -589,6 +597,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         m.outputs = table.outputs_mask();
         m.n_channels = table.channel_count() as u8;
         m.centre_nm = sc.centre_nm;
+        m.max_corr_f32 = env.max_corr_nm.map(|v| v as f32);
         if table.term_count() > MAX_TERMS {
             return Err(LoadError::TooManyTerms {
                 count: table.term_count() as u32,
@@ -656,6 +665,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                 } => {
                     // Coefficients per m°C, so the factor is the integer ΔT in m°C.
                     m.reads_temp = true;
+                    m.has_factored = true;
                     let sum: f64 = coefs.iter().map(|(_, c)| (c / 1000.0).abs()).sum();
                     let q = choose_q(sum, 16).ok_or(range_err)?;
                     for (mono, c) in coefs.iter() {
@@ -675,6 +685,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                 }
                 TermView::Abbe { output, coefs } => {
                     m.reads_tool = true;
+                    m.has_factored = true;
                     let sum: f64 = coefs.iter().map(|(_, c)| c.abs()).sum();
                     let q = choose_q(sum, 16).ok_or(range_err)?;
                     for (mono, c) in coefs.iter() {
@@ -987,57 +998,38 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             pos[2].wrapping_sub(self.centre_nm[2]) as f32 * self.inv_half_f32[2],
         ];
         // Monomials up to degree 3 (the common case) are one straight-line
-        // expression and the block loop has a constant trip count; all other
-        // terms are evaluated out of line so they cost the polynomial path
-        // nothing (registers, stack) when a table has none.
-        let out = match self.n_monos {
-            0 => {
-                let mut out = [0.0f32; 3];
-                if !self.terms.is_empty() {
-                    self.terms_f32(&[], &pos, inp, &mut flags, &mut out);
-                }
-                out
-            }
-            1..=20 => {
-                let mv = mono20_f32(u);
-                let mut out = self.block_f32(&mv);
-                if !self.terms.is_empty() {
-                    self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
-                }
-                out
-            }
-            _ => {
-                let mv = mono56_f32(u);
-                let mut out = self.block_f32(&mv);
-                if !self.terms.is_empty() {
-                    self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
-                }
-                out
-            }
+        // expression and the block loop has a constant trip count. All other
+        // terms are evaluated out of line (recomputing the monomials they
+        // need), so they cost the polynomial path nothing — no spilled
+        // monomials, no hoisted constants — when a table has none.
+        let mut out = match self.n_monos {
+            0 => [0.0; 3],
+            1..=20 => self.block_f32(&mono20_f32(u)),
+            _ => self.block_f32(&mono56_f32(u)),
         };
+        if !self.terms.is_empty() {
+            self.terms_f32(u, &pos, inp, &mut flags, &mut out);
+        }
         let mut corr = [0i32; 3];
         for o in 0..3 {
             // Absent outputs have no coefficients and no terms: they are 0.
             let v = out[o];
-            let max = self.env.max_corr_nm[o] as f32; // exact: ≤ 10^7 < 2^24
-            let c = if v > max {
+            let max = self.max_corr_f32[o];
+            let c = if v.abs() <= max {
+                v // the common case; NaN fails the comparison
+            } else if v > max {
                 flags.insert(Flags::CLAMPED);
                 max
             } else if v < -max {
                 flags.insert(Flags::CLAMPED);
                 -max
-            } else if !v.is_nan() {
-                v
             } else {
                 flags.insert(Flags::NOT_FINITE);
                 0.0
             };
-            // Round half away from zero; |c| ≤ max, so no overflow.
-            corr[o] = if c >= 0.0 {
-                (c + 0.5) as i32
-            } else {
-                (c - 0.5) as i32
-            };
+            // Round to nearest (ties to even) with the 1.5·2^23 trick: exact
+            // for |c| < 2^22, which MAX_CORR_LIMIT_NM guarantees.
+            corr[o] = ((c + ROUND_MAGIC) - ROUND_MAGIC) as i32;
         }
         Outputs {
             corr_nm: corr,
@@ -1063,13 +1055,21 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     #[inline(never)]
     fn terms_f32(
         &self,
-        mv: &[f32],
+        u: [f32; 3],
         pos: &[i32; 3],
         inp: &Inputs,
         flags: &mut Flags,
         out: &mut [f32; 3],
     ) {
         let (rev, temp, tool) = self.hold_aux(inp, flags);
+        let mut mv = [0.0f32; MAX_MONOMIALS];
+        if self.n_monos > 0 && self.has_factored {
+            if self.n_monos <= 20 {
+                mv[..20].copy_from_slice(&mono20_f32(u));
+            } else {
+                mv = mono56_f32(u);
+            }
+        }
         for t in self.terms.iter() {
             match *t {
                 Term::Factored {
@@ -1082,7 +1082,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     let (s, e) = (start as usize, start as usize + len as usize);
                     let mut v = 0.0f32;
                     for (c, &i) in self.pf[s..e].iter().zip(self.pidx[s..e].iter()) {
-                        v += c * mv.get(i as usize).copied().unwrap_or(0.0);
+                        v += c * mv[i as usize % MAX_MONOMIALS];
                     }
                     let f = match factor {
                         Factor::Temp { ch, t_ref_mc } => {
@@ -1101,14 +1101,13 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     start,
                     ..
                 } => {
-                    let theta = phase_turns(pos[axis as usize % 3], period_nm, turns);
-                    let mut v = 0.0f32;
-                    let c = &self.pf[start as usize..start as usize + 2 * harmonics as usize];
-                    for (k, ab) in c.chunks_exact(2).enumerate() {
-                        let (sn, cs) = sincos_q30(theta.wrapping_mul(k as u32 + 1));
-                        v += ab[0] * sn as f32 + ab[1] * cs as f32;
-                    }
-                    out[output as usize % 3] += v;
+                    out[output as usize % 3] += self.periodic_f32(
+                        pos[axis as usize % 3],
+                        harmonics,
+                        period_nm,
+                        turns,
+                        start,
+                    );
                 }
                 Term::Reversal {
                     output,
@@ -1125,66 +1124,93 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                 } => {
                     out[output as usize % 3] += self.grid_f32(axes, start as usize, pos);
                 }
-                Term::Mlp {
-                    outputs,
-                    n_in,
-                    n_layers,
-                    widths,
-                    n_out,
-                    in_start,
-                    start,
-                    ..
-                } => {
-                    // Two activation buffers used alternately (no copies).
-                    let mut buf = [[0.0f32; MAX_HIDDEN_UNITS]; 2];
-                    let n_in = (n_in as usize).min(MAX_MLP_INPUTS);
-                    for (i, mi) in self.mlp_in[in_start as usize..in_start as usize + n_in]
-                        .iter()
-                        .enumerate()
-                    {
-                        let v = mlp_source(mi.src, pos, &temp);
-                        buf[0][i] = (v as i64 - mi.mid as i64) as f32 * mi.k_f32;
-                    }
-                    let mut prev = n_in;
-                    let mut k = start as usize;
-                    let n_layers = n_layers as usize;
-                    for layer in 0..=n_layers {
-                        let is_out = layer == n_layers;
-                        let width = if is_out {
-                            n_out as usize
-                        } else {
-                            widths[layer % 2] as usize
-                        }
-                        .min(MAX_HIDDEN_UNITS);
-                        let (w, rest) = self.pf[k..].split_at(width * prev);
-                        let b = &rest[..width];
-                        let (src, dst) = if layer % 2 == 0 {
-                            let (a, b) = buf.split_at_mut(1);
-                            (&a[0], &mut b[0])
-                        } else {
-                            let (a, b) = buf.split_at_mut(1);
-                            (&b[0], &mut a[0])
-                        };
-                        let x = &src[..prev];
-                        for ((row, &bj), y) in w.chunks_exact(prev).zip(b).zip(dst.iter_mut()) {
-                            let mut z = bj;
-                            for (wl, xl) in row.iter().zip(x) {
-                                z += wl * xl;
-                            }
-                            *y = if is_out { z } else { tanh_f32(z) };
-                        }
-                        k += width * prev + width;
-                        prev = width;
-                    }
-                    let res = &buf[(n_layers + 1) % 2];
-                    let mut j = 0;
-                    for o in 0..3 {
-                        if outputs & (1 << o) != 0 {
-                            out[o] += res[j % MAX_HIDDEN_UNITS];
-                            j += 1;
-                        }
-                    }
+                Term::Mlp { .. } => self.mlp_f32(t, pos, &temp, out),
+            }
+        }
+    }
+
+    /// Σ a_k sin kθ + b_k cos kθ: the first harmonic from the table, the
+    /// others by the angle-addition recurrence (4 multiplies each).
+    #[inline(never)]
+    fn periodic_f32(&self, p: i32, harmonics: u8, period_nm: i32, turns: Scale, start: u16) -> f32 {
+        let theta = phase_turns(p, period_nm, turns);
+        let (s1, c1) = sincos_q30(theta);
+        // The coefficients carry the 2^-30 of the Q30 sin/cos.
+        let (s1, c1) = (s1 as f32, c1 as f32);
+        let (s1n, c1n) = (s1 * (1.0 / ONE_Q30 as f32), c1 * (1.0 / ONE_Q30 as f32));
+        let c = &self.pf[start as usize..start as usize + 2 * harmonics as usize];
+        let (mut s, mut co) = (s1, c1);
+        let mut v = 0.0f32;
+        for ab in c.chunks_exact(2) {
+            v += ab[0] * s + ab[1] * co;
+            let sn = s * c1n + co * s1n;
+            co = co * c1n - s * s1n;
+            s = sn;
+        }
+        v
+    }
+
+    #[inline(never)]
+    fn mlp_f32(&self, t: &Term, pos: &[i32; 3], temp: &[i32; MAX_TEMPS], out: &mut [f32; 3]) {
+        let Term::Mlp {
+            outputs,
+            n_in,
+            n_layers,
+            widths,
+            n_out,
+            in_start,
+            start,
+            ..
+        } = *t
+        else {
+            return;
+        };
+        // Two activation buffers used alternately (no copies).
+        let mut buf = [[0.0f32; MAX_HIDDEN_UNITS]; 2];
+        let n_in = (n_in as usize).min(MAX_MLP_INPUTS);
+        for (i, mi) in self.mlp_in[in_start as usize..in_start as usize + n_in]
+            .iter()
+            .enumerate()
+        {
+            let v = mlp_source(mi.src, pos, temp);
+            buf[0][i] = (v as i64 - mi.mid as i64) as f32 * mi.k_f32;
+        }
+        let mut prev = n_in;
+        let mut k = start as usize;
+        let n_layers = n_layers as usize;
+        for layer in 0..=n_layers {
+            let is_out = layer == n_layers;
+            let width = if is_out {
+                n_out as usize
+            } else {
+                widths[layer % 2] as usize
+            }
+            .min(MAX_HIDDEN_UNITS);
+            let (w, rest) = self.pf[k..].split_at(width * prev);
+            let b = &rest[..width];
+            let (lo, hi) = buf.split_at_mut(1);
+            let (src, dst) = if layer % 2 == 0 {
+                (&lo[0], &mut hi[0])
+            } else {
+                (&hi[0], &mut lo[0])
+            };
+            let x = &src[..prev];
+            for ((row, &bj), y) in w.chunks_exact(prev).zip(b).zip(dst.iter_mut()) {
+                let mut z = bj;
+                for (wl, xl) in row.iter().zip(x) {
+                    z += wl * xl;
                 }
+                *y = if is_out { z } else { tanh_f32(z) };
+            }
+            k += width * prev + width;
+            prev = width;
+        }
+        let res = &buf[(n_layers + 1) % 2];
+        let mut j = 0;
+        for o in 0..3 {
+            if outputs & (1 << o) != 0 {
+                out[o] += res[j % MAX_HIDDEN_UNITS];
+                j += 1;
             }
         }
     }
@@ -1264,31 +1290,14 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             self.u_scale[1].apply32(pos[1].wrapping_sub(self.centre_nm[1])),
             self.u_scale[2].apply32(pos[2].wrapping_sub(self.centre_nm[2])),
         ];
-        let out = match self.n_monos {
-            0 => {
-                let mut out = [0i64; 3];
-                if !self.terms.is_empty() {
-                    self.terms_fixed(&[], &pos, inp, &mut flags, &mut out);
-                }
-                out
-            }
-            1..=20 => {
-                let mv = mono20_q30(u);
-                let mut out = self.block_fixed(&mv);
-                if !self.terms.is_empty() {
-                    self.terms_fixed(&mv, &pos, inp, &mut flags, &mut out);
-                }
-                out
-            }
-            _ => {
-                let mv = mono56_q30(u);
-                let mut out = self.block_fixed(&mv);
-                if !self.terms.is_empty() {
-                    self.terms_fixed(&mv, &pos, inp, &mut flags, &mut out);
-                }
-                out
-            }
+        let mut out = match self.n_monos {
+            0 => [0; 3],
+            1..=20 => self.block_fixed(&mono20_q30(u)),
+            _ => self.block_fixed(&mono56_q30(u)),
         };
+        if !self.terms.is_empty() {
+            self.terms_fixed(u, &pos, inp, &mut flags, &mut out);
+        }
         let mut corr = [0i32; 3];
         for o in 0..3 {
             let max = self.env.max_corr_nm[o] as i64;
@@ -1333,13 +1342,21 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     #[inline(never)]
     fn terms_fixed(
         &self,
-        mv: &[i32],
+        u: [i32; 3],
         pos: &[i32; 3],
         inp: &Inputs,
         flags: &mut Flags,
         out: &mut [i64; 3],
     ) {
         let (rev, temp, tool) = self.hold_aux(inp, flags);
+        let mut mv = [0i32; MAX_MONOMIALS];
+        if self.n_monos > 0 && self.has_factored {
+            if self.n_monos <= 20 {
+                mv[..20].copy_from_slice(&mono20_q30(u));
+            } else {
+                mv = mono56_q30(u);
+            }
+        }
         for t in self.terms.iter() {
             match *t {
                 Term::Factored {
@@ -1352,7 +1369,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     let (s, e) = (start as usize, start as usize + len as usize);
                     let mut v = 0i64;
                     for (&c, &i) in self.pq[s..e].iter().zip(self.pidx[s..e].iter()) {
-                        v += c as i64 * mv.get(i as usize).copied().unwrap_or(0) as i64;
+                        v += c as i64 * mv[i as usize % MAX_MONOMIALS] as i64;
                     }
                     let f = match factor {
                         Factor::Temp { ch, t_ref_mc } => {
@@ -1372,14 +1389,14 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     start,
                     shift,
                 } => {
-                    let theta = phase_turns(pos[axis as usize % 3], period_nm, turns);
-                    let mut v = 0i64;
-                    let c = &self.pq[start as usize..start as usize + 2 * harmonics as usize];
-                    for (k, ab) in c.chunks_exact(2).enumerate() {
-                        let (sn, cs) = sincos_q30(theta.wrapping_mul(k as u32 + 1));
-                        v += ab[0] as i64 * sn as i64 + ab[1] as i64 * cs as i64;
-                    }
                     let o = output as usize % 3;
+                    let v = self.periodic_fixed(
+                        pos[axis as usize % 3],
+                        harmonics,
+                        period_nm,
+                        turns,
+                        start,
+                    );
                     out[o] = out[o].saturating_add(rshr(v, shift));
                 }
                 Term::Reversal {
@@ -1401,85 +1418,117 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     let o = output as usize % 3;
                     out[o] = out[o].saturating_add(self.grid_fixed(axes, start as usize, pos));
                 }
-                Term::Mlp {
-                    outputs,
-                    n_in,
-                    n_layers,
-                    widths,
-                    n_out,
-                    in_start,
-                    start,
-                    q,
-                } => {
-                    // Layer-1 inputs in Q28 (|x| ≤ 7 checked at load), later ones Q30.
-                    let mut buf = [[0i32; MAX_HIDDEN_UNITS]; 2];
-                    let n_in = (n_in as usize).min(MAX_MLP_INPUTS);
-                    for (i, mi) in self.mlp_in[in_start as usize..in_start as usize + n_in]
-                        .iter()
-                        .enumerate()
-                    {
-                        let v = mlp_source(mi.src, pos, &temp);
-                        buf[0][i] = mi
-                            .k_q28
-                            .apply(v as i64 - mi.mid as i64)
-                            .clamp(i32::MIN as i64, i32::MAX as i64)
-                            as i32;
-                    }
-                    let mut in_frac = 28u32;
-                    let mut prev = n_in;
-                    let mut k = start as usize;
-                    let mut res = [0i64; 3];
-                    let n_layers = n_layers as usize;
-                    for layer in 0..=n_layers {
-                        let is_out = layer == n_layers;
-                        let width = if is_out {
-                            n_out as usize
-                        } else {
-                            widths[layer % 2] as usize
-                        }
-                        .min(MAX_HIDDEN_UNITS);
-                        let ql = if is_out { q[2] } else { q[layer % 2] } as u32;
-                        let (w, rest) = self.pq[k..].split_at(width * prev);
-                        let b = &rest[..width];
-                        let (src, dst) = if layer % 2 == 0 {
-                            let (a, b) = buf.split_at_mut(1);
-                            (&a[0], &mut b[0])
-                        } else {
-                            let (a, b) = buf.split_at_mut(1);
-                            (&b[0], &mut a[0])
-                        };
-                        let x = &src[..prev];
-                        for (j, (row, &bj)) in w.chunks_exact(prev).zip(b).enumerate() {
-                            let mut z = (bj as i64) << in_frac;
-                            for (&wl, &xl) in row.iter().zip(x) {
-                                z += wl as i64 * xl as i64;
-                            }
-                            // z is Q(q + in_frac).
-                            if is_out {
-                                res[j % 3] = rshr(z, ql + in_frac - 16);
-                            } else {
-                                let z26 = rshr(z, ql + in_frac - TANH_IN_FRAC);
-                                dst[j] = tanh_q30(
-                                    z26.clamp(-(16 << TANH_IN_FRAC), 16 << TANH_IN_FRAC) as i32,
-                                );
-                            }
-                        }
-                        k += width * prev + width;
-                        prev = width;
-                        in_frac = 30;
-                    }
-                    let mut j = 0;
-                    for (o, acc) in out.iter_mut().enumerate() {
-                        if outputs & (1 << o) != 0 {
-                            *acc = acc.saturating_add(res[j % 3]);
-                            j += 1;
-                        }
-                    }
+                Term::Mlp { .. } => self.mlp_fixed(t, pos, &temp, out),
+            }
+        }
+    }
+
+    /// Σ a_k sin kθ + b_k cos kθ in Q(q+30): the first harmonic from the
+    /// table, the others by the angle-addition recurrence in Q30.
+    #[inline(never)]
+    fn periodic_fixed(
+        &self,
+        p: i32,
+        harmonics: u8,
+        period_nm: i32,
+        turns: Scale,
+        start: u16,
+    ) -> i64 {
+        let theta = phase_turns(p, period_nm, turns);
+        let (s1, c1) = sincos_q30(theta);
+        let c = &self.pq[start as usize..start as usize + 2 * harmonics as usize];
+        let (mut s, mut co) = (s1, c1);
+        let mut v = 0i64;
+        for ab in c.chunks_exact(2) {
+            v += ab[0] as i64 * s as i64 + ab[1] as i64 * co as i64;
+            let sn = ((s as i64 * c1 as i64 + co as i64 * s1 as i64 + (1 << 29)) >> 30) as i32;
+            co = ((co as i64 * c1 as i64 - s as i64 * s1 as i64 + (1 << 29)) >> 30) as i32;
+            s = sn;
+        }
+        v
+    }
+
+    #[inline(never)]
+    fn mlp_fixed(&self, t: &Term, pos: &[i32; 3], temp: &[i32; MAX_TEMPS], out: &mut [i64; 3]) {
+        let Term::Mlp {
+            outputs,
+            n_in,
+            n_layers,
+            widths,
+            n_out,
+            in_start,
+            start,
+            q,
+        } = *t
+        else {
+            return;
+        };
+        // Layer-1 inputs in Q28 (|x| ≤ 7 checked at load), later ones Q30.
+        let mut buf = [[0i32; MAX_HIDDEN_UNITS]; 2];
+        let n_in = (n_in as usize).min(MAX_MLP_INPUTS);
+        for (i, mi) in self.mlp_in[in_start as usize..in_start as usize + n_in]
+            .iter()
+            .enumerate()
+        {
+            let v = mlp_source(mi.src, pos, temp);
+            buf[0][i] = mi
+                .k_q28
+                .apply(v as i64 - mi.mid as i64)
+                .clamp(i32::MIN as i64, i32::MAX as i64) as i32;
+        }
+        let mut in_frac = 28u32;
+        let mut prev = n_in;
+        let mut k = start as usize;
+        let mut res = [0i64; 3];
+        let n_layers = n_layers as usize;
+        for layer in 0..=n_layers {
+            let is_out = layer == n_layers;
+            let width = if is_out {
+                n_out as usize
+            } else {
+                widths[layer % 2] as usize
+            }
+            .min(MAX_HIDDEN_UNITS);
+            let ql = if is_out { q[2] } else { q[layer % 2] } as u32;
+            let (w, rest) = self.pq[k..].split_at(width * prev);
+            let b = &rest[..width];
+            let (lo, hi) = buf.split_at_mut(1);
+            let (src, dst) = if layer % 2 == 0 {
+                (&lo[0], &mut hi[0])
+            } else {
+                (&hi[0], &mut lo[0])
+            };
+            let x = &src[..prev];
+            for (j, (row, &bj)) in w.chunks_exact(prev).zip(b).enumerate() {
+                let mut z = (bj as i64) << in_frac;
+                for (&wl, &xl) in row.iter().zip(x) {
+                    z += wl as i64 * xl as i64;
                 }
+                // z is Q(q + in_frac).
+                if is_out {
+                    res[j % 3] = rshr(z, ql + in_frac - 16);
+                } else {
+                    let z26 = rshr(z, ql + in_frac - TANH_IN_FRAC);
+                    dst[j % MAX_HIDDEN_UNITS] =
+                        tanh_q30(z26.clamp(-(16 << TANH_IN_FRAC), 16 << TANH_IN_FRAC) as i32);
+                }
+            }
+            k += width * prev + width;
+            prev = width;
+            in_frac = 30;
+        }
+        let mut j = 0;
+        for (o, acc) in out.iter_mut().enumerate() {
+            if outputs & (1 << o) != 0 {
+                *acc = acc.saturating_add(res[j % 3]);
+                j += 1;
             }
         }
     }
 }
+
+/// 1.5 · 2^23: adding and subtracting it rounds an f32 of magnitude < 2^22 to an integer.
+const ROUND_MAGIC: f32 = 12_582_912.0;
 
 /// `v` held inside [lo, hi] (lo ≤ hi is validated), raising `f` when it was outside.
 #[inline(always)]

@@ -40,8 +40,9 @@ pub const MAX_HIDDEN_UNITS: usize = 32;
 pub const MAX_HIDDEN_LAYERS: usize = 2;
 /// Most nodes along one grid axis.
 pub const MAX_GRID_NODES_PER_AXIS: u16 = 1024;
-/// Largest |max correction| an envelope may declare (10 mm).
-pub const MAX_CORR_LIMIT_NM: i32 = 10_000_000;
+/// Largest |max correction| an envelope may declare: 4 mm, below 2^22 nm so
+/// the f32 evaluator rounds its outputs exactly with one add and subtract.
+pub const MAX_CORR_LIMIT_NM: i32 = 4_000_000;
 /// Largest |T_ref| of a thermal term (200 °C).
 pub const MAX_TREF_MC: i32 = 200_000;
 /// The CRC used for the trailer: CRC-32/ISO-HDLC (the zlib/PNG CRC-32,

@@ -77,7 +77,7 @@ pub fn base_spec(rng: &mut Rng, n_channels: usize) -> TableSpec {
         sc.half_span_nm[a] = half;
         env.travel_min_nm[a] = centre - half;
         env.travel_max_nm[a] = centre + half;
-        env.max_corr_nm[a] = 5_000_000;
+        env.max_corr_nm[a] = 4_000_000;
     }
     env.max_slew_nm_per_ms = 1000;
     for ch in 0..n_channels {
