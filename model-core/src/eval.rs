@@ -373,12 +373,48 @@ impl Scale {
     fn apply(self, x: i64) -> i64 {
         rshr(x * self.mul, self.shift)
     }
-    /// `apply` for an i32 argument and a result known to fit i32 (normalised
-    /// positions, grid fractions): i32 × i32 products are one SMULL on the M4.
-    /// `mul` < 2^31 holds for every scale whose factor·2^frac ≤ 2^30.
+}
+
+/// x ↦ round(x · factor · 2^frac) as (x·k + 2^31) >> 32: a constant shift,
+/// so on the M4 it is one SMULL/MLA pair and an add — no variable 64-bit
+/// shift. Valid while |x · k| < 2^63 (callers keep |x| ≤ 1/factor).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Mul32 {
+    k: i64,
+}
+
+impl Mul32 {
+    fn new(factor: f64, frac: i32) -> Mul32 {
+        Mul32 {
+            k: round_i64(factor * pow2(frac + 32)),
+        }
+    }
     #[inline(always)]
-    fn apply32(self, x: i32) -> i32 {
-        rshr(x as i64 * (self.mul as i32) as i64, self.shift) as i32
+    fn apply(self, x: i32) -> i32 {
+        ((x as i64 * self.k + (1 << 31)) >> 32) as i32
+    }
+}
+
+/// The phase increment per nm as a fraction of a turn (2^32 = one turn),
+/// split into integer and fractional parts so the phase of r nm is
+/// `r·int + hi32(r·frac)` — a MUL and a UMULL, exact to 1 LSB.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Turns {
+    int: u32,
+    frac: u32,
+}
+
+impl Turns {
+    fn new(period_nm: i32) -> Turns {
+        let p = period_nm.max(1) as u64;
+        let int = (1u64 << 32) / p;
+        let rem = (1u64 << 32) % p;
+        // frac = round(rem / p · 2^32), computed exactly in u128.
+        let frac = (((rem as u128) << 32) + (p as u128 / 2)) / p as u128;
+        Turns {
+            int: int as u32,
+            frac: frac.min(u32::MAX as u128) as u32,
+        }
     }
 }
 
@@ -407,7 +443,7 @@ struct GridAxis {
     origin_nm: i32,
     step_nm: i32,
     inv_step_f32: f32,
-    t_scale: Scale,
+    t_scale: Mul32,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -434,7 +470,7 @@ enum Term {
         axis: u8,
         harmonics: u8,
         period_nm: i32,
-        turns: Scale,
+        turns: Turns,
         start: u16,
         shift: u32,
     },
@@ -475,7 +511,7 @@ pub struct ModelCap<const P: usize, const G: usize> {
     n_channels: u8,
     centre_nm: [i32; 3],
     inv_half_f32: [f32; 3],
-    u_scale: [Scale; 3],
+    u_scale: [Mul32; 3],
     /// Number of graded monomials needed (0 = no polynomial at all).
     n_monos: u8,
     block_f32: [[f32; 3]; MAX_MONOMIALS],
@@ -533,7 +569,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             n_channels: 0,
             centre_nm: [0; 3],
             inv_half_f32: [0.0; 3],
-            u_scale: [Scale { mul: 0, shift: 0 }; 3],
+            u_scale: [Mul32 { k: 0 }; 3],
             n_monos: 0,
             block_f32: [[0.0; 3]; MAX_MONOMIALS],
             block_q: [[0; 3]; MAX_MONOMIALS],
@@ -606,7 +642,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         for a in 0..3 {
             let h = sc.half_span_nm[a] as f64;
             m.inv_half_f32[a] = (1.0 / h) as f32;
-            m.u_scale[a] = Scale::new(1.0 / h, 30);
+            m.u_scale[a] = Mul32::new(1.0 / h, 30);
         }
         // Pass 1: the shared polynomial block (all plain polynomial terms) and
         // the highest degree any polynomial needs.
@@ -725,7 +761,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                         axis: axis as u8,
                         harmonics: harmonics as u8,
                         period_nm,
-                        turns: Scale::new(1.0 / period_nm as f64, 32),
+                        turns: Turns::new(period_nm),
                         start,
                         shift: (q + 14) as u32,
                     }
@@ -752,7 +788,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                         origin_nm: 0,
                         step_nm: 1,
                         inv_step_f32: 1.0,
-                        t_scale: Scale::default(),
+                        t_scale: Mul32::default(),
                     }; 3];
                     for (a, ax) in axes.iter_mut().enumerate() {
                         let g = grid.axis(a);
@@ -761,7 +797,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                             origin_nm: g.origin_nm,
                             step_nm: g.step_nm,
                             inv_step_f32: (1.0 / g.step_nm as f64) as f32,
-                            t_scale: Scale::new(1.0 / g.step_nm as f64, 30),
+                            t_scale: Mul32::new(1.0 / g.step_nm as f64, 30),
                         };
                     }
                     let gstart = grid_needed as u32;
@@ -1002,14 +1038,34 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         // terms are evaluated out of line (recomputing the monomials they
         // need), so they cost the polynomial path nothing — no spilled
         // monomials, no hoisted constants — when a table has none.
-        let mut out = match self.n_monos {
-            0 => [0.0; 3],
-            1..=20 => self.block_f32(&mono20_f32(u)),
-            _ => self.block_f32(&mono56_f32(u)),
+        let out = if self.terms.is_empty() {
+            match self.n_monos {
+                0 => [0.0; 3],
+                1..=20 => self.block_f32(&mono20_f32(u)),
+                _ => self.block_f32(&mono56_f32(u)),
+            }
+        } else {
+            // The monomials are handed to the thermal/Abbe terms.
+            match self.n_monos {
+                0 => {
+                    let mut out = [0.0; 3];
+                    self.terms_f32(&[], &pos, inp, &mut flags, &mut out);
+                    out
+                }
+                1..=20 => {
+                    let mv = mono20_f32(u);
+                    let mut out = self.block_f32(&mv);
+                    self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
+                    out
+                }
+                _ => {
+                    let mv = mono56_f32(u);
+                    let mut out = self.block_f32(&mv);
+                    self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
+                    out
+                }
+            }
         };
-        if !self.terms.is_empty() {
-            self.terms_f32(u, &pos, inp, &mut flags, &mut out);
-        }
         let mut corr = [0i32; 3];
         for o in 0..3 {
             // Absent outputs have no coefficients and no terms: they are 0.
@@ -1055,21 +1111,13 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     #[inline(never)]
     fn terms_f32(
         &self,
-        u: [f32; 3],
+        mv: &[f32],
         pos: &[i32; 3],
         inp: &Inputs,
         flags: &mut Flags,
         out: &mut [f32; 3],
     ) {
         let (rev, temp, tool) = self.hold_aux(inp, flags);
-        let mut mv = [0.0f32; MAX_MONOMIALS];
-        if self.n_monos > 0 && self.has_factored {
-            if self.n_monos <= 20 {
-                mv[..20].copy_from_slice(&mono20_f32(u));
-            } else {
-                mv = mono56_f32(u);
-            }
-        }
         for t in self.terms.iter() {
             match *t {
                 Term::Factored {
@@ -1082,7 +1130,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     let (s, e) = (start as usize, start as usize + len as usize);
                     let mut v = 0.0f32;
                     for (c, &i) in self.pf[s..e].iter().zip(self.pidx[s..e].iter()) {
-                        v += c * mv[i as usize % MAX_MONOMIALS];
+                        v += c * mv.get(i as usize).copied().unwrap_or(0.0);
                     }
                     let f = match factor {
                         Factor::Temp { ch, t_ref_mc } => {
@@ -1132,7 +1180,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     /// Σ a_k sin kθ + b_k cos kθ: the first harmonic from the table, the
     /// others by the angle-addition recurrence (4 multiplies each).
     #[inline(never)]
-    fn periodic_f32(&self, p: i32, harmonics: u8, period_nm: i32, turns: Scale, start: u16) -> f32 {
+    fn periodic_f32(&self, p: i32, harmonics: u8, period_nm: i32, turns: Turns, start: u16) -> f32 {
         let theta = phase_turns(p, period_nm, turns);
         let (s1, c1) = sincos_q30(theta);
         // The coefficients carry the 2^-30 of the Q30 sin/cos.
@@ -1259,7 +1307,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             } else {
                 i
             };
-            t[a] = axes[a].t_scale.apply32(frac) as i64;
+            t[a] = axes[a].t_scale.apply(frac) as i64;
         }
         let nx = axes[0].nodes as usize;
         let nxy = nx * axes[1].nodes as usize;
@@ -1286,18 +1334,38 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         let pos = self.hold_pos(inp.pos_nm, &mut flags);
         // |p − c| ≤ half-span, so |u| ≤ 2^30 (+1 from rounding) fits i32.
         let u = [
-            self.u_scale[0].apply32(pos[0].wrapping_sub(self.centre_nm[0])),
-            self.u_scale[1].apply32(pos[1].wrapping_sub(self.centre_nm[1])),
-            self.u_scale[2].apply32(pos[2].wrapping_sub(self.centre_nm[2])),
+            self.u_scale[0].apply(pos[0].wrapping_sub(self.centre_nm[0])),
+            self.u_scale[1].apply(pos[1].wrapping_sub(self.centre_nm[1])),
+            self.u_scale[2].apply(pos[2].wrapping_sub(self.centre_nm[2])),
         ];
-        let mut out = match self.n_monos {
-            0 => [0; 3],
-            1..=20 => self.block_fixed(&mono20_q30(u)),
-            _ => self.block_fixed(&mono56_q30(u)),
+        let out = if self.terms.is_empty() {
+            match self.n_monos {
+                0 => [0; 3],
+                1..=20 => self.block_fixed(&mono20_q30(u)),
+                _ => self.block_fixed(&mono56_q30(u)),
+            }
+        } else {
+            // The monomials are handed to the thermal/Abbe terms.
+            match self.n_monos {
+                0 => {
+                    let mut out = [0; 3];
+                    self.terms_fixed(&[], &pos, inp, &mut flags, &mut out);
+                    out
+                }
+                1..=20 => {
+                    let mv = mono20_q30(u);
+                    let mut out = self.block_fixed(&mv);
+                    self.terms_fixed(&mv, &pos, inp, &mut flags, &mut out);
+                    out
+                }
+                _ => {
+                    let mv = mono56_q30(u);
+                    let mut out = self.block_fixed(&mv);
+                    self.terms_fixed(&mv, &pos, inp, &mut flags, &mut out);
+                    out
+                }
+            }
         };
-        if !self.terms.is_empty() {
-            self.terms_fixed(u, &pos, inp, &mut flags, &mut out);
-        }
         let mut corr = [0i32; 3];
         for o in 0..3 {
             let max = self.env.max_corr_nm[o] as i64;
@@ -1342,21 +1410,13 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     #[inline(never)]
     fn terms_fixed(
         &self,
-        u: [i32; 3],
+        mv: &[i32],
         pos: &[i32; 3],
         inp: &Inputs,
         flags: &mut Flags,
         out: &mut [i64; 3],
     ) {
         let (rev, temp, tool) = self.hold_aux(inp, flags);
-        let mut mv = [0i32; MAX_MONOMIALS];
-        if self.n_monos > 0 && self.has_factored {
-            if self.n_monos <= 20 {
-                mv[..20].copy_from_slice(&mono20_q30(u));
-            } else {
-                mv = mono56_q30(u);
-            }
-        }
         for t in self.terms.iter() {
             match *t {
                 Term::Factored {
@@ -1369,7 +1429,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     let (s, e) = (start as usize, start as usize + len as usize);
                     let mut v = 0i64;
                     for (&c, &i) in self.pq[s..e].iter().zip(self.pidx[s..e].iter()) {
-                        v += c as i64 * mv[i as usize % MAX_MONOMIALS] as i64;
+                        v += c as i64 * mv.get(i as usize).copied().unwrap_or(0) as i64;
                     }
                     let f = match factor {
                         Factor::Temp { ch, t_ref_mc } => {
@@ -1431,7 +1491,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         p: i32,
         harmonics: u8,
         period_nm: i32,
-        turns: Scale,
+        turns: Turns,
         start: u16,
     ) -> i64 {
         let theta = phase_turns(p, period_nm, turns);
@@ -1634,9 +1694,10 @@ fn mono56_q30(u: [i32; 3]) -> [i32; MAX_MONOMIALS] {
 /// Phase of `pos` along a period as a fraction of a turn (2^32 = one turn),
 /// computed in integers so it stays exact at any position.
 #[inline(always)]
-fn phase_turns(pos_nm: i32, period_nm: i32, turns: Scale) -> u32 {
-    let r = pos_nm.rem_euclid(period_nm);
-    turns.apply(r as i64) as u32
+fn phase_turns(pos_nm: i32, period_nm: i32, turns: Turns) -> u32 {
+    let r = pos_nm.rem_euclid(period_nm) as u32;
+    r.wrapping_mul(turns.int)
+        .wrapping_add(((r as u64 * turns.frac as u64) >> 32) as u32)
 }
 
 #[inline(always)]
