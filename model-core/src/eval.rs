@@ -349,32 +349,6 @@ fn to_q(c: f64, q: i32) -> i32 {
     round_i64(c * pow2(q)).clamp(i32::MIN as i64, i32::MAX as i64) as i32
 }
 
-/// x ↦ round(x · factor · 2^frac) as (x·mul) >> shift, for |x| < 2^32.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-struct Scale {
-    mul: i64,
-    shift: u32,
-}
-
-impl Scale {
-    fn new(factor: f64, frac: i32) -> Scale {
-        // Normalise mul into [2^29, 2^30) so that |x| < 2^32 keeps x·mul < 2^62.
-        let mut shift = 0i32;
-        let target = factor * pow2(frac);
-        while target * pow2(shift) < (1u64 << 29) as f64 && shift < 62 {
-            shift += 1;
-        }
-        Scale {
-            mul: round_i64(target * pow2(shift)),
-            shift: shift as u32,
-        }
-    }
-    #[inline(always)]
-    fn apply(self, x: i64) -> i64 {
-        rshr(x * self.mul, self.shift)
-    }
-}
-
 /// x ↦ round(x · factor · 2^frac) as (x·k + 2^31) >> 32: a constant shift,
 /// so on the M4 it is one SMULL/MLA pair and an add — no variable 64-bit
 /// shift. Valid while |x · k| < 2^63 (callers keep |x| ≤ 1/factor).
@@ -451,7 +425,7 @@ struct MlpInput {
     src: u8,
     mid: i32,
     k_f32: f32,
-    k_q28: Scale,
+    k_q28: Mul32,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -843,7 +817,16 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                         };
                         let xs_lo = (lo as f64 - mid as f64) * k;
                         let xs_hi = (hi as f64 - mid as f64) * k;
-                        if xs_lo.abs() > 7.0 || xs_hi.abs() > 7.0 {
+                        // The evaluators take v − mid as an i32 and scale it
+                        // with a 32-bit constant shift: both need these bounds.
+                        let d_max = (lo as f64 - mid as f64)
+                            .abs()
+                            .max((hi as f64 - mid as f64).abs());
+                        if xs_lo.abs() > 7.0
+                            || xs_hi.abs() > 7.0
+                            || d_max >= 2_147_483_647.0
+                            || k > 2.0
+                        {
                             return Err(LoadError::MlpInputRange { term: ti as u32 });
                         }
                         m.reads_temp |= inp.source >= 3;
@@ -851,7 +834,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                             src: inp.source,
                             mid,
                             k_f32: k as f32,
-                            k_q28: Scale::new(k, 28),
+                            k_q28: Mul32::new(k, 28),
                         });
                     }
                     let mut qs = [0u8; 3];
@@ -1198,6 +1181,9 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         v
     }
 
+    /// The MLP in f32. The last hidden layer is fused with the linear output
+    /// layer (each unit's activation is consumed as soon as it is computed),
+    /// so a one-hidden-layer net needs no activation buffer at all.
     #[inline(never)]
     fn mlp_f32(&self, t: &Term, pos: &[i32; 3], temp: &[i32; MAX_TEMPS], out: &mut [f32; 3]) {
         let Term::Mlp {
@@ -1213,51 +1199,50 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         else {
             return;
         };
-        // Two activation buffers used alternately (no copies).
-        let mut buf = [[0.0f32; MAX_HIDDEN_UNITS]; 2];
         let n_in = (n_in as usize).min(MAX_MLP_INPUTS);
-        for (i, mi) in self.mlp_in[in_start as usize..in_start as usize + n_in]
-            .iter()
-            .enumerate()
+        let n_out = (n_out as usize).min(3);
+        let mut x = [0.0f32; MAX_MLP_INPUTS];
+        for (xi, mi) in x
+            .iter_mut()
+            .zip(&self.mlp_in[in_start as usize..in_start as usize + n_in])
         {
-            let v = mlp_source(mi.src, pos, temp);
-            buf[0][i] = (v as i64 - mi.mid as i64) as f32 * mi.k_f32;
+            // |v − mid| < 2^31 over the envelope (checked at load).
+            *xi = mlp_source(mi.src, pos, temp).wrapping_sub(mi.mid) as f32 * mi.k_f32;
         }
-        let mut prev = n_in;
+        let x = &x[..n_in];
         let mut k = start as usize;
-        let n_layers = n_layers as usize;
-        for layer in 0..=n_layers {
-            let is_out = layer == n_layers;
-            let width = if is_out {
-                n_out as usize
-            } else {
-                widths[layer % 2] as usize
-            }
-            .min(MAX_HIDDEN_UNITS);
-            let (w, rest) = self.pf[k..].split_at(width * prev);
+        let h1: [f32; MAX_HIDDEN_UNITS];
+        let (src, prev): (&[f32], usize) = if n_layers >= 2 {
+            let width = (widths[0] as usize).min(MAX_HIDDEN_UNITS);
+            let (w, rest) = self.pf[k..].split_at(width * n_in);
             let b = &rest[..width];
-            let (lo, hi) = buf.split_at_mut(1);
-            let (src, dst) = if layer % 2 == 0 {
-                (&lo[0], &mut hi[0])
-            } else {
-                (&hi[0], &mut lo[0])
-            };
-            let x = &src[..prev];
-            for ((row, &bj), y) in w.chunks_exact(prev).zip(b).zip(dst.iter_mut()) {
-                let mut z = bj;
-                for (wl, xl) in row.iter().zip(x) {
-                    z += wl * xl;
-                }
-                *y = if is_out { z } else { tanh_f32(z) };
-            }
-            k += width * prev + width;
-            prev = width;
+            h1 = core::array::from_fn(|j| match (w.get(j * n_in..(j + 1) * n_in), b.get(j)) {
+                (Some(row), Some(&bj)) => tanh_f32(bj + dot_f32(row, x)),
+                _ => 0.0,
+            });
+            k += width * n_in + width;
+            (&h1[..width], width)
+        } else {
+            (x, n_in)
+        };
+        let width = (widths[(n_layers as usize).clamp(1, 2) - 1] as usize).min(MAX_HIDDEN_UNITS);
+        let (w, rest) = self.pf[k..].split_at(width * prev);
+        let (b, rest) = rest.split_at(width);
+        let (wo, rest) = rest.split_at(n_out * width);
+        let mut acc = [0.0f32; 3];
+        for (a, &bo) in acc.iter_mut().zip(&rest[..n_out]) {
+            *a = bo;
         }
-        let res = &buf[(n_layers + 1) % 2];
+        for (j, (row, &bj)) in w.chunks_exact(prev).zip(b).enumerate() {
+            let h = tanh_f32(bj + dot_f32(row, src));
+            for (o, a) in acc.iter_mut().enumerate().take(n_out) {
+                *a += wo.get(o * width + j).copied().unwrap_or(0.0) * h;
+            }
+        }
         let mut j = 0;
         for o in 0..3 {
             if outputs & (1 << o) != 0 {
-                out[o] += res[j % MAX_HIDDEN_UNITS];
+                out[o] += acc[j % 3];
                 j += 1;
             }
         }
@@ -1508,6 +1493,8 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         v
     }
 
+    /// The MLP in fixed point (same structure as [`Self::mlp_f32`]); the
+    /// integer sums are exact, so fusing the output layer changes nothing.
     #[inline(never)]
     fn mlp_fixed(&self, t: &Term, pos: &[i32; 3], temp: &[i32; MAX_TEMPS], out: &mut [i64; 3]) {
         let Term::Mlp {
@@ -1523,68 +1510,89 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         else {
             return;
         };
-        // Layer-1 inputs in Q28 (|x| ≤ 7 checked at load), later ones Q30.
-        let mut buf = [[0i32; MAX_HIDDEN_UNITS]; 2];
         let n_in = (n_in as usize).min(MAX_MLP_INPUTS);
-        for (i, mi) in self.mlp_in[in_start as usize..in_start as usize + n_in]
-            .iter()
-            .enumerate()
+        let n_out = (n_out as usize).min(3);
+        // Layer-1 inputs in Q28 (|x| ≤ 7 checked at load), later ones Q30.
+        let mut x = [0i32; MAX_MLP_INPUTS];
+        for (xi, mi) in x
+            .iter_mut()
+            .zip(&self.mlp_in[in_start as usize..in_start as usize + n_in])
         {
-            let v = mlp_source(mi.src, pos, temp);
-            buf[0][i] = mi
+            *xi = mi
                 .k_q28
-                .apply(v as i64 - mi.mid as i64)
-                .clamp(i32::MIN as i64, i32::MAX as i64) as i32;
+                .apply(mlp_source(mi.src, pos, temp).wrapping_sub(mi.mid));
         }
-        let mut in_frac = 28u32;
-        let mut prev = n_in;
+        let x = &x[..n_in];
         let mut k = start as usize;
-        let mut res = [0i64; 3];
-        let n_layers = n_layers as usize;
-        for layer in 0..=n_layers {
-            let is_out = layer == n_layers;
-            let width = if is_out {
-                n_out as usize
-            } else {
-                widths[layer % 2] as usize
-            }
-            .min(MAX_HIDDEN_UNITS);
-            let ql = if is_out { q[2] } else { q[layer % 2] } as u32;
-            let (w, rest) = self.pq[k..].split_at(width * prev);
+        let h1: [i32; MAX_HIDDEN_UNITS];
+        let (src, prev, in_frac): (&[i32], usize, u32) = if n_layers >= 2 {
+            let width = (widths[0] as usize).min(MAX_HIDDEN_UNITS);
+            let (w, rest) = self.pq[k..].split_at(width * n_in);
             let b = &rest[..width];
-            let (lo, hi) = buf.split_at_mut(1);
-            let (src, dst) = if layer % 2 == 0 {
-                (&lo[0], &mut hi[0])
-            } else {
-                (&hi[0], &mut lo[0])
-            };
-            let x = &src[..prev];
-            for (j, (row, &bj)) in w.chunks_exact(prev).zip(b).enumerate() {
-                let mut z = (bj as i64) << in_frac;
-                for (&wl, &xl) in row.iter().zip(x) {
-                    z += wl as i64 * xl as i64;
-                }
-                // z is Q(q + in_frac).
-                if is_out {
-                    res[j % 3] = rshr(z, ql + in_frac - 16);
-                } else {
-                    let z26 = rshr(z, ql + in_frac - TANH_IN_FRAC);
-                    dst[j % MAX_HIDDEN_UNITS] =
-                        tanh_q30(z26.clamp(-(16 << TANH_IN_FRAC), 16 << TANH_IN_FRAC) as i32);
-                }
+            let ql = q[0] as u32;
+            h1 = core::array::from_fn(|j| match (w.get(j * n_in..(j + 1) * n_in), b.get(j)) {
+                (Some(row), Some(&bj)) => tanh_q26_of(((bj as i64) << 28) + dot_q(row, x), ql + 28),
+                _ => 0,
+            });
+            k += width * n_in + width;
+            (&h1[..width], width, 30)
+        } else {
+            (x, n_in, 28)
+        };
+        let last = (n_layers as usize).clamp(1, 2) - 1;
+        let width = (widths[last] as usize).min(MAX_HIDDEN_UNITS);
+        let ql = q[last] as u32;
+        let qo = q[2] as u32;
+        let (w, rest) = self.pq[k..].split_at(width * prev);
+        let (b, rest) = rest.split_at(width);
+        let (wo, rest) = rest.split_at(n_out * width);
+        let mut acc = [0i64; 3];
+        for (a, &bo) in acc.iter_mut().zip(&rest[..n_out]) {
+            *a = (bo as i64) << 30;
+        }
+        for (j, (row, &bj)) in w.chunks_exact(prev).zip(b).enumerate() {
+            let h = tanh_q26_of(((bj as i64) << in_frac) + dot_q(row, src), ql + in_frac) as i64;
+            for (o, a) in acc.iter_mut().enumerate().take(n_out) {
+                *a += wo.get(o * width + j).copied().unwrap_or(0) as i64 * h;
             }
-            k += width * prev + width;
-            prev = width;
-            in_frac = 30;
         }
         let mut j = 0;
-        for (o, acc) in out.iter_mut().enumerate() {
+        for (o, a) in out.iter_mut().enumerate() {
             if outputs & (1 << o) != 0 {
-                *acc = acc.saturating_add(res[j % 3]);
+                // acc is Q(q_out + 30).
+                *a = a.saturating_add(rshr(acc[j % 3], qo + 14));
                 j += 1;
             }
         }
     }
+}
+
+/// Dot product with the common tiny input counts unrolled.
+#[inline(always)]
+fn dot_f32(row: &[f32], x: &[f32]) -> f32 {
+    match (row, x) {
+        ([a, b, c], [p, q, r, ..]) => a * p + b * q + c * r,
+        ([a, b, c, d], [p, q, r, s, ..]) => a * p + b * q + c * r + d * s,
+        _ => row.iter().zip(x).fold(0.0, |z, (w, v)| z + w * v),
+    }
+}
+
+/// Integer dot product (exact), the common tiny input counts unrolled.
+#[inline(always)]
+fn dot_q(row: &[i32], x: &[i32]) -> i64 {
+    let m = |a: i32, b: i32| a as i64 * b as i64;
+    match (row, x) {
+        ([a, b, c], [p, q, r, ..]) => m(*a, *p) + m(*b, *q) + m(*c, *r),
+        ([a, b, c, d], [p, q, r, s, ..]) => m(*a, *p) + m(*b, *q) + m(*c, *r) + m(*d, *s),
+        _ => row.iter().zip(x).fold(0, |z, (w, v)| z + m(*w, *v)),
+    }
+}
+
+/// tanh of a pre-activation `z` with `frac` fractional bits, Q30 out.
+#[inline(always)]
+fn tanh_q26_of(z: i64, frac: u32) -> i32 {
+    let z26 = rshr(z, frac - TANH_IN_FRAC);
+    tanh_q30(z26.clamp(-(16 << TANH_IN_FRAC), 16 << TANH_IN_FRAC) as i32)
 }
 
 /// 1.5 · 2^23: adding and subtracting it rounds an f32 of magnitude < 2^22 to an integer.
