@@ -132,6 +132,24 @@ pub fn record_step(model_path: &Path, mut step: Step) -> Result<History> {
     Ok(h)
 }
 
+/// Appends the fit of `model` (just written to `model_path`) to its history.
+/// This is the one call `fit` makes.
+pub fn record(model_path: &Path, model: &crate::model::ModelFile) -> Result<History> {
+    record_step(
+        model_path,
+        Step {
+            step: 0,
+            seed: model.seed.clone(),
+            adds: model.adds.clone(),
+            added: Vec::new(),
+            terms: model.stats.terms,
+            rms_um: model.stats.rms_um.clone(),
+            held_out_rms_um: model.stats.held_out_rms_um.clone(),
+            data_sha256: model.data.sha256.clone(),
+        },
+    )
+}
+
 /// The history as a text table: one row per step and target.
 pub fn table(h: &History) -> String {
     let mut out = String::new();

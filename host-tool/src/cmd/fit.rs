@@ -88,6 +88,7 @@ impl Args {
             .clone()
             .unwrap_or_else(|| default_model_path(&self.data));
         model.save(&out)?;
+        crate::history::record(&out, &model)?;
         for w in &model.stats.warnings {
             eprintln!("warning: {w}");
         }

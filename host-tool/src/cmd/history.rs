@@ -1,11 +1,104 @@
-//! `trueaxis history` — placeholder until its issue lands; fails loudly.
+//! `trueaxis history MODEL.json [--json] [--report DIR]`: how the error fell,
+//! fit by fit — the steps `fit` appended to `MODEL.history.json` (see
+//! `crate::history`), as a table, one JSON document, or an HTML page with
+//! the RMS and held-out RMS per target plotted against the step.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+
+use crate::history::{self, History};
+use crate::report::plot::{Series, XyPlot};
+use crate::report::Page;
 
 /// Arguments of `trueaxis history`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// The model file whose history to show (its `MODEL.history.json` beside it is read).
+    pub model: PathBuf,
+    /// Write the table and a plot of the error falling into this directory.
+    #[arg(long, value_name = "DIR")]
+    pub report: Option<PathBuf>,
+    /// Write one JSON document to stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
 
 impl Args {
-    pub fn run(self) -> anyhow::Result<()> {
-        anyhow::bail!("`trueaxis history` is not implemented yet")
+    pub fn run(self) -> Result<()> {
+        let h = history::load(&self.model)?;
+        if let Some(dir) = &self.report {
+            let index = write_report(&h, &self.model.display().to_string(), dir)?;
+            if !self.json {
+                println!("report: {}", index.display());
+            }
+        }
+        if self.json {
+            println!("{}", serde_json::to_string_pretty(&h)?);
+        } else {
+            println!("{}: {} step(s)", self.model.display(), h.steps.len());
+            print!("{}", history::table(&h));
+        }
+        Ok(())
     }
+}
+
+/// The plot of RMS and held-out RMS per target against the step.
+pub fn plot(h: &History) -> XyPlot {
+    let mut p = XyPlot::new("The error falling, step by step", "step", "µm");
+    let targets: std::collections::BTreeSet<&String> =
+        h.steps.iter().flat_map(|s| s.rms_um.keys()).collect();
+    for t in targets {
+        let rms: Vec<(f64, f64)> = h
+            .steps
+            .iter()
+            .filter_map(|s| s.rms_um.get(t).map(|v| (s.step as f64, *v)))
+            .collect();
+        let held: Vec<(f64, f64)> = h
+            .steps
+            .iter()
+            .filter_map(|s| s.held_out_rms_um.get(t).map(|v| (s.step as f64, *v)))
+            .collect();
+        p = p
+            .with(Series::line(format!("{t} rms"), rms))
+            .with(Series::line(format!("{t} held-out rms"), held));
+    }
+    p
+}
+
+/// Writes `DIR/index.html` with the table and the plot.
+pub fn write_report(h: &History, name: &str, dir: &std::path::Path) -> Result<PathBuf> {
+    let mut page = Page::new(format!("trueaxis history — {name}"));
+    page.heading("History");
+    let rows = h
+        .steps
+        .iter()
+        .flat_map(|s| {
+            s.rms_um.iter().map(move |(t, r)| {
+                vec![
+                    s.step.to_string(),
+                    t.clone(),
+                    format!("{r:.4}"),
+                    s.held_out_rms_um
+                        .get(t)
+                        .map_or("—".into(), |v| format!("{v:.4}")),
+                    if s.added.is_empty() {
+                        s.spec()
+                    } else {
+                        format!("+ {}", s.added.join(" + "))
+                    },
+                ]
+            })
+        })
+        .collect();
+    page.table(
+        &["step", "target", "rms µm", "held-out rms µm", "added"],
+        rows,
+    );
+    page.figure(
+        "history",
+        "RMS and block-held-out RMS per target after each fit",
+        plot(h).to_svg()?,
+    );
+    page.write(dir)
 }

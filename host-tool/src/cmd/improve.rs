@@ -1,11 +1,181 @@
-//! `trueaxis improve` — placeholder until its issue lands; fails loudly.
+//! `trueaxis improve DATA --model cubic19 [-o MODEL.json] [--json]`: the
+//! diagnosis loop run by itself — fit, diagnose, add the best significant
+//! effect, refit — until the diagnosis says `at_noise_floor`, printing each
+//! step. Every fit is written to MODEL.json and appended to its history, so
+//! `trueaxis history MODEL.json` shows the same steps afterwards.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use anyhow::Result;
+use serde::Serialize;
+
+use crate::cmd::fit::default_model_path;
+use crate::data::Dataset;
+use crate::diagnose::{self, Options, Verdict};
+use crate::features::Effect;
+use crate::fit::{self, FitOptions};
+use crate::{history, import};
+
+/// Most effects `improve` adds before it stops anyway.
+pub const MAX_STEPS: usize = 8;
 
 /// Arguments of `trueaxis improve`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// The measurement file (contract CSV or Renishaw .rtl).
+    pub data: PathBuf,
+    /// Seed model to start from (cubic19 or kinematic).
+    #[arg(long)]
+    pub model: String,
+    /// Where to write the final model (default: `<data>.model.json`).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Write one JSON document to stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// One step of the loop.
+#[derive(Clone, Debug, Serialize)]
+pub struct ImproveStep {
+    /// 1-based.
+    pub step: usize,
+    /// The effect added at this step (none for the seed).
+    pub added: Option<String>,
+    /// Its evidence, as diagnose gave it.
+    pub evidence: Option<String>,
+    /// In-sample RMS per target after the fit, µm.
+    pub rms_um: BTreeMap<String, f64>,
+    /// Block-held-out RMS per target after the fit, µm.
+    pub held_out_rms_um: BTreeMap<String, f64>,
+    /// Noise floor per target from the diagnosis of this fit, µm.
+    pub noise_floor_um: BTreeMap<String, Option<f64>>,
+    /// The diagnosis of this fit.
+    pub verdict: Verdict,
+}
+
+/// The whole run.
+#[derive(Clone, Debug, Serialize)]
+pub struct Improvement {
+    /// Final model spec (`cubic19 --add …`).
+    pub model: String,
+    /// Where the final model was written.
+    pub model_file: String,
+    /// Steps, first fit first.
+    pub steps: Vec<ImproveStep>,
+    /// The last diagnosis' verdict.
+    pub verdict: Verdict,
+}
+
+/// Runs the loop on `data`, writing each fit to `out` (and its history);
+/// `on_step` sees each step as it completes (for printing).
+pub fn improve(
+    data: &Dataset,
+    seed: &str,
+    out: &std::path::Path,
+    mut on_step: impl FnMut(&ImproveStep),
+) -> Result<Improvement> {
+    let mut adds: Vec<String> = Vec::new();
+    let mut steps = Vec::new();
+    let mut added: Option<(String, String)> = None;
+    loop {
+        let effects = adds
+            .iter()
+            .map(|a| Effect::parse(a))
+            .collect::<Result<Vec<_>>>()?;
+        let model = fit::fit(data, seed, &effects, &FitOptions::default())?;
+        model.save(out)?;
+        history::record(out, &model)?;
+        let d = diagnose::diagnose(
+            data,
+            &Options {
+                seed: seed.to_string(),
+                adds: adds.clone(),
+                follow_path: false,
+            },
+        )?;
+        let step = ImproveStep {
+            step: steps.len() + 1,
+            added: added.as_ref().map(|a| a.0.clone()),
+            evidence: added.as_ref().map(|a| a.1.clone()),
+            rms_um: model.stats.rms_um.clone(),
+            held_out_rms_um: model.stats.held_out_rms_um.clone(),
+            noise_floor_um: d.noise_floor_um.clone(),
+            verdict: d.verdict,
+        };
+        on_step(&step);
+        steps.push(step);
+        match d.best() {
+            Some(b) if steps.len() <= MAX_STEPS && !adds.contains(&b.add) => {
+                added = Some((b.add.clone(), b.evidence.clone()));
+                adds.push(b.add.clone());
+            }
+            _ => {
+                return Ok(Improvement {
+                    model: model.spec(),
+                    model_file: out.display().to_string(),
+                    steps,
+                    verdict: d.verdict,
+                })
+            }
+        }
+    }
+}
 
 impl Args {
-    pub fn run(self) -> anyhow::Result<()> {
-        anyhow::bail!("`trueaxis improve` is not implemented yet")
+    pub fn run(self) -> Result<()> {
+        let (seed, adds) = crate::cmd::diagnose::model_spec(&self.model)?;
+        if !adds.is_empty() {
+            anyhow::bail!(
+                "improve starts from a seed (cubic19 or kinematic), not from a model with effects"
+            );
+        }
+        let data = import::load(&self.data)?;
+        let out = self
+            .output
+            .clone()
+            .unwrap_or_else(|| default_model_path(&self.data));
+        let json = self.json;
+        let r = improve(&data, &seed, &out, |s| {
+            if json {
+                return;
+            }
+            let what = s
+                .added
+                .as_deref()
+                .map_or(format!("fit {seed}"), |a| format!("add {a}"));
+            println!("step {}: {what}", s.step);
+            for (t, rms) in &s.rms_um {
+                println!(
+                    "  {t}: rms {rms:.4} µm, held-out {} µm, noise floor {} µm",
+                    s.held_out_rms_um
+                        .get(t)
+                        .map_or("—".into(), |v| format!("{v:.4}")),
+                    s.noise_floor_um
+                        .get(t)
+                        .copied()
+                        .flatten()
+                        .map_or("—".into(), |v| format!("{v:.4}"))
+                );
+            }
+            if let Some(e) = &s.evidence {
+                println!("  because: {e}");
+            }
+        })?;
+        if json {
+            println!("{}", serde_json::to_string_pretty(&r)?);
+        } else {
+            println!(
+                "{}: model {} written to {}",
+                match r.verdict {
+                    Verdict::AtNoiseFloor => "at the noise floor",
+                    Verdict::MissingEffect => "stopped after the step limit",
+                },
+                r.model,
+                r.model_file
+            );
+        }
+        Ok(())
     }
 }

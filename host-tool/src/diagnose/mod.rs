@@ -947,13 +947,16 @@ fn rank_target(
             if ii == 0 && ov >= COMPETING_OVERLAP && competing_best.is_none() {
                 competing_best = sc[j].cand.delta_bic;
             }
-            if ov >= CONFOUNDED_OVERLAP && sc[i].cand.effect != sc[j].cand.effect {
+            let strong = |k: usize| sc[k].cand.delta_bic.is_some_and(|d| d < DBIC_SIGNIFICANT);
+            if ov >= CONFOUNDED_OVERLAP
+                && sc[i].cand.effect != sc[j].cand.effect
+                && (strong(i) || strong(j))
+            {
                 let (ai, aj) = (sc[i].cand.add.clone(), sc[j].cand.add.clone());
                 sc[i].cand.confounded_with.push(aj.clone());
                 sc[j].cand.confounded_with.push(ai.clone());
-                let fix = if [sc[i].cand.effect.as_str(), sc[j].cand.effect.as_str()]
-                    .contains(&"drift")
-                {
+                let fams = [sc[i].cand.effect.as_str(), sc[j].cand.effect.as_str()];
+                let fix = if fams.contains(&"drift") && fams.contains(&"thermal") {
                     "; measure with temperature varying independently of time (a cool-down as well as a warm-up, or a second session)"
                 } else {
                     "; vary the two channels independently in the next measurement"
