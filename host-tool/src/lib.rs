@@ -17,6 +17,7 @@ pub mod history;
 pub mod holdout;
 pub mod import;
 pub mod iso230;
+pub mod link;
 pub mod lsq;
 pub mod model;
 pub mod report;

@@ -187,7 +187,7 @@ impl Clock for SimClock {
 pub struct SimBoard {
     /// Sensor values and pulses.
     pub io: Arc<Mutex<SimIo>>,
-    engine: &'static RefCell<Engine<'static>>,
+    engine: Box<RefCell<Engine<'static>>>,
     server: Server<'static, 'static, SimFlash>,
     clock: SimClock,
 }
@@ -204,16 +204,17 @@ impl SimBoard {
         Self::with_flash(SimFlash::new_erased(vec![0; 2 * SIM_SLOT_BYTES as usize]))
     }
 
-    /// A board booting from `flash`. The model buffers and the engine are
-    /// leaked (≈ 60 KiB per board; test processes create a handful).
+    /// A board booting from `flash`. The model buffers and the staging
+    /// buffer are leaked (≈ 100 KiB per board; test processes create a
+    /// few hundred at most).
     pub fn with_flash(flash: SimFlash) -> Self {
         let store = TableStore::new(flash, SIM_LAYOUT).expect("sim layout fits");
         let stage: &'static mut [u8] = Box::leak(vec![0u8; 48 * 1024].into_boxed_slice());
         let m1: &'static mut ModelBuf = Box::leak(Box::default());
         let m2: &'static mut ModelBuf = Box::leak(Box::default());
-        let engine = Box::leak(Box::new(RefCell::new(
+        let engine = Box::new(RefCell::new(
             Engine::new(sim_engine_config()).expect("sim config is valid"),
-        )));
+        ));
         let mut server = Server::new(
             store,
             stage,
@@ -256,7 +257,7 @@ impl SimBoard {
         let mut out = Vec::new();
         let now = self.now_us();
         self.server
-            .handle_bytes(port, bytes, now, self.engine, |f| out.extend_from_slice(f));
+            .handle_bytes(port, bytes, now, &*self.engine, |f| out.extend_from_slice(f));
         out
     }
 

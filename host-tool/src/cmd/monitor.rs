@@ -1,11 +1,68 @@
-//! `trueaxis monitor` — placeholder until its issue lands; fails loudly.
+//! `trueaxis monitor --port PORT` — live telemetry: one line per sample
+//! (positions, model and output corrections, loop timing, faults). With
+//! `--json`, the samples are collected and written as one JSON document
+//! (`{"samples": [...]}`) at the end, so `--count` defaults to 1 there.
+
+use std::time::Duration;
+
+use anyhow::Result;
+
+use crate::link::{telemetry_json, Client, Timing};
 
 /// Arguments of `trueaxis monitor`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Serial port of the board (`/dev/ttyACM0`, `COM3`) or `tcp://HOST:PORT`.
+    #[arg(long)]
+    pub port: String,
+    /// Number of samples (default: until interrupted; 1 with --json).
+    #[arg(long)]
+    pub count: Option<u64>,
+    /// Time between samples, ms.
+    #[arg(long, default_value_t = 200)]
+    pub interval_ms: u64,
+    /// Write one JSON document to stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
 
 impl Args {
-    pub fn run(self) -> anyhow::Result<()> {
-        anyhow::bail!("`trueaxis monitor` is not implemented yet")
+    pub fn run(self) -> Result<()> {
+        let mut client = Client::open(&self.port, Timing::default())?;
+        let count = self.count.or(self.json.then_some(1));
+        let mut samples = Vec::new();
+        let mut k = 0u64;
+        while count.is_none_or(|c| k < c) {
+            if k > 0 {
+                std::thread::sleep(Duration::from_millis(self.interval_ms));
+            }
+            let t = client.status()?;
+            if self.json {
+                samples.push(telemetry_json(&t));
+            } else {
+                let faults: Vec<_> = t.faults.names().collect();
+                println!(
+                    "t={:>10.3}s pos_nm={:?} corr_nm={:?} model_nm={:?} worst_loop_us={} faults={}",
+                    t.uptime_us as f64 / 1e6,
+                    t.pos_nm,
+                    t.corr_nm,
+                    t.model_corr_nm,
+                    t.worst_loop_us,
+                    if faults.is_empty() {
+                        "none".into()
+                    } else {
+                        faults.join(",")
+                    }
+                );
+            }
+            k += 1;
+        }
+        if self.json {
+            println!(
+                "{}",
+                serde_json::json!({ "port": self.port, "samples": samples })
+            );
+        }
+        Ok(())
     }
 }

@@ -1,11 +1,77 @@
-//! `trueaxis upload` — placeholder until its issue lands; fails loudly.
+//! `trueaxis upload TABLE.bin --port PORT` — sends a table to the board
+//! over the link (USB CDC-ACM / UART, or `tcp://HOST:PORT` for emulators):
+//! validates it locally with model-core's parser first, uploads it in
+//! acknowledged chunks (resuming an interrupted upload of the same table),
+//! commits it to the free flash slot, activates it and checks that the
+//! board reports the new table's CRC.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::link::{slot_json, slot_text, Client, Timing};
 
 /// Arguments of `trueaxis upload`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// The table (from `trueaxis export`).
+    pub table: PathBuf,
+    /// Serial port of the board (`/dev/ttyACM0`, `COM3`) or `tcp://HOST:PORT`.
+    #[arg(long)]
+    pub port: String,
+    /// Write one JSON document to stdout instead of text (and no progress bar).
+    #[arg(long)]
+    pub json: bool,
+}
 
 impl Args {
-    pub fn run(self) -> anyhow::Result<()> {
-        anyhow::bail!("`trueaxis upload` is not implemented yet")
+    pub fn run(self) -> Result<()> {
+        let bytes = std::fs::read(&self.table)
+            .with_context(|| format!("cannot read {}", self.table.display()))?;
+        model_core::parse(&bytes)
+            .map_err(|e| anyhow::anyhow!("{}: not a valid table: {e}", self.table.display()))?;
+        let mut client = Client::open(&self.port, Timing::default())?;
+        let bar = if self.json {
+            ProgressBar::hidden()
+        } else {
+            ProgressBar::new(bytes.len() as u64).with_style(
+                ProgressStyle::with_template("{msg} [{bar:40}] {bytes}/{total_bytes}")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            )
+        };
+        bar.set_message("uploading");
+        let report = client
+            .upload(&bytes, |done, _| bar.set_position(done))
+            .with_context(|| format!("upload of {} to {}", self.table.display(), self.port))?;
+        bar.finish_and_clear();
+        if self.json {
+            println!(
+                "{}",
+                serde_json::json!({
+                    "port": self.port,
+                    "bytes": report.bytes,
+                    "crc32": format!("{:#010x}", report.crc32),
+                    "resumed_at": report.resumed_at,
+                    "chunks": report.chunks,
+                    "retries": report.retries,
+                    "committed": slot_json(&report.committed),
+                    "active": slot_json(&report.activated),
+                    "verified": true,
+                })
+            );
+        } else {
+            if report.resumed_at > 0 {
+                println!("resumed an earlier upload at byte {}", report.resumed_at);
+            }
+            println!(
+                "uploaded {} bytes (CRC {:#010x}) to {}: committed to {}, active and verified",
+                report.bytes,
+                report.crc32,
+                self.port,
+                slot_text(&report.committed)
+            );
+        }
+        Ok(())
     }
 }

@@ -1,0 +1,293 @@
+//! End to end: the `trueaxis` binary's link commands (upload, status,
+//! monitor) against the firmware's application core running on the host —
+//! the simulated board of `trueaxis-app` (engine, table store on a RAM
+//! flash, link server, fake sensors) served on a loopback TCP socket, the
+//! same bytes a board sees on its USB/UART link. Also: corrections read
+//! back over the link equal model-core's own evaluation, an interrupted
+//! upload keeps the running table and resumes, garbage on the line does
+//! not stick the board, and `trueaxis flash` says clearly that no probe is
+//! attached.
+
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::PathBuf;
+use std::process::{Command, Output};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use model_core::link::{
+    encode_frame, FrameDecoder, Injection, Packet, Request, Response, FRAME_CRC, LINK_TEMPS,
+    MAX_FRAME_BYTES,
+};
+use model_core::{parse, Inputs, Model};
+use serde_json::Value;
+use trueaxis::link::{Client, Timing};
+use trueaxis_app::sim::{sample_table, SimBoard};
+
+/// A simulated board on a loopback port; stopped on drop.
+struct Board {
+    port: String,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<SimBoard>>,
+}
+
+impl Board {
+    fn start() -> Self {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = format!("tcp://{}", listener.local_addr().unwrap());
+        let stop = Arc::new(AtomicBool::new(false));
+        let s = stop.clone();
+        let thread = std::thread::spawn(move || SimBoard::new().serve(listener, s));
+        Self {
+            port,
+            stop,
+            thread: Some(thread),
+        }
+    }
+}
+
+impl Drop for Board {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn trueaxis(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_trueaxis"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn json_ok(args: &[&str]) -> Value {
+    let out = trueaxis(args);
+    assert!(
+        out.status.success(),
+        "trueaxis {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+fn table_file(name: &str, bytes: &[u8]) -> PathBuf {
+    let p = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("link_e2e_{name}.bin"));
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+fn crc_hex(bytes: &[u8]) -> String {
+    format!("{:#010x}", FRAME_CRC.checksum(bytes))
+}
+
+#[test]
+fn upload_status_monitor_and_read_back_equal_model_core() {
+    let board = Board::start();
+    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    assert!(s["active"].is_null());
+    assert!(s["telemetry"]["faults"]
+        .as_array()
+        .unwrap()
+        .contains(&"no_table".into()));
+
+    let table = sample_table(0);
+    let path = table_file("t0", &table);
+    let u = json_ok(&[
+        "upload",
+        path.to_str().unwrap(),
+        "--port",
+        &board.port,
+        "--json",
+    ]);
+    assert_eq!(u["crc32"], crc_hex(&table));
+    assert_eq!(u["verified"], true);
+    assert_eq!(u["active"]["slot"], "A");
+
+    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    assert_eq!(s["active"]["crc32"], crc_hex(&table));
+    assert_eq!(s["table_format"], model_core::FORMAT_VERSION);
+
+    // Inject positions and read the corrections back over the link.
+    let model = Model::load(&parse(&table).unwrap()).unwrap();
+    let mut c = Client::open(&board.port, Timing::default()).unwrap();
+    for pos_nm in [
+        [0, 0, 0],
+        [250_000_000, -120_000_000, 30_000_000],
+        [-399_999_999, 399_999_999, -5],
+    ] {
+        let mut temp_mc = [21_000; LINK_TEMPS];
+        temp_mc[0] = 24_500;
+        let inj = Injection {
+            pos_nm,
+            rev_q30: [-(1 << 30), 1 << 30, 0],
+            temp_mc,
+            tool_nm: 10_000_000,
+        };
+        let Response::Correction(got) = c.request(&Request::Inject(inj)).unwrap() else {
+            panic!()
+        };
+        let mut t = [0; model_core::MAX_TEMPS];
+        t.copy_from_slice(&temp_mc[..model_core::MAX_TEMPS]);
+        let want = model.eval_fixed(&Inputs {
+            pos_nm,
+            rev_q30: inj.rev_q30,
+            temp_mc: t,
+            tool_nm: inj.tool_nm,
+        });
+        assert_eq!(got.model_corr_nm, want.corr_nm, "at {pos_nm:?}");
+        // The output slews to it (500 nm/ms, |corr| ≤ 60 µm: < 150 ms).
+        std::thread::sleep(Duration::from_millis(400));
+        let Response::Correction(now) = c.request(&Request::ReadCorrection).unwrap() else {
+            panic!()
+        };
+        assert_eq!(now.corr_nm, want.corr_nm);
+    }
+    c.request(&Request::EndInject).unwrap();
+    drop(c);
+
+    let m = json_ok(&[
+        "monitor",
+        "--port",
+        &board.port,
+        "--count",
+        "3",
+        "--interval-ms",
+        "20",
+        "--json",
+    ]);
+    let samples = m["samples"].as_array().unwrap();
+    assert_eq!(samples.len(), 3);
+    assert!(samples[2]["ticks"].as_u64() > samples[0]["ticks"].as_u64());
+    assert_eq!(samples[0]["active"]["crc32"], crc_hex(&table));
+}
+
+#[test]
+fn a_cut_upload_keeps_the_old_table_and_the_next_upload_resumes() {
+    let board = Board::start();
+    let t1 = sample_table(0);
+    let p1 = table_file("cut_t1", &t1);
+    json_ok(&[
+        "upload",
+        p1.to_str().unwrap(),
+        "--port",
+        &board.port,
+        "--json",
+    ]);
+
+    // Half of t2, then the host goes away.
+    let t2 = sample_table(2);
+    {
+        let mut c = Client::open(&board.port, Timing::default()).unwrap();
+        c.request(&Request::UploadBegin {
+            size: t2.len() as u32,
+            crc32: FRAME_CRC.checksum(&t2),
+        })
+        .unwrap();
+        c.request(&Request::UploadChunk {
+            offset: 0,
+            data: &t2[..256],
+        })
+        .unwrap();
+    }
+    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    assert_eq!(s["active"]["crc32"], crc_hex(&t1));
+
+    // Uploading t2 again picks up at byte 256.
+    let p2 = table_file("cut_t2", &t2);
+    let u = json_ok(&[
+        "upload",
+        p2.to_str().unwrap(),
+        "--port",
+        &board.port,
+        "--json",
+    ]);
+    assert_eq!(u["resumed_at"], 256);
+    assert_eq!(u["active"]["crc32"], crc_hex(&t2));
+    assert_eq!(u["active"]["slot"], "B");
+    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    assert_eq!(s["standby"]["crc32"], crc_hex(&t1));
+}
+
+#[test]
+fn garbage_on_the_line_does_not_stick_the_board() {
+    let board = Board::start();
+    let addr = board.port.strip_prefix("tcp://").unwrap().to_string();
+    let mut s = TcpStream::connect(&addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(2))).unwrap();
+    let mut frame = [0u8; MAX_FRAME_BYTES];
+    let n = encode_frame(
+        &Packet {
+            seq: 5,
+            msg: Request::Identify,
+        },
+        &mut frame,
+    )
+    .unwrap();
+    let mut junk: Vec<u8> = (0..3000u32)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
+        .collect();
+    junk.extend_from_slice(&frame[..n / 2]); // a cut frame
+    s.write_all(&junk).unwrap();
+    s.write_all(&frame[..n]).unwrap();
+    let mut dec: FrameDecoder = FrameDecoder::new();
+    let mut buf = [0u8; 1024];
+    let mut answered = false;
+    while !answered {
+        let k = s.read(&mut buf).unwrap();
+        assert!(k > 0, "board closed the link");
+        let mut input = &buf[..k];
+        while let Some(f) = dec.feed(&mut input) {
+            let p: Packet<Response> = model_core::link::decode_message(f.unwrap()).unwrap();
+            answered |= p.seq == 5 && matches!(p.msg, Response::Identity(_));
+        }
+    }
+    drop(s);
+    // And the next client is served normally.
+    let st = json_ok(&["status", "--port", &board.port, "--json"]);
+    assert!(st["telemetry"]["rx_bad_frames"].as_u64().unwrap() >= 1);
+}
+
+#[test]
+fn invalid_tables_are_refused_before_anything_is_sent() {
+    let mut t = sample_table(0);
+    t[100] ^= 1;
+    let p = table_file("bad", &t);
+    // No board on this port: the local check must fail first.
+    let out = trueaxis(&[
+        "upload",
+        p.to_str().unwrap(),
+        "--port",
+        "tcp://127.0.0.1:9",
+        "--json",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not a valid table"));
+}
+
+#[test]
+fn status_without_a_board_fails_with_the_port_named() {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = format!("tcp://{}", listener.local_addr().unwrap());
+    drop(listener);
+    let out = trueaxis(&["status", "--port", &port]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains(&port));
+}
+
+#[test]
+fn flash_without_a_probe_is_a_clear_error() {
+    let p = table_file("flash", &sample_table(0));
+    let out = trueaxis(&["flash", p.to_str().unwrap()]);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no debug probe attached"), "{err}");
+}
