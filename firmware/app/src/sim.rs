@@ -257,7 +257,9 @@ impl SimBoard {
         let mut out = Vec::new();
         let now = self.now_us();
         self.server
-            .handle_bytes(port, bytes, now, &*self.engine, |f| out.extend_from_slice(f));
+            .handle_bytes(port, bytes, now, &*self.engine, |f| {
+                out.extend_from_slice(f)
+            });
         out
     }
 
