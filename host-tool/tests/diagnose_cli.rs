@@ -1,0 +1,231 @@
+//! The diagnosis commands end to end through the `trueaxis` binary:
+//! `diagnose --json` has the shape of CONTRACT.md §2 and its `add` string is
+//! accepted verbatim by `fit --add`; `improve` runs the loop to the noise
+//! floor and leaves the same steps in the model's history; grid-only data
+//! warns `aliasing` and one-direction data warns `one_direction`.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use serde_json::Value;
+use trueaxis::diagnose::synth::{generate, Hidden, Plan, SynthConfig};
+use trueaxis::diagnose::{diagnose, Options};
+
+fn tmp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("trueaxis-diag-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn write(cfg: &SynthConfig, path: &Path) {
+    let data = generate(cfg);
+    let mut f = std::fs::File::create(path).unwrap();
+    trueaxis::import::write_csv(&data, &mut f).unwrap();
+}
+
+fn trueaxis(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_trueaxis"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn is_num_map(v: &Value) -> bool {
+    v.as_object().is_some_and(|m| {
+        !m.is_empty()
+            && m.keys().all(|k| ["ex", "ey", "ez"].contains(&k.as_str()))
+            && m.values().all(|x| x.is_number())
+    })
+}
+
+#[test]
+fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
+    let dir = tmp_dir("json");
+    let csv = dir.join("periodic.csv");
+    write(
+        &SynthConfig {
+            seed: 5,
+            hidden: vec![Hidden::Periodic],
+            ..SynthConfig::default()
+        },
+        &csv,
+    );
+    let csv_s = csv.to_str().unwrap();
+    let (code, out, err) = trueaxis(&["diagnose", csv_s, "--model", "cubic19", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: Value = serde_json::from_str(&out).expect("one JSON document");
+    assert_eq!(v["model"], "cubic19");
+    assert!(
+        is_num_map(&v["rms_um"]) && is_num_map(&v["held_out_rms_um"]),
+        "{v}"
+    );
+    assert!(v["noise_floor_um"]
+        .as_object()
+        .unwrap()
+        .values()
+        .all(|x| x.is_number() || x.is_null()));
+    assert_eq!(v["verdict"], "missing_effect");
+    let cands = v["candidates"].as_array().unwrap();
+    assert!(!cands.is_empty());
+    let families = [
+        "periodic",
+        "thermal",
+        "reversal",
+        "abbe",
+        "drift",
+        "squareness",
+        "higher_order",
+    ];
+    for c in cands {
+        assert!(families.contains(&c["effect"].as_str().unwrap()), "{c}");
+        assert!(["ex", "ey", "ez"].contains(&c["target"].as_str().unwrap()));
+        assert!(c["axis"].is_string() || c["axis"].is_null());
+        assert!(c["channel"].is_string() || c["channel"].is_null());
+        assert!(c["params"].is_object());
+        assert!(c["add"].is_string());
+        assert!(c["held_out_rms_um_after"].is_number() || c["held_out_rms_um_after"].is_null());
+        assert!(c["gain"].is_number() || c["gain"].is_null());
+        assert!(c["identifiable"].is_boolean());
+        assert!(c["evidence"].is_string());
+    }
+    let top = &cands[0];
+    assert_eq!(top["effect"], "periodic");
+    assert!((top["params"]["period_mm"].as_f64().unwrap() - 5.08).abs() < 0.01);
+    let codes = [
+        "aliasing",
+        "one_direction",
+        "constant_temperature",
+        "in_model_span",
+        "confounded",
+    ];
+    for w in v["warnings"].as_array().unwrap() {
+        assert!(codes.contains(&w["code"].as_str().unwrap()), "{w}");
+        assert!(w["detail"].is_string());
+    }
+    for r in v["worst_regions"].as_array().unwrap() {
+        assert!(r["target"].is_string() && r["bbox_mm"].is_object() && r["rms_um"].is_number());
+    }
+    // The add string goes to fit verbatim, and the fit starts a history.
+    let model = dir.join("m.json");
+    let add = top["add"].as_str().unwrap();
+    let (code, out, err) = trueaxis(&[
+        "fit",
+        csv_s,
+        "--model",
+        "cubic19",
+        "--add",
+        add,
+        "-o",
+        model.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let fit: Value = serde_json::from_str(&out).unwrap();
+    assert!(fit["rms_um"]["ey"].as_f64().unwrap() < 0.4, "{fit}");
+    let (code, out, err) = trueaxis(&["history", model.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let h: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(h["steps"].as_array().unwrap().len(), 1);
+    // A usage error (unknown seed) is exit 1 with a message, not a panic.
+    let (code, _, err) = trueaxis(&["diagnose", csv_s, "--model", "nn:8"]);
+    assert_eq!(code, 1);
+    assert!(err.contains("linear seeds"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn improve_runs_to_the_noise_floor_and_keeps_the_history() {
+    let dir = tmp_dir("improve");
+    let csv = dir.join("two.csv");
+    write(
+        &SynthConfig {
+            seed: 9,
+            hidden: vec![Hidden::Periodic, Hidden::Reversal],
+            ..SynthConfig::default()
+        },
+        &csv,
+    );
+    let model = dir.join("m.json");
+    let (code, out, err) = trueaxis(&[
+        "improve",
+        csv.to_str().unwrap(),
+        "--model",
+        "cubic19",
+        "-o",
+        model.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let v: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["verdict"], "at_noise_floor", "{v}");
+    let steps = v["steps"].as_array().unwrap();
+    assert_eq!(steps.len(), 3, "{v}");
+    let added: Vec<&str> = steps.iter().filter_map(|s| s["added"].as_str()).collect();
+    assert!(
+        added
+            .iter()
+            .any(|a| a.starts_with("periodic:target=ey,axis=y")),
+        "{added:?}"
+    );
+    assert!(
+        added
+            .iter()
+            .any(|a| a.starts_with("reversal:target=ex,axis=x")),
+        "{added:?}"
+    );
+    let last = &steps[2];
+    for t in ["ex", "ey", "ez"] {
+        assert!(last["rms_um"][t].as_f64().unwrap() <= 1.3 * 0.3, "{last}");
+    }
+    let (code, out, _) = trueaxis(&["history", model.to_str().unwrap()]);
+    assert_eq!(code, 0);
+    assert!(
+        out.contains("3 step(s)") && out.contains("+ reversal:target=ex,axis=x"),
+        "{out}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn grid_only_data_warns_aliasing_with_the_line_to_add() {
+    let data = generate(&SynthConfig {
+        plan: Plan::GridOnly,
+        hidden: vec![Hidden::Periodic],
+        ..SynthConfig::default()
+    });
+    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    for axis in ["x", "y", "z"] {
+        assert!(
+            d.warnings.iter().any(|w| w.code == "aliasing"
+                && w.detail.contains(&format!("add a dense line along {axis}"))),
+            "{:?}",
+            d.warnings
+        );
+    }
+    // The 5.08 mm period cannot be seen on a 100 mm grid: no periodic
+    // candidate may claim it.
+    assert!(d
+        .candidates
+        .iter()
+        .all(|c| !(c.significant && c.effect == "periodic")));
+}
+
+#[test]
+fn one_direction_data_warns_one_direction() {
+    let data = generate(&SynthConfig {
+        bidirectional: false,
+        ..SynthConfig::default()
+    });
+    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    assert!(
+        d.warnings.iter().any(|w| w.code == "one_direction"),
+        "{:?}",
+        d.warnings
+    );
+    assert!(d.candidates.iter().all(|c| c.effect != "reversal"));
+}
