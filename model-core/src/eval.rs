@@ -837,70 +837,100 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                             k_q28: Mul32::new(k, 28),
                         });
                     }
-                    let mut qs = [0u8; 3];
-                    let mut prev = shape.n_in;
-                    let mut k = 0usize;
                     let n_layers = shape.n_layers;
-                    for layer in 0..=n_layers {
-                        let is_out = layer == n_layers;
-                        let width = if is_out {
-                            shape.n_out
-                        } else {
-                            shape.hidden[layer]
-                        };
-                        let w_at = |k0: usize, j: usize, l: usize| net.param(k0 + j * prev + l);
-                        let b_at = |k0: usize, j: usize| net.param(k0 + width * prev + j);
-                        // Effective (folded) weights and biases.
-                        let eff = |j: usize, l: Option<usize>| -> f64 {
-                            let (s, off) = if is_out {
-                                let (lo, hi) = net.output_range(j);
-                                ((hi - lo) / 2.0, (hi + lo) / 2.0)
+                    let n_out = shape.n_out;
+                    // (start, inputs, units) of each layer in the table's parameter order.
+                    let mut lay = [(0usize, 0usize, 0usize); MAX_HIDDEN_LAYERS + 1];
+                    {
+                        let (mut k, mut prev) = (0usize, shape.n_in);
+                        for (layer, l) in lay.iter_mut().enumerate().take(n_layers + 1) {
+                            let width = if layer == n_layers {
+                                n_out
                             } else {
-                                (1.0, 0.0)
+                                shape.hidden[layer]
                             };
-                            match l {
-                                Some(l) => w_at(k, j, l) * s,
-                                None => {
-                                    let mut b = b_at(k, j);
-                                    if layer == 0 {
-                                        for (l, el) in e.iter().enumerate().take(prev) {
-                                            b += w_at(k, j, l) * el;
-                                        }
-                                    }
-                                    b * s + off
-                                }
-                            }
+                            *l = (k, prev, width);
+                            k += width * prev + width;
+                            prev = width;
+                        }
+                    }
+                    // Effective weights: output scaling folded into the output
+                    // layer, the inputs' integer-mid offsets into layer 1's biases.
+                    let eff = |layer: usize, j: usize, l: Option<usize>| -> f64 {
+                        let (k0, prev, width) = lay[layer];
+                        let (s, off) = if layer == n_layers {
+                            let (lo, hi) = net.output_range(j);
+                            ((hi - lo) / 2.0, (hi + lo) / 2.0)
+                        } else {
+                            (1.0, 0.0)
                         };
+                        match l {
+                            Some(l) => net.param(k0 + j * prev + l) * s,
+                            None => {
+                                let mut b = net.param(k0 + width * prev + j);
+                                if layer == 0 {
+                                    for (l, el) in e.iter().enumerate().take(prev) {
+                                        b += net.param(k0 + j * prev + l) * el;
+                                    }
+                                }
+                                b * s + off
+                            }
+                        }
+                    };
+                    let mut qs = [0u8; 3];
+                    for layer in 0..=n_layers {
+                        let (_, prev, width) = lay[layer];
                         let mut worst = 0.0f64;
                         for j in 0..width {
-                            let mut s = eff(j, None).abs();
+                            let mut s = eff(layer, j, None).abs();
                             for l in 0..prev {
-                                s += eff(j, Some(l)).abs();
+                                s += eff(layer, j, Some(l)).abs();
                             }
                             worst = worst.max(s);
                         }
                         let q = choose_q(worst, 0).ok_or(range_err)?;
                         qs[layer.min(2)] = q as u8;
+                    }
+                    // Output layer q goes last so the evaluators find it at index 2.
+                    if n_layers == 1 {
+                        qs[2] = qs[1];
+                    }
+                    let push = |pools: &mut Pools<'_, P>, v: f64, q: u8| {
+                        pools.push(v as f32, to_q(v, q as i32), 0)
+                    };
+                    // Pool layout: [layer 1 rows, layer 1 biases] for a
+                    // two-layer net; then the last hidden layer fused with the
+                    // output layer, one record per unit
+                    // [bias, weights from the previous layer, output weights],
+                    // then the output biases.
+                    if n_layers == 2 {
+                        let (_, prev, width) = lay[0];
                         for j in 0..width {
                             for l in 0..prev {
-                                let w = eff(j, Some(l));
-                                pools.push(w as f32, to_q(w, q), 0);
+                                push(&mut pools, eff(0, j, Some(l)), qs[0]);
                             }
                         }
                         for j in 0..width {
-                            let b = eff(j, None);
-                            pools.push(b as f32, to_q(b, q), 0);
+                            push(&mut pools, eff(0, j, None), qs[0]);
                         }
-                        k += width * prev + width;
-                        prev = width;
+                    }
+                    let last = n_layers - 1;
+                    let (_, prev, width) = lay[last];
+                    for j in 0..width {
+                        push(&mut pools, eff(last, j, None), qs[last]);
+                        for l in 0..prev {
+                            push(&mut pools, eff(last, j, Some(l)), qs[last]);
+                        }
+                        for o in 0..n_out {
+                            push(&mut pools, eff(n_layers, o, Some(j)), qs[2]);
+                        }
+                    }
+                    for o in 0..n_out {
+                        push(&mut pools, eff(n_layers, o, None), qs[2]);
                     }
                     let mut widths = [0u8; MAX_HIDDEN_LAYERS];
                     for (i, w) in widths.iter_mut().enumerate() {
                         *w = shape.hidden[i] as u8;
-                    }
-                    // Output layer q goes last so the evaluators find it at index n_layers.
-                    if n_layers == 1 {
-                        qs[2] = qs[1];
                     }
                     Term::Mlp {
                         outputs,
@@ -1226,19 +1256,15 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             (x, n_in)
         };
         let width = (widths[(n_layers as usize).clamp(1, 2) - 1] as usize).min(MAX_HIDDEN_UNITS);
-        let (w, rest) = self.pf[k..].split_at(width * prev);
-        let (b, rest) = rest.split_at(width);
-        let (wo, rest) = rest.split_at(n_out * width);
-        let mut acc = [0.0f32; 3];
-        for (a, &bo) in acc.iter_mut().zip(&rest[..n_out]) {
-            *a = bo;
-        }
-        for (j, (row, &bj)) in w.chunks_exact(prev).zip(b).enumerate() {
-            let h = tanh_f32(bj + dot_f32(row, src));
-            for (o, a) in acc.iter_mut().enumerate().take(n_out) {
-                *a += wo.get(o * width + j).copied().unwrap_or(0.0) * h;
-            }
-        }
+        let blk = self.pf.get(k..).unwrap_or(&[]);
+        // Monomorphised (fully unrolled) for the common shapes.
+        let acc = match (prev, n_out) {
+            (3, 3) => fused_f32::<3, 3>(blk, src, width),
+            (4, 3) => fused_f32::<4, 3>(blk, src, width),
+            (3, 1) => fused_f32::<3, 1>(blk, src, width),
+            (16, 3) => fused_f32::<16, 3>(blk, src, width),
+            _ => fused_f32_dyn(blk, src, width, n_out),
+        };
         let mut j = 0;
         for o in 0..3 {
             if outputs & (1 << o) != 0 {
@@ -1541,21 +1567,15 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         };
         let last = (n_layers as usize).clamp(1, 2) - 1;
         let width = (widths[last] as usize).min(MAX_HIDDEN_UNITS);
-        let ql = q[last] as u32;
-        let qo = q[2] as u32;
-        let (w, rest) = self.pq[k..].split_at(width * prev);
-        let (b, rest) = rest.split_at(width);
-        let (wo, rest) = rest.split_at(n_out * width);
-        let mut acc = [0i64; 3];
-        for (a, &bo) in acc.iter_mut().zip(&rest[..n_out]) {
-            *a = (bo as i64) << 30;
-        }
-        for (j, (row, &bj)) in w.chunks_exact(prev).zip(b).enumerate() {
-            let h = tanh_q26_of(((bj as i64) << in_frac) + dot_q(row, src), ql + in_frac) as i64;
-            for (o, a) in acc.iter_mut().enumerate().take(n_out) {
-                *a += wo.get(o * width + j).copied().unwrap_or(0) as i64 * h;
-            }
-        }
+        let (ql, qo) = (q[last] as u32 + in_frac, q[2] as u32);
+        let blk = self.pq.get(k..).unwrap_or(&[]);
+        let acc = match (prev, n_out) {
+            (3, 3) => fused_q::<3, 3>(blk, src, width, in_frac, ql),
+            (4, 3) => fused_q::<4, 3>(blk, src, width, in_frac, ql),
+            (3, 1) => fused_q::<3, 1>(blk, src, width, in_frac, ql),
+            (16, 3) => fused_q::<16, 3>(blk, src, width, in_frac, ql),
+            _ => fused_q_dyn(blk, src, width, n_out, in_frac, ql),
+        };
         let mut j = 0;
         for (o, a) in out.iter_mut().enumerate() {
             if outputs & (1 << o) != 0 {
@@ -1565,6 +1585,144 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             }
         }
     }
+}
+
+/// The last hidden layer fused with the output layer, f32: per unit the
+/// record [bias, NI weights, NO output weights]; then NO output biases.
+#[inline(always)]
+fn fused_f32<const NI: usize, const NO: usize>(blk: &[f32], x: &[f32], width: usize) -> [f32; 3] {
+    let mut acc = [0.0f32; 3];
+    let Ok(x) = <&[f32; NI]>::try_from(x) else {
+        return acc;
+    };
+    let stride = 1 + NI + NO;
+    let (Some(units), Some(bo)) = (
+        blk.get(..width * stride),
+        blk.get(width * stride..width * stride + NO),
+    ) else {
+        return acc;
+    };
+    let mut a = [0.0f32; NO];
+    for (ai, &b) in a.iter_mut().zip(bo) {
+        *ai = b;
+    }
+    for u in units.chunks_exact(stride) {
+        let (b, w, wo) = (u[0], &u[1..1 + NI], &u[1 + NI..]);
+        let (Ok(w), Ok(wo)) = (<&[f32; NI]>::try_from(w), <&[f32; NO]>::try_from(wo)) else {
+            continue;
+        };
+        let mut z = b;
+        for i in 0..NI {
+            z += w[i] * x[i];
+        }
+        let h = tanh_f32(z);
+        for o in 0..NO {
+            a[o] += wo[o] * h;
+        }
+    }
+    for (ac, ai) in acc.iter_mut().zip(a) {
+        *ac = ai;
+    }
+    acc
+}
+
+/// [`fused_f32`] for any shape.
+fn fused_f32_dyn(blk: &[f32], x: &[f32], width: usize, n_out: usize) -> [f32; 3] {
+    let mut acc = [0.0f32; 3];
+    let stride = 1 + x.len() + n_out;
+    let (Some(units), Some(bo)) = (
+        blk.get(..width * stride),
+        blk.get(width * stride..width * stride + n_out),
+    ) else {
+        return acc;
+    };
+    for (a, &b) in acc.iter_mut().zip(bo) {
+        *a = b;
+    }
+    for u in units.chunks_exact(stride) {
+        let (w, wo) = u[1..].split_at(x.len());
+        let h = tanh_f32(u[0] + dot_f32(w, x));
+        for (a, &wj) in acc.iter_mut().zip(wo) {
+            *a += wj * h;
+        }
+    }
+    acc
+}
+
+/// The fused last hidden + output layer in fixed point: `x` has `in_frac`
+/// fractional bits, hidden pre-activations `ql` (= q + in_frac); the result
+/// is Q(q_out + 30).
+#[inline(always)]
+fn fused_q<const NI: usize, const NO: usize>(
+    blk: &[i32],
+    x: &[i32],
+    width: usize,
+    in_frac: u32,
+    ql: u32,
+) -> [i64; 3] {
+    let mut acc = [0i64; 3];
+    let Ok(x) = <&[i32; NI]>::try_from(x) else {
+        return acc;
+    };
+    let stride = 1 + NI + NO;
+    let (Some(units), Some(bo)) = (
+        blk.get(..width * stride),
+        blk.get(width * stride..width * stride + NO),
+    ) else {
+        return acc;
+    };
+    let mut a = [0i64; NO];
+    for (ai, &b) in a.iter_mut().zip(bo) {
+        *ai = (b as i64) << 30;
+    }
+    for u in units.chunks_exact(stride) {
+        let (b, w, wo) = (u[0], &u[1..1 + NI], &u[1 + NI..]);
+        let (Ok(w), Ok(wo)) = (<&[i32; NI]>::try_from(w), <&[i32; NO]>::try_from(wo)) else {
+            continue;
+        };
+        let mut z = (b as i64) << in_frac;
+        for i in 0..NI {
+            z += w[i] as i64 * x[i] as i64;
+        }
+        let h = tanh_q26_of(z, ql) as i64;
+        for o in 0..NO {
+            a[o] += wo[o] as i64 * h;
+        }
+    }
+    for (ac, ai) in acc.iter_mut().zip(a) {
+        *ac = ai;
+    }
+    acc
+}
+
+/// [`fused_q`] for any shape.
+fn fused_q_dyn(
+    blk: &[i32],
+    x: &[i32],
+    width: usize,
+    n_out: usize,
+    in_frac: u32,
+    ql: u32,
+) -> [i64; 3] {
+    let mut acc = [0i64; 3];
+    let stride = 1 + x.len() + n_out;
+    let (Some(units), Some(bo)) = (
+        blk.get(..width * stride),
+        blk.get(width * stride..width * stride + n_out),
+    ) else {
+        return acc;
+    };
+    for (a, &b) in acc.iter_mut().zip(bo) {
+        *a = (b as i64) << 30;
+    }
+    for u in units.chunks_exact(stride) {
+        let (w, wo) = u[1..].split_at(x.len());
+        let h = tanh_q26_of(((u[0] as i64) << in_frac) + dot_q(w, x), ql) as i64;
+        for (a, &wj) in acc.iter_mut().zip(wo) {
+            *a += wj as i64 * h;
+        }
+    }
+    acc
 }
 
 /// Dot product with the common tiny input counts unrolled.
