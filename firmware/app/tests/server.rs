@@ -296,6 +296,64 @@ fn refusals() {
     );
 }
 
+/// A valid table the firmware's model capacity cannot hold (a 40 × 40
+/// grid: 1600 values > `FW_GRID`) is refused at commit, not half loaded.
+#[test]
+fn tables_beyond_the_firmware_capacity_are_refused_at_commit() {
+    use model_core::spec::{GridAxisSpec, GridSpec, TermSpec};
+    let mut spec = trueaxis_app::sim::sample_spec(0);
+    let n = 40u16;
+    let step = 800_000_000 / (n as i32 - 1);
+    let ax = GridAxisSpec {
+        nodes: n,
+        origin_nm: -400_000_000,
+        step_nm: step,
+    };
+    let one = GridAxisSpec {
+        nodes: 1,
+        origin_nm: 0,
+        step_nm: 1,
+    };
+    spec.terms = vec![TermSpec::Grid(GridSpec {
+        output: 0,
+        axes: [ax, ax, one],
+        values_nm: (0..n as usize * n as usize)
+            .map(|i| (i % 97) as f64 * 10.0)
+            .collect(),
+    })];
+    let table = spec.encode().unwrap();
+    assert!(trueaxis_app::model::FW_GRID < 1600);
+    // Valid, and model-core's default capacity would take it.
+    assert!(Model::load(&parse(&table).unwrap()).is_ok());
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    let crc32 = FRAME_CRC.checksum(&table);
+    call(
+        &mut b,
+        &mut p,
+        1,
+        Request::UploadBegin {
+            size: table.len() as u32,
+            crc32,
+        },
+    );
+    for (i, c) in table.chunks(256).enumerate() {
+        call(
+            &mut b,
+            &mut p,
+            2,
+            Request::UploadChunk {
+                offset: (i * 256) as u32,
+                data: c,
+            },
+        );
+    }
+    assert_eq!(
+        call(&mut b, &mut p, 3, Request::Commit),
+        Response::Error(LinkError::InvalidTable)
+    );
+}
+
 #[test]
 fn commit_is_refused_while_axes_move() {
     let mut b = SimBoard::new();

@@ -32,7 +32,6 @@ use {defmt_rtt as _, panic_probe as _};
 use model_core::link::LINK_TEMPS;
 use trueaxis_app::engine::Engine;
 use trueaxis_app::hw::{Clock, TemperatureSource};
-use trueaxis_app::model::ModelBuf;
 use trueaxis_app::server::{Server, ServerConfig};
 use trueaxis_app::store::TableStore;
 
@@ -54,11 +53,8 @@ fn main() -> ! {
     let store = unwrap!(TableStore::new(parts.flash, board::LAYOUT));
     let mut server = Server::new(
         store,
-        shared::STAGE.init([0; shared::STAGE_BYTES]),
-        [
-            shared::MODEL_A.init(ModelBuf::new()),
-            shared::MODEL_B.init(ModelBuf::new()),
-        ],
+        shared::STAGE.take(),
+        [shared::MODEL_A.take(), shared::MODEL_B.take()],
         ServerConfig {
             firmware: trueaxis_app::FIRMWARE_VERSION,
             quiet_ms: QUIET_MS,

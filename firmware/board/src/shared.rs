@@ -23,7 +23,7 @@ use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, ThreadModeRawMu
 use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
 use embassy_sync::mutex::Mutex;
 use model_core::link::LINK_TEMPS;
-use static_cell::StaticCell;
+use static_cell::{ConstStaticCell, StaticCell};
 use trueaxis_app::engine::Engine;
 use trueaxis_app::model::ModelBuf;
 use trueaxis_app::server::{EngineAccess, Server};
@@ -54,10 +54,11 @@ pub static TEMPS_MC: [AtomicI32; LINK_TEMPS] = [const { AtomicI32::new(i32::MIN)
 /// See the table above.
 pub static TICKS: AtomicU32 = AtomicU32::new(0);
 
-/// The two model buffers (≈ 26 KiB each): one runs, one receives the next
+/// The two model buffers (≈ 11 KiB each): one runs, one receives the next
 /// table. Owned by the server and the engine in turn, never shared.
-pub static MODEL_A: StaticCell<ModelBuf> = StaticCell::new();
+/// `ConstStaticCell`: initialised in place, never built on the stack.
+pub static MODEL_A: ConstStaticCell<ModelBuf> = ConstStaticCell::new(ModelBuf::new());
 /// See [`MODEL_A`].
-pub static MODEL_B: StaticCell<ModelBuf> = StaticCell::new();
+pub static MODEL_B: ConstStaticCell<ModelBuf> = ConstStaticCell::new(ModelBuf::new());
 /// Upload staging buffer (owned by the server).
-pub static STAGE: StaticCell<[u8; STAGE_BYTES]> = StaticCell::new();
+pub static STAGE: ConstStaticCell<[u8; STAGE_BYTES]> = ConstStaticCell::new([0; STAGE_BYTES]);
