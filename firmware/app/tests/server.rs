@@ -322,7 +322,7 @@ fn tables_beyond_the_firmware_capacity_are_refused_at_commit() {
             .collect(),
     })];
     let table = spec.encode().unwrap();
-    assert!(trueaxis_app::model::FW_GRID < 1600);
+    const { assert!(trueaxis_app::model::FW_GRID < 1600) };
     // Valid, and model-core's default capacity would take it.
     assert!(Model::load(&parse(&table).unwrap()).is_ok());
     let mut b = SimBoard::new();
