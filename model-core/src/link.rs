@@ -353,7 +353,10 @@ pub enum LinkError {
     NothingToActivate,
     /// Rollback without a valid table in the other slot.
     NothingToRollBackTo,
-    /// An injection carries a value outside the model's input range.
+    /// An injection carries a value no sensor can produce (a reversal
+    /// state beyond ±2^30). Positions, temperatures and tool lengths outside
+    /// the table's envelope are accepted: the model holds them at the edge
+    /// and flags it, exactly as for real sensors.
     BadInjection,
 }
 

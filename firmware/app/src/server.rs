@@ -305,10 +305,17 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                 engine.with_engine(|e| e.clear_faults());
                 Response::Ok
             }
-            Request::Inject(inj) => Response::Correction(engine.with_engine(|e| {
-                e.set_injection(Some(inj));
-                e.evaluate_injection(&inj)
-            })),
+            Request::Inject(inj) => {
+                // A reversal state beyond ±1 (Q30) is not a state a
+                // DirTracker can be in: the host built it wrong.
+                if inj.rev_q30.iter().any(|r| r.unsigned_abs() > 1 << 30) {
+                    return Err(LinkError::BadInjection);
+                }
+                Response::Correction(engine.with_engine(|e| {
+                    e.set_injection(Some(inj));
+                    e.evaluate_injection(&inj)
+                }))
+            }
             Request::EndInject => {
                 engine.with_engine(|e| e.set_injection(None));
                 Response::Ok

@@ -105,6 +105,12 @@ fn install_inject_and_read_back_equals_model_core() {
             );
         }
     }
+    let mut bad = injection([0; 3]);
+    bad.rev_q30[2] = (1 << 30) + 1;
+    assert_eq!(
+        call(&mut b, &mut p, 39, Request::Inject(bad)),
+        Response::Error(LinkError::BadInjection)
+    );
     assert_eq!(call(&mut b, &mut p, 40, Request::EndInject), Response::Ok);
 }
 
