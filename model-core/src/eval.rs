@@ -192,7 +192,8 @@ pub enum LoadError {
     CoefficientRange { term: u32 },
     /// A grid value exceeds ±4.1 mm (the Q8 nm range with interpolation headroom).
     GridValueRange { term: u32 },
-    /// An MLP's input min-max maps the envelope beyond ±7 (the fixed-point input range).
+    /// An MLP's input scaling maps the envelope beyond ±7 (the fixed-point input range),
+    /// or its min-max range is narrower than 1 nm / 1 m°C.
     MlpInputRange { term: u32 },
 }
 
@@ -1000,11 +1001,11 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         pos
     }
 
-    /// Hold the auxiliary inputs (temperatures, tool, reversal state) the
-    /// terms read. Temperature and tool flags are raised only when the table
-    /// reads them.
+    /// Hold the temperatures and the tool arm the terms read (the reversal
+    /// state is clamped where it is used). Their flags are raised only when
+    /// the table reads them.
     #[inline(always)]
-    fn hold_aux(&self, inp: &Inputs, flags: &mut Flags) -> ([i32; 3], [i32; MAX_TEMPS], i32) {
+    fn hold_aux(&self, inp: &Inputs, flags: &mut Flags) -> ([i32; MAX_TEMPS], i32) {
         let mut temp = inp.temp_mc;
         if self.reads_temp {
             for ch in 0..(self.n_channels as usize).min(MAX_TEMPS) {
@@ -1028,11 +1029,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         } else {
             inp.tool_nm
         };
-        let mut none = Flags::empty();
-        let rev = inp
-            .rev_q30
-            .map(|r| hold(r, -ONE_Q30, ONE_Q30, &mut none, Flags::empty()));
-        (rev, temp, tool)
+        (temp, tool)
     }
 
     /// Evaluate in f32 (the fast path on the Cortex-M4F).
@@ -1041,11 +1038,14 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         let pos = self.hold_pos(inp.pos_nm, &mut flags);
         // |p − c| ≤ half-span < 2^31 (validated), so the wrapping i32
         // difference is exact.
-        let u = [
-            pos[0].wrapping_sub(self.centre_nm[0]) as f32 * self.inv_half_f32[0],
-            pos[1].wrapping_sub(self.centre_nm[1]) as f32 * self.inv_half_f32[1],
-            pos[2].wrapping_sub(self.centre_nm[2]) as f32 * self.inv_half_f32[2],
-        ];
+        // Computed only when the table has polynomials.
+        let u = || {
+            [
+                pos[0].wrapping_sub(self.centre_nm[0]) as f32 * self.inv_half_f32[0],
+                pos[1].wrapping_sub(self.centre_nm[1]) as f32 * self.inv_half_f32[1],
+                pos[2].wrapping_sub(self.centre_nm[2]) as f32 * self.inv_half_f32[2],
+            ]
+        };
         // Monomials up to degree 3 (the common case) are one straight-line
         // expression and the block loop has a constant trip count. All other
         // terms are evaluated out of line (recomputing the monomials they
@@ -1054,8 +1054,8 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         let out = if self.terms.is_empty() {
             match self.n_monos {
                 0 => [0.0; 3],
-                1..=20 => self.block_f32(&mono20_f32(u)),
-                _ => self.block_f32(&mono56_f32(u)),
+                1..=20 => self.block_f32(&mono20_f32(u())),
+                _ => self.block_f32(&mono56_f32(u())),
             }
         } else {
             // The monomials are handed to the thermal/Abbe terms.
@@ -1066,13 +1066,13 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     out
                 }
                 1..=20 => {
-                    let mv = mono20_f32(u);
+                    let mv = mono20_f32(u());
                     let mut out = self.block_f32(&mv);
                     self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
                     out
                 }
                 _ => {
-                    let mv = mono56_f32(u);
+                    let mv = mono56_f32(u());
                     let mut out = self.block_f32(&mv);
                     self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
                     out
@@ -1130,71 +1130,75 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         flags: &mut Flags,
         out: &mut [f32; 3],
     ) {
-        let (rev, temp, tool) = self.hold_aux(inp, flags);
+        // Each kind is its own out-of-line function taking the term by
+        // reference: this loop then hoists nothing and costs a few
+        // instructions per term.
+        let (temp, tool) = self.hold_aux(inp, flags);
         for t in self.terms.iter() {
-            match *t {
-                Term::Factored {
-                    output,
-                    factor,
-                    start,
-                    len,
-                    ..
-                } => {
-                    let (s, e) = (start as usize, start as usize + len as usize);
-                    let mut v = 0.0f32;
-                    for (c, &i) in self.pf[s..e].iter().zip(self.pidx[s..e].iter()) {
-                        v += c * mv.get(i as usize).copied().unwrap_or(0.0);
-                    }
-                    let f = match factor {
-                        Factor::Temp { ch, t_ref_mc } => {
-                            temp[ch as usize & 3].wrapping_sub(t_ref_mc) as f32
-                        }
-                        Factor::Tool => tool as f32,
-                    };
-                    out[output as usize % 3] += v * f;
-                }
-                Term::Periodic {
-                    output,
-                    axis,
-                    harmonics,
-                    period_nm,
-                    turns,
-                    start,
-                    ..
-                } => {
-                    out[output as usize % 3] += self.periodic_f32(
-                        pos[axis as usize % 3],
-                        harmonics,
-                        period_nm,
-                        turns,
-                        start,
-                    );
-                }
+            let (o, v) = match t {
+                Term::Factored { output, .. } => (*output, self.factored_f32(t, mv, &temp, tool)),
+                Term::Periodic { output, .. } => (*output, self.periodic_f32(t, pos)),
                 Term::Reversal {
                     output,
                     axis,
                     amp_f32,
                     ..
                 } => {
-                    out[output as usize % 3] += amp_f32 * rev[axis as usize % 3] as f32;
+                    let r = inp.rev_q30[*axis as usize % 3].clamp(-ONE_Q30, ONE_Q30);
+                    (*output, amp_f32 * r as f32)
                 }
                 Term::Grid {
                     output,
-                    ref axes,
+                    axes,
                     start,
-                } => {
-                    out[output as usize % 3] += self.grid_f32(axes, start as usize, pos);
+                } => (*output, self.grid_f32(axes, *start as usize, pos)),
+                Term::Mlp { .. } => {
+                    self.mlp_f32(t, pos, &temp, out);
+                    continue;
                 }
-                Term::Mlp { .. } => self.mlp_f32(t, pos, &temp, out),
+            };
+            out[o as usize % 3] += v;
+        }
+    }
+
+    #[inline(never)]
+    fn factored_f32(&self, t: &Term, mv: &[f32], temp: &[i32; MAX_TEMPS], tool: i32) -> f32 {
+        let Term::Factored {
+            factor, start, len, ..
+        } = *t
+        else {
+            return 0.0;
+        };
+        let (s, e) = (start as usize, start as usize + len as usize);
+        let mut v = 0.0f32;
+        if let (Some(c), Some(idx)) = (self.pf.get(s..e), self.pidx.get(s..e)) {
+            for (c, &i) in c.iter().zip(idx) {
+                v += c * mv.get(i as usize).copied().unwrap_or(0.0);
             }
         }
+        let f = match factor {
+            Factor::Temp { ch, t_ref_mc } => temp[ch as usize & 3].wrapping_sub(t_ref_mc) as f32,
+            Factor::Tool => tool as f32,
+        };
+        v * f
     }
 
     /// Σ a_k sin kθ + b_k cos kθ: the first harmonic from the table, the
     /// others by the angle-addition recurrence (4 multiplies each).
     #[inline(never)]
-    fn periodic_f32(&self, p: i32, harmonics: u8, period_nm: i32, turns: Turns, start: u16) -> f32 {
-        let theta = phase_turns(p, period_nm, turns);
+    fn periodic_f32(&self, t: &Term, pos: &[i32; 3]) -> f32 {
+        let Term::Periodic {
+            axis,
+            harmonics,
+            period_nm,
+            turns,
+            start,
+            ..
+        } = *t
+        else {
+            return 0.0;
+        };
+        let theta = phase_turns(pos[axis as usize % 3], period_nm, turns);
         let (s1, c1) = sincos_q30(theta);
         // The coefficients carry the 2^-30 of the Q30 sin/cos.
         let (s1, c1) = (s1 as f32, c1 as f32);
@@ -1344,16 +1348,19 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         let mut flags = Flags::empty();
         let pos = self.hold_pos(inp.pos_nm, &mut flags);
         // |p − c| ≤ half-span, so |u| ≤ 2^30 (+1 from rounding) fits i32.
-        let u = [
-            self.u_scale[0].apply(pos[0].wrapping_sub(self.centre_nm[0])),
-            self.u_scale[1].apply(pos[1].wrapping_sub(self.centre_nm[1])),
-            self.u_scale[2].apply(pos[2].wrapping_sub(self.centre_nm[2])),
-        ];
+        // Computed only when the table has polynomials.
+        let u = || {
+            [
+                self.u_scale[0].apply(pos[0].wrapping_sub(self.centre_nm[0])),
+                self.u_scale[1].apply(pos[1].wrapping_sub(self.centre_nm[1])),
+                self.u_scale[2].apply(pos[2].wrapping_sub(self.centre_nm[2])),
+            ]
+        };
         let out = if self.terms.is_empty() {
             match self.n_monos {
                 0 => [0; 3],
-                1..=20 => self.block_fixed(&mono20_q30(u)),
-                _ => self.block_fixed(&mono56_q30(u)),
+                1..=20 => self.block_fixed(&mono20_q30(u())),
+                _ => self.block_fixed(&mono56_q30(u())),
             }
         } else {
             // The monomials are handed to the thermal/Abbe terms.
@@ -1364,13 +1371,13 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     out
                 }
                 1..=20 => {
-                    let mv = mono20_q30(u);
+                    let mv = mono20_q30(u());
                     let mut out = self.block_fixed(&mv);
                     self.terms_fixed(&mv, &pos, inp, &mut flags, &mut out);
                     out
                 }
                 _ => {
-                    let mv = mono56_q30(u);
+                    let mv = mono56_q30(u());
                     let mut out = self.block_fixed(&mv);
                     self.terms_fixed(&mv, &pos, inp, &mut flags, &mut out);
                     out
@@ -1427,48 +1434,12 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         flags: &mut Flags,
         out: &mut [i64; 3],
     ) {
-        let (rev, temp, tool) = self.hold_aux(inp, flags);
+        let (temp, tool) = self.hold_aux(inp, flags);
         for t in self.terms.iter() {
-            match *t {
-                Term::Factored {
-                    output,
-                    factor,
-                    start,
-                    len,
-                    shift,
-                } => {
-                    let (s, e) = (start as usize, start as usize + len as usize);
-                    let mut v = 0i64;
-                    for (&c, &i) in self.pq[s..e].iter().zip(self.pidx[s..e].iter()) {
-                        v += c as i64 * mv.get(i as usize).copied().unwrap_or(0) as i64;
-                    }
-                    let f = match factor {
-                        Factor::Temp { ch, t_ref_mc } => {
-                            temp[ch as usize & 3] as i64 - t_ref_mc as i64
-                        }
-                        Factor::Tool => tool as i64,
-                    };
-                    let o = output as usize % 3;
-                    out[o] = out[o].saturating_add(rshr(rshr(v, 30) * f, shift));
-                }
-                Term::Periodic {
-                    output,
-                    axis,
-                    harmonics,
-                    period_nm,
-                    turns,
-                    start,
-                    shift,
-                } => {
-                    let o = output as usize % 3;
-                    let v = self.periodic_fixed(
-                        pos[axis as usize % 3],
-                        harmonics,
-                        period_nm,
-                        turns,
-                        start,
-                    );
-                    out[o] = out[o].saturating_add(rshr(v, shift));
+            let (o, v) = match t {
+                Term::Factored { output, .. } => (*output, self.factored_fixed(t, mv, &temp, tool)),
+                Term::Periodic { output, shift, .. } => {
+                    (*output, rshr(self.periodic_fixed(t, pos), *shift))
                 }
                 Term::Reversal {
                     output,
@@ -1477,35 +1448,67 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     shift,
                     ..
                 } => {
-                    let o = output as usize % 3;
-                    out[o] = out[o]
-                        .saturating_add(rshr(amp_q as i64 * rev[axis as usize % 3] as i64, shift));
+                    let r = inp.rev_q30[*axis as usize % 3].clamp(-ONE_Q30, ONE_Q30);
+                    (*output, rshr(*amp_q as i64 * r as i64, *shift))
                 }
                 Term::Grid {
                     output,
-                    ref axes,
+                    axes,
                     start,
-                } => {
-                    let o = output as usize % 3;
-                    out[o] = out[o].saturating_add(self.grid_fixed(axes, start as usize, pos));
+                } => (*output, self.grid_fixed(axes, *start as usize, pos)),
+                Term::Mlp { .. } => {
+                    self.mlp_fixed(t, pos, &temp, out);
+                    continue;
                 }
-                Term::Mlp { .. } => self.mlp_fixed(t, pos, &temp, out),
+            };
+            let o = o as usize % 3;
+            out[o] = out[o].saturating_add(v);
+        }
+    }
+
+    /// factor × polynomial, Q16 nm.
+    #[inline(never)]
+    fn factored_fixed(&self, t: &Term, mv: &[i32], temp: &[i32; MAX_TEMPS], tool: i32) -> i64 {
+        let Term::Factored {
+            factor,
+            start,
+            len,
+            shift,
+            ..
+        } = *t
+        else {
+            return 0;
+        };
+        let (s, e) = (start as usize, start as usize + len as usize);
+        let mut v = 0i64;
+        if let (Some(c), Some(idx)) = (self.pq.get(s..e), self.pidx.get(s..e)) {
+            for (&c, &i) in c.iter().zip(idx) {
+                v += c as i64 * mv.get(i as usize).copied().unwrap_or(0) as i64;
             }
         }
+        let f = match factor {
+            Factor::Temp { ch, t_ref_mc } => temp[ch as usize & 3] as i64 - t_ref_mc as i64,
+            Factor::Tool => tool as i64,
+        };
+        rshr(rshr(v, 30) * f, shift)
     }
 
     /// Σ a_k sin kθ + b_k cos kθ in Q(q+30): the first harmonic from the
     /// table, the others by the angle-addition recurrence in Q30.
     #[inline(never)]
-    fn periodic_fixed(
-        &self,
-        p: i32,
-        harmonics: u8,
-        period_nm: i32,
-        turns: Turns,
-        start: u16,
-    ) -> i64 {
-        let theta = phase_turns(p, period_nm, turns);
+    fn periodic_fixed(&self, t: &Term, pos: &[i32; 3]) -> i64 {
+        let Term::Periodic {
+            axis,
+            harmonics,
+            period_nm,
+            turns,
+            start,
+            ..
+        } = *t
+        else {
+            return 0;
+        };
+        let theta = phase_turns(pos[axis as usize % 3], period_nm, turns);
         let (s1, c1) = sincos_q30(theta);
         let c = &self.pq[start as usize..start as usize + 2 * harmonics as usize];
         let (mut s, mut co) = (s1, c1);
