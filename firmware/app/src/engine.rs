@@ -146,6 +146,12 @@ pub struct TickReport {
 #[derive(Debug)]
 pub struct Engine<'m> {
     cfg: EngineConfig,
+    /// Per axis: an encoder step of at least this many pm in one tick is a
+    /// jump (`i64::MAX`: check disabled). Twice the distance at full speed
+    /// in one period, as margin for a late tick.
+    jump_threshold_pm: [i64; 3],
+    /// Per axis: the scale in whole nm per count, when it is one.
+    nm_per_count: [Option<i64>; 3],
     slew_nm_per_ms: i32,
     model: Option<&'m mut ModelBuf>,
     active: Option<SlotInfo>,
@@ -179,8 +185,20 @@ impl<'m> Engine<'m> {
     /// An engine without a table (it outputs zero and reports `NO_TABLE`).
     pub fn new(cfg: EngineConfig) -> Result<Self, ConfigError> {
         cfg.check()?;
+        let jump_threshold_pm = cfg.axes.map(|a| {
+            if a.max_speed_nm_per_ms <= 0 {
+                return i64::MAX;
+            }
+            let max_nm = 2 * a.max_speed_nm_per_ms as i64 * cfg.period_us as i64 / 1000;
+            (max_nm.max(1) + 1) * 1000
+        });
+        let nm_per_count = cfg
+            .axes
+            .map(|a| (a.pm_per_count % 1000 == 0).then_some(a.pm_per_count / 1000));
         Ok(Self {
             cfg,
+            jump_threshold_pm,
+            nm_per_count,
             slew_nm_per_ms: 0,
             model: None,
             active: None,
@@ -396,20 +414,22 @@ impl<'m> Engine<'m> {
         }
         let enc_pos_nm = core::array::from_fn(|i| {
             let a = &self.cfg.axes[i];
-            let nm = counts[i] as i64 * a.pm_per_count / 1000 + a.origin_nm as i64;
+            // Whole nm per count (the usual scales): a multiply; else the
+            // exact 64-bit division (a library call on the M4).
+            let scaled = match self.nm_per_count[i] {
+                Some(k) => counts[i] as i64 * k,
+                None => counts[i] as i64 * a.pm_per_count / 1000,
+            };
+            let nm = scaled + a.origin_nm as i64;
             nm.clamp(i32::MIN as i64, i32::MAX as i64) as i32
         });
         if let Some(prev) = self.last_counts {
             for (i, a) in self.cfg.axes.iter().enumerate() {
-                if a.max_speed_nm_per_ms <= 0 {
-                    continue;
-                }
-                let d_counts = counts[i].wrapping_sub(prev[i]) as i64;
-                let d_nm = (d_counts * a.pm_per_count / 1000).abs();
-                // Twice the distance at full speed in one period: margin
-                // for a late tick.
-                let max_nm = 2 * a.max_speed_nm_per_ms as i64 * self.cfg.period_us as i64 / 1000;
-                if d_nm > max_nm.max(1) {
+                // |Δcounts| · |pm/count| ≥ threshold ⇔ the jump exceeds
+                // the limit in whole nm (threshold precomputed: 64-bit
+                // divisions are library calls on the M4).
+                let d_counts = counts[i].wrapping_sub(prev[i]).unsigned_abs() as i64;
+                if d_counts.saturating_mul(a.pm_per_count.abs()) >= self.jump_threshold_pm[i] {
                     events = events.union(Faults::ENCODER_JUMP);
                 }
             }

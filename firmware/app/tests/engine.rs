@@ -345,3 +345,25 @@ fn configurations_the_pulse_budget_cannot_follow_are_refused() {
         e.slew_nm_per_ms()
     );
 }
+
+#[test]
+fn positions_scale_exactly_for_whole_and_fractional_nm_per_count() {
+    for pm in [100_000i64, 12_345, -25_000] {
+        let mut cfg = sim_engine_config();
+        cfg.axes[0].pm_per_count = pm;
+        cfg.axes[0].origin_nm = -7;
+        let mut e = Engine::new(cfg).unwrap();
+        let clock = FakeClock(Cell::new(0));
+        let mut io = Fake::new();
+        for counts in [0, 1, 999, -123_457, 2_000_000] {
+            io.counts[0] = counts;
+            run(&mut e, &clock, &mut io, 1);
+            let want = counts as i64 * pm / 1000 - 7;
+            assert_eq!(
+                e.telemetry().pos_nm[0] as i64,
+                want,
+                "pm {pm} counts {counts}"
+            );
+        }
+    }
+}

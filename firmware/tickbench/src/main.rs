@@ -1,0 +1,166 @@
+//! How many instructions one tick of the correction engine costs on the
+//! Cortex-M4F, measured under `qemu-system-arm -M netduinoplus2 -icount
+//! shift=0` (one instruction = 1 ns of virtual time, so TIM2 at prescaler 0
+//! counts instructions exactly — the method of the QEMU bench image).
+//! Instructions, not cycles: a lower bound for the real chip.
+//!
+//! Run: `cargo build --release -p trueaxis-tickbench`, then
+//! `qemu-system-arm -M netduinoplus2 -nographic -monitor none -serial null
+//! -semihosting-config enable=on,target=native -icount shift=0 -kernel
+//! $CARGO_TARGET_DIR/thumbv7em-none-eabihf/release/tickbench`.
+//!
+//! Cases: the engine without a table (its own overhead: sensors,
+//! direction tracking, slew, pulse accumulator), and with the sample table
+//! while the axes move. Step pulses are counted, not bit-banged (the
+//! board's bit-banging costs 2 µs per pulse by construction).
+#![no_std]
+#![no_main]
+
+use core::cell::Cell;
+use core::hint::black_box;
+
+use model_core::link::{Slot, SlotInfo, LINK_TEMPS};
+use semihosting::println;
+use stm32_metapac::{timer::vals::Urs, TIM2};
+use trueaxis_app::engine::{AxisConfig, Engine, EngineConfig};
+use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
+use trueaxis_app::model::{load_into, ModelBuf};
+
+static TABLE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/sample.bin"));
+
+/// The board's configuration (firmware/board/src/board.rs).
+const CONFIG: EngineConfig = EngineConfig {
+    axes: [AxisConfig {
+        pm_per_count: 25_000,
+        origin_nm: 0,
+        pulse_nm: 100,
+        max_speed_nm_per_ms: 500_000,
+    }; 3],
+    period_us: 50,
+    max_steps_per_tick: 2,
+    temps_used: 4,
+    temp_min_mc: -20_000,
+    temp_max_mc: 80_000,
+    fault_ramp_nm_per_ms: 1_000,
+    tool_nm: 0,
+};
+
+struct Fake {
+    counts: [i32; 3],
+    pulses: i64,
+}
+
+impl Encoders for Fake {
+    fn read_counts(&mut self) -> [i32; 3] {
+        // Every axis moving, X fastest: 20 counts per tick = 10 mm/s.
+        self.counts[0] += 20;
+        self.counts[1] -= 7;
+        self.counts[2] += 3;
+        black_box(self.counts)
+    }
+}
+
+struct Temps;
+
+impl TemperatureSource for Temps {
+    fn read_temps_mc(&mut self) -> [i32; LINK_TEMPS] {
+        black_box([21_500; LINK_TEMPS])
+    }
+}
+
+impl StepOutput for Fake {
+    fn pulses(&mut self, _axis: usize, steps: i32) {
+        self.pulses += black_box(steps) as i64;
+    }
+}
+
+struct TickClock(Cell<u64>);
+
+impl Clock for TickClock {
+    fn now_us(&self) -> u64 {
+        self.0.get()
+    }
+}
+
+fn counter() -> u32 {
+    TIM2.cnt().read()
+}
+
+/// Runs `n` ticks and reports min / mean / max instructions per tick.
+fn run(name: &str, engine: &mut Engine<'_>, n: u32) {
+    let clock = TickClock(Cell::new(0));
+    let mut io = Fake {
+        counts: [0; 3],
+        pulses: 0,
+    };
+    let mut temps = Temps;
+    // Overhead of two counter reads.
+    let a = counter();
+    let b = counter();
+    let overhead = b.wrapping_sub(a);
+    let (mut min, mut max, mut total) = (u32::MAX, 0u32, 0u64);
+    for k in 0..n + 16 {
+        clock.0.set(clock.0.get() + 50);
+        let t0 = counter();
+        engine.tick(
+            &clock,
+            &mut io,
+            &mut temps,
+            &mut Fake {
+                counts: [0; 3],
+                pulses: 0,
+            },
+        );
+        let t1 = counter();
+        if k >= 16 {
+            let d = t1.wrapping_sub(t0).wrapping_sub(overhead);
+            min = min.min(d);
+            max = max.max(d);
+            total += d as u64;
+        }
+    }
+    let faults = engine.faults().0;
+    println!(
+        "TICK {} min={} mean={} max={} faults={:#x}",
+        name,
+        min,
+        total / n as u64,
+        max,
+        faults
+    );
+}
+
+#[cortex_m_rt::entry]
+fn main() -> ! {
+    TIM2.cr1().write(|w| {
+        w.set_cen(false);
+        w.set_urs(Urs::COUNTER_ONLY);
+    });
+    TIM2.psc().write_value(0);
+    TIM2.arr().write_value(u32::MAX);
+    TIM2.egr().write(|w| w.set_ug(true));
+    TIM2.cr1().modify(|w| w.set_cen(true));
+
+    let Ok(mut engine) = Engine::new(CONFIG) else {
+        panic!("board configuration refused")
+    };
+    run("no_table", &mut engine, 256);
+
+    let mut buf = ModelBuf::new();
+    if load_into(TABLE, &mut buf).is_err() {
+        panic!("sample table does not load");
+    }
+    let info = SlotInfo {
+        slot: Slot::A,
+        seq: 1,
+        len: TABLE.len() as u32,
+        crc32: model_core::link::FRAME_CRC.checksum(TABLE),
+    };
+    let mut engine = match Engine::new(CONFIG) {
+        Ok(e) => e,
+        Err(_) => panic!("board configuration refused"),
+    };
+    engine.set_model(&mut buf, info);
+    run("sample_table_moving", &mut engine, 1024);
+    semihosting::process::exit(0)
+}
