@@ -164,3 +164,10 @@ fn main() -> ! {
     run("sample_table_moving", &mut engine, 1024);
     semihosting::process::exit(0)
 }
+
+/// A panic ends the run with status 1 (QEMU exits instead of hanging).
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    semihosting::eprintln!("panicked: {}", info);
+    semihosting::process::exit(1)
+}
