@@ -26,7 +26,7 @@
 
 use heapless::Vec;
 
-use crate::math::{sincos_q30, tanh_f32, tanh_q30, ONE_Q30, TANH_IN_FRAC};
+use crate::math::{sincos_f32, sincos_q30, tanh_f32, tanh_q30, ONE_Q30, TANH_IN_FRAC};
 use crate::table::{
     Envelope, Table, TermView, MAX_HIDDEN_LAYERS, MAX_HIDDEN_UNITS, MAX_MLP_INPUTS, MAX_MONOMIALS,
 };
@@ -439,7 +439,7 @@ enum Term {
         len: u16,
         shift: u32,
     },
-    /// Σ a_k sin + b_k cos; pool holds (a, b) pairs (f32 pre-scaled by 2^-30).
+    /// Σ a_k sin + b_k cos; pool holds (a, b) pairs, nm.
     Periodic {
         output: u8,
         axis: u8,
@@ -725,11 +725,10 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                         sum += a.abs() + b.abs();
                     }
                     let q = choose_q(sum, 0).ok_or(range_err)?;
-                    let s30 = pow2(-30);
                     for k in 1..=harmonics {
                         let (a, b) = view.harmonic(k);
-                        pools.push((a * s30) as f32, to_q(a, q), 0);
-                        pools.push((b * s30) as f32, to_q(b, q), 0);
+                        pools.push(a as f32, to_q(a, q), 0);
+                        pools.push(b as f32, to_q(b, q), 0);
                     }
                     Term::Periodic {
                         output: output as u8,
@@ -1199,17 +1198,17 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             return 0.0;
         };
         let theta = phase_turns(pos[axis as usize % 3], period_nm, turns);
-        let (s1, c1) = sincos_q30(theta);
-        // The coefficients carry the 2^-30 of the Q30 sin/cos.
-        let (s1, c1) = (s1 as f32, c1 as f32);
-        let (s1n, c1n) = (s1 * (1.0 / ONE_Q30 as f32), c1 * (1.0 / ONE_Q30 as f32));
-        let c = &self.pf[start as usize..start as usize + 2 * harmonics as usize];
+        let (s1, c1) = sincos_f32(theta);
+        let c = self
+            .pf
+            .get(start as usize..start as usize + 2 * harmonics as usize)
+            .unwrap_or(&[]);
         let (mut s, mut co) = (s1, c1);
         let mut v = 0.0f32;
         for ab in c.chunks_exact(2) {
             v += ab[0] * s + ab[1] * co;
-            let sn = s * c1n + co * s1n;
-            co = co * c1n - s * s1n;
+            let sn = s * c1 + co * s1;
+            co = co * c1 - s * s1;
             s = sn;
         }
         v
@@ -1278,6 +1277,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         }
     }
 
+    #[inline(never)]
     fn grid_f32(&self, axes: &[GridAxis; 3], start: usize, pos: &[i32; 3]) -> f32 {
         let mut idx = [0usize; 3];
         let mut nxt = [0usize; 3];
@@ -1310,6 +1310,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         lerp(c0, c1, t[2]) * (1.0 / 256.0)
     }
 
+    #[inline(never)]
     fn grid_fixed(&self, axes: &[GridAxis; 3], start: usize, pos: &[i32; 3]) -> i64 {
         let mut idx = [0usize; 3];
         let mut nxt = [0usize; 3];
@@ -1813,11 +1814,12 @@ fn mono56_f32(u: [f32; 3]) -> [f32; MAX_MONOMIALS] {
     mv
 }
 
-/// Q30 × Q30 → Q30, rounded. Operands are i32 (|v| ≤ 2^30) so the product
-/// is a single SMULL on the Cortex-M4.
+/// Q30 × Q30 → Q30, truncated toward −∞ (SMULL and a funnel shift; the
+/// 2^-30 bias per product is far below the 1 nm bound and keeps the
+/// monomials at 3 instructions each on the M4).
 #[inline(always)]
 fn mul_q30(a: i32, b: i32) -> i32 {
-    ((a as i64 * b as i64 + (1 << 29)) >> 30) as i32
+    ((a as i64 * b as i64) >> 30) as i32
 }
 
 /// The 20 graded monomials of degree ≤ 3, Q30 (same rounding as [`mono56_q30`]).

@@ -7,6 +7,7 @@
 //! Stated error bounds (all tested in `tests` below against f64 over dense
 //! sweeps):
 //! - [`sincos_q30`]: |error| ≤ 4e-9 (≈ 4 LSB of Q30) for sin and cos.
+//! - [`sincos_f32`]: |error| ≤ 2e-7.
 //! - [`tanh_q30`]: |error| ≤ 5e-9 over the whole Q26 input range (the
 //!   saturation at |z| = 10 costs 1 − tanh 10 = 4.1e-9).
 //! - [`tanh_f32`]: |error| ≤ 5e-7 over all finite inputs (the rational
@@ -51,6 +52,23 @@ pub fn sincos_q30(turn: u32) -> (i32, i32) {
     let s = rshr30(sa * cd + ca * sd);
     let c = rshr30(ca * cd - sa * sd);
     (s as i32, c as i32)
+}
+
+/// sin and cos of `turn` (a full turn is 2^32) in f32, for the f32
+/// evaluator: the same 256-point table and angle addition as
+/// [`sincos_q30`], in f32 arithmetic (about 15 instructions).
+/// |error| ≤ 2e-7 (tested).
+#[inline]
+pub fn sincos_f32(turn: u32) -> (f32, f32) {
+    let i = (turn >> 24) as usize;
+    // δ < 2π/256; (d as f32) is exact (d < 2^24).
+    let d = (turn & 0x00FF_FFFF) as f32 * (core::f32::consts::TAU / 4_294_967_296.0);
+    let d2 = d * d;
+    let sd = d - d * d2 * (1.0 / 6.0);
+    let cd = 1.0 - d2 * 0.5; // δ⁴/24 < 1.6e-8 left out
+    let sa = SIN_F32.get(i).copied().unwrap_or(0.0);
+    let ca = SIN_F32.get(i + 64).copied().unwrap_or(0.0);
+    (sa * cd + ca * sd, ca * cd - sa * sd)
 }
 
 /// Fractional bits of the fixed-point tanh input.
@@ -134,7 +152,8 @@ pub fn tanh_f32(x: f32) -> f32 {
     p / q
 }
 
-pub(crate) static SIN_Q30: [i32; 320] = [
+/// The sin table (in the source as integers; `SIN_Q30` and `SIN_F32` are built from it).
+const SIN_Q30_TABLE: [i32; 320] = [
     0,
     26350943,
     52686014,
@@ -457,6 +476,21 @@ pub(crate) static SIN_Q30: [i32; 320] = [
     1073418433,
 ];
 
+/// sin(2πi/256), Q30, i = 0..320 (a quarter turn extra so cos = sin[i + 64]).
+pub(crate) static SIN_Q30: [i32; 320] = SIN_Q30_TABLE;
+
+/// The same table as f32 (converted at compile time).
+static SIN_F32: [f32; 320] = {
+    let mut t = [0.0f32; 320];
+    let mut i = 0;
+    while i < 320 {
+        t[i] = SIN_Q30_TABLE[i] as f32 * (1.0 / ONE_Q30 as f32);
+        i += 1;
+    }
+    t
+};
+
+/// tanh(i/64), Q30, i = 0..=640.
 pub(crate) static TANH_Q30: [i32; 641] = [
     0, 16775851, 33543514, 50294816, 67021619, 83715829, 100369417, 116974433, 133523019,
     150007427, 166420030, 182753337, 199000008, 215152863, 231204897, 247149288, 262979411,
@@ -572,6 +606,21 @@ mod tests {
             turn = turn.wrapping_add(2_147_483_647 / 1_000_000 * 2 + 1);
         }
         assert!(worst <= 4e-9, "sincos worst error {worst:e}");
+    }
+
+    #[test]
+    fn sincos_f32_error_bound() {
+        let mut worst = 0.0f64;
+        let mut turn: u32 = 12345;
+        for _ in 0..2_000_000 {
+            let (s, c) = sincos_f32(turn);
+            let a = turn as f64 / 4_294_967_296.0 * 2.0 * core::f64::consts::PI;
+            worst = worst
+                .max((s as f64 - a.sin()).abs())
+                .max((c as f64 - a.cos()).abs());
+            turn = turn.wrapping_add(2_147_483_647 / 1_000_000 * 2 + 1);
+        }
+        assert!(worst <= 2e-7, "sincos_f32 worst error {worst:e}");
     }
 
     #[test]
