@@ -24,6 +24,16 @@
 //! state, both of which name a valid table. It is refused unless the other
 //! slot holds a valid table.
 //!
+//! Assumption, stated because it matters: a *torn erase* of a slot is
+//! modelled as erasing a prefix of it (the header first). Real NOR may leave
+//! any mix of bits; the header and table CRCs make a half-erased slot
+//! invalid in every case but one — a previously revoked slot whose revoke
+//! marker erased while its header and table survived would come back (with
+//! its old, higher sequence number). The F405's sector erase is not
+//! documented to be ordered, so after a rollback the next commit is the
+//! moment to look at if that ever matters; the marker could be moved into
+//! the header's CRC-covered words to close it.
+//!
 //! These claims are tested by cutting the power at every erase and write
 //! step of commits and rollbacks against [`MemFlash`](crate::memflash).
 
