@@ -31,8 +31,10 @@
 //! marker erased while its header and table survived would come back (with
 //! its old, higher sequence number). The F405's sector erase is not
 //! documented to be ordered, so after a rollback the next commit is the
-//! moment to look at if that ever matters; the marker could be moved into
-//! the header's CRC-covered words to close it.
+//! moment to look at if that ever matters. Closing it needs a rollback
+//! that also zeroes the header's magic word — programming zeros over
+//! programmed bits, which not every flash allows (the test fake forbids
+//! writes to non-erased bytes).
 //!
 //! These claims are tested by cutting the power at every erase and write
 //! step of commits and rollbacks against [`MemFlash`](crate::memflash).
