@@ -89,7 +89,56 @@ pub fn design_matrix(
     rows: &[usize],
 ) -> Result<DMatrix<f64>> {
     let mut a = DMatrix::zeros(rows.len(), features.len());
+    // Monomials (most columns of every seed) come from a table of the
+    // powers u_a^k of the selected rows, built once: ten times faster than
+    // evaluating each feature over the whole data set, and bit-identical to
+    // `Feature::column` (same powi, same product order x·y·z).
+    let max_exp = features
+        .iter()
+        .filter_map(|f| match f {
+            Feature::Monomial { exp } => exp.iter().copied().max(),
+            _ => None,
+        })
+        .max()
+        .unwrap_or(0) as usize;
+    let mut pow: [Vec<f64>; 3] = Default::default();
+    if features
+        .iter()
+        .any(|f| matches!(f, Feature::Monomial { .. }))
+    {
+        for axis in 0..3 {
+            let mut p = vec![1.0; rows.len() * (max_exp + 1)];
+            if let Some(col) = &data.pos_mm[axis] {
+                for (i, &r) in rows.iter().enumerate() {
+                    let u = norm.u(axis, col[r]);
+                    for k in 1..=max_exp {
+                        p[k * rows.len() + i] = u.powi(k as i32);
+                    }
+                }
+            } else {
+                // An absent axis sits at u = 0: u^0 = 1, higher powers 0.
+                for v in &mut p[rows.len()..] {
+                    *v = 0.0;
+                }
+            }
+            pow[axis] = p;
+        }
+    }
+    let m = rows.len();
     for (j, f) in features.iter().enumerate() {
+        if let Feature::Monomial { exp } = f {
+            let [ex, ey, ez] = exp.map(usize::from);
+            let (px, py, pz) = (
+                &pow[0][ex * m..(ex + 1) * m],
+                &pow[1][ey * m..(ey + 1) * m],
+                &pow[2][ez * m..(ez + 1) * m],
+            );
+            let mut col = a.column_mut(j);
+            for i in 0..m {
+                col[i] = px[i] * py[i] * pz[i];
+            }
+            continue;
+        }
         let col = f.column(data, norm)?;
         for (i, &r) in rows.iter().enumerate() {
             a[(i, j)] = col[r];
@@ -414,6 +463,34 @@ mod tests {
             solve(&a, &b, None).unwrap_err().downcast_ref::<LsqError>(),
             Some(LsqError::TooFewRows { rows: 2, cols: 3 })
         ));
+    }
+
+    #[test]
+    fn design_matrix_fast_path_matches_feature_columns() {
+        let data = Dataset {
+            pos_mm: [
+                Some(vec![0.0, 3.0, 7.5, 10.0]),
+                None,
+                Some(vec![1.0, -2.0, 4.0, 0.5]),
+            ],
+            err_um: [Some(vec![Some(0.0); 4]), None, None],
+            dir: [Some(vec![1, -1, 1, -1]), None, None],
+            ..Default::default()
+        };
+        let norm = Norm::from_data(&data);
+        let features: Vec<Feature> = crate::features::CUBIC19
+            .iter()
+            .map(|&exp| Feature::Monomial { exp })
+            .chain([Feature::Reversal { axis: 0 }])
+            .collect();
+        let rows = [3, 1, 2];
+        let a = design_matrix(&data, &norm, &features, &rows).unwrap();
+        for (j, f) in features.iter().enumerate() {
+            let col = f.column(&data, &norm).unwrap();
+            for (i, &r) in rows.iter().enumerate() {
+                assert_eq!(a[(i, j)].to_bits(), col[r].to_bits(), "{f} row {r}");
+            }
+        }
     }
 
     #[test]
