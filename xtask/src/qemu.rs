@@ -82,6 +82,7 @@ pub fn test_all() -> Result<()> {
     eprintln!("\nqemu: {} suites passed", suites.len());
 
     check_loopback()?;
+    check_end_to_end()?;
     Ok(())
 }
 
@@ -173,9 +174,160 @@ fn parse_bench_log(log: &str) -> Result<Vec<BenchResult>> {
     Ok(out)
 }
 
-/// The end of `cargo xtask demo`: the board image in QEMU with the fitted table.
-pub fn demo_board(_out: &Path) -> Result<()> {
-    eprintln!("\nxtask demo: the QEMU board stage is not built yet");
+/// The end of `cargo xtask demo`: the board image in QEMU gets the table the
+/// demo exported (`out/demo/table.bin`) through `trueaxis upload`, and its
+/// corrections along a path are printed beside the host's.
+pub fn demo_board(out: &Path) -> Result<()> {
+    let table = out.join("table.bin");
+    if !table.exists() {
+        eprintln!(
+            "\nxtask demo: {} does not exist, skipping the QEMU board stage",
+            table.display()
+        );
+        return Ok(());
+    }
+    // The demo ran `cargo run --release -p trueaxis`, so this is a no-op build.
+    let trueaxis = build_trueaxis(Profile::Release)?;
+    let runner = build_e2e_runner()?;
+    let board = build_bin("board", Profile::Release)?;
+    eprintln!("\n== the board (STM32F405 in QEMU) with the demo's table ==");
+    run_against_board(
+        &board,
+        &runner,
+        &[
+            "show",
+            "--table",
+            &table.to_string_lossy(),
+            "--trueaxis",
+            &trueaxis.to_string_lossy(),
+        ],
+    )
+}
+
+/// Builds the host tool and returns its binary.
+fn build_trueaxis(profile: Profile) -> Result<PathBuf> {
+    let root = crate::root();
+    let mut args = vec!["build", "--quiet", "-p", "trueaxis"];
+    if profile == Profile::Release {
+        args.push("--release");
+    }
+    crate::run(&root, "cargo", &args)?;
+    let dir = match std::env::var_os("CARGO_TARGET_DIR") {
+        Some(d) if Path::new(&d).is_absolute() => PathBuf::from(d),
+        Some(d) => root.join(d),
+        None => root.join("target"),
+    };
+    let bin = dir
+        .join(profile.dir())
+        .join(format!("trueaxis{}", std::env::consts::EXE_SUFFIX));
+    if bin.exists() {
+        Ok(bin)
+    } else {
+        Err(format!(
+            "cargo built trueaxis but {} is missing",
+            bin.display()
+        ))
+    }
+}
+
+/// Builds the end-to-end runner (tests/e2e, its own workspace, for the host).
+fn build_e2e_runner() -> Result<PathBuf> {
+    let dir = crate::root().join("tests").join("e2e");
+    crate::run(&dir, "cargo", &["build", "--quiet", "--release"])?;
+    let target = match std::env::var_os("CARGO_TARGET_DIR") {
+        Some(d) if Path::new(&d).is_absolute() => PathBuf::from(d),
+        Some(d) => dir.join(d),
+        None => dir.join("target"),
+    };
+    let bin = target
+        .join("release")
+        .join(format!("trueaxis-e2e{}", std::env::consts::EXE_SUFFIX));
+    if bin.exists() {
+        Ok(bin)
+    } else {
+        Err(format!(
+            "cargo built trueaxis-e2e but {} is missing",
+            bin.display()
+        ))
+    }
+}
+
+/// Starts `board` with USART1 on a TCP socket, runs `runner ARGS --port P`
+/// against it, and requires the runner to pass and the board to be still
+/// running afterwards (no fault, no panic); then stops the board.
+fn run_against_board(board: &Path, runner: &Path, args: &[&str]) -> Result<()> {
+    let (mut image, stream, port) = start_with_serial(board)?;
+    // Our connection only started the guest (wait=on); the runner connects
+    // on its own once QEMU has seen this one go.
+    drop(stream);
+    let port_s = port.to_string();
+    let mut all: Vec<&str> = args.to_vec();
+    all.extend(["--port", &port_s]);
+    eprintln!("\n$ {} {}", runner.display(), all.join(" "));
+    let status = Command::new(runner).args(&all).status();
+    let board_alive = matches!(image.qemu.try_wait(), Ok(None));
+    image.kill();
+    let run = image.wait()?;
+    let status = status.map_err(|e| format!("cannot run {}: {e}", runner.display()))?;
+    if !board_alive {
+        return Err(format!(
+            "the board image stopped during the run ({})\n{}{}",
+            describe(&run.status),
+            run.log,
+            run.stderr
+        ));
+    }
+    if !status.success() {
+        return Err(format!(
+            "end-to-end run failed ({status}); board log:\n{}{}",
+            run.log, run.stderr
+        ));
+    }
+    Ok(())
+}
+
+/// The end-to-end test: a table from a real fit (simulate → fit → export
+/// with the host tool, fixed seed) sent by `trueaxis upload` to the board
+/// image in QEMU, then the scenarios of tests/e2e/src/check.rs.
+fn check_end_to_end() -> Result<()> {
+    let trueaxis = build_trueaxis(Profile::Dev)?;
+    let runner = build_e2e_runner()?;
+    let board = build_bin("board", Profile::Release)?;
+
+    let work = target_dir().join("qemu-e2e");
+    std::fs::create_dir_all(&work).map_err(|e| format!("create {}: {e}", work.display()))?;
+    let t = trueaxis.to_string_lossy().into_owned();
+    let ws = |name: &str| work.join(name).to_string_lossy().into_owned();
+    let (data, model, table) = (ws("data.csv"), ws("model.json"), ws("table.bin"));
+    let quiet = |args: &[&str]| -> Result<()> {
+        eprintln!("$ trueaxis {}", args.join(" "));
+        let out = Command::new(&t)
+            .args(args)
+            .output()
+            .map_err(|e| format!("cannot run {t}: {e}"))?;
+        if out.status.success() {
+            Ok(())
+        } else {
+            Err(format!(
+                "`trueaxis {}` failed ({}):\n{}",
+                args.join(" "),
+                out.status,
+                String::from_utf8_lossy(&out.stderr)
+            ))
+        }
+    };
+    quiet(&[
+        "simulate", "--plan", "grid:100", "--seed", "3", "-o", &data, "--json",
+    ])?;
+    quiet(&["fit", &data, "--model", "cubic19", "-o", &model, "--json"])?;
+    quiet(&["export", &model, "-o", &table, "--json"])?;
+
+    run_against_board(
+        &board,
+        &runner,
+        &["check", "--table", &table, "--trueaxis", &t],
+    )?;
+    eprintln!("qemu: end to end passed");
     Ok(())
 }
 
@@ -454,7 +606,7 @@ fn start_with_serial(elf: &Path) -> Result<(RunningImage, TcpStream, u16)> {
     for _attempt in 0..3 {
         let port = free_port()?;
         let opts = QemuOpts {
-            serial: Some(format!("tcp:127.0.0.1:{port},server=on,wait=on")),
+            serial: Some(format!("tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on")),
             timeout: None,
         };
         let mut image = start_image(elf, &opts)?;

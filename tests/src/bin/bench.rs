@@ -37,7 +37,11 @@ fn input(i: usize) -> Inputs {
         let frac = if phase < n { phase } else { 2 * n - phase };
         (i64::from(TRAVEL_MAX_NM[axis]) * frac / n) as i32
     });
-    let rev = if i.is_multiple_of(3) { -(1 << 30) } else { 1 << 30 };
+    let rev = if i.is_multiple_of(3) {
+        -(1 << 30)
+    } else {
+        1 << 30
+    };
     Inputs {
         pos_nm,
         rev_q30: [rev, -rev, rev],
