@@ -264,11 +264,11 @@ fn run_against_board(board: &Path, runner: &Path, args: &[&str]) -> Result<()> {
     let mut all: Vec<&str> = args.to_vec();
     all.extend(["--port", &port_s]);
     eprintln!("\n$ {} {}", runner.display(), all.join(" "));
-    let status = Command::new(runner).args(&all).status();
+    let status = run_with_timeout(runner, &all, RUNNER_TIMEOUT);
     let board_alive = matches!(image.qemu.try_wait(), Ok(None));
     image.kill();
     let run = image.wait()?;
-    let status = status.map_err(|e| format!("cannot run {}: {e}", runner.display()))?;
+    let status = status?;
     if !board_alive {
         return Err(format!(
             "the board image stopped during the run ({})\n{}{}",
@@ -284,6 +284,35 @@ fn run_against_board(board: &Path, runner: &Path, args: &[&str]) -> Result<()> {
         ));
     }
     Ok(())
+}
+
+/// How long the end-to-end runner may take (wall clock; it normally needs
+/// a few seconds).
+const RUNNER_TIMEOUT: Duration = Duration::from_secs(180);
+
+/// Runs `program args`, killing it (an error) when it outlives `limit`.
+fn run_with_timeout(program: &Path, args: &[&str], limit: Duration) -> Result<ExitStatus> {
+    let mut child = Command::new(program)
+        .args(args)
+        .spawn()
+        .map_err(|e| format!("cannot run {}: {e}", program.display()))?;
+    let started = Instant::now();
+    loop {
+        match child.try_wait() {
+            Ok(Some(status)) => return Ok(status),
+            Ok(None) if started.elapsed() > limit => {
+                let _ = child.kill();
+                let _ = child.wait();
+                return Err(format!(
+                    "{} hung: killed after {} s",
+                    program.display(),
+                    limit.as_secs()
+                ));
+            }
+            Ok(None) => thread::sleep(Duration::from_millis(50)),
+            Err(e) => return Err(format!("waiting for {}: {e}", program.display())),
+        }
+    }
 }
 
 /// The end-to-end test: a table from a real fit (simulate → fit → export
