@@ -208,6 +208,11 @@ fn capacity_exceeded_is_a_typed_error_and_large_alias_fits_17x11x11x3() {
     ));
     assert!(LargeModel::load(&table).is_ok());
     // The default model stays small enough for the MCU's 128 KiB of RAM.
+    eprintln!(
+        "Model: {} bytes, LargeModel: {} bytes",
+        core::mem::size_of::<Model>(),
+        core::mem::size_of::<LargeModel>()
+    );
     assert!(
         core::mem::size_of::<Model>() <= 40 * 1024,
         "Model is {} bytes",
