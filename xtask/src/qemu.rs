@@ -230,15 +230,22 @@ fn build_trueaxis(profile: Profile) -> Result<PathBuf> {
     }
 }
 
-/// Builds the end-to-end runner (tests/e2e, its own workspace, for the host).
+/// Builds the end-to-end runner (tests/e2e, its own workspace, for the host)
+/// into CARGO_TARGET_DIR or tests/target (git-ignored).
 fn build_e2e_runner() -> Result<PathBuf> {
-    let dir = crate::root().join("tests").join("e2e");
-    crate::run(&dir, "cargo", &["build", "--quiet", "--release"])?;
+    let root = crate::root();
+    let dir = root.join("tests").join("e2e");
     let target = match std::env::var_os("CARGO_TARGET_DIR") {
         Some(d) if Path::new(&d).is_absolute() => PathBuf::from(d),
         Some(d) => dir.join(d),
-        None => dir.join("target"),
+        None => root.join("tests").join("target"),
     };
+    let target_s = target.to_string_lossy().into_owned();
+    crate::run(
+        &dir,
+        "cargo",
+        &["build", "--quiet", "--release", "--target-dir", &target_s],
+    )?;
     let bin = target
         .join("release")
         .join(format!("trueaxis-e2e{}", std::env::consts::EXE_SUFFIX));
