@@ -123,6 +123,96 @@ pub fn improve(
     }
 }
 
+/// The diagnosis stage of `trueaxis demo`: where the seed model fails, the
+/// missing effect named, added and refitted until the noise floor, the
+/// error falling step by step. Writes every fit to `model_path` (with its
+/// history) and, with `report_dir`, the diagnosis of the seed model and the
+/// history plot under `report_dir/diagnose` and `report_dir/history`.
+/// Returns the final model and the story told.
+pub fn demo_stage(
+    data: &Dataset,
+    seed: &str,
+    model_path: &std::path::Path,
+    report_dir: Option<&std::path::Path>,
+) -> Result<(crate::model::ModelFile, String)> {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let first = diagnose::diagnose(data, &Options::seed(seed))?;
+    let _ = writeln!(s, "Diagnose {seed} — which physical effect is missing?");
+    let mut worst: Vec<&diagnose::Region> = first.worst_regions.iter().collect();
+    worst.sort_by(|a, b| b.rms_um.total_cmp(&a.rms_um));
+    if let Some(r) = worst.first() {
+        let bbox: Vec<String> = r
+            .bbox_mm
+            .iter()
+            .map(|(a, [lo, hi])| format!("{a} {lo:.0}…{hi:.0}"))
+            .collect();
+        let _ = writeln!(
+            s,
+            "   the model fails most on {} in {} mm (residual RMS {:.2} µm)",
+            r.target,
+            bbox.join(", "),
+            r.rms_um
+        );
+    }
+    if let Some(dir) = report_dir {
+        let p = diagnose::report::write(&first, data, &dir.join("diagnose"))?;
+        let _ = writeln!(s, "   evidence: {}", p.display());
+    }
+    let fmt = |m: &BTreeMap<String, f64>| {
+        m.iter()
+            .map(|(k, v)| format!("{k} {v:.2}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let r = improve(data, seed, model_path, |st| {
+        match (&st.added, &st.evidence) {
+            (Some(a), Some(e)) => {
+                let _ = writeln!(s, "   step {}: named and added `{a}`", st.step);
+                let _ = writeln!(s, "      because {e}");
+                let _ = writeln!(
+                    s,
+                    "      refit: RMS µm {}; held out {}",
+                    fmt(&st.rms_um),
+                    fmt(&st.held_out_rms_um)
+                );
+            }
+            _ => {
+                let _ = writeln!(
+                    s,
+                    "   step {}: {seed} alone: RMS µm {}; held out {}",
+                    st.step,
+                    fmt(&st.rms_um),
+                    fmt(&st.held_out_rms_um)
+                );
+            }
+        }
+        if st.verdict == Verdict::AtNoiseFloor {
+            let nf: Vec<String> = st
+                .noise_floor_um
+                .iter()
+                .filter_map(|(k, v)| v.map(|v| format!("{k} {v:.2}")))
+                .collect();
+            let _ = writeln!(
+                s,
+                "   at the noise floor (µm: {}): no candidate is significant any more",
+                nf.join(", ")
+            );
+        }
+    })?;
+    if let Some(dir) = report_dir {
+        let h = history::load(model_path)?;
+        let p = crate::cmd::history::write_report(
+            &h,
+            &model_path.display().to_string(),
+            &dir.join("history"),
+        )?;
+        let _ = writeln!(s, "   the error falling: {}", p.display());
+    }
+    let _ = write!(s, "   model: {} → {}", r.model, r.model_file);
+    Ok((crate::model::ModelFile::load(model_path)?, s))
+}
+
 impl Args {
     pub fn run(self) -> Result<()> {
         let (seed, adds) = crate::cmd::diagnose::model_spec(&self.model)?;
