@@ -6,7 +6,8 @@
 //! (excluding the time spent here measuring held-out error), training MSE and
 //! the validation / test RMS in µm.
 //!
-//! `cargo run --release -p trueaxis --example lm_bench -- <out_dir> [seed] [hidden]`
+//! `cargo run --release -p trueaxis --example lm_bench -- <out_dir> [seed] [hidden] [max_fail] [max_epochs]`
+//! (max_fail 6 and max_epochs 1000 are trainlm's defaults and `fit`'s).
 
 use std::io::Write;
 use std::time::{Duration, Instant};
@@ -73,8 +74,12 @@ fn main() -> anyhow::Result<()> {
     }
     f.flush()?;
 
+    let max_fail: usize = args.get(4).map_or(Ok(6), |s| s.parse())?;
+    let max_epochs: usize = args.get(5).map_or(Ok(1000), |s| s.parse())?;
     let opts = nn::NnOptions {
         seed,
+        max_fail,
+        max_epochs,
         ..Default::default()
     };
     let start = Instant::now();
