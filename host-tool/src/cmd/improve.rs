@@ -47,8 +47,11 @@ pub struct ImproveStep {
     pub evidence: Option<String>,
     /// In-sample RMS per target after the fit, µm.
     pub rms_um: BTreeMap<String, f64>,
-    /// Block-held-out RMS per target after the fit, µm.
+    /// Block-held-out RMS per target after the fit, µm, with the
+    /// diagnosis' blocks (long passes cut into segments).
     pub held_out_rms_um: BTreeMap<String, f64>,
+    /// The held-out RMS `fit` reports (its own blocks), µm.
+    pub fit_held_out_rms_um: BTreeMap<String, f64>,
     /// Noise floor per target from the diagnosis of this fit, µm.
     pub noise_floor_um: BTreeMap<String, Option<f64>>,
     /// The diagnosis of this fit.
@@ -100,7 +103,8 @@ pub fn improve(
             added: added.as_ref().map(|a| a.0.clone()),
             evidence: added.as_ref().map(|a| a.1.clone()),
             rms_um: model.stats.rms_um.clone(),
-            held_out_rms_um: model.stats.held_out_rms_um.clone(),
+            held_out_rms_um: d.held_out_rms_um.clone(),
+            fit_held_out_rms_um: model.stats.held_out_rms_um.clone(),
             noise_floor_um: d.noise_floor_um.clone(),
             verdict: d.verdict,
         };
