@@ -292,6 +292,62 @@ mod tests {
     }
 
     #[test]
+    fn u_um_weights_silence_a_row_with_huge_uncertainty() {
+        let mut d = mill_grid();
+        set_target(&mut d, 0, |_, u| 1.0 + u[0] - u[1] * u[2]);
+        d.err_um[1] = None;
+        d.err_um[2] = None;
+        let n = d.len();
+        if let Some(c) = d.err_um[0].as_mut() {
+            c[100] = c[100].map(|v| v + 500.0);
+        }
+        let mut u = vec![0.1; n];
+        u[100] = 1e8;
+        d.u_um = Some(u);
+        let (m, s) = fit(&d, "cubic19", &[], 5).unwrap();
+        let FittedModel::Linear(m) = m else { panic!() };
+        let c = &m.outputs[0].coef_um;
+        assert!(
+            (c[0] - 1.0).abs() < 1e-6 && (c[1] - 1.0).abs() < 1e-6,
+            "{c:?}"
+        );
+        // The outlier still shows in the (unweighted) residual statistics.
+        assert!(s.max_abs_um["ex"] > 499.0);
+        d.u_um = Some(vec![0.1; n]);
+        let (m, _) = fit(&d, "cubic19", &[], 5).unwrap();
+        let FittedModel::Linear(m) = m else { panic!() };
+        assert!((m.outputs[0].coef_um[0] - 1.0).abs() > 0.01);
+        // u ≤ 0 is bad input.
+        d.u_um = Some(vec![0.0; n]);
+        let e = fit(&d, "cubic19", &[], 5).unwrap_err().to_string();
+        assert!(e.contains("positive"), "{e}");
+    }
+
+    #[test]
+    fn nearly_collinear_terms_warn_with_the_condition_number() {
+        let mut d = mill_grid();
+        set_target(&mut d, 0, |_, u| u[0]);
+        d.err_um[1] = None;
+        d.err_um[2] = None;
+        // A tool length that barely changes along x: `abbe` is almost the
+        // constant column (ill-conditioned, yet above the rank threshold).
+        let x = d.pos_mm[0].clone().unwrap();
+        d.tool_mm = Some(x.iter().map(|p| 100.0 + 1e-5 * (p / 37.0).sin()).collect());
+        let adds = [Effect::parse("abbe:target=ex").unwrap()];
+        let (_, s) = fit(&d, "kinematic", &adds, 5).unwrap();
+        assert!(
+            s.condition_number["ex"] > ILL_CONDITIONED,
+            "{:?}",
+            s.condition_number
+        );
+        assert!(
+            s.warnings.iter().any(|w| w.contains("ill-conditioned")),
+            "{:?}",
+            s.warnings
+        );
+    }
+
+    #[test]
     fn too_few_distinct_points_is_an_error() {
         let d = mill_grid();
         // Keep only 3 × 3 × 1 positions (9 distinct points, measured twice each).
