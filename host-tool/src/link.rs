@@ -10,8 +10,8 @@ use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
 use model_core::link::{
-    decode_message, encode_frame, FrameDecoder, Identity, LinkError, Packet, Request, Response,
-    SlotInfo, Telemetry, FRAME_CRC, MAX_CHUNK_BYTES, MAX_FRAME_BYTES, PROTOCOL_VERSION,
+    decode_message, encode_frame, table_id, FrameDecoder, Identity, LinkError, Packet, Request,
+    Response, SlotInfo, Telemetry, MAX_CHUNK_BYTES, MAX_FRAME_BYTES, PROTOCOL_VERSION,
 };
 
 /// What can go wrong talking to the board.
@@ -324,7 +324,7 @@ impl Client {
             });
         }
         let size = table.len() as u32;
-        let crc32 = FRAME_CRC.checksum(table);
+        let crc32 = table_id(table);
         let begin = Request::UploadBegin { size, crc32 };
         let mut offset = match self.request(&begin)? {
             Response::UploadAck { next_offset } => next_offset,

@@ -18,7 +18,7 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use model_core::link::{
-    encode_frame, FrameDecoder, Injection, Packet, Request, Response, FRAME_CRC, LINK_TEMPS,
+    encode_frame, table_id, FrameDecoder, Injection, Packet, Request, Response, LINK_TEMPS,
     MAX_FRAME_BYTES,
 };
 use model_core::{parse, Inputs, Model};
@@ -81,7 +81,7 @@ fn table_file(name: &str, bytes: &[u8]) -> PathBuf {
 }
 
 fn crc_hex(bytes: &[u8]) -> String {
-    format!("{:#010x}", FRAME_CRC.checksum(bytes))
+    format!("{:#010x}", table_id(bytes))
 }
 
 #[test]
@@ -184,7 +184,7 @@ fn a_cut_upload_keeps_the_old_table_and_the_next_upload_resumes() {
         let mut c = Client::open(&board.port, Timing::default()).unwrap();
         c.request(&Request::UploadBegin {
             size: t2.len() as u32,
-            crc32: FRAME_CRC.checksum(&t2),
+            crc32: table_id(&t2),
         })
         .unwrap();
         c.request(&Request::UploadChunk {

@@ -65,6 +65,18 @@ pub const MAX_FRAME_BYTES: usize =
 /// the zlib/PNG one).
 pub const FRAME_CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
+/// The checksum that identifies a whole table file on the link and in the
+/// flash slots: CRC-32C (Castagnoli). Not the table's own CRC-32/ISO-HDLC:
+/// a table ends with that CRC of everything before it, so the same CRC over
+/// the whole file is the algorithm's constant residue (0x2144DF1C) for every
+/// valid table and could not tell two tables apart.
+pub const TABLE_ID_CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISCSI);
+
+/// The identity of a whole table file (upload begin, slot headers, status).
+pub fn table_id(table: &[u8]) -> u32 {
+    TABLE_ID_CRC.checksum(table)
+}
+
 /// One message on the wire: the sequence number that pairs a response with
 /// its request, and the message.
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq, Eq)]
@@ -605,7 +617,7 @@ pub mod slot {
             slot,
             seq,
             len: table.len() as u32,
-            crc32: FRAME_CRC.checksum(table),
+            crc32: super::table_id(table),
         };
         let mut v = std::vec::Vec::with_capacity(BODY_AT as usize + table.len());
         v.extend_from_slice(&encode_header(&info));
@@ -822,5 +834,25 @@ mod tests {
                 prop_assert!(it.any(|g| g == m), "lost {:?}", m);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod table_id_tests {
+    use super::{table_id, FRAME_CRC};
+
+    /// Two different byte strings that each end with their own CRC-32, as
+    /// every table does: the whole-file CRC-32 is the same residue for both,
+    /// the table identity is not.
+    #[test]
+    fn table_id_tells_self_checked_files_apart() {
+        let seal = |body: &[u8]| {
+            let mut v = body.to_vec();
+            v.extend_from_slice(&FRAME_CRC.checksum(body).to_le_bytes());
+            v
+        };
+        let (a, b) = (seal(b"table one"), seal(b"another table"));
+        assert_eq!(FRAME_CRC.checksum(&a), FRAME_CRC.checksum(&b));
+        assert_ne!(table_id(&a), table_id(&b));
     }
 }

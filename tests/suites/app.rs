@@ -9,7 +9,7 @@
 
 use core::cell::Cell;
 
-use model_core::link::{Injection, Slot, SlotInfo, FRAME_CRC, LINK_TEMPS};
+use model_core::link::{table_id, Injection, Slot, SlotInfo, LINK_TEMPS};
 use trueaxis_app::engine::{round_div, AxisConfig, Engine, EngineConfig};
 use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::memflash::MemFlash;
@@ -47,15 +47,14 @@ fn boot(mem: &'static mut [u8; 2 * SLOT], buf: &mut [u8]) -> TableStore<Flash> {
 fn active_table_crc(s: &mut TableStore<Flash>, buf: &mut [u8]) -> Option<u32> {
     let info = s.active()?;
     match s.read_table(info, buf) {
-        Ok(t) => Some(FRAME_CRC.checksum(t) ^ t.len() as u32),
+        Ok(t) => Some(table_id(t)),
         Err(e) => defmt::panic!("active table unreadable: {}", e),
     }
 }
 
-/// A table's identity for these tests: its CRC mixed with its length (the
-/// CRC alone is the same for every valid table: each ends with its own CRC).
+/// A table's identity for these tests (model-core's `table_id`).
 fn ident(t: &[u8]) -> u32 {
-    FRAME_CRC.checksum(t) ^ t.len() as u32
+    table_id(t)
 }
 
 struct Io {
@@ -120,7 +119,7 @@ fn info(table: &[u8]) -> SlotInfo {
         slot: Slot::A,
         seq: 1,
         len: table.len() as u32,
-        crc32: FRAME_CRC.checksum(table),
+        crc32: table_id(table),
     }
 }
 

@@ -279,7 +279,10 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                         size: u.size,
                     });
                 }
-                if model_core::link::FRAME_CRC.checksum(&self.stage[..u.size as usize]) != u.crc32 {
+                if model_core::link::table_id(&self.stage[..u.size as usize]) != u.crc32 {
+                    // The staged bytes are wrong: forget them, or the next
+                    // UploadBegin of the same table would "resume" them.
+                    self.upload = None;
                     return Err(LinkError::CrcMismatch);
                 }
                 self.require_quiet(now_us, engine)?;
@@ -289,9 +292,10 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                     .store
                     .commit(table, |b| model::load_into(b, spare).is_ok());
                 engine.with_engine(|e| e.resync_clock());
-                let info = r.map_err(store_error)?;
+                // Committed or refused by the store (an invalid table): either
+                // way the staged upload is spent; a retry starts from byte 0.
                 self.upload = None;
-                Response::Committed(info)
+                Response::Committed(r.map_err(store_error)?)
             }
             Request::Activate => Response::Activated(self.activate_newest(engine)?),
             Request::Rollback => {

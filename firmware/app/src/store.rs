@@ -44,7 +44,7 @@ use model_core::link::slot::{
     decode_header, encode_header, is_live, BODY_AT, HEADER_AT, HEADER_BYTES, REVOKE_AT,
     REVOKE_BYTES,
 };
-use model_core::link::{Slot, SlotInfo, FRAME_CRC};
+use model_core::link::{table_id, Slot, SlotInfo};
 
 /// Bytes written or compared per flash operation.
 const CHUNK: usize = 256;
@@ -177,7 +177,7 @@ impl<F: NorFlash + ReadNorFlash> TableStore<F> {
         }
         let body = &mut buf[..info.len as usize];
         self.flash.read(base + BODY_AT, body).ok()?;
-        if FRAME_CRC.checksum(body) != info.crc32 || !validate(body) {
+        if table_id(body) != info.crc32 || !validate(body) {
             return None;
         }
         Some(info)
@@ -215,7 +215,7 @@ impl<F: NorFlash + ReadNorFlash> TableStore<F> {
         self.flash
             .read(base + BODY_AT, body)
             .map_err(|_| StoreError::Flash)?;
-        if FRAME_CRC.checksum(body) != info.crc32 {
+        if table_id(body) != info.crc32 {
             return Err(StoreError::Verify);
         }
         Ok(body)
@@ -244,7 +244,7 @@ impl<F: NorFlash + ReadNorFlash> TableStore<F> {
             slot: target,
             seq: active.map_or(1, |a| a.seq.wrapping_add(1)),
             len: table.len() as u32,
-            crc32: FRAME_CRC.checksum(table),
+            crc32: table_id(table),
         };
         let ti = slot_index(target);
         self.valid[ti] = None;

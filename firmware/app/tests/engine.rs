@@ -73,7 +73,7 @@ fn info(table: &[u8]) -> SlotInfo {
         slot: Slot::A,
         seq: 1,
         len: table.len() as u32,
-        crc32: model_core::link::FRAME_CRC.checksum(table),
+        crc32: model_core::link::table_id(table),
     }
 }
 

@@ -8,7 +8,7 @@ mod common;
 
 use common::{call, decode_all, install};
 use model_core::link::{
-    encode_frame, Faults, Injection, LinkError, Packet, Request, Response, Slot, FRAME_CRC,
+    encode_frame, table_id, Faults, Injection, LinkError, Packet, Request, Response, Slot,
     LINK_TEMPS, MAX_FRAME_BYTES,
 };
 use model_core::{parse, Inputs, Model};
@@ -71,7 +71,7 @@ fn install_inject_and_read_back_equals_model_core() {
     let Response::Activated(info) = r else {
         panic!("{r:?}")
     };
-    assert_eq!(info.crc32, FRAME_CRC.checksum(&table));
+    assert_eq!(info.crc32, table_id(&table));
     assert_eq!((info.slot, info.seq), (Slot::A, 1));
 
     for (k, pos) in [
@@ -118,7 +118,7 @@ fn install_inject_and_read_back_equals_model_core() {
 fn upload_resumes_after_a_dropped_link() {
     let mut b = SimBoard::new();
     let table = sample_table(1);
-    let crc32 = FRAME_CRC.checksum(&table);
+    let crc32 = table_id(&table);
     let size = table.len() as u32;
     let mut p = Port::new();
     call(&mut b, &mut p, 1, Request::UploadBegin { size, crc32 });
@@ -267,11 +267,25 @@ fn refusals() {
         call(&mut b, &mut p, 4, Request::Commit),
         Response::Error(LinkError::CrcMismatch)
     );
+    // The refused bytes are forgotten: announcing the same upload again
+    // starts from byte 0 instead of "resuming" the bad staged bytes.
+    assert_eq!(
+        call(
+            &mut b,
+            &mut p,
+            4,
+            Request::UploadBegin {
+                size: table.len() as u32,
+                crc32: 1,
+            },
+        ),
+        Response::UploadAck { next_offset: 0 }
+    );
 
     // Bytes that match their announced CRC but are not a valid table.
     let mut bad = table.clone();
     bad[300] ^= 0x40;
-    let crc32 = FRAME_CRC.checksum(&bad);
+    let crc32 = table_id(&bad);
     call(
         &mut b,
         &mut p,
@@ -295,6 +309,18 @@ fn refusals() {
     assert_eq!(
         call(&mut b, &mut p, 7, Request::Commit),
         Response::Error(LinkError::InvalidTable)
+    );
+    assert_eq!(
+        call(
+            &mut b,
+            &mut p,
+            7,
+            Request::UploadBegin {
+                size: bad.len() as u32,
+                crc32,
+            },
+        ),
+        Response::UploadAck { next_offset: 0 }
     );
     assert_eq!(
         call(&mut b, &mut p, 8, Request::Rollback),
@@ -333,7 +359,7 @@ fn tables_beyond_the_firmware_capacity_are_refused_at_commit() {
     assert!(Model::load(&parse(&table).unwrap()).is_ok());
     let mut b = SimBoard::new();
     let mut p = Port::new();
-    let crc32 = FRAME_CRC.checksum(&table);
+    let crc32 = table_id(&table);
     call(
         &mut b,
         &mut p,
@@ -366,7 +392,7 @@ fn commit_is_refused_while_axes_move() {
     let mut p = Port::new();
     install(&mut b, &mut p, &sample_table(0));
     let t2 = sample_table(1);
-    let crc32 = FRAME_CRC.checksum(&t2);
+    let crc32 = table_id(&t2);
     call(
         &mut b,
         &mut p,
@@ -426,7 +452,7 @@ fn rollback_and_reboot_pick_the_right_table() {
     let Response::RolledBack(i1) = call(&mut b, &mut p, 2, Request::Rollback) else {
         panic!()
     };
-    assert_eq!(i1.crc32, FRAME_CRC.checksum(&t1));
+    assert_eq!(i1.crc32, table_id(&t1));
     assert_eq!(b.engine().active(), Some(i1));
     let b = SimBoard::with_flash(b.into_flash());
     assert_eq!(b.engine().active(), Some(i1));
@@ -447,7 +473,7 @@ fn an_interrupted_upload_keeps_the_running_table() {
         1,
         Request::UploadBegin {
             size: t2.len() as u32,
-            crc32: FRAME_CRC.checksum(&t2),
+            crc32: table_id(&t2),
         },
     );
     call(

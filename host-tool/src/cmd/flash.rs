@@ -15,7 +15,7 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use model_core::link::{slot, Slot, FRAME_CRC};
+use model_core::link::{slot, table_id, Slot};
 use probe_rs::flashing::DownloadOptions;
 use probe_rs::probe::list::Lister;
 use probe_rs::{MemoryInterface, Permissions};
@@ -165,7 +165,7 @@ impl Args {
         }
         core.reset().context("cannot reset the board")?;
 
-        let crc32 = FRAME_CRC.checksum(&bytes);
+        let crc32 = table_id(&bytes);
         if self.json {
             println!(
                 "{}",

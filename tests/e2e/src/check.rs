@@ -9,7 +9,7 @@ use std::process::Command;
 use std::time::Duration;
 
 use model_core::link::{
-    Correction, Injection, LinkError, Request, Response, SlotInfo, FRAME_CRC, LINK_TEMPS,
+    Correction, Injection, LinkError, Request, Response, SlotInfo, table_id, LINK_TEMPS,
     MAX_CHUNK_BYTES,
 };
 use model_core::{Inputs, Model, MAX_TEMPS};
@@ -37,7 +37,7 @@ impl HostTable {
             Box::new(Model::load(&table).map_err(|e| format!("{name}: cannot load: {e:?}"))?);
         Ok(Self {
             name,
-            crc32: FRAME_CRC.checksum(&bytes),
+            crc32: table_id(&bytes),
             bytes,
             model,
         })

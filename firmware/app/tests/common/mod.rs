@@ -32,7 +32,7 @@ pub fn decode_all(bytes: &[u8]) -> Vec<Packet<Response>> {
 
 /// Uploads, commits and activates `table`.
 pub fn install(board: &mut SimBoard, port: &mut Port, table: &[u8]) -> Response {
-    let crc32 = model_core::link::FRAME_CRC.checksum(table);
+    let crc32 = model_core::link::table_id(table);
     let r = call(
         board,
         port,
