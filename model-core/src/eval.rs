@@ -477,6 +477,34 @@ enum Term {
     },
 }
 
+/// A periodic term laid out for the f32 fast path (coefficients inline).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct PeriodicF32 {
+    output: u8,
+    axis: u8,
+    harmonics: u8,
+    period_nm: i32,
+    turns: Turns,
+    /// (a_k, b_k) for k = 1 … harmonics, zero beyond.
+    ab: [[f32; 2]; 4],
+}
+
+/// Most monomials of a thermal/Abbe term on the f32 fast path.
+const FLAT_FACTORED_MONOS: usize = 4;
+
+/// A small thermal/Abbe term laid out for the f32 fast path.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct FactoredF32 {
+    output: u8,
+    /// 0…3 temperature channel, 4 the tool arm.
+    src: u8,
+    len: u8,
+    /// Subtracted from the factor (t_ref for thermal, 0 for Abbe).
+    offset: i32,
+    c: [f32; FLAT_FACTORED_MONOS],
+    idx: [u8; FLAT_FACTORED_MONOS],
+}
+
 /// A prepared, RAM-resident model with capacity `P` parameters and `G` grid
 /// values. Use the aliases [`Model`] and [`LargeModel`].
 #[derive(Clone, Debug)]
@@ -506,6 +534,15 @@ pub struct ModelCap<const P: usize, const G: usize> {
     pidx: Vec<u8, P>,
     mlp_in: Vec<MlpInput, MAX_MLP_INPUTS_TOTAL>,
     grid: Vec<i32, G>,
+    /// f32 fast path: every term is a reversal, a periodic term or a
+    /// thermal/Abbe term of at most [`FLAT_FACTORED_MONOS`] monomials, laid
+    /// out per kind below (no per-term dispatch, no pool slicing).
+    flat: bool,
+    /// Σ reversal amplitudes (× 2^-30) per [axis][output].
+    rev_f32: [[f32; 3]; 3],
+    has_rev: bool,
+    per_f32: Vec<PeriodicF32, MAX_TERMS>,
+    fac_f32: Vec<FactoredF32, MAX_TERMS>,
 }
 
 struct Pools<'m, const P: usize> {
@@ -560,6 +597,11 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             pidx: Vec::new(),
             mlp_in: Vec::new(),
             grid: Vec::new(),
+            flat: false,
+            rev_f32: [[0.0; 3]; 3],
+            has_rev: false,
+            per_f32: Vec::new(),
+            fac_f32: Vec::new(),
         }
     }
 
@@ -597,6 +639,86 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         self.pidx.clear();
         self.mlp_in.clear();
         self.grid.clear();
+        self.flat = false;
+        self.rev_f32 = [[0.0; 3]; 3];
+        self.has_rev = false;
+        self.per_f32.clear();
+        self.fac_f32.clear();
+    }
+
+    /// Lay the terms out per kind for [`ModelCap::flat_f32`] (sets `flat`
+    /// only when every term fits it; otherwise the f32 path keeps the
+    /// general term loop).
+    fn prepare_flat(&mut self) {
+        let mut flat = true;
+        for t in self.terms.iter() {
+            match *t {
+                Term::Reversal {
+                    output,
+                    axis,
+                    amp_f32,
+                    ..
+                } => {
+                    self.rev_f32[axis as usize % 3][output as usize % 3] += amp_f32;
+                    self.has_rev = true;
+                }
+                Term::Periodic {
+                    output,
+                    axis,
+                    harmonics,
+                    period_nm,
+                    turns,
+                    start,
+                    ..
+                } => {
+                    let mut ab = [[0.0f32; 2]; 4];
+                    for (k, abk) in ab.iter_mut().enumerate().take(harmonics as usize) {
+                        let i = start as usize + 2 * k;
+                        *abk = [
+                            self.pf.get(i).copied().unwrap_or(0.0),
+                            self.pf.get(i + 1).copied().unwrap_or(0.0),
+                        ];
+                    }
+                    let _ = self.per_f32.push(PeriodicF32 {
+                        output,
+                        axis,
+                        harmonics: harmonics.min(4),
+                        period_nm,
+                        turns,
+                        ab,
+                    });
+                }
+                Term::Factored {
+                    output,
+                    factor,
+                    start,
+                    len,
+                    ..
+                } if (len as usize) <= FLAT_FACTORED_MONOS => {
+                    let (src, offset) = match factor {
+                        Factor::Temp { ch, t_ref_mc } => (ch & 3, t_ref_mc),
+                        Factor::Tool => (4, 0),
+                    };
+                    let mut c = [0.0f32; FLAT_FACTORED_MONOS];
+                    let mut idx = [0u8; FLAT_FACTORED_MONOS];
+                    for k in 0..len as usize {
+                        let i = start as usize + k;
+                        c[k] = self.pf.get(i).copied().unwrap_or(0.0);
+                        idx[k] = self.pidx.get(i).copied().unwrap_or(0);
+                    }
+                    let _ = self.fac_f32.push(FactoredF32 {
+                        output,
+                        src,
+                        len: len as u8,
+                        offset,
+                        c,
+                        idx,
+                    });
+                }
+                _ => flat = false,
+            }
+        }
+        self.flat = flat;
     }
 
     fn load_inner(&mut self, table: &Table<'_>) -> Result<(), LoadError> {
@@ -958,6 +1080,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                 capacity: G as u32,
             });
         }
+        m.prepare_flat();
         Ok(())
     }
 
@@ -1061,19 +1184,19 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             match self.n_monos {
                 0 => {
                     let mut out = [0.0; 3];
-                    self.terms_f32(&[], &pos, inp, &mut flags, &mut out);
+                    self.extras_f32(&[], &pos, inp, &mut flags, &mut out);
                     out
                 }
                 1..=20 => {
                     let mv = mono20_f32(u());
                     let mut out = self.block_f32(&mv);
-                    self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
+                    self.extras_f32(&mv, &pos, inp, &mut flags, &mut out);
                     out
                 }
                 _ => {
                     let mv = mono56_f32(u());
                     let mut out = self.block_f32(&mv);
-                    self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
+                    self.extras_f32(&mv, &pos, inp, &mut flags, &mut out);
                     out
                 }
             }
@@ -1118,6 +1241,73 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             a2 += c[2] * m;
         }
         [a0, a1, a2]
+    }
+
+    /// Every term but the shared polynomial block: the flat per-kind path
+    /// when the model has one, the general term loop otherwise.
+    #[inline(always)]
+    fn extras_f32(
+        &self,
+        mv: &[f32],
+        pos: &[i32; 3],
+        inp: &Inputs,
+        flags: &mut Flags,
+        out: &mut [f32; 3],
+    ) {
+        if self.flat {
+            self.flat_f32(mv, pos, inp, flags, out);
+        } else {
+            self.terms_f32(mv, pos, inp, flags, out);
+        }
+    }
+
+    /// Thermal/Abbe, periodic and reversal terms from their per-kind arrays.
+    #[inline(never)]
+    fn flat_f32(
+        &self,
+        mv: &[f32],
+        pos: &[i32; 3],
+        inp: &Inputs,
+        flags: &mut Flags,
+        out: &mut [f32; 3],
+    ) {
+        let (temp, tool) = self.hold_aux(inp, flags);
+        let mut acc = [out[0], out[1], out[2], 0.0f32];
+        for f in self.fac_f32.iter() {
+            let mut s = 0.0f32;
+            for (c, &i) in f.c.iter().zip(&f.idx).take(f.len as usize) {
+                s += c * mv.get(i as usize).copied().unwrap_or(0.0);
+            }
+            let v = if f.src < 4 {
+                temp[f.src as usize & 3]
+            } else {
+                tool
+            };
+            acc[f.output as usize & 3] += s * v.wrapping_sub(f.offset) as f32;
+        }
+        for p in self.per_f32.iter() {
+            let theta = phase_turns(pos[p.axis as usize % 3], p.period_nm, p.turns);
+            let (s1, c1) = sincos_f32(theta);
+            let (mut s, mut co) = (s1, c1);
+            let mut v = 0.0f32;
+            for ab in p.ab.iter().take(p.harmonics as usize) {
+                v += ab[0] * s + ab[1] * co;
+                let sn = s * c1 + co * s1;
+                co = co * c1 - s * s1;
+                s = sn;
+            }
+            acc[p.output as usize & 3] += v;
+        }
+        if self.has_rev {
+            // Held to ±1 (the upper bound 1 − 2^-30 makes it one SSAT).
+            let r = inp.rev_q30.map(|r| r.clamp(-ONE_Q30, ONE_Q30 - 1) as f32);
+            for (ra, rv) in self.rev_f32.iter().zip(r) {
+                acc[0] += ra[0] * rv;
+                acc[1] += ra[1] * rv;
+                acc[2] += ra[2] * rv;
+            }
+        }
+        *out = [acc[0], acc[1], acc[2]];
     }
 
     #[inline(never)]
