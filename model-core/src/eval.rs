@@ -24,6 +24,8 @@
 // hot loops' shape obvious in the disassembly); iterator chains would not help.
 #![allow(clippy::needless_range_loop)]
 
+use core::num::NonZeroU32;
+
 use heapless::Vec;
 
 use crate::math::{sincos_f32, sincos_q30, tanh_f32, tanh_q30, ONE_Q30, TANH_IN_FRAC};
@@ -483,26 +485,28 @@ struct PeriodicF32 {
     output: u8,
     axis: u8,
     harmonics: u8,
-    period_nm: i32,
+    /// The period, nm (> 0).
+    period: NonZeroU32,
+    /// A multiple of the period at or below the travel minimum (truncated to
+    /// i32: the held position minus it, wrapping, is the exact u32 offset).
+    base_nm: i32,
     turns: Turns,
     /// (a_k, b_k) for k = 1 … harmonics, zero beyond.
     ab: [[f32; 2]; 4],
 }
 
-/// Most monomials of a thermal/Abbe term on the f32 fast path.
-const FLAT_FACTORED_MONOS: usize = 4;
-
-/// A small thermal/Abbe term laid out for the f32 fast path.
+/// A thermal/Abbe term of degree ≤ 1 laid out for the f32 fast path:
+/// factor × (c₀ + c₁x + c₂y + c₃z), read straight from the normalised
+/// position (no monomial vector in memory).
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct FactoredF32 {
     output: u8,
     /// 0…3 temperature channel, 4 the tool arm.
     src: u8,
-    len: u8,
     /// Subtracted from the factor (t_ref for thermal, 0 for Abbe).
     offset: i32,
-    c: [f32; FLAT_FACTORED_MONOS],
-    idx: [u8; FLAT_FACTORED_MONOS],
+    /// Coefficients of 1, x, y, z (the first four graded monomials).
+    c: [f32; 4],
 }
 
 /// A prepared, RAM-resident model with capacity `P` parameters and `G` grid
@@ -535,8 +539,8 @@ pub struct ModelCap<const P: usize, const G: usize> {
     mlp_in: Vec<MlpInput, MAX_MLP_INPUTS_TOTAL>,
     grid: Vec<i32, G>,
     /// f32 fast path: every term is a reversal, a periodic term or a
-    /// thermal/Abbe term of at most [`FLAT_FACTORED_MONOS`] monomials, laid
-    /// out per kind below (no per-term dispatch, no pool slicing).
+    /// thermal/Abbe term of degree ≤ 1, laid out per kind below (no per-term
+    /// dispatch, no pool slicing, no monomial vector in memory).
     flat: bool,
     /// Σ reversal amplitudes (× 2^-30) per [axis][output].
     rev_f32: [[f32; 3]; 3],
@@ -679,11 +683,20 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                             self.pf.get(i + 1).copied().unwrap_or(0.0),
                         ];
                     }
+                    // The held position minus a multiple of the period at or
+                    // below the travel must fit u32 (so the remainder is one UDIV).
+                    let a = axis as usize % 3;
+                    let p = period_nm.max(1) as i64;
+                    let base = (self.env.travel_min_nm[a] as i64).div_euclid(p) * p;
+                    if self.env.travel_max_nm[a] as i64 - base > u32::MAX as i64 {
+                        flat = false;
+                    }
                     let _ = self.per_f32.push(PeriodicF32 {
                         output,
-                        axis,
+                        axis: a as u8,
                         harmonics: harmonics.min(4),
-                        period_nm,
+                        period: NonZeroU32::new(p as u32).unwrap_or(NonZeroU32::MIN),
+                        base_nm: base as i32,
                         turns,
                         ab,
                     });
@@ -694,25 +707,26 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     start,
                     len,
                     ..
-                } if (len as usize) <= FLAT_FACTORED_MONOS => {
+                } => {
                     let (src, offset) = match factor {
                         Factor::Temp { ch, t_ref_mc } => (ch & 3, t_ref_mc),
                         Factor::Tool => (4, 0),
                     };
-                    let mut c = [0.0f32; FLAT_FACTORED_MONOS];
-                    let mut idx = [0u8; FLAT_FACTORED_MONOS];
-                    for k in 0..len as usize {
-                        let i = start as usize + k;
-                        c[k] = self.pf.get(i).copied().unwrap_or(0.0);
-                        idx[k] = self.pidx.get(i).copied().unwrap_or(0);
+                    let mut c = [0.0f32; 4];
+                    for i in start as usize..start as usize + len as usize {
+                        // Graded order: 0 = 1, 1 = x, 2 = y, 3 = z.
+                        match self.pidx.get(i) {
+                            Some(&k) if k < 4 => {
+                                c[k as usize] += self.pf.get(i).copied().unwrap_or(0.0)
+                            }
+                            _ => flat = false,
+                        }
                     }
                     let _ = self.fac_f32.push(FactoredF32 {
                         output,
                         src,
-                        len: len as u8,
                         offset,
                         c,
-                        idx,
                     });
                 }
                 _ => flat = false,
@@ -1179,24 +1193,34 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                 1..=20 => self.block_f32(&mono20_f32(u())),
                 _ => self.block_f32(&mono56_f32(u())),
             }
+        } else if self.flat {
+            // The flat terms read u itself, so the monomials stay in registers.
+            let uv = u();
+            let mut out = match self.n_monos {
+                0 => [0.0; 3],
+                1..=20 => self.block_f32(&mono20_f32(uv)),
+                _ => self.block_f32(&mono56_f32(uv)),
+            };
+            self.flat_f32(uv, &pos, inp, &mut flags, &mut out);
+            out
         } else {
             // The monomials are handed to the thermal/Abbe terms.
             match self.n_monos {
                 0 => {
                     let mut out = [0.0; 3];
-                    self.extras_f32(&[], &pos, inp, &mut flags, &mut out);
+                    self.terms_f32(&[], &pos, inp, &mut flags, &mut out);
                     out
                 }
                 1..=20 => {
                     let mv = mono20_f32(u());
                     let mut out = self.block_f32(&mv);
-                    self.extras_f32(&mv, &pos, inp, &mut flags, &mut out);
+                    self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
                     out
                 }
                 _ => {
                     let mv = mono56_f32(u());
                     let mut out = self.block_f32(&mv);
-                    self.extras_f32(&mv, &pos, inp, &mut flags, &mut out);
+                    self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
                     out
                 }
             }
@@ -1243,29 +1267,11 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         [a0, a1, a2]
     }
 
-    /// Every term but the shared polynomial block: the flat per-kind path
-    /// when the model has one, the general term loop otherwise.
-    #[inline(always)]
-    fn extras_f32(
-        &self,
-        mv: &[f32],
-        pos: &[i32; 3],
-        inp: &Inputs,
-        flags: &mut Flags,
-        out: &mut [f32; 3],
-    ) {
-        if self.flat {
-            self.flat_f32(mv, pos, inp, flags, out);
-        } else {
-            self.terms_f32(mv, pos, inp, flags, out);
-        }
-    }
-
     /// Thermal/Abbe, periodic and reversal terms from their per-kind arrays.
     #[inline(never)]
     fn flat_f32(
         &self,
-        mv: &[f32],
+        u: [f32; 3],
         pos: &[i32; 3],
         inp: &Inputs,
         flags: &mut Flags,
@@ -1274,10 +1280,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         let (temp, tool) = self.hold_aux(inp, flags);
         let mut acc = [out[0], out[1], out[2], 0.0f32];
         for f in self.fac_f32.iter() {
-            let mut s = 0.0f32;
-            for (c, &i) in f.c.iter().zip(&f.idx).take(f.len as usize) {
-                s += c * mv.get(i as usize).copied().unwrap_or(0.0);
-            }
+            let s = f.c[0] + f.c[1] * u[0] + f.c[2] * u[1] + f.c[3] * u[2];
             let v = if f.src < 4 {
                 temp[f.src as usize & 3]
             } else {
@@ -1286,7 +1289,15 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             acc[f.output as usize & 3] += s * v.wrapping_sub(f.offset) as f32;
         }
         for p in self.per_f32.iter() {
-            let theta = phase_turns(pos[p.axis as usize % 3], p.period_nm, p.turns);
+            let d = pos
+                .get(p.axis as usize)
+                .copied()
+                .unwrap_or(0)
+                .wrapping_sub(p.base_nm) as u32;
+            let r = d % p.period;
+            let theta = r
+                .wrapping_mul(p.turns.int)
+                .wrapping_add(((r as u64 * p.turns.frac as u64) >> 32) as u32);
             let (s1, c1) = sincos_f32(theta);
             let (mut s, mut co) = (s1, c1);
             let mut v = 0.0f32;
