@@ -577,6 +577,30 @@ pub fn planes(data: &Dataset) -> Vec<Plane> {
             }
         }
         for (at, rows) in groups {
+            // Keep the rows on the plane's grid: a position on one in-plane
+            // axis counts only when it was measured at ≥ 3 positions of the
+            // other, so a dense line through the plane does not turn the
+            // map into thousands of empty columns.
+            let snap = |v: f64| (v / SNAP_MM).round() as i64;
+            let mut seen: BTreeMap<(usize, i64), Vec<i64>> = BTreeMap::new();
+            for &r in &rows {
+                for (i, &a) in others.iter().enumerate() {
+                    let b = others[1 - i];
+                    let e = seen.entry((a, snap(data.pos(a, r)))).or_default();
+                    let v = snap(data.pos(b, r));
+                    if !e.contains(&v) {
+                        e.push(v);
+                    }
+                }
+            }
+            let rows: Vec<usize> = rows
+                .into_iter()
+                .filter(|&r| {
+                    others
+                        .iter()
+                        .all(|&a| seen[&(a, snap(data.pos(a, r)))].len() >= 3)
+                })
+                .collect();
             let distinct = |a: usize| {
                 let mut v: Vec<f64> = rows.iter().map(|&r| data.pos(a, r)).collect();
                 v.sort_by(f64::total_cmp);
@@ -679,7 +703,7 @@ fn thin<T: Copy>(v: &[T], max: usize) -> Vec<T> {
 }
 
 /// Points per scatter series in the report.
-const MAX_SCATTER: usize = 1200;
+const MAX_SCATTER: usize = 800;
 /// Minimum distinct positions for a line to count as dense.
 pub const DENSE_LINE_POINTS: usize = 25;
 /// Plots of dense lines at most.
@@ -951,22 +975,39 @@ pub fn build_report(
                     thin(&m, MAX_SCATTER),
                 ))
                 .with(Series::line(format!("{} model", TARGETS[t]), p));
-            resid = resid.with(Series::styled(
-                TARGETS[t],
-                thin(&rr, MAX_SCATTER),
-                Style::LinePoints,
-            ));
+            // A polyline of every point: compact, and the zoom below needs
+            // the full resolution.
+            resid = resid.with(Series::line(TARGETS[t], rr));
         }
         page.figure(
             format!("line{k}_measured"),
             format!("Measured error and model along {ax} at {}.", line.label),
             meas.to_svg()?,
         );
+        // Zoom on the first 60 mm of a long line: short periods (a lead
+        // screw's pitch) are unreadable over the whole travel.
+        let lo = data.pos(line.axis, line.rows[0]);
+        let hi = data.pos(line.axis, line.rows[line.rows.len() - 1]);
+        let zoom = (hi - lo > 200.0).then(|| {
+            let mut z = resid.clone();
+            z.title = format!("residual along {ax}, first 60 mm ({})", line.label);
+            for s in &mut z.series {
+                s.points.retain(|p| p.0 <= lo + 60.0);
+            }
+            z
+        });
         page.figure(
             format!("line{k}_residual"),
             format!("Residual along {ax} at {}.", line.label),
             resid.to_svg()?,
         );
+        if let Some(z) = zoom {
+            page.figure(
+                format!("line{k}_residual_zoom"),
+                format!("Residual along {ax} at {}, the first 60 mm.", line.label),
+                z.to_svg()?,
+            );
+        }
     }
 
     // Measured vs model over all points.

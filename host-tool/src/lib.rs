@@ -11,6 +11,7 @@ pub mod cmd;
 pub mod compare;
 pub mod data;
 pub mod diagnose;
+pub mod export;
 pub mod features;
 pub mod fit;
 pub mod history;

@@ -437,20 +437,14 @@ impl HeatMap {
             Rectangle::new([(xe[ix], ye[iy]), (xe[ix + 1], ye[iy + 1])], style)
         });
         chart.draw_series(cells).map_err(plot_err)?;
-        // Colour bar: a vertical strip from −limit to +limit.
+        // Colour bar: a vertical strip from −limit to +limit, labelled by
+        // hand on its right (x 0..1 is the strip, 1..3 the labels), which
+        // keeps the labels inside the chart whatever the font metrics.
         let mut bar = ChartBuilder::on(&bar_area)
             .margin_top(40)
             .margin_bottom(54)
-            .margin_right(8)
-            .y_label_area_size(52)
-            .build_cartesian_2d(0.0..1.0, -limit..limit)
-            .map_err(plot_err)?;
-        bar.configure_mesh()
-            .disable_mesh()
-            .disable_x_axis()
-            .y_desc(&self.unit)
-            .y_labels(7)
-            .draw()
+            .margin_right(4)
+            .build_cartesian_2d(0.0..3.0, -limit * 1.04..limit * 1.04)
             .map_err(plot_err)?;
         let steps = 64;
         bar.draw_series((0..steps).map(|i| {
@@ -461,6 +455,20 @@ impl HeatMap {
                 diverging(0.5 * (a + b) / limit).filled(),
             )
         }))
+        .map_err(plot_err)?;
+        bar.draw_series([-1.0, -0.5, 0.0, 0.5, 1.0].map(|f| {
+            Text::new(
+                format_value(f * limit),
+                (1.15, f * limit),
+                ("sans-serif", 11).into_font(),
+            )
+        }))
+        .map_err(plot_err)?;
+        bar.draw_series(std::iter::once(Text::new(
+            self.unit.clone(),
+            (0.0, limit * 1.04),
+            ("sans-serif", 12).into_font(),
+        )))
         .map_err(plot_err)?;
         Ok(())
     }

@@ -1,0 +1,332 @@
+//! Export a fitted model (MODEL.json) to what a machine runs: the trueaxis
+//! firmware table ([`table`]), a LinuxCNC screw-compensation file
+//! ([`linuxcnc`]) or a Sinumerik leadscrew-error table ([`sinumerik`]).
+//!
+//! Sign conventions (docs/export-formats.md): the model predicts the
+//! *error* e = actual − nominal in µm. A compensation must move the axis by
+//! −e. The firmware table and LinuxCNC store that correction (−e, added to
+//! the commanded position); Sinumerik stores +e because its controller moves
+//! the axis in the negative direction for a positive value. Each writer
+//! converts once, here, from the model's error.
+//!
+//! This module holds what the controller formats share: evaluating any
+//! model kind (linear, nn, grid) along one axis with the host's own f64
+//! code (`FittedModel::predict`) at a fixed state (other axes at the centre
+//! of the travel, temperatures at the reference, tool length 0, time 0).
+
+pub mod linuxcnc;
+pub mod sinumerik;
+pub mod table;
+
+use anyhow::{bail, Result};
+use serde::Serialize;
+
+use crate::data::{Dataset, TempChannel, AXES, TARGETS};
+use crate::features::Feature;
+use crate::model::{FittedModel, ModelFile};
+
+/// A warning in an export's `--json` output and on stderr.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Warning {
+    /// Stable code: `drift_left_out`, `lag_dropped`, `periodic_left_out`, …
+    pub code: String,
+    /// What happened and what it means for the machine.
+    pub detail: String,
+}
+
+impl Warning {
+    /// A warning with a code and a detail.
+    pub fn new(code: &str, detail: impl Into<String>) -> Warning {
+        Warning {
+            code: code.to_string(),
+            detail: detail.into(),
+        }
+    }
+}
+
+/// The travel of `axis` (0 = x) that the model was fitted on, mm, or `None`
+/// when the model does not use the axis. Linear: the normalisation's span
+/// (the data's span); nn: the input scaling range; grid: the nodes.
+pub fn axis_travel_mm(model: &FittedModel, axis: usize) -> Option<(f64, f64)> {
+    match model {
+        FittedModel::Linear(m) => {
+            let used = m
+                .outputs
+                .iter()
+                .flat_map(|o| o.features.iter())
+                .any(|f| feature_uses_axis(f, axis));
+            used.then(|| {
+                (
+                    m.norm.centre_mm[axis] - m.norm.half_span_mm[axis],
+                    m.norm.centre_mm[axis] + m.norm.half_span_mm[axis],
+                )
+            })
+        }
+        FittedModel::Nn(m) => m
+            .inputs
+            .iter()
+            .position(|&a| a == axis)
+            .map(|i| (m.in_min_mm[i], m.in_max_mm[i])),
+        FittedModel::Grid(m) => m.axes.iter().position(|&a| a == axis).map(|i| {
+            (
+                m.origin_mm[i],
+                m.origin_mm[i] + m.step_mm * (m.counts[i].max(1) - 1) as f64,
+            )
+        }),
+        FittedModel::Local(m) => Some((
+            m.norm.centre_mm[axis] - m.norm.half_span_mm[axis],
+            m.norm.centre_mm[axis] + m.norm.half_span_mm[axis],
+        )),
+    }
+}
+
+/// True when the feature's value changes with the position of `axis`.
+pub fn feature_uses_axis(f: &Feature, axis: usize) -> bool {
+    match f {
+        Feature::Monomial { exp } | Feature::Abbe { exp } | Feature::Thermal { exp, .. } => {
+            exp[axis] > 0
+        }
+        Feature::Periodic { axis: a, .. } | Feature::Reversal { axis: a } => *a == axis,
+        Feature::Drift { .. } => false,
+    }
+}
+
+/// Temperature channels a linear model reads, with the reference
+/// temperature of the first feature that names each.
+pub fn thermal_channels(model: &FittedModel) -> Vec<(String, f64)> {
+    let mut out: Vec<(String, f64)> = Vec::new();
+    if let FittedModel::Linear(m) = model {
+        for f in m.outputs.iter().flat_map(|o| o.features.iter()) {
+            if let Feature::Thermal {
+                channel, t_ref_c, ..
+            } = f
+            {
+                if !out.iter().any(|(c, _)| c == channel) {
+                    out.push((channel.clone(), *t_ref_c));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// One state of the machine at which a model is evaluated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Point {
+    /// Positions x, y, z, mm.
+    pub pos_mm: [f64; 3],
+    /// Direction of the last approach per axis, ±1.
+    pub dir: [i8; 3],
+    /// Temperatures in the order of the channel list, °C.
+    pub temp_c: Vec<f64>,
+    /// Tool length (Abbe arm), mm.
+    pub tool_mm: f64,
+}
+
+/// The host model's error prediction (µm) at each point, per target, with
+/// the host's own f64 code: the points become a [`Dataset`] (t_s = 0, one
+/// session) and go through `FittedModel::predict`.
+pub fn predict_points(
+    model: &FittedModel,
+    channels: &[String],
+    points: &[Point],
+) -> Result<[Option<Vec<f64>>; 3]> {
+    let n = points.len();
+    let col = |f: &dyn Fn(&Point) -> f64| -> Vec<f64> { points.iter().map(f).collect() };
+    let data = Dataset {
+        source: "export sweep".into(),
+        pos_mm: [
+            Some(col(&|p| p.pos_mm[0])),
+            Some(col(&|p| p.pos_mm[1])),
+            Some(col(&|p| p.pos_mm[2])),
+        ],
+        err_um: [None, None, None],
+        t_s: Some(vec![0.0; n]),
+        dir: [0, 1, 2].map(|a| Some(points.iter().map(|p| p.dir[a]).collect())),
+        temps: channels
+            .iter()
+            .enumerate()
+            .map(|(i, name)| TempChannel {
+                name: name.clone(),
+                temp_c: col(&|p| p.temp_c[i]),
+            })
+            .collect(),
+        tool_mm: Some(col(&|p| p.tool_mm)),
+        ..Dataset::default()
+    };
+    model.predict(&data)
+}
+
+/// The error of one axis sampled along its travel, for the controller
+/// formats: both approach directions, at the fixed state described in the
+/// module docs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AxisSamples {
+    /// Axis index (0 = x).
+    pub axis: usize,
+    /// Nominal positions, ascending, mm.
+    pub nominal_mm: Vec<f64>,
+    /// Predicted error after a positive approach, µm.
+    pub err_fwd_um: Vec<f64>,
+    /// Predicted error after a negative approach, µm.
+    pub err_rev_um: Vec<f64>,
+    /// Where the other axes stood, mm.
+    pub at_mm: [f64; 3],
+    /// What was left out of the model and why.
+    pub warnings: Vec<Warning>,
+    /// Largest difference between linear interpolation of the samples and
+    /// the model (as sampled) on a 16× finer sweep, µm — what the
+    /// controller's table loses against the model.
+    pub max_interp_error_um: f64,
+}
+
+/// Samples the error of `axis` along its travel at `points` evenly spaced
+/// nominal positions. Periodic terms along the axis whose period is shorter
+/// than 4 sample steps are left out with a warning: a controller table that
+/// coarse would alias them into a wrong, longer wave (worse than nothing).
+pub fn sample_axis(file: &ModelFile, axis: usize, points: usize) -> Result<AxisSamples> {
+    if points < 2 {
+        bail!("a compensation table needs at least 2 points, got {points}");
+    }
+    let target = axis; // the positioning error of an axis is along itself
+    let Some((lo, hi)) = axis_travel_mm(&file.model, axis) else {
+        bail!(
+            "the model does not depend on {} (fitted axes: {}); choose --axis among them",
+            AXES[axis],
+            (0..3)
+                .filter(|&a| axis_travel_mm(&file.model, a).is_some())
+                .map(|a| AXES[a])
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    };
+    if !file.model.targets().contains(&target) {
+        bail!(
+            "the model has no {} (the error along {}); a one-axis controller table needs it",
+            TARGETS[target],
+            AXES[axis]
+        );
+    }
+    if hi <= lo {
+        bail!(
+            "the model's travel on {} is a single position ({lo} mm)",
+            AXES[axis]
+        );
+    }
+    let step = (hi - lo) / (points - 1) as f64;
+    let mut warnings = Vec::new();
+    let mut model = file.model.clone();
+    if let FittedModel::Linear(m) = &mut model {
+        for o in &mut m.outputs {
+            for (f, c) in o.features.iter().zip(o.coef_um.iter_mut()) {
+                match f {
+                    Feature::Periodic {
+                        axis: a,
+                        period_mm,
+                        harmonic,
+                        ..
+                    } if *a == axis && period_mm / f64::from(*harmonic) < 4.0 * step => {
+                        if *c != 0.0 && o.target == target {
+                            warnings.push(Warning::new(
+                                "periodic_left_out",
+                                format!(
+                                    "{f} ({:.3} µm) left out: its period {:.3} mm is shorter than 4 table steps of {step:.3} mm; use more points or the firmware table",
+                                    c.abs(),
+                                    period_mm / f64::from(*harmonic)
+                                ),
+                            ));
+                        }
+                        *c = 0.0;
+                    }
+                    Feature::Drift { .. } if *c != 0.0 && o.target == target => {
+                        warnings.push(Warning::new(
+                            "drift_left_out",
+                            format!("{f} left out: drift describes the measurement session, not the machine"),
+                        ));
+                        *c = 0.0;
+                    }
+                    _ => {}
+                }
+            }
+        }
+    }
+    let mut at_mm = [0.0; 3];
+    for (a, at) in at_mm.iter_mut().enumerate() {
+        if a != axis {
+            if let Some((l, h)) = axis_travel_mm(&model, a) {
+                *at = 0.5 * (l + h);
+            }
+        }
+    }
+    let chans = thermal_channels(&model);
+    let names: Vec<String> = chans.iter().map(|c| c.0.clone()).collect();
+    if !chans.is_empty() {
+        warnings.push(Warning::new(
+            "thermal_at_reference",
+            format!(
+                "evaluated at the reference temperature ({}): a one-axis controller table has no temperature input",
+                chans
+                    .iter()
+                    .map(|(c, t)| format!("T_{c}_C = {t} °C"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        ));
+    }
+    let fine = 16;
+    let n_fine = (points - 1) * fine + 1;
+    let mut pts = Vec::with_capacity(2 * n_fine);
+    for dir in [1i8, -1] {
+        for i in 0..n_fine {
+            let mut pos = at_mm;
+            pos[axis] = if i + 1 == n_fine {
+                hi
+            } else {
+                lo + (hi - lo) * i as f64 / (n_fine - 1) as f64
+            };
+            pts.push(Point {
+                pos_mm: pos,
+                dir: [dir; 3],
+                temp_c: chans.iter().map(|c| c.1).collect(),
+                tool_mm: 0.0,
+            });
+        }
+    }
+    let pred = predict_points(&model, &names, &pts)?;
+    let Some(e) = &pred[target] else {
+        bail!("the model predicts no {}", TARGETS[target]);
+    };
+    let (fwd_fine, rev_fine) = e.split_at(n_fine);
+    let take = |v: &[f64]| -> Vec<f64> { v.iter().step_by(fine).copied().collect() };
+    let nominal_mm: Vec<f64> = pts[..n_fine]
+        .iter()
+        .step_by(fine)
+        .map(|p| p.pos_mm[axis])
+        .collect();
+    let err_fwd_um = take(fwd_fine);
+    let err_rev_um = take(rev_fine);
+    // Interpolation loss: linear between the table's points vs the model.
+    let mut max_interp_error_um = 0.0f64;
+    for (fine_v, coarse) in [(fwd_fine, &err_fwd_um), (rev_fine, &err_rev_um)] {
+        for (i, v) in fine_v.iter().enumerate() {
+            let k = (i / fine).min(points - 2);
+            let t = (i - k * fine) as f64 / fine as f64;
+            let interp = coarse[k] + t * (coarse[k + 1] - coarse[k]);
+            max_interp_error_um = max_interp_error_um.max((interp - v).abs());
+        }
+    }
+    Ok(AxisSamples {
+        axis,
+        nominal_mm,
+        err_fwd_um,
+        err_rev_um,
+        at_mm,
+        warnings,
+        max_interp_error_um,
+    })
+}
+
+/// Standard CRC-32 (IEEE, as zlib and the table format use), hex `0x…`.
+pub fn crc32_hex(bytes: &[u8]) -> String {
+    format!("0x{:08x}", model_core::table::CRC32.checksum(bytes))
+}
