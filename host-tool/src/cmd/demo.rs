@@ -7,14 +7,20 @@
 //! 2. **fit** the seed's cubic19 → `DIR/model.json`;
 //! 3. **compare** → where it fails, `DIR/report/index.html`,
 //!    `DIR/compare.json`;
-//! 4. **export** the firmware table → `DIR/table.bin`, with the accuracy
-//!    check in `DIR/table.json`.
+//! 4. **diagnose** what the polynomial misses, name the physical effect,
+//!    add it, refit, and repeat until the residual is at the noise floor
+//!    → `DIR/model.json` (overwritten by the improved model, its history
+//!    beside it), `DIR/report/diagnose/`, `DIR/report/history/`;
+//! 5. **export** the improved model's firmware table → `DIR/table.bin`,
+//!    with the accuracy check in `DIR/table.json`.
 //!
 //! The file names are stable: the QEMU stage of `xtask demo` uploads
-//! `table.bin` and checks the board's corrections against `model.json` at
-//! the positions of `data.csv`. Each stage is a function so that more can
-//! be put between them (diagnose → add the effect → refit → the error
-//! falls) without touching the others; [`Demo::run`] is the story.
+//! `table.bin` with `trueaxis upload` to the board firmware in QEMU and
+//! checks the board's corrections along a path through the envelope
+//! (positions, temperatures, directions) bit for bit against model-core's
+//! fixed-point evaluation of the same table on the host; `table.json`
+//! holds the table's agreement with `model.json`. Each stage is a
+//! function; [`Demo::run`] is the story.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -138,7 +144,19 @@ impl Demo {
         Ok(c)
     }
 
-    /// Stage 4: export the firmware table (accuracy check ≤ 1 nm) and write
+    /// Stage 4: diagnose the fitted seed, add the effects it names, refit
+    /// until the residual is at the noise floor; overwrites `model.json`
+    /// with the improved model. Returns it and the story of the steps.
+    pub fn improve(&self, data: &Dataset) -> Result<(ModelFile, String)> {
+        super::improve::demo_stage(
+            data,
+            SEED_MODEL,
+            &self.model_json(),
+            Some(&self.report_dir()),
+        )
+    }
+
+    /// Stage 5: export the firmware table (accuracy check ≤ 1 nm) and write
     /// `table.bin` and `table.json`.
     pub fn export(&self, model: &ModelFile) -> Result<TableExport> {
         let opts = TableOptions {
@@ -162,6 +180,13 @@ impl Demo {
             story.push('\n');
         };
         let t0 = Instant::now();
+        // A fresh story: the history of an earlier demo run in the same
+        // directory would otherwise be continued.
+        let old = crate::history::history_path(&self.model_json());
+        if old.exists() {
+            std::fs::remove_file(&old)
+                .with_context(|| format!("cannot remove {}", old.display()))?;
+        }
 
         say(format!("trueaxis demo → {}\n", self.out.display()));
         let data = self.simulate()?;
@@ -242,9 +267,12 @@ impl Demo {
         let _ = write!(s, "   report: {}", c.report.as_deref().unwrap_or("(none)"));
         say(s);
 
+        let (model, text) = self.improve(&data)?;
+        say(format!("4. {text}"));
+
         let e = self.export(&model)?;
         say(format!(
-            "4. Export the firmware table: {} bytes, crc32 {}, {} terms; the board's evaluation differs from the host model by at most {:.3} nm (f32) and {:.3} nm (fixed point) over {} points of the envelope (travel {}) → {}",
+            "5. Export the firmware table: {} bytes, crc32 {}, {} terms; the board's evaluation differs from the host model by at most {:.3} nm (f32) and {:.3} nm (fixed point) over {} points of the envelope (travel {}) → {}",
             e.bytes,
             e.crc32,
             e.terms,
