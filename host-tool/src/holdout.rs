@@ -4,9 +4,14 @@
 //! flatters every model — its neighbours are still in the fit. We leave out
 //! whole blocks instead:
 //!
-//! - **Whole passes** when the data has `pass_id` with at least two passes:
-//!   the sorted pass ids are dealt round-robin into `k` blocks (pass i →
-//!   block i mod k), so every block holds complete traverses.
+//! - **Whole passes** when the data has `pass_id`: the sorted pass ids are
+//!   dealt round-robin into `k` blocks (pass i → block i mod k), so every
+//!   block holds complete traverses. A long pass (a dense line of 1600
+//!   points) is first cut into segments of [`PASS_SEGMENT`] consecutive
+//!   rows, each dealt like a pass: holding out a whole dense line would
+//!   leave no row that sees a short-period effect (a 5 mm lead error), and
+//!   the held-out RMS would measure an aliased extrapolation, not the model.
+//!   This needs at least two passes or segments.
 //! - **Spatial blocks** otherwise, along the axis with the longest travel:
 //!   the distinct positions on that axis (a measured plane or line shares one)
 //!   are cut, in order, into min(#positions, 4k) contiguous chunks of about
@@ -35,11 +40,34 @@ use crate::lsq;
 /// Number of hold-out blocks unless the caller asks otherwise.
 pub const DEFAULT_BLOCKS: usize = 5;
 
+/// Rows of one pass beyond which the pass is cut into segments for hold-out.
+pub const PASS_SEGMENT: usize = 100;
+
+/// The hold-out unit of each of `rows` when the data has `pass_id`: (pass
+/// id, segment), segment = (index of the row within its pass, in the order
+/// of `rows`) / [`PASS_SEGMENT`]. None without `pass_id`.
+pub fn pass_segments(data: &Dataset, rows: &[usize]) -> Option<Vec<(i64, usize)>> {
+    let pass = data.pass_id.as_ref()?;
+    let mut seen: BTreeMap<i64, usize> = BTreeMap::new();
+    Some(
+        rows.iter()
+            .map(|&r| {
+                let c = seen.entry(pass[r]).or_insert(0);
+                *c += 1;
+                (pass[r], (*c - 1) / PASS_SEGMENT)
+            })
+            .collect(),
+    )
+}
+
 /// How the rows were split, for reports (`"5 blocks of whole passes"`).
 pub fn describe(data: &Dataset, rows: &[usize], k: usize) -> String {
     let b = blocks(data, rows, k);
     match block_kind(data, rows) {
-        BlockKind::Passes => format!("{} blocks of whole passes (pass_id)", b.len()),
+        BlockKind::Passes => format!(
+            "{} blocks of whole passes (pass_id; passes longer than {PASS_SEGMENT} points cut into segments)",
+            b.len()
+        ),
         BlockKind::Spatial(axis) => format!(
             "{} spatial blocks along {} (contiguous slabs dealt round-robin)",
             b.len(),
@@ -56,8 +84,7 @@ enum BlockKind {
 }
 
 fn block_kind(data: &Dataset, rows: &[usize]) -> BlockKind {
-    if let Some(pass) = &data.pass_id {
-        let mut ids: Vec<i64> = rows.iter().map(|&r| pass[r]).collect();
+    if let Some(mut ids) = pass_segments(data, rows) {
         ids.sort_unstable();
         ids.dedup();
         if ids.len() >= 2 {
@@ -94,14 +121,13 @@ pub fn blocks(data: &Dataset, rows: &[usize], k: usize) -> Vec<Vec<usize>> {
     let mut out: Vec<Vec<usize>> = vec![Vec::new(); k];
     match block_kind(data, rows) {
         BlockKind::Passes => {
-            let pass = data.pass_id.as_ref().expect("checked by block_kind");
-            let mut ids: Vec<i64> = rows.iter().map(|&r| pass[r]).collect();
+            let keys = pass_segments(data, rows).expect("checked by block_kind");
+            let mut ids = keys.clone();
             ids.sort_unstable();
             ids.dedup();
-            let block_of: BTreeMap<i64, usize> =
-                ids.iter().enumerate().map(|(i, &id)| (id, i % k)).collect();
-            for &r in rows {
-                out[block_of[&pass[r]]].push(r);
+            for (&r, key) in rows.iter().zip(&keys) {
+                let i = ids.binary_search(key).expect("every key is in ids");
+                out[i % k].push(r);
             }
         }
         BlockKind::Spatial(axis) => {
@@ -303,6 +329,34 @@ mod tests {
         // 6 passes into 4 blocks: passes 0,4 | 1,5 | 2 | 3.
         assert_eq!(b[0].len(), 20);
         assert_eq!(b[2].len(), 10);
+    }
+
+    #[test]
+    fn a_long_pass_is_cut_into_consecutive_segments() {
+        // One dense pass of 450 rows plus a short pass of 30: the long pass
+        // becomes segments of PASS_SEGMENT consecutive rows (0..100,
+        // 100..200, …, 400..450), dealt round-robin with the short pass.
+        let n = 480;
+        let pass: Vec<i64> = (0..n).map(|i| if i < 450 { 1 } else { 2 }).collect();
+        let d = line(n, Some(pass));
+        let rows: Vec<usize> = (0..n).collect();
+        let b = blocks(&d, &rows, 5);
+        assert_eq!(b.len(), 5, "5 segments of pass 1 + pass 2 fill 5 blocks");
+        let mut sizes: Vec<usize> = b.iter().map(Vec::len).collect();
+        sizes.sort_unstable();
+        // Keys sorted: (1,0) (1,1) (1,2) (1,3) (1,4) (2,0) → blocks 0..4, 0.
+        assert_eq!(sizes, vec![50, 100, 100, 100, 130]);
+        for block in &b {
+            // Segments are consecutive rows: a held-out block of pass 1 is
+            // one contiguous run of at most PASS_SEGMENT rows.
+            let p1: Vec<usize> = block.iter().copied().filter(|&r| r < 450).collect();
+            assert!(p1.len() <= PASS_SEGMENT);
+            assert!(p1.windows(2).all(|w| w[1] == w[0] + 1), "{p1:?}");
+            if let Some(&first) = p1.first() {
+                assert_eq!(first % PASS_SEGMENT, 0);
+            }
+        }
+        assert!(describe(&d, &rows, 5).contains("segments"));
     }
 
     #[test]

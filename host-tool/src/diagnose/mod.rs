@@ -1037,21 +1037,11 @@ fn rank_target(
 
 fn hold_out_blocks(data: &Dataset, rows: &[usize], norm: &Norm) -> (Vec<usize>, usize, String) {
     const K: usize = 5;
-    if let Some(pass) = &data.pass_id {
-        // Whole passes, but a long pass (a dense line of 1600 points) is cut
-        // into segments of PASS_SEGMENT consecutive rows: holding out a whole
-        // dense line would leave no row that can see a short period, and the
-        // periodic candidate would be judged on an aliased fit.
-        const PASS_SEGMENT: usize = 100;
-        let mut seen: BTreeMap<i64, usize> = BTreeMap::new();
-        let keys: Vec<(i64, usize)> = rows
-            .iter()
-            .map(|&r| {
-                let c = seen.entry(pass[r]).or_insert(0);
-                *c += 1;
-                (pass[r], (*c - 1) / PASS_SEGMENT)
-            })
-            .collect();
+    // Whole passes, but a long pass (a dense line of 1600 points) is cut
+    // into segments (holdout::PASS_SEGMENT consecutive rows): holding out a
+    // whole dense line would leave no row that can see a short period, and
+    // the periodic candidate would be judged on an aliased fit.
+    if let Some(keys) = crate::holdout::pass_segments(data, rows) {
         let mut ids = keys.clone();
         ids.sort_unstable();
         ids.dedup();
@@ -1064,7 +1054,8 @@ fn hold_out_blocks(data: &Dataset, rows: &[usize], norm: &Norm) -> (Vec<usize>, 
                 fold,
                 K,
                 format!(
-                    "whole passes (pass_id; passes longer than {PASS_SEGMENT} points cut into segments), {} blocks in {K} folds",
+                    "whole passes (pass_id; passes longer than {} points cut into segments), {} blocks in {K} folds",
+                    crate::holdout::PASS_SEGMENT,
                     ids.len()
                 ),
             );
