@@ -233,13 +233,24 @@ impl Args {
             .collect();
         let backlash_mean_um = backlash.iter().sum::<f64>() / backlash.len() as f64;
         let step_mm = (s.nominal_mm[points - 1] - s.nominal_mm[0]) / (points - 1) as f64;
+        // What the file says: Sinumerik's _MIN/_STEP are rounded to the
+        // written 1 nm and _MAX follows from them (see `sinumerik::write`).
+        let (min_mm, step_mm, max_mm) = if linux {
+            (s.nominal_mm[0], step_mm, s.nominal_mm[points - 1])
+        } else {
+            let (lo, st) = (
+                sinumerik::written_mm(s.nominal_mm[0]),
+                sinumerik::written_mm(step_mm),
+            );
+            (lo, st, lo + st * (points - 1) as f64)
+        };
         let doc = json!({
             "format": name,
             "output": self.output.display().to_string(),
             "axis": AXES[axis],
             "points": points,
-            "min_mm": s.nominal_mm[0],
-            "max_mm": s.nominal_mm[points - 1],
+            "min_mm": min_mm,
+            "max_mm": max_mm,
             "step_mm": step_mm,
             "at_mm": {"x": s.at_mm[0], "y": s.at_mm[1], "z": s.at_mm[2]},
             "bytes": body.len(),
@@ -252,8 +263,8 @@ impl Args {
             "{}: {name} table for {}, {points} points {:.3}…{:.3} mm (step {step_mm:.4} mm); linear interpolation loses at most {:.3} µm against the model; mean reversal (fwd − rev) {backlash_mean_um:.3} µm{}\n",
             self.output.display(),
             AXES[axis],
-            s.nominal_mm[0],
-            s.nominal_mm[points - 1],
+            min_mm,
+            max_mm,
             s.max_interp_error_um,
             if linux { "" } else { " — set it in MD32450 $MA_BACKLASH, the table holds the mean of both directions" }
         );

@@ -25,8 +25,21 @@ use std::fmt::Write as _;
 
 use anyhow::{bail, Result};
 
+/// A position as the file holds it: mm rounded to 6 decimals (1 nm).
+pub fn written_mm(v_mm: f64) -> f64 {
+    (v_mm * 1e6).round() / 1e6
+}
+
 /// Writes the program for axis name `axis` (e.g. `AX1`, `X1`): `errors_um`
 /// at `min_mm + i·step_mm`. Values in mm with 6 decimals.
+///
+/// The control places point N at `_MIN + N·_STEP` and requires `_MAX` to be
+/// the last point (Siemens K3: "the end position … ≙ interpolation point
+/// k"). So `_MIN` and `_STEP` are rounded to the written 1 nm first and
+/// `_MAX` is computed from the rounded values: with 200 points over 200 mm
+/// the step 1.005025… is written 1.005025 and `_MAX` is 199.999975, not a
+/// 200.000000 that no point sits on. The shift of the points (≤ 0.5 nm ×
+/// N) is far below what the values resolve.
 pub fn write(axis: &str, min_mm: f64, step_mm: f64, errors_um: &[f64]) -> Result<String> {
     if axis.is_empty() || !axis.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
         bail!("Sinumerik axis name `{axis}`: expected letters, digits and `_` (AX1, X1)");
@@ -39,6 +52,10 @@ pub fn write(axis: &str, min_mm: f64, step_mm: f64, errors_um: &[f64]) -> Result
     }
     if let Some(i) = errors_um.iter().position(|v| !v.is_finite()) {
         bail!("Sinumerik table: value {i} is not finite");
+    }
+    let (min_mm, step_mm) = (written_mm(min_mm), written_mm(step_mm));
+    if step_mm <= 0.0 {
+        bail!("Sinumerik table: step below the written 1 nm resolution");
     }
     let max_mm = min_mm + step_mm * (errors_um.len() - 1) as f64;
     let mut s = String::new();
@@ -75,6 +92,14 @@ mod tests {
             s,
             "%_N_AX_EEC_INI\nCHANDATA(1)\n$AA_ENC_COMP[0,0,AX1]=0.003000\n$AA_ENC_COMP[0,1,AX1]=0.010000\n$AA_ENC_COMP[0,2,AX1]=0.000000\n$AA_ENC_COMP_STEP[0,AX1]=1.000000\n$AA_ENC_COMP_MIN[0,AX1]=-200.000000\n$AA_ENC_COMP_MAX[0,AX1]=-198.000000\n$AA_ENC_COMP_IS_MODULO[0,AX1]=0\nM17\n"
         );
+    }
+
+    #[test]
+    fn max_is_the_last_point_of_the_written_step() {
+        let s = write("AX1", 0.0, 200.0 / 199.0, &[0.0; 200]).unwrap();
+        assert!(s.contains("$AA_ENC_COMP_STEP[0,AX1]=1.005025\n"), "{s}");
+        assert!(s.contains("$AA_ENC_COMP_MAX[0,AX1]=199.999975\n"), "{s}");
+        assert!(write("AX1", 0.0, 4e-7, &[0.0; 2]).is_err());
     }
 
     #[test]
