@@ -65,16 +65,21 @@ pub const MAX_FRAME_BYTES: usize =
 /// the zlib/PNG one).
 pub const FRAME_CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
-/// The checksum that identifies a whole table file on the link and in the
-/// flash slots: CRC-32C (Castagnoli). Not the table's own CRC-32/ISO-HDLC:
-/// a table ends with that CRC of everything before it, so the same CRC over
-/// the whole file is the algorithm's constant residue (0x2144DF1C) for every
-/// valid table and could not tell two tables apart.
-pub const TABLE_ID_CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISCSI);
-
-/// The identity of a whole table file (upload begin, slot headers, status).
+/// The identity of a table on the link and in the flash slots (upload
+/// begin, slot headers, status): the table's own CRC-32/ISO-HDLC, i.e. the
+/// CRC of every byte before the 4-byte trailer — for a valid table exactly
+/// the value in its trailer, the `crc32` that `trueaxis export` prints, so a
+/// user can match what the board reports with the file they exported.
+///
+/// Not the CRC-32 of the whole file: a table ends with the CRC of the bytes
+/// before it, so that is the algorithm's constant residue (0x2144DF1C) for
+/// every valid table and could not tell two tables apart. The trailer is not
+/// covered by the identity, but nothing is used without `table::parse`,
+/// which checks it: a table whose trailer was corrupted is refused at
+/// commit, at boot and at load.
 pub fn table_id(table: &[u8]) -> u32 {
-    TABLE_ID_CRC.checksum(table)
+    let body = table.len().saturating_sub(4);
+    FRAME_CRC.checksum(&table[..body])
 }
 
 /// One message on the wire: the sequence number that pairs a response with
@@ -843,7 +848,7 @@ mod table_id_tests {
 
     /// Two different byte strings that each end with their own CRC-32, as
     /// every table does: the whole-file CRC-32 is the same residue for both,
-    /// the table identity is not.
+    /// the table identity is not, and it equals each one's trailer.
     #[test]
     fn table_id_tells_self_checked_files_apart() {
         let seal = |body: &[u8]| {
@@ -854,5 +859,11 @@ mod table_id_tests {
         let (a, b) = (seal(b"table one"), seal(b"another table"));
         assert_eq!(FRAME_CRC.checksum(&a), FRAME_CRC.checksum(&b));
         assert_ne!(table_id(&a), table_id(&b));
+        for t in [&a, &b] {
+            let trailer = u32::from_le_bytes(t[t.len() - 4..].try_into().unwrap());
+            assert_eq!(table_id(t), trailer);
+        }
+        // Shorter than a trailer: no panic, still a checksum of something.
+        assert_eq!(table_id(b"abc"), FRAME_CRC.checksum(b""));
     }
 }
