@@ -677,11 +677,22 @@ fn sinumerik_table_holds_plus_the_mean_error_in_mm() {
         let truth = 0.5 * (line_truth_um(xs[i], 1.0) + line_truth_um(xs[i], -1.0));
         assert!((v - truth * 1e-3).abs() <= 2e-6, "{i}: {v} vs {truth}");
     }
-    // The reversal is not in the table: it is reported for MD32450.
+    // The reversal is not in the table: it is reported for MD32450, which
+    // Siemens enters positive when the slide falls short in the direction of
+    // travel (e_fwd < e_rev). This line overshoots forward (fwd − rev =
+    // +4.8 µm), so MD32450 is negative.
     assert!((num(&v["backlash_um"]) - 4.8).abs() < 1e-3, "{v}");
+    assert!(
+        (num(&v["md32450_backlash_mm"]) + 0.0048).abs() < 1e-6,
+        "{v}"
+    );
     let text_out = run(&["export", s(&model), "--format", "sinumerik", "-o", s(&out)]);
     assert!(text_out.status.success());
-    assert!(String::from_utf8_lossy(&text_out.stdout).contains("MD32450"));
+    let text = String::from_utf8_lossy(&text_out.stdout);
+    assert!(
+        text.contains("MD32450 $MA_BACKLASH = -0.004800 mm"),
+        "{text}"
+    );
     expect_exit(
         &[
             "export",

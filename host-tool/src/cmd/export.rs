@@ -244,7 +244,12 @@ impl Args {
             );
             (lo, st, lo + st * (points - 1) as f64)
         };
-        let doc = json!({
+        // Siemens enters MD32450 positive when "the encoder is leading the
+        // machine part (normal situation)": the slide falls short in the
+        // direction of travel, e_fwd < 0 < e_rev. So the value is rev − fwd,
+        // the opposite sign of `backlash_um`, in mm.
+        let md32450_mm = -backlash_mean_um * 1e-3;
+        let mut doc = json!({
             "format": name,
             "output": self.output.display().to_string(),
             "axis": AXES[axis],
@@ -259,6 +264,9 @@ impl Args {
             "backlash_um": backlash_mean_um,
             "warnings": s.warnings,
         });
+        if !linux {
+            doc["md32450_backlash_mm"] = json!(md32450_mm);
+        }
         let text = format!(
             "{}: {name} table for {}, {points} points {:.3}…{:.3} mm (step {step_mm:.4} mm); linear interpolation loses at most {:.3} µm against the model; mean reversal (fwd − rev) {backlash_mean_um:.3} µm{}\n",
             self.output.display(),
@@ -266,7 +274,11 @@ impl Args {
             min_mm,
             max_mm,
             s.max_interp_error_um,
-            if linux { "" } else { " — set it in MD32450 $MA_BACKLASH, the table holds the mean of both directions" }
+            if linux {
+                String::new()
+            } else {
+                format!(" — the table holds the mean of both directions; set MD32450 $MA_BACKLASH = {md32450_mm:.6} mm (rev − fwd: positive when the axis falls short in the direction of travel, Siemens' normal case)")
+            }
         );
         Ok((doc, s.warnings.clone(), text))
     }
