@@ -457,3 +457,74 @@ fn bad_input_exits_1_and_usage_exits_2() {
         &["--bogus"],
     );
 }
+
+/// A hand-made file (tests/golden/line_x.csv: an x line with a ±2.4 µm
+/// reversal, both directions): a cubic without the reversal leaves exactly
+/// the reversal, and compare shows it as a step between dir_x = −1 and +1;
+/// with the reversal added the residual is the file's 0.1 nm rounding.
+#[test]
+fn hand_made_line_shows_the_missing_reversal() {
+    let dir = tmp_dir("line");
+    let csv = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/line_x.csv");
+    let plain = dir.join("plain.model.json");
+    json(&run(&[
+        "fit",
+        s(&csv),
+        "--model",
+        "cubic19",
+        "-o",
+        s(&plain),
+        "--json",
+    ]));
+    let v = json(&run(&["compare", s(&csv), "--model", s(&plain), "--json"]));
+    assert_eq!(v["rows"], 42);
+    let r = num(&v["rms_um"]["ex"], "rms");
+    assert!(
+        (r - 2.4).abs() < 1e-3,
+        "the reversal is all that is left: {r}"
+    );
+    let prof = v["channels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["channel"] == "dir_x")
+        .expect("a dir_x profile");
+    assert!(num(&prof["corr"], "corr") > 0.999, "{prof}");
+    let bins = prof["bins"].as_array().unwrap();
+    assert_eq!(bins.len(), 2);
+    assert!(
+        (num(&bins[0]["mean_um"], "mean") + 2.4).abs() < 1e-3,
+        "{prof}"
+    );
+    assert!(
+        (num(&bins[1]["mean_um"], "mean") - 2.4).abs() < 1e-3,
+        "{prof}"
+    );
+    assert_eq!(
+        (bins[0]["points"].as_u64(), bins[1]["points"].as_u64()),
+        (Some(21), Some(21))
+    );
+    // The text output names the correlated channel.
+    let out = run(&["compare", s(&csv), "--model", s(&plain)]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("ex vs dir_x: r = +1.00"), "{text}");
+
+    let full = dir.join("full.model.json");
+    json(&run(&[
+        "fit",
+        s(&csv),
+        "--model",
+        "cubic19",
+        "--add",
+        "reversal:target=ex,axis=x",
+        "-o",
+        s(&full),
+        "--json",
+    ]));
+    let v = json(&run(&["compare", s(&csv), "--model", s(&full), "--json"]));
+    let after = num(&v["rms_um"]["ex"], "rms");
+    assert!(after < 1e-4, "{after}");
+    let before = num(&v["targets"]["ex"]["before"]["rms_um"], "before");
+    close(before, rms(&csv_column(&csv, "ex_um")), "before rms");
+    assert!(num(&v["targets"]["ex"]["improvement"], "improvement") > 1e4);
+}
