@@ -891,3 +891,67 @@ fn bad_input_exits_1_with_a_clear_message() {
         &["--axis"],
     );
 }
+
+/// Every exportable model kind from the command line: a grid table and a
+/// tanh network fitted to the simulated grid become tables that pass the
+/// accuracy check, and one-axis controller files; a local model is refused
+/// as a table with a message that says what to fit instead.
+#[test]
+fn grid_and_network_models_export_and_local_is_refused() {
+    let dir = tmp_dir("kinds");
+    let (csv, _) = grid_model(&dir);
+    for (args, terms) in [
+        (vec!["--model", "grid:100"], 3),
+        (vec!["--model", "nn:4", "--max-epochs", "30"], 1),
+    ] {
+        let model = dir.join("kind.model.json");
+        let mut a = vec!["fit", s(&csv), "-o", s(&model), "--json"];
+        a.extend(args.iter().copied());
+        json(&run(&a));
+        let bin = dir.join("kind.bin");
+        let v = json(&run(&["export", s(&model), "-o", s(&bin), "--json"]));
+        assert!(num(&v["max_f32_error_nm"]) <= 1.0, "{args:?}: {v}");
+        assert!(num(&v["max_fixed_error_nm"]) <= 1.0, "{args:?}: {v}");
+        assert_eq!(v["terms"], terms, "{args:?}");
+        let bytes = std::fs::read(&bin).unwrap();
+        let t = model_core::parse(&bytes).unwrap();
+        assert_eq!(t.envelope().travel_nm(0), (0, 800_000_000), "{args:?}");
+        let lc = dir.join("kind.comp");
+        let v = json(&run(&[
+            "export",
+            s(&model),
+            "--format",
+            "linuxcnc",
+            "--axis",
+            "z",
+            "-o",
+            s(&lc),
+            "--json",
+        ]));
+        assert_eq!(v["axis"], "z");
+        let rows = read_linuxcnc(&std::fs::read_to_string(&lc).unwrap());
+        assert_eq!(rows.len(), 201);
+        assert_eq!((rows[0][0], rows[200][0]), (0.0, 500.0), "{args:?}");
+    }
+    let local = dir.join("local.model.json");
+    json(&run(&[
+        "fit",
+        s(&csv),
+        "--model",
+        "cubic19",
+        "--local",
+        "-o",
+        s(&local),
+        "--json",
+    ]));
+    let bin = dir.join("local.bin");
+    expect_exit(
+        &["export", s(&local), "-o", s(&bin)],
+        1,
+        &[
+            "local (piecewise) models cannot be exported as a table",
+            "grid:<step_mm>",
+        ],
+    );
+    assert!(!bin.exists());
+}
