@@ -955,3 +955,64 @@ fn grid_and_network_models_export_and_local_is_refused() {
     );
     assert!(!bin.exists());
 }
+
+// ---------------------------------------------------------------------------
+// Reproducible tables.
+
+fn run_env(args: &[&str], env: &[(&str, &str)]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_trueaxis"))
+        .args(args)
+        .envs(env.iter().copied())
+        .output()
+        .unwrap()
+}
+
+/// With SOURCE_DATE_EPOCH the same model gives the same bytes (and CRC):
+/// two exports are identical, carry that creation time, and equal the
+/// checked-in golden table; a malformed SOURCE_DATE_EPOCH is refused, and
+/// `--axis` with a table (which holds every axis) is an error, not ignored.
+#[test]
+fn source_date_epoch_makes_the_table_reproducible() {
+    let dir = tmp_dir("epoch");
+    let model = line_model(&dir);
+    let mut bytes = Vec::new();
+    for i in 0..2 {
+        let out = dir.join(format!("t{i}.bin"));
+        let v = json(&run_env(
+            &["export", s(&model), "-o", s(&out), "--json"],
+            &[("SOURCE_DATE_EPOCH", "1700000000")],
+        ));
+        let b = std::fs::read(&out).unwrap();
+        assert_eq!(
+            v["crc32"],
+            format!("0x{:08x}", crc32_ieee(&b[..b.len() - 4]))
+        );
+        let t = model_core::parse(&b).unwrap();
+        assert_eq!(t.created_unix_s(), 1_700_000_000);
+        bytes.push(b);
+    }
+    assert_eq!(bytes[0], bytes[1]);
+    golden("line_x.table.bin", &bytes[0]);
+
+    let out = run_env(
+        &["export", s(&model), "-o", s(&dir.join("bad.bin")), "--json"],
+        &[("SOURCE_DATE_EPOCH", "yesterday")],
+    );
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("SOURCE_DATE_EPOCH"));
+    assert!(!dir.join("bad.bin").exists());
+
+    expect_exit(
+        &[
+            "export",
+            s(&model),
+            "--axis",
+            "x",
+            "-o",
+            s(&dir.join("a.bin")),
+        ],
+        1,
+        &["--axis x applies to the one-axis controller formats"],
+    );
+    assert!(!dir.join("a.bin").exists());
+}

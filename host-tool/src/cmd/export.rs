@@ -129,11 +129,30 @@ pub fn export_table(
     Ok(e)
 }
 
+/// The table's creation time: `SOURCE_DATE_EPOCH` when set (the
+/// reproducible-builds convention: the same model then gives the same bytes
+/// and CRC), else now.
+fn created_unix_s() -> Result<i64> {
+    match std::env::var("SOURCE_DATE_EPOCH") {
+        Ok(v) => v.trim().parse::<i64>().with_context(|| {
+            format!("SOURCE_DATE_EPOCH={v:?}: expected whole seconds since 1970-01-01 UTC")
+        }),
+        Err(_) => Ok(std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs() as i64)),
+    }
+}
+
 impl Args {
     pub fn run(self) -> Result<()> {
         let model = ModelFile::load(&self.model)?;
         let (doc, warnings, text) = match self.format {
             Format::Table => {
+                if let Some(a) = &self.axis {
+                    bail!(
+                        "--axis {a} applies to the one-axis controller formats (linuxcnc, sinumerik); a firmware table holds every axis of the model"
+                    );
+                }
                 let opts = TableOptions {
                     max_corr_um: self.max_corr_um,
                     max_slew_nm_per_ms: self.max_slew_nm_per_ms,
@@ -146,9 +165,7 @@ impl Args {
                         .map(|s| parse_range(s, "--tool-range-mm"))
                         .transpose()?,
                     drop_lag: self.drop_lag,
-                    created_unix_s: std::time::SystemTime::now()
-                        .duration_since(std::time::UNIX_EPOCH)
-                        .map_or(0, |d| d.as_secs() as i64),
+                    created_unix_s: created_unix_s()?,
                 };
                 let e = export_table(&model, &self.output, &opts, self.allow_error_nm)?;
                 let text = format!(
