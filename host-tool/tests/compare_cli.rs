@@ -8,40 +8,14 @@
 //! `data_hash_mismatch`; and each class of bad input exits 1 with a message
 //! that names the file (and line and column for a bad cell), usage errors 2.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
+use std::path::{Path, PathBuf};
+
+use common::{json, run, s, tmp_dir};
 use serde_json::Value;
 use trueaxis::import;
 use trueaxis::model::ModelFile;
-
-fn tmp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("trueaxis-compare-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_trueaxis"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-/// Stdout of a successful run as one JSON document.
-fn json(out: &Output) -> Value {
-    assert!(
-        out.status.success(),
-        "exit {:?}\nstderr: {}",
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("exactly one JSON document on stdout")
-}
 
 /// The preset mill on a 100 mm grid (9 × 6 × 6 = 324 points, ex ey ez),
 /// σ = 0.2 µm noise, fixed seed.
@@ -128,7 +102,7 @@ fn num(v: &Value, what: &str) -> f64 {
 
 #[test]
 fn json_has_the_contract_keys_and_numbers_that_recompute() {
-    let dir = tmp_dir("json");
+    let dir = tmp_dir("compare", "json");
     let csv = simulate(&dir, "grid.csv", 7);
     let model = dir.join("grid.model.json");
     let f = fit(&csv, &model);
@@ -253,7 +227,7 @@ fn json_has_the_contract_keys_and_numbers_that_recompute() {
 
 #[test]
 fn report_opens_offline_with_every_figure() {
-    let dir = tmp_dir("report");
+    let dir = tmp_dir("compare", "report");
     let csv = simulate(&dir, "grid.csv", 7);
     let model = dir.join("grid.model.json");
     fit(&csv, &model);
@@ -307,7 +281,7 @@ fn no_network(text: &str) -> bool {
 
 #[test]
 fn other_data_warns_data_hash_mismatch() {
-    let dir = tmp_dir("hash");
+    let dir = tmp_dir("compare", "hash");
     let csv = simulate(&dir, "a.csv", 7);
     let other = simulate(&dir, "b.csv", 8);
     let model = dir.join("a.model.json");
@@ -332,7 +306,7 @@ fn other_data_warns_data_hash_mismatch() {
 
 #[test]
 fn a_target_the_model_lacks_is_warned() {
-    let dir = tmp_dir("target");
+    let dir = tmp_dir("compare", "target");
     let csv = simulate(&dir, "grid.csv", 7);
     // The same data with ex only → a model of ex only.
     let mut data = import::load(&csv).unwrap();
@@ -371,7 +345,7 @@ fn expect_exit(args: &[&str], code: i32, needles: &[&str]) {
 
 #[test]
 fn bad_input_exits_1_and_usage_exits_2() {
-    let dir = tmp_dir("bad");
+    let dir = tmp_dir("compare", "bad");
     let csv = simulate(&dir, "grid.csv", 7);
     let model = dir.join("grid.model.json");
     let fit_json = fit(&csv, &model);
@@ -464,7 +438,7 @@ fn bad_input_exits_1_and_usage_exits_2() {
 /// with the reversal added the residual is the file's 0.1 nm rounding.
 #[test]
 fn hand_made_line_shows_the_missing_reversal() {
-    let dir = tmp_dir("line");
+    let dir = tmp_dir("compare", "line");
     let csv = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/line_x.csv");
     let plain = dir.join("plain.model.json");
     json(&run(&[

@@ -17,41 +17,16 @@
 //! - Bad input: missing / truncated / non-model files, an axis the model
 //!   does not use, out-of-range options → exit 1 with a clear message.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
+use std::path::{Path, PathBuf};
+
+use common::{json, run, run_env, s, tmp_dir};
 use model_core::{Inputs, Model, MAX_TEMPS};
 use serde_json::Value;
 use trueaxis::data::{Dataset, TempChannel};
 use trueaxis::import;
 use trueaxis::model::ModelFile;
-
-fn tmp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("trueaxis-export-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_trueaxis"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn json(out: &Output) -> Value {
-    assert!(
-        out.status.success(),
-        "exit {:?}\nstderr: {}",
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("exactly one JSON document on stdout")
-}
 
 fn num(v: &Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
@@ -213,7 +188,7 @@ fn predict_ex(model: &ModelFile, x_mm: &[f64], dir: i8, bed_c: Option<f64>) -> V
 
 #[test]
 fn table_json_matches_the_file_and_the_firmware_corrects_minus_the_error() {
-    let dir = tmp_dir("table");
+    let dir = tmp_dir("export", "table");
     let (csv, model) = grid_model(&dir);
     let bin = dir.join("grid.bin");
     let v = json(&run(&["export", s(&model), "-o", s(&bin), "--json"]));
@@ -292,7 +267,7 @@ fn table_json_matches_the_file_and_the_firmware_corrects_minus_the_error() {
 
 #[test]
 fn table_envelope_follows_the_options() {
-    let dir = tmp_dir("envelope");
+    let dir = tmp_dir("export", "envelope");
     let (_, model) = grid_model(&dir);
     let bin = dir.join("t.bin");
     let envelope = |extra: &[&str]| {
@@ -356,7 +331,7 @@ fn table_envelope_follows_the_options() {
 
 #[test]
 fn failed_accuracy_check_exits_1_and_writes_nothing() {
-    let dir = tmp_dir("accuracy");
+    let dir = tmp_dir("export", "accuracy");
     let (_, model) = grid_model(&dir);
     let bin = dir.join("never.bin");
     expect_exit(
@@ -381,7 +356,7 @@ fn failed_accuracy_check_exits_1_and_writes_nothing() {
 
 #[test]
 fn thermal_lag_is_refused_without_drop_lag_and_drift_is_left_out() {
-    let dir = tmp_dir("thermal");
+    let dir = tmp_dir("export", "thermal");
     let csv = thermal_csv(&dir);
     let model = dir.join("thermal.model.json");
     json(&run(&[
@@ -513,7 +488,7 @@ fn read_linuxcnc(text: &str) -> Vec<[f64; 3]> {
 
 #[test]
 fn linuxcnc_trims_are_minus_the_error_in_mm() {
-    let dir = tmp_dir("linuxcnc");
+    let dir = tmp_dir("export", "linuxcnc");
     let model = line_model(&dir);
     let out = dir.join("x.comp");
     let v = json(&run(&[
@@ -619,7 +594,7 @@ fn linuxcnc_trims_are_minus_the_error_in_mm() {
 
 #[test]
 fn sinumerik_table_holds_plus_the_mean_error_in_mm() {
-    let dir = tmp_dir("sinumerik");
+    let dir = tmp_dir("export", "sinumerik");
     let model = line_model(&dir);
     let out = dir.join("x.ini");
     let v = json(&run(&[
@@ -747,7 +722,7 @@ fn golden(name: &str, actual: &[u8]) {
 
 #[test]
 fn golden_linuxcnc_and_sinumerik_files() {
-    let dir = tmp_dir("golden");
+    let dir = tmp_dir("export", "golden");
     let model = line_model(&dir);
     let mf = ModelFile::load(&model).unwrap();
     // The golden values must not sit on a rounding edge of the written
@@ -788,7 +763,7 @@ fn golden_linuxcnc_and_sinumerik_files() {
 
 #[test]
 fn bad_input_exits_1_with_a_clear_message() {
-    let dir = tmp_dir("bad");
+    let dir = tmp_dir("export", "bad");
     let model = line_model(&dir);
     let out = dir.join("out.bin");
     let o = s(&out);
@@ -898,7 +873,7 @@ fn bad_input_exits_1_with_a_clear_message() {
 /// as a table with a message that says what to fit instead.
 #[test]
 fn grid_and_network_models_export_and_local_is_refused() {
-    let dir = tmp_dir("kinds");
+    let dir = tmp_dir("export", "kinds");
     let (csv, _) = grid_model(&dir);
     for (args, terms) in [
         (vec!["--model", "grid:100"], 3),
@@ -959,21 +934,13 @@ fn grid_and_network_models_export_and_local_is_refused() {
 // ---------------------------------------------------------------------------
 // Reproducible tables.
 
-fn run_env(args: &[&str], env: &[(&str, &str)]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_trueaxis"))
-        .args(args)
-        .envs(env.iter().copied())
-        .output()
-        .unwrap()
-}
-
 /// With SOURCE_DATE_EPOCH the same model gives the same bytes (and CRC):
 /// two exports are identical, carry that creation time, and equal the
 /// checked-in golden table; a malformed SOURCE_DATE_EPOCH is refused, and
 /// `--axis` with a table (which holds every axis) is an error, not ignored.
 #[test]
 fn source_date_epoch_makes_the_table_reproducible() {
-    let dir = tmp_dir("epoch");
+    let dir = tmp_dir("export", "epoch");
     let model = line_model(&dir);
     let mut bytes = Vec::new();
     for i in 0..2 {

@@ -4,25 +4,14 @@
 //! 1 for bad input (too few distinct points, unknown model, bad --add,
 //! collinear terms), 2 for usage.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
+use std::path::Path;
+
+use common::{json, run, tmp_dir};
 use trueaxis::data::Dataset;
 use trueaxis::import;
 use trueaxis::model::{FittedModel, ModelFile};
-
-fn tmp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("trueaxis-fit-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_trueaxis"))
-        .args(args)
-        .output()
-        .unwrap()
-}
 
 fn write(data: &Dataset, path: &Path) {
     let f = std::fs::File::create(path).unwrap();
@@ -62,19 +51,9 @@ fn grid_data() -> Dataset {
     }
 }
 
-fn json(out: &Output) -> serde_json::Value {
-    assert!(
-        out.status.success(),
-        "exit {:?}\nstderr: {}",
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("exactly one JSON document on stdout")
-}
-
 #[test]
 fn json_shape_and_model_file_round_trip() {
-    let dir = tmp_dir("shape");
+    let dir = tmp_dir("fit", "shape");
     let csv = dir.join("grid.csv");
     write(&grid_data(), &csv);
     let out = run(&["fit", csv.to_str().unwrap(), "--model", "cubic19", "--json"]);
@@ -123,7 +102,7 @@ fn json_shape_and_model_file_round_trip() {
 
 #[test]
 fn add_effects_and_output_path() {
-    let dir = tmp_dir("add");
+    let dir = tmp_dir("fit", "add");
     let csv = dir.join("grid.csv");
     write(&grid_data(), &csv);
     let model = dir.join("m.json");
@@ -160,7 +139,7 @@ fn add_effects_and_output_path() {
 
 #[test]
 fn every_model_kind_runs_from_the_command_line() {
-    let dir = tmp_dir("kinds");
+    let dir = tmp_dir("fit", "kinds");
     let csv = dir.join("grid.csv");
     write(&grid_data(), &csv);
     for (args, kind) in [
@@ -204,7 +183,7 @@ fn expect_exit(args: &[&str], code: i32, needle: &str) {
 
 #[test]
 fn bad_input_exits_1_and_usage_exits_2() {
-    let dir = tmp_dir("bad");
+    let dir = tmp_dir("fit", "bad");
     let csv = dir.join("grid.csv");
     write(&grid_data(), &csv);
     let c = csv.to_str().unwrap();
