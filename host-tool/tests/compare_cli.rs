@@ -12,7 +12,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{json, run, s, tmp_dir};
+use common::{expect_exit, json, run, s, tmp_dir};
 use serde_json::Value;
 use trueaxis::import;
 use trueaxis::model::ModelFile;
@@ -331,16 +331,6 @@ fn a_target_the_model_lacks_is_warned() {
         "{codes:?}"
     );
     assert!(codes.contains(&"data_hash_mismatch"), "{codes:?}");
-}
-
-fn expect_exit(args: &[&str], code: i32, needles: &[&str]) {
-    let out = run(args);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(code), "{args:?}: stderr {err}");
-    for n in needles {
-        assert!(err.contains(n), "{args:?}: expected `{n}` in stderr: {err}");
-    }
-    assert!(out.stdout.is_empty(), "no output on failure: {args:?}");
 }
 
 #[test]

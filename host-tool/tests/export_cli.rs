@@ -21,7 +21,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{json, run, run_env, s, tmp_dir};
+use common::{expect_exit, json, run, run_env, s, tmp_dir};
 use model_core::{Inputs, Model, MAX_TEMPS};
 use serde_json::Value;
 use trueaxis::data::{Dataset, TempChannel};
@@ -30,17 +30,6 @@ use trueaxis::model::ModelFile;
 
 fn num(v: &Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
-}
-
-fn expect_exit(args: &[&str], code: i32, needles: &[&str]) -> String {
-    let out = run(args);
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert_eq!(out.status.code(), Some(code), "{args:?}: stderr {err}");
-    for n in needles {
-        assert!(err.contains(n), "{args:?}: expected `{n}` in stderr: {err}");
-    }
-    assert!(out.stdout.is_empty(), "no output on failure: {args:?}");
-    err
 }
 
 /// CRC-32 (IEEE 802.3, reflected 0xEDB88320, as zlib), bit by bit — an

@@ -46,3 +46,16 @@ pub fn json(out: &Output) -> Value {
     );
     serde_json::from_slice(&out.stdout).expect("exactly one JSON document on stdout")
 }
+
+/// Runs `trueaxis` expecting exit `code`, every one of `needles` in stderr
+/// and nothing on stdout (no half document on failure); returns stderr.
+pub fn expect_exit(args: &[&str], code: i32, needles: &[&str]) -> String {
+    let out = run(args);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(code), "{args:?}: stderr {err}");
+    for n in needles {
+        assert!(err.contains(n), "{args:?}: expected `{n}` in stderr: {err}");
+    }
+    assert!(out.stdout.is_empty(), "no output on failure: {args:?}");
+    err
+}
