@@ -50,6 +50,8 @@ fn demo_finds_both_hidden_effects_and_its_table_compensates_the_data() {
         demo.report_dir().join("index.html"),
         demo.report_dir().join("diagnose").join("index.html"),
         demo.report_dir().join("history").join("index.html"),
+        demo.final_report_dir().join("index.html"),
+        demo.compare_final_json(),
     ] {
         assert!(p.is_file(), "{} is missing", p.display());
     }
@@ -88,6 +90,12 @@ fn demo_finds_both_hidden_effects_and_its_table_compensates_the_data() {
     let c = read_json(&demo.compare_json());
     let ex_after = c["targets"]["ex"]["rms_um"].as_f64().unwrap();
     assert!(ex_after > 5.0 * NOISE_UM, "compare.json ex {ex_after}");
+    // compare_final.json describes the improved model: at the noise.
+    let c = read_json(&demo.compare_final_json());
+    for t in ["ex", "ey", "ez"] {
+        let after = c["targets"][t]["rms_um"].as_f64().unwrap();
+        assert!(after <= 1.3 * NOISE_UM, "compare_final.json {t} {after}");
+    }
 
     // The table: parses, its accuracy check passed, and evaluated by
     // model-core in fixed point (the board's path) at every measured point it

@@ -10,7 +10,9 @@
 //! 4. **diagnose** what the polynomial misses, name the physical effect,
 //!    add it, refit, and repeat until the residual is at the noise floor
 //!    → `DIR/model.json` (overwritten by the improved model, its history
-//!    beside it), `DIR/report/diagnose/`, `DIR/report/history/`;
+//!    beside it), `DIR/report/diagnose/`, `DIR/report/history/`, and the
+//!    improved model compared with the data → `DIR/report/final/`,
+//!    `DIR/compare_final.json`;
 //! 5. **export** the improved model's firmware table → `DIR/table.bin`,
 //!    with the accuracy check in `DIR/table.json`.
 //!
@@ -95,6 +97,14 @@ impl Demo {
     pub fn report_dir(&self) -> PathBuf {
         self.out.join("report")
     }
+    /// `DIR/compare_final.json`: the improved model against the data.
+    pub fn compare_final_json(&self) -> PathBuf {
+        self.out.join("compare_final.json")
+    }
+    /// `DIR/report/final/`: the report of the improved model.
+    pub fn final_report_dir(&self) -> PathBuf {
+        self.report_dir().join("final")
+    }
 
     /// Stage 1: simulate the machine and write `data.csv`.
     pub fn simulate(&self) -> Result<Dataset> {
@@ -135,12 +145,19 @@ impl Demo {
     /// Stage 3: compare the model with the data, write the report and
     /// `compare.json`.
     pub fn compare(&self, data: &Dataset, model: &ModelFile) -> Result<Comparison> {
-        let c = super::compare::run_compare(data, model, Some(&self.report_dir()))?;
-        std::fs::write(
-            self.compare_json(),
-            serde_json::to_string_pretty(&c)? + "\n",
-        )
-        .with_context(|| format!("cannot write {}", self.compare_json().display()))?;
+        self.compare_into(data, model, &self.report_dir(), &self.compare_json())
+    }
+
+    fn compare_into(
+        &self,
+        data: &Dataset,
+        model: &ModelFile,
+        report: &Path,
+        json: &Path,
+    ) -> Result<Comparison> {
+        let c = super::compare::run_compare(data, model, Some(report))?;
+        std::fs::write(json, serde_json::to_string_pretty(&c)? + "\n")
+            .with_context(|| format!("cannot write {}", json.display()))?;
         Ok(c)
     }
 
@@ -268,6 +285,26 @@ impl Demo {
         say(s);
 
         let (model, text) = self.improve(&data)?;
+        let c = self.compare_into(
+            &data,
+            &model,
+            &self.final_report_dir(),
+            &self.compare_final_json(),
+        )?;
+        let mut text = text;
+        let _ = write!(text, "\n   compare the improved model:");
+        for (name, r) in &c.targets {
+            let _ = write!(
+                text,
+                "\n   {name}: raw error RMS {:.2} µm → residual RMS {:.2} µm (max {:.2}), {:.0}× better",
+                r.before.rms_um, r.after.rms_um, r.after.max_abs_um, r.improvement
+            );
+        }
+        let _ = write!(
+            text,
+            "\n   report: {}",
+            c.report.as_deref().unwrap_or("(none)")
+        );
         say(format!("4. {text}"));
 
         let e = self.export(&model)?;
