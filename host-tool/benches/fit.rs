@@ -80,6 +80,7 @@ fn bench(c: &mut Criterion) {
     let opts = nn::NnOptions {
         max_epochs: 1,
         max_fail: 1000,
+        restarts: 1,
         ..Default::default()
     };
     c.bench_function("lm_3_16_3_epoch", |bch| {
