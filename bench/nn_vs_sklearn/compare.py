@@ -7,15 +7,22 @@ with lbfgs and with adam, tracking the held-out (test) RMS in um against
 training wall time:
 
 - lbfgs: separate runs from the same initial weights (random_state) with
-  max_iter = 5, 10, 20, ... 2560; each run's full fit time is its time.
-  (warm_start would restart L-BFGS's curvature memory at every call.)
+  max_iter = 5, 7, 10, 14, ... 2560 (x sqrt 2 apart); each run's full fit
+  time is its time. (warm_start would restart L-BFGS's curvature memory at
+  every call.) So lbfgs first reaches a level somewhere between the
+  previous checkpoint's time and its own: both are printed.
 - adam: partial_fit one epoch at a time (the optimizer state is kept),
   timing only the partial_fit calls.
 
-Then, with trueaxis' per-epoch log, prints a table: best held-out RMS of
-each method, and the time each needed to first reach a common target
-(the worst of the methods' best held-out RMS, i.e. a level all reach) and
-to reach LM's own final held-out RMS.
+Then, with trueaxis' log (all restarts on one clock), prints per method
+the best held-out RMS over its run — for scikit-learn the best of its
+checkpoints, i.e. picked by looking at the test rows, which LM never does:
+its network is the one `fit` ships, chosen on validation rows only — and
+the time each scikit-learn solver needs to first reach the held-out RMS of
+LM's kept network, against LM's total training time. The goal of issue 3
+(>= 5x faster at equal or better held-out error) is checked against lbfgs:
+LM's kept network at or below lbfgs' best, and lbfgs needing >= 5x LM's
+time to reach LM's level.
 """
 import json
 import sys
@@ -50,7 +57,7 @@ curves = {}
 
 # lbfgs: independent runs of growing length.
 pts = []
-for it in [5, 10, 20, 40, 80, 160, 320, 640, 1280, 2560]:
+for it in [5, 7, 10, 14, 20, 28, 40, 57, 80, 113, 160, 226, 320, 453, 640, 905, 1280, 1810, 2560]:
     m = MLPRegressor(hidden_layer_sizes=(16,), activation="tanh", solver="lbfgs",
                      max_iter=it, max_fun=10**7, tol=0.0, alpha=0.0, random_state=seed)
     t0 = time.perf_counter()
@@ -70,40 +77,50 @@ for ep in range(1, 2001):
         pts.append((t, test_rms(m), ep))
 curves["sklearn adam"] = pts
 
-# trueaxis LM, from lm_bench's JSON lines.
-pts, final = [], None
+# trueaxis LM, from lm_bench's JSON lines: the kept network and the total
+# training time of all restarts.
+final = None
 for line in open(f"{out_dir}/lm.jsonl"):
     d = json.loads(line)
     if d.get("final"):
         final = d
-    else:
-        pts.append((d["t_s"], d["test_rms_um"], d["epoch"]))
-curves["trueaxis LM"] = pts
-lm_final = final["test_rms_um"]
+lm_t, lm_rms = final["t_s"], final["test_rms_um"]
 
 
-def first_time(pts, target):
+def reach(pts, target):
+    """(time of the checkpoint before the first one at or below target,
+    time of that one), or None if never reached."""
+    prev = 0.0
     for t, r, _ in pts:
         if r <= target * (1 + 1e-9):
-            return t
+            return prev, t
+        prev = t
     return None
 
 
-best = {k: min(r for _, r, _ in v) for k, v in curves.items()}
-common = max(best.values())
 print(f"data: {len(X)} samples, split train/val/test = {tr.sum()}/{(sets == 'val').sum()}/{te.sum()} rows (blocks); 3-16-3 tanh; seed {seed}")
-print(f"LM: stopped by {final['stop']} after {final['epochs']} epochs (best {final['best_epoch']}), "
-      f"{final['t_s']:.3f} s, final held-out RMS {lm_final:.4f} um")
-print(f"common target (worst of the best held-out RMS) = {common:.4f} um")
-hdr = f"{'method':<15} {'best held-out um':>17} {'t to common (s)':>16} {'t to LM final (s)':>18} {'x LM (common)':>14}"
-print(hdr)
-t_lm = first_time(curves["trueaxis LM"], common)
-rows = []
+print(f"trueaxis LM: {final['restarts']} restarts, kept restart {final['kept']} "
+      f"(stopped by {final['stop']} after {final['epochs']} epochs, best {final['best_epoch']}), "
+      f"total {lm_t:.3f} s, held-out RMS {lm_rms:.4f} um (validation {final['val_rms_um']:.4f})")
+print(f"{'method':<15} {'best held-out um':>17} {'at (s)':>8} {'last um':>8} {'t to LM kept (s)':>18} {'x LM time':>12}")
+print(f"{'trueaxis LM':<15} {lm_rms:>17.4f} {lm_t:>8.3f} {lm_rms:>8.4f} {lm_t:>18.3f} {'1.0x':>12}")
+rows = [{"method": "trueaxis LM", "best_held_out_rms_um": lm_rms, "t_best_s": lm_t, "t_to_lm_s": [lm_t, lm_t]}]
 for k, v in curves.items():
-    tc, tl = first_time(v, common), first_time(v, lm_final)
-    ratio = (tc / t_lm) if (tc is not None and t_lm) else None
-    fmt = lambda x: "not reached" if x is None else f"{x:.3f}"
-    print(f"{k:<15} {best[k]:>17.4f} {fmt(tc):>16} {fmt(tl):>18} {('—' if ratio is None else f'{ratio:.1f}x'):>14}")
-    rows.append({"method": k, "best_held_out_rms_um": best[k], "t_to_common_s": tc, "t_to_lm_final_s": tl})
-json.dump({"common_target_um": common, "lm_final_um": lm_final, "rows": rows,
+    b = min(r for _, r, _ in v)
+    tb = reach(v, b)[1]
+    rr = reach(v, lm_rms)
+    tl = "not reached" if rr is None else f"{rr[0]:.3f}-{rr[1]:.3f}"
+    ratio = "-" if rr is None else f"{rr[0] / lm_t:.1f}-{rr[1] / lm_t:.1f}x"
+    print(f"{k:<15} {b:>17.4f} {tb:>8.3f} {v[-1][1]:>8.4f} {tl:>18} {ratio:>12}")
+    rows.append({"method": k, "best_held_out_rms_um": b, "t_best_s": tb, "last_held_out_rms_um": v[-1][1],
+                 "t_to_lm_s": rr})
+lb = curves["sklearn lbfgs"]
+b = min(r for _, r, _ in lb)
+rr = reach(lb, lm_rms)
+acc = lm_rms <= b * (1 + 1e-9)
+fast = rr is not None and rr[0] >= 5 * lm_t
+print(f"goal vs lbfgs: held-out {lm_rms:.4f} vs lbfgs best {b:.4f} um ({100 * (lm_rms / b - 1):+.1f} %): "
+      f"{'equal or better' if acc else 'WORSE'}; lbfgs to LM's level: "
+      f"{'never' if rr is None else f'{rr[0] / lm_t:.1f}-{rr[1] / lm_t:.1f}x LM time'} -> goal {'MET' if acc and fast else 'MISSED'}")
+json.dump({"lm": final, "rows": rows, "goal_met": bool(acc and fast),
            "curves": {k: v for k, v in curves.items()}}, open(f"{out_dir}/result.json", "w"), indent=1)
