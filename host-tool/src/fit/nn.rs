@@ -11,10 +11,17 @@
 //!   weights; ChaCha8 from a fixed seed, so the same data and seed give the
 //!   same network bit for bit.
 //! - **Split** (like trainlm's train/val/test, but by blocks — see
-//!   `holdout`): of the k hold-out blocks, the last is the test set (the
-//!   held-out RMS), the one before it the validation set (early stopping),
-//!   the rest train. Random points would let the network be validated on
-//!   the neighbours of its training points.
+//!   `holdout`): of the k hold-out blocks, the last *interior* one is the
+//!   test set (the held-out RMS), the interior one before it the validation
+//!   set (early stopping), the rest train. Interior = on some axis the
+//!   block's rows lie strictly inside the data's span, so the blocks that
+//!   hold the ends of the travel always train: a network never trained on
+//!   the last slab of the travel would ship extrapolating there (a tanh
+//!   network extrapolates badly), and its test error would measure that
+//!   extrapolation rather than the fit. Without two interior blocks (whole
+//!   passes that each span the travel) the last two blocks are taken.
+//!   Random points would let the network be validated on the neighbours of
+//!   its training points.
 //! - **LM**: per epoch the Jacobian of the (√w-weighted) residuals by
 //!   backpropagation, then (JᵀJ + μI)δ = Jᵀe by Cholesky; success → accept,
 //!   μ ÷ 10; failure → μ × 10 and retry (stop above μ_max = 10¹⁰). Stop after
@@ -108,14 +115,39 @@ pub fn split(data: &Dataset, blocks: usize) -> Split {
     let mut bl = holdout::blocks(data, &rows, blocks.max(3));
     let mut s = Split::default();
     if bl.len() >= 3 {
-        s.test = bl.pop().unwrap_or_default();
-        s.val = bl.pop().unwrap_or_default();
+        // Test, then validation: the last interior blocks, else the last two.
+        let mut inner: Vec<usize> = (0..bl.len())
+            .rev()
+            .filter(|&b| interior(data, &rows, &bl[b]))
+            .collect();
+        if inner.len() < 2 {
+            inner = vec![bl.len() - 1, bl.len() - 2];
+        }
+        let (t, v) = (inner[0], inner[1]);
+        s.test = std::mem::take(&mut bl[t]);
+        s.val = std::mem::take(&mut bl[v]);
     } else if bl.len() == 2 {
         s.test = bl.pop().unwrap_or_default();
     }
     s.train = bl.concat();
     s.train.sort_unstable();
     s
+}
+
+/// Whether `block` lies strictly inside the span of `rows` on some axis
+/// (it holds neither end of the travel there).
+fn interior(data: &Dataset, rows: &[usize], block: &[usize]) -> bool {
+    let span = |col: &[f64], rs: &[usize]| {
+        rs.iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &r| {
+                (lo.min(col[r]), hi.max(col[r]))
+            })
+    };
+    data.pos_mm.iter().flatten().any(|col| {
+        let (lo, hi) = span(col, rows);
+        let (blo, bhi) = span(col, block);
+        blo > lo && bhi < hi
+    })
 }
 
 /// Min-max map to [−1, 1]; a constant maps to 0.
@@ -917,6 +949,43 @@ mod tests {
         assert!(n.training.epochs >= 2);
         let (m3, _) = fit(&d, 4, &NnOptions { seed: 7, ..opts }, false, 5).unwrap();
         assert_ne!(m1, m3, "another seed starts elsewhere");
+    }
+
+    #[test]
+    fn the_ends_of_the_travel_always_train() {
+        // The lathe plane (51 × 51 on x, y): spatial slabs along x. The
+        // rows at both ends of x train; test and validation are interior
+        // on x; the three sets partition the rows.
+        let d = crate::fit::bench_data::lathe_plane(1);
+        let sp = split(&d, 5);
+        let x = d.pos_mm[0].as_ref().unwrap();
+        let (lo, hi) = x
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        for r in 0..d.len() {
+            if x[r] == lo || x[r] == hi {
+                assert!(sp.train.binary_search(&r).is_ok(), "row {r} at x {}", x[r]);
+            }
+        }
+        for set in [&sp.test, &sp.val] {
+            assert!(!set.is_empty());
+            assert!(set.iter().all(|&r| x[r] > lo && x[r] < hi));
+        }
+        let mut all: Vec<usize> = [sp.train.clone(), sp.val.clone(), sp.test.clone()].concat();
+        all.sort_unstable();
+        assert_eq!(all, (0..d.len()).collect::<Vec<_>>());
+
+        // Whole passes that each span the travel: no block is interior, the
+        // last two blocks are test and validation as before.
+        // 6 interleaved passes → blocks {0, 5}, {1}, {2}, {3}, {4}.
+        let mut p = sine_line(200);
+        let pass: Vec<i64> = (0..200).map(|i| i % 6).collect();
+        p.pass_id = Some(pass.clone());
+        let sp = split(&p, 5);
+        assert!(!sp.test.is_empty() && sp.test.iter().all(|&r| pass[r] == 4));
+        assert!(!sp.val.is_empty() && sp.val.iter().all(|&r| pass[r] == 3));
     }
 
     #[test]
