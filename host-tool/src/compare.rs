@@ -101,6 +101,15 @@ pub struct TargetResult {
     pub improvement: f64,
 }
 
+/// A region's box as text, `x 600…800, y 150…350` (mm, whole numbers).
+pub fn bbox_text(bbox_mm: &BTreeMap<String, [f64; 2]>) -> String {
+    bbox_mm
+        .iter()
+        .map(|(a, [lo, hi])| format!("{a} {lo:.0}…{hi:.0}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// A box where the residual of one target concentrates.
 #[derive(Clone, Debug, Serialize)]
 pub struct Region {

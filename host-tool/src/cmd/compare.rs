@@ -102,12 +102,7 @@ pub fn text(c: &Comparison) -> String {
     if !c.worst_regions.is_empty() {
         let _ = writeln!(s, "worst regions:");
         for r in &c.worst_regions {
-            let bbox = r
-                .bbox_mm
-                .iter()
-                .map(|(a, b)| format!("{a} {:.0}…{:.0}", b[0], b[1]))
-                .collect::<Vec<_>>()
-                .join(", ");
+            let bbox = compare::bbox_text(&r.bbox_mm);
             let _ = writeln!(
                 s,
                 "  {} {bbox}: RMS {:.3} µm ({:.2}× the overall), {:.0} % of the squared residual",

@@ -249,12 +249,7 @@ impl Demo {
         {
             let name = worst.0;
             if let Some(region) = c.worst_regions.iter().find(|r| &r.target == name) {
-                let bbox = region
-                    .bbox_mm
-                    .iter()
-                    .map(|(a, b)| format!("{a} {:.0}…{:.0}", b[0], b[1]))
-                    .collect::<Vec<_>>()
-                    .join(", ");
+                let bbox = crate::compare::bbox_text(&region.bbox_mm);
                 let _ = writeln!(
                     s,
                     "   worst: {name} in {bbox} mm, RMS {:.2} µm ({:.1}× its average)",

@@ -146,16 +146,11 @@ pub fn demo_stage(
     let mut worst: Vec<&diagnose::Region> = first.worst_regions.iter().collect();
     worst.sort_by(|a, b| b.rms_um.total_cmp(&a.rms_um));
     if let Some(r) = worst.first() {
-        let bbox: Vec<String> = r
-            .bbox_mm
-            .iter()
-            .map(|(a, [lo, hi])| format!("{a} {lo:.0}…{hi:.0}"))
-            .collect();
         let _ = writeln!(
             s,
             "   the model fails most on {} in {} mm (residual RMS {:.2} µm)",
             r.target,
-            bbox.join(", "),
+            crate::compare::bbox_text(&r.bbox_mm),
             r.rms_um
         );
     }
