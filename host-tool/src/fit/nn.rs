@@ -247,6 +247,15 @@ impl Net {
     }
 }
 
+/// tanh through one `exp` for training: 1 − 2/(e^{2x} + 1), within a few
+/// 1e-16 of `f64::tanh` in absolute terms (which is all a weight update
+/// needs) and half its cost — glibc's tanh goes through expm1 and was a
+/// quarter of all training instructions. ±∞ and NaN come out as tanh's.
+/// `predict` (what is exported and compared) keeps `f64::tanh`.
+fn tanh_fast(x: f64) -> f64 {
+    1.0 - 2.0 / ((2.0 * x).exp() + 1.0)
+}
+
 /// Scaled data of one set: inputs n × nin (row-major) and, per output, the
 /// residual entries (sample, scaled target, √weight) in sample order. Kept
 /// output by output so that the Jacobian's output-layer columns of one
@@ -263,14 +272,25 @@ impl Samples {
     }
 
     /// Hidden activations (n × nh) and outputs (n × nout) of every sample.
+    /// The training loop's hot path (one call per μ trial): slices instead
+    /// of indexed parameters, and [`tanh_fast`].
     fn forward(&self, net: &Net, act: &mut [f64], out: &mut [f64]) {
         let (nin, nh, nout) = (net.nin, net.nh, net.nout);
-        for s in 0..self.n {
-            net.forward(
-                &self.x[s * nin..(s + 1) * nin],
-                &mut act[s * nh..(s + 1) * nh],
-                &mut out[s * nout..(s + 1) * nout],
-            );
+        let (w1, rest) = net.p.split_at(nh * nin);
+        let (b1, rest) = rest.split_at(nh);
+        let (w2, b2) = rest.split_at(nout * nh);
+        for ((x, a), y) in self
+            .x
+            .chunks_exact(nin)
+            .zip(act.chunks_exact_mut(nh))
+            .zip(out.chunks_exact_mut(nout))
+        {
+            for ((aj, wj), bj) in a.iter_mut().zip(w1.chunks_exact(nin)).zip(b1) {
+                *aj = tanh_fast(wj.iter().zip(x).fold(*bj, |s, (w, xi)| s + w * xi));
+            }
+            for ((yo, w2o), bo) in y.iter_mut().zip(w2.chunks_exact(nh)).zip(b2) {
+                *yo = w2o.iter().zip(a.iter()).fold(*bo, |s, (w, aj)| s + w * aj);
+            }
         }
     }
 
@@ -324,21 +344,46 @@ impl Samples {
 /// Workspace of Levenberg–Marquardt on one training set, allocated once per
 /// training and reused every epoch and restart.
 ///
-/// JᵀJ is formed from the structure of J rather than as a dense product: an
-/// entry of output o depends on the hidden layer (W1, b1: nh·(nin+1)
-/// columns) and on W2's row o and b2[o] only (nh+1 columns), so J is stored
-/// as two transposed blocks — `ht` (hidden columns) and `at` (the own
-/// output's columns) — each entry one contiguous column. Then
-/// JᵀJ = [HᵀH, HₒᵀAₒ; AₒᵀHₒ, AₒᵀAₒ] per output, the output-to-other-output
-/// blocks being zero. For 3-16-3 on 1581 samples this is 26 M multiply-adds
-/// instead of 63 M for the dense 4743 × 115 product, with no transpose copy.
+/// JᵀJ is formed from the structure of J rather than as a dense product. The
+/// row of J for sample s and output o is √w_s · [w2[o,h]·g_h·x̃_i (hidden
+/// weights and biases, g = 1 − a², x̃ = (x, 1)) | ã = (a, 1) in the columns
+/// of output o only]. So with z_s = g ⊗ x̃ (the hidden part without the
+/// output weight) and the outputs measured on s written as its pattern p:
+///
+/// - HᵀH[k,k'] = Σₚ Wₚ[h(k),h(k')] · Σ_{s∈p} w_s z_s[k] z_s[k'], where
+///   Wₚ[h,h'] = Σ_{o∈p} w2[o,h]·w2[o,h'] — the sum over outputs moves out of
+///   the sum over samples;
+/// - the hidden × output-o block is w2[o,h(k)] · Σ_{s∋o} w_s z_s[k] ã_s[r];
+/// - the output-o block is Σ_{s∋o} w_s ã_s ã_sᵀ; outputs do not couple.
+///
+/// All three are blocks of one Gram matrix of the per-sample vectors
+/// m_s = √w_s (z_s, ã_s), one per measurement pattern (usually a single
+/// one: every target measured on every row), formed by one GEMM each. For
+/// 3-16-3 on 1581 samples that is 81² × 1581 = 10 M multiply-adds where the
+/// product over the 4 743 rows of J takes 63 M (26 M when only its
+/// hidden/own-output blocks are multiplied), with Jᵀe from the same vectors.
+/// The weight of a sample is the same for all its outputs (u_um is per
+/// row), which is what lets the outputs share one Gram matrix.
 struct Lm {
-    nhid: usize,
-    /// Offsets of each output's entries in the columns of `ht` / `at`.
-    off: Vec<usize>,
-    ht: DMatrix<f64>,
-    at: DMatrix<f64>,
-    e: DVector<f64>,
+    nz: usize,
+    /// Hidden neuron of each hidden parameter (weights h·nin + i, then biases).
+    hid: Vec<usize>,
+    /// Rows of the Gram matrix: z (nz) then ã (nh + 1).
+    nm: usize,
+    /// Samples grouped by measurement pattern: (bitmask of outputs, first
+    /// column, end column) of `mt`.
+    groups: Vec<(u32, usize, usize)>,
+    /// Sample index of each column of `mt`.
+    order: Vec<usize>,
+    /// √w of each sample, targets per (sample, output) (NaN: not measured).
+    sw: Vec<f64>,
+    target: Vec<f64>,
+    /// m_s per column (nm × samples, column-major: each sample contiguous).
+    mt: DMatrix<f64>,
+    /// One Gram matrix (nm × nm) per group.
+    gram: Vec<DMatrix<f64>>,
+    /// Number of residuals (measured values).
+    m: usize,
     jtj: DMatrix<f64>,
     g: DVector<f64>,
     /// Activations and outputs of the current network on the training set.
@@ -348,23 +393,46 @@ struct Lm {
 
 impl Lm {
     fn new(train: &Samples, nin: usize, nh: usize, nout: usize) -> Lm {
-        let nhid = nh * (nin + 1);
-        let m = train.n_entries();
-        let mut off = vec![0];
-        for es in &train.by_out {
-            off.push(off.last().copied().unwrap_or(0) + es.len());
+        let nz = nh * (nin + 1);
+        let nm = nz + nh + 1;
+        let n = train.n;
+        let mut mask = vec![0u32; n];
+        let mut sw = vec![0.0; n];
+        let mut target = vec![f64::NAN; n * nout];
+        for (o, es) in train.by_out.iter().enumerate() {
+            for &(s, t, w) in es {
+                mask[s] |= 1 << o;
+                sw[s] = w;
+                target[s * nout + o] = t;
+            }
+        }
+        let mut order: Vec<usize> = (0..n).filter(|&s| mask[s] != 0).collect();
+        order.sort_by_key(|&s| mask[s]);
+        let mut groups: Vec<(u32, usize, usize)> = Vec::new();
+        for (c, &s) in order.iter().enumerate() {
+            match groups.last_mut() {
+                Some(g) if g.0 == mask[s] => g.2 = c + 1,
+                _ => groups.push((mask[s], c, c + 1)),
+            }
         }
         let np = Net::n_params(nin, nh, nout);
         Lm {
-            nhid,
-            off,
-            ht: DMatrix::zeros(nhid, m),
-            at: DMatrix::zeros(nh + 1, m),
-            e: DVector::zeros(m),
+            nz,
+            hid: (0..nz)
+                .map(|k| if k < nh * nin { k / nin } else { k - nh * nin })
+                .collect(),
+            nm,
+            gram: vec![DMatrix::zeros(nm, nm); groups.len()],
+            mt: DMatrix::zeros(nm, order.len()),
+            groups,
+            order,
+            sw,
+            target,
+            m: train.n_entries(),
             jtj: DMatrix::zeros(np, np),
             g: DVector::zeros(np),
-            act: vec![0.0; train.n * nh],
-            out: vec![0.0; train.n * nout],
+            act: vec![0.0; n * nh],
+            out: vec![0.0; n * nout],
         }
     }
 
@@ -372,69 +440,83 @@ impl Lm {
     /// `self.act` / `self.out`.
     fn normal_equations(&mut self, train: &Samples, net: &Net) {
         let (nin, nh, nout) = (net.nin, net.nh, net.nout);
-        let (nhid, na) = (self.nhid, nh + 1);
+        let (nz, nm) = (self.nz, self.nm);
         let (w2o, b2o) = (net.w2_off(), net.b2_off());
+        let w2 = &net.p[w2o..b2o];
+        let hid = &self.hid;
+        let pidx = |o: usize, r: usize| if r < nh { w2o + o * nh + r } else { b2o + o };
+        self.g.fill(0.0);
         {
-            let ht = self.ht.as_mut_slice();
-            let at = self.at.as_mut_slice();
-            for (o, es) in train.by_out.iter().enumerate() {
-                for (k, &(s, t, sw)) in es.iter().enumerate() {
-                    let col = self.off[o] + k;
-                    let x = &train.x[s * nin..(s + 1) * nin];
-                    let a = &self.act[s * nh..(s + 1) * nh];
-                    self.e[col] = sw * (self.out[s * nout + o] - t);
-                    let hc = &mut ht[col * nhid..(col + 1) * nhid];
-                    let ac = &mut at[col * na..(col + 1) * na];
-                    for h in 0..nh {
-                        let d = sw * net.w2(o, h) * (1.0 - a[h] * a[h]);
-                        for (i, xi) in x.iter().enumerate() {
-                            hc[h * nin + i] = d * xi;
-                        }
-                        hc[nh * nin + h] = d;
-                        ac[h] = sw * a[h];
+            let mt = self.mt.as_mut_slice();
+            let mut q = vec![0.0; nh];
+            for (c, &s) in self.order.iter().enumerate() {
+                let x = &train.x[s * nin..(s + 1) * nin];
+                let a = &self.act[s * nh..(s + 1) * nh];
+                let sw = self.sw[s];
+                let col = &mut mt[c * nm..(c + 1) * nm];
+                for h in 0..nh {
+                    let d = sw * (1.0 - a[h] * a[h]);
+                    for (i, xi) in x.iter().enumerate() {
+                        col[h * nin + i] = d * xi;
                     }
-                    ac[nh] = sw;
+                    col[nh * nin + h] = d;
+                    col[nz + h] = sw * a[h];
+                }
+                col[nz + nh] = sw;
+                // Jᵀe: e_{s,o} = √w (y − t) on the measured outputs.
+                q.fill(0.0);
+                for o in 0..nout {
+                    let t = self.target[s * nout + o];
+                    if t.is_nan() {
+                        continue;
+                    }
+                    let e = sw * (self.out[s * nout + o] - t);
+                    for h in 0..nh {
+                        q[h] += w2[o * nh + h] * e;
+                    }
+                    for r in 0..=nh {
+                        self.g[pidx(o, r)] += col[nz + r] * e;
+                    }
+                }
+                for k in 0..nz {
+                    self.g[k] += col[k] * q[hid[k]];
                 }
             }
         }
-        let m = self.e.len();
+        for (gi, &(_, c0, c1)) in self.groups.iter().enumerate() {
+            // mtᵀ read as its transpose (a strided view, no copy).
+            let cols = &self.mt.as_slice()[c0 * nm..c1 * nm];
+            let tview = DMatrixView::from_slice_with_strides(cols, c1 - c0, nm, nm, 1);
+            self.gram[gi].gemm(1.0, &self.mt.columns(c0, c1 - c0), &tview, 0.0);
+        }
         self.jtj.fill(0.0);
-        // HᵀH: ht times ht read as its transpose (a strided view, no copy).
-        let h = DMatrixView::from_slice_with_strides(self.ht.as_slice(), m, nhid, nhid, 1);
-        self.jtj
-            .view_mut((0, 0), (nhid, nhid))
-            .gemm(1.0, &self.ht, &h, 0.0);
-        let ghid = &self.ht * &self.e;
-        self.g.rows_mut(0, nhid).copy_from(&ghid);
-        // The output-layer columns of output o: W2 row o, then b2[o].
-        let pidx = |o: usize, r: usize| if r < nh { w2o + o * nh + r } else { b2o + o };
-        for o in 0..nout {
-            let (c0, mo) = (self.off[o], self.off[o + 1] - self.off[o]);
-            if mo == 0 {
-                continue;
+        let mut wp = vec![0.0; nh * nh];
+        for (gi, &(mask, _, _)) in self.groups.iter().enumerate() {
+            let gram = &self.gram[gi];
+            wp.fill(0.0);
+            for o in (0..nout).filter(|o| mask & (1 << o) != 0) {
+                let w2o = &w2[o * nh..(o + 1) * nh];
+                for h in 0..nh {
+                    for h2 in 0..nh {
+                        wp[h * nh + h2] += w2o[h] * w2o[h2];
+                    }
+                }
+                for r in 0..=nh {
+                    let pr = pidx(o, r);
+                    for k in 0..nz {
+                        let v = w2o[hid[k]] * gram[(k, nz + r)];
+                        self.jtj[(k, pr)] += v;
+                        self.jtj[(pr, k)] += v;
+                    }
+                    for r2 in 0..=nh {
+                        self.jtj[(pr, pidx(o, r2))] += gram[(nz + r, nz + r2)];
+                    }
+                }
             }
-            let hto = self.ht.columns(c0, mo);
-            let ato = self.at.columns(c0, mo);
-            let a_o = DMatrixView::from_slice_with_strides(
-                &self.at.as_slice()[c0 * na..(c0 + mo) * na],
-                mo,
-                na,
-                na,
-                1,
-            );
-            let cross = hto * a_o; // nhid × na
-            let aa = ato * a_o; // na × na
-            let go = ato * self.e.rows(c0, mo);
-            for r in 0..na {
-                let pr = pidx(o, r);
-                for k in 0..nhid {
-                    self.jtj[(k, pr)] = cross[(k, r)];
-                    self.jtj[(pr, k)] = cross[(k, r)];
+            for k2 in 0..nz {
+                for k in 0..nz {
+                    self.jtj[(k, k2)] += wp[hid[k] * nh + hid[k2]] * gram[(k, k2)];
                 }
-                for c in 0..na {
-                    self.jtj[(pr, pidx(o, c))] = aa[(r, c)];
-                }
-                self.g[pr] = go[r];
             }
         }
     }
@@ -653,7 +735,7 @@ fn run_lm(
         let info = Epoch {
             restart,
             epoch,
-            train_mse: sse / lm.e.len().max(1) as f64,
+            train_mse: sse / lm.m.max(1) as f64,
             val_mse: v / n_val.max(1) as f64,
             mu,
         };
@@ -670,7 +752,7 @@ fn run_lm(
     let score = if has_val {
         best_val / n_val as f64
     } else {
-        sse / lm.e.len().max(1) as f64
+        sse / lm.m.max(1) as f64
     };
     net.p = best;
     Run {
@@ -1057,15 +1139,19 @@ mod tests {
 
     #[test]
     fn structured_normal_equations_match_the_dense_jacobian() {
-        // Three outputs, two of them missing on a row each, so that every
-        // block of the structured JᵀJ is exercised with unequal lengths.
+        // Three outputs, two of them missing on a row each and both on a
+        // third (four measurement patterns, groups of unequal length),
+        // and unequal row weights (u_um).
         let mut d = crate::fit::bench_data::lathe_plane(5);
         d.err_um[1].as_mut().unwrap()[3] = None;
         d.err_um[2].as_mut().unwrap()[10] = None;
+        d.err_um[1].as_mut().unwrap()[20] = None;
+        d.err_um[2].as_mut().unwrap()[20] = None;
+        d.u_um = Some((0..d.len()).map(|r| 0.02 + 0.01 * (r % 7) as f64).collect());
         let rows: Vec<usize> = (0..40).collect();
         let prep = prepare(&d).unwrap();
         let s = samples(&d, &prep, &rows).unwrap();
-        assert_eq!(s.n_entries(), 118);
+        assert_eq!(s.n_entries(), 116);
         let net = Net::init(3, 7, 3, 11);
         let (j, e) = s.jacobian(&net);
         let mut lm = Lm::new(&s, 3, 7, 3);
@@ -1079,7 +1165,75 @@ mod tests {
             (&lm.g - &g).amax() < 1e-12 * g.amax().max(1.0),
             "Jᵀe differs"
         );
-        assert!((&lm.e - &e).amax() < 1e-15, "residuals differ");
+        assert_eq!(lm.groups.len(), 4, "{:?}", lm.groups);
+        assert_eq!(lm.m, e.len());
+    }
+
+    #[test]
+    fn mu_adapts_and_training_stops_early_on_the_validation_rows() {
+        // trainlm's rules, seen through the epoch observer: a step is only
+        // taken when it lowers the training error; μ ÷ 10 after the epoch's
+        // accepted step, × 10 per rejected trial before it; training stops
+        // `max_fail` epochs after the validation minimum, whose weights are
+        // the ones kept.
+        let d = crate::fit::bench_data::lathe_plane(3);
+        let sp = split(&d, 5);
+        let opts = NnOptions {
+            restarts: 1,
+            ..Default::default()
+        };
+        let mut seen: Vec<Epoch> = Vec::new();
+        let t =
+            train_restarts(&d, 8, &opts, &sp, false, &mut |ep, _| seen.push(ep.clone())).unwrap();
+        let m = &t.model;
+        assert_eq!(m.training.stop, "validation", "{:?}", m.training);
+        assert_eq!(seen.len(), m.training.epochs);
+        assert_eq!(m.training.best_epoch + opts.max_fail, m.training.epochs);
+        let mut mu = opts.mu;
+        let mut rejected = 0;
+        for w in seen.windows(2) {
+            assert!(w[1].train_mse < w[0].train_mse, "epoch {}", w[1].epoch);
+        }
+        for ep in &seen {
+            // μ_after = μ_before · 10^k · 0.1 for k ≥ 0 rejected trials.
+            let k = (ep.mu / (mu * opts.mu_dec)).log10();
+            assert!(
+                k > -1e-9 && (k - k.round()).abs() < 1e-9,
+                "epoch {} μ {}",
+                ep.epoch,
+                ep.mu
+            );
+            rejected += k.round() as usize;
+            mu = ep.mu;
+        }
+        assert!(rejected > 0, "no trial was ever rejected: μ never grew");
+        let best = &seen[m.training.best_epoch - 1];
+        for ep in &seen {
+            assert!(
+                best.val_mse <= ep.val_mse,
+                "epoch {} beats the kept one",
+                ep.epoch
+            );
+        }
+        for ep in &seen[m.training.best_epoch..] {
+            assert!(ep.val_mse > best.val_mse);
+        }
+        assert!((t.scores[0] - best.val_mse).abs() <= 1e-12 * best.val_mse);
+    }
+
+    #[test]
+    fn tanh_fast_is_tanh() {
+        let mut worst: f64 = 0.0;
+        for k in -40_000..=40_000 {
+            let x = k as f64 * 5e-4;
+            worst = worst.max((tanh_fast(x) - x.tanh()).abs());
+        }
+        assert!(worst < 1e-15, "{worst}");
+        assert_eq!(tanh_fast(1e-300), 0.0);
+        assert_eq!(tanh_fast(800.0), 1.0);
+        assert_eq!(tanh_fast(-800.0), -1.0);
+        assert_eq!(tanh_fast(f64::INFINITY), 1.0);
+        assert!(tanh_fast(f64::NAN).is_nan());
     }
 
     #[test]
