@@ -84,19 +84,27 @@ pub fn test_all() -> Result<()> {
     }
     eprintln!("\nqemu: {} suites passed", suites.len());
 
+    check_bench()?;
     check_loopback()?;
     check_end_to_end()?;
     Ok(())
 }
 
-/// Instruction counts per model update (CONTRACT.md §3): one JSON line per
-/// model kind on stdout, `{"bench": "cubic19_f32", "instructions_per_update":
-/// N, "outputs": 3}`, a human summary with the loop rate each allows at
-/// 168 MHz on stderr.
-pub fn bench_mcu(args: &[String]) -> Result<()> {
-    if let Some(a) = args.first() {
-        return Err(format!("bench-mcu takes no arguments (got `{a}`)"));
-    }
+/// The instruction budgets per 3-axis model update (issue 6): the bench
+/// names CONTRACT.md §3 requires and the most instructions each may take.
+/// `cargo xtask bench-mcu` prints them beside the counts; `cargo xtask
+/// test` fails when a bench is missing or its worst call exceeds its budget.
+pub const BUDGETS: [(&str, u64); 4] = [
+    ("cubic19_f32", 300),
+    ("cubic19_fixed", 600),
+    ("full_f32", 500),
+    ("nn_3x16x3_f32", 1000),
+];
+
+/// Builds and runs the bench image (firmware release profile, `-icount
+/// shift=0`) and returns its figures: the one code path of `bench-mcu` and
+/// of the check in `cargo xtask test`.
+fn run_bench() -> Result<Vec<BenchResult>> {
     let elf = build_bin("bench", Profile::Release)?;
     eprintln!("\n$ qemu bench (-icount shift=0)");
     let run = run_image(&elf, &QemuOpts::default())?;
@@ -108,28 +116,88 @@ pub fn bench_mcu(args: &[String]) -> Result<()> {
             run.stderr
         ));
     }
-    let results = parse_bench_log(&run.log)?;
+    parse_bench_log(&run.log)
+}
+
+/// Every name of [`BUDGETS`] measured, and no worst call above its budget;
+/// the error lists every miss.
+fn check_budgets(results: &[BenchResult]) -> Result<()> {
+    let mut misses = Vec::new();
+    for (name, budget) in BUDGETS {
+        match results.iter().find(|r| r.name == name) {
+            None => misses.push(format!("{name}: not measured by the bench image")),
+            Some(r) if r.max > budget => misses.push(format!(
+                "{name}: {} instructions per update (worst call), budget {budget}",
+                r.max
+            )),
+            Some(_) => {}
+        }
+    }
+    if misses.is_empty() {
+        Ok(())
+    } else {
+        Err(format!(
+            "instruction budgets exceeded (cargo xtask bench-mcu):\n  {}",
+            misses.join("\n  ")
+        ))
+    }
+}
+
+/// The budget of a bench, if it has one.
+fn budget_of(name: &str) -> Option<u64> {
+    BUDGETS.iter().find(|(n, _)| *n == name).map(|&(_, b)| b)
+}
+
+/// The bench image in `cargo xtask test`: the budgets must hold.
+fn check_bench() -> Result<()> {
+    let results = run_bench()?;
+    print_bench_table(&results);
+    check_budgets(&results)?;
+    eprintln!("qemu: instruction budgets met ({} benches)", BUDGETS.len());
+    Ok(())
+}
+
+/// Instruction counts per model update (CONTRACT.md §3): one JSON line per
+/// model kind on stdout, `{"bench": "cubic19_f32", "instructions_per_update":
+/// N, "outputs": 3}`, a human summary with the budgets and the loop rate
+/// each allows at 168 MHz on stderr.
+pub fn bench_mcu(args: &[String]) -> Result<()> {
+    if let Some(a) = args.first() {
+        return Err(format!("bench-mcu takes no arguments (got `{a}`)"));
+    }
+    let results = run_bench()?;
     for r in &results {
         println!(
             "{{\"bench\": \"{}\", \"instructions_per_update\": {}, \"outputs\": 3}}",
             r.name, r.per_update
         );
     }
+    print_bench_table(&results);
+    Ok(())
+}
+
+/// The human summary of the bench figures, on stderr.
+fn print_bench_table(results: &[BenchResult]) {
     eprintln!(
-        "\n{:<18} {:>12} {:>10} {:>10}",
-        "model", "instr/update", "min..max", "kHz@168MHz"
+        "\n{:<24} {:>12} {:>12} {:>8} {:>10}",
+        "model", "instr/update", "min..max", "budget", "kHz@168MHz"
     );
-    for r in &results {
+    for r in results {
+        let budget = match budget_of(&r.name) {
+            Some(b) if r.max <= b => format!("{b} ok"),
+            Some(b) => format!("{b} OVER"),
+            None => "-".into(),
+        };
         eprintln!(
-            "{:<18} {:>12} {:>10} {:>10.0}",
+            "{:<24} {:>12} {:>12} {:>8} {:>10.0}",
             r.name,
             r.per_update,
             format!("{}..{}", r.min, r.max),
+            budget,
             168_000.0 / r.per_update as f64
         );
     }
     eprintln!("(instructions, not cycles: a loop rate is an upper bound on the real chip)");
-    Ok(())
 }
 
 /// One model kind's figures from the bench image.
@@ -757,6 +825,24 @@ mod tests {
         assert_eq!(r[1].per_update, 3); // 2.5 rounds half up
         assert!(parse_bench_log("INFO  BENCH x total=1 calls=0 min=0 max=0").is_err());
         assert!(parse_bench_log("INFO  nothing").is_err());
+    }
+
+    #[test]
+    fn budgets_fail_on_a_miss_or_an_overrun() {
+        let r = |name: &str, max: u64| BenchResult {
+            name: name.into(),
+            per_update: max,
+            min: max,
+            max,
+        };
+        let all: Vec<BenchResult> = BUDGETS.iter().map(|&(n, b)| r(n, b)).collect();
+        assert!(check_budgets(&all).is_ok(), "at the budget is within it");
+        let mut over = all.clone();
+        over[2].max = BUDGETS[2].1 + 1;
+        let e = check_budgets(&over).unwrap_err();
+        assert!(e.contains("full_f32") && e.contains("budget 500"), "{e}");
+        let e = check_budgets(&all[1..]).unwrap_err();
+        assert!(e.contains("cubic19_f32: not measured"), "{e}");
     }
 
     #[test]

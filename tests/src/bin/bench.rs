@@ -4,8 +4,10 @@
 //! counter (exact under `-icount shift=0`, see `icount`). One `BENCH` log
 //! line per model kind; xtask turns them into CONTRACT.md §3 JSON lines.
 //!
-//! What is counted: one call of `eval_f32` / `eval_fixed` on a loaded
-//! model, i.e. one 3-axis update of the model (all three outputs), from the
+//! Tables: the list build.rs generates (`BENCH_TABLES`), each as
+//! `<name>_f32` and `<name>_fixed`. What is counted: one call of
+//! `eval_f32` / `eval_fixed` on a loaded model (the firmware's
+//! `ModelCap` capacity), i.e. one 3-axis update of the model (all three outputs), from the
 //! call to the return. Not counted: reading sensors, the direction tracker,
 //! slew limiting and pulse output (the engine's share).
 #![no_std]
@@ -13,44 +15,48 @@
 
 use core::hint::black_box;
 
-use model_core::{Inputs, Model, Outputs};
+use model_core::{Envelope, Inputs, Outputs};
+use trueaxis_app::model::Model;
 use trueaxis_qemu::icount::InstructionCounter;
+
+include!(concat!(env!("OUT_DIR"), "/bench_tables.rs"));
 
 /// Inputs per benchmark: a trajectory through the whole travel.
 const CALLS: usize = 64;
 
-/// Travel of the bench tables, nm (build/tables.rs).
-const TRAVEL_MAX_NM: [i32; 3] = [800_000_000, 500_000_000, 500_000_000];
-
-static CUBIC19: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/cubic19.bin"));
-static FULL: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/full.bin"));
-static NN_3X16X3: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/nn_3x16x3.bin"));
-
-/// Input `i` of the trajectory: a space-filling zig-zag with reversals,
-/// temperatures between 18 and 28 °C, a 100 mm tool.
-fn input(i: usize) -> Inputs {
+/// Input `i` of the trajectory through the table's travel: a space-filling
+/// zig-zag with reversals, temperatures between 18 and 28 °C, a 100 mm tool.
+fn input(env: &Envelope, i: usize) -> Inputs {
     let t = i as i64;
     let n = CALLS as i64;
     let pos_nm = core::array::from_fn(|axis| {
         // Different speeds per axis so the points do not line up.
         let phase = (t * (axis as i64 + 2) * 7919) % (2 * n);
         let frac = if phase < n { phase } else { 2 * n - phase };
-        (i64::from(TRAVEL_MAX_NM[axis]) * frac / n) as i32
+        let (lo, hi) = (
+            i64::from(env.travel_min_nm[axis]),
+            i64::from(env.travel_max_nm[axis]),
+        );
+        (lo + (hi - lo) * frac / n) as i32
     });
     let rev = if i.is_multiple_of(3) {
         -(1 << 30)
     } else {
         1 << 30
     };
+    let temp = 18_000 + (i as i32 * 157) % 10_000;
     Inputs {
         pos_nm,
         rev_q30: [rev, -rev, rev],
-        temp_mc: [18_000 + (i as i32 * 157) % 10_000, 0, 0, 0],
+        temp_mc: [temp, temp - 500, 0, 0],
         tool_nm: 100_000_000,
     }
 }
 
-fn load(name: &str, bytes: &'static [u8]) -> Model {
+/// Loads `bytes` into `model` — the firmware's model type and capacity, in
+/// a static buffer: `Model::load` returns the model by value, and with a
+/// few of them on the stack the image overflowed its 112 KiB stack.
+fn load(name: &str, bytes: &'static [u8], model: &mut Model) {
     let table = match model_core::parse(bytes) {
         Ok(t) => t,
         Err(e) => defmt::panic!(
@@ -59,13 +65,12 @@ fn load(name: &str, bytes: &'static [u8]) -> Model {
             defmt::Debug2Format(&e)
         ),
     };
-    match Model::load(&table) {
-        Ok(m) => m,
-        Err(e) => defmt::panic!(
+    if let Err(e) = model.load_into(&table) {
+        defmt::panic!(
             "bench table {=str} does not load: {}",
             name,
             defmt::Debug2Format(&e)
-        ),
+        );
     }
 }
 
@@ -73,12 +78,13 @@ fn load(name: &str, bytes: &'static [u8]) -> Model {
 fn bench(
     counter: &InstructionCounter,
     name: &str,
+    path: &str,
     model: &Model,
     eval: fn(&Model, &Inputs) -> Outputs,
 ) {
     let (mut total, mut min, mut max) = (0u64, u32::MAX, 0u32);
     for i in 0..CALLS {
-        let inp = black_box(input(i));
+        let inp = black_box(input(model.envelope(), i));
         let (out, n) = counter.measure(|| eval(black_box(model), &inp));
         black_box(out);
         total += u64::from(n);
@@ -86,8 +92,9 @@ fn bench(
         max = max.max(n);
     }
     defmt::info!(
-        "BENCH {=str} total={=u64} calls={=u32} min={=u32} max={=u32}",
+        "BENCH {=str}_{=str} total={=u64} calls={=u32} min={=u32} max={=u32}",
         name,
+        path,
         total,
         CALLS as u32,
         min,
@@ -99,7 +106,7 @@ fn bench(
 /// or the counts would be of a broken evaluation.
 fn sanity(name: &str, model: &Model) {
     for i in 0..CALLS {
-        let inp = input(i);
+        let inp = input(model.envelope(), i);
         let (a, b) = (model.eval_f32(&inp), model.eval_fixed(&inp));
         for axis in 0..3 {
             let d = a.corr_nm[axis].abs_diff(b.corr_nm[axis]);
@@ -119,26 +126,12 @@ fn sanity(name: &str, model: &Model) {
 #[cortex_m_rt::entry]
 fn main() -> ! {
     let counter = InstructionCounter::start();
-    let models: [(&str, &'static [u8]); 3] = [
-        ("cubic19", CUBIC19),
-        ("full", FULL),
-        ("nn_3x16x3", NN_3X16X3),
-    ];
-    for (name, bytes) in models {
-        let model = load(name, bytes);
-        sanity(name, &model);
-        let label_f32 = match name {
-            "cubic19" => "cubic19_f32",
-            "full" => "full_f32",
-            _ => "nn_3x16x3_f32",
-        };
-        bench(&counter, label_f32, &model, Model::eval_f32);
-        let label_fixed = match name {
-            "cubic19" => "cubic19_fixed",
-            "full" => "full_fixed",
-            _ => "nn_3x16x3_fixed",
-        };
-        bench(&counter, label_fixed, &model, Model::eval_fixed);
+    let model = cortex_m::singleton!(: Model = Model::empty()).expect("once");
+    for &(name, bytes) in BENCH_TABLES {
+        load(name, bytes, model);
+        sanity(name, model);
+        bench(&counter, name, "f32", model, Model::eval_f32);
+        bench(&counter, name, "fixed", model, Model::eval_fixed);
     }
     trueaxis_qemu::exit(0)
 }
