@@ -61,7 +61,7 @@ pub struct EngineConfig {
     pub temp_min_mc: i32,
     /// See `temp_min_mc`.
     pub temp_max_mc: i32,
-    /// Rate at which a fault ramps the correction to zero, nm/ms.
+    /// Rate at which a fault ramps the correction to zero, nm/ms (> 0).
     pub fault_ramp_nm_per_ms: i32,
     /// Tool length used when nothing else sets it, nm.
     pub tool_nm: i32,
@@ -71,7 +71,9 @@ pub struct EngineConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ConfigError {
-    /// A pulse size ≤ 0, period 0, or steps per tick ≤ 0.
+    /// A pulse size ≤ 0, period 0, steps per tick ≤ 0, or a fault ramp
+    /// ≤ 0 (a fault must ramp the correction to zero: at 0 nm/ms it would
+    /// hold the last correction forever).
     NonPositive,
     /// More temperature channels than the link carries.
     TooManyTemps,
@@ -86,7 +88,7 @@ pub enum ConfigError {
 impl EngineConfig {
     /// Checks the invariants the no-drift guarantee rests on.
     pub fn check(&self) -> Result<(), ConfigError> {
-        if self.period_us == 0 || self.max_steps_per_tick <= 0 || self.fault_ramp_nm_per_ms < 0 {
+        if self.period_us == 0 || self.max_steps_per_tick <= 0 || self.fault_ramp_nm_per_ms <= 0 {
             return Err(ConfigError::NonPositive);
         }
         if self.temps_used > LINK_TEMPS {

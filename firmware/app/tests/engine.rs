@@ -347,6 +347,20 @@ fn configurations_the_pulse_budget_cannot_follow_are_refused() {
 }
 
 #[test]
+fn a_fault_ramp_of_zero_or_less_is_refused() {
+    // At 0 nm/ms a fault would hold the last correction forever instead of
+    // ramping it to zero.
+    for ramp in [0, -1] {
+        let mut cfg = sim_engine_config();
+        cfg.fault_ramp_nm_per_ms = ramp;
+        assert_eq!(Engine::new(cfg).err(), Some(ConfigError::NonPositive));
+    }
+    let mut cfg = sim_engine_config();
+    cfg.fault_ramp_nm_per_ms = 1;
+    assert!(Engine::new(cfg).is_ok());
+}
+
+#[test]
 fn positions_scale_exactly_for_whole_and_fractional_nm_per_count() {
     for pm in [100_000i64, 12_345, -25_000] {
         let mut cfg = sim_engine_config();
