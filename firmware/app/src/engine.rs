@@ -175,6 +175,9 @@ pub struct Engine<'m> {
     latched: Faults,
 
     last_tick_us: Option<u64>,
+    /// The previous tick ended past the next deadline and was counted as
+    /// an overrun: the gap it leaves is not counted a second time.
+    late_end: bool,
     last_motion_us: Option<u64>,
     now_us: u64,
     ticks: u64,
@@ -218,6 +221,7 @@ impl<'m> Engine<'m> {
             sticky: Faults::NONE,
             latched: Faults::NO_TABLE,
             last_tick_us: None,
+            late_end: false,
             last_motion_us: None,
             now_us: 0,
             ticks: 0,
@@ -393,16 +397,19 @@ impl<'m> Engine<'m> {
         let mut events = Faults::NONE;
 
         // Timing: the gap since the previous tick. Missing a whole period
-        // (gap ≥ 2 periods) is an overrun; jitter below that is not.
+        // (gap ≥ 2 periods) is an overrun; jitter below that is not. (A gap
+        // left by a tick that already counted itself as late is not
+        // counted again; see the end of the tick.)
         if let Some(prev) = self.last_tick_us {
             let gap = start_us.saturating_sub(prev);
             self.worst_loop_us = self.worst_loop_us.max(gap.min(u32::MAX as u64) as u32);
-            if gap >= 2 * self.cfg.period_us as u64 {
+            if gap >= 2 * self.cfg.period_us as u64 && !self.late_end {
                 self.overruns = self.overruns.saturating_add(1);
                 events = events.union(Faults::LOOP_OVERRUN);
             }
         }
         self.last_tick_us = Some(start_us);
+        self.late_end = false;
         self.ticks += 1;
 
         // Sensors (always read, so a stuck sensor shows in telemetry even
@@ -518,6 +525,17 @@ impl<'m> Engine<'m> {
 
         let took = clock.now_us().saturating_sub(start_us);
         self.worst_tick_us = self.worst_tick_us.max(took.min(u32::MAX as u64) as u32);
+        // A tick that took longer than a period ended after the next tick
+        // was due (it started at or after its own due time): a missed
+        // deadline, even when the next tick then starts less than two
+        // periods after this one. The fault acts from the next tick on.
+        if took > self.cfg.period_us as u64 {
+            self.overruns = self.overruns.saturating_add(1);
+            self.sticky = self.sticky.union(Faults::LOOP_OVERRUN);
+            self.latched = self.latched.union(Faults::LOOP_OVERRUN);
+            self.late_end = true;
+            report.faults = self.faults();
+        }
         report
     }
 }

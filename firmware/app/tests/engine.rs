@@ -273,6 +273,86 @@ fn loop_overrun_is_sticky_until_cleared() {
     assert_ne!(e.corr_nm(), [0; 3]);
 }
 
+/// A clock for ticks on a fixed period that take `took_us` each: a tick
+/// reads it at its start (the period's due time, or the end of the previous
+/// tick if that ended later — what a ticker does) and at its end.
+struct TickTimes {
+    period_us: u64,
+    took_us: Cell<u64>,
+    due_us: Cell<u64>,
+    start_us: Cell<u64>,
+    at_start: Cell<bool>,
+}
+impl TickTimes {
+    fn new(period_us: u64) -> Self {
+        Self {
+            period_us,
+            took_us: Cell::new(0),
+            due_us: Cell::new(0),
+            start_us: Cell::new(0),
+            at_start: Cell::new(true),
+        }
+    }
+}
+impl Clock for TickTimes {
+    fn now_us(&self) -> u64 {
+        if self.at_start.replace(false) {
+            let start = self.due_us.get().max(self.start_us.get());
+            self.start_us.set(start);
+            start
+        } else {
+            self.at_start.set(true);
+            self.due_us.set(self.due_us.get() + self.period_us);
+            let end = self.start_us.get() + self.took_us.get();
+            self.start_us.set(end);
+            end
+        }
+    }
+}
+
+#[test]
+fn a_tick_that_ends_past_the_next_deadline_is_an_overrun() {
+    let table = sample_table(0);
+    let mut e = Engine::new(sim_engine_config()).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let period = e.config().period_us as u64;
+    let clock = TickTimes::new(period);
+    let mut io = Fake::new();
+    let mut tick = |e: &mut Engine<'_>, took_us: u64| {
+        clock.took_us.set(took_us);
+        let mut enc = Fake { ..io };
+        let mut t = Fake { ..io };
+        e.tick(&clock, &mut enc, &mut t, &mut io)
+    };
+    // Ticks that end exactly when the next is due meet every deadline.
+    for _ in 0..5 {
+        tick(&mut e, period);
+    }
+    assert_eq!(e.telemetry().overruns, 0);
+    assert!(e.faults().is_empty());
+    assert_eq!(e.telemetry().worst_tick_us, period as u32);
+    // One microsecond more and the tick ends after the next was due,
+    // although the next starts far less than two periods after it: an
+    // overrun, and the fault acts at once.
+    let r = tick(&mut e, period + 1);
+    assert!(r.faults.contains(Faults::LOOP_OVERRUN));
+    assert_eq!(e.telemetry().overruns, 1);
+    assert!(e.telemetry().worst_loop_us < 2 * period as u32);
+    // A tick of 2.5 periods leaves a gap ≥ 2 periods before the next start:
+    // still one overrun, not two.
+    tick(&mut e, 5 * period / 2);
+    assert_eq!(e.telemetry().overruns, 2);
+    tick(&mut e, period / 2);
+    assert_eq!(e.telemetry().overruns, 2);
+    assert!(e.telemetry().worst_loop_us >= 2 * period as u32);
+    e.clear_faults();
+    for _ in 0..5 {
+        tick(&mut e, period / 2);
+    }
+    assert_eq!(e.telemetry().overruns, 2);
+    assert!(e.faults().is_empty());
+}
+
 #[test]
 fn a_stall_announced_by_resync_is_not_an_overrun() {
     let table = sample_table(0);
