@@ -121,29 +121,143 @@ pub fn setup() -> Result<()> {
     if !have("qemu-system-arm") {
         if !is_root() {
             return Err("qemu-system-arm is missing and this is not root: \
-                 run `sudo apt-get install --no-install-recommends qemu-system-arm`"
+                 run `sudo cargo xtask setup`, or install it as docs/qemu.md \
+                 (\"Which QEMU\") says"
                 .into());
         }
-        // Debian bookworm's qemu-system-arm (7.2) emulates the STM32F405
-        // (netduinoplus2); --no-install-recommends keeps the install small.
-        run(&root, "apt-get", &["update", "-q"])?;
-        run_env(
-            &root,
-            "apt-get",
-            &[
-                "install",
-                "-y",
-                "-q",
-                "--no-install-recommends",
-                "qemu-system-arm",
-            ],
-            &[("DEBIAN_FRONTEND", "noninteractive")],
-        )?;
+        install_qemu(&root)?;
     }
     if !have("defmt-print") {
         run(&root, "cargo", &["install", "defmt-print", "--locked"])?;
     }
     Ok(())
+}
+
+/// Where `qemu-system-arm` comes from: the release's own archive, or its
+/// backports when the machine already has `qemu-utils` from there.
+#[derive(Debug, PartialEq, Eq)]
+enum QemuSource {
+    /// The release's package (bookworm: QEMU 7.2).
+    Release,
+    /// `<codename>-backports` (bookworm-backports: QEMU 10.0).
+    Backports(String),
+}
+
+/// Picks the source from the installed `qemu-utils` version (None when it is
+/// not installed) and the release codename. A backports `qemu-utils`
+/// (`…~bpo12+1`) breaks the release's `qemu-system-common`, so installing
+/// bookworm's `qemu-system-arm` next to it would remove `qemu-utils` — the
+/// image this runs on ships qemu-utils 10.0.2 from bookworm-backports, and
+/// apt did exactly that. The backports `qemu-system-arm` keeps it.
+fn qemu_source(qemu_utils_version: Option<&str>, codename: &str) -> QemuSource {
+    match qemu_utils_version {
+        Some(v) if v.contains("bpo") => QemuSource::Backports(format!("{codename}-backports")),
+        _ => QemuSource::Release,
+    }
+}
+
+/// The `apt-get` arguments that install `qemu-system-arm` from `source`.
+/// `--no-remove` makes apt abort instead of removing anything to make room
+/// (it never silently uninstalls a package the machine relies on).
+fn qemu_install_args(source: &QemuSource) -> Vec<String> {
+    let mut args: Vec<String> = ["install", "-y", "-q", "--no-remove"]
+        .map(String::from)
+        .to_vec();
+    if let QemuSource::Backports(suite) = source {
+        args.extend(["-t".to_string(), suite.clone()]);
+    }
+    args.extend(["--no-install-recommends", "qemu-system-arm"].map(String::from));
+    args
+}
+
+/// A deb822 source for `suite` from deb.debian.org (the keyring every
+/// Debian install has).
+fn backports_source(suite: &str) -> String {
+    format!(
+        "Types: deb\nURIs: http://deb.debian.org/debian\nSuites: {suite}\n\
+         Components: main\nSigned-By: /usr/share/keyrings/debian-archive-keyring.gpg\n"
+    )
+}
+
+/// Where setup writes the backports source when apt has none.
+const BACKPORTS_LIST: &str = "/etc/apt/sources.list.d/trueaxis-backports.sources";
+
+/// The installed version of a Debian package (None if not installed).
+fn dpkg_version(package: &str) -> Option<String> {
+    let out = Command::new("dpkg-query")
+        .args(["-W", "-f=${Status}|${Version}", package])
+        .output()
+        .ok()?;
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    let (status, version) = text.split_once('|')?;
+    (out.status.success() && status.ends_with(" installed") && !version.is_empty())
+        .then(|| version.to_string())
+}
+
+/// `VERSION_CODENAME` from /etc/os-release (bookworm if absent).
+fn release_codename() -> String {
+    std::fs::read_to_string("/etc/os-release")
+        .ok()
+        .and_then(|t| {
+            t.lines()
+                .find_map(|l| l.strip_prefix("VERSION_CODENAME="))
+                .map(|v| v.trim_matches('"').to_string())
+        })
+        .filter(|c| !c.is_empty())
+        .unwrap_or_else(|| "bookworm".into())
+}
+
+/// True when some apt source already names `suite`.
+fn apt_has_suite(suite: &str) -> bool {
+    let mut files = vec![PathBuf::from("/etc/apt/sources.list")];
+    if let Ok(dir) = std::fs::read_dir("/etc/apt/sources.list.d") {
+        files.extend(
+            dir.flatten()
+                .map(|e| e.path())
+                .filter(|p| p.extension().is_some_and(|x| x == "list" || x == "sources")),
+        );
+    }
+    files.iter().any(|f| {
+        std::fs::read_to_string(f).is_ok_and(|t| {
+            t.lines()
+                .filter(|l| !l.trim_start().starts_with('#'))
+                .any(|l| l.split_whitespace().any(|w| w == suite))
+        })
+    })
+}
+
+/// Installs `qemu-system-arm` with apt (root only), from the source that
+/// keeps what is installed (see [`qemu_source`]).
+fn install_qemu(root: &Path) -> Result<()> {
+    let utils = dpkg_version("qemu-utils");
+    let source = qemu_source(utils.as_deref(), &release_codename());
+    if let QemuSource::Backports(suite) = &source {
+        eprintln!(
+            "qemu-utils {} is from {suite}: installing qemu-system-arm from there too",
+            utils.as_deref().unwrap_or("?")
+        );
+        if !apt_has_suite(suite) {
+            eprintln!("adding {suite} as an apt source ({BACKPORTS_LIST})");
+            std::fs::write(BACKPORTS_LIST, backports_source(suite))
+                .map_err(|e| format!("write {BACKPORTS_LIST}: {e}"))?;
+        }
+    }
+    run(root, "apt-get", &["update", "-q"])?;
+    let args = qemu_install_args(&source);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    run_env(
+        root,
+        "apt-get",
+        &args,
+        &[("DEBIAN_FRONTEND", "noninteractive")],
+    )
+    .map_err(|e| {
+        format!(
+            "{e}\ninstalling qemu-system-arm ({source:?}) would need apt to remove \
+             packages or failed otherwise; nothing was removed (--no-remove). \
+             Install it by hand: docs/qemu.md, \"Which QEMU\""
+        )
+    })
 }
 
 /// Every check CI makes, in order of cost so a cheap failure shows first.
@@ -266,4 +380,35 @@ fn demo(args: &[String]) -> Result<()> {
     run(&root, "cargo", &cargo_args)?;
     qemu::demo_board(&out)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn backports_qemu_utils_selects_backports_qemu() {
+        // The version this image ships (dpkg-query -W qemu-utils).
+        let bpo = "1:10.0.2+ds-2+deb13u1~bpo12+1";
+        let src = qemu_source(Some(bpo), "bookworm");
+        assert_eq!(src, QemuSource::Backports("bookworm-backports".into()));
+        let args = qemu_install_args(&src);
+        let t = args.iter().position(|a| a == "-t").expect("-t");
+        assert_eq!(args[t + 1], "bookworm-backports");
+        assert!(args.contains(&"--no-remove".to_string()));
+        assert!(args.contains(&"--no-install-recommends".to_string()));
+        assert_eq!(args.last().map(String::as_str), Some("qemu-system-arm"));
+        assert!(backports_source("bookworm-backports").contains("Suites: bookworm-backports\n"));
+    }
+
+    #[test]
+    fn release_qemu_otherwise_and_never_removes() {
+        for utils in [None, Some("1:7.2+dfsg-7+deb12u18+b3")] {
+            let src = qemu_source(utils, "bookworm");
+            assert_eq!(src, QemuSource::Release);
+            let args = qemu_install_args(&src);
+            assert!(!args.contains(&"-t".to_string()), "{args:?}");
+            assert!(args.contains(&"--no-remove".to_string()));
+        }
+    }
 }
