@@ -102,6 +102,8 @@ fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
         "constant_temperature",
         "in_model_span",
         "confounded",
+        "implausible_parameter",
+        "above_noise_floor",
     ];
     for w in v["warnings"].as_array().unwrap() {
         assert!(codes.contains(&w["code"].as_str().unwrap()), "{w}");

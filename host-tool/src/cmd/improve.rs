@@ -56,6 +56,30 @@ pub struct ImproveStep {
     pub noise_floor_um: BTreeMap<String, Option<f64>>,
     /// The diagnosis of this fit.
     pub verdict: Verdict,
+    /// Targets whose RMS is still more than `ABOVE_NOISE_RATIO` × their noise
+    /// floor, with the ratio: `at_noise_floor` says no candidate is
+    /// significant, this says whether the data is really explained.
+    pub above_noise_floor: BTreeMap<String, f64>,
+}
+
+impl ImproveStep {
+    /// What the step's verdict means, in words (for the closing line).
+    pub fn outcome(&self) -> String {
+        match self.verdict {
+            Verdict::MissingEffect => "stopped after the step limit".into(),
+            Verdict::AtNoiseFloor if self.above_noise_floor.is_empty() => {
+                "at the noise floor".into()
+            }
+            Verdict::AtNoiseFloor => format!(
+                "no significant candidate left, but above the noise floor ({})",
+                self.above_noise_floor
+                    .iter()
+                    .map(|(t, r)| format!("{t} {r:.1}×"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        }
+    }
 }
 
 /// The whole run.
@@ -98,6 +122,16 @@ pub fn improve(
                 follow_path: false,
             },
         )?;
+        let above_noise_floor = model
+            .stats
+            .rms_um
+            .iter()
+            .filter_map(|(t, rms)| {
+                let nf = d.noise_floor_um.get(t).copied().flatten()?;
+                let ratio = rms / nf;
+                (ratio > diagnose::ABOVE_NOISE_RATIO).then(|| (t.clone(), ratio))
+            })
+            .collect();
         let step = ImproveStep {
             step: steps.len() + 1,
             added: added.as_ref().map(|a| a.0.clone()),
@@ -107,6 +141,7 @@ pub fn improve(
             fit_held_out_rms_um: model.stats.held_out_rms_um.clone(),
             noise_floor_um: d.noise_floor_um.clone(),
             verdict: d.verdict,
+            above_noise_floor,
         };
         on_step(&step);
         steps.push(step);
@@ -194,7 +229,8 @@ pub fn demo_stage(
                 .collect();
             let _ = writeln!(
                 s,
-                "   at the noise floor (µm: {}): no candidate is significant any more",
+                "   {} — noise floor µm: {}; no candidate is significant any more",
+                st.outcome(),
                 nf.join(", ")
             );
         }
@@ -257,10 +293,7 @@ impl Args {
         } else {
             println!(
                 "{}: model {} written to {}",
-                match r.verdict {
-                    Verdict::AtNoiseFloor => "at the noise floor",
-                    Verdict::MissingEffect => "stopped after the step limit",
-                },
+                r.steps.last().map_or(String::new(), ImproveStep::outcome),
                 r.model,
                 r.model_file
             );
