@@ -177,7 +177,12 @@ impl Client {
 
     /// Sends `req` and returns the board's answer (a refusal is an
     /// `Ok(Response::Error)` here; see [`Client::request`]). Retries on
-    /// timeout: requests are idempotent or resumable by design.
+    /// timeout: requests are idempotent or resumable by design — uploads
+    /// resume, a repeated chunk is acknowledged again, and a repeated
+    /// `Commit` whose first answer was lost gets the same `Committed` (the
+    /// board remembers its last commit). The exception is `Rollback`: a
+    /// repeat after a lost answer is refused (`NothingToRollBackTo`)
+    /// although the first one happened; nothing here sends one.
     pub fn call(&mut self, req: &Request<'_>) -> Result<Response, ClientError> {
         let timeout = if matches!(req, Request::Commit | Request::Rollback) {
             self.timing.commit_timeout

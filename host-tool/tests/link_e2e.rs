@@ -212,6 +212,99 @@ fn a_cut_upload_keeps_the_old_table_and_the_next_upload_resumes() {
     assert_eq!(s["standby"]["crc32"], crc_hex(&t1));
 }
 
+/// A TCP proxy between the host and the board that drops the board's first
+/// answer to a `Commit` (a frame lost on the way back) and passes every
+/// other byte through.
+fn lossy_commit_proxy(board: &str) -> String {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = format!("tcp://{}", listener.local_addr().unwrap());
+    let board = board.strip_prefix("tcp://").unwrap().to_string();
+    std::thread::spawn(move || {
+        let (host, _) = listener.accept().unwrap();
+        let up = TcpStream::connect(board).unwrap();
+        let commit_seq = Arc::new(std::sync::Mutex::new(None::<u16>));
+        // Host → board: note the sequence number of the first commit.
+        let (mut from_host, mut to_board) = (host.try_clone().unwrap(), up.try_clone().unwrap());
+        let seen = commit_seq.clone();
+        std::thread::spawn(move || {
+            let mut dec: FrameDecoder = FrameDecoder::new();
+            let mut buf = [0u8; 1024];
+            while let Ok(n) = from_host.read(&mut buf) {
+                if n == 0 {
+                    break;
+                }
+                // Noted before it is passed on, so the answer cannot overtake it.
+                let mut input = &buf[..n];
+                while let Some(f) = dec.feed(&mut input) {
+                    let Ok(p) = f.and_then(model_core::link::decode_message::<Packet<Request>>)
+                    else {
+                        continue;
+                    };
+                    let mut s = seen.lock().unwrap();
+                    if matches!(p.msg, Request::Commit) && s.is_none() {
+                        *s = Some(p.seq);
+                    }
+                }
+                if to_board.write_all(&buf[..n]).is_err() {
+                    break;
+                }
+            }
+            // The host hung up: hang up on the board too (it serves one
+            // connection at a time).
+            let _ = to_board.shutdown(std::net::Shutdown::Both);
+        });
+        // Board → host: every frame but the answer to that commit.
+        let (mut from_board, mut to_host) = (up, host);
+        let mut dec: FrameDecoder = FrameDecoder::new();
+        let mut buf = [0u8; 1024];
+        let mut dropped = false;
+        while let Ok(n) = from_board.read(&mut buf) {
+            if n == 0 {
+                break;
+            }
+            let mut input = &buf[..n];
+            while let Some(f) = dec.feed(&mut input) {
+                let Ok(p) = f.and_then(model_core::link::decode_message::<Packet<Response>>) else {
+                    continue;
+                };
+                if !dropped && Some(p.seq) == *commit_seq.lock().unwrap() {
+                    dropped = true;
+                    continue;
+                }
+                let mut frame = [0u8; MAX_FRAME_BYTES];
+                let k = encode_frame(&p, &mut frame).unwrap();
+                if to_host.write_all(&frame[..k]).is_err() {
+                    return;
+                }
+            }
+        }
+    });
+    addr
+}
+
+#[test]
+fn an_upload_whose_commit_answer_is_lost_still_succeeds() {
+    let board = Board::start();
+    let proxy = lossy_commit_proxy(&board.port);
+    let table = sample_table(0);
+    let timing = Timing {
+        timeout: Duration::from_millis(300),
+        tries: 4,
+        commit_timeout: Duration::from_millis(500),
+    };
+    let mut c = Client::open(&proxy, timing).unwrap();
+    // The commit is retried after its answer is lost; the board answers the
+    // retry with the same success, so the upload completes.
+    let r = c.upload(&table, |_, _| {}).unwrap();
+    assert!(r.retries >= 1, "the commit's answer was not dropped");
+    assert_eq!(r.committed.crc32, table_id(&table));
+    assert_eq!(r.activated, r.committed);
+    drop(c);
+    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    assert_eq!(s["active"]["crc32"], crc_hex(&table));
+    assert_eq!(s["active"]["seq"], 1, "written once");
+}
+
 #[test]
 fn garbage_on_the_line_does_not_stick_the_board() {
     let board = Board::start();

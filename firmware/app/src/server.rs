@@ -91,6 +91,11 @@ pub struct Server<'b, 'm, F> {
     /// Model buffers not in use by the engine (at least one once booted).
     spares: [Option<&'m mut ModelBuf>; 2],
     upload: Option<Upload>,
+    /// The table the last `Commit` wrote, kept so that a retried commit —
+    /// the host's retry after the answer was lost — gets the same success
+    /// instead of `NoUpload` (the upload it refers to is spent). Forgotten
+    /// at the next `UploadBegin` and at a rollback.
+    last_commit: Option<SlotInfo>,
     cfg: ServerConfig,
     rx_bad_frames: u32,
 }
@@ -111,6 +116,7 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
             stage,
             spares: [Some(a), Some(b)],
             upload: None,
+            last_commit: None,
             cfg,
             rx_bad_frames: 0,
         }
@@ -236,6 +242,7 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                 if size == 0 {
                     return Err(LinkError::BadChunk);
                 }
+                self.last_commit = None;
                 match self.upload {
                     // Same table: resume where we are.
                     Some(u) if u.size == size && u.crc32 == crc32 => {}
@@ -272,7 +279,17 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                 }
             }
             Request::Commit => {
-                let u = self.upload.ok_or(LinkError::NoUpload)?;
+                let Some(u) = self.upload else {
+                    // Idempotent: a commit repeated after its answer was
+                    // lost (no upload since) gets the same answer, as long
+                    // as that table is still the newest stored one.
+                    return match self.last_commit {
+                        Some(info) if self.store.active() == Some(info) => {
+                            Ok(Response::Committed(info))
+                        }
+                        _ => Err(LinkError::NoUpload),
+                    };
+                };
                 if u.received < u.size {
                     return Err(LinkError::Incomplete {
                         received: u.received,
@@ -293,13 +310,17 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                     .commit(table, |b| model::load_into(b, spare).is_ok());
                 engine.with_engine(|e| e.resync_clock());
                 // Committed or refused by the store (an invalid table): either
-                // way the staged upload is spent; a retry starts from byte 0.
+                // way the staged upload is spent; a new upload starts from
+                // byte 0, a repeated commit gets the same answer (above).
                 self.upload = None;
-                Response::Committed(r.map_err(store_error)?)
+                let info = r.map_err(store_error)?;
+                self.last_commit = Some(info);
+                Response::Committed(info)
             }
             Request::Activate => Response::Activated(self.activate_newest(engine)?),
             Request::Rollback => {
                 self.require_quiet(now_us, engine)?;
+                self.last_commit = None;
                 let r = self.store.rollback();
                 engine.with_engine(|e| e.resync_clock());
                 r.map_err(store_error)?;

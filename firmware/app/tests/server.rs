@@ -208,6 +208,67 @@ fn upload_resumes_after_a_dropped_link() {
     ));
 }
 
+/// The host retries a request whose answer it did not get. For a commit
+/// whose answer was lost on the way back, the retry must get the same
+/// success — the upload it refers to is spent, and `NoUpload` would make
+/// `trueaxis upload` fail although the table is stored.
+#[test]
+fn a_repeated_commit_gets_the_same_answer() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    let table = sample_table(0);
+    install(&mut b, &mut p, &table);
+    let t2 = sample_table(1);
+    let crc32 = table_id(&t2);
+    let begin = Request::UploadBegin {
+        size: t2.len() as u32,
+        crc32,
+    };
+    call(&mut b, &mut p, 20, begin.clone());
+    for (i, c) in t2.chunks(200).enumerate() {
+        call(
+            &mut b,
+            &mut p,
+            21,
+            Request::UploadChunk {
+                offset: (i * 200) as u32,
+                data: c,
+            },
+        );
+    }
+    // The first commit's answer is lost on the way back...
+    let Response::Committed(first) = call(&mut b, &mut p, 22, Request::Commit) else {
+        panic!("commit refused")
+    };
+    assert_eq!((first.slot, first.crc32), (Slot::B, crc32));
+    // ... so the host sends it again (a new sequence number): the same
+    // answer — same slot and sequence number, so nothing was written again.
+    assert_eq!(
+        call(&mut b, &mut p, 23, Request::Commit),
+        Response::Committed(first)
+    );
+    assert!(matches!(
+        call(&mut b, &mut p, 24, Request::Activate),
+        Response::Activated(i) if i == first
+    ));
+    // Not once the board moved on: after a rollback, or once a new upload
+    // began, a commit without an upload is refused again.
+    assert!(matches!(
+        call(&mut b, &mut p, 25, Request::Rollback),
+        Response::RolledBack(_)
+    ));
+    assert_eq!(
+        call(&mut b, &mut p, 26, Request::Commit),
+        Response::Error(LinkError::NoUpload)
+    );
+    install(&mut b, &mut p, &t2);
+    call(&mut b, &mut p, 27, begin);
+    assert!(matches!(
+        call(&mut b, &mut p, 28, Request::Commit),
+        Response::Error(LinkError::Incomplete { received: 0, .. })
+    ));
+}
+
 #[test]
 fn refusals() {
     let mut b = SimBoard::new();
