@@ -267,9 +267,17 @@ fn test(args: &[String]) -> Result<()> {
     let root = root();
     let fw = root.join("firmware");
 
-    // Formatting and lints, host workspace and firmware workspace.
+    // Formatting of every workspace (host, firmware, the end-to-end
+    // runner and the fuzz targets, which are workspaces of their own), and
+    // lints.
     run(&root, "cargo", &["fmt", "--all", "--check"])?;
     run(&fw, "cargo", &["fmt", "--all", "--check"])?;
+    run(
+        &root.join("tests/e2e"),
+        "cargo",
+        &["fmt", "--all", "--check"],
+    )?;
+    run(&root.join("fuzz"), "cargo", &["fmt", "--all", "--check"])?;
     run(
         &root,
         "cargo",

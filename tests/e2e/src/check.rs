@@ -9,7 +9,7 @@ use std::process::Command;
 use std::time::Duration;
 
 use model_core::link::{
-    Correction, Injection, LinkError, Request, Response, SlotInfo, table_id, LINK_TEMPS,
+    table_id, Correction, Injection, LinkError, Request, Response, SlotInfo, LINK_TEMPS,
     MAX_CHUNK_BYTES,
 };
 use model_core::{Inputs, Model, MAX_TEMPS};
