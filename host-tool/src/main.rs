@@ -3,7 +3,8 @@
 //! clap struct (with `///` help on every flag) and a `run` method.
 //!
 //! Exit codes (CONTRACT.md §2): 0 ok, 1 bad input or a failed check (message
-//! on stderr), 2 usage error (clap's own exit code).
+//! on stderr), 2 usage error (clap's own exit code). A stdout closed by its
+//! reader ends the command quietly with 0.
 
 use std::process::ExitCode;
 
@@ -72,6 +73,9 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        // The reader of our stdout went away (`… | head`): it wanted no
+        // more output, which is not a failure (cmd/out.rs).
+        Err(e) if cmd::out::is_stdout_closed(&e) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE

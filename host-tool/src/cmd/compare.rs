@@ -8,6 +8,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
+use crate::cmd::out::outln;
 use crate::compare::{self, Comparison, Warning};
 use crate::data::Dataset;
 use crate::import;
@@ -150,9 +151,9 @@ impl Args {
             for w in &c.warnings {
                 eprintln!("warning ({}): {}", w.code, w.detail);
             }
-            println!("{}", serde_json::to_string(&c)?);
+            outln!("{}", serde_json::to_string(&c)?)?;
         } else {
-            print!("{}", text(&c));
+            crate::cmd::out::print(&text(&c))?;
         }
         Ok(())
     }

@@ -191,10 +191,10 @@ impl Demo {
         std::fs::create_dir_all(&self.out)
             .with_context(|| format!("cannot create {}", self.out.display()))?;
         let mut story = String::new();
-        let mut say = |s: String| {
-            println!("{s}");
+        let mut say = |s: String| -> Result<()> {
             story.push_str(&s);
             story.push('\n');
+            crate::cmd::out::print(&(s + "\n"))
         };
         let t0 = Instant::now();
         // A fresh story: the history of an earlier demo run in the same
@@ -205,7 +205,7 @@ impl Demo {
                 .with_context(|| format!("cannot remove {}", old.display()))?;
         }
 
-        say(format!("trueaxis demo → {}\n", self.out.display()));
+        say(format!("trueaxis demo → {}\n", self.out.display()))?;
         let data = self.simulate()?;
         let duration_h = data
             .t_s
@@ -217,7 +217,7 @@ impl Demo {
             PLANS.join(" + "),
             data.len(),
             self.data_csv().display()
-        ));
+        ))?;
 
         let model = self.fit(&data, SEED_MODEL, &[])?;
         let fmt_map = |m: &std::collections::BTreeMap<String, f64>| {
@@ -231,7 +231,7 @@ impl Demo {
             fmt_map(&model.stats.rms_um),
             fmt_map(&model.stats.held_out_rms_um),
             self.model_json().display()
-        ));
+        ))?;
 
         let c = self.compare(&data, &model)?;
         let mut s = String::from("3. Compare — where does it fail?\n");
@@ -277,7 +277,7 @@ impl Demo {
             }
         }
         let _ = write!(s, "   report: {}", c.report.as_deref().unwrap_or("(none)"));
-        say(s);
+        say(s)?;
 
         let (model, text) = self.improve(&data)?;
         let c = self.compare_into(
@@ -300,7 +300,7 @@ impl Demo {
             "\n   report: {}",
             c.report.as_deref().unwrap_or("(none)")
         );
-        say(format!("4. {text}"));
+        say(format!("4. {text}"))?;
 
         let e = self.export(&model)?;
         say(format!(
@@ -319,14 +319,14 @@ impl Demo {
                 .collect::<Vec<_>>()
                 .join(", "),
             self.table_bin().display()
-        ));
+        ))?;
         say(format!(
             "Done in {:.1} s. Files for the board stage: {}, {}, {}",
             t0.elapsed().as_secs_f64(),
             self.table_bin().display(),
             self.model_json().display(),
             self.data_csv().display()
-        ));
+        ))?;
         Ok(story)
     }
 }

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
+use crate::cmd::out::outln;
 use crate::diagnose::{self, Diagnosis, Options, Verdict};
 use crate::features::Effect;
 use crate::import;
@@ -86,13 +87,13 @@ impl Args {
         if let Some(dir) = &self.report {
             let index = diagnose::report::write(&d, &data, dir)?;
             if !self.json {
-                println!("report: {}", index.display());
+                outln!("report: {}", index.display())?;
             }
         }
         if self.json {
-            println!("{}", serde_json::to_string_pretty(&d)?);
+            outln!("{}", serde_json::to_string_pretty(&d)?)?;
         } else {
-            print!("{}", text(&d, &self.data));
+            crate::cmd::out::print(&text(&d, &self.data))?;
         }
         Ok(())
     }

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use serde_json::json;
 
+use crate::cmd::out::outln;
 use crate::data::AXES;
 use crate::export::table::{self, TableExport, TableOptions};
 use crate::export::{crc32_hex, linuxcnc, sample_axis, sinumerik, Warning};
@@ -189,9 +190,9 @@ impl Args {
             eprintln!("warning ({}): {}", w.code, w.detail);
         }
         if self.json {
-            println!("{doc}");
+            outln!("{doc}")?;
         } else {
-            print!("{text}");
+            crate::cmd::out::print(&text)?;
         }
         Ok(())
     }

@@ -8,6 +8,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
+use crate::cmd::out::outln;
 use crate::features::Effect;
 use crate::fit::{self, nn::NnOptions, FitOptions};
 use crate::import;
@@ -93,21 +94,26 @@ impl Args {
             eprintln!("warning: {w}");
         }
         if self.json {
-            println!("{}", model.summary_json(Some(&out)));
+            outln!("{}", model.summary_json(Some(&out)))?;
             return Ok(());
         }
         let s = &model.stats;
-        println!(
+        outln!(
             "{}: {} on {} rows, {} terms per target",
             self.data.display(),
             model.spec(),
             data.len(),
             s.terms
-        );
-        println!(
+        )?;
+        outln!(
             "  {:<4} {:>7} {:>12} {:>16} {:>12} {:>10}",
-            "", "rows", "rms µm", "held-out rms µm", "max |e| µm", "cond"
-        );
+            "",
+            "rows",
+            "rms µm",
+            "held-out rms µm",
+            "max |e| µm",
+            "cond"
+        )?;
         for (t, rms) in &s.rms_um {
             let opt = |m: &std::collections::BTreeMap<String, f64>, prec: usize| {
                 m.get(t).map_or("—".to_string(), |v| {
@@ -118,7 +124,7 @@ impl Args {
                     }
                 })
             };
-            println!(
+            outln!(
                 "  {:<4} {:>7} {:>12.4} {:>16} {:>12.4} {:>10}",
                 t,
                 s.rows.get(t).copied().unwrap_or(0),
@@ -126,10 +132,10 @@ impl Args {
                 opt(&s.held_out_rms_um, 4),
                 s.max_abs_um.get(t).copied().unwrap_or(0.0),
                 opt(&s.condition_number, 0),
-            );
+            )?;
         }
-        println!("  hold-out: {}", s.holdout);
-        println!("  model written to {}", out.display());
+        outln!("  hold-out: {}", s.holdout)?;
+        outln!("  model written to {}", out.display())?;
         Ok(())
     }
 }

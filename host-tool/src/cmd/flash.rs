@@ -20,6 +20,8 @@ use probe_rs::flashing::DownloadOptions;
 use probe_rs::probe::list::Lister;
 use probe_rs::{MemoryInterface, Permissions};
 
+use crate::cmd::out::outln;
+
 /// The firmware's memory map (repository root).
 pub const MEMORY_X: &str = include_str!("../../../memory.x");
 
@@ -167,7 +169,7 @@ impl Args {
 
         let crc32 = table_id(&bytes);
         if self.json {
-            println!(
+            outln!(
                 "{}",
                 serde_json::json!({
                     "probe": info.identifier,
@@ -179,14 +181,14 @@ impl Args {
                     "crc32": format!("{crc32:#010x}"),
                     "verified": true,
                 })
-            );
+            )?;
         } else {
-            println!(
+            outln!(
                 "wrote {} bytes (CRC {crc32:#010x}) to slot {which:?} at {:#010x} (seq {seq}) through {}, verified, board reset",
                 bytes.len(),
                 addr[target],
                 info.identifier
-            );
+            )?;
         }
         Ok(())
     }

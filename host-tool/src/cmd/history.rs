@@ -7,6 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
+use crate::cmd::out::outln;
 use crate::history::{self, History};
 use crate::report::plot::{Series, XyPlot};
 use crate::report::Page;
@@ -30,14 +31,14 @@ impl Args {
         if let Some(dir) = &self.report {
             let index = write_report(&h, &self.model.display().to_string(), dir)?;
             if !self.json {
-                println!("report: {}", index.display());
+                outln!("report: {}", index.display())?;
             }
         }
         if self.json {
-            println!("{}", serde_json::to_string_pretty(&h)?);
+            outln!("{}", serde_json::to_string_pretty(&h)?)?;
         } else {
-            println!("{}: {} step(s)", self.model.display(), h.steps.len());
-            print!("{}", history::table(&h));
+            outln!("{}: {} step(s)", self.model.display(), h.steps.len())?;
+            crate::cmd::out::print(&history::table(&h))?;
         }
         Ok(())
     }

@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use serde_json::json;
 
+use crate::cmd::out::outln;
 use crate::data::AXES;
 use crate::import;
 
@@ -56,29 +57,29 @@ impl Args {
                 "skipped": data.skipped.iter().map(|s| json!({"line": s.line, "reason": s.reason})).collect::<Vec<_>>(),
                 "sha256": data.content_hash(),
             });
-            println!("{doc}");
+            outln!("{doc}")?;
         } else {
-            println!(
+            outln!(
                 "{}: {} rows, columns {}",
                 self.file.display(),
                 data.len(),
                 columns.join(", ")
-            );
+            )?;
             for (k, v) in &data.metadata {
-                println!("  # {k}: {v}");
+                outln!("  # {k}: {v}")?;
             }
             if !data.aux.is_empty() {
                 let names: Vec<&str> = data.aux.iter().map(|c| c.name.as_str()).collect();
-                println!("  auxiliary channels kept: {}", names.join(", "));
+                outln!("  auxiliary channels kept: {}", names.join(", "))?;
             }
             if !data.skipped.is_empty() {
-                println!("  {} rows left out:", data.skipped.len());
+                outln!("  {} rows left out:", data.skipped.len())?;
                 for s in &data.skipped {
-                    println!("    line {}: {}", s.line, s.reason);
+                    outln!("    line {}: {}", s.line, s.reason)?;
                 }
             }
             if let Some(out) = &self.output {
-                println!("wrote {}", out.display());
+                outln!("wrote {}", out.display())?;
             }
         }
         Ok(())

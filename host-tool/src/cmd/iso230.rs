@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 
+use crate::cmd::out::outln;
 use crate::data::AXES;
 use crate::{import, iso230};
 
@@ -47,11 +48,11 @@ impl Args {
             if let (Some(p), Some(obj)) = (&plot, v.as_object_mut()) {
                 obj.insert("plot".into(), p.display().to_string().into());
             }
-            println!("{v}");
+            outln!("{v}")?;
         } else {
-            print!("{}", res.table());
+            crate::cmd::out::print(&res.table())?;
             if let Some(p) = plot {
-                println!("\nplot: {}", p.display());
+                outln!("\nplot: {}", p.display())?;
             }
         }
         Ok(())

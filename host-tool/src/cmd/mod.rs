@@ -11,6 +11,7 @@ pub mod import;
 pub mod improve;
 pub mod iso230;
 pub mod monitor;
+pub mod out;
 pub mod simulate;
 pub mod status;
 pub mod upload;

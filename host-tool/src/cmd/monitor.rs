@@ -7,6 +7,7 @@ use std::time::Duration;
 
 use anyhow::Result;
 
+use crate::cmd::out::outln;
 use crate::link::{telemetry_json, Client, Timing};
 
 /// Arguments of `trueaxis monitor`.
@@ -41,7 +42,7 @@ impl Args {
                 samples.push(telemetry_json(&t));
             } else {
                 let faults: Vec<_> = t.faults.names().collect();
-                println!(
+                outln!(
                     "t={:>10.3}s pos_nm={:?} corr_nm={:?} model_nm={:?} worst_loop_us={} faults={}",
                     t.uptime_us as f64 / 1e6,
                     t.pos_nm,
@@ -53,15 +54,15 @@ impl Args {
                     } else {
                         faults.join(",")
                     }
-                );
+                )?;
             }
             k += 1;
         }
         if self.json {
-            println!(
+            outln!(
                 "{}",
                 serde_json::json!({ "port": self.port, "samples": samples })
-            );
+            )?;
         }
         Ok(())
     }

@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 use serde_json::json;
 
+use crate::cmd::out::outln;
 use crate::import;
 use crate::simulate::{self, Effect, Plan, RefReturn, SimConfig};
 
@@ -136,18 +137,18 @@ impl Args {
                 "warnings": warnings,
                 "sha256": data.content_hash(),
             });
-            println!("{doc}");
+            outln!("{doc}")?;
         } else {
-            println!(
+            outln!(
                 "simulated {} rows ({} passes, {:.0} s) of {} → {}",
                 data.len(),
                 passes,
                 duration_s,
                 cfg.machine.name,
                 self.output.display()
-            );
+            )?;
             for w in warnings {
-                println!("warning: {w}");
+                outln!("warning: {w}")?;
             }
         }
         Ok(())

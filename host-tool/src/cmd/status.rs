@@ -4,6 +4,7 @@
 
 use anyhow::Result;
 
+use crate::cmd::out::outln;
 use crate::link::{slot_json, slot_text, telemetry_json, Client, Timing};
 
 /// Arguments of `trueaxis status`.
@@ -24,7 +25,7 @@ impl Args {
         let t = client.status()?;
         let fw = format!("{}.{}.{}", id.firmware[0], id.firmware[1], id.firmware[2]);
         if self.json {
-            println!(
+            outln!(
                 "{}",
                 serde_json::json!({
                     "port": self.port,
@@ -36,36 +37,43 @@ impl Args {
                     "standby": id.standby.as_ref().map(slot_json),
                     "telemetry": telemetry_json(&t),
                 })
-            );
+            )?;
             return Ok(());
         }
-        println!(
+        outln!(
             "board on {}: firmware {fw}, link protocol {}, table format {}",
-            self.port, id.protocol, id.table_format
-        );
+            self.port,
+            id.protocol,
+            id.table_format
+        )?;
         match &id.active {
-            Some(a) => println!("active table:  {}", slot_text(a)),
-            None => println!("active table:  none (correction held at zero)"),
+            Some(a) => outln!("active table:  {}", slot_text(a))?,
+            None => outln!("active table:  none (correction held at zero)")?,
         }
         if let Some(s) = &id.standby {
-            println!("standby table: {} (rollback target)", slot_text(s));
+            outln!("standby table: {} (rollback target)", slot_text(s))?;
         }
-        println!(
+        outln!(
             "loop: {} ticks at {} µs, worst gap {} µs, worst tick {} µs, {} overruns",
-            t.ticks, t.period_us, t.worst_loop_us, t.worst_tick_us, t.overruns
-        );
-        println!(
+            t.ticks,
+            t.period_us,
+            t.worst_loop_us,
+            t.worst_tick_us,
+            t.overruns
+        )?;
+        outln!(
             "position nm:   {:?}{}",
             t.pos_nm,
             if t.injecting { " (injected)" } else { "" }
-        );
-        println!(
+        )?;
+        outln!(
             "correction nm: {:?} (model {:?})",
-            t.corr_nm, t.model_corr_nm
-        );
+            t.corr_nm,
+            t.model_corr_nm
+        )?;
         let faults: Vec<_> = t.faults.names().collect();
         let latched: Vec<_> = t.faults_latched.names().collect();
-        println!(
+        outln!(
             "faults: {} (latched: {})",
             if faults.is_empty() {
                 "none".into()
@@ -77,7 +85,7 @@ impl Args {
             } else {
                 latched.join(", ")
             }
-        );
+        )?;
         Ok(())
     }
 }

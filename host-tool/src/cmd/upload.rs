@@ -10,6 +10,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use crate::cmd::out::outln;
 use crate::link::{slot_json, slot_text, Client, Timing};
 
 /// Arguments of `trueaxis upload`.
@@ -46,7 +47,7 @@ impl Args {
             .with_context(|| format!("upload of {} to {}", self.table.display(), self.port))?;
         bar.finish_and_clear();
         if self.json {
-            println!(
+            outln!(
                 "{}",
                 serde_json::json!({
                     "port": self.port,
@@ -59,18 +60,18 @@ impl Args {
                     "active": slot_json(&report.activated),
                     "verified": true,
                 })
-            );
+            )?;
         } else {
             if report.resumed_at > 0 {
-                println!("resumed an earlier upload at byte {}", report.resumed_at);
+                outln!("resumed an earlier upload at byte {}", report.resumed_at)?;
             }
-            println!(
+            outln!(
                 "uploaded {} bytes (CRC {:#010x}) to {}: committed to {}, active and verified",
                 report.bytes,
                 report.crc32,
                 self.port,
                 slot_text(&report.committed)
-            );
+            )?;
         }
         Ok(())
     }

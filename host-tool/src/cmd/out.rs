@@ -1,0 +1,69 @@
+//! Standard output for every command: text and the one JSON document of
+//! `--json` go through here, never through `println!`.
+//!
+//! Why: Rust ignores SIGPIPE, so when the reader of a pipe goes away
+//! (`trueaxis compare … --json | head -c 400`) a write fails with EPIPE,
+//! and `println!` turns that into a panic with a backtrace hint. Here a
+//! closed stdout becomes [`StdoutClosed`], which the command returns like
+//! any error (so it stops writing) and `main` maps to a quiet exit 0 — the
+//! reader asked for no more, which is not a failure of the command. Any
+//! other write error is a real error (exit 1).
+
+use std::io::{ErrorKind, Write};
+
+use anyhow::Result;
+
+/// Stdout was closed by its reader (EPIPE): stop quietly.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("stdout was closed by its reader")]
+pub struct StdoutClosed;
+
+/// True when `e` (or anything in its context chain) is [`StdoutClosed`].
+pub fn is_stdout_closed(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| c.is::<StdoutClosed>())
+}
+
+/// Writes `text` to stdout as is and flushes (so a closed pipe is seen
+/// here, not later in a destructor that cannot report it).
+pub fn print(text: &str) -> Result<()> {
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == ErrorKind::BrokenPipe => Err(StdoutClosed.into()),
+        Err(e) => Err(anyhow::Error::new(e).context("cannot write to stdout")),
+    }
+}
+
+/// Writes `doc` as one line of JSON (the `--json` document).
+pub fn json<T: serde::Serialize + ?Sized>(doc: &T) -> Result<()> {
+    print(&(serde_json::to_string(doc)? + "\n"))
+}
+
+/// Writes `doc` as pretty-printed JSON (still one document).
+pub fn json_pretty<T: serde::Serialize + ?Sized>(doc: &T) -> Result<()> {
+    print(&(serde_json::to_string_pretty(doc)? + "\n"))
+}
+
+/// `println!` through [`print`]: evaluates to `anyhow::Result<()>`.
+macro_rules! outln {
+    () => {
+        $crate::cmd::out::print("\n")
+    };
+    ($($arg:tt)*) => {
+        $crate::cmd::out::print(&format!("{}\n", format_args!($($arg)*)))
+    };
+}
+pub(crate) use outln;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stdout_closed_is_found_behind_context() {
+        let e: anyhow::Error = StdoutClosed.into();
+        let e = e.context("writing the report");
+        assert!(is_stdout_closed(&e));
+        assert!(!is_stdout_closed(&anyhow::anyhow!("other")));
+    }
+}

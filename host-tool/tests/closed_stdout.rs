@@ -1,0 +1,86 @@
+//! A stdout whose reader has gone away (`trueaxis compare … --json | head
+//! -c 400`): every command stops quietly with exit 0 instead of panicking
+//! on EPIPE. The pipe's read end is closed before the command starts, so
+//! its very first write fails — deterministic, no race with the reader.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+
+use common::{json, run, s, tmp_dir};
+
+/// Runs `trueaxis args` with stdout a pipe nobody reads; returns the exit
+/// code and stderr.
+fn run_into_closed_pipe(args: &[&str]) -> (Option<i32>, String) {
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = Command::new(env!("CARGO_BIN_EXE_trueaxis"))
+        .args(args)
+        .stdout(writer)
+        .stderr(Stdio::piped())
+        .output()
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn data(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+#[test]
+fn every_command_exits_0_quietly_when_stdout_is_closed() {
+    let dir = tmp_dir("closed-stdout", "all");
+    let csv = dir.join("d.csv");
+    let model = dir.join("m.json");
+    json(&run(&[
+        "simulate",
+        "--plan",
+        "grid:100",
+        "--seed",
+        "1",
+        "-o",
+        s(&csv),
+        "--json",
+    ]));
+    json(&run(&[
+        "fit",
+        s(&csv),
+        "--model",
+        "cubic19",
+        "-o",
+        s(&model),
+        "--json",
+    ]));
+    let csv2 = dir.join("d2.csv");
+    let model2 = dir.join("m2.json");
+    let table = dir.join("t.bin");
+    let iso = data("iso_worked.rtl");
+    let cases: Vec<Vec<&str>> = vec![
+        vec!["compare", s(&csv), "--model", s(&model), "--json"],
+        vec!["compare", s(&csv), "--model", s(&model)],
+        vec!["iso230", &iso, "--json"],
+        vec!["iso230", &iso],
+        vec!["import", &iso, "--json"],
+        vec!["import", &iso],
+        vec!["simulate", "--plan", "line:x:100", "-o", s(&csv2)],
+        vec!["fit", s(&csv), "--model", "cubic19", "-o", s(&model2)],
+        vec!["diagnose", s(&csv), "--model", "cubic19", "--json"],
+        vec!["history", s(&model), "--json"],
+        vec!["export", s(&model), "-o", s(&table), "--json"],
+    ];
+    for args in &cases {
+        let (code, err) = run_into_closed_pipe(args);
+        assert_eq!(code, Some(0), "{args:?}: stderr {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert!(!err.contains("Broken pipe"), "{args:?}: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
