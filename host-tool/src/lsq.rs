@@ -169,6 +169,19 @@ pub fn solve(
     b: &DVector<f64>,
     weights: Option<&DVector<f64>>,
 ) -> Result<LsqSolution> {
+    let b = DMatrix::from_column_slice(b.len(), 1, b.as_slice());
+    Ok(solve_inner(a, &b, weights, false)?.remove(0))
+}
+
+/// [`solve`] for several right-hand sides (the columns of `b`) on the same
+/// design and weights — the three error targets of a seed model measured on
+/// the same rows — with one QR and one SVD: one solution per column, each
+/// equal to what [`solve`] gives for that column alone.
+pub fn solve_multi(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    weights: Option<&DVector<f64>>,
+) -> Result<Vec<LsqSolution>> {
     solve_inner(a, b, weights, false)
 }
 
@@ -181,20 +194,22 @@ pub fn solve_min_norm(
     b: &DVector<f64>,
     weights: Option<&DVector<f64>>,
 ) -> Result<LsqSolution> {
-    solve_inner(a, b, weights, true)
+    let b = DMatrix::from_column_slice(b.len(), 1, b.as_slice());
+    Ok(solve_inner(a, &b, weights, true)?.remove(0))
 }
 
 fn solve_inner(
     a: &DMatrix<f64>,
-    b: &DVector<f64>,
+    b: &DMatrix<f64>,
     weights: Option<&DVector<f64>>,
     allow_deficient: bool,
-) -> Result<LsqSolution> {
+) -> Result<Vec<LsqSolution>> {
     let (m, n) = a.shape();
-    if b.len() != m {
+    let nrhs = b.ncols();
+    if b.nrows() != m || nrhs == 0 {
         bail!(LsqError::BadInput(format!(
             "{m} rows but {} right-hand sides",
-            b.len()
+            b.nrows()
         )));
     }
     if n == 0 {
@@ -226,7 +241,7 @@ fn solve_inner(
         for i in 0..m {
             let s = w[i].sqrt();
             aw.row_mut(i).scale_mut(s);
-            bw[i] *= s;
+            bw.row_mut(i).scale_mut(s);
         }
     }
     // Column scaling to unit norm; an all-zero column is its own collinear
@@ -249,12 +264,12 @@ fn solve_inner(
     }
     // Reduce to a square problem: R x = Qᵀb (QR of the scaled m×n matrix).
     let (r, qtb) = if m > n {
-        let qr = aw.clone().qr();
+        let qr = aw.qr();
         let mut qtb_full = bw.clone();
         qr.q_tr_mul(&mut qtb_full);
         (qr.r(), qtb_full.rows(0, n).into_owned())
     } else {
-        (aw.clone(), bw.clone())
+        (aw, bw.clone())
     };
     let svd = nalgebra::linalg::SVD::new(r, true, true);
     let (Some(u), Some(v_t)) = (svd.u.as_ref(), svd.v_t.as_ref()) else {
@@ -289,40 +304,48 @@ fn solve_inner(
     // x_scaled = V S⁺ Uᵀ (Qᵀb); the truncated pseudo-inverse keeps the
     // minimum-norm solution when rank-deficient (only reached with allow_deficient).
     let utb = u.tr_mul(&qtb);
-    let mut x: DVector<f64> = DVector::zeros(n);
     let mut var_scaled: DVector<f64> = DVector::zeros(n);
+    let mut x: DMatrix<f64> = DMatrix::zeros(n, nrhs);
     for k in 0..k_cols {
         if s[k] <= tol {
             continue;
         }
-        let coef_k = utb[k] / s[k];
         for j in 0..n {
-            x[j] += v_t[(k, j)] * coef_k;
             var_scaled[j] += (v_t[(k, j)] / s[k]).powi(2);
         }
+        for c in 0..nrhs {
+            let coef_k = utb[(k, c)] / s[k];
+            for j in 0..n {
+                x[(j, c)] += v_t[(k, j)] * coef_k;
+            }
+        }
     }
-    let coef = x.component_div(&scale);
-    // Residuals from the weighted original problem (not Qᵀb bookkeeping),
-    // so rss is exact even when the fit is nearly perfect.
-    let resid = &bw - &(a_weighted_times(a, weights, &coef));
-    let rss = resid.norm_squared();
-    let dof = m.saturating_sub(rank);
-    let sigma2 = if dof > 0 { rss / dof as f64 } else { f64::NAN };
-    let coef_sd = DVector::from_fn(n, |j, _| (sigma2 * var_scaled[j]).sqrt() / scale[j]);
     let s_min = s.iter().copied().fold(f64::INFINITY, f64::min);
     let condition_number = if rank < n || s_min <= 0.0 {
         f64::INFINITY
     } else {
         s_max / s_min
     };
-    Ok(LsqSolution {
-        coef,
-        coef_sd,
-        rss,
-        dof,
-        rank,
-        condition_number,
-    })
+    let dof = m.saturating_sub(rank);
+    Ok((0..nrhs)
+        .map(|c| {
+            let coef = x.column(c).component_div(&scale);
+            // Residuals from the weighted original problem (not Qᵀb
+            // bookkeeping), so rss is exact even when the fit is nearly perfect.
+            let resid = bw.column(c) - a_weighted_times(a, weights, &coef);
+            let rss = resid.norm_squared();
+            let sigma2 = if dof > 0 { rss / dof as f64 } else { f64::NAN };
+            let coef_sd = DVector::from_fn(n, |j, _| (sigma2 * var_scaled[j]).sqrt() / scale[j]);
+            LsqSolution {
+                coef,
+                coef_sd,
+                rss,
+                dof,
+                rank,
+                condition_number,
+            }
+        })
+        .collect())
 }
 
 /// √W·A·x without forming √W·A again.
@@ -352,6 +375,26 @@ mod tests {
         });
         let b = DVector::from_fn(n_rows, |i, _| (0..4).map(|j| a[(i, j)] * coef[j]).sum());
         (a, b, coef)
+    }
+
+    #[test]
+    fn several_right_hand_sides_equal_separate_solves() {
+        let (a, b, _) = poly_problem(40);
+        let b2 = b.map(|v| (v * 1.7).sin());
+        let b3 = DVector::from_fn(b.len(), |i, _| (i as f64 * 0.37).cos());
+        let w = DVector::from_fn(b.len(), |i, _| 1.0 + (i % 5) as f64);
+        let bm = DMatrix::from_columns(&[b.clone(), b2.clone(), b3.clone()]);
+        let multi = solve_multi(&a, &bm, Some(&w)).unwrap();
+        assert_eq!(multi.len(), 3);
+        for (sol, rhs) in multi.iter().zip([&b, &b2, &b3]) {
+            let one = solve(&a, rhs, Some(&w)).unwrap();
+            assert!((&sol.coef - &one.coef).amax() < 1e-12 * one.coef.amax().max(1.0));
+            assert!((&sol.coef_sd - &one.coef_sd).amax() < 1e-12 * one.coef_sd.amax().max(1.0));
+            assert!((sol.rss - one.rss).abs() <= 1e-12 * rhs.norm_squared());
+            assert_eq!((sol.dof, sol.rank), (one.dof, one.rank));
+            assert_eq!(sol.condition_number, one.condition_number);
+        }
+        assert!(multi[1].rss > 0.0 && multi[0].coef != multi[1].coef);
     }
 
     #[test]

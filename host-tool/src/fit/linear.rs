@@ -9,7 +9,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use anyhow::{bail, Result};
-use nalgebra::DVector;
+use nalgebra::DMatrix;
 
 use crate::data::{Dataset, TARGETS};
 use crate::features::{seed_monomials, Effect, Feature, Norm};
@@ -62,7 +62,21 @@ pub fn fit_target(
         bail!("the data has no {}_um column", TARGETS[target]);
     };
     let rows: Vec<usize> = rows.iter().copied().filter(|&r| err[r].is_some()).collect();
-    let a = lsq::design_matrix(data, norm, features, &rows)?;
+    Ok(fit_targets(data, norm, features, &[target], &rows, label)?.remove(0))
+}
+
+/// Fits `features` to each of `targets` on `rows`, where every one of them
+/// is measured: one design matrix, one QR and one SVD for all (the three
+/// targets of a seed model on a full grid). `label` prefixes messages.
+fn fit_targets(
+    data: &Dataset,
+    norm: &Norm,
+    features: &[Feature],
+    targets: &[usize],
+    rows: &[usize],
+    label: &str,
+) -> Result<Vec<TargetFit>> {
+    let a = lsq::design_matrix(data, norm, features, rows)?;
     let distinct = lsq::distinct_rows(&a);
     if distinct < features.len() {
         bail!(
@@ -70,9 +84,15 @@ pub fn fit_target(
             features.len()
         );
     }
-    let b = DVector::from_iterator(rows.len(), rows.iter().map(|&r| err[r].unwrap_or(0.0)));
-    let w = holdout::weights(data, &rows)?;
-    let sol = match lsq::solve(&a, &b, w.as_ref()) {
+    let mut b = DMatrix::zeros(rows.len(), targets.len());
+    for (c, &t) in targets.iter().enumerate() {
+        let err = data.err_um[t].as_ref();
+        for (i, &r) in rows.iter().enumerate() {
+            b[(i, c)] = err.and_then(|col| col[r]).unwrap_or(0.0);
+        }
+    }
+    let w = holdout::weights(data, rows)?;
+    let sols = match lsq::solve_multi(&a, &b, w.as_ref()) {
         Ok(s) => s,
         Err(e) => {
             if let Some(LsqError::RankDeficient { groups, rank, cols }) =
@@ -98,19 +118,25 @@ pub fn fit_target(
             return Err(e.context(format!("{label}: least squares failed")));
         }
     };
-    let pred = &a * &sol.coef;
-    let residual_um: Vec<f64> = (0..rows.len()).map(|i| b[i] - pred[i]).collect();
-    Ok(TargetFit {
-        output: LinearOutput {
-            target,
-            features: features.to_vec(),
-            coef_um: sol.coef.iter().copied().collect(),
-            coef_sd_um: sol.coef_sd.iter().copied().collect(),
-        },
-        rows,
-        residual_um,
-        condition_number: sol.condition_number,
-    })
+    Ok(sols
+        .into_iter()
+        .zip(targets)
+        .enumerate()
+        .map(|(c, (sol, &target))| {
+            let pred = &a * &sol.coef;
+            TargetFit {
+                output: LinearOutput {
+                    target,
+                    features: features.to_vec(),
+                    coef_um: sol.coef.iter().copied().collect(),
+                    coef_sd_um: sol.coef_sd.iter().copied().collect(),
+                },
+                rows: rows.to_vec(),
+                residual_um: (0..rows.len()).map(|i| b[(i, c)] - pred[i]).collect(),
+                condition_number: sol.condition_number,
+            }
+        })
+        .collect())
 }
 
 /// Fits the linear model `seed` + `adds` to every target present.
@@ -122,19 +148,45 @@ pub fn fit(
 ) -> Result<(FittedModel, FitStats)> {
     let norm = Norm::from_data(data);
     let axes = data.axes();
-    let all_rows: Vec<usize> = (0..data.len()).collect();
     let mut stats = FitStats::default();
     let mut outputs = Vec::new();
+    // Targets with the same features measured on the same rows (a seed
+    // model on a full grid) share one solve; the rest are fitted alone.
+    let mut jobs: Vec<(Vec<usize>, Vec<Feature>, Vec<usize>)> = Vec::new();
     for t in data.targets() {
-        let name = TARGETS[t].to_string();
         if data.measured(t).next().is_none() {
-            stats
-                .warnings
-                .push(format!("{name}: the column has no values; not modelled"));
+            stats.warnings.push(format!(
+                "{}: the column has no values; not modelled",
+                TARGETS[t]
+            ));
             continue;
         }
         let features = features_for(seed, adds, t, &axes)?;
-        let tf = fit_target(data, &norm, &features, t, &all_rows, &name)?;
+        let rows: Vec<usize> = data.measured(t).map(|(r, _)| r).collect();
+        match jobs.iter_mut().find(|j| j.1 == features && j.2 == rows) {
+            Some(job) => job.0.push(t),
+            None => jobs.push((vec![t], features, rows)),
+        }
+    }
+    let mut fits: Vec<(usize, Vec<Feature>, TargetFit)> = Vec::new();
+    for (targets, features, rows) in jobs {
+        let label: Vec<&str> = targets.iter().map(|&t| TARGETS[t]).collect();
+        let tfs = match fit_targets(data, &norm, &features, &targets, &rows, &label.join(", ")) {
+            Ok(tfs) => tfs,
+            // Name the first target that fails on its own, as a lone fit would.
+            Err(_) if targets.len() > 1 => targets
+                .iter()
+                .map(|&t| fit_target(data, &norm, &features, t, &rows, TARGETS[t]))
+                .collect::<Result<_>>()?,
+            Err(e) => return Err(e),
+        };
+        for (t, tf) in targets.into_iter().zip(tfs) {
+            fits.push((t, features.clone(), tf));
+        }
+    }
+    fits.sort_by_key(|f| f.0);
+    for (t, features, tf) in fits {
+        let name = TARGETS[t].to_string();
         stats.terms = stats.terms.max(features.len());
         stats.terms_per_target.insert(name.clone(), features.len());
         stats.rows.insert(name.clone(), tf.rows.len());
