@@ -62,6 +62,7 @@ fn every_command_exits_0_quietly_when_stdout_is_closed() {
     let csv2 = dir.join("d2.csv");
     let model2 = dir.join("m2.json");
     let table = dir.join("t.bin");
+    let model3 = dir.join("m3.json");
     let iso = data("iso_worked.rtl");
     let cases: Vec<Vec<&str>> = vec![
         vec!["compare", s(&csv), "--model", s(&model), "--json"],
@@ -74,6 +75,16 @@ fn every_command_exits_0_quietly_when_stdout_is_closed() {
         vec!["fit", s(&csv), "--model", "cubic19", "-o", s(&model2)],
         vec!["diagnose", s(&csv), "--model", "cubic19", "--json"],
         vec!["history", s(&model), "--json"],
+        vec!["improve", s(&csv), "--model", "cubic19", "-o", s(&model3)],
+        vec![
+            "improve",
+            s(&csv),
+            "--model",
+            "cubic19",
+            "-o",
+            s(&model3),
+            "--json",
+        ],
         vec!["export", s(&model), "-o", s(&table), "--json"],
     ];
     for args in &cases {

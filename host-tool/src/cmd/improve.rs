@@ -11,6 +11,7 @@ use anyhow::Result;
 use serde::Serialize;
 
 use crate::cmd::fit::default_model_path;
+use crate::cmd::out::{self, outln};
 use crate::data::Dataset;
 use crate::diagnose::{self, Options, Verdict};
 use crate::features::Effect;
@@ -36,15 +37,33 @@ pub struct Args {
     pub json: bool,
 }
 
+/// One effect added (or swapped in) at a step.
+#[derive(Clone, Debug, Serialize)]
+pub struct AddedEffect {
+    /// Target.
+    pub target: String,
+    /// The `fit --add` string.
+    pub add: String,
+    /// The effect it replaced (the same effect with another lag, period,
+    /// order or degree), if any.
+    pub replaces: Option<String>,
+    /// Its evidence, as diagnose gave it.
+    pub evidence: String,
+}
+
 /// One step of the loop.
 #[derive(Clone, Debug, Serialize)]
 pub struct ImproveStep {
     /// 1-based.
     pub step: usize,
-    /// The effect added at this step (none for the seed).
+    /// The best effect added at this step (none for the seed).
     pub added: Option<String>,
     /// Its evidence, as diagnose gave it.
     pub evidence: Option<String>,
+    /// Every effect added at this step: the best significant candidate of
+    /// each target (targets are fitted independently, so one step can
+    /// serve all of them).
+    pub added_effects: Vec<AddedEffect>,
     /// In-sample RMS per target after the fit, µm.
     pub rms_um: BTreeMap<String, f64>,
     /// Block-held-out RMS per target after the fit, µm, with the
@@ -105,7 +124,7 @@ pub fn improve(
 ) -> Result<Improvement> {
     let mut adds: Vec<String> = Vec::new();
     let mut steps = Vec::new();
-    let mut added: Option<(String, String)> = None;
+    let mut added: Vec<AddedEffect> = Vec::new();
     loop {
         let effects = adds
             .iter()
@@ -134,8 +153,9 @@ pub fn improve(
             .collect();
         let step = ImproveStep {
             step: steps.len() + 1,
-            added: added.as_ref().map(|a| a.0.clone()),
-            evidence: added.as_ref().map(|a| a.1.clone()),
+            added: added.first().map(|a| a.add.clone()),
+            evidence: added.first().map(|a| a.evidence.clone()),
+            added_effects: std::mem::take(&mut added),
             rms_um: model.stats.rms_um.clone(),
             held_out_rms_um: d.held_out_rms_um.clone(),
             fit_held_out_rms_um: model.stats.held_out_rms_um.clone(),
@@ -145,19 +165,46 @@ pub fn improve(
         };
         on_step(&step);
         steps.push(step);
-        match d.best() {
-            Some(b) if steps.len() <= MAX_STEPS && !adds.contains(&b.add) => {
-                added = Some((b.add.clone(), b.evidence.clone()));
-                adds.push(b.add.clone());
+        // The best significant candidate of each target (candidates are
+        // sorted best first; without the path there is at most one per
+        // target), added — or swapped in for the same effect — together.
+        let mut seen = std::collections::BTreeSet::new();
+        if steps.len() <= MAX_STEPS {
+            for c in d.candidates.iter().filter(|c| c.significant) {
+                if !seen.insert(c.target.clone()) {
+                    continue;
+                }
+                let changed = match &c.replaces {
+                    Some(old) => match adds.iter_mut().find(|a| *a == old) {
+                        Some(a) => {
+                            a.clone_from(&c.add);
+                            true
+                        }
+                        None => false,
+                    },
+                    None if !adds.contains(&c.add) => {
+                        adds.push(c.add.clone());
+                        true
+                    }
+                    None => false,
+                };
+                if changed {
+                    added.push(AddedEffect {
+                        target: c.target.clone(),
+                        add: c.add.clone(),
+                        replaces: c.replaces.clone(),
+                        evidence: c.evidence.clone(),
+                    });
+                }
             }
-            _ => {
-                return Ok(Improvement {
-                    model: model.spec(),
-                    model_file: out.display().to_string(),
-                    steps,
-                    verdict: d.verdict,
-                })
-            }
+        }
+        if added.is_empty() {
+            return Ok(Improvement {
+                model: model.spec(),
+                model_file: out.display().to_string(),
+                steps,
+                verdict: d.verdict,
+            });
         }
     }
 }
@@ -200,22 +247,35 @@ pub fn demo_stage(
             .join(", ")
     };
     let r = improve(data, seed, model_path, |st| {
-        match (&st.added, &st.evidence) {
-            (Some(a), Some(e)) => {
-                let _ = writeln!(s, "   step {}: named and added `{a}`", st.step);
-                let _ = writeln!(s, "      because {e}");
-                let _ = writeln!(
-                    s,
-                    "      refit: RMS µm {}; held out {}",
-                    fmt(&st.rms_um),
-                    fmt(&st.held_out_rms_um)
-                );
-            }
-            _ => {
+        match st.added_effects.as_slice() {
+            [] => {
                 let _ = writeln!(
                     s,
                     "   step {}: {seed} alone: RMS µm {}; held out {}",
                     st.step,
+                    fmt(&st.rms_um),
+                    fmt(&st.held_out_rms_um)
+                );
+            }
+            added => {
+                for a in added {
+                    match &a.replaces {
+                        Some(old) => {
+                            let _ = writeln!(
+                                s,
+                                "   step {}: named `{}`, replacing `{old}`",
+                                st.step, a.add
+                            );
+                        }
+                        None => {
+                            let _ = writeln!(s, "   step {}: named and added `{}`", st.step, a.add);
+                        }
+                    }
+                    let _ = writeln!(s, "      because {}", a.evidence);
+                }
+                let _ = writeln!(
+                    s,
+                    "      refit: RMS µm {}; held out {}",
                     fmt(&st.rms_um),
                     fmt(&st.held_out_rms_um)
                 );
@@ -262,18 +322,22 @@ impl Args {
             .clone()
             .unwrap_or_else(|| default_model_path(&self.data));
         let json = self.json;
+        // Steps are printed as they complete; a failed write (stdout closed)
+        // stops the printing, not the loop — the model file is the result —
+        // and is returned once the loop is done.
+        let mut write_err: Option<anyhow::Error> = None;
         let r = improve(&data, &seed, &out, |s| {
-            if json {
+            if json || write_err.is_some() {
                 return;
             }
             let what = s
                 .added
                 .as_deref()
                 .map_or(format!("fit {seed}"), |a| format!("add {a}"));
-            println!("step {}: {what}", s.step);
+            let mut text = format!("step {}: {what}\n", s.step);
             for (t, rms) in &s.rms_um {
-                println!(
-                    "  {t}: rms {rms:.4} µm, held-out {} µm, noise floor {} µm",
+                text.push_str(&format!(
+                    "  {t}: rms {rms:.4} µm, held-out {} µm, noise floor {} µm\n",
                     s.held_out_rms_um
                         .get(t)
                         .map_or("—".into(), |v| format!("{v:.4}")),
@@ -282,21 +346,25 @@ impl Args {
                         .copied()
                         .flatten()
                         .map_or("—".into(), |v| format!("{v:.4}"))
-                );
+                ));
             }
             if let Some(e) = &s.evidence {
-                println!("  because: {e}");
+                text.push_str(&format!("  because: {e}\n"));
             }
+            write_err = out::print(&text).err();
         })?;
+        if let Some(e) = write_err {
+            return Err(e);
+        }
         if json {
-            println!("{}", serde_json::to_string_pretty(&r)?);
+            out::json_pretty(&r)?;
         } else {
-            println!(
+            outln!(
                 "{}: model {} written to {}",
                 r.steps.last().map_or(String::new(), ImproveStep::outcome),
                 r.model,
                 r.model_file
-            );
+            )?;
         }
         Ok(())
     }
