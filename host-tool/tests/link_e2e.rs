@@ -361,6 +361,68 @@ fn invalid_tables_are_refused_before_anything_is_sent() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("not a valid table"));
 }
 
+/// A valid table with one `n` × `n` grid on ex (model-core's default
+/// capacity loads it; the board's may not).
+fn grid_table(n: u16) -> Vec<u8> {
+    use model_core::spec::{GridAxisSpec, GridSpec, TermSpec};
+    let mut spec = trueaxis_app::sim::sample_spec(0);
+    let ax = GridAxisSpec {
+        nodes: n,
+        origin_nm: -400_000_000,
+        step_nm: 800_000_000 / (i32::from(n) - 1),
+    };
+    let one = GridAxisSpec {
+        nodes: 1,
+        origin_nm: 0,
+        step_nm: 1,
+    };
+    spec.terms = vec![TermSpec::Grid(GridSpec {
+        output: 0,
+        axes: [ax, ax, one],
+        values_nm: (0..usize::from(n) * usize::from(n))
+            .map(|i| (i % 97) as f64 * 10.0)
+            .collect(),
+    })];
+    spec.encode().unwrap()
+}
+
+#[test]
+fn tables_beyond_the_boards_limits_are_refused_before_touching_it() {
+    // 40 × 40 = 1600 grid values (12.8 KB): over the 1024 of the board's
+    // models. 60 × 60 (28.8 KB): over its 24 KiB staging buffer.
+    let grid = table_file("limit_grid", &grid_table(40));
+    let big_bytes = grid_table(60);
+    let over = big_bytes.len() - model_core::board::STAGE_BYTES;
+    let big = table_file("limit_bytes", &big_bytes);
+    for (path, want) in [
+        (
+            &grid,
+            "needs 1600 grid values, the board's models hold 1024: 576 over".to_string(),
+        ),
+        (
+            &big,
+            format!("the board takes at most 24576 (its staging buffer): {over} bytes over"),
+        ),
+    ] {
+        // No board on this port and (here) no probe: the check comes first.
+        for args in [
+            vec![
+                "upload",
+                path.to_str().unwrap(),
+                "--port",
+                "tcp://127.0.0.1:9",
+            ],
+            vec!["flash", path.to_str().unwrap()],
+        ] {
+            let out = trueaxis(&args);
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+            assert!(err.contains("does not fit the board"), "{args:?}: {err}");
+            assert!(err.contains(&want), "{args:?}: {err}");
+        }
+    }
+}
+
 #[test]
 fn status_without_a_board_fails_with_the_port_named() {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();

@@ -7,11 +7,14 @@
 //! - [`eval`]: the prepared [`Model`] with `eval_f32` / `eval_fixed`,
 //!   [`Inputs`], [`Outputs`], [`Flags`], [`DirTracker`].
 //! - [`monomials`]: the named polynomial sets (`cubic19`, `kinematic`).
+//! - [`board`]: the compensation board's limits (staging buffer, model
+//!   capacity) as constants the firmware uses and the host checks.
 //! - `spec` (feature `std`): [`TableSpec`] — the host's owned description,
 //!   `encode` and the f64 reference `eval_f64`.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![forbid(unsafe_code)]
 
+pub mod board;
 pub mod eval;
 pub mod link;
 pub mod math;

@@ -3,7 +3,7 @@
 //! its envelope, track directions. Keeping it in one file keeps the engine
 //! readable and makes a model-core API change a one-file change.
 //!
-//! A [`Model`] is large (≈ 11 KiB: fixed-capacity coefficient pools), so it
+//! A [`Model`] is large (≈ 14.5 KiB: fixed-capacity coefficient pools), so it
 //! is never moved around: the board owns two buffers, the link server loads
 //! a table into the spare one *outside* the engine's lock, and activation
 //! swaps two references inside it — O(1) in the correction loop's critical
@@ -14,20 +14,21 @@ use model_core::{DirTracker, Flags, Inputs, MAX_TEMPS};
 
 pub use model_core::FORMAT_VERSION;
 
-/// Parameter capacity of the firmware's models (coefficients, weights):
-/// cubic19 on three outputs needs 57, a 3-16-3 MLP 115.
-pub const FW_PARAMS: usize = 768;
-/// Grid value capacity of the firmware's models (e.g. a 32 × 32 grid).
-pub const FW_GRID: usize = 1024;
+/// Parameter capacity of the firmware's models (model-core's
+/// [`board`](model_core::board) limits, which the host checks too).
+pub const FW_PARAMS: usize = model_core::board::MODEL_PARAMS;
+/// Grid value capacity of the firmware's models.
+pub const FW_GRID: usize = model_core::board::MODEL_GRID;
 
 /// The firmware's prepared model: model-core's evaluator with capacities
-/// sized for the F405's RAM. `Model::load` builds the model on the stack
-/// and returns it by value, so loading one costs a few model sizes of
-/// stack; with model-core's default capacity (≈ 26 KiB) that was ≈ 79 KiB,
-/// more than the board has. A table that needs more is refused at commit
-/// (`InvalidTable::Load`), never half loaded. Evaluation is the same code
-/// whatever the capacity, so results are bit-identical to the host's.
-pub type Model = model_core::ModelCap<FW_PARAMS, FW_GRID>;
+/// sized for the F405's RAM ([`model_core::board::BoardModel`]).
+/// `Model::load` builds the model on the stack and returns it by value, so
+/// loading one costs a few model sizes of stack; with model-core's default
+/// capacity (≈ 26 KiB) that was ≈ 79 KiB, more than the board has. A table
+/// that needs more is refused at commit (`InvalidTable::Load`), never half
+/// loaded. Evaluation is the same code whatever the capacity, so results
+/// are bit-identical to the host's.
+pub type Model = model_core::board::BoardModel;
 
 /// Why a table cannot become the active model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

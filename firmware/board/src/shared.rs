@@ -41,8 +41,9 @@ impl EngineAccess<'static> for SharedEngine {
 pub type BoardServer = Server<'static, 'static, Flash<'static, Blocking>>;
 
 /// Largest table the board accepts over the link, bytes (the staging
-/// buffer; a slot could hold 128 KiB, RAM cannot).
-pub const STAGE_BYTES: usize = 24 * 1024;
+/// buffer; a slot could hold 128 KiB, RAM cannot). Defined in model-core,
+/// where the host checks tables against it.
+pub const STAGE_BYTES: usize = model_core::board::STAGE_BYTES;
 
 /// See the table above.
 pub static ENGINE: StaticCell<SharedEngine> = StaticCell::new();
@@ -54,7 +55,7 @@ pub static TEMPS_MC: [AtomicI32; LINK_TEMPS] = [const { AtomicI32::new(i32::MIN)
 /// See the table above.
 pub static TICKS: AtomicU32 = AtomicU32::new(0);
 
-/// The two model buffers (≈ 11 KiB each): one runs, one receives the next
+/// The two model buffers (≈ 14.5 KiB each): one runs, one receives the next
 /// table. Owned by the server and the engine in turn, never shared.
 /// `ConstStaticCell`: initialised in place, never built on the stack.
 pub static MODEL_A: ConstStaticCell<ModelBuf> = ConstStaticCell::new(ModelBuf::new());

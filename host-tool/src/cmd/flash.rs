@@ -10,7 +10,10 @@
 //! reads. The sequence number is one above the other slot's, so the new
 //! table is the newest valid one at boot. Without `--slot`, the slot that
 //! does not hold the newest table is written, keeping the old one as the
-//! rollback target.
+//! rollback target. The table is checked against the board's limits first
+//! (model-core's `board`: the 24 KiB staging buffer each slot is read into
+//! at boot, the model capacity) — the slot itself would take 128 KiB, the
+//! board could not boot from such a table.
 
 use std::path::PathBuf;
 
@@ -88,8 +91,13 @@ impl Args {
     pub fn run(self) -> Result<()> {
         let bytes = std::fs::read(&self.table)
             .with_context(|| format!("cannot read {}", self.table.display()))?;
-        model_core::parse(&bytes)
+        let table = model_core::parse(&bytes)
             .map_err(|e| anyhow::anyhow!("{}: not a valid table: {e}", self.table.display()))?;
+        // The board's own limits (staging buffer, model capacity), before
+        // anything touches it.
+        model_core::board::check(&table).map_err(|e| {
+            anyhow::anyhow!("{}: does not fit the board: {e}", self.table.display())
+        })?;
         let (addr, slot_bytes) = slots()?;
         if bytes.len() as u64 + slot::BODY_AT as u64 > slot_bytes as u64 {
             bail!(

@@ -1,9 +1,10 @@
 //! `trueaxis upload TABLE.bin --port PORT` — sends a table to the board
 //! over the link (USB CDC-ACM / UART, or `tcp://HOST:PORT` for emulators):
-//! validates it locally with model-core's parser first, uploads it in
-//! acknowledged chunks (resuming an interrupted upload of the same table),
-//! commits it to the free flash slot, activates it and checks that the
-//! board reports the new table's CRC.
+//! validates it locally with model-core's parser and against the board's
+//! limits (model-core's `board`: staging buffer, model capacity) first,
+//! uploads it in acknowledged chunks (resuming an interrupted upload of the
+//! same table), commits it to the free flash slot, activates it and checks
+//! that the board reports the new table's CRC.
 
 use std::path::PathBuf;
 
@@ -30,8 +31,13 @@ impl Args {
     pub fn run(self) -> Result<()> {
         let bytes = std::fs::read(&self.table)
             .with_context(|| format!("cannot read {}", self.table.display()))?;
-        model_core::parse(&bytes)
+        let table = model_core::parse(&bytes)
             .map_err(|e| anyhow::anyhow!("{}: not a valid table: {e}", self.table.display()))?;
+        // The board's own limits (staging buffer, model capacity), before
+        // anything touches it.
+        model_core::board::check(&table).map_err(|e| {
+            anyhow::anyhow!("{}: does not fit the board: {e}", self.table.display())
+        })?;
         let mut client = Client::open(&self.port, Timing::default())?;
         let bar = if self.json {
             ProgressBar::hidden()

@@ -1,0 +1,201 @@
+//! The compensation board's fixed resources (STM32F405RG, `firmware/board`),
+//! defined once: the firmware sizes its buffers with these constants, and
+//! the host checks a table against them before it touches a board
+//! (`trueaxis flash`, `trueaxis upload`), so a table the board cannot hold
+//! is refused on the desk with the limit it exceeds and by how much —
+//! not by the board after an upload, nor (for `flash`, which writes the
+//! slot directly) silently at the next boot.
+
+use core::fmt;
+
+use crate::eval::{LoadError, ModelCap};
+use crate::table::Table;
+
+/// Largest table the board takes, bytes: its RAM staging buffer. An upload
+/// is received into it, and at boot each flash slot is read into it to be
+/// validated, so this — not the 128 KiB flash slot — bounds a table.
+pub const STAGE_BYTES: usize = 24 * 1024;
+
+/// Parameter capacity (coefficients, weights) of the board's models:
+/// cubic19 on three outputs needs 57, a 3-16-3 MLP 115.
+pub const MODEL_PARAMS: usize = 768;
+
+/// Grid value capacity of the board's models (e.g. a 32 × 32 grid).
+pub const MODEL_GRID: usize = 1024;
+
+/// The board's prepared model: model-core's evaluator with the capacities
+/// above (≈ 14.5 KiB; the board keeps two). Evaluation is the same code
+/// whatever the capacity, so results are bit-identical to any other
+/// [`ModelCap`]'s.
+pub type BoardModel = ModelCap<MODEL_PARAMS, MODEL_GRID>;
+
+/// A limit of the board a table exceeds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LimitError {
+    /// The table is larger than [`STAGE_BYTES`].
+    TooLarge {
+        /// Its size, bytes.
+        bytes: u32,
+        /// [`STAGE_BYTES`].
+        max: u32,
+    },
+    /// It needs more parameters than [`MODEL_PARAMS`].
+    Params {
+        /// Parameters needed.
+        needed: u32,
+        /// [`MODEL_PARAMS`].
+        max: u32,
+    },
+    /// It needs more grid values than [`MODEL_GRID`].
+    Grid {
+        /// Grid values needed.
+        needed: u32,
+        /// [`MODEL_GRID`].
+        max: u32,
+    },
+    /// It cannot be loaded for another reason (terms, MLP inputs,
+    /// coefficient ranges: the same for every capacity).
+    Load(LoadError),
+}
+
+impl fmt::Display for LimitError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            LimitError::TooLarge { bytes, max } => write!(
+                f,
+                "the table is {bytes} bytes, the board takes at most {max} (its staging buffer): {} bytes over",
+                bytes.saturating_sub(max)
+            ),
+            LimitError::Params { needed, max } => write!(
+                f,
+                "the table needs {needed} model parameters, the board's models hold {max}: {} over",
+                needed.saturating_sub(max)
+            ),
+            LimitError::Grid { needed, max } => write!(
+                f,
+                "the table needs {needed} grid values, the board's models hold {max}: {} over",
+                needed.saturating_sub(max)
+            ),
+            LimitError::Load(e) => write!(f, "the board cannot load the table: {e}"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for LimitError {}
+
+/// Checks `table` against the board's limits: its size, then whether it
+/// loads into a [`BoardModel`] (built in `model`, which is left loaded
+/// when it fits; ≈ 14.5 KiB, so callers with a small stack pass a static).
+pub fn check_into(table: &Table<'_>, model: &mut BoardModel) -> Result<(), LimitError> {
+    let bytes = table.bytes().len();
+    if bytes > STAGE_BYTES {
+        return Err(LimitError::TooLarge {
+            bytes: bytes.min(u32::MAX as usize) as u32,
+            max: STAGE_BYTES as u32,
+        });
+    }
+    model.load_into(table).map_err(|e| match e {
+        LoadError::ParamCapacity { needed, capacity } => LimitError::Params {
+            needed,
+            max: capacity,
+        },
+        LoadError::GridCapacity { needed, capacity } => LimitError::Grid {
+            needed,
+            max: capacity,
+        },
+        e => LimitError::Load(e),
+    })
+}
+
+/// [`check_into`] with a model of its own (host: it is boxed).
+#[cfg(feature = "std")]
+pub fn check(table: &Table<'_>) -> Result<(), LimitError> {
+    let mut m = std::boxed::Box::new(BoardModel::empty());
+    check_into(table, &mut m)
+}
+
+#[cfg(all(test, feature = "std"))]
+mod tests {
+    use super::*;
+    use crate::spec::{GridAxisSpec, GridSpec, TableSpec, TermSpec};
+    use crate::{Envelope, InputScaling};
+
+    /// A valid table with one grid of `nx` × `ny` values.
+    fn grid_table(nx: u16, ny: u16) -> std::vec::Vec<u8> {
+        let t = 400_000_000;
+        let ax = |n: u16| GridAxisSpec {
+            nodes: n,
+            origin_nm: -t,
+            step_nm: 2 * t / (i32::from(n) - 1),
+        };
+        TableSpec {
+            created_unix_s: 0,
+            source_hash: [0; 32],
+            channels: std::vec::Vec::new(),
+            envelope: Envelope {
+                travel_min_nm: [-t; 3],
+                travel_max_nm: [t; 3],
+                max_corr_nm: [100_000; 3],
+                max_slew_nm_per_ms: 100,
+                ..Envelope::default()
+            },
+            scaling: InputScaling {
+                centre_nm: [0; 3],
+                half_span_nm: [t; 3],
+            },
+            outputs: [true, false, false],
+            terms: std::vec![TermSpec::Grid(GridSpec {
+                output: 0,
+                axes: [
+                    ax(nx),
+                    ax(ny),
+                    GridAxisSpec {
+                        nodes: 1,
+                        origin_nm: 0,
+                        step_nm: 1,
+                    },
+                ],
+                values_nm: (0..usize::from(nx) * usize::from(ny))
+                    .map(|i| (i % 97) as f64)
+                    .collect(),
+            })],
+        }
+        .encode()
+        .unwrap()
+    }
+
+    #[test]
+    fn limits_name_what_is_exceeded_and_by_how_much() {
+        // 32 × 32 = 1024 values: exactly the capacity.
+        let fits = grid_table(32, 32);
+        assert_eq!(check(&crate::parse(&fits).unwrap()), Ok(()));
+        // 40 × 40 = 1600 values, 12.8 KB: over the grid capacity by 576.
+        let big = grid_table(40, 40);
+        let e = check(&crate::parse(&big).unwrap()).unwrap_err();
+        assert_eq!(
+            e,
+            LimitError::Grid {
+                needed: 1600,
+                max: MODEL_GRID as u32
+            }
+        );
+        assert!(e.to_string().contains("576 over"), "{e}");
+        // 60 × 60 values, 28.8 KB: over the staging buffer first.
+        let huge = grid_table(60, 60);
+        let e = check(&crate::parse(&huge).unwrap()).unwrap_err();
+        let over = huge.len() - STAGE_BYTES;
+        assert_eq!(
+            e,
+            LimitError::TooLarge {
+                bytes: huge.len() as u32,
+                max: STAGE_BYTES as u32
+            }
+        );
+        assert!(
+            e.to_string().contains(&std::format!("{over} bytes over")),
+            "{e}"
+        );
+    }
+}
