@@ -717,6 +717,27 @@ const MAX_SCATTER: usize = 800;
 pub const DENSE_LINE_POINTS: usize = 25;
 /// Plots of dense lines at most.
 const MAX_LINE_PLOTS: usize = 6;
+/// Residual maps per plane orientation at most: a 50 mm grid of the seed's
+/// mill has 17 planes normal to x; five evenly spaced ones (both ends and
+/// the middle among them) show how the residual changes through the
+/// volume without burying the page in near-identical maps.
+pub const MAX_PLANES_PER_NORMAL: usize = 5;
+
+/// Indices of at most `max` of `n` items, evenly spaced, the first and the
+/// last included (all of them when `n <= max`).
+pub fn pick_evenly(n: usize, max: usize) -> Vec<usize> {
+    if n <= max {
+        return (0..n).collect();
+    }
+    if max <= 1 {
+        return vec![0; max.min(n)];
+    }
+    let mut v: Vec<usize> = (0..max)
+        .map(|i| ((i * (n - 1)) as f64 / (max - 1) as f64).round() as usize)
+        .collect();
+    v.dedup();
+    v
+}
 
 /// Writes the HTML report of a comparison to `dir` (index.html + SVGs) and
 /// returns the path of index.html.
@@ -845,51 +866,89 @@ pub fn build_report(
         rows,
     );
 
-    // Heat maps: residual on measured planes (first, middle and last plane
-    // of the first normal found), before vs after on the middle one.
+    // Heat maps: residual on every measured plane, in every orientation
+    // (at most MAX_PLANES_PER_NORMAL per orientation, evenly spaced, and the
+    // page says so when planes are left out); before vs after on the middle
+    // plane of the first orientation.
     let planes = planes(data);
-    if let Some(normal) = planes.first().map(|p| p.normal) {
-        let same: Vec<&Plane> = planes.iter().filter(|p| p.normal == normal).collect();
-        let mut pick = vec![0, same.len() / 2, same.len() - 1];
-        pick.dedup();
-        let others: Vec<usize> = (0..3).filter(|&a| a != normal).collect();
+    let mut normals: Vec<usize> = Vec::new();
+    for p in &planes {
+        if !normals.contains(&p.normal) {
+            normals.push(p.normal);
+        }
+    }
+    if let Some(&first_normal) = normals.first() {
+        let groups: Vec<(usize, Vec<&Plane>)> = normals
+            .iter()
+            .map(|&n| (n, planes.iter().filter(|p| p.normal == n).collect()))
+            .collect();
         page.heading("Residual maps on measured planes");
         page.paragraph("Mean residual per grid position (both directions and repeats averaged); grey cells were not measured. Red: the machine is further along the error's axis than the model says.");
-        for t in data.targets() {
-            let res = residuals(data, predicted, t);
-            for &i in &pick {
-                let plane = same[i];
-                let pts: Vec<(f64, f64, f64)> = plane
-                    .rows
-                    .iter()
-                    .filter_map(|&r| {
-                        res[r].map(|v| (data.pos(others[0], r), data.pos(others[1], r), v))
-                    })
-                    .collect();
-                let title = if data.axes().len() == 3 {
+        if data.axes().len() == 3 {
+            for (normal, same) in &groups {
+                let shown = pick_evenly(same.len(), MAX_PLANES_PER_NORMAL).len();
+                page.paragraph(if shown < same.len() {
                     format!(
-                        "{} residual at {} = {} mm",
-                        TARGETS[t],
-                        AXES[normal],
-                        plot_num(plane.at_mm)
+                        "Planes {} = const: {} measured, {shown} shown (at most {MAX_PLANES_PER_NORMAL} per orientation, evenly spaced, first and last included): {} mm.",
+                        AXES[*normal],
+                        same.len(),
+                        pick_evenly(same.len(), MAX_PLANES_PER_NORMAL)
+                            .iter()
+                            .map(|&i| plot_num(same[i].at_mm))
+                            .collect::<Vec<_>>()
+                            .join(", ")
                     )
                 } else {
-                    format!("{} residual", TARGETS[t])
-                };
-                let map = HeatMap::from_points(
-                    title,
-                    format!("{} (mm)", AXES[others[0]]),
-                    format!("{} (mm)", AXES[others[1]]),
-                    "µm",
-                    &pts,
-                    SNAP_MM,
-                );
-                page.figure(
-                    format!("map_{}_{}{}", TARGETS[t], AXES[normal], i),
-                    format!("Residual of {} on a measured plane.", TARGETS[t]),
-                    map.to_svg()?,
-                );
+                    format!(
+                        "Planes {} = const: {} measured, all shown.",
+                        AXES[*normal],
+                        same.len()
+                    )
+                });
             }
+        }
+        for t in data.targets() {
+            let res = residuals(data, predicted, t);
+            for (normal, same) in &groups {
+                let normal = *normal;
+                let others: Vec<usize> = (0..3).filter(|&a| a != normal).collect();
+                for i in pick_evenly(same.len(), MAX_PLANES_PER_NORMAL) {
+                    let plane = same[i];
+                    let pts: Vec<(f64, f64, f64)> = plane
+                        .rows
+                        .iter()
+                        .filter_map(|&r| {
+                            res[r].map(|v| (data.pos(others[0], r), data.pos(others[1], r), v))
+                        })
+                        .collect();
+                    let title = if data.axes().len() == 3 {
+                        format!(
+                            "{} residual at {} = {} mm",
+                            TARGETS[t],
+                            AXES[normal],
+                            plot_num(plane.at_mm)
+                        )
+                    } else {
+                        format!("{} residual", TARGETS[t])
+                    };
+                    let map = HeatMap::from_points(
+                        title,
+                        format!("{} (mm)", AXES[others[0]]),
+                        format!("{} (mm)", AXES[others[1]]),
+                        "µm",
+                        &pts,
+                        SNAP_MM,
+                    );
+                    page.figure(
+                        format!("map_{}_{}{}", TARGETS[t], AXES[normal], i),
+                        format!("Residual of {} on a measured plane.", TARGETS[t]),
+                        map.to_svg()?,
+                    );
+                }
+            }
+            let normal = first_normal;
+            let same = &groups[0].1;
+            let others: Vec<usize> = (0..3).filter(|&a| a != normal).collect();
             // Before vs after on the middle plane, one colour scale.
             let plane = same[same.len() / 2];
             let mk = |title: String, vals: &dyn Fn(usize) -> Option<f64>| {
@@ -1113,6 +1172,15 @@ pub fn build_report(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pick_evenly_keeps_both_ends() {
+        assert_eq!(pick_evenly(3, 5), vec![0, 1, 2]);
+        assert_eq!(pick_evenly(9, 5), vec![0, 2, 4, 6, 8]);
+        assert_eq!(pick_evenly(17, 5), vec![0, 4, 8, 12, 16]);
+        assert_eq!(pick_evenly(6, 5), vec![0, 1, 3, 4, 5]);
+        assert_eq!(pick_evenly(0, 5), Vec::<usize>::new());
+    }
 
     #[test]
     fn stats_match_hand_computation() {

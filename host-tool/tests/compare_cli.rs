@@ -271,6 +271,91 @@ fn report_opens_offline_with_every_figure() {
     assert!(!html.contains("<script src") && !html.contains("<link"));
 }
 
+/// Three planes, one per orientation (the plans of a user who measures
+/// line → plane → volume): each gets its residual maps, not just the
+/// planes facing the first orientation found.
+#[test]
+fn report_maps_every_plane_in_every_orientation() {
+    let dir = tmp_dir("compare", "planes");
+    let csv = dir.join("planes.csv");
+    json(&run(&[
+        "simulate",
+        "--plan",
+        "plane:xz:50,y=250",
+        "plane:xy:50,z=100",
+        "plane:yz:50,x=400",
+        "-o",
+        s(&csv),
+        "--json",
+    ]));
+    let model = dir.join("planes.model.json");
+    fit(&csv, &model);
+    let rep = dir.join("rep");
+    json(&run(&[
+        "compare",
+        s(&csv),
+        "--model",
+        s(&model),
+        "--report",
+        s(&rep),
+        "--json",
+    ]));
+    for t in ["ex", "ey", "ez"] {
+        for normal in ["x", "y", "z"] {
+            let maps: Vec<String> = std::fs::read_dir(&rep)
+                .unwrap()
+                .filter_map(|e| e.ok()?.file_name().into_string().ok())
+                .filter(|n| n.starts_with(&format!("map_{t}_{normal}")))
+                .collect();
+            assert_eq!(maps.len(), 1, "{t} normal {normal}: {maps:?}");
+        }
+    }
+    let html = std::fs::read_to_string(rep.join("index.html")).unwrap();
+    for at in ["x = 400 mm", "y = 250 mm", "z = 100 mm"] {
+        assert!(html.contains(&format!("residual at {at}")), "{at}");
+    }
+    assert!(!html.contains("shown (at most"), "nothing is left out here");
+}
+
+/// A 100 mm grid has 9 planes normal to x and 6 normal to y and z: five
+/// of each are mapped (both ends included) and the page says which.
+#[test]
+fn report_caps_planes_per_orientation_and_says_so() {
+    let dir = tmp_dir("compare", "cap");
+    let csv = simulate(&dir, "grid.csv", 7);
+    let model = dir.join("grid.model.json");
+    fit(&csv, &model);
+    let rep = dir.join("rep");
+    json(&run(&[
+        "compare",
+        s(&csv),
+        "--model",
+        s(&model),
+        "--report",
+        s(&rep),
+        "--json",
+    ]));
+    let count = |prefix: &str| {
+        std::fs::read_dir(&rep)
+            .unwrap()
+            .filter_map(|e| e.ok()?.file_name().into_string().ok())
+            .filter(|n| n.starts_with(prefix) && n.ends_with(".svg"))
+            .count()
+    };
+    for normal in ["x", "y", "z"] {
+        assert_eq!(count(&format!("map_ex_{normal}")), 5, "{normal}");
+    }
+    // The last plane of each orientation is among them.
+    assert!(rep.join("map_ex_x8.svg").is_file());
+    assert!(rep.join("map_ex_z5.svg").is_file());
+    let html = std::fs::read_to_string(rep.join("index.html")).unwrap();
+    assert!(
+        html.contains("Planes x = const: 9 measured, 5 shown (at most 5 per orientation, evenly spaced, first and last included): 0, 200, 400, 600, 800 mm."),
+        "the cap is said"
+    );
+    assert!(html.contains("Planes z = const: 6 measured, 5 shown"));
+}
+
 /// True when `text` holds no http(s) URL other than XML namespace names.
 fn no_network(text: &str) -> bool {
     let t = text
