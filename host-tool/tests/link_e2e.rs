@@ -165,6 +165,40 @@ fn upload_status_monitor_and_read_back_equal_model_core() {
     assert_eq!(samples[0]["active"]["crc32"], crc_hex(&table));
 }
 
+/// The serial-port path of the host's link (every other test here uses
+/// tcp://): the simulated board on the master side of a pseudo-terminal,
+/// `trueaxis upload/status --port /dev/pts/N` opening the other side as a
+/// serial port (115 200 8N1, exclusive, raw) like a USB CDC-ACM or UART
+/// device.
+#[cfg(unix)]
+#[test]
+fn upload_and_status_over_a_serial_port() {
+    use serialport::{SerialPort, TTYPort};
+    let (mut master, slave) = TTYPort::pair().expect("a pseudo-terminal pair");
+    let path = slave.name().expect("the pty has a name");
+    // Only the host tool holds the serial side: its exclusive lock is gone
+    // when it exits, and the next command can open the port again.
+    drop(slave);
+    master.set_timeout(Duration::from_millis(1)).unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let s = stop.clone();
+    let board = std::thread::spawn(move || SimBoard::new().serve_stream(master, s));
+
+    let table = sample_table(1);
+    let file = table_file("serial", &table);
+    let u = json_ok(&["upload", file.to_str().unwrap(), "--port", &path, "--json"]);
+    assert_eq!(u["port"], path.as_str());
+    assert_eq!(u["crc32"], crc_hex(&table));
+    assert_eq!(u["verified"], true);
+    let st = json_ok(&["status", "--port", &path, "--json"]);
+    assert_eq!(st["active"]["crc32"], crc_hex(&table));
+    assert_eq!(st["telemetry"]["rx_bad_frames"], 0);
+
+    stop.store(true, Ordering::Relaxed);
+    let b = board.join().unwrap();
+    assert_eq!(b.engine().active().map(|a| a.crc32), Some(table_id(&table)));
+}
+
 #[test]
 fn a_cut_upload_keeps_the_old_table_and_the_next_upload_resumes() {
     let board = Board::start();

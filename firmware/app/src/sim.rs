@@ -1,6 +1,6 @@
 //! The simulated board (feature `std`): the application core with fake
 //! encoders, thermistors, step outputs, clock and a RAM flash, served over
-//! TCP. The host tool's end-to-end tests run `trueaxis upload/status/
+//! TCP or any byte stream (a pseudo-terminal, for the serial-port path). The host tool's end-to-end tests run `trueaxis upload/status/
 //! monitor` against it (`--port tcp://127.0.0.1:PORT`), and the `sim-board`
 //! binary runs it by hand. Also the sample tables the tests upload.
 //!
@@ -277,8 +277,7 @@ impl SimBoard {
     /// is set, ticking in step with wall-clock time. Returns the board.
     pub fn serve(mut self, listener: TcpListener, stop: Arc<AtomicBool>) -> Self {
         let _ = listener.set_nonblocking(true);
-        let period = Duration::from_micros(self.engine.borrow().config().period_us as u64);
-        let mut last = Instant::now();
+        let mut clock = WallClock::new(&self);
         let mut conn: Option<(TcpStream, Port)> = None;
         let mut buf = [0u8; 1024];
         while !stop.load(Ordering::Relaxed) {
@@ -309,15 +308,57 @@ impl SimBoard {
             if drop_conn {
                 conn = None;
             }
-            // Simulated time follows the wall clock, at most 50 ticks per
-            // poll.
-            let due = (last.elapsed().as_micros() / period.as_micros().max(1)) as u64;
-            if due > 0 {
-                self.tick(due.min(50));
-                last += period * due as u32;
-            }
+            clock.catch_up(&mut self);
         }
         self
+    }
+
+    /// Serves one byte stream — the board end of a serial line, e.g. the
+    /// master side of a pseudo-terminal whose other side the host tool
+    /// opens as a serial port — until `stop` is set, ticking in step with
+    /// wall-clock time. Reads should time out after a millisecond or so.
+    /// A serial line has no connection to lose: end of file and read
+    /// errors (a pty's master reads EIO while no one has the other side
+    /// open) are waited out. Returns the board.
+    pub fn serve_stream<S: Read + Write>(mut self, mut io: S, stop: Arc<AtomicBool>) -> Self {
+        let mut clock = WallClock::new(&self);
+        let mut port = Port::new();
+        let mut buf = [0u8; 1024];
+        while !stop.load(Ordering::Relaxed) {
+            match io.read(&mut buf) {
+                Ok(n) if n > 0 => {
+                    let out = self.receive(&mut port, &buf[..n]);
+                    let _ = io.write_all(&out).and_then(|()| io.flush());
+                }
+                Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
+                _ => std::thread::sleep(Duration::from_millis(1)),
+            }
+            clock.catch_up(&mut self);
+        }
+        self
+    }
+}
+
+/// Simulated time following the wall clock, at most 50 ticks per poll.
+struct WallClock {
+    period: Duration,
+    last: Instant,
+}
+
+impl WallClock {
+    fn new(board: &SimBoard) -> Self {
+        Self {
+            period: Duration::from_micros(board.engine.borrow().config().period_us as u64),
+            last: Instant::now(),
+        }
+    }
+
+    fn catch_up(&mut self, board: &mut SimBoard) {
+        let due = (self.last.elapsed().as_micros() / self.period.as_micros().max(1)) as u64;
+        if due > 0 {
+            board.tick(due.min(50));
+            self.last += self.period * due as u32;
+        }
     }
 }
 
