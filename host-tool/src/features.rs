@@ -285,52 +285,20 @@ pub fn lagged(temp_c: &[f64], t_s: &[f64], session: Option<&[i64]>, tau_s: f64) 
     out
 }
 
-/// The seed's 19 monomials per error axis (SEEDS.md): 1, x, x², x³, y, y²,
-/// y³, z, z², z³, xy, xz, yz, xy², xz², yz², yx², zx², zy² — no xyz.
-pub const CUBIC19: [[u8; 3]; 19] = [
-    [0, 0, 0],
-    [1, 0, 0],
-    [2, 0, 0],
-    [3, 0, 0],
-    [0, 1, 0],
-    [0, 2, 0],
-    [0, 3, 0],
-    [0, 0, 1],
-    [0, 0, 2],
-    [0, 0, 3],
-    [1, 1, 0],
-    [1, 0, 1],
-    [0, 1, 1],
-    [1, 2, 0],
-    [1, 0, 2],
-    [0, 1, 2],
-    [2, 1, 0],
-    [2, 0, 1],
-    [0, 2, 1],
-];
-
-/// `kinematic` for target `t` (0 = ex): the own axis' cubic (1, a, a², a³)
-/// plus quadratic and cubic straightness along each other axis (b², b³) —
-/// no linear cross terms, so squareness is left for `diagnose` to find.
-pub fn kinematic(t: usize) -> Vec<[u8; 3]> {
-    let mut out = vec![[0, 0, 0]];
-    for axis in 0..3 {
-        let powers: &[u8] = if axis == t { &[1, 2, 3] } else { &[2, 3] };
-        for &p in powers {
-            let mut e = [0; 3];
-            e[axis] = p;
-            out.push(e);
-        }
-    }
-    out
-}
+// The seed sets are model-core's (`model_core::monomials`): the one list the
+// table format, its docs and the host share (STYLE: define each format
+// once). Their order is the order of the fit's columns and of MODEL.json's
+// coefficients; every MODEL.json names each coefficient by its exponents, so
+// files written with the order the host used to have (kinematic ey/ez: the
+// other axes first) read and export the same.
+pub use model_core::monomials::{kinematic, CUBIC19};
 
 /// Monomials of a seed spec for target `t`, restricted to the axes present
 /// (a monomial in an absent axis is constant and would duplicate `1`).
 pub fn seed_monomials(spec: &str, t: usize, axes: &[usize]) -> Result<Vec<[u8; 3]>> {
     let all: Vec<[u8; 3]> = match spec {
         "cubic19" => CUBIC19.to_vec(),
-        "kinematic" => kinematic(t),
+        "kinematic" => kinematic(t).to_vec(),
         other => bail!("unknown polynomial seed `{other}` (expected cubic19 or kinematic)"),
     };
     Ok(all
@@ -564,7 +532,7 @@ mod tests {
         for t in 0..3 {
             let k = kinematic(t);
             assert_eq!(k.len(), 8);
-            for e in &k {
+            for e in k {
                 let nonzero = e.iter().filter(|&&p| p > 0).count();
                 assert!(nonzero <= 1, "{e:?} is a cross term");
                 for a in 0..3 {
@@ -573,6 +541,21 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    #[test]
+    fn seeds_are_model_cores_lists_in_its_order() {
+        // The host fits, and export writes, exactly model-core's sets.
+        for t in 0..3 {
+            assert_eq!(
+                seed_monomials("kinematic", t, &[0, 1, 2]).unwrap(),
+                model_core::monomials::kinematic(t)
+            );
+            assert_eq!(
+                seed_monomials("cubic19", t, &[0, 1, 2]).unwrap(),
+                model_core::monomials::CUBIC19
+            );
         }
     }
 

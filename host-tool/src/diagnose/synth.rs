@@ -230,8 +230,8 @@ pub fn generate(cfg: &SynthConfig) -> Dataset {
     for (t, e) in err.iter_mut().enumerate() {
         // Base geometry inside the kinematic seed (so inside cubic19 too).
         let coef: Vec<(f64, [u8; 3])> = kinematic(t)
-            .into_iter()
-            .map(|m| (5.0 * rng.normal(), m))
+            .iter()
+            .map(|&m| (5.0 * rng.normal(), m))
             .collect();
         for (r, v) in e.iter_mut().enumerate() {
             *v = coef.iter().map(|(c, m)| c * mono(*m, u(r))).sum();
