@@ -1136,12 +1136,14 @@ pub enum TermView<'a> {
 
 impl<'a> TermView<'a> {
     /// Harmonic k (1-based) of a periodic term: (sin amplitude, cos amplitude) in nm.
+    /// (0, 0) for k = 0, for k beyond the term's harmonics and for other
+    /// kinds: a public accessor must not panic for any argument.
     pub fn harmonic(&self, k: usize) -> (f64, f64) {
         match self {
-            TermView::Periodic { body, .. } => (
-                rd_f64(body, 8 + 16 * (k - 1)),
-                rd_f64(body, 16 + 16 * (k - 1)),
-            ),
+            // k ≤ harmonics ≤ MAX_HARMONICS (validated), so the offsets are small.
+            TermView::Periodic {
+                body, harmonics, ..
+            } if (1..=*harmonics).contains(&k) => (rd_f64(body, 16 * k - 8), rd_f64(body, 16 * k)),
             _ => (0.0, 0.0),
         }
     }

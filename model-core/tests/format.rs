@@ -49,7 +49,9 @@ fn exercise(b: &[u8]) -> Result<(), TableError> {
                 let _ = (0..grid.len()).map(|i| grid.value(i)).sum::<f64>();
             }
             v => {
-                let _ = v.harmonic(1);
+                for k in [0, 1, 2, 3, 4, 5, usize::MAX] {
+                    let _ = v.harmonic(k);
+                }
             }
         }
     }
@@ -536,4 +538,37 @@ fn errors_display_something_useful() {
     g[100] ^= 1;
     assert!(matches!(parse(&g), Err(TableError::CrcMismatch { .. })));
     assert!(parse(&g).unwrap_err().to_string().contains("CRC32"));
+}
+
+#[test]
+fn harmonic_accessor_is_total() {
+    // `all_kinds` has a periodic term with 4 harmonics (sin 2000, 500, −250,
+    // 100; cos −700, 300, 120, −50), `full` one with 2.
+    for (name, want) in [
+        (
+            "all_kinds",
+            vec![
+                (2_000.0, -700.0),
+                (500.0, 300.0),
+                (-250.0, 120.0),
+                (100.0, -50.0),
+            ],
+        ),
+        ("full", vec![(3_000.0, 1_200.0), (-800.0, 400.0)]),
+    ] {
+        let g = golden(name);
+        let t = parse(&g).unwrap();
+        let v = t
+            .terms()
+            .map(|term| term.view())
+            .find(|v| matches!(v, model_core::table::TermView::Periodic { .. }))
+            .unwrap();
+        for (k, w) in want.iter().enumerate() {
+            assert_eq!(v.harmonic(k + 1), *w, "{name} harmonic {}", k + 1);
+        }
+        // Outside 1..=harmonics: zero, never a panic (k = 0 used to underflow).
+        for k in [0, want.len() + 1, 5, usize::MAX / 16, usize::MAX] {
+            assert_eq!(v.harmonic(k), (0.0, 0.0), "{name} harmonic {k}");
+        }
+    }
 }
