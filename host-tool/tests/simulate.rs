@@ -543,3 +543,105 @@ fn two_thermal_effects_share_one_sensor() {
     }
     assert!(*temp.last().unwrap() < 22.0, "the first effect's 2 K rise");
 }
+
+/// Every number `simulate` takes is checked before anything is written:
+/// not finite, or outside a physically sensible range → exit 1 with the
+/// option's name and the range, and no file (a NaN tool length used to
+/// write a file of NaN errors that `import` then refused; 1e300 mm wrote
+/// errors of 2e300 µm).
+#[test]
+fn every_numeric_option_is_validated() {
+    let out_csv = tmp("bad-number.csv");
+    let _ = std::fs::remove_file(&out_csv);
+    let o = out_csv.to_str().unwrap();
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["--tool-mm", "nan"],
+            "--tool-mm = NaN: expected a finite value",
+        ),
+        (&["--tool-mm", "1e300"], "--tool-mm = 1e300"),
+        (&["--tool-mm=-inf"], "--tool-mm = -inf"),
+        (&["--noise-um", "nan"], "--noise-um = NaN"),
+        (
+            &["--noise-um=-0.1"],
+            "--noise-um = -0.1: expected a finite value ≥ 0 µm",
+        ),
+        (
+            &["--noise-um", "1e9"],
+            "--noise-um = 1000000000.0: expected a finite value ≥ 0 µm and ≤ 100 µm",
+        ),
+        (
+            &["--feed-mm-s", "0"],
+            "--feed-mm-s = 0.0: expected a finite value > 0 mm/s",
+        ),
+        (&["--feed-mm-s", "inf"], "--feed-mm-s = inf"),
+        (&["--dwell-s", "nan"], "--dwell-s = NaN"),
+        (&["--dwell-s=-1"], "--dwell-s = -1.0"),
+        (
+            &["--effect", "periodic:axis=x,period_mm=5,amp_um=1e300"],
+            "effect `periodic`: amp_um = 1e300",
+        ),
+        (
+            &["--effect", "thermal:channel=bed,cte_um_per_m_k=1e9"],
+            "cte_um_per_m_k = 1000000000.0",
+        ),
+        (
+            &["--effect", "thermal:channel=bed,start_c=-300"],
+            "start_c = -300.0: expected a finite value ≥ -50 °C and ≤ 100 °C",
+        ),
+        (
+            &["--effect", "reversal:axis=x,backlash_um=5e6"],
+            "backlash_um = 5000000.0",
+        ),
+        (
+            &["--effect", "abbe:angle_urad=48.5,tools_mm=0/1e9"],
+            "tools_mm = 1000000000.0",
+        ),
+        (&["--effect", "drift:um_per_h=1e200"], "um_per_h = 1e200"),
+    ];
+    for (extra, needle) in cases {
+        let mut args = vec!["simulate", "--plan", "grid:100", "-o", o];
+        args.extend_from_slice(extra);
+        let out = run(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{extra:?}: {err}");
+        assert!(
+            err.contains(needle),
+            "{extra:?}: expected `{needle}` in {err}"
+        );
+        assert!(!out_csv.exists(), "{extra:?}: a file was written");
+    }
+    // A pause far beyond any measurement campaign.
+    let out = run(&["simulate", "--plan", "grid:100", "pause:1e300", "-o", o]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("plan `pause`: duration = 1e300"));
+    // From Rust too: check() refuses what the CLI refuses.
+    let mut cfg = SimConfig::preset("mill800").unwrap();
+    cfg.plans = vec!["grid:100".parse().unwrap()];
+    cfg.tool_mm = f64::NAN;
+    assert!(cfg
+        .check()
+        .unwrap_err()
+        .to_string()
+        .contains("--tool-mm = NaN"));
+    cfg.tool_mm = 100.0;
+    cfg.check().unwrap();
+    // The edges of the ranges are allowed.
+    let out = run(&[
+        "simulate",
+        "--plan",
+        "line:x:100",
+        "--tool-mm=-1000",
+        "--noise-um",
+        "0",
+        "-o",
+        o,
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let _ = std::fs::remove_file(&out_csv);
+}

@@ -6,7 +6,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use serde_json::json;
 
 use crate::cmd::out::outln;
@@ -73,12 +73,11 @@ impl Args {
             .iter()
             .map(|s| s.parse::<Effect>())
             .collect::<Result<_>>()?;
+        // Every number is range-checked by `cfg.check()` below, with the
+        // flag's name in the message.
         cfg.noise_um = self.noise_um;
         cfg.seed = self.seed;
         cfg.tool_mm = self.tool_mm;
-        if !(self.feed_mm_s > 0.0 && self.dwell_s >= 0.0) {
-            bail!("--feed-mm-s must be > 0 and --dwell-s ≥ 0");
-        }
         cfg.timing.feed_mm_s = self.feed_mm_s;
         cfg.timing.dwell_s = self.dwell_s;
         if let Some(r) = &self.reference {

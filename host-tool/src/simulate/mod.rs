@@ -143,6 +143,107 @@ impl Default for Timing {
     }
 }
 
+/// A sensible range for one simulation number: generous enough for any
+/// real machine and instrument (ARCHITECTURE.md's magnitudes sit well
+/// inside), tight enough that a typo (`1e300`, a NaN) is refused with its
+/// name instead of silently producing a file of absurd or NaN errors.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Limit {
+    /// Smallest value allowed.
+    pub min: f64,
+    /// Largest value allowed.
+    pub max: f64,
+    /// `min` itself is allowed (false: strictly greater, e.g. a step).
+    pub min_inclusive: bool,
+    /// Unit for the message.
+    pub unit: &'static str,
+}
+
+impl Limit {
+    const fn closed(min: f64, max: f64, unit: &'static str) -> Limit {
+        Limit {
+            min,
+            max,
+            min_inclusive: true,
+            unit,
+        }
+    }
+    const fn above(min: f64, max: f64, unit: &'static str) -> Limit {
+        Limit {
+            min,
+            max,
+            min_inclusive: false,
+            unit,
+        }
+    }
+    /// Noise σ of the instrument: a laser reads to nm, a dial gauge to µm.
+    pub const NOISE_UM: Limit = Limit::closed(0.0, 100.0, "µm");
+    /// Tool length / probe offset (and every Abbe tool length).
+    pub const TOOL_MM: Limit = Limit::closed(-1000.0, 1000.0, "mm");
+    /// Traverse feed: up to 120 m/min rapids.
+    pub const FEED_MM_S: Limit = Limit::above(0.0, 2000.0, "mm/s");
+    /// Time at each point.
+    pub const DWELL_S: Limit = Limit::closed(0.0, 3600.0, "s");
+    /// Raster spacing.
+    pub const STEP_MM: Limit = Limit::above(0.0, 10_000.0, "mm");
+    /// ISO 230-2 overrun (also < travel/2, checked with the plan).
+    pub const OVERRUN_MM: Limit = Limit::closed(0.0, 10_000.0, "mm");
+    /// A pause: up to ~4 months.
+    pub const DURATION_S: Limit = Limit::closed(0.0, 1e7, "s");
+    /// Lead or scale pitch (leads 2–40 mm; scales shorter).
+    pub const PERIOD_MM: Limit = Limit::above(0.0, 10_000.0, "mm");
+    /// Cyclic error amplitude (1–8 µm typical).
+    pub const AMP_UM: Limit = Limit::closed(-100.0, 100.0, "µm");
+    /// Harmonics of a cyclic error.
+    pub const HARMONICS: Limit = Limit::closed(1.0, 50.0, "");
+    /// A phase, degrees.
+    pub const PHASE_DEG: Limit = Limit::closed(-3600.0, 3600.0, "°");
+    /// Expansion coefficient (steel 11.5, aluminium 23, Invar ~1).
+    pub const CTE: Limit = Limit::closed(-100.0, 100.0, "µm/m/K");
+    /// Position-independent growth.
+    pub const OFFSET_UM_PER_K: Limit = Limit::closed(-100.0, 100.0, "µm/K");
+    /// A temperature of a machine shop.
+    pub const TEMP_C: Limit = Limit::closed(-50.0, 100.0, "°C");
+    /// A warm-up rise.
+    pub const RISE_C: Limit = Limit::closed(-50.0, 50.0, "K");
+    /// Time constants and lags.
+    pub const TIME_CONST_S: Limit = Limit::closed(0.0, 1e7, "s");
+    /// An air conditioner's swing.
+    pub const SWING_C: Limit = Limit::closed(-20.0, 20.0, "K");
+    /// Its period.
+    pub const SWING_PERIOD_S: Limit = Limit::above(0.0, 1e7, "s");
+    /// Backlash (5–50 µm on worn machines).
+    pub const BACKLASH_UM: Limit = Limit::closed(-1000.0, 1000.0, "µm");
+    /// A tilt (48.5 µrad typical; 10 mrad is a crash).
+    pub const ANGLE_URAD: Limit = Limit::closed(-10_000.0, 10_000.0, "µrad");
+    /// Drift rate.
+    pub const DRIFT_UM_PER_H: Limit = Limit::closed(-1000.0, 1000.0, "µm/h");
+
+    /// `Ok` when `v` is finite and inside; otherwise an error naming `what`.
+    pub fn check(&self, what: &str, v: f64) -> anyhow::Result<()> {
+        let low_ok = if self.min_inclusive {
+            v >= self.min
+        } else {
+            v > self.min
+        };
+        if v.is_finite() && low_ok && v <= self.max {
+            return Ok(());
+        }
+        let lo = if self.min_inclusive { "≥" } else { ">" };
+        let unit = if self.unit.is_empty() {
+            String::new()
+        } else {
+            format!(" {}", self.unit)
+        };
+        // `{:?}`: 1e300 prints as `1e300`, not as 301 digits.
+        anyhow::bail!(
+            "{what} = {v:?}: expected a finite value {lo} {}{unit} and ≤ {}{unit}",
+            self.min,
+            self.max
+        )
+    }
+}
+
 /// Everything `simulate` needs.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SimConfig {
@@ -180,15 +281,17 @@ impl SimConfig {
     }
 
     /// Checks what `simulate` cannot do anything sensible with: no plan,
-    /// non-positive steps, positions outside the travel, negative noise.
+    /// non-positive steps, positions outside the travel, and every number
+    /// (noise, tool length, timing, plan and effect parameters) that is not
+    /// finite or outside the physically sensible range of [`Limit`] — a
+    /// NaN tool length would otherwise give a file of NaN errors that
+    /// `import` refuses, and 1e300 mm a file of 2e300 µm errors.
     pub fn check(&self) -> anyhow::Result<()> {
         use anyhow::bail;
         if self.plans.is_empty() {
             bail!("no measurement plan (expected at least one --plan, e.g. grid:50)");
         }
-        if !(self.noise_um >= 0.0 && self.noise_um.is_finite()) {
-            bail!("noise {} µm: expected a finite value ≥ 0", self.noise_um);
-        }
+        self.check_numbers()?;
         let tr = self.machine.travel_mm;
         let inside = |p: &[Option<f64>; 3], what: &str| -> anyhow::Result<()> {
             for a in 0..3 {
@@ -265,9 +368,6 @@ impl SimConfig {
         if !(tr.iter().all(|t| t.is_finite() && *t > 0.0)) {
             bail!("machine travels {tr:?} mm: expected positive values");
         }
-        if !(self.timing.feed_mm_s > 0.0 && self.timing.dwell_s >= 0.0) {
-            bail!("timing: expected feed > 0 mm/s and dwell ≥ 0 s");
-        }
         // Rows the plans would generate: refuse sizes that would only
         // exhaust memory (a 1 mm grid of the preset is 2·10⁸ points).
         let mut rows = 0.0f64;
@@ -312,6 +412,90 @@ impl SimConfig {
             };
             if !ok {
                 bail!("effect `{e}`: expected tools_mm not empty, period_mm > 0, harmonics ≥ 1, tau_s and lag_s ≥ 0, swing_period_s > 0");
+            }
+        }
+        Ok(())
+    }
+
+    /// The numeric half of [`SimConfig::check`]: every number finite and
+    /// inside its [`Limit`], named the way the command line and the
+    /// spec strings name it.
+    fn check_numbers(&self) -> anyhow::Result<()> {
+        Limit::NOISE_UM.check("--noise-um", self.noise_um)?;
+        Limit::TOOL_MM.check("--tool-mm", self.tool_mm)?;
+        Limit::FEED_MM_S.check("--feed-mm-s", self.timing.feed_mm_s)?;
+        Limit::DWELL_S.check("--dwell-s", self.timing.dwell_s)?;
+        for p in &self.plans {
+            // The kind only: the full spec would repeat the bad number.
+            let kind = p.to_string();
+            let kind = kind.split(':').next().unwrap_or_default();
+            let what = |k: &str| format!("plan `{kind}`: {k}");
+            match p {
+                Plan::Raster { step_mm, .. } => Limit::STEP_MM.check(&what("step"), *step_mm)?,
+                Plan::Iso230 { overrun_mm, .. } => {
+                    Limit::OVERRUN_MM.check(&what("overrun_mm"), *overrun_mm)?
+                }
+                Plan::Pause { duration_s, .. } => {
+                    Limit::DURATION_S.check(&what("duration"), *duration_s)?
+                }
+                Plan::Point { .. } => {}
+            }
+        }
+        for e in &self.effects {
+            let family = e.to_string();
+            let family = family.split(':').next().unwrap_or_default();
+            let what = |k: &str| format!("effect `{family}`: {k}");
+            match e {
+                Effect::Periodic {
+                    period_mm,
+                    amp_um,
+                    harmonics,
+                    phase_deg,
+                    ..
+                } => {
+                    Limit::PERIOD_MM.check(&what("period_mm"), *period_mm)?;
+                    Limit::AMP_UM.check(&what("amp_um"), *amp_um)?;
+                    Limit::HARMONICS.check(&what("harmonics"), f64::from(*harmonics))?;
+                    Limit::PHASE_DEG.check(&what("phase_deg"), *phase_deg)?;
+                }
+                Effect::Thermal {
+                    cte_um_per_m_k,
+                    offset_um_per_k,
+                    t_ref_c,
+                    start_c,
+                    rise_c,
+                    tau_s,
+                    lag_s,
+                    swing_c,
+                    swing_period_s,
+                    ..
+                } => {
+                    Limit::CTE.check(&what("cte_um_per_m_k"), *cte_um_per_m_k)?;
+                    Limit::OFFSET_UM_PER_K.check(&what("offset_um_per_k"), *offset_um_per_k)?;
+                    Limit::TEMP_C.check(&what("t_ref_c"), *t_ref_c)?;
+                    Limit::TEMP_C.check(&what("start_c"), *start_c)?;
+                    Limit::RISE_C.check(&what("rise_c"), *rise_c)?;
+                    Limit::TIME_CONST_S.check(&what("tau_s"), *tau_s)?;
+                    Limit::TIME_CONST_S.check(&what("lag_s"), *lag_s)?;
+                    Limit::SWING_C.check(&what("swing_c"), *swing_c)?;
+                    Limit::SWING_PERIOD_S.check(&what("swing_period_s"), *swing_period_s)?;
+                }
+                Effect::Reversal { backlash_um, .. } => {
+                    Limit::BACKLASH_UM.check(&what("backlash_um"), *backlash_um)?
+                }
+                Effect::Abbe {
+                    angle_urad,
+                    tools_mm,
+                    ..
+                } => {
+                    Limit::ANGLE_URAD.check(&what("angle_urad"), *angle_urad)?;
+                    for t in tools_mm {
+                        Limit::TOOL_MM.check(&what("tools_mm"), *t)?;
+                    }
+                }
+                Effect::Drift { um_per_h, .. } => {
+                    Limit::DRIFT_UM_PER_H.check(&what("um_per_h"), *um_per_h)?
+                }
             }
         }
         Ok(())
