@@ -1108,8 +1108,10 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         self.outputs
     }
 
-    /// The transition length of the first reversal term on `axis`, for the
+    /// The transition length of the reversal terms on `axis`, for the
     /// firmware's [`DirTracker`] (None if no reversal term uses that axis).
+    /// All of them have this length: `parse` refuses a table where two
+    /// differ (`TableError::ReversalTransitionMismatch`).
     pub fn reversal_transition_nm(&self, axis: usize) -> Option<i32> {
         self.terms.iter().find_map(|t| match *t {
             Term::Reversal {

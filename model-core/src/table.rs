@@ -102,6 +102,8 @@ pub enum TableError {
     NotFinite { offset: u32 },
     /// Bytes left over between the last term and the CRC trailer.
     TrailingBytes { offset: u32 },
+    /// A reversal term's transition length differs from an earlier reversal term's on the same axis.
+    ReversalTransitionMismatch { offset: u32 },
 }
 
 impl fmt::Display for TableError {
@@ -162,6 +164,12 @@ impl fmt::Display for TableError {
             Self::NotFinite { offset } => write!(f, "non-finite number at offset {offset}"),
             Self::TrailingBytes { offset } => {
                 write!(f, "unexpected bytes after the last term at offset {offset}")
+            }
+            Self::ReversalTransitionMismatch { offset } => {
+                write!(
+                    f,
+                    "reversal transition at offset {offset} differs from an earlier reversal term's on the same axis"
+                )
             }
         }
     }
@@ -520,6 +528,17 @@ fn validate_structure(b: &[u8]) -> Result<(), TableError> {
     // Terms.
     let count = rd_u16(b, l::TERM_COUNT);
     let mut off = l::TERMS;
+    // Reversal terms of one axis must share one transition length. The
+    // evaluator reads one reversal state per axis (`Inputs::rev_q30`), which
+    // the firmware's single `DirTracker` per axis produces with one
+    // transition length (`Model::reversal_transition_nm`); a second term
+    // with another length would run on the first one's ramp, its own length
+    // silently ignored. Refusing the table is the safe choice: one state per
+    // axis is what the inputs, the link and the firmware carry, trackers
+    // per term would change all three for a table no exporter writes (the
+    // host exports one length for every reversal term). 0 = no term yet
+    // (a valid length is > 0).
+    let mut transition_nm = [0i32; 3];
     for _ in 0..count {
         let hdr_end = off + TERM_HEADER_LEN;
         if hdr_end > b.len() {
@@ -531,6 +550,18 @@ fn validate_structure(b: &[u8]) -> Result<(), TableError> {
             _ => return Err(TableError::TermTruncated { offset: off as u32 }),
         };
         validate_term(b, off, end, outputs, nch)?;
+        if rd_u8(b, off) == TermKind::Reversal as u8 {
+            // Validated: the axis is < 3, the length > 0.
+            let axis = rd_u8(b, off + 2) as usize % 3;
+            let t = rd_i32(b, off + TERM_HEADER_LEN);
+            if transition_nm[axis] == 0 {
+                transition_nm[axis] = t;
+            } else if transition_nm[axis] != t {
+                return Err(TableError::ReversalTransitionMismatch {
+                    offset: (off + TERM_HEADER_LEN) as u32,
+                });
+            }
+        }
         off = end;
     }
     if off != b.len() {

@@ -572,3 +572,55 @@ fn harmonic_accessor_is_total() {
         }
     }
 }
+
+#[test]
+fn reversal_terms_of_one_axis_share_one_transition() {
+    use model_core::{EncodeError, Model, TermSpec};
+    let mut spec = golden_specs()
+        .into_iter()
+        .find(|(n, _)| *n == "full")
+        .unwrap()
+        .1;
+    // `full` has a reversal on x (ex, 20 µm). Another one on x for ey with
+    // the same length is fine, and so is one with another length on y.
+    let rev = |output, axis, transition_nm| TermSpec::Reversal {
+        output,
+        axis,
+        transition_nm,
+        amplitude_nm: 1_500.0,
+    };
+    spec.terms.push(rev(1, 0, 20_000));
+    spec.terms.push(rev(2, 1, 50_000));
+    let bytes = spec.encode().unwrap();
+    let m = Model::load(&parse(&bytes).unwrap()).unwrap();
+    assert_eq!(m.reversal_transition_nm(0), Some(20_000));
+    assert_eq!(m.reversal_transition_nm(1), Some(50_000));
+    assert_eq!(m.reversal_transition_nm(2), None);
+    // A second length on x would be run on the first one's ramp: refused.
+    spec.terms.push(rev(2, 0, 50_000));
+    let e = spec.encode().unwrap_err();
+    assert!(
+        matches!(
+            e,
+            EncodeError::Invalid(TableError::ReversalTransitionMismatch { .. })
+        ),
+        "{e:?}"
+    );
+    // The same bytes sealed by hand (not through encode) are refused by parse
+    // at the offending field.
+    let mut ok = spec.clone();
+    ok.terms.pop();
+    ok.terms.push(rev(2, 0, 20_000));
+    let mut b = ok.encode().unwrap();
+    let last = parse(&b).unwrap().terms().last().unwrap().offset;
+    let field = last + model_core::table::TERM_HEADER_LEN;
+    set_i32(&mut b, field, 50_000);
+    reseal(&mut b);
+    assert_eq!(
+        parse(&b).unwrap_err(),
+        TableError::ReversalTransitionMismatch {
+            offset: field as u32
+        }
+    );
+    assert!(parse(&b).unwrap_err().to_string().contains("transition"));
+}

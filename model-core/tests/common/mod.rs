@@ -159,12 +159,31 @@ pub fn add_kind(rng: &mut Rng, spec: &mut TableSpec, kind: Kind) {
                 coefs_nm_per_k: poly(rng, set, 2_500.0),
             });
         }
-        Kind::Reversal => spec.terms.push(TermSpec::Reversal {
-            output: rng.int(0, 2) as u8,
-            axis: rng.int(0, 2) as u8,
-            transition_nm: rng.range(5e3, 100e3) as i32,
-            amplitude_nm: rng.sym(25_000.0),
-        }),
+        Kind::Reversal => {
+            let output = rng.int(0, 2) as u8;
+            let axis = rng.int(0, 2) as u8;
+            let mut transition_nm = rng.range(5e3, 100e3) as i32;
+            // One transition length per axis (the table format requires it);
+            // the draw above is kept so the generated streams stay the same.
+            for t in &spec.terms {
+                if let TermSpec::Reversal {
+                    axis: a,
+                    transition_nm: earlier,
+                    ..
+                } = t
+                {
+                    if *a == axis {
+                        transition_nm = *earlier;
+                    }
+                }
+            }
+            spec.terms.push(TermSpec::Reversal {
+                output,
+                axis,
+                transition_nm,
+                amplitude_nm: rng.sym(25_000.0),
+            })
+        }
         Kind::Abbe => spec.terms.push(TermSpec::Abbe {
             output: rng.int(0, 2) as u8,
             coefs: poly(rng, &[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], 5e-5),
