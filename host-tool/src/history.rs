@@ -5,8 +5,9 @@
 //! added (issue 4, "watch the error fall").
 //!
 //! A step continues the history when it refits the same data with the same
-//! seed and keeps every effect of the last step (the diagnose → add → refit
-//! loop); refitting the same spec replaces the last step (so running a
+//! seed and keeps every effect of the last step, or the same effect with a
+//! new nonlinear parameter (a lag, period, order or degree searched again —
+//! `diagnose`'s `replaces`) (the diagnose → add → refit loop); refitting the same spec replaces the last step (so running a
 //! command twice does not add a step); anything else — other data, another
 //! seed, effects taken away — starts a new history.
 
@@ -107,7 +108,11 @@ pub fn record_step(model_path: &Path, mut step: Step) -> Result<History> {
     let continues = h.steps.last().is_some_and(|last| {
         last.seed == step.seed
             && last.data_sha256 == step.data_sha256
-            && last.adds.iter().all(|a| step.adds.contains(a))
+            && last.adds.iter().all(|a| {
+                step.adds
+                    .iter()
+                    .any(|b| a == b || crate::diagnose::same_effect(a, b))
+            })
     });
     if !continues {
         h.steps.clear();
@@ -246,6 +251,20 @@ mod tests {
         assert_eq!(back.steps[1].adds, h.steps[1].adds);
         let t = table(&h);
         assert!(t.contains("+ periodic:target=ex"), "{t}");
+        // The same effect with its parameter searched again (diagnose's
+        // `replaces`) continues the history; taking an effect away does not.
+        let h = record_step(
+            &m,
+            step(&["periodic:target=ex,axis=x,period_mm=5.08"], 0.5, "a"),
+        )
+        .unwrap();
+        assert_eq!(h.steps.len(), 3);
+        let h = record_step(
+            &m,
+            step(&["periodic:target=ex,axis=y,period_mm=5.08"], 0.5, "a"),
+        )
+        .unwrap();
+        assert_eq!(h.steps.len(), 1);
         // Other data starts again.
         let h = record_step(&m, step(&[], 4.0, "b")).unwrap();
         assert_eq!(h.steps.len(), 1);

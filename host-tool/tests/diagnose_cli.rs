@@ -165,9 +165,17 @@ fn improve_runs_to_the_noise_floor_and_keeps_the_history() {
     assert_eq!(code, 0, "{err}");
     let v: Value = serde_json::from_str(&out).unwrap();
     assert_eq!(v["verdict"], "at_noise_floor", "{v}");
+    // The two effects are on different targets (fitted independently), so
+    // one step adds the best of each: seed, then both.
     let steps = v["steps"].as_array().unwrap();
-    assert_eq!(steps.len(), 3, "{v}");
-    let added: Vec<&str> = steps.iter().filter_map(|s| s["added"].as_str()).collect();
+    assert_eq!(steps.len(), 2, "{v}");
+    let added: Vec<&str> = steps[1]["added_effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a["add"].as_str().unwrap())
+        .collect();
+    assert_eq!(added.len(), 2, "{added:?}");
     assert!(
         added
             .iter()
@@ -180,14 +188,28 @@ fn improve_runs_to_the_noise_floor_and_keeps_the_history() {
             .any(|a| a.starts_with("reversal:target=ex,axis=x")),
         "{added:?}"
     );
-    let last = &steps[2];
+    let last = &steps[1];
     for t in ["ex", "ey", "ez"] {
         assert!(last["rms_um"][t].as_f64().unwrap() <= 1.3 * 0.3, "{last}");
+    }
+    // No effect is in the model twice (the same family, target, axis,
+    // channel and times — a re-found lag or period replaces the old one).
+    let m: Value = serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    let adds: Vec<&str> = m["adds"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a.as_str().unwrap())
+        .collect();
+    for (i, a) in adds.iter().enumerate() {
+        for b in &adds[i + 1..] {
+            assert!(!trueaxis::diagnose::same_effect(a, b), "{adds:?}");
+        }
     }
     let (code, out, _) = trueaxis(&["history", model.to_str().unwrap()]);
     assert_eq!(code, 0);
     assert!(
-        out.contains("3 step(s)") && out.contains("+ reversal:target=ex,axis=x"),
+        out.contains("2 step(s)") && out.contains("reversal:target=ex,axis=x"),
         "{out}"
     );
     std::fs::remove_dir_all(&dir).unwrap();

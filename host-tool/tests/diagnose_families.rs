@@ -273,3 +273,43 @@ fn residual_above_the_noise_is_said_even_without_a_candidate() {
         d.warnings
     );
 }
+
+/// An effect that is already in the model is never added a second time:
+/// with a thermal term of the wrong lag (3600 s; the truth is 600 s) in the
+/// model, the diagnosis proposes the same effect with its lag searched
+/// again, as a replacement (`replaces`), and the path swaps it in — one
+/// thermal term on ex, not two lags of one temperature.
+#[test]
+fn an_effect_already_in_the_model_is_replaced_not_added_twice() {
+    let data = generate(&SynthConfig {
+        seed: 7,
+        noise_um: NOISE_UM,
+        hidden: vec![Hidden::Thermal],
+        ..SynthConfig::default()
+    });
+    let old = "thermal:target=ex,channel=bed,times=x,offset=1,lag_s=3600";
+    let mut opts = Options::seed("cubic19");
+    opts.adds = vec![old.to_string()];
+    let d = diagnose(&data, &opts).unwrap();
+    let top = &d.candidates[0];
+    assert!(top.significant, "{}", top.evidence);
+    assert_eq!(top.replaces.as_deref(), Some(old), "{}", top.add);
+    assert!(
+        top.add
+            .starts_with("thermal:target=ex,channel=bed,times=x,offset=1,lag_s="),
+        "{}",
+        top.add
+    );
+    let ex: Vec<_> = d.path.iter().filter(|s| s.target == "ex").collect();
+    assert_eq!(ex.len(), 1, "{ex:?}");
+    assert_eq!(ex[0].replaces.as_deref(), Some(old));
+    let lag: f64 = ex[0].add.split("lag_s=").nth(1).unwrap().parse().unwrap();
+    assert!((lag - 600.0).abs() <= 100.0, "lag {lag}");
+    assert!(ex[0].rms_um <= 1.3 * NOISE_UM, "{}", ex[0].rms_um);
+    // No candidate proposes a second thermal × x on the bed sensor for ex.
+    assert!(d
+        .candidates
+        .iter()
+        .all(|c| c.replaces.is_some()
+            || !c.add.starts_with("thermal:target=ex,channel=bed,times=x,")));
+}

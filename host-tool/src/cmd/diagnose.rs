@@ -145,7 +145,10 @@ pub fn text(d: &Diagnosis, data_path: &Path) -> String {
             "  {}. {}{}\n     {}\n",
             i + 1,
             if c.significant { "[significant] " } else { "" },
-            c.add,
+            match &c.replaces {
+                Some(old) => format!("{} (replacing {old})", c.add),
+                None => c.add.clone(),
+            },
             c.evidence
         ));
     }
@@ -187,12 +190,18 @@ pub fn text(d: &Diagnosis, data_path: &Path) -> String {
             data_path.display(),
             d.model.split(" + ").next().unwrap_or("cubic19")
         );
-        for a in d
-            .model
-            .split(" + ")
-            .skip(1)
-            .chain(std::iter::once(b.add.as_str()))
-        {
+        // A candidate that replaces an effect of the model (the same effect
+        // with another lag, period, order or degree) takes its place.
+        let mut adds: Vec<&str> = d.model.split(" + ").skip(1).collect();
+        match b.replaces.as_deref() {
+            Some(old) if adds.contains(&old) => {
+                for a in adds.iter_mut().filter(|a| **a == old) {
+                    *a = b.add.as_str();
+                }
+            }
+            _ => adds.push(b.add.as_str()),
+        }
+        for a in adds {
             cmd.push_str(&format!(" --add '{a}'"));
         }
         s.push_str(&format!("next: {cmd}\n"));

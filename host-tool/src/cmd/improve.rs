@@ -37,15 +37,33 @@ pub struct Args {
     pub json: bool,
 }
 
+/// One effect added (or swapped in) at a step.
+#[derive(Clone, Debug, Serialize)]
+pub struct AddedEffect {
+    /// Target.
+    pub target: String,
+    /// The `fit --add` string.
+    pub add: String,
+    /// The effect it replaced (the same effect with another lag, period,
+    /// order or degree), if any.
+    pub replaces: Option<String>,
+    /// Its evidence, as diagnose gave it.
+    pub evidence: String,
+}
+
 /// One step of the loop.
 #[derive(Clone, Debug, Serialize)]
 pub struct ImproveStep {
     /// 1-based.
     pub step: usize,
-    /// The effect added at this step (none for the seed).
+    /// The best effect added at this step (none for the seed).
     pub added: Option<String>,
     /// Its evidence, as diagnose gave it.
     pub evidence: Option<String>,
+    /// Every effect added at this step: the best significant candidate of
+    /// each target (targets are fitted independently, so one step can
+    /// serve all of them).
+    pub added_effects: Vec<AddedEffect>,
     /// In-sample RMS per target after the fit, µm.
     pub rms_um: BTreeMap<String, f64>,
     /// Block-held-out RMS per target after the fit, µm, with the
@@ -106,7 +124,7 @@ pub fn improve(
 ) -> Result<Improvement> {
     let mut adds: Vec<String> = Vec::new();
     let mut steps = Vec::new();
-    let mut added: Option<(String, String)> = None;
+    let mut added: Vec<AddedEffect> = Vec::new();
     loop {
         let effects = adds
             .iter()
@@ -135,8 +153,9 @@ pub fn improve(
             .collect();
         let step = ImproveStep {
             step: steps.len() + 1,
-            added: added.as_ref().map(|a| a.0.clone()),
-            evidence: added.as_ref().map(|a| a.1.clone()),
+            added: added.first().map(|a| a.add.clone()),
+            evidence: added.first().map(|a| a.evidence.clone()),
+            added_effects: std::mem::take(&mut added),
             rms_um: model.stats.rms_um.clone(),
             held_out_rms_um: d.held_out_rms_um.clone(),
             fit_held_out_rms_um: model.stats.held_out_rms_um.clone(),
@@ -146,19 +165,46 @@ pub fn improve(
         };
         on_step(&step);
         steps.push(step);
-        match d.best() {
-            Some(b) if steps.len() <= MAX_STEPS && !adds.contains(&b.add) => {
-                added = Some((b.add.clone(), b.evidence.clone()));
-                adds.push(b.add.clone());
+        // The best significant candidate of each target (candidates are
+        // sorted best first; without the path there is at most one per
+        // target), added — or swapped in for the same effect — together.
+        let mut seen = std::collections::BTreeSet::new();
+        if steps.len() <= MAX_STEPS {
+            for c in d.candidates.iter().filter(|c| c.significant) {
+                if !seen.insert(c.target.clone()) {
+                    continue;
+                }
+                let changed = match &c.replaces {
+                    Some(old) => match adds.iter_mut().find(|a| *a == old) {
+                        Some(a) => {
+                            a.clone_from(&c.add);
+                            true
+                        }
+                        None => false,
+                    },
+                    None if !adds.contains(&c.add) => {
+                        adds.push(c.add.clone());
+                        true
+                    }
+                    None => false,
+                };
+                if changed {
+                    added.push(AddedEffect {
+                        target: c.target.clone(),
+                        add: c.add.clone(),
+                        replaces: c.replaces.clone(),
+                        evidence: c.evidence.clone(),
+                    });
+                }
             }
-            _ => {
-                return Ok(Improvement {
-                    model: model.spec(),
-                    model_file: out.display().to_string(),
-                    steps,
-                    verdict: d.verdict,
-                })
-            }
+        }
+        if added.is_empty() {
+            return Ok(Improvement {
+                model: model.spec(),
+                model_file: out.display().to_string(),
+                steps,
+                verdict: d.verdict,
+            });
         }
     }
 }
@@ -201,22 +247,35 @@ pub fn demo_stage(
             .join(", ")
     };
     let r = improve(data, seed, model_path, |st| {
-        match (&st.added, &st.evidence) {
-            (Some(a), Some(e)) => {
-                let _ = writeln!(s, "   step {}: named and added `{a}`", st.step);
-                let _ = writeln!(s, "      because {e}");
-                let _ = writeln!(
-                    s,
-                    "      refit: RMS µm {}; held out {}",
-                    fmt(&st.rms_um),
-                    fmt(&st.held_out_rms_um)
-                );
-            }
-            _ => {
+        match st.added_effects.as_slice() {
+            [] => {
                 let _ = writeln!(
                     s,
                     "   step {}: {seed} alone: RMS µm {}; held out {}",
                     st.step,
+                    fmt(&st.rms_um),
+                    fmt(&st.held_out_rms_um)
+                );
+            }
+            added => {
+                for a in added {
+                    match &a.replaces {
+                        Some(old) => {
+                            let _ = writeln!(
+                                s,
+                                "   step {}: named `{}`, replacing `{old}`",
+                                st.step, a.add
+                            );
+                        }
+                        None => {
+                            let _ = writeln!(s, "   step {}: named and added `{}`", st.step, a.add);
+                        }
+                    }
+                    let _ = writeln!(s, "      because {}", a.evidence);
+                }
+                let _ = writeln!(
+                    s,
+                    "      refit: RMS µm {}; held out {}",
                     fmt(&st.rms_um),
                     fmt(&st.held_out_rms_um)
                 );

@@ -161,6 +161,11 @@ pub struct Candidate {
     pub physical: Option<Physical>,
     /// `add` strings of candidates it cannot be told from.
     pub confounded_with: Vec<String>,
+    /// The effect already in the model that this one replaces (the same
+    /// family, target, axis, channel and `times`, its nonlinear parameter
+    /// searched again without it); null for a new effect. ΔBIC and gain are
+    /// against the current model, so they say what the swap buys.
+    pub replaces: Option<String>,
 }
 
 /// One step of the BIC-ordered path.
@@ -176,6 +181,8 @@ pub struct PathStep {
     pub rms_um: f64,
     /// Block-held-out RMS after the step, µm.
     pub held_out_rms_um: f64,
+    /// The effect this step swapped out (same effect, new parameter), if any.
+    pub replaces: Option<String>,
 }
 
 /// Where the residual concentrates.
@@ -326,6 +333,81 @@ impl State {
     }
 }
 
+/// What makes two effects "the same effect" for the path: family, target,
+/// axis, channel and `times` — the nonlinear parameter (lag, order, degree)
+/// is what a re-search may change. Periodic effects on one axis are the
+/// same when their periods are within 10 % (a lead re-found more exactly);
+/// farther apart they are two effects (a screw lead and a scale pitch).
+#[derive(Clone, Debug, PartialEq)]
+struct EffectKey {
+    family: String,
+    target: String,
+    axis: Option<String>,
+    channel: Option<String>,
+    times: Option<String>,
+    period_mm: Option<f64>,
+}
+
+impl EffectKey {
+    /// The key of a `fit --add` string (None when it does not parse).
+    fn of(spec: &str) -> Option<EffectKey> {
+        let (family, rest) = spec.split_once(':')?;
+        let get = |key: &str| {
+            rest.split(',')
+                .filter_map(|kv| kv.split_once('='))
+                .find(|(k, _)| k.trim() == key)
+                .map(|(_, v)| v.trim().to_string())
+        };
+        Some(EffectKey {
+            family: family.to_string(),
+            target: get("target")?,
+            axis: get("axis"),
+            channel: get("channel"),
+            times: get("times"),
+            period_mm: get("period_mm").and_then(|v| v.parse().ok()),
+        })
+    }
+
+    /// Same effect, up to its nonlinear parameter.
+    fn matches(&self, o: &EffectKey) -> bool {
+        let period_ok = match (self.period_mm, o.period_mm) {
+            (Some(a), Some(b)) => (a / b - 1.0).abs() <= 0.1,
+            _ => true,
+        };
+        self.family == o.family
+            && self.target == o.target
+            && self.axis == o.axis
+            && self.channel == o.channel
+            && self.times == o.times
+            && period_ok
+    }
+
+    /// Whether a proposal of `family` along `axis` / following `channel` /
+    /// times `times` could match (checked before its parameter search).
+    fn admits(
+        &self,
+        family: &str,
+        axis: Option<&str>,
+        channel: Option<&str>,
+        times: Option<&str>,
+    ) -> bool {
+        self.family == family
+            && self.axis.as_deref() == axis
+            && self.channel.as_deref() == channel
+            && self.times.as_deref() == times
+    }
+}
+
+/// Whether two `fit --add` strings are the same effect up to its nonlinear
+/// parameter (family, target, axis, channel, `times`; periods within 10 %):
+/// the second replaces the first rather than adding to it.
+pub fn same_effect(a: &str, b: &str) -> bool {
+    match (EffectKey::of(a), EffectKey::of(b)) {
+        (Some(x), Some(y)) => x.matches(&y),
+        _ => false,
+    }
+}
+
 /// A candidate before scoring: its spec and what the search learned.
 #[derive(Clone, Debug)]
 struct Proposal {
@@ -394,11 +476,21 @@ const LAGS_S: [f64; 11] = [
     0.0, 120.0, 300.0, 600.0, 900.0, 1200.0, 1800.0, 2400.0, 3600.0, 5400.0, 7200.0,
 ];
 
-/// Builds the candidate library for one target at the current model.
-fn propose(td: &TargetData, st: &State, ev: &mut Evidence) -> Vec<Proposal> {
+/// Builds the candidate library for one target at the current model; with
+/// `only`, just the candidates that could be that effect (the re-search of
+/// an effect already in the model, against the model without it).
+fn propose(
+    td: &TargetData,
+    st: &State,
+    ev: &mut Evidence,
+    only: Option<&EffectKey>,
+) -> Vec<Proposal> {
     let data = td.data;
     let tn = TARGETS[td.t];
     let axes = data.axes();
+    let want = |family: &str, axis: Option<&str>, channel: Option<&str>, times: Option<&str>| {
+        only.is_none_or(|k| k.admits(family, axis, channel, times))
+    };
     let mut out = Vec::new();
     // Local index of each data row, for the periodogram's subset.
     let mut local = vec![usize::MAX; data.len()];
@@ -407,6 +499,9 @@ fn propose(td: &TargetData, st: &State, ev: &mut Evidence) -> Vec<Proposal> {
     }
     // periodic: Lomb–Scargle along each axis on the densest lines.
     for &a in &axes {
+        if !want("periodic", Some(AXES[a]), None, None) {
+            continue;
+        }
         let Some(dl) = dense_lines(data, a, &td.rows) else {
             continue;
         };
@@ -511,6 +606,9 @@ fn propose(td: &TargetData, st: &State, ev: &mut Evidence) -> Vec<Proposal> {
             .chain(axes.iter().map(|&a| Some(a)))
             .collect();
         for tm in times {
+            if !want("thermal", None, Some(ch.name.as_str()), tm.map(|a| AXES[a])) {
+                continue;
+            }
             let spec_at = |lag: f64| {
                 let mut s = format!("thermal:target={tn},channel={}", ch.name);
                 if let Some(a) = tm {
@@ -565,6 +663,9 @@ fn propose(td: &TargetData, st: &State, ev: &mut Evidence) -> Vec<Proposal> {
     }
     // reversal: each axis approached from both sides.
     for &a in &axes {
+        if !want("reversal", Some(AXES[a]), None, None) {
+            continue;
+        }
         let Some(d) = &data.dir[a] else { continue };
         let (mut up, mut down) = (0, 0);
         for &r in &td.rows {
@@ -604,6 +705,9 @@ fn propose(td: &TargetData, st: &State, ev: &mut Evidence) -> Vec<Proposal> {
         let lo = tool.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = tool.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         for tm in std::iter::once(None).chain(axes.iter().map(|&a| Some(a))) {
+            if !want("abbe", None, None, tm.map(|a| AXES[a])) {
+                continue;
+            }
             let mut spec = format!("abbe:target={tn}");
             if let Some(a) = tm {
                 spec.push_str(&format!(",times={}", AXES[a]));
@@ -627,7 +731,7 @@ fn propose(td: &TargetData, st: &State, ev: &mut Evidence) -> Vec<Proposal> {
         }
     }
     // drift: time, order by BIC.
-    if data.t_s.is_some() {
+    if data.t_s.is_some() && want("drift", None, None, None) {
         let spec_at = |o: u8| {
             if o == 1 {
                 format!("drift:target={tn}")
@@ -657,7 +761,7 @@ fn propose(td: &TargetData, st: &State, ev: &mut Evidence) -> Vec<Proposal> {
     }
     // squareness: linear cross terms.
     for &a in &axes {
-        if a == td.t {
+        if a == td.t || !want("squareness", Some(AXES[a]), None, None) {
             continue;
         }
         out.push(Proposal {
@@ -671,6 +775,9 @@ fn propose(td: &TargetData, st: &State, ev: &mut Evidence) -> Vec<Proposal> {
     }
     // higher_order: degree 4, or 5 when it buys ΔBIC < −10.
     for &a in &axes {
+        if !want("higher_order", Some(AXES[a]), None, None) {
+            continue;
+        }
         let spec_at = |d: u8| format!("higher_order:target={tn},axis={},degree={d}", AXES[a]);
         let d4 = fwl(td, st, &spec_at(4), 0).map_or(f64::INFINITY, |x| x.dbic);
         let d5 = fwl(td, st, &spec_at(5), 0).map_or(f64::INFINITY, |x| x.dbic);
@@ -784,19 +891,40 @@ struct Scored {
     beta: Vec<f64>,
 }
 
+/// A replacement's comparison: `st` passed to `score` is the model without
+/// the old effect; ΔBIC and gain are taken against the current model.
+struct Replacing<'a> {
+    current: &'a State,
+    old: String,
+    /// Columns of the old effect (its rank in the current model).
+    old_rank: usize,
+}
+
 fn score(
     td: &TargetData,
     st: &State,
     props: Vec<Proposal>,
     seed_name: &str,
     warnings: &mut Vec<Warning>,
+    repl: Option<&Replacing>,
 ) -> Vec<Scored> {
     let n = td.rows.len();
     let tn = TARGETS[td.t];
     let mut out = Vec::new();
     for p in props {
-        let Ok(ff) = fwl(td, st, &p.spec, p.searched) else {
+        let Ok(mut ff) = fwl(td, st, &p.spec, p.searched) else {
             continue;
+        };
+        // Against the current model: the swap keeps the parameter count
+        // (one lag for another), so only the change in columns is charged.
+        let ref_held = match repl {
+            Some(r) => {
+                let nf = n as f64;
+                ff.dbic = nf * (ff.fit.rss.max(1e-300) / r.current.rss.max(1e-300)).ln()
+                    + (ff.fit.rank as f64 - r.old_rank as f64) * nf.ln();
+                r.current.held_out_rms
+            }
+            None => st.held_out_rms,
         };
         let mut params = BTreeMap::new();
         if let Ok(e) = Effect::parse(&p.spec) {
@@ -837,8 +965,12 @@ fn score(
             significant: false,
             physical: None,
             confounded_with: Vec::new(),
+            replaces: repl.map(|r| r.old.clone()),
         };
         if ff.share < IN_SPAN_SHARE || ff.fit.rank == 0 {
+            if repl.is_some() {
+                continue;
+            }
             let cols = Effect::parse(&p.spec)
                 .map(|e| {
                     e.features
@@ -873,16 +1005,20 @@ fn score(
             continue;
         }
         let held = st.holdout.rms(&ff.cols);
-        let gain = held.map(|h| 1.0 - h / st.held_out_rms);
+        let gain = held.map(|h| 1.0 - h / ref_held);
         let dof = n.saturating_sub(st.basis.rank() + ff.fit.rank).max(1) as f64;
         let sigma2 = ff.fit.rss / dof;
         let phys = physical(td, &p, &ff, sigma2);
         let rms_after = (ff.fit.rss / n as f64).sqrt();
         let mut evidence = format!(
-            "{}; ΔBIC {:.0}; block-held-out RMS {:.3} → {} µm (gain {})",
+            "{}{}; ΔBIC {:.0}; block-held-out RMS {:.3} → {} µm (gain {})",
             p.note,
+            repl.map_or(String::new(), |r| format!(
+                "; replaces `{}` (the same effect, its parameter searched again without it)",
+                r.old
+            )),
             ff.dbic,
-            st.held_out_rms,
+            ref_held,
             held.map_or("?".into(), |h| format!("{h:.3}")),
             gain.map_or("?".into(), |g| format!("{:.0} %", 100.0 * g))
         );
@@ -954,8 +1090,62 @@ fn rank_target(
     warnings: &mut Vec<Warning>,
     ev: &mut Evidence,
 ) -> Vec<Scored> {
-    let props = propose(td, st, ev);
-    let mut sc = score(td, st, props, seed_name, warnings);
+    // Effects already in the model for this target: a candidate that is
+    // one of them again (the same family, axis, channel, times) is not a
+    // second effect — it replaces the old one, with its nonlinear parameter
+    // searched again against the model without it. (Adding it twice fits
+    // two lags of one temperature: a two-time-constant model of what is
+    // one effect, and the path never ends.)
+    let own: Vec<(String, EffectKey)> = st
+        .adds
+        .iter()
+        .filter_map(|a| {
+            let k = EffectKey::of(a)?;
+            (k.target == TARGETS[td.t]).then(|| (a.clone(), k))
+        })
+        .collect();
+    let props: Vec<Proposal> = propose(td, st, ev, None)
+        .into_iter()
+        .filter(|p| EffectKey::of(&p.spec).is_none_or(|k| !own.iter().any(|(_, o)| o.matches(&k))))
+        .collect();
+    let mut sc = score(td, st, props, seed_name, warnings, None);
+    for (old, key) in &own {
+        let searchable = match key.family.as_str() {
+            "periodic" | "drift" | "higher_order" => true,
+            "thermal" => td.data.t_s.is_some(),
+            _ => false,
+        };
+        let Ok(old_effect) = Effect::parse(old) else {
+            continue;
+        };
+        if !searchable {
+            continue;
+        }
+        let rest: Vec<String> = st.adds.iter().filter(|a| *a != old).cloned().collect();
+        let Ok(reduced) = State::new(td, seed_name, &rest) else {
+            continue;
+        };
+        let props: Vec<Proposal> = propose(td, &reduced, &mut Evidence::default(), Some(key))
+            .into_iter()
+            .filter(|p| {
+                EffectKey::of(&p.spec).is_some_and(|k| k.matches(key))
+                    && Effect::parse(&p.spec).is_ok_and(|e| e.features != old_effect.features)
+            })
+            .collect();
+        let repl = Replacing {
+            current: st,
+            old: old.clone(),
+            old_rank: old_effect.features.len(),
+        };
+        sc.extend(score(
+            td,
+            &reduced,
+            props,
+            seed_name,
+            &mut Vec::new(),
+            Some(&repl),
+        ));
+    }
     sc.sort_by(|a, b| {
         let ka = a.cand.delta_bic.unwrap_or(f64::INFINITY);
         let kb = b.cand.delta_bic.unwrap_or(f64::INFINITY);
@@ -1328,7 +1518,14 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
                 ev.components.push((t, best.cand.add.clone(), comp));
             }
             let mut adds = st.adds.clone();
-            adds.push(best.cand.add.clone());
+            match &best.cand.replaces {
+                Some(old) => {
+                    for a in adds.iter_mut().filter(|a| *a == old) {
+                        a.clone_from(&best.cand.add);
+                    }
+                }
+                None => adds.push(best.cand.add.clone()),
+            }
             let next = State::new(&td, &opts.seed, &adds)?;
             if next.held_out_rms.is_nan() || next.held_out_rms >= st.held_out_rms {
                 break;
@@ -1339,6 +1536,7 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
                 delta_bic: best.cand.delta_bic.unwrap_or(0.0),
                 rms_um: next.rms(),
                 held_out_rms_um: next.held_out_rms,
+                replaces: best.cand.replaces.clone(),
             });
             warnings.extend(plausibility_warning(&best.cand));
             if first {
@@ -1442,7 +1640,7 @@ pub fn library(data: &Dataset, opts: &Options) -> Result<Vec<TargetLibrary>> {
         };
         let st = State::new(&td, &opts.seed, &opts.adds)?;
         let mut groups = Vec::new();
-        for p in propose(&td, &st, &mut Evidence::default()) {
+        for p in propose(&td, &st, &mut Evidence::default(), None) {
             let Ok(ff) = fwl(&td, &st, &p.spec, p.searched) else {
                 continue;
             };
