@@ -18,6 +18,9 @@ use std::{env, fs, path::PathBuf};
 #[allow(dead_code)] // shared with the e2e runner, which uses other parts
 mod tables;
 
+#[path = "build/cost_tables.rs"]
+mod cost_tables;
+
 fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     let memory_x = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../memory.x");
@@ -63,9 +66,10 @@ fn main() {
 }
 
 /// The bench image's table list (`bench_tables.rs` in OUT_DIR): the three
-/// tables of build/tables.rs (CONTRACT §3 names) and two checked-in golden
+/// tables of build/tables.rs (CONTRACT §3 names), two checked-in golden
 /// tables of model-core (`grid_17x11`; `all_kinds`, every term kind in one
-/// table: the worst realistic case).
+/// table: the worst realistic case), and build/cost_tables.rs (one table
+/// per evaluation path, for the check of model-core's cost estimate).
 fn bench_list(out: &std::path::Path, contract: [&str; 3]) {
     let mut names: Vec<String> = contract.iter().map(|s| s.to_string()).collect();
     let golden = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../model-core/tests/golden");
@@ -73,6 +77,11 @@ fn bench_list(out: &std::path::Path, contract: [&str; 3]) {
         let src = golden.join(format!("{name}.bin"));
         println!("cargo:rerun-if-changed={}", src.display());
         fs::copy(&src, out.join(format!("{name}.bin"))).expect("copy a golden table");
+        names.push(name.into());
+    }
+    println!("cargo:rerun-if-changed=build/cost_tables.rs");
+    for (name, bytes) in cost_tables::all().unwrap_or_else(|e| panic!("cost tables: {e}")) {
+        fs::write(out.join(format!("{name}.bin")), bytes).expect("write a cost table");
         names.push(name.into());
     }
     let mut rs = String::from(

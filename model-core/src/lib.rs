@@ -9,12 +9,15 @@
 //! - [`monomials`]: the named polynomial sets (`cubic19`, `kinematic`).
 //! - [`board`]: the compensation board's limits (staging buffer, model
 //!   capacity) as constants the firmware uses and the host checks.
+//! - [`cost`]: a static estimate of a table's evaluation cost in
+//!   instructions, for the board's admission of a table at commit.
 //! - `spec` (feature `std`): [`TableSpec`] — the host's owned description,
 //!   `encode` and the f64 reference `eval_f64`.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![forbid(unsafe_code)]
 
 pub mod board;
+pub mod cost;
 pub mod eval;
 pub mod link;
 pub mod math;

@@ -143,6 +143,37 @@ fn check_budgets(results: &[BenchResult]) -> Result<()> {
     }
 }
 
+/// The cost estimate must bound every count and not by too much: for every
+/// bench, worst call ≤ estimate ≤ 1.5 × worst call. The firmware refuses
+/// tables by this estimate, so an estimate below a count would let a table
+/// too slow for the loop through, and one far above would refuse tables
+/// that fit.
+fn check_estimates(results: &[BenchResult]) -> Result<()> {
+    let mut misses = Vec::new();
+    for r in results {
+        match r.est {
+            None => misses.push(format!("{}: no estimate", r.name)),
+            Some(est) if est < r.max => misses.push(format!(
+                "{}: estimate {est} below the measured {} instructions",
+                r.name, r.max
+            )),
+            Some(est) if 2 * est > 3 * r.max => misses.push(format!(
+                "{}: estimate {est} above 1.5 × the measured {} instructions",
+                r.name, r.max
+            )),
+            Some(_) => {}
+        }
+    }
+    if misses.is_empty() {
+        Ok(())
+    } else {
+        Err(format!(
+            "model-core's cost estimate (model-core/src/cost.rs) is off:\n  {}",
+            misses.join("\n  ")
+        ))
+    }
+}
+
 /// The budget of a bench, if it has one.
 fn budget_of(name: &str) -> Option<u64> {
     BUDGETS.iter().find(|(n, _)| *n == name).map(|&(_, b)| b)
@@ -154,6 +185,15 @@ fn check_bench() -> Result<()> {
     print_bench_table(&results);
     check_budgets(&results)?;
     eprintln!("qemu: instruction budgets met ({} benches)", BUDGETS.len());
+    check_estimates(&results)?;
+    let worst = results
+        .iter()
+        .filter_map(|r| Some(r.est? as f64 / r.max as f64))
+        .fold(0.0f64, f64::max);
+    eprintln!(
+        "qemu: cost estimate within [1, 1.5] × the count for all {} benches (largest ratio {worst:.2})",
+        results.len()
+    );
     Ok(())
 }
 
@@ -179,8 +219,8 @@ pub fn bench_mcu(args: &[String]) -> Result<()> {
 /// The human summary of the bench figures, on stderr.
 fn print_bench_table(results: &[BenchResult]) {
     eprintln!(
-        "\n{:<24} {:>12} {:>12} {:>8} {:>10}",
-        "model", "instr/update", "min..max", "budget", "kHz@168MHz"
+        "\n{:<24} {:>12} {:>12} {:>8} {:>9} {:>10}",
+        "model", "instr/update", "min..max", "budget", "estimate", "kHz@168MHz"
     );
     for r in results {
         let budget = match budget_of(&r.name) {
@@ -189,11 +229,12 @@ fn print_bench_table(results: &[BenchResult]) {
             None => "-".into(),
         };
         eprintln!(
-            "{:<24} {:>12} {:>12} {:>8} {:>10.0}",
+            "{:<24} {:>12} {:>12} {:>8} {:>9} {:>10.0}",
             r.name,
             r.per_update,
             format!("{}..{}", r.min, r.max),
             budget,
+            r.est.map_or("-".into(), |e| e.to_string()),
             168_000.0 / r.per_update as f64
         );
     }
@@ -208,6 +249,8 @@ struct BenchResult {
     per_update: u64,
     min: u64,
     max: u64,
+    /// model-core's static estimate of the same evaluation (`est=`).
+    est: Option<u64>,
 }
 
 /// Reads the bench image's `BENCH <name> total=T calls=C min=A max=B` lines.
@@ -237,6 +280,7 @@ fn parse_bench_log(log: &str) -> Result<Vec<BenchResult>> {
             per_update: (total + calls / 2) / calls,
             min: field("min")?,
             max: field("max")?,
+            est: field("est").ok(),
         });
     }
     if out.is_empty() {
@@ -834,6 +878,7 @@ mod tests {
             per_update: max,
             min: max,
             max,
+            est: Some(max),
         };
         let all: Vec<BenchResult> = BUDGETS.iter().map(|&(n, b)| r(n, b)).collect();
         assert!(check_budgets(&all).is_ok(), "at the budget is within it");
@@ -843,6 +888,27 @@ mod tests {
         assert!(e.contains("full_f32") && e.contains("budget 500"), "{e}");
         let e = check_budgets(&all[1..]).unwrap_err();
         assert!(e.contains("cubic19_f32: not measured"), "{e}");
+    }
+
+    #[test]
+    fn estimates_must_bound_the_counts_within_half() {
+        let r = |max: u64, est: Option<u64>| BenchResult {
+            name: "t".into(),
+            per_update: max,
+            min: max,
+            max,
+            est,
+        };
+        assert!(check_estimates(&[r(100, Some(100)), r(100, Some(150))]).is_ok());
+        assert!(check_estimates(&[r(100, Some(99))])
+            .unwrap_err()
+            .contains("below"));
+        assert!(check_estimates(&[r(100, Some(151))])
+            .unwrap_err()
+            .contains("above"));
+        assert!(check_estimates(&[r(100, None)]).is_err());
+        let log = "INFO  BENCH a_f32 total=64 calls=64 min=1 max=1 est=2\n";
+        assert_eq!(parse_bench_log(log).unwrap()[0].est, Some(2));
     }
 
     #[test]

@@ -9,7 +9,9 @@
 //! `eval_f32` / `eval_fixed` on a loaded model (the firmware's
 //! `ModelCap` capacity), i.e. one 3-axis update of the model (all three outputs), from the
 //! call to the return. Not counted: reading sensors, the direction tracker,
-//! slew limiting and pulse output (the engine's share).
+//! slew limiting and pulse output (the engine's share). Each line also
+//! carries model-core's static cost estimate of the same evaluation
+//! (`est=`), which `cargo xtask test` checks against the count.
 #![no_std]
 #![no_main]
 
@@ -74,13 +76,15 @@ fn load(name: &str, bytes: &'static [u8], model: &mut Model) {
     }
 }
 
-/// Counts `eval` over the trajectory and logs one BENCH line.
+/// Counts `eval` over the trajectory and logs one BENCH line, with
+/// model-core's static estimate of the same evaluation (`est`).
 fn bench(
     counter: &InstructionCounter,
     name: &str,
     path: &str,
     model: &Model,
     eval: fn(&Model, &Inputs) -> Outputs,
+    est: u32,
 ) {
     let (mut total, mut min, mut max) = (0u64, u32::MAX, 0u32);
     for i in 0..CALLS {
@@ -92,13 +96,14 @@ fn bench(
         max = max.max(n);
     }
     defmt::info!(
-        "BENCH {=str}_{=str} total={=u64} calls={=u32} min={=u32} max={=u32}",
+        "BENCH {=str}_{=str} total={=u64} calls={=u32} min={=u32} max={=u32} est={=u32}",
         name,
         path,
         total,
         CALLS as u32,
         min,
-        max
+        max,
+        est
     );
 }
 
@@ -130,8 +135,19 @@ fn main() -> ! {
     for &(name, bytes) in BENCH_TABLES {
         load(name, bytes, model);
         sanity(name, model);
-        bench(&counter, name, "f32", model, Model::eval_f32);
-        bench(&counter, name, "fixed", model, Model::eval_fixed);
+        let est = match model_core::parse(bytes) {
+            Ok(t) => model_core::cost::estimate(&t),
+            Err(_) => defmt::panic!("bench table {=str} does not parse", name),
+        };
+        bench(&counter, name, "f32", model, Model::eval_f32, est.f32_instr);
+        bench(
+            &counter,
+            name,
+            "fixed",
+            model,
+            Model::eval_fixed,
+            est.fixed_instr,
+        );
     }
     trueaxis_qemu::exit(0)
 }
