@@ -1,7 +1,9 @@
 //! The evaluation guarantees, proptested over random models of realistic
 //! size (every term kind, mixtures of them) and the whole envelope:
 //! - f32 and fixed point within 1 nm of the f64 reference (`TableSpec::eval_f64`);
-//! - outside the travel the position is held at the edge and flagged;
+//! - outside the travel the position is held at the edge and flagged, and so
+//!   are temperatures and the tool arm outside their ranges when the table
+//!   reads them;
 //! - no panic, no NaN, no overflow for any i32 inputs; corrections never
 //!   exceed the envelope's max and are flagged when limited.
 #![allow(clippy::needless_range_loop)] // per-output index loops mirror [ex, ey, ez]
@@ -57,35 +59,38 @@ proptest! {
     fn held_at_edge_and_flagged_outside_travel(seed in any::<u64>(), kinds in kinds_strategy(), in_seed in any::<u64>()) {
         let spec = random_spec(seed, &kinds);
         let model = load(&spec);
-        let env = spec.envelope;
         let mut rng = Rng(in_seed);
+        // Temperatures and the tool arm are held and flagged only when the
+        // table reads them.
+        let reads_temp = spec.terms.iter().any(|t| match t {
+            model_core::TermSpec::Thermal { .. } => true,
+            model_core::TermSpec::Mlp(m) => m.inputs.iter().any(|i| matches!(i.source, model_core::MlpSource::Temp(_))),
+            _ => false,
+        });
+        let reads_tool = spec.terms.iter().any(|t| matches!(t, model_core::TermSpec::Abbe { .. }));
         for _ in 0..100 {
-            let inp = random_inputs(&mut rng, &spec, true);
-            let mut held = inp;
+            let inp = random_inputs_beyond(&mut rng, &spec);
+            let held = held_inputs(&spec, &inp);
             let mut expect = Flags::empty();
             for a in 0..3 {
-                let c = inp.pos_nm[a].clamp(env.travel_min_nm[a], env.travel_max_nm[a]);
-                if c != inp.pos_nm[a] {
+                if held.pos_nm[a] != inp.pos_nm[a] {
                     expect.insert(Flags::out_of_travel(a));
                 }
-                held.pos_nm[a] = c;
             }
-            // Temperatures are held and flagged only when the table reads them.
-            let reads_temp = spec.terms.iter().any(|t| match t {
-                model_core::TermSpec::Thermal { .. } => true,
-                model_core::TermSpec::Mlp(m) => m.inputs.iter().any(|i| matches!(i.source, model_core::MlpSource::Temp(_))),
-                _ => false,
-            });
-            for ch in 0..spec.channels.len() {
-                let c = inp.temp_mc[ch].clamp(env.temp_min_mc[ch], env.temp_max_mc[ch]);
-                if c != inp.temp_mc[ch] && reads_temp {
-                    expect.insert(Flags::TEMP_OUT_OF_RANGE);
-                }
-                held.temp_mc[ch] = c;
+            if reads_temp && held.temp_mc != inp.temp_mc {
+                expect.insert(Flags::TEMP_OUT_OF_RANGE);
             }
+            let tool_outside = held.tool_nm != inp.tool_nm;
+            if reads_tool && tool_outside {
+                expect.insert(Flags::TOOL_OUT_OF_RANGE);
+            }
+            let edge_flags = Flags::TEMP_OUT_OF_RANGE | Flags::TOOL_OUT_OF_RANGE
+                | Flags::out_of_travel(0) | Flags::out_of_travel(1) | Flags::out_of_travel(2);
             for (out, out_held) in [(model.eval_f32(&inp), model.eval_f32(&held)), (model.eval_fixed(&inp), model.eval_fixed(&held))] {
+                // Held at the edge: the same correction as at the edge itself.
                 prop_assert_eq!(out.corr_nm, out_held.corr_nm);
-                prop_assert!(out.flags.contains(expect), "{:?} lacks {:?}", out.flags, expect);
+                // Exactly the inputs that were held (and the table reads) are flagged.
+                prop_assert_eq!(Flags::from_bits(out.flags.bits() & edge_flags.bits()), expect, "{:?} for {:?}", out.flags, inp);
                 prop_assert!(out_held.flags.is_empty());
             }
         }
@@ -122,6 +127,65 @@ fn per_kind_sweep_within_1nm() {
             );
         }
     }
+}
+
+/// The tool arm (Abbe terms) beyond its range is held at the edge and flagged
+/// `TOOL_OUT_OF_RANGE`, in f32 and fixed point; a table without Abbe terms
+/// ignores the arm and never raises the flag.
+#[test]
+fn tool_arm_held_at_edge_and_flagged() {
+    let mut seen = 0;
+    for s in 0..8u64 {
+        let spec = random_spec(0x7001 + s, &[Kind::Cubic19, Kind::Abbe]);
+        let model = load(&spec);
+        let env = spec.envelope;
+        let inside = random_inputs(&mut Rng(s), &spec, false);
+        for (tool, edge) in [
+            (env.tool_min_nm - 1, env.tool_min_nm),
+            (env.tool_max_nm + 1, env.tool_max_nm),
+            (i32::MIN, env.tool_min_nm),
+            (i32::MAX, env.tool_max_nm),
+        ] {
+            let inp = Inputs {
+                tool_nm: tool,
+                ..inside
+            };
+            let at_edge = Inputs {
+                tool_nm: edge,
+                ..inside
+            };
+            for (out, want) in [
+                (model.eval_f32(&inp), model.eval_f32(&at_edge)),
+                (model.eval_fixed(&inp), model.eval_fixed(&at_edge)),
+            ] {
+                assert_eq!(out.corr_nm, want.corr_nm, "tool {tool} held at {edge}");
+                assert_eq!(out.flags, Flags::TOOL_OUT_OF_RANGE, "tool {tool}");
+                assert!(want.flags.is_empty());
+            }
+            // The arm matters: at the edge the correction differs from a
+            // mid-range arm's (else holding it would go untested).
+            let mid = Inputs {
+                tool_nm: (env.tool_min_nm + env.tool_max_nm) / 2,
+                ..inside
+            };
+            if model.eval_fixed(&mid).corr_nm != model.eval_fixed(&at_edge).corr_nm {
+                seen += 1;
+            }
+        }
+        // Without Abbe terms the arm is not read: no flag, no change.
+        let spec = random_spec(0x7001 + s, &[Kind::Cubic19]);
+        let model = load(&spec);
+        let far = Inputs {
+            tool_nm: i32::MIN,
+            ..inside
+        };
+        assert_eq!(model.eval_fixed(&far), model.eval_fixed(&inside));
+        assert_eq!(model.eval_f32(&far), model.eval_f32(&inside));
+    }
+    assert!(
+        seen >= 16,
+        "the arm changed the correction in only {seen} of 32 cases"
+    );
 }
 
 #[test]

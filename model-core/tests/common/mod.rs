@@ -299,6 +299,39 @@ pub fn random_inputs(rng: &mut Rng, spec: &TableSpec, outside: bool) -> Inputs {
     i
 }
 
+/// Like `random_inputs(rng, spec, true)`, and the tool arm too sometimes
+/// outside its range (just beyond an edge, or anywhere in i32). A separate
+/// function so the streams of `random_inputs` — and the golden replay
+/// vectors drawn from it — stay as they are.
+pub fn random_inputs_beyond(rng: &mut Rng, spec: &TableSpec) -> Inputs {
+    let mut i = random_inputs(rng, spec, true);
+    let env = &spec.envelope;
+    let (lo, hi) = (env.tool_min_nm as i64, env.tool_max_nm as i64);
+    i.tool_nm = match rng.int(0, 9) {
+        0 => rng.int(i32::MIN as i64, i32::MAX as i64) as i32,
+        1 => (lo - rng.int(1, 50_000_000)).max(i32::MIN as i64) as i32,
+        2 => (hi + rng.int(1, 50_000_000)).min(i32::MAX as i64) as i32,
+        _ => i.tool_nm,
+    };
+    i
+}
+
+/// The inputs held at the envelope's edges, as the evaluator holds them:
+/// positions to the travel, temperatures to their channel's range, the tool
+/// arm to its range (the flags say which were held).
+pub fn held_inputs(spec: &TableSpec, inp: &Inputs) -> Inputs {
+    let env = &spec.envelope;
+    let mut held = *inp;
+    for a in 0..3 {
+        held.pos_nm[a] = inp.pos_nm[a].clamp(env.travel_min_nm[a], env.travel_max_nm[a]);
+    }
+    for ch in 0..spec.channels.len() {
+        held.temp_mc[ch] = inp.temp_mc[ch].clamp(env.temp_min_mc[ch], env.temp_max_mc[ch]);
+    }
+    held.tool_nm = inp.tool_nm.clamp(env.tool_min_nm, env.tool_max_nm);
+    held
+}
+
 /// The 800 × 500 × 500 mm vertical mill of the seed (X ±400, Y ±250, Z ±250 mm).
 pub fn mill_spec(n_channels: usize) -> TableSpec {
     let mut env = Envelope::default();
