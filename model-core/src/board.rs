@@ -29,6 +29,43 @@ pub const MODEL_GRID: usize = 1024;
 /// [`ModelCap`]'s.
 pub type BoardModel = ModelCap<MODEL_PARAMS, MODEL_GRID>;
 
+/// Core clock of the board's STM32F405, Hz.
+pub const CPU_HZ: u32 = 168_000_000;
+
+/// Rate of the board's correction loop, Hz.
+pub const LOOP_HZ: u32 = 20_000;
+
+/// One loop period in core clock cycles (8 400): the most instructions a
+/// tick could take at one instruction per cycle.
+pub const PERIOD_INSTR: u32 = CPU_HZ / LOOP_HZ;
+
+/// Share of the period a tick may not use, percent: kept for what the
+/// instruction counts of QEMU do not see — interrupt entry and exit, the
+/// executor, the link tasks holding the engine's lock for a request, and
+/// cycles beyond one per instruction (flash wait states the ART
+/// accelerator misses, loads, divisions). The 20 % is a judgement, not a
+/// measurement: on hardware `worst_tick_us` in `trueaxis status` is the
+/// measured answer.
+pub const TICK_MARGIN_PERCENT: u32 = 20;
+
+/// The instructions one tick may take (6 720): [`PERIOD_INSTR`] less the
+/// margin. `cargo xtask test` fails when a table the board accepts ticks
+/// longer than this under QEMU (firmware/tickbench).
+pub const TICK_BUDGET_INSTR: u32 = PERIOD_INSTR / 100 * (100 - TICK_MARGIN_PERCENT);
+
+/// The engine's own share of a tick, instructions, at most: sensors,
+/// direction tracking, slew limit, pulses and the call of the model.
+/// Measured by firmware/tickbench: 1 060 without a table, 1 050–1 350 as
+/// a whole tick less the bench count of the table's evaluation; `cargo
+/// xtask test` checks that every measured tick is at most this plus the
+/// table's estimate.
+pub const ENGINE_TICK_INSTR: u32 = 1_400;
+
+/// The most instructions a table's fixed-point evaluation may be
+/// estimated to take ([`crate::cost::estimate`]) for the board to accept
+/// it (5 320): what the tick budget leaves after the engine's share.
+pub const MODEL_BUDGET_INSTR: u32 = TICK_BUDGET_INSTR - ENGINE_TICK_INSTR;
+
 /// A limit of the board a table exceeds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

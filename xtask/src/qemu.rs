@@ -85,6 +85,7 @@ pub fn test_all() -> Result<()> {
     eprintln!("\nqemu: {} suites passed", suites.len());
 
     check_bench()?;
+    check_tickbench()?;
     check_loopback()?;
     check_end_to_end()?;
     Ok(())
@@ -239,6 +240,181 @@ fn print_bench_table(results: &[BenchResult]) {
         );
     }
     eprintln!("(instructions, not cycles: a loop rate is an upper bound on the real chip)");
+}
+
+/// The loop budget of the board as the tickbench image prints it (model-core's
+/// `board` constants: defined once, read here from the image).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct TickBudget {
+    /// One period at one instruction per cycle (8 400 at 20 kHz, 168 MHz).
+    period: u64,
+    /// What a tick may take: the period less the margin kept for what
+    /// QEMU's counts do not see.
+    tick: u64,
+    /// The engine's own share of a tick, at most.
+    engine: u64,
+    /// The most a table's estimated evaluation may take to be accepted.
+    model: u64,
+}
+
+/// One case of the tickbench image.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct TickResult {
+    name: String,
+    min: u64,
+    mean: u64,
+    max: u64,
+    /// model-core's estimate of the table's fixed-point evaluation (0
+    /// without a table).
+    est_fixed: u64,
+}
+
+/// Reads tickbench's `BUDGET …` line and `TICK name min=… mean=… max=…
+/// faults=… est_fixed=…` lines.
+fn parse_tick_log(log: &str) -> Result<(TickBudget, Vec<TickResult>)> {
+    let field = |line: &str, key: &str| -> Result<u64> {
+        line.split_whitespace()
+            .find_map(|w| w.strip_prefix(key)?.strip_prefix('='))
+            .ok_or_else(|| format!("tickbench line without {key}: {line}"))?
+            .parse::<u64>()
+            .map_err(|e| format!("tickbench {key}: {e} in {line}"))
+    };
+    let mut budget = None;
+    let mut out = Vec::new();
+    for line in log.lines() {
+        if let Some(rest) = line.strip_prefix("BUDGET ") {
+            budget = Some(TickBudget {
+                period: field(rest, "period")?,
+                tick: field(rest, "tick")?,
+                engine: field(rest, "engine")?,
+                model: field(rest, "model")?,
+            });
+        } else if let Some(rest) = line.strip_prefix("TICK ") {
+            let name = rest.split_whitespace().next().unwrap_or_default();
+            out.push(TickResult {
+                name: name.to_owned(),
+                min: field(rest, "min")?,
+                mean: field(rest, "mean")?,
+                max: field(rest, "max")?,
+                est_fixed: field(rest, "est_fixed")?,
+            });
+        }
+    }
+    let budget = budget.ok_or_else(|| format!("tickbench printed no BUDGET line:\n{log}"))?;
+    if out.is_empty() {
+        return Err(format!("tickbench printed no TICK line:\n{log}"));
+    }
+    Ok((budget, out))
+}
+
+/// Whether the board accepts a table of this estimate (its admission at
+/// commit: `est ≤ budget.model`).
+fn accepted(budget: &TickBudget, est_fixed: u64) -> bool {
+    est_fixed <= budget.model
+}
+
+/// The loop-rate claim: every tick of a table the board accepts fits the
+/// tick budget (the 20 kHz period less its margin), the engine without a
+/// table stays within its share, and every tick is at most the engine's
+/// share plus the table's estimate (what the admission assumes). A table
+/// the board refuses (its estimate over the budget) is reported, not
+/// failed; `all_kinds` is one.
+fn check_ticks(budget: &TickBudget, ticks: &[TickResult]) -> Result<Vec<String>> {
+    let mut misses = Vec::new();
+    let mut notes = Vec::new();
+    if budget.tick > budget.period || budget.engine + budget.model != budget.tick {
+        misses.push(format!("inconsistent budget {budget:?}"));
+    }
+    for t in ticks {
+        let bound = budget.engine + t.est_fixed;
+        if t.max > bound {
+            misses.push(format!(
+                "{}: worst tick {} > engine share {} + estimate {} = {bound}",
+                t.name, t.max, budget.engine, t.est_fixed
+            ));
+        }
+        if t.name == "no_table" {
+            continue;
+        }
+        if accepted(budget, t.est_fixed) {
+            if t.max > budget.tick {
+                misses.push(format!(
+                    "{}: worst tick {} instructions > the tick budget {} ({} a period, less the margin)",
+                    t.name, t.max, budget.tick, budget.period
+                ));
+            }
+        } else {
+            notes.push(format!(
+                "{}: refused by the board (estimate {} > {}); its tick takes {} instructions, {:.0} kHz at most",
+                t.name,
+                t.est_fixed,
+                budget.model,
+                t.max,
+                168_000.0 / t.max as f64
+            ));
+        }
+    }
+    if !ticks.iter().any(|t| t.name == "no_table") {
+        misses.push("no `no_table` case".into());
+    }
+    if misses.is_empty() {
+        Ok(notes)
+    } else {
+        Err(format!(
+            "correction tick over budget (firmware/tickbench):\n  {}",
+            misses.join("\n  ")
+        ))
+    }
+}
+
+/// firmware/tickbench under QEMU: instructions of whole engine ticks.
+fn check_tickbench() -> Result<()> {
+    let elf = build_package_bin("trueaxis-tickbench", "tickbench", Profile::Release)?;
+    eprintln!("\n$ qemu tickbench (-icount shift=0)");
+    let run = run_image(
+        &elf,
+        &QemuOpts {
+            plain: true,
+            ..QemuOpts::default()
+        },
+    )?;
+    if !run.status.success() {
+        return Err(format!(
+            "the tickbench image failed ({})\n{}{}",
+            describe(&run.status),
+            run.log,
+            run.stderr
+        ));
+    }
+    let (budget, ticks) = parse_tick_log(&run.log)?;
+    eprintln!(
+        "\n{:<16} {:>22} {:>10} {:>9}",
+        "tick", "min / mean / max", "estimate", "accepted"
+    );
+    for t in &ticks {
+        eprintln!(
+            "{:<16} {:>22} {:>10} {:>9}",
+            t.name,
+            format!("{} / {} / {}", t.min, t.mean, t.max),
+            budget.engine + t.est_fixed,
+            if t.name == "no_table" {
+                "-"
+            } else if accepted(&budget, t.est_fixed) {
+                "yes"
+            } else {
+                "no"
+            }
+        );
+    }
+    eprintln!(
+        "(budget: {} instructions per tick = the {}-instruction period less the margin; estimate = engine {} + the table's)",
+        budget.tick, budget.period, budget.engine
+    );
+    for n in check_ticks(&budget, &ticks)? {
+        eprintln!("qemu: note: {n}");
+    }
+    eprintln!("qemu: every accepted table ticks within the budget");
+    Ok(())
 }
 
 /// One model kind's figures from the bench image.
@@ -524,7 +700,12 @@ fn target_dir() -> PathBuf {
 
 /// Builds one binary of the QEMU crate and returns the ELF's path.
 fn build_bin(bin: &str, profile: Profile) -> Result<PathBuf> {
-    let mut args = vec!["build", "-p", PACKAGE, "--target", THUMB, "--bin", bin];
+    build_package_bin(PACKAGE, bin, profile)
+}
+
+/// Builds binary `bin` of firmware-workspace package `package`.
+fn build_package_bin(package: &str, bin: &str, profile: Profile) -> Result<PathBuf> {
+    let mut args = vec!["build", "-p", package, "--target", THUMB, "--bin", bin];
     if profile == Profile::Release {
         args.push("--release");
     }
@@ -597,6 +778,9 @@ struct QemuOpts {
     serial: Option<String>,
     /// Wall-clock limit; [`TIMEOUT`] when not given.
     timeout: Option<Duration>,
+    /// The image prints plain text on semihosting stdout (tickbench), not
+    /// defmt: no `defmt-print`.
+    plain: bool,
 }
 
 /// What one image printed and how it ended.
@@ -619,7 +803,7 @@ fn run_image(elf: &Path, opts: &QemuOpts) -> Result<ImageRun> {
 struct RunningImage {
     elf: PathBuf,
     qemu: std::process::Child,
-    printer: std::process::Child,
+    printer: Option<std::process::Child>,
     log_reader: thread::JoinHandle<String>,
     err_reader: thread::JoinHandle<String>,
     started: Instant,
@@ -652,8 +836,29 @@ fn start_image(elf: &Path, opts: &QemuOpts) -> Result<RunningImage> {
         .stderr(Stdio::piped())
         .spawn()
         .map_err(|e| format!("cannot start qemu-system-arm (cargo xtask setup): {e}"))?;
-    let qemu_out = qemu.stdout.take().expect("stdout is piped");
+    let mut qemu_out = qemu.stdout.take().expect("stdout is piped");
     let mut qemu_err = qemu.stderr.take().expect("stderr is piped");
+    let err_reader = thread::spawn(move || {
+        let mut s = String::new();
+        let _ = qemu_err.read_to_string(&mut s);
+        s
+    });
+    if opts.plain {
+        let log_reader = thread::spawn(move || {
+            let mut s = String::new();
+            let _ = qemu_out.read_to_string(&mut s);
+            s
+        });
+        return Ok(RunningImage {
+            elf: elf.to_path_buf(),
+            qemu,
+            printer: None,
+            log_reader,
+            err_reader,
+            started: Instant::now(),
+            limit: opts.timeout.unwrap_or(TIMEOUT),
+        });
+    }
     let printer = Command::new("defmt-print")
         .args(["-e", &elf_s, "stdin"])
         .stdin(Stdio::from(qemu_out))
@@ -674,15 +879,10 @@ fn start_image(elf: &Path, opts: &QemuOpts) -> Result<RunningImage> {
         let _ = printer_out.read_to_string(&mut s);
         s
     });
-    let err_reader = thread::spawn(move || {
-        let mut s = String::new();
-        let _ = qemu_err.read_to_string(&mut s);
-        s
-    });
     Ok(RunningImage {
         elf: elf.to_path_buf(),
         qemu,
-        printer,
+        printer: Some(printer),
         log_reader,
         err_reader,
         started: Instant::now(),
@@ -709,7 +909,9 @@ impl RunningImage {
             self.kill();
         }
         // QEMU's exit closes the pipe, so defmt-print ends by itself.
-        let _ = self.printer.wait();
+        if let Some(p) = self.printer.as_mut() {
+            let _ = p.wait();
+        }
         let log = self.log_reader.join().unwrap_or_default();
         let stderr = self.err_reader.join().unwrap_or_default();
         match status {
@@ -758,7 +960,7 @@ fn start_with_serial(elf: &Path) -> Result<(RunningImage, TcpStream, u16)> {
         let port = free_port()?;
         let opts = QemuOpts {
             serial: Some(format!("tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on")),
-            timeout: None,
+            ..QemuOpts::default()
         };
         let mut image = start_image(elf, &opts)?;
         // QEMU listens as soon as it has parsed its options and, with
@@ -909,6 +1111,37 @@ mod tests {
         assert!(check_estimates(&[r(100, None)]).is_err());
         let log = "INFO  BENCH a_f32 total=64 calls=64 min=1 max=1 est=2\n";
         assert_eq!(parse_bench_log(log).unwrap()[0].est, Some(2));
+    }
+
+    #[test]
+    fn ticks_over_the_budget_fail() {
+        let log = "BUDGET period=8400 tick=6720 engine=1400 model=5320\n\
+                   TICK no_table min=1060 mean=1060 max=1060 faults=0x1 est_fixed=0\n\
+                   TICK small min=1600 mean=1600 max=1640 faults=0x0 est_fixed=656\n\
+                   TICK huge min=10900 mean=10970 max=10986 faults=0x0 est_fixed=10691\n";
+        let (b, ticks) = parse_tick_log(log).unwrap();
+        assert_eq!(
+            (b.period, b.tick, b.engine, b.model),
+            (8400, 6720, 1400, 5320)
+        );
+        assert_eq!(ticks[1].max, 1640);
+        // The refused table is a note, not a failure.
+        let notes = check_ticks(&b, &ticks).unwrap();
+        assert!(
+            notes.len() == 1 && notes[0].contains("huge: refused"),
+            "{notes:?}"
+        );
+        // An accepted table over the tick budget fails (estimate too low
+        // for it as well).
+        let mut over = ticks.clone();
+        over[1].max = 6721;
+        let e = check_ticks(&b, &over).unwrap_err();
+        assert!(e.contains("small: worst tick 6721"), "{e}");
+        // A tick above engine share + estimate fails even within budget.
+        let mut under_est = ticks.clone();
+        under_est[1].max = 1400 + 656 + 1;
+        assert!(check_ticks(&b, &under_est).is_err());
+        assert!(parse_tick_log("TICK x min=1 mean=1 max=1 faults=0 est_fixed=0").is_err());
     }
 
     #[test]

@@ -10,15 +10,26 @@
 //! $CARGO_TARGET_DIR/thumbv7em-none-eabihf/release/tickbench`.
 //!
 //! Cases: the engine without a table (its own overhead: sensors,
-//! direction tracking, slew, pulse accumulator), and with the sample table
-//! while the axes move. Step pulses are counted, not bit-banged (the
+//! direction tracking, slew, pulse accumulator), then with each table while
+//! the axes move: the simulated board's sample table (polynomials,
+//! reversal, thermal) and model-core's golden tables — `all_kinds` (every
+//! term kind in one table, a two-layer 4-16-16-3 network among them) is
+//! the worst realistic case. Step pulses are counted, not bit-banged (the
 //! board's bit-banging costs 2 µs per pulse by construction).
+//!
+//! Output (semihosting stdout): `BUDGET period=… tick=… engine=… model=…`
+//! (model-core's `board` constants) and one `TICK name min=… mean=… max=…
+//! faults=… est_fixed=…` line per case, `est_fixed` being model-core's
+//! static estimate of the table's fixed-point evaluation (the one the
+//! board's admission at commit uses). `cargo xtask test` runs this image
+//! and checks every tick against them.
 #![no_std]
 #![no_main]
 
 use core::cell::Cell;
 use core::hint::black_box;
 
+use model_core::board;
 use model_core::link::{Slot, SlotInfo, LINK_TEMPS};
 use semihosting::println;
 use stm32_metapac::{timer::vals::Urs, TIM2};
@@ -26,7 +37,33 @@ use trueaxis_app::engine::{AxisConfig, Engine, EngineConfig};
 use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::model::{load_into, ModelBuf};
 
-static TABLE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/sample.bin"));
+/// The tables, by name.
+static TABLES: [(&str, &[u8]); 6] = [
+    (
+        "sample_table",
+        include_bytes!(concat!(env!("OUT_DIR"), "/sample.bin")),
+    ),
+    (
+        "cubic19",
+        include_bytes!("../../../model-core/tests/golden/cubic19.bin"),
+    ),
+    (
+        "full",
+        include_bytes!("../../../model-core/tests/golden/full.bin"),
+    ),
+    (
+        "nn_3x16x3",
+        include_bytes!("../../../model-core/tests/golden/nn_3x16x3.bin"),
+    ),
+    (
+        "grid_17x11",
+        include_bytes!("../../../model-core/tests/golden/grid_17x11.bin"),
+    ),
+    (
+        "all_kinds",
+        include_bytes!("../../../model-core/tests/golden/all_kinds.bin"),
+    ),
+];
 
 /// The board's configuration (firmware/board/src/board.rs).
 const CONFIG: EngineConfig = EngineConfig {
@@ -86,8 +123,9 @@ fn counter() -> u32 {
     TIM2.cnt().read()
 }
 
-/// Runs `n` ticks and reports min / mean / max instructions per tick.
-fn run(name: &str, engine: &mut Engine<'_>, n: u32) {
+/// Runs `n` ticks and reports min / mean / max instructions per tick, with
+/// the table's estimate.
+fn run(name: &str, engine: &mut Engine<'_>, n: u32, est_fixed: u32) {
     let clock = TickClock(Cell::new(0));
     let mut io = Fake {
         counts: [0; 3],
@@ -121,12 +159,13 @@ fn run(name: &str, engine: &mut Engine<'_>, n: u32) {
     }
     let faults = engine.faults().0;
     println!(
-        "TICK {} min={} mean={} max={} faults={:#x}",
+        "TICK {} min={} mean={} max={} faults={:#x} est_fixed={}",
         name,
         min,
         total / n as u64,
         max,
-        faults
+        faults,
+        est_fixed
     );
 }
 
@@ -141,27 +180,40 @@ fn main() -> ! {
     TIM2.egr().write(|w| w.set_ug(true));
     TIM2.cr1().modify(|w| w.set_cen(true));
 
+    println!(
+        "BUDGET period={} tick={} engine={} model={}",
+        board::PERIOD_INSTR,
+        board::TICK_BUDGET_INSTR,
+        board::ENGINE_TICK_INSTR,
+        board::MODEL_BUDGET_INSTR
+    );
     let Ok(mut engine) = Engine::new(CONFIG) else {
         panic!("board configuration refused")
     };
-    run("no_table", &mut engine, 256);
+    run("no_table", &mut engine, 256, 0);
 
     let mut buf = ModelBuf::new();
-    if load_into(TABLE, &mut buf).is_err() {
-        panic!("sample table does not load");
+    for (name, table) in TABLES {
+        let Ok(parsed) = model_core::parse(table) else {
+            panic!("table {} does not parse", name);
+        };
+        let est = model_core::cost::estimate(&parsed).fixed_instr;
+        if load_into(table, &mut buf).is_err() {
+            panic!("table {} does not load", name);
+        }
+        let info = SlotInfo {
+            slot: Slot::A,
+            seq: 1,
+            len: table.len() as u32,
+            crc32: model_core::link::table_id(table),
+        };
+        let mut engine = match Engine::new(CONFIG) {
+            Ok(e) => e,
+            Err(_) => panic!("board configuration refused"),
+        };
+        engine.set_model(&mut buf, info);
+        run(name, &mut engine, 1024, est);
     }
-    let info = SlotInfo {
-        slot: Slot::A,
-        seq: 1,
-        len: TABLE.len() as u32,
-        crc32: model_core::link::FRAME_CRC.checksum(TABLE),
-    };
-    let mut engine = match Engine::new(CONFIG) {
-        Ok(e) => e,
-        Err(_) => panic!("board configuration refused"),
-    };
-    engine.set_model(&mut buf, info);
-    run("sample_table_moving", &mut engine, 1024);
     semihosting::process::exit(0)
 }
 
