@@ -178,6 +178,9 @@ pub struct Comparison {
     pub model: String,
     /// Rows in the data set.
     pub rows: usize,
+    /// Rows of the file left out on load (empty, no error value; CONTRACT
+    /// §1: counted and said, never silently skipped).
+    pub skipped_count: usize,
     /// Residual RMS per target, µm (same key as `fit --json`).
     pub rms_um: BTreeMap<String, f64>,
     /// Largest |residual| per target, µm.
@@ -227,6 +230,7 @@ pub fn compare(
         data: data.source.clone(),
         model: model.to_string(),
         rows: data.len(),
+        skipped_count: data.skipped.len(),
         rms_um: BTreeMap::new(),
         max_abs_um: BTreeMap::new(),
         pv_um: BTreeMap::new(),

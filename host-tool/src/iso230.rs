@@ -105,8 +105,12 @@ pub struct Iso230 {
     pub per_target: Vec<TargetStats>,
     /// Readings evaluated.
     pub rows_used: usize,
-    /// Readings not evaluated (other lines, rows without an error value).
+    /// Readings of the data set not evaluated (other lines, no value for
+    /// this axis' error).
     pub rows_ignored: usize,
+    /// Rows of the file left out on load, before any of this (an empty
+    /// row, a row with no error value at all).
+    pub skipped_count: usize,
 }
 
 fn mean(v: &[f64]) -> f64 {
@@ -279,6 +283,7 @@ pub fn evaluate(data: &Dataset, axis: usize) -> Result<Iso230> {
         per_target,
         rows_used: rows.len(),
         rows_ignored,
+        skipped_count: data.skipped.len(),
     })
 }
 

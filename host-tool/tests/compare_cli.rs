@@ -12,7 +12,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{expect_exit, json, run, s, tmp_dir};
+use common::{expect_exit, json, run, s, tmp_dir, with_blank_error_row};
 use serde_json::Value;
 use trueaxis::import;
 use trueaxis::model::ModelFile;
@@ -387,6 +387,44 @@ fn other_data_warns_data_hash_mismatch() {
     // level, and no better than the fit's own residual would suggest.
     let r = num(&v["rms_um"]["ex"], "rms");
     assert!(r > 0.1 && r < 0.35, "{r}");
+}
+
+/// A row with no error value is left out, and compare says so: the count
+/// in the JSON (`skipped_count`) and the line with its reason on stderr —
+/// CONTRACT §1, nothing is silently skipped.
+#[test]
+fn rows_left_out_are_counted_and_said() {
+    let dir = tmp_dir("compare", "skipped");
+    let csv = simulate(&dir, "grid.csv", 7);
+    let model = dir.join("grid.model.json");
+    fit(&csv, &model);
+    let clean = run(&["compare", s(&csv), "--model", s(&model), "--json"]);
+    assert_eq!(json(&clean)["skipped_count"], 0);
+    assert!(!String::from_utf8_lossy(&clean.stderr).contains("left out"));
+
+    let holed = dir.join("holed.csv");
+    let line = with_blank_error_row(&csv, &holed);
+    for json_flag in [true, false] {
+        let mut args = vec!["compare", s(&holed), "--model", s(&model)];
+        if json_flag {
+            args.push("--json");
+        }
+        let out = run(&args);
+        assert!(out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains(&format!(
+                "note: 1 row of {} was left out (line {line}: no error value on this row)",
+                s(&holed)
+            )),
+            "{err}"
+        );
+        if json_flag {
+            let v = json(&out);
+            assert_eq!(v["skipped_count"], 1);
+            assert_eq!(v["rows"], 324, "the row is not in the data set");
+        }
+    }
 }
 
 #[test]

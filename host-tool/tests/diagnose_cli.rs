@@ -4,6 +4,8 @@
 //! floor and leaves the same steps in the model's history; grid-only data
 //! warns `aliasing` and one-direction data warns `one_direction`.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -252,4 +254,47 @@ fn one_direction_data_warns_one_direction() {
         d.warnings
     );
     assert!(d.candidates.iter().all(|c| c.effect != "reversal"));
+}
+
+/// Rows the importer leaves out are said on stderr and counted in the
+/// JSON (`skipped_count`), by diagnose and by improve.
+#[test]
+fn rows_left_out_are_counted_and_said() {
+    let dir = tmp_dir("skipped");
+    let csv = dir.join("grid.csv");
+    let csv_s = csv.to_str().unwrap();
+    let (code, _, err) = trueaxis(&["simulate", "--plan", "grid:100", "-o", csv_s]);
+    assert_eq!(code, 0, "{err}");
+    let holed = dir.join("holed.csv");
+    let line = common::with_blank_error_row(&csv, &holed);
+    let holed_s = holed.to_str().unwrap();
+    let note =
+        format!("note: 1 row of {holed_s} was left out (line {line}: no error value on this row)");
+
+    let (code, out, err) = trueaxis(&["diagnose", holed_s, "--model", "cubic19", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["skipped_count"], 1);
+    assert!(err.contains(&note), "{err}");
+    let (code, out, err) = trueaxis(&["diagnose", csv_s, "--model", "cubic19", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["skipped_count"], 0);
+    assert!(!err.contains("left out"), "{err}");
+
+    let model = dir.join("m.json");
+    let (code, out, err) = trueaxis(&[
+        "improve",
+        holed_s,
+        "--model",
+        "cubic19",
+        "-o",
+        model.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let v: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["skipped_count"], 1);
+    assert!(err.contains(&note), "{err}");
+    let _ = std::fs::remove_dir_all(dir);
 }

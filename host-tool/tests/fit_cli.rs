@@ -8,7 +8,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{json, run, tmp_dir};
+use common::{json, run, tmp_dir, with_blank_error_row};
 use trueaxis::data::Dataset;
 use trueaxis::import;
 use trueaxis::model::{FittedModel, ModelFile};
@@ -166,6 +166,42 @@ fn every_model_kind_runs_from_the_command_line() {
         text.contains("held-out") && text.contains("model written to"),
         "{text}"
     );
+}
+
+/// Rows the importer leaves out are said on stderr (with the line and the
+/// reason) and counted in the JSON as `skipped_count`.
+#[test]
+fn rows_left_out_are_counted_and_said() {
+    let dir = tmp_dir("fit", "skipped");
+    let csv = dir.join("grid.csv");
+    write(&grid_data(), &csv);
+    let clean = run(&["fit", csv.to_str().unwrap(), "--model", "cubic19", "--json"]);
+    assert_eq!(json(&clean)["skipped_count"], 0);
+    assert!(!String::from_utf8_lossy(&clean.stderr).contains("left out"));
+
+    let holed = dir.join("holed.csv");
+    let line = with_blank_error_row(&csv, &holed);
+    let out = run(&[
+        "fit",
+        holed.to_str().unwrap(),
+        "--model",
+        "cubic19",
+        "--json",
+    ]);
+    let v = json(&out);
+    assert_eq!(v["skipped_count"], 1);
+    assert_eq!(v["rows"]["ex"], 270, "the row is not fitted");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains(&format!(
+            "was left out (line {line}: no error value on this row)"
+        )),
+        "{err}"
+    );
+    // In text mode too.
+    let out = run(&["fit", holed.to_str().unwrap(), "--model", "cubic19"]);
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("note: 1 row of"));
 }
 
 fn expect_exit(args: &[&str], code: i32, needle: &str) {

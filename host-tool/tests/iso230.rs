@@ -35,6 +35,8 @@
 //!   → A↓ = 5.914214.
 //! - A = max(6.828427, 2) − min(−2.828427, −3.914214) = 10.742641.
 
+mod common;
+
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -187,4 +189,29 @@ fn one_direction_only_is_bad_input() {
     let no_dir = import::read_csv("x_mm,ex_um\n0,1\n100,2\n".as_bytes(), "nodir.csv").unwrap();
     let e = iso230::evaluate(&no_dir, 0).unwrap_err().to_string();
     assert!(e.contains("no dir_x column"), "{e}");
+}
+
+/// A reading with no error value is left out on load: the evaluation is
+/// the worked example's, `rows_ignored` stays 0 (it counts readings of the
+/// data set that were not evaluated) and `skipped_count` says 1, with the
+/// line on stderr.
+#[test]
+fn rows_left_out_on_load_are_counted_and_said() {
+    let dir = common::tmp_dir("iso230", "skipped");
+    let holed = dir.join("holed.csv");
+    let line = common::with_blank_error_row(&data("iso_worked.csv"), &holed);
+    let out = common::run(&["iso230", common::s(&holed), "--json"]);
+    let v = common::json(&out);
+    assert_eq!(v["skipped_count"], 1);
+    assert_eq!(v["rows_ignored"], 0);
+    assert_eq!(v["rows_used"], 12);
+    assert!((v["A_um"].as_f64().unwrap() - 10.742641).abs() < TOL);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains(&format!("(line {line}: no error value on this row)")),
+        "{err}"
+    );
+    let clean = common::run(&["iso230", data("iso_worked.csv").to_str().unwrap(), "--json"]);
+    assert_eq!(common::json(&clean)["skipped_count"], 0);
+    let _ = std::fs::remove_dir_all(dir);
 }

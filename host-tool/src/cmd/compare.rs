@@ -8,10 +8,10 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
+use crate::cmd::input;
 use crate::cmd::out::outln;
 use crate::compare::{self, Comparison, Warning};
 use crate::data::Dataset;
-use crate::import;
 use crate::model::ModelFile;
 
 /// Arguments of `trueaxis compare`.
@@ -143,7 +143,7 @@ pub fn text(c: &Comparison) -> String {
 
 impl Args {
     pub fn run(self) -> Result<()> {
-        let data = import::load(&self.data)?;
+        let data = input::load_data(&self.data, None)?;
         let model = ModelFile::load(&self.model)?;
         let c = run_compare(&data, &model, self.report.as_deref())?;
         if self.json {

@@ -8,10 +8,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
-use crate::cmd::out::outln;
+use crate::cmd::input;
+use crate::cmd::out::{self, outln};
 use crate::diagnose::{self, Diagnosis, Options, Verdict};
 use crate::features::Effect;
-use crate::import;
 
 /// Arguments of `trueaxis diagnose`.
 #[derive(clap::Args, Debug)]
@@ -75,7 +75,7 @@ impl Args {
                 adds.push(e.spec);
             }
         }
-        let data = import::load(&self.data)?;
+        let data = input::load_data(&self.data, None)?;
         let d = diagnose::diagnose(
             &data,
             &Options {
@@ -91,7 +91,9 @@ impl Args {
             }
         }
         if self.json {
-            outln!("{}", serde_json::to_string_pretty(&d)?)?;
+            let mut doc = serde_json::to_value(&d)?;
+            input::add_skipped_count(&mut doc, &data);
+            out::json_pretty(&doc)?;
         } else {
             crate::cmd::out::print(&text(&d, &self.data))?;
         }

@@ -8,10 +8,10 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
-use crate::cmd::out::outln;
+use crate::cmd::input;
+use crate::cmd::out::{self, outln};
 use crate::features::Effect;
 use crate::fit::{self, nn::NnOptions, FitOptions};
-use crate::import;
 
 /// Arguments of `trueaxis fit`.
 #[derive(clap::Args, Debug)]
@@ -65,14 +65,7 @@ impl Args {
             .iter()
             .map(|s| Effect::parse(s))
             .collect::<Result<Vec<_>>>()?;
-        let data = import::load(&self.data)?;
-        if !data.skipped.is_empty() {
-            eprintln!(
-                "note: {} rows of {} were left out on import (run `trueaxis import` to list them)",
-                data.skipped.len(),
-                self.data.display()
-            );
-        }
+        let data = input::load_data(&self.data, None)?;
         let opts = FitOptions {
             blocks: usize::from(self.blocks),
             local: self.local,
@@ -94,7 +87,9 @@ impl Args {
             eprintln!("warning: {w}");
         }
         if self.json {
-            outln!("{}", model.summary_json(Some(&out)))?;
+            let mut doc = model.summary_json(Some(&out));
+            input::add_skipped_count(&mut doc, &data);
+            out::json(&doc)?;
             return Ok(());
         }
         let s = &model.stats;

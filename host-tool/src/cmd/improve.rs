@@ -11,12 +11,13 @@ use anyhow::Result;
 use serde::Serialize;
 
 use crate::cmd::fit::default_model_path;
+use crate::cmd::input;
 use crate::cmd::out::{self, outln};
 use crate::data::Dataset;
 use crate::diagnose::{self, Options, Verdict};
 use crate::features::Effect;
 use crate::fit::{self, FitOptions};
-use crate::{history, import};
+use crate::history;
 
 /// Most effects `improve` adds before it stops anyway.
 pub const MAX_STEPS: usize = 8;
@@ -316,7 +317,7 @@ impl Args {
                 "improve starts from a seed (cubic19 or kinematic), not from a model with effects"
             );
         }
-        let data = import::load(&self.data)?;
+        let data = input::load_data(&self.data, None)?;
         let out = self
             .output
             .clone()
@@ -357,7 +358,9 @@ impl Args {
             return Err(e);
         }
         if json {
-            out::json_pretty(&r)?;
+            let mut doc = serde_json::to_value(&r)?;
+            input::add_skipped_count(&mut doc, &data);
+            out::json_pretty(&doc)?;
         } else {
             outln!(
                 "{}: model {} written to {}",

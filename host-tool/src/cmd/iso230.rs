@@ -6,9 +6,10 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 
+use crate::cmd::input;
 use crate::cmd::out::outln;
 use crate::data::AXES;
-use crate::{import, iso230};
+use crate::iso230;
 
 /// Arguments of `trueaxis iso230`.
 #[derive(clap::Args, Debug)]
@@ -29,7 +30,7 @@ pub struct Args {
 
 impl Args {
     pub fn run(self) -> Result<()> {
-        let data = import::load(&self.data)?;
+        let data = input::load_data(&self.data, None)?;
         let axis = match self.axis.as_deref() {
             Some(a) => AXES.iter().position(|x| *x == a).context("axis")?,
             None => iso230::default_axis(&data)?,

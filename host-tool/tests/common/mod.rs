@@ -59,3 +59,27 @@ pub fn expect_exit(args: &[&str], code: i32, needles: &[&str]) -> String {
     assert!(out.stdout.is_empty(), "no output on failure: {args:?}");
     err
 }
+
+/// Copies the CSV `src` to `dst` with one more row whose error cells
+/// (`ex_um`, `ey_um`, `ez_um`) are empty — the row a measurement file gets
+/// when the instrument lost its beam, which the importer leaves out ("no
+/// error value on this row"). Returns the row's 1-based line number.
+pub fn with_blank_error_row(src: &Path, dst: &Path) -> usize {
+    let text = std::fs::read_to_string(src).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let header = lines
+        .iter()
+        .find(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .unwrap();
+    let last = lines.last().unwrap();
+    let row: Vec<&str> = header
+        .split(',')
+        .zip(last.split(','))
+        .map(|(h, v)| match h.trim() {
+            "ex_um" | "ey_um" | "ez_um" => "",
+            _ => v,
+        })
+        .collect();
+    std::fs::write(dst, format!("{}\n{}\n", text.trim_end(), row.join(","))).unwrap();
+    lines.len() + 1
+}
