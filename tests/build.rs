@@ -21,6 +21,9 @@ mod tables;
 #[path = "build/cost_tables.rs"]
 mod cost_tables;
 
+#[path = "build/random.rs"]
+mod random;
+
 fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     let memory_x = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../memory.x");
@@ -63,6 +66,7 @@ fn main() {
         fs::write(out.join(format!("{name}.vectors")), vectors).expect("write vectors");
     }
     bench_list(&out, benches.map(|(name, _)| name));
+    random::write(&out);
 }
 
 /// The bench image's table list (`bench_tables.rs` in OUT_DIR): the three

@@ -14,7 +14,7 @@ mod common;
 use std::path::PathBuf;
 
 use common::*;
-use model_core::{parse, Inputs, InputsF64, LargeModel, TableSpec};
+use model_core::{parse, Flags, Inputs, LargeModel, TableSpec};
 
 fn dir(sub: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -26,62 +26,12 @@ fn bless() -> bool {
     std::env::var_os("TRUEAXIS_BLESS").is_some_and(|v| v == "1")
 }
 
-/// Vector file format (little-endian), see docs/table-format.md:
-/// header `TXVE`, u16 version 1, u16 record size in i32 words (18),
-/// u32 record count, u32 CRC32 of the table the vectors belong to;
-/// then per record 18 × i32: pos_nm[3], rev_q30[3], temp_mc[4], tool_nm,
-/// expected fixed corr_nm[3], expected fixed flags, f64 reference in Q8 nm [3].
-const VEC_MAGIC: &[u8; 4] = b"TXVE";
-const VEC_WORDS: usize = 18;
-const VEC_RECORDS: usize = 256;
-
-fn make_vectors(spec: &TableSpec, crc: u32, seed: u64) -> Vec<u8> {
-    let model = LargeModel::load(&parse(&spec.encode().unwrap()).unwrap()).unwrap();
-    let mut rng = Rng(seed);
-    let mut out = Vec::new();
-    out.extend_from_slice(VEC_MAGIC);
-    out.extend_from_slice(&1u16.to_le_bytes());
-    out.extend_from_slice(&(VEC_WORDS as u16).to_le_bytes());
-    out.extend_from_slice(&(VEC_RECORDS as u32).to_le_bytes());
-    out.extend_from_slice(&crc.to_le_bytes());
-    for i in 0..VEC_RECORDS {
-        // The first 200 inside the envelope, the rest anywhere (edge hold, flags).
-        let inp = random_inputs(&mut rng, spec, i >= 200);
-        let q = model.eval_fixed(&inp);
-        // Reference on the held inputs (what the firmware should approach).
-        let mut held = inp;
-        for a in 0..3 {
-            held.pos_nm[a] = inp.pos_nm[a].clamp(
-                spec.envelope.travel_min_nm[a],
-                spec.envelope.travel_max_nm[a],
-            );
-        }
-        for ch in 0..spec.channels.len() {
-            held.temp_mc[ch] =
-                inp.temp_mc[ch].clamp(spec.envelope.temp_min_mc[ch], spec.envelope.temp_max_mc[ch]);
-        }
-        let r = spec.eval_f64(&InputsF64::from(&held));
-        let words: Vec<i32> = inp
-            .pos_nm
-            .iter()
-            .chain(&inp.rev_q30)
-            .chain(&inp.temp_mc)
-            .copied()
-            .chain([inp.tool_nm])
-            .chain(q.corr_nm)
-            .chain([q.flags.bits() as i32])
-            .chain(
-                r.iter()
-                    .map(|v| (v * 256.0).round().clamp(i32::MIN as f64, i32::MAX as f64) as i32),
-            )
-            .collect();
-        assert_eq!(words.len(), VEC_WORDS);
-        for w in words {
-            out.extend_from_slice(&w.to_le_bytes());
-        }
-    }
-    out
-}
+/// Records per golden vector file: 200 inside the envelope, 56 anywhere.
+const VEC_PLAN: VectorPlan = VectorPlan {
+    records: 256,
+    inside: 200,
+    tool_beyond: false,
+};
 
 fn check_or_bless(path: PathBuf, bytes: &[u8]) {
     if bless() {
@@ -121,47 +71,91 @@ fn golden_tables_byte_for_byte() {
     }
 }
 
+/// Replays a vector file the way the MCU does (tests/suites/model_core.rs):
+/// fixed point bit-exact, f32 within 1 nm of the f64 reference (clamped to
+/// the envelope's max correction; 0 for absent outputs). Returns the flags
+/// of every record, or'ed.
+fn replay(name: &str, spec: &TableSpec, table_bytes: &[u8], stored: &[u8]) -> Flags {
+    let model = LargeModel::load(&parse(table_bytes).unwrap()).unwrap();
+    let crc = parse(table_bytes).unwrap().crc32();
+    let count = u32::from_le_bytes(stored[8..12].try_into().unwrap()) as usize;
+    assert_eq!(u32::from_le_bytes(stored[12..16].try_into().unwrap()), crc);
+    assert_eq!(stored.len(), 16 + 4 * VEC_WORDS * count);
+    let mut seen = Flags::empty();
+    for r in 0..count {
+        let w = |k: usize| {
+            let o = 16 + 4 * (VEC_WORDS * r + k);
+            i32::from_le_bytes(stored[o..o + 4].try_into().unwrap())
+        };
+        let inp = Inputs {
+            pos_nm: [w(0), w(1), w(2)],
+            rev_q30: [w(3), w(4), w(5)],
+            temp_mc: [w(6), w(7), w(8), w(9)],
+            tool_nm: w(10),
+        };
+        let q = model.eval_fixed(&inp);
+        assert_eq!(q.corr_nm, [w(11), w(12), w(13)], "{name} record {r}");
+        assert_eq!(q.flags.bits() as i32, w(14), "{name} record {r}");
+        seen.insert(q.flags);
+        let f = model.eval_f32(&inp);
+        for o in 0..3 {
+            let reference = w(15 + o) as f64 / 256.0;
+            let max = spec.envelope.max_corr_nm[o] as f64;
+            let expect = if spec.outputs[o] {
+                reference.clamp(-max, max)
+            } else {
+                0.0
+            };
+            assert!(
+                (f.corr_nm[o] as f64 - expect).abs() <= 1.0 + 1.0 / 256.0,
+                "{name} record {r} output {o}: f32 {} nm, reference {expect} nm",
+                f.corr_nm[o]
+            );
+        }
+    }
+    seen
+}
+
 #[test]
 fn replay_vectors_match_the_evaluator() {
     for (n, (name, spec)) in golden_specs().into_iter().enumerate() {
         let table_bytes = spec.encode().unwrap();
-        let crc = parse(&table_bytes).unwrap().crc32();
-        let vec_bytes = make_vectors(&spec, crc, 0xBEEF + n as u64);
+        let vec_bytes = make_vectors(&spec, 0xBEEF + n as u64, VEC_PLAN);
         check_or_bless(dir("vectors").join(format!("{name}.vec")), &vec_bytes);
-        // Replay the stored file the way the MCU does: fixed bit-exact, f32 within 1 nm
-        // of the reference for in-envelope records.
         let stored = std::fs::read(dir("vectors").join(format!("{name}.vec"))).unwrap();
-        let model = LargeModel::load(&parse(&table_bytes).unwrap()).unwrap();
-        let count = u32::from_le_bytes(stored[8..12].try_into().unwrap()) as usize;
-        assert_eq!(u32::from_le_bytes(stored[12..16].try_into().unwrap()), crc);
-        for r in 0..count {
-            let w = |k: usize| {
-                let o = 16 + 4 * (VEC_WORDS * r + k);
-                i32::from_le_bytes(stored[o..o + 4].try_into().unwrap())
-            };
-            let inp = Inputs {
-                pos_nm: [w(0), w(1), w(2)],
-                rev_q30: [w(3), w(4), w(5)],
-                temp_mc: [w(6), w(7), w(8), w(9)],
-                tool_nm: w(10),
-            };
-            let q = model.eval_fixed(&inp);
-            assert_eq!(q.corr_nm, [w(11), w(12), w(13)], "{name} record {r}");
-            assert_eq!(q.flags.bits() as i32, w(14), "{name} record {r}");
-            let f = model.eval_f32(&inp);
-            for o in 0..3 {
-                let reference = w(15 + o) as f64 / 256.0;
-                let max = spec.envelope.max_corr_nm[o] as f64;
-                let expect = if spec.outputs[o] {
-                    reference.clamp(-max, max)
-                } else {
-                    0.0
-                };
-                assert!(
-                    (f.corr_nm[o] as f64 - expect).abs() <= 1.0 + 1.0 / 256.0,
-                    "{name} record {r} output {o}"
-                );
-            }
-        }
+        replay(name, &spec, &table_bytes, &stored);
+    }
+}
+
+/// The seeded random models the QEMU suite replays on the target (vectors
+/// written by tests/build/random.rs with the same generator): here the same
+/// replay on the host, so a model or bound problem shows before QEMU; and
+/// the set covers every term kind and, beyond the envelope, every edge flag.
+#[test]
+fn qemu_random_models_replay_on_the_host() {
+    let specs = qemu_random_specs();
+    assert_eq!(specs.len(), QEMU_RANDOM_MODELS);
+    let mut seen = Flags::empty();
+    for (i, (name, spec)) in specs.iter().enumerate() {
+        let table_bytes = spec.encode().unwrap();
+        let vec_bytes = make_vectors(spec, qemu_random_vector_seed(i), QEMU_RANDOM_PLAN);
+        let flags = replay(name, spec, &table_bytes, &vec_bytes);
+        seen.insert(flags);
+        eprintln!("{name}: {} bytes, flags seen {flags:?}", table_bytes.len());
+    }
+    for kind in ALL_KINDS {
+        assert!(
+            specs.iter().any(|(n, _)| n.contains(&format!("{kind:?}"))),
+            "{kind:?} missing"
+        );
+    }
+    for f in [
+        Flags::OUT_OF_TRAVEL_X,
+        Flags::OUT_OF_TRAVEL_Y,
+        Flags::OUT_OF_TRAVEL_Z,
+        Flags::TEMP_OUT_OF_RANGE,
+        Flags::TOOL_OUT_OF_RANGE,
+    ] {
+        assert!(seen.contains(f), "no record flagged {f:?}");
     }
 }

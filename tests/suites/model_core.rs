@@ -7,7 +7,10 @@
 //! host by model-core's tests), and the bench tables with vectors computed
 //! on the host by this crate's build script (build/tables.rs). Parsing the
 //! golden tables cut short or with any single bit flipped must fail with an
-//! error, never panic.
+//! error, never panic. Also 16 seeded random models of model-core's test
+//! generator (every term kind; build/random.rs writes them and their
+//! vectors, inside and beyond the envelope, tool arm included), replayed
+//! like the golden ones.
 #![no_std]
 #![no_main]
 
@@ -107,11 +110,93 @@ const GOLDEN: [(&str, &[u8], &[u8]); 5] = [
     ),
 ];
 
+// `RANDOM_MODELS`: (name, table, vectors) of 16 seeded random models of
+// model-core's generator, written by build/random.rs.
+include!(concat!(env!("OUT_DIR"), "/random_models.rs"));
+
 /// Words per record of a `.vec` file (model-core/tests/vectors/README.md).
 const VEC_WORDS: usize = 18;
 
 fn le_i32(b: &[u8], at: usize) -> i32 {
     i32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
+}
+
+/// Replays a `.vec` file (model-core/tests/vectors/README.md) against its
+/// table: `eval_fixed` must equal the host's result bit for bit (and the
+/// flags), `eval_f32` lie within 1 nm of the f64 reference.
+fn replay(name: &str, table_bytes: &[u8], vec: &[u8]) {
+    let table = match model_core::parse(table_bytes) {
+        Ok(t) => t,
+        Err(e) => defmt::panic!("{=str}: {}", name, defmt::Debug2Format(&e)),
+    };
+    // Header: magic, version 1, words per record, count, table CRC.
+    defmt::assert_eq!(&vec[..4], b"TXVE", "{=str}: vector magic", name);
+    defmt::assert_eq!(u16::from_le_bytes([vec[4], vec[5]]), 1);
+    defmt::assert_eq!(u16::from_le_bytes([vec[6], vec[7]]) as usize, VEC_WORDS);
+    let count = le_i32(vec, 8) as usize;
+    defmt::assert_eq!(
+        le_i32(vec, 12) as u32,
+        table.crc32(),
+        "{=str}: vectors belong to another table",
+        name
+    );
+    defmt::assert_eq!(vec.len(), 16 + count * 4 * VEC_WORDS);
+    let model = match model_core::Model::load(&table) {
+        Ok(m) => m,
+        Err(e) => defmt::panic!("{=str}: load: {}", name, defmt::Debug2Format(&e)),
+    };
+    let env = table.envelope();
+    let mask = model.outputs_mask();
+    let mut worst_f32_milli_nm = 0i64;
+    let mut flagged = 0u32;
+    for r in 0..count {
+        let w = |i: usize| le_i32(vec, 16 + 4 * (r * VEC_WORDS + i));
+        let inputs = model_core::Inputs {
+            pos_nm: [w(0), w(1), w(2)],
+            rev_q30: [w(3), w(4), w(5)],
+            temp_mc: [w(6), w(7), w(8), w(9)],
+            tool_nm: w(10),
+        };
+        let fixed = model.eval_fixed(&inputs);
+        let want = [w(11), w(12), w(13)];
+        if fixed.corr_nm != want || i32::from(fixed.flags.bits()) != w(14) {
+            defmt::panic!(
+                "{=str} record {}: target {} flags {=u16:#x}, host {} flags {:#x}",
+                name,
+                r,
+                fixed.corr_nm,
+                fixed.flags.bits(),
+                want,
+                w(14)
+            );
+        }
+        flagged += u32::from(w(14) != 0);
+        let f = model.eval_f32(&inputs);
+        for o in 0..3 {
+            // The f64 reference in Q8 nm, held to the envelope.
+            let reference_q8 = if mask & (1 << o) == 0 {
+                0
+            } else {
+                let m = i64::from(env.max_corr_nm[o]) * 256;
+                i64::from(w(15 + o)).clamp(-m, m)
+            };
+            let diff_q8 = (i64::from(f.corr_nm[o]) * 256 - reference_q8).abs();
+            worst_f32_milli_nm = worst_f32_milli_nm.max(diff_q8 * 1000 / 256);
+            defmt::assert!(
+                diff_q8 <= 256,
+                "{=str} record {} output {}: f32 {} nm, reference {} / 256 nm",
+                name,
+                r,
+                o,
+                f.corr_nm[o],
+                reference_q8
+            );
+        }
+    }
+    defmt::info!(
+        "{=str}: {} vectors ({} flagged), fixed point bit exact, f32 within {} milli-nm of the f64 reference",
+        name, count, flagged, worst_f32_milli_nm
+    );
 }
 
 #[defmt_test::tests]
@@ -121,76 +206,15 @@ mod tests {
     #[test]
     fn golden_vectors_replay_on_the_target() {
         for (name, table_bytes, vec) in GOLDEN {
-            let table = match model_core::parse(table_bytes) {
-                Ok(t) => t,
-                Err(e) => defmt::panic!("{=str}: {}", name, defmt::Debug2Format(&e)),
-            };
-            // Header: magic, version 1, words per record, count, table CRC.
-            defmt::assert_eq!(&vec[..4], b"TXVE", "{=str}: vector magic", name);
-            defmt::assert_eq!(u16::from_le_bytes([vec[4], vec[5]]), 1);
-            defmt::assert_eq!(u16::from_le_bytes([vec[6], vec[7]]) as usize, VEC_WORDS);
-            let count = le_i32(vec, 8) as usize;
-            defmt::assert_eq!(
-                le_i32(vec, 12) as u32,
-                table.crc32(),
-                "{=str}: vectors belong to another table",
-                name
-            );
-            defmt::assert_eq!(vec.len(), 16 + count * 4 * VEC_WORDS);
-            let model = match model_core::Model::load(&table) {
-                Ok(m) => m,
-                Err(e) => defmt::panic!("{=str}: load: {}", name, defmt::Debug2Format(&e)),
-            };
-            let env = table.envelope();
-            let mask = model.outputs_mask();
-            let mut worst_f32_milli_nm = 0i64;
-            for r in 0..count {
-                let w = |i: usize| le_i32(vec, 16 + 4 * (r * VEC_WORDS + i));
-                let inputs = model_core::Inputs {
-                    pos_nm: [w(0), w(1), w(2)],
-                    rev_q30: [w(3), w(4), w(5)],
-                    temp_mc: [w(6), w(7), w(8), w(9)],
-                    tool_nm: w(10),
-                };
-                let fixed = model.eval_fixed(&inputs);
-                let want = [w(11), w(12), w(13)];
-                if fixed.corr_nm != want || i32::from(fixed.flags.bits()) != w(14) {
-                    defmt::panic!(
-                        "{=str} record {}: target {} flags {=u16:#x}, host {} flags {:#x}",
-                        name,
-                        r,
-                        fixed.corr_nm,
-                        fixed.flags.bits(),
-                        want,
-                        w(14)
-                    );
-                }
-                let f = model.eval_f32(&inputs);
-                for o in 0..3 {
-                    // The f64 reference in Q8 nm, held to the envelope.
-                    let reference_q8 = if mask & (1 << o) == 0 {
-                        0
-                    } else {
-                        let m = i64::from(env.max_corr_nm[o]) * 256;
-                        i64::from(w(15 + o)).clamp(-m, m)
-                    };
-                    let diff_q8 = (i64::from(f.corr_nm[o]) * 256 - reference_q8).abs();
-                    worst_f32_milli_nm = worst_f32_milli_nm.max(diff_q8 * 1000 / 256);
-                    defmt::assert!(
-                        diff_q8 <= 256,
-                        "{=str} record {} output {}: f32 {} nm, reference {} / 256 nm",
-                        name,
-                        r,
-                        o,
-                        f.corr_nm[o],
-                        reference_q8
-                    );
-                }
-            }
-            defmt::info!(
-                "{=str}: {} vectors, fixed point bit exact, f32 within {} milli-nm of the f64 reference",
-                name, count, worst_f32_milli_nm
-            );
+            replay(name, table_bytes, vec);
+        }
+    }
+
+    #[test]
+    fn random_models_replay_on_the_target() {
+        defmt::assert_eq!(RANDOM_MODELS.len(), 16);
+        for (name, table_bytes, vec) in RANDOM_MODELS {
+            replay(name, table_bytes, vec);
         }
     }
 

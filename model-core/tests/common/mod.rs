@@ -2,14 +2,18 @@
 //! models are identical on every run and every machine) and generators of
 //! realistic random table specs and inputs — corrections up to ±200 µm,
 //! travel up to ±1 m, temperatures 10–40 °C — used by the accuracy
-//! proptests, the golden files and the replay vectors.
+//! proptests, the golden files and the replay vectors; and the replay
+//! vector writer. Also compiled into the QEMU crate's build script
+//! (`tests/build/random.rs`), which replays seeded random models on the
+//! target — so everything here must build with model-core's `std` feature
+//! alone.
 #![allow(dead_code)]
 
 use model_core::monomials::{kinematic, CUBIC19};
 use model_core::spec::PolyCoef;
 use model_core::{
-    Envelope, GridAxisSpec, GridSpec, InputScaling, Inputs, LayerSpec, MlpInputSpec, MlpSource,
-    MlpSpec, TableSpec, TermSpec, MAX_TEMPS,
+    parse, Envelope, GridAxisSpec, GridSpec, InputScaling, Inputs, InputsF64, LayerSpec,
+    MlpInputSpec, MlpSource, MlpSpec, Model, TableSpec, TermSpec, MAX_TEMPS,
 };
 
 /// SplitMix64.
@@ -559,3 +563,116 @@ pub fn golden_specs() -> Vec<(&'static str, TableSpec)> {
     out.push(("all_kinds", all));
     out
 }
+
+/// Replay vector files (little-endian), see `tests/vectors/README.md`:
+/// header `TXVE`, u16 version 1, u16 record size in i32 words (18),
+/// u32 record count, u32 CRC32 of the table the vectors belong to;
+/// then per record 18 × i32: pos_nm[3], rev_q30[3], temp_mc[4], tool_nm,
+/// expected fixed corr_nm[3], expected fixed flags, f64 reference in Q8 nm [3].
+pub const VEC_MAGIC: &[u8; 4] = b"TXVE";
+/// i32 words per record.
+pub const VEC_WORDS: usize = 18;
+
+/// Which inputs a vector file draws.
+#[derive(Clone, Copy, Debug)]
+pub struct VectorPlan {
+    /// Records in all.
+    pub records: usize,
+    /// The first this many inside the envelope, the rest beyond it.
+    pub inside: usize,
+    /// Beyond the envelope the tool arm leaves its range too
+    /// (`random_inputs_beyond`; otherwise `random_inputs(.., true)`).
+    pub tool_beyond: bool,
+}
+
+/// The replay vectors of `spec` drawn from `seed`: inputs, the expected
+/// fixed-point result (`Model::eval_fixed`) and the f64 reference on the
+/// inputs held at the envelope's edges (what the firmware should approach).
+pub fn make_vectors(spec: &TableSpec, seed: u64, plan: VectorPlan) -> Vec<u8> {
+    let bytes = spec.encode().expect("encode");
+    let table = parse(&bytes).expect("parse");
+    let model = Model::load(&table).expect("load");
+    let mut rng = Rng(seed);
+    let mut out = Vec::new();
+    out.extend_from_slice(VEC_MAGIC);
+    out.extend_from_slice(&1u16.to_le_bytes());
+    out.extend_from_slice(&(VEC_WORDS as u16).to_le_bytes());
+    out.extend_from_slice(&(plan.records as u32).to_le_bytes());
+    out.extend_from_slice(&table.crc32().to_le_bytes());
+    for i in 0..plan.records {
+        let inp = if i < plan.inside {
+            random_inputs(&mut rng, spec, false)
+        } else if plan.tool_beyond {
+            random_inputs_beyond(&mut rng, spec)
+        } else {
+            random_inputs(&mut rng, spec, true)
+        };
+        let q = model.eval_fixed(&inp);
+        let r = spec.eval_f64(&InputsF64::from(&held_inputs(spec, &inp)));
+        let words: Vec<i32> = inp
+            .pos_nm
+            .iter()
+            .chain(&inp.rev_q30)
+            .chain(&inp.temp_mc)
+            .copied()
+            .chain([inp.tool_nm])
+            .chain(q.corr_nm)
+            .chain([q.flags.bits() as i32])
+            .chain(
+                r.iter()
+                    .map(|v| (v * 256.0).round().clamp(i32::MIN as f64, i32::MAX as f64) as i32),
+            )
+            .collect();
+        assert_eq!(words.len(), VEC_WORDS);
+        for w in words {
+            out.extend_from_slice(&w.to_le_bytes());
+        }
+    }
+    out
+}
+
+/// Number of seeded random models replayed on the target.
+pub const QEMU_RANDOM_MODELS: usize = 16;
+
+/// The seeded random models the QEMU suite replays (host vs thumbv7em, fixed
+/// point bit for bit, f32 within 1 nm of the f64 reference): model i has
+/// kind i (every kind at least once) plus 0–3 others drawn from its seed,
+/// of realistic size (`random_spec`); a draw that does not fit the MCU's
+/// `Model` (grid or parameter capacity) is skipped for the next seed.
+/// Name: `random_<i>` and its kinds.
+pub fn qemu_random_specs() -> Vec<(String, TableSpec)> {
+    let mut out = Vec::new();
+    let mut seed = 0x0E_4D00_0000u64;
+    while out.len() < QEMU_RANDOM_MODELS {
+        seed += 1;
+        let i = out.len();
+        let mut rng = Rng(seed);
+        let mut kinds = vec![ALL_KINDS[i % ALL_KINDS.len()]];
+        for _ in 0..rng.int(0, 3) {
+            kinds.push(ALL_KINDS[rng.int(0, ALL_KINDS.len() as i64 - 1) as usize]);
+        }
+        let spec = random_spec(seed, &kinds);
+        let fits = spec
+            .encode()
+            .ok()
+            .is_some_and(|b| parse(&b).is_ok_and(|t| Model::load(&t).is_ok()));
+        if fits {
+            let names: Vec<String> = kinds.iter().map(|k| format!("{k:?}")).collect();
+            out.push((format!("random_{i:02} {}", names.join("+")), spec));
+        }
+    }
+    out
+}
+
+/// The seed of random model i's vectors.
+pub fn qemu_random_vector_seed(i: usize) -> u64 {
+    0x0E_4D00_5EED + i as u64
+}
+
+/// The vector plan of the random models: 64 records inside the envelope,
+/// 32 beyond it (positions, temperatures, tool arm).
+pub const QEMU_RANDOM_PLAN: VectorPlan = VectorPlan {
+    records: 96,
+    inside: 64,
+    tool_beyond: true,
+};
