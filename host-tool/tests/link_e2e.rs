@@ -423,11 +423,22 @@ fn grid_table(n: u16) -> Vec<u8> {
 #[test]
 fn tables_beyond_the_boards_limits_are_refused_before_touching_it() {
     // 40 × 40 = 1600 grid values (12.8 KB): over the 1024 of the board's
-    // models. 60 × 60 (28.8 KB): over its 24 KiB staging buffer.
+    // models. 60 × 60 (28.8 KB): over its 24 KiB staging buffer. And a
+    // table too slow for the correction loop.
     let grid = table_file("limit_grid", &grid_table(40));
     let big_bytes = grid_table(60);
     let over = big_bytes.len() - model_core::board::STAGE_BYTES;
     let big = table_file("limit_bytes", &big_bytes);
+    // model-core's golden all_kinds: fits the memory, but its fixed-point
+    // evaluation is estimated over what the 20 kHz loop leaves for a model.
+    let slow_bytes = include_bytes!("../../model-core/tests/golden/all_kinds.bin");
+    let est = model_core::cost::estimate(&parse(slow_bytes).unwrap()).fixed_instr;
+    let budget = model_core::board::MODEL_BUDGET_INSTR;
+    let slow = table_file("limit_slow", slow_bytes);
+    let slow_want = format!(
+        "estimated at {est} instructions, the board's 20000 Hz correction loop leaves {budget} for it: {} over",
+        est - budget
+    );
     for (path, want) in [
         (
             &grid,
@@ -437,6 +448,7 @@ fn tables_beyond_the_boards_limits_are_refused_before_touching_it() {
             &big,
             format!("the board takes at most 24576 (its staging buffer): {over} bytes over"),
         ),
+        (&slow, slow_want),
     ] {
         // No board on this port and (here) no probe: the check comes first.
         for args in [

@@ -1,13 +1,15 @@
 //! The compensation board's fixed resources (STM32F405RG, `firmware/board`),
-//! defined once: the firmware sizes its buffers with these constants, and
-//! the host checks a table against them before it touches a board
-//! (`trueaxis flash`, `trueaxis upload`), so a table the board cannot hold
-//! is refused on the desk with the limit it exceeds and by how much —
-//! not by the board after an upload, nor (for `flash`, which writes the
-//! slot directly) silently at the next boot.
+//! defined once: the firmware sizes its buffers with these constants and
+//! admits tables by the loop budget below, and the host checks a table
+//! against the same limits before it touches a board (`trueaxis flash`,
+//! `trueaxis upload`; `trueaxis export` warns), so a table the board
+//! cannot hold or evaluate in time is refused on the desk with the limit
+//! it exceeds and by how much — not by the board after an upload, nor
+//! (for `flash`, which writes the slot directly) silently at the next boot.
 
 use core::fmt;
 
+use crate::cost::{estimate, CostEstimate};
 use crate::eval::{LoadError, ModelCap};
 use crate::table::Table;
 
@@ -94,6 +96,14 @@ pub enum LimitError {
     /// It cannot be loaded for another reason (terms, MLP inputs,
     /// coefficient ranges: the same for every capacity).
     Load(LoadError),
+    /// Its fixed-point evaluation is estimated above [`MODEL_BUDGET_INSTR`]:
+    /// the correction loop could not evaluate it every period.
+    TooSlow {
+        /// The estimate, instructions.
+        estimate: u32,
+        /// The budget, instructions.
+        budget: u32,
+    },
 }
 
 impl fmt::Display for LimitError {
@@ -115,6 +125,17 @@ impl fmt::Display for LimitError {
                 needed.saturating_sub(max)
             ),
             LimitError::Load(e) => write!(f, "the board cannot load the table: {e}"),
+            LimitError::TooSlow { estimate, budget } => write!(
+                f,
+                "its evaluation is estimated at {estimate} instructions, the board's {} Hz \
+                 correction loop leaves {budget} for it: {} over (a tick may take {} of the \
+                 {} a period has, {} of them the engine's own)",
+                LOOP_HZ,
+                estimate.saturating_sub(budget),
+                TICK_BUDGET_INSTR,
+                PERIOD_INSTR,
+                ENGINE_TICK_INSTR
+            ),
         }
     }
 }
@@ -122,9 +143,25 @@ impl fmt::Display for LimitError {
 #[cfg(feature = "std")]
 impl std::error::Error for LimitError {}
 
-/// Checks `table` against the board's limits: its size, then whether it
-/// loads into a [`BoardModel`] (built in `model`, which is left loaded
-/// when it fits; ≈ 14.5 KiB, so callers with a small stack pass a static).
+/// Whether the correction loop can evaluate `table` every period: its
+/// fixed-point cost estimate against `budget_instr` (the board uses
+/// [`MODEL_BUDGET_INSTR`]). The firmware's admission at commit and the
+/// host's checks call this one function.
+pub fn check_cost(table: &Table<'_>, budget_instr: u32) -> Result<CostEstimate, LimitError> {
+    let est = estimate(table);
+    if est.fixed_instr > budget_instr {
+        return Err(LimitError::TooSlow {
+            estimate: est.fixed_instr,
+            budget: budget_instr,
+        });
+    }
+    Ok(est)
+}
+
+/// Checks `table` against the board's limits: its size, whether it loads
+/// into a [`BoardModel`] (built in `model`, which is left loaded when it
+/// fits; ≈ 14.5 KiB, so callers with a small stack pass a static), and
+/// whether the loop can evaluate it ([`check_cost`]).
 pub fn check_into(table: &Table<'_>, model: &mut BoardModel) -> Result<(), LimitError> {
     let bytes = table.bytes().len();
     if bytes > STAGE_BYTES {
@@ -143,7 +180,8 @@ pub fn check_into(table: &Table<'_>, model: &mut BoardModel) -> Result<(), Limit
             max: capacity,
         },
         e => LimitError::Load(e),
-    })
+    })?;
+    check_cost(table, MODEL_BUDGET_INSTR).map(|_| ())
 }
 
 /// [`check_into`] with a model of its own (host: it is boxed).
@@ -234,5 +272,28 @@ mod tests {
             e.to_string().contains(&std::format!("{over} bytes over")),
             "{e}"
         );
+    }
+
+    #[test]
+    fn tables_too_slow_for_the_loop_are_refused_by_their_estimate() {
+        let all = crate::parse(include_bytes!("../tests/golden/all_kinds.bin")).unwrap();
+        let est = crate::cost::estimate(&all).fixed_instr;
+        assert!(est > MODEL_BUDGET_INSTR, "{est}");
+        let e = check(&all).unwrap_err();
+        assert_eq!(
+            e,
+            LimitError::TooSlow {
+                estimate: est,
+                budget: MODEL_BUDGET_INSTR
+            }
+        );
+        let over = est - MODEL_BUDGET_INSTR;
+        assert!(e.to_string().contains(&std::format!("{over} over")), "{e}");
+        // A larger budget takes it; a small table fits the board's.
+        assert!(check_cost(&all, est).is_ok());
+        let nn = crate::parse(include_bytes!("../tests/golden/nn_3x16x3.bin")).unwrap();
+        assert_eq!(check(&nn), Ok(()));
+        const { assert!(TICK_BUDGET_INSTR == ENGINE_TICK_INSTR + MODEL_BUDGET_INSTR) };
+        const { assert!(TICK_BUDGET_INSTR < PERIOD_INSTR) };
     }
 }

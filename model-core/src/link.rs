@@ -375,6 +375,17 @@ pub enum LinkError {
     /// the table's envelope are accepted: the model holds them at the edge
     /// and flags it, exactly as for real sensors.
     BadInjection,
+    /// The table is valid but too slow for the correction loop: its
+    /// fixed-point evaluation is estimated ([`crate::cost::estimate`]) above
+    /// what a tick leaves for the model ([`crate::board`]). Refused at
+    /// commit; the active table stays. (Appended last, so the messages of
+    /// every other variant encode as before.)
+    TooSlow {
+        /// The table's estimate, instructions per evaluation.
+        estimate_instr: u32,
+        /// The most the board accepts, instructions.
+        budget_instr: u32,
+    },
 }
 
 impl core::fmt::Display for LinkError {
@@ -406,6 +417,14 @@ impl core::fmt::Display for LinkError {
             LinkError::NothingToActivate => write!(f, "no committed table to activate"),
             LinkError::NothingToRollBackTo => write!(f, "no valid table in the other slot"),
             LinkError::BadInjection => write!(f, "injected value out of range"),
+            LinkError::TooSlow {
+                estimate_instr,
+                budget_instr,
+            } => write!(
+                f,
+                "the table is too slow for the correction loop: its evaluation is estimated \
+                 at {estimate_instr} instructions, the board allows {budget_instr}"
+            ),
         }
     }
 }

@@ -19,6 +19,11 @@
 //! changed for `quiet_ms`; a machine at rest needs no new correction while
 //! the CPU waits. After the flash operation the engine's clock is resynced
 //! so the stall is not reported as a loop overrun.
+//!
+//! **Loop budget.** A commit is also refused (`LinkError::TooSlow`) when
+//! the table's fixed-point evaluation is estimated (`model_core::cost`)
+//! above `ServerConfig::model_budget_instr`: a table valid in every other
+//! way that the correction loop could not evaluate every period.
 
 use core::cell::RefCell;
 
@@ -28,6 +33,7 @@ use model_core::link::{
 };
 
 use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
+use model_core::board::{check_cost, LimitError};
 
 use crate::engine::Engine;
 use crate::model::{self, ModelBuf};
@@ -54,6 +60,11 @@ pub struct ServerConfig {
     pub firmware: [u16; 3],
     /// How long the axes must stand still before a flash erase, ms.
     pub quiet_ms: u32,
+    /// The most instructions a table's fixed-point evaluation may be
+    /// estimated to take (`model_core::cost`) for a commit to be accepted:
+    /// what a loop period leaves for the model
+    /// (`model_core::board::MODEL_BUDGET_INSTR` on the board).
+    pub model_budget_instr: u32,
 }
 
 /// One transport's receive state.
@@ -301,6 +312,21 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                     // UploadBegin of the same table would "resume" them.
                     self.upload = None;
                     return Err(LinkError::CrcMismatch);
+                }
+                // A valid table the loop cannot evaluate every period is
+                // refused before anything is written (and before waiting
+                // for the axes to stop): the active table stays. An
+                // invalid one is the store's to refuse below.
+                if let Ok(t) = model_core::parse(&self.stage[..u.size as usize]) {
+                    if let Err(LimitError::TooSlow { estimate, budget }) =
+                        check_cost(&t, self.cfg.model_budget_instr)
+                    {
+                        self.upload = None;
+                        return Err(LinkError::TooSlow {
+                            estimate_instr: estimate,
+                            budget_instr: budget,
+                        });
+                    }
                 }
                 self.require_quiet(now_us, engine)?;
                 let spare = spare(&mut self.spares);

@@ -222,6 +222,8 @@ impl SimBoard {
             ServerConfig {
                 firmware: crate::FIRMWARE_VERSION,
                 quiet_ms: 200,
+                // The real board's loop budget (model_core::board).
+                model_budget_instr: model_core::board::MODEL_BUDGET_INSTR,
             },
         );
         server.boot(&*engine);

@@ -447,6 +447,55 @@ fn tables_beyond_the_firmware_capacity_are_refused_at_commit() {
     );
 }
 
+/// A valid table the correction loop could not evaluate every period —
+/// model-core's golden `all_kinds`, a two-layer network among every other
+/// term kind, estimated above the board's model budget — is refused at
+/// commit with both figures; nothing is written, the active table stays.
+#[test]
+fn tables_too_slow_for_the_loop_are_refused_at_commit() {
+    let slow: &[u8] = include_bytes!("../../../model-core/tests/golden/all_kinds.bin");
+    let est = model_core::cost::estimate(&parse(slow).unwrap()).fixed_instr;
+    let budget = model_core::board::MODEL_BUDGET_INSTR;
+    assert!(est > budget, "{est} ≤ {budget}: not a test of the refusal");
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    let table = sample_table(0);
+    install(&mut b, &mut p, &table);
+    let begin = Request::UploadBegin {
+        size: slow.len() as u32,
+        crc32: table_id(slow),
+    };
+    call(&mut b, &mut p, 30, begin.clone());
+    for (i, c) in slow.chunks(256).enumerate() {
+        call(
+            &mut b,
+            &mut p,
+            31,
+            Request::UploadChunk {
+                offset: (i * 256) as u32,
+                data: c,
+            },
+        );
+    }
+    assert_eq!(
+        call(&mut b, &mut p, 32, Request::Commit),
+        Response::Error(LinkError::TooSlow {
+            estimate_instr: est,
+            budget_instr: budget
+        })
+    );
+    let Response::Identity(id) = call(&mut b, &mut p, 33, Request::Identify) else {
+        panic!()
+    };
+    assert_eq!(id.active.map(|a| a.crc32), Some(table_id(&table)));
+    assert_eq!(id.standby, None, "nothing was written");
+    // The staged bytes are spent: uploading again starts at 0.
+    assert_eq!(
+        call(&mut b, &mut p, 34, begin),
+        Response::UploadAck { next_offset: 0 }
+    );
+}
+
 #[test]
 fn commit_is_refused_while_axes_move() {
     let mut b = SimBoard::new();

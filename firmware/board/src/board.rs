@@ -60,8 +60,9 @@ pub const LAYOUT: Layout = Layout {
     slot_bytes: slots::SLOT_BYTES,
 };
 
-/// Correction loop rate.
-pub const LOOP_HZ: u64 = 20_000;
+/// Correction loop rate (defined in model-core, which derives the loop's
+/// instruction budget from it).
+pub const LOOP_HZ: u64 = model_core::board::LOOP_HZ as u64;
 
 /// The machine this board is set up for: 0.1 µm glass scales read in
 /// quadrature (25 nm/count… expressed as 25 000 pm), 100 nm correction

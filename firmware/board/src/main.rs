@@ -58,6 +58,7 @@ fn main() -> ! {
         ServerConfig {
             firmware: trueaxis_app::FIRMWARE_VERSION,
             quiet_ms: QUIET_MS,
+            model_budget_instr: model_core::board::MODEL_BUDGET_INSTR,
         },
     );
     match server.boot(engine) {

@@ -118,6 +118,10 @@ pub struct TableExport {
     pub terms: usize,
     /// The envelope written.
     pub envelope: EnvelopeJson,
+    /// Whether the compensation board takes the table (`model_core::board`:
+    /// size, model capacity, loop budget), with the cost estimate it admits
+    /// tables by.
+    pub board: BoardFit,
     /// What was left out or changed, and why.
     pub warnings: Vec<Warning>,
     /// The encoded table.
@@ -126,6 +130,37 @@ pub struct TableExport {
     /// The spec it was encoded from.
     #[serde(skip)]
     pub spec: Option<TableSpec>,
+}
+
+/// The table against the compensation board's limits (JSON `board`).
+#[derive(Clone, Debug, Serialize)]
+pub struct BoardFit {
+    /// The board takes it: `trueaxis upload` and `flash` would not refuse it.
+    pub fits: bool,
+    /// Estimated instructions of one fixed-point evaluation (what the
+    /// board's correction loop runs; `model_core::cost`).
+    pub estimate_fixed_instr: u32,
+    /// Estimated instructions of one f32 evaluation.
+    pub estimate_f32_instr: u32,
+    /// The most the board accepts for the fixed-point estimate.
+    pub model_budget_instr: u32,
+    /// Why the board would refuse it (`null` when it fits).
+    pub refusal: Option<String>,
+}
+
+impl BoardFit {
+    /// `table` against the board's limits.
+    pub fn of(table: &model_core::Table<'_>) -> BoardFit {
+        let est = model_core::cost::estimate(table);
+        let refusal = model_core::board::check(table).err().map(|e| e.to_string());
+        BoardFit {
+            fits: refusal.is_none(),
+            estimate_fixed_instr: est.fixed_instr,
+            estimate_f32_instr: est.f32_instr,
+            model_budget_instr: model_core::board::MODEL_BUDGET_INSTR,
+            refusal,
+        }
+    }
 }
 
 /// The envelope in readable units for JSON.
@@ -728,6 +763,17 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
     let crc = table.crc32();
     let fw = Model::load(&table)
         .map_err(|e| anyhow::anyhow!("the firmware cannot load the table: {e}"))?;
+    // The board's own limits: the table is written anyway (it is valid),
+    // but upload and flash will refuse it, so say so now.
+    let board = BoardFit::of(&table);
+    if let Some(why) = &board.refusal {
+        warnings.push(Warning::new(
+            "board_refuses",
+            format!(
+                "the compensation board would refuse this table ({why}); `trueaxis upload` and `flash` refuse it too — fit a smaller model"
+            ),
+        ));
+    }
 
     // The check.
     let mut max_f32 = 0.0f64;
@@ -774,6 +820,7 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
             temp_range_c: [t_lo, t_hi],
             tool_range_mm: [tool_lo, tool_hi],
         },
+        board,
         warnings,
         table: bytes,
         spec: Some(spec),
@@ -952,6 +999,58 @@ mod tests {
         .unwrap();
         assert!(e.warnings.iter().any(|w| w.code == "lag_dropped"));
         assert!(e.max_fixed_error_nm <= 1.0);
+    }
+
+    #[test]
+    fn the_boards_limits_are_reported_and_a_too_slow_table_warned() {
+        let net = |hidden: usize| {
+            let mut rng = 0x2545_f491_u32;
+            let mut r = move || {
+                rng ^= rng << 13;
+                rng ^= rng >> 17;
+                rng ^= rng << 5;
+                f64::from(rng % 2000) / 1000.0 - 1.0
+            };
+            FittedModel::Nn(NnModel {
+                inputs: vec![0, 1, 2],
+                outputs: vec![0, 1, 2],
+                in_min_mm: vec![0.0; 3],
+                in_max_mm: vec![100.0; 3],
+                out_min_um: vec![-2.0; 3],
+                out_max_um: vec![2.0; 3],
+                hidden,
+                w1: (0..3 * hidden).map(|_| r()).collect(),
+                b1: (0..hidden).map(|_| 0.5 * r()).collect(),
+                w2: (0..3 * hidden).map(|_| 0.3 * r()).collect(),
+                b2: vec![0.01, -0.02, 0.03],
+                training: NnTraining {
+                    epochs: 1,
+                    best_epoch: 1,
+                    stop: "test".into(),
+                    seed: 1,
+                    split_rows: [1, 1, 1],
+                },
+            })
+        };
+        // 3-16-3: within the board's budget.
+        let e = export(&file(net(16)), &TableOptions::default()).unwrap();
+        assert!(e.board.fits, "{:?}", e.board);
+        assert!(e.board.estimate_fixed_instr <= e.board.model_budget_instr);
+        assert!(e.warnings.iter().all(|w| w.code != "board_refuses"));
+        // 3-32-3: its fixed-point evaluation is estimated over the budget —
+        // written (it is valid), but warned, and the JSON says why.
+        let e = export(&file(net(32)), &TableOptions::default()).unwrap();
+        assert!(!e.board.fits);
+        assert!(e.board.estimate_fixed_instr > e.board.model_budget_instr);
+        let why = e.board.refusal.as_deref().unwrap();
+        assert!(why.contains("estimated at"), "{why}");
+        assert!(e.warnings.iter().any(|w| w.code == "board_refuses"));
+        let json = serde_json::to_value(&e).unwrap();
+        assert_eq!(json["board"]["fits"], false);
+        assert_eq!(
+            json["board"]["model_budget_instr"],
+            model_core::board::MODEL_BUDGET_INSTR
+        );
     }
 
     #[test]

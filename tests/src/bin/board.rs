@@ -172,6 +172,8 @@ fn main() -> ! {
         ServerConfig {
             firmware: trueaxis_app::FIRMWARE_VERSION,
             quiet_ms: 20,
+            // The real board's loop budget (model_core::board).
+            model_budget_instr: model_core::board::MODEL_BUDGET_INSTR,
         },
     );
     let booted = server.boot(&SharedEngine);
