@@ -420,6 +420,134 @@ impl TableSpec {
         Ok(w.0)
     }
 
+    /// Decode a parsed table back into its spec, the inverse of
+    /// [`TableSpec::encode`]: `from_table(&parse(&spec.encode()?)?) == spec`
+    /// and re-encoding gives the same bytes (both proptested). With it the
+    /// host evaluates any `.bin` in f64 ([`TableSpec::eval_f64`]), e.g. to
+    /// check a table someone else exported. Total: `parse` has validated
+    /// every field the accessors read.
+    pub fn from_table(t: &table::Table<'_>) -> TableSpec {
+        use table::TermView;
+        let poly = |c: table::PolyCoefs<'_>| c.iter().collect::<Vec<PolyCoef>>();
+        let terms = t
+            .terms()
+            .map(|term| match term.view() {
+                TermView::Poly { output, coefs } => TermSpec::Poly {
+                    output: output as u8,
+                    coefs: poly(coefs),
+                },
+                TermView::Abbe { output, coefs } => TermSpec::Abbe {
+                    output: output as u8,
+                    coefs: poly(coefs),
+                },
+                TermView::Thermal {
+                    output,
+                    channel,
+                    t_ref_mc,
+                    coefs,
+                } => TermSpec::Thermal {
+                    output: output as u8,
+                    channel: channel as u8,
+                    t_ref_mc,
+                    coefs_nm_per_k: poly(coefs),
+                },
+                v @ TermView::Periodic {
+                    output,
+                    axis,
+                    period_nm,
+                    harmonics,
+                    ..
+                } => {
+                    let (sin_nm, cos_nm) = (1..=harmonics).map(|k| v.harmonic(k)).unzip();
+                    TermSpec::Periodic {
+                        output: output as u8,
+                        axis: axis as u8,
+                        period_nm,
+                        sin_nm,
+                        cos_nm,
+                    }
+                }
+                TermView::Reversal {
+                    output,
+                    axis,
+                    transition_nm,
+                    amplitude_nm,
+                } => TermSpec::Reversal {
+                    output: output as u8,
+                    axis: axis as u8,
+                    transition_nm,
+                    amplitude_nm,
+                },
+                TermView::Mlp { outputs, net } => {
+                    let inputs = (0..net.n_inputs())
+                        .map(|i| {
+                            let r = net.input(i);
+                            MlpInputSpec {
+                                source: if r.source < 3 {
+                                    MlpSource::Pos(r.source)
+                                } else {
+                                    MlpSource::Temp(r.source - 3)
+                                },
+                                min: r.min,
+                                max: r.max,
+                            }
+                        })
+                        .collect();
+                    // Parameters in the table's order: per layer W (row-major,
+                    // units × inputs) then b; hidden layers, then the output layer.
+                    let mut k = 0;
+                    let mut layer = |units: usize, prev: usize| {
+                        let weights = (k..k + units * prev).map(|i| net.param(i)).collect();
+                        k += units * prev;
+                        let bias = (k..k + units).map(|i| net.param(i)).collect();
+                        k += units;
+                        LayerSpec { weights, bias }
+                    };
+                    let mut prev = net.n_inputs();
+                    let mut hidden = Vec::new();
+                    for &units in net.hidden() {
+                        hidden.push(layer(units, prev));
+                        prev = units;
+                    }
+                    let output = layer(net.n_outputs(), prev);
+                    let (out_min_nm, out_max_nm) =
+                        (0..net.n_outputs()).map(|j| net.output_range(j)).unzip();
+                    TermSpec::Mlp(MlpSpec {
+                        outputs: (0..3u8).filter(|o| outputs & (1 << o) != 0).collect(),
+                        inputs,
+                        hidden,
+                        output,
+                        out_min_nm,
+                        out_max_nm,
+                    })
+                }
+                TermView::Grid { output, grid } => TermSpec::Grid(GridSpec {
+                    output: output as u8,
+                    axes: core::array::from_fn(|a| {
+                        let r = grid.axis(a);
+                        GridAxisSpec {
+                            nodes: r.nodes,
+                            origin_nm: r.origin_nm,
+                            step_nm: r.step_nm,
+                        }
+                    }),
+                    values_nm: (0..grid.len()).map(|i| grid.value(i)).collect(),
+                }),
+            })
+            .collect();
+        TableSpec {
+            created_unix_s: t.created_unix_s(),
+            source_hash: t.source_hash(),
+            channels: (0..t.channel_count())
+                .map(|ch| t.channel_name(ch).unwrap_or_default().to_string())
+                .collect(),
+            envelope: t.envelope(),
+            scaling: t.scaling(),
+            outputs: core::array::from_fn(|o| t.has_output(o)),
+            terms,
+        }
+    }
+
     /// The f64 reference: the model's corrections in nm, without the envelope
     /// (no clamping of inputs or outputs). Absent outputs are 0.
     pub fn eval_f64(&self, inp: &InputsF64) -> [f64; 3] {
