@@ -313,3 +313,37 @@ fn an_effect_already_in_the_model_is_replaced_not_added_twice() {
         .all(|c| c.replaces.is_some()
             || !c.add.starts_with("thermal:target=ex,channel=bed,times=x,")));
 }
+
+/// The thermal lag is found between the search grid's points (600, 900,
+/// 1200, 2400, 3600 s): lags of 1000 s and 2900 s are recovered to ±5 %,
+/// and the CTE's 95 % interval — which includes the lag's own uncertainty —
+/// covers the true 11.5 µm/m/K (the grid alone gave 900 s and an interval
+/// [11.74, 12.01] that missed it).
+#[test]
+fn an_off_grid_thermal_lag_and_its_cte_are_recovered() {
+    for lag in [1000.0, 2900.0] {
+        let data = generate(&SynthConfig {
+            seed: 2,
+            noise_um: NOISE_UM,
+            hidden: vec![Hidden::Thermal],
+            thermal_lag_s: lag,
+            ..SynthConfig::default()
+        });
+        let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+        let top = &d.candidates[0];
+        assert!(
+            top.significant && top.add.starts_with("thermal:target=ex,channel=bed,times=x"),
+            "{}",
+            top.add
+        );
+        let found = top.params["lag_s"];
+        assert!((found / lag - 1.0).abs() < 0.05, "lag {lag}: found {found}");
+        let ph = top.physical.clone().unwrap();
+        assert!(
+            ph.ci95[0] <= 11.5 && 11.5 <= ph.ci95[1],
+            "lag {lag}: cte {} (95 % {:?})",
+            ph.value,
+            ph.ci95
+        );
+    }
+}

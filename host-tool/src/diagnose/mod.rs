@@ -6,11 +6,11 @@
 //! named candidate effects is built over every axis and channel present:
 //! `periodic` (period from a Lomb–Scargle periodogram of the residuals on
 //! dense lines, harmonics by BIC), `thermal` (per `T_*` channel, alone or
-//! times a position, lag by a 1-D search), `reversal` (`dir_*`), `abbe`
-//! (`tool_mm` × position), `drift` (`t_s`), `squareness` (linear cross
-//! terms) and `higher_order` (degree 4–5 along an axis). Each candidate is
-//! first checked for identifiability (the share of its columns outside the
-//! model's span: ≈0 → `in_model_span`; mostly inside the span of model plus
+//! times a position, lag by a grid refined by golden-section search),
+//! `reversal` (`dir_*`), `abbe` (`tool_mm` × position), `drift` (`t_s`),
+//! `squareness` (linear cross terms) and `higher_order` (degree 4–5 along
+//! an axis). Each candidate is first checked for identifiability (the share
+//! of its columns outside the model's span: ≈0 → `in_model_span`; mostly inside the span of model plus
 //! another candidate → `confounded`), then the model is partialled out
 //! (Frisch–Waugh–Lovell) and the candidate scored: ΔBIC, the gain in
 //! block-held-out RMS, and its physical parameter with a 95 % interval and a
@@ -471,7 +471,37 @@ fn fmt_num(v: f64, decimals: usize) -> String {
     }
 }
 
-/// Thermal lags tried, s.
+/// Minimum of `f` on [lo, hi] by golden-section search, to `tol`: (x, f(x)).
+/// Assumes one minimum in the bracket (the grid point and its neighbours).
+fn golden_min(f: impl Fn(f64) -> f64, lo: f64, hi: f64, tol: f64) -> (f64, f64) {
+    let g = (5f64.sqrt() - 1.0) / 2.0;
+    let (mut a, mut b) = (lo, hi);
+    let mut c = b - g * (b - a);
+    let mut d = a + g * (b - a);
+    let (mut fc, mut fd) = (f(c), f(d));
+    while b - a > tol {
+        if fc <= fd {
+            b = d;
+            d = c;
+            fd = fc;
+            c = b - g * (b - a);
+            fc = f(c);
+        } else {
+            a = c;
+            c = d;
+            fc = fd;
+            d = a + g * (b - a);
+            fd = f(d);
+        }
+    }
+    if fc <= fd {
+        (c, fc)
+    } else {
+        (d, fd)
+    }
+}
+
+/// Thermal lags tried, s (then refined between neighbours).
 const LAGS_S: [f64; 11] = [
     0.0, 120.0, 300.0, 600.0, 900.0, 1200.0, 1800.0, 2400.0, 3600.0, 5400.0, 7200.0,
 ];
@@ -624,16 +654,31 @@ fn propose(
             } else {
                 &LAGS_S[..1]
             };
+            let rss_at =
+                |lag: f64| fwl(td, st, &spec_at(lag), 0).map_or(f64::INFINITY, |ff| ff.fit.rss);
             let mut best = (f64::INFINITY, 0.0);
-            for &lag in lags {
-                if let Ok(ff) = fwl(td, st, &spec_at(lag), 0) {
-                    if ff.fit.rss < best.0 {
-                        best = (ff.fit.rss, lag);
-                    }
+            let mut best_i = 0;
+            for (i, &lag) in lags.iter().enumerate() {
+                let rss = rss_at(lag);
+                if rss < best.0 {
+                    best = (rss, lag);
+                    best_i = i;
                 }
             }
             if !best.0.is_finite() {
                 continue;
+            }
+            // The grid only brackets the lag (a true 1000 s was reported as
+            // 900 s, and the CTE's interval, which takes the lag as known,
+            // then missed the truth): refine between the grid neighbours of
+            // the best point by golden-section search to 1 s.
+            if lags.len() > 1 {
+                let lo = lags[best_i.saturating_sub(1)];
+                let hi = lags[(best_i + 1).min(lags.len() - 1)];
+                let (lag, rss) = golden_min(rss_at, lo, hi, 1.0);
+                if rss < best.0 {
+                    best = (rss, lag.round());
+                }
             }
             let note = if data.t_s.is_some() {
                 format!(
@@ -883,6 +928,68 @@ fn physical(td: &TargetData, p: &Proposal, ff: &FwlFit, sigma2: f64) -> Option<P
     }
 }
 
+/// (XᵀX)⁻¹ of a lagged thermal candidate's coefficients with the lag's own
+/// uncertainty in it: the lag is estimated from the same data, so the
+/// coefficient covariance is the (β, β) block of σ²(JᵀJ)⁻¹ with J the
+/// candidate's columns plus ∂(Σ β_k c_k)/∂lag (central difference), all with
+/// the model partialled out. Taking the lag as known made the CTE interval
+/// too narrow to cover the truth when the lag was a little off. None for
+/// other candidates and lag 0 (at the edge of the search).
+fn lag_aware_xtx_inv(
+    td: &TargetData,
+    st: &State,
+    spec: &str,
+    ff: &FwlFit,
+) -> Option<nalgebra::DMatrix<f64>> {
+    let e = Effect::parse(spec).ok()?;
+    let lag = match e.features.first()? {
+        Feature::Thermal { lag_s, .. } if *lag_s > 0.0 => *lag_s,
+        _ => return None,
+    };
+    let h = (0.02 * lag).max(1.0);
+    let cols_at = |l: f64| -> Option<Vec<Vec<f64>>> {
+        e.features
+            .iter()
+            .map(|f| match f {
+                Feature::Thermal {
+                    channel,
+                    t_ref_c,
+                    exp,
+                    ..
+                } => td
+                    .col(&Feature::Thermal {
+                        channel: channel.clone(),
+                        t_ref_c: *t_ref_c,
+                        lag_s: l,
+                        exp: *exp,
+                    })
+                    .ok(),
+                _ => None,
+            })
+            .collect()
+    };
+    let (up, down) = (cols_at(lag + h)?, cols_at(lag - h)?);
+    let n = td.rows.len();
+    let d: Vec<f64> = (0..n)
+        .map(|r| {
+            ff.fit
+                .beta
+                .iter()
+                .enumerate()
+                .map(|(k, b)| b * (up[k][r] - down[k][r]) / (2.0 * h))
+                .sum()
+        })
+        .collect();
+    let mut aug = ff.partialled.clone();
+    aug.push(st.basis.residual(&d));
+    let full = small_fit(&aug, &st.resid);
+    if full.rank < aug.len() {
+        return None;
+    }
+    let k = ff.partialled.len();
+    Some(full.xtx_inv.view((0, 0), (k, k)).into_owned())
+}
+
 /// The scored candidates of one target, with the data needed for overlaps.
 struct Scored {
     cand: Candidate,
@@ -1008,6 +1115,9 @@ fn score(
         let gain = held.map(|h| 1.0 - h / ref_held);
         let dof = n.saturating_sub(st.basis.rank() + ff.fit.rank).max(1) as f64;
         let sigma2 = ff.fit.rss / dof;
+        if let Some(inv) = lag_aware_xtx_inv(td, st, &p.spec, &ff) {
+            ff.fit.xtx_inv = inv;
+        }
         let phys = physical(td, &p, &ff, sigma2);
         let rms_after = (ff.fit.rss / n as f64).sqrt();
         let mut evidence = format!(

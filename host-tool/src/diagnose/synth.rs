@@ -22,7 +22,8 @@ use super::linalg::Basis;
 pub enum Hidden {
     /// ey += 2.5 µm · sin(2π·y/5.08 mm + 0.7): a 5.08 mm (0.2 in) lead.
     Periodic,
-    /// ex += 11.5 µm/m/K · x · ΔT_bed, the structure lagging the sensor by 600 s.
+    /// ex += 11.5 µm/m/K · x · ΔT_bed, the structure lagging the sensor by
+    /// `SynthConfig::thermal_lag_s` (600 s).
     Thermal,
     /// ex += 4 µm · dir_x: 8 µm of backlash.
     Reversal,
@@ -102,6 +103,8 @@ pub struct SynthConfig {
     pub plan: Plan,
     /// Forward and backward traverses; false = every approach from below.
     pub bidirectional: bool,
+    /// Lag of the structure behind the bed sensor in `Hidden::Thermal`, s.
+    pub thermal_lag_s: f64,
 }
 
 impl Default for SynthConfig {
@@ -114,6 +117,7 @@ impl Default for SynthConfig {
             misfit_um: 0.0,
             plan: Plan::GridAndLines,
             bidirectional: true,
+            thermal_lag_s: 600.0,
         }
     }
 }
@@ -225,7 +229,7 @@ pub fn generate(cfg: &SynthConfig) -> Dataset {
     let u = |r: usize| [0, 1, 2].map(|a| norm.u(a, d.pos(a, r)));
     let mono =
         |e: [u8; 3], uu: [f64; 3]| (0..3).map(|a| uu[a].powi(i32::from(e[a]))).product::<f64>();
-    let lag_bed = lagged(&t_bed, &t_s, None, 600.0);
+    let lag_bed = lagged(&t_bed, &t_s, None, cfg.thermal_lag_s);
     let mut err = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
     for (t, e) in err.iter_mut().enumerate() {
         // Base geometry inside the kinematic seed (so inside cubic19 too).
