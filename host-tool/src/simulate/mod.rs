@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::{Dataset, TempChannel, AXES};
 
-pub use machine::{AxisErrors, ErrorFn, Machine, Squareness, Wave, PRESETS};
+pub use machine::{AxisErrors, ErrorFn, Machine, Realistic, Squareness, Wave, PRESETS, REALISTIC};
 pub use plan::{iso_targets, stations, Plan, Visit};
 
 /// A physical effect added to the geometric errors. Magnitudes as in
