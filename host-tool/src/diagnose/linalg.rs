@@ -65,6 +65,24 @@ impl Basis {
         self.u.len()
     }
 
+    /// How much two spans share: the mean squared cosine of their principal
+    /// angles over the smaller one, ‖U_aᵀ U_b‖²_F / min(r_a, r_b) ∈ [0, 1].
+    /// 1 when one span lies inside the other, 0 when they are orthogonal;
+    /// two columns of which only one lies in the other span give ½, not 1
+    /// (a per-column maximum would call them the same effect).
+    pub fn overlap(&self, other: &Basis) -> f64 {
+        let r = self.rank().min(other.rank());
+        if r == 0 {
+            return 0.0;
+        }
+        let ss: f64 = self
+            .u
+            .iter()
+            .flat_map(|a| other.u.iter().map(move |b| dot(a, b).powi(2)))
+            .sum();
+        (ss / r as f64).clamp(0.0, 1.0)
+    }
+
     /// v − P v: the part of `v` orthogonal to the span.
     pub fn residual(&self, v: &[f64]) -> Vec<f64> {
         let mut r = v.to_vec();
@@ -309,6 +327,31 @@ mod tests {
         assert!(r.iter().all(|v| v.abs() < 1e-9));
         let r2 = b.residual(&x2);
         assert!(dot(&r2, &r2) > 1e-3);
+    }
+
+    #[test]
+    fn overlap_is_the_mean_share_over_the_smaller_span() {
+        let n = 200;
+        let x: Vec<f64> = (0..n).map(|i| i as f64 / n as f64 - 0.5).collect();
+        let x2: Vec<f64> = x.iter().map(|v| v * v - 1.0 / 12.0).collect();
+        let s: Vec<f64> = x.iter().map(|v| (40.0 * v).sin()).collect();
+        let a = Basis::new(&[x.clone(), x2.clone()], n);
+        // Nested: x alone lies inside span(x, x²).
+        assert!((a.overlap(&Basis::new(std::slice::from_ref(&x), n)) - 1.0).abs() < 1e-9);
+        // Only one of two directions shared: about ½, where the largest
+        // per-column share would say 100 %.
+        let b = Basis::new(&[x.clone(), s.clone()], n);
+        let ov = a.overlap(&b);
+        assert!(ov > 0.45 && ov < 0.6, "{ov}");
+        assert!((ov - b.overlap(&a)).abs() < 1e-12);
+        // Unrelated.
+        let c = Basis::new(
+            &[(0..n)
+                .map(|i| if i % 2 == 0 { 1.0 } else { -1.0 })
+                .collect()],
+            n,
+        );
+        assert!(a.overlap(&c) < 0.01);
     }
 
     #[test]

@@ -1172,23 +1172,14 @@ fn score(
     out
 }
 
-/// Share of `a`'s (partialled) directions explained by `b`'s: the largest
-/// over `a`'s columns of 1 − ‖a − P_b a‖² / ‖a‖².
+/// How much two candidates' (partialled) column spaces share: the mean
+/// squared cosine of their principal angles over the smaller span
+/// (`Basis::overlap`). The largest share of any single column, used before,
+/// called `thermal…,times=z,offset=1` 100 % inside `drift:order=3` because
+/// its plain ΔT column is — though its ΔT·z column is not, and the data told
+/// the two apart.
 fn overlap(a: &[Vec<f64>], b: &[Vec<f64>], n: usize) -> f64 {
-    let bb = Basis::new(b, n);
-    if bb.rank() == 0 {
-        return 0.0;
-    }
-    a.iter()
-        .map(|c| {
-            let cc = linalg::dot(c, c);
-            if cc <= 0.0 {
-                return 0.0;
-            }
-            let r = bb.residual(c);
-            1.0 - linalg::dot(&r, &r) / cc
-        })
-        .fold(0.0, f64::max)
+    Basis::new(a, n).overlap(&Basis::new(b, n))
 }
 
 /// Scores one target at one model state; marks confounding and the best
@@ -1270,16 +1261,20 @@ fn rank_target(
     let mut competing_best: Option<f64> = None;
     for (ii, &i) in top.iter().enumerate() {
         for &j in &top[ii + 1..] {
-            let ov = overlap(&sc[i].partialled, &sc[j].partialled, n).max(overlap(
-                &sc[j].partialled,
-                &sc[i].partialled,
-                n,
-            ));
+            let ov = overlap(&sc[i].partialled, &sc[j].partialled, n);
             if ii == 0 && ov >= COMPETING_OVERLAP && competing_best.is_none() {
                 competing_best = sc[j].cand.delta_bic;
             }
             let strong = |k: usize| sc[k].cand.delta_bic.is_some_and(|d| d < DBIC_SIGNIFICANT);
+            // Two candidates the data does separate (ΔBIC at least the gap
+            // rule's margin apart) are not confounded, however alike.
+            let (di, dj) = (
+                sc[i].cand.delta_bic.unwrap_or(f64::INFINITY),
+                sc[j].cand.delta_bic.unwrap_or(f64::INFINITY),
+            );
+            let separated = (di - dj).abs() >= MIN_GAP_DBIC;
             if ov >= CONFOUNDED_OVERLAP
+                && !separated
                 && sc[i].cand.effect != sc[j].cand.effect
                 && (strong(i) || strong(j))
             {
@@ -1295,8 +1290,10 @@ fn rank_target(
                 warnings.push(Warning {
                     code: "confounded".into(),
                     detail: format!(
-                        "`{ai}` and `{aj}` cannot be told apart on these data ({:.0} % of the new directions of one lie in the other){fix}",
-                        100.0 * ov
+                        "`{ai}` and `{aj}` cannot be told apart on these data (their new directions overlap {:.0} %: mean squared cosine of the principal angles; ΔBIC {:.0} vs {:.0}){fix}",
+                        100.0 * ov,
+                        di,
+                        dj
                     ),
                 });
             }
