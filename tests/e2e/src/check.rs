@@ -9,7 +9,7 @@ use std::process::Command;
 use std::time::Duration;
 
 use model_core::link::{
-    table_id, Correction, Injection, LinkError, Request, Response, SlotInfo, LINK_TEMPS,
+    table_id, Correction, Faults, Injection, LinkError, Request, Response, SlotInfo, LINK_TEMPS,
     MAX_CHUNK_BYTES,
 };
 use model_core::{Inputs, Model, MAX_TEMPS};
@@ -244,6 +244,89 @@ fn compare_trajectory(
     Ok(flagged)
 }
 
+/// The loop's output: at each point the board's `corr_nm` — what the
+/// correction loop drives the axes with, after the slew limit, not the
+/// link task's `model_corr_nm` — must settle on the host's fixed-point
+/// evaluation exactly. Waits for the slew: |change| / the table's slew
+/// limit, tripled (the engine may lower the limit to what its pulses can
+/// follow; QEMU's virtual time is not the wall clock's), plus 2 s. A fault
+/// ramps the output to zero instead, so there must be none — except loop
+/// overruns, which QEMU produces by itself: while the guest idles its
+/// virtual clock follows the host's, so a host that deschedules QEMU for a
+/// few ms (a loaded CI machine) shows the engine a gap of several periods.
+/// Those are cleared and counted, and the output must still settle.
+/// Returns the longest wait and the overruns cleared.
+fn settle_output(
+    link: &mut LinkClient,
+    t: &HostTable,
+    points: &[Injection],
+) -> Result<(Duration, u32), String> {
+    let slew = u64::from(
+        t.model
+            .envelope()
+            .max_slew_nm_per_ms()
+            .unsigned_abs()
+            .max(1),
+    );
+    match req(link, &Request::ClearFaults)? {
+        Response::Ok => {}
+        other => return err("ClearFaults", other),
+    }
+    let read = |link: &mut LinkClient| -> Result<Correction, String> {
+        match req(link, &Request::ReadCorrection)? {
+            Response::Correction(c) => Ok(c),
+            other => err("ReadCorrection", other),
+        }
+    };
+    let mut longest = Duration::ZERO;
+    let mut overruns = 0u32;
+    for (i, inj) in points.iter().enumerate() {
+        let before = read(link)?.corr_nm;
+        let (want, _) = t.expect(inj);
+        match req(link, &Request::Inject(*inj))? {
+            Response::Correction(c) if c.model_corr_nm == want => {}
+            other => return err("Inject before the output settles", other),
+        }
+        let dist = (0..3)
+            .map(|a| u64::from(want[a].abs_diff(before[a])))
+            .max()
+            .unwrap_or(0);
+        let limit = Duration::from_millis(2000 + 3 * dist / slew);
+        let started = std::time::Instant::now();
+        loop {
+            std::thread::sleep(Duration::from_millis(20));
+            let c = read(link)?;
+            if c.faults == Faults::LOOP_OVERRUN && overruns < 20 {
+                overruns += 1;
+                match req(link, &Request::ClearFaults)? {
+                    Response::Ok => continue,
+                    other => return err("ClearFaults", other),
+                }
+            }
+            if !c.faults.is_empty() {
+                return Err(format!(
+                    "point {i}: faults {:?} while the output settles (corr_nm {:?}, host {want:?})",
+                    c.faults.names().collect::<Vec<_>>(),
+                    c.corr_nm
+                ));
+            }
+            if c.corr_nm == want {
+                longest = longest.max(started.elapsed());
+                break;
+            }
+            if started.elapsed() > limit + Duration::from_millis(500) * overruns {
+                return Err(format!(
+                    "point {i} {inj:?}: the loop's output corr_nm is {:?} after {} ms, the host's evaluation {want:?} ({} nm to go at {slew} nm/ms)",
+                    c.corr_nm,
+                    limit.as_millis(),
+                    dist
+                ));
+            }
+        }
+    }
+    Ok((longest, overruns))
+}
+
 /// The end-to-end test.
 pub fn check(cli: &Cli) -> Result<(), String> {
     let t = HostTable::read(&cli.table)?;
@@ -335,14 +418,28 @@ pub fn check(cli: &Cli) -> Result<(), String> {
         "e2e: {} injected points, board == host (fixed point, bit exact; {flagged} flagged at the edges)",
         points.len()
     );
+    // The loop's output, after the slew limit, at points across the
+    // trajectory (one beyond the travel, index 49).
+    let settle: Vec<Injection> = [0, 49, 150, 300, 450, 599]
+        .iter()
+        .map(|&i| points[i])
+        .collect();
+    let (longest, overruns) = settle_output(&mut link, &t, &settle)?;
+    eprintln!(
+        "e2e: the loop's output corr_nm settled on the host's evaluation at {} points (longest {} ms; {overruns} emulation overruns cleared on the way)",
+        settle.len(),
+        longest.as_millis()
+    );
 
     // 4. A cut upload: half of another table, then the connection drops.
     // The board must keep the old table active, and refuse to commit.
-    upload_bytes(&mut link, &o.bytes, o.crc32, Some(o.bytes.len() / 2))?;
+    let sent = upload_bytes(&mut link, &o.bytes, o.crc32, Some(o.bytes.len() / 2))?;
     drop(link);
     let mut link = connect(cli.port)?;
+    let size = o.bytes.len() as u32;
     match req_when_quiet(&mut link, &Request::Commit)? {
-        Response::Error(LinkError::Incomplete { .. } | LinkError::NoUpload) => {}
+        Response::Error(LinkError::Incomplete { received, size: s })
+            if received == sent && s == size => {}
         other => return err("Commit of a cut upload", other),
     }
     let (active, _) = slots(&mut link)?;
@@ -352,8 +449,20 @@ pub fn check(cli: &Cli) -> Result<(), String> {
     compare_trajectory(&mut link, &t, &points[..50])?;
     eprintln!("e2e: cut upload refused, old table still active and correcting");
 
-    // 5. The other table for real (resuming the cut upload is allowed),
+    // 5. The other table for real, resuming the cut upload where it
+    // stopped (the board kept the bytes across the dropped connection),
     // then a rollback to the first: the corrections follow each.
+    match req(
+        &mut link,
+        &Request::UploadBegin {
+            size,
+            crc32: o.crc32,
+        },
+    )? {
+        Response::UploadAck { next_offset } if next_offset == sent => {}
+        other => return err("UploadBegin resuming the cut upload", other),
+    }
+    eprintln!("e2e: the cut upload resumes at byte {sent} of {size}");
     upload_activate(&mut link, &o)?;
     compare_trajectory(&mut link, &o, &points[..100])?;
     match req_when_quiet(&mut link, &Request::Rollback)? {
