@@ -26,7 +26,7 @@ pub const MODEL_PARAMS: usize = 768;
 pub const MODEL_GRID: usize = 1024;
 
 /// The board's prepared model: model-core's evaluator with the capacities
-/// above (≈ 14.5 KiB; the board keeps two). Evaluation is the same code
+/// above (≈ 16.3 KiB; the board keeps two). Evaluation is the same code
 /// whatever the capacity, so results are bit-identical to any other
 /// [`ModelCap`]'s.
 pub type BoardModel = ModelCap<MODEL_PARAMS, MODEL_GRID>;
@@ -160,7 +160,7 @@ pub fn check_cost(table: &Table<'_>, budget_instr: u32) -> Result<CostEstimate, 
 
 /// Checks `table` against the board's limits: its size, whether it loads
 /// into a [`BoardModel`] (built in `model`, which is left loaded when it
-/// fits; ≈ 14.5 KiB, so callers with a small stack pass a static), and
+/// fits; ≈ 16.3 KiB, so callers with a small stack pass a static), and
 /// whether the loop can evaluate it ([`check_cost`]).
 pub fn check_into(table: &Table<'_>, model: &mut BoardModel) -> Result<(), LimitError> {
     let bytes = table.bytes().len();

@@ -3,7 +3,7 @@
 //! its envelope, track directions. Keeping it in one file keeps the engine
 //! readable and makes a model-core API change a one-file change.
 //!
-//! A [`Model`] is large (≈ 14.5 KiB: fixed-capacity coefficient pools), so it
+//! A [`Model`] is large (≈ 16.3 KiB: fixed-capacity coefficient pools), so it
 //! is never moved around: the board owns two buffers, the link server loads
 //! a table into the spare one *outside* the engine's lock, and activation
 //! swaps two references inside it — O(1) in the correction loop's critical
@@ -92,7 +92,7 @@ pub fn load_into(bytes: &[u8], dst: &mut ModelBuf) -> Result<(), InvalidTable> {
     dst.0 = None;
     let t = model_core::parse(bytes).map_err(InvalidTable::Format)?;
     // Written so the loaded model goes straight from model-core's result
-    // into the buffer: every extra temporary is 14.5 KiB of stack.
+    // into the buffer: every extra temporary is 16.3 KiB of stack.
     let r = Model::load(&t);
     match r {
         Ok(m) => {

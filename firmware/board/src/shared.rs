@@ -55,7 +55,7 @@ pub static TEMPS_MC: [AtomicI32; LINK_TEMPS] = [const { AtomicI32::new(i32::MIN)
 /// See the table above.
 pub static TICKS: AtomicU32 = AtomicU32::new(0);
 
-/// The two model buffers (≈ 14.5 KiB each): one runs, one receives the next
+/// The two model buffers (≈ 16.3 KiB each): one runs, one receives the next
 /// table. Owned by the server and the engine in turn, never shared.
 /// `ConstStaticCell`: initialised in place, never built on the stack.
 pub static MODEL_A: ConstStaticCell<ModelBuf> = ConstStaticCell::new(ModelBuf::new());
