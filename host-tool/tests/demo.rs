@@ -56,6 +56,25 @@ fn demo_finds_both_hidden_effects_and_its_table_compensates_the_data() {
         assert!(p.is_file(), "{} is missing", p.display());
     }
 
+    // The dense line along X is bidirectional, as the docs say: both
+    // approach directions at its positions between the grid's (reversal
+    // needs both to be identifiable).
+    let data = import::load(&demo.data_csv()).unwrap();
+    let dir_x = data.dir[0].as_ref().expect("dir_x");
+    let on_line: Vec<i8> = (0..data.len())
+        .filter(|&r| {
+            data.pos(1, r) == 250.0 && data.pos(2, r) == 250.0 && data.pos(0, r) % 50.0 != 0.0
+        })
+        .map(|r| dir_x[r])
+        .collect();
+    assert_eq!(
+        on_line.len(),
+        2 * (1601 - 17),
+        "both directions of the 0.5 mm line"
+    );
+    assert!(on_line.contains(&1) && on_line.contains(&-1));
+    assert_eq!(on_line.iter().filter(|d| **d == 1).count(), 1601 - 17);
+
     // The improved model: periodic with the 5 mm period found from the
     // data, thermal on the bed sensor; ex down to ≤ 1.3 × the noise.
     let model = ModelFile::load(demo.model_json()).unwrap();
@@ -111,7 +130,6 @@ fn demo_finds_both_hidden_effects_and_its_table_compensates_the_data() {
     assert!(tj["max_f32_error_nm"].as_f64().unwrap() <= 1.0);
     assert!(tj["max_fixed_error_nm"].as_f64().unwrap() <= 1.0);
     let fw = Model::load(&t).unwrap();
-    let data = import::load(&demo.data_csv()).unwrap();
     let mut temp_col = [None; MAX_TEMPS];
     for (ch, slot) in temp_col.iter_mut().enumerate().take(t.channel_count()) {
         let name = t.channel_name(ch).unwrap();

@@ -3,7 +3,8 @@
 //!
 //! 1. **simulate** the preset mill (800 × 500 × 500 mm) with a lead-screw
 //!    periodic error on X and thermal growth of X during the measurement,
-//!    on a 50 mm grid plus a dense line along X → `DIR/data.csv`;
+//!    on a 50 mm grid plus a dense bidirectional line along X →
+//!    `DIR/data.csv`;
 //! 2. **fit** the seed's cubic19 → `DIR/model.json`;
 //! 3. **compare** → where it fails, `DIR/report/index.html`,
 //!    `DIR/compare.json`;
@@ -51,7 +52,7 @@ pub const PRESET: &str = "mill800";
 /// Measurement plans: the seed's 50 mm grid, then a dense bidirectional
 /// line along X through the middle of the work zone (the only way to see a
 /// 5 mm lead error: on the 50 mm grid it aliases to a constant).
-pub const PLANS: [&str; 2] = ["grid:50", "line:x:0.5,y=250,z=250"];
+pub const PLANS: [&str; 2] = ["grid:50", "line:x:0.5,y=250,z=250,bidir"];
 /// Hidden effects: a 5 mm lead screw's cyclic error on X (3 µm), and the
 /// machine warming 3 K during the measurement, growing X like steel.
 pub const EFFECTS: [&str; 2] = [
