@@ -8,7 +8,7 @@
 use std::path::PathBuf;
 
 use model_core::{parse, Inputs, Model, MAX_TEMPS};
-use trueaxis::cmd::demo::{run_demo, Demo, NOISE_UM};
+use trueaxis::cmd::demo::{Demo, NOISE_UM};
 use trueaxis::history;
 use trueaxis::import;
 use trueaxis::model::ModelFile;
@@ -26,7 +26,16 @@ fn read_json(p: &std::path::Path) -> serde_json::Value {
 #[test]
 fn demo_finds_both_hidden_effects_and_its_table_compensates_the_data() {
     let out = tmp_dir();
-    let story = run_demo(&out).unwrap();
+    // Through the binary with --json: one JSON document on stdout, the
+    // story on stderr.
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_trueaxis"))
+        .args(["demo", "--out", out.to_str().unwrap(), "--json"])
+        .output()
+        .unwrap();
+    let story = String::from_utf8(run.stderr).unwrap();
+    assert!(run.status.success(), "{story}");
+    let summary: serde_json::Value =
+        serde_json::from_slice(&run.stdout).expect("exactly one JSON document on stdout");
     let demo = Demo { out: out.clone() };
 
     // The story names both effects it added and ends at the noise floor.
@@ -39,6 +48,21 @@ fn demo_finds_both_hidden_effects_and_its_table_compensates_the_data() {
         "{story}"
     );
     assert!(story.contains("at the noise floor"), "{story}");
+
+    // The summary: the files it names exist, the effects it names are the
+    // model's, the story's end, each step's RMS, the table's bytes and CRC
+    // as written.
+    assert_eq!(summary["out"], out.to_str().unwrap());
+    for (name, p) in summary["files"].as_object().unwrap() {
+        assert!(
+            std::path::Path::new(p.as_str().unwrap()).is_file(),
+            "{name}: {p}"
+        );
+    }
+    assert_eq!(summary["improve"]["outcome"], "at the noise floor");
+    assert_eq!(summary["simulate"]["rows"].as_u64().unwrap() as usize, {
+        import::load(&demo.data_csv()).unwrap().len()
+    });
 
     // The files of the documented layout.
     for p in [
@@ -90,6 +114,18 @@ fn demo_finds_both_hidden_effects_and_its_table_compensates_the_data() {
         .parse()
         .unwrap();
     assert!((period - 5.0).abs() < 0.01, "period {period} mm");
+    assert_eq!(summary["improve"]["effects"], serde_json::json!(model.adds));
+    let steps = summary["improve"]["steps"].as_array().unwrap();
+    assert_eq!(steps.len(), 3);
+    let named: Vec<&str> = steps
+        .iter()
+        .flat_map(|st| st["added"].as_array().unwrap())
+        .map(|a| a.as_str().unwrap())
+        .collect();
+    assert_eq!(named, model.adds, "the effects named, step by step");
+    for st in steps {
+        assert!(st["rms_um"]["ex"].is_number() && st["held_out_rms_um"]["ex"].is_number());
+    }
     assert!(model.adds.iter().any(|a| a.starts_with("thermal:")));
     for t in ["ex", "ey", "ez"] {
         let rms = model.stats.rms_um[t];
@@ -114,6 +150,10 @@ fn demo_finds_both_hidden_effects_and_its_table_compensates_the_data() {
     for t in ["ex", "ey", "ez"] {
         let after = c["targets"][t]["rms_um"].as_f64().unwrap();
         assert!(after <= 1.3 * NOISE_UM, "compare_final.json {t} {after}");
+        assert_eq!(
+            summary["final"]["targets"][t]["rms_um"].as_f64(),
+            Some(after)
+        );
     }
 
     // The table: parses, its accuracy check passed, and evaluated by
@@ -128,6 +168,12 @@ fn demo_finds_both_hidden_effects_and_its_table_compensates_the_data() {
         format!("0x{:08x}", t.crc32())
     );
     assert!(tj["max_f32_error_nm"].as_f64().unwrap() <= 1.0);
+    assert_eq!(summary["table"]["bytes"], tj["bytes"]);
+    assert_eq!(summary["table"]["crc32"], tj["crc32"]);
+    assert_eq!(
+        summary["table"]["max_fixed_error_nm"],
+        tj["max_fixed_error_nm"]
+    );
     assert!(tj["max_fixed_error_nm"].as_f64().unwrap() <= 1.0);
     let fw = Model::load(&t).unwrap();
     let mut temp_col = [None; MAX_TEMPS];

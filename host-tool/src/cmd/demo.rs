@@ -45,6 +45,40 @@ pub struct Args {
     /// Directory for everything the demo writes (created if missing).
     #[arg(long, default_value = "out/demo")]
     pub out: PathBuf,
+    /// Write one JSON document to stdout (the numbers of every stage and
+    /// the files written); the story goes to stderr instead.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Where the story is told as it goes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Story {
+    /// On stdout (the human mode).
+    Stdout,
+    /// On stderr (with `--json`, whose stdout holds the one document).
+    Stderr,
+}
+
+/// Per-target before/after figures of a comparison, for the JSON summary.
+fn targets_json(c: &Comparison) -> serde_json::Value {
+    c.targets
+        .iter()
+        .map(|(name, r)| {
+            (
+                name.clone(),
+                serde_json::json!({
+                    "raw_rms_um": r.before.rms_um,
+                    "raw_max_abs_um": r.before.max_abs_um,
+                    "rms_um": r.after.rms_um,
+                    "max_abs_um": r.after.max_abs_um,
+                    "p95_abs_um": r.after.p95_abs_um,
+                    "improvement": r.improvement,
+                }),
+            )
+        })
+        .collect::<serde_json::Map<_, _>>()
+        .into()
 }
 
 /// The simulated machine of the demo: plans, effects, noise and seed.
@@ -165,7 +199,10 @@ impl Demo {
     /// Stage 4: diagnose the fitted seed, add the effects it names, refit
     /// until the residual is at the noise floor; overwrites `model.json`
     /// with the improved model. Returns it and the story of the steps.
-    pub fn improve(&self, data: &Dataset) -> Result<(ModelFile, String)> {
+    pub fn improve(
+        &self,
+        data: &Dataset,
+    ) -> Result<(ModelFile, String, super::improve::Improvement)> {
         super::improve::demo_stage(
             data,
             SEED_MODEL,
@@ -187,16 +224,32 @@ impl Demo {
         Ok(e)
     }
 
-    /// The whole story, printed as it goes. Returns the text printed.
+    /// The whole story, printed on stdout as it goes. Returns the text.
     pub fn run(&self) -> Result<String> {
+        self.run_with(Story::Stdout).map(|(story, _)| story)
+    }
+
+    /// The whole story, told on `to` as it goes. Returns the text and the
+    /// summary that `demo --json` prints: every stage's numbers (per-target
+    /// RMS before and after, each step of the diagnosis with the effect it
+    /// named, the export's bytes, CRC and accuracy) and the files written.
+    pub fn run_with(&self, to: Story) -> Result<(String, serde_json::Value)> {
+        use serde_json::json;
         std::fs::create_dir_all(&self.out)
             .with_context(|| format!("cannot create {}", self.out.display()))?;
         let mut story = String::new();
         let mut say = |s: String| -> Result<()> {
             story.push_str(&s);
             story.push('\n');
-            crate::cmd::out::print(&(s + "\n"))
+            match to {
+                Story::Stdout => crate::cmd::out::print(&(s + "\n")),
+                Story::Stderr => {
+                    eprintln!("{s}");
+                    Ok(())
+                }
+            }
         };
+        let path = |p: PathBuf| p.display().to_string();
         let t0 = Instant::now();
         // A fresh story: the history of an earlier demo run in the same
         // directory would otherwise be continued.
@@ -220,7 +273,22 @@ impl Demo {
             self.data_csv().display()
         ))?;
 
+        let sim_json = json!({
+            "preset": PRESET,
+            "plans": PLANS,
+            "effects": EFFECTS,
+            "noise_um": NOISE_UM,
+            "seed": SEED,
+            "rows": data.len(),
+            "duration_h": duration_h,
+        });
+
         let model = self.fit(&data, SEED_MODEL, &[])?;
+        let fit_json = json!({
+            "model": SEED_MODEL,
+            "rms_um": model.stats.rms_um,
+            "held_out_rms_um": model.stats.held_out_rms_um,
+        });
         let fmt_map = |m: &std::collections::BTreeMap<String, f64>| {
             m.iter()
                 .map(|(k, v)| format!("{k} {v:.2}"))
@@ -235,6 +303,10 @@ impl Demo {
         ))?;
 
         let c = self.compare(&data, &model)?;
+        let compare_json = json!({
+            "targets": targets_json(&c),
+            "worst_regions": c.worst_regions,
+        });
         let mut s = String::from("3. Compare — where does it fail?\n");
         for (name, r) in &c.targets {
             let _ = writeln!(
@@ -280,13 +352,27 @@ impl Demo {
         let _ = write!(s, "   report: {}", c.report.as_deref().unwrap_or("(none)"));
         say(s)?;
 
-        let (model, text) = self.improve(&data)?;
+        let (model, text, imp) = self.improve(&data)?;
         let c = self.compare_into(
             &data,
             &model,
             &self.final_report_dir(),
             &self.compare_final_json(),
         )?;
+        let improve_json = json!({
+            "steps": imp.steps.iter().map(|st| json!({
+                "step": st.step,
+                "added": st.added_effects.iter().map(|a| &a.add).collect::<Vec<_>>(),
+                "rms_um": st.rms_um,
+                "held_out_rms_um": st.held_out_rms_um,
+                "noise_floor_um": st.noise_floor_um,
+            })).collect::<Vec<_>>(),
+            "effects": model.adds,
+            "model": imp.model,
+            "verdict": imp.verdict,
+            "outcome": imp.steps.last().map(|st| st.outcome()),
+        });
+        let final_json = json!({ "targets": targets_json(&c) });
         let mut text = text;
         let _ = write!(text, "\n   compare the improved model:");
         for (name, r) in &c.targets {
@@ -304,6 +390,14 @@ impl Demo {
         say(format!("4. {text}"))?;
 
         let e = self.export(&model)?;
+        let table_json = json!({
+            "bytes": e.bytes,
+            "crc32": e.crc32,
+            "terms": e.terms,
+            "max_f32_error_nm": e.max_f32_error_nm,
+            "max_fixed_error_nm": e.max_fixed_error_nm,
+            "sweep_points": e.sweep_points,
+        });
         say(format!(
             "5. Export the firmware table: {} bytes, crc32 {}, {} terms; the board's evaluation differs from the host model by at most {:.3} nm (f32) and {:.3} nm (fixed point) over {} points of the envelope (travel {}) → {}",
             e.bytes,
@@ -321,14 +415,37 @@ impl Demo {
                 .join(", "),
             self.table_bin().display()
         ))?;
+        let elapsed_s = t0.elapsed().as_secs_f64();
         say(format!(
-            "Done in {:.1} s. Files for the board stage: {}, {}, {}",
-            t0.elapsed().as_secs_f64(),
+            "Done in {elapsed_s:.1} s. Files for the board stage: {}, {}, {}",
             self.table_bin().display(),
             self.model_json().display(),
             self.data_csv().display()
         ))?;
-        Ok(story)
+        let summary = json!({
+            "out": path(self.out.clone()),
+            "simulate": sim_json,
+            "fit": fit_json,
+            "compare": compare_json,
+            "improve": improve_json,
+            "final": final_json,
+            "table": table_json,
+            "files": {
+                "data_csv": path(self.data_csv()),
+                "model_json": path(self.model_json()),
+                "history_json": path(crate::history::history_path(&self.model_json())),
+                "table_bin": path(self.table_bin()),
+                "table_json": path(self.table_json()),
+                "compare_json": path(self.compare_json()),
+                "compare_final_json": path(self.compare_final_json()),
+                "report": path(self.report_dir().join("index.html")),
+                "diagnose_report": path(self.report_dir().join("diagnose").join("index.html")),
+                "history_report": path(self.report_dir().join("history").join("index.html")),
+                "final_report": path(self.final_report_dir().join("index.html")),
+            },
+            "elapsed_s": elapsed_s,
+        });
+        Ok((story, summary))
     }
 }
 
@@ -342,6 +459,12 @@ pub fn run_demo(out: &Path) -> Result<String> {
 
 impl Args {
     pub fn run(self) -> Result<()> {
-        run_demo(&self.out).map(|_| ())
+        let demo = Demo { out: self.out };
+        if self.json {
+            let (_, summary) = demo.run_with(Story::Stderr)?;
+            crate::cmd::out::json(&summary)
+        } else {
+            demo.run().map(|_| ())
+        }
     }
 }

@@ -215,13 +215,13 @@ pub fn improve(
 /// error falling step by step. Writes every fit to `model_path` (with its
 /// history) and, with `report_dir`, the diagnosis of the seed model and the
 /// history plot under `report_dir/diagnose` and `report_dir/history`.
-/// Returns the final model and the story told.
+/// Returns the final model, the story told and the steps.
 pub fn demo_stage(
     data: &Dataset,
     seed: &str,
     model_path: &std::path::Path,
     report_dir: Option<&std::path::Path>,
-) -> Result<(crate::model::ModelFile, String)> {
+) -> Result<(crate::model::ModelFile, String, Improvement)> {
     use std::fmt::Write as _;
     let mut s = String::new();
     let first = diagnose::diagnose(data, &Options::seed(seed))?;
@@ -306,7 +306,7 @@ pub fn demo_stage(
         let _ = writeln!(s, "   the error falling: {}", p.display());
     }
     let _ = write!(s, "   model: {} → {}", r.model, r.model_file);
-    Ok((crate::model::ModelFile::load(model_path)?, s))
+    Ok((crate::model::ModelFile::load(model_path)?, s, r))
 }
 
 impl Args {
