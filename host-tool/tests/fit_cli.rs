@@ -313,7 +313,10 @@ fn bad_input_exits_1_and_usage_exits_2() {
             "--json",
         ],
         1,
-        "3 distinct points but the model has 4 terms",
+        &format!(
+            "{}: cannot fit cubic19: ex: 3 distinct points but the model has 4 terms",
+            small.display()
+        ),
     );
 
     // Usage errors: clap's exit code 2.

@@ -83,7 +83,8 @@ impl Args {
                 adds,
                 follow_path: true,
             },
-        )?;
+        )
+        .with_context(|| format!("{}: cannot diagnose", self.data.display()))?;
         if let Some(dir) = &self.report {
             let index = diagnose::report::write(&d, &data, dir)?;
             if !self.json {

@@ -6,7 +6,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 
 use crate::cmd::input;
 use crate::cmd::out::{self, outln};
@@ -76,7 +76,10 @@ impl Args {
             },
             progress: !self.json,
         };
-        let model = fit::fit(&data, &self.model, &adds, &opts)?;
+        // The fit's own messages name the target (`ex: 3 distinct points
+        // but the model has 4 terms`); the file is named here.
+        let model = fit::fit(&data, &self.model, &adds, &opts)
+            .with_context(|| format!("{}: cannot fit {}", self.data.display(), self.model))?;
         let out = self
             .output
             .clone()

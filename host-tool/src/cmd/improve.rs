@@ -7,7 +7,7 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use serde::Serialize;
 
 use crate::cmd::fit::default_model_path;
@@ -353,7 +353,8 @@ impl Args {
                 text.push_str(&format!("  because: {e}\n"));
             }
             write_err = out::print(&text).err();
-        })?;
+        })
+        .with_context(|| format!("{}: cannot improve {seed}", self.data.display()))?;
         if let Some(e) = write_err {
             return Err(e);
         }
