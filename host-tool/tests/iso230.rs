@@ -215,3 +215,30 @@ fn rows_left_out_on_load_are_counted_and_said() {
     assert_eq!(common::json(&clean)["skipped_count"], 0);
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// `--axis` reaches the .rtl reader: a file whose USER-TEXT:: has no
+/// `Axis:` line is evaluated along the axis named on the command line
+/// (before, it failed with "no `Axis:` line … or pass --axis" even when
+/// --axis was passed).
+#[test]
+fn axis_option_reaches_the_rtl_reader() {
+    let dir = common::tmp_dir("iso230", "axis");
+    let text = std::fs::read_to_string(data("iso_worked.rtl")).unwrap();
+    assert!(text.contains("Axis: X\r\n"));
+    let no_axis = dir.join("no_axis.rtl");
+    std::fs::write(&no_axis, text.replace("Axis: X\r\n", "")).unwrap();
+    let f = common::s(&no_axis);
+
+    let out = common::run(&["iso230", f]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("or pass --axis"));
+
+    let v = common::json(&common::run(&["iso230", f, "--axis", "x", "--json"]));
+    assert_eq!(v["axis"], "x");
+    assert!((v["A_um"].as_f64().unwrap() - 10.742641).abs() < TOL);
+    // The same runs read as Y: the axis named wins, the numbers are the same.
+    let v = common::json(&common::run(&["iso230", f, "--axis", "y", "--json"]));
+    assert_eq!(v["axis"], "y");
+    assert!((v["A_um"].as_f64().unwrap() - 10.742641).abs() < TOL);
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -17,7 +17,8 @@ pub struct Args {
     /// Measurement data (.csv or .rtl) with bidirectional runs along one axis.
     pub data: PathBuf,
     /// The axis to evaluate (default: the only axis with position, error and
-    /// direction columns).
+    /// direction columns); for an .rtl file, the axis of its runs (overrides
+    /// the file's `Axis:` line, needed when it has none).
     #[arg(long, value_parser = ["x", "y", "z"])]
     pub axis: Option<String>,
     /// Directory for the plot (`iso230_<axis>.svg`); created if missing.
@@ -30,9 +31,15 @@ pub struct Args {
 
 impl Args {
     pub fn run(self) -> Result<()> {
-        let data = input::load_data(&self.data, None)?;
-        let axis = match self.axis.as_deref() {
-            Some(a) => AXES.iter().position(|x| *x == a).context("axis")?,
+        let named = match self.axis.as_deref() {
+            Some(a) => Some(AXES.iter().position(|x| *x == a).context("axis")?),
+            None => None,
+        };
+        // `--axis` also tells an .rtl file's reader the axis (its
+        // USER-TEXT:: may have no `Axis:` line, or name another one).
+        let data = input::load_data(&self.data, named)?;
+        let axis = match named {
+            Some(a) => a,
             None => iso230::default_axis(&data)?,
         };
         let res = iso230::evaluate(&data, axis)?;
