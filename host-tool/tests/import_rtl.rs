@@ -168,3 +168,20 @@ fn label_in_front_of_every_row_is_read_the_same() {
     assert_eq!(a.dir, b.dir);
     assert_eq!(a.pass_id, b.pass_id);
 }
+/// A UTF-8 byte order mark (as Windows editors write it) is skipped, like
+/// the CSV reader does — from memory and from a file.
+#[test]
+fn byte_order_mark_is_skipped() {
+    let text = std::fs::read_to_string(data("iso_worked.rtl")).unwrap();
+    let plain = import::read_rtl(&text, "a.rtl", None).unwrap();
+    let bom = import::read_rtl(&format!("\u{feff}{text}"), "b.rtl", None).unwrap();
+    assert_eq!(bom.pos_mm, plain.pos_mm);
+    assert_eq!(bom.err_um, plain.err_um);
+    assert_eq!(bom.dir, plain.dir);
+    let path = std::env::temp_dir().join(format!("trueaxis-bom-{}.rtl", std::process::id()));
+    let mut bytes = vec![0xef, 0xbb, 0xbf];
+    bytes.extend_from_slice(text.as_bytes());
+    std::fs::write(&path, bytes).unwrap();
+    assert_eq!(import::load(&path).unwrap().err_um, plain.err_um);
+    let _ = std::fs::remove_file(path);
+}

@@ -18,7 +18,8 @@
 //! Odd runs go forward (targets ascending), even runs backward (targets
 //! listed in descending order); `target` is the 1-based index into
 //! `Targets`. The order is checked because a file that breaks it has been
-//! misread or edited, and the direction of each row depends on it.
+//! misread or edited, and the direction of each row depends on it. A
+//! leading UTF-8 byte order mark is skipped.
 
 use super::ImportError;
 use crate::data::{Dataset, AXES};
@@ -74,6 +75,9 @@ fn parse_count(v: &str, file: &str, line: usize, key: &str) -> Result<usize, Imp
 /// `Axis:` line of `USER-TEXT::`.
 pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, ImportError> {
     let err = |line: usize, col: Option<usize>, m: String| ImportError::at(name, line, col, m);
+    // A UTF-8 byte order mark (Windows editors write one) is not part of
+    // the first section name; the CSV reader strips it the same way.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut section = Section::None;
     let mut list = List::None;
     let mut metadata: Vec<(String, String)> = vec![("format".into(), "Renishaw .rtl".into())];
