@@ -168,6 +168,14 @@ fn label_in_front_of_every_row_is_read_the_same() {
     assert_eq!(a.dir, b.dir);
     assert_eq!(a.pass_id, b.pass_id);
 }
+
+/// The worked example with one edit, read from memory.
+fn edited(from: &str, to: &str) -> String {
+    let text = std::fs::read_to_string(data("iso_worked.rtl")).unwrap();
+    assert!(text.contains(from), "{from:?}");
+    text.replacen(from, to, 1)
+}
+
 /// A UTF-8 byte order mark (as Windows editors write it) is skipped, like
 /// the CSV reader does — from memory and from a file.
 #[test]
@@ -184,4 +192,55 @@ fn byte_order_mark_is_skipped() {
     std::fs::write(&path, bytes).unwrap();
     assert_eq!(import::load(&path).unwrap().err_um, plain.err_um);
     let _ = std::fs::remove_file(path);
+}
+
+/// `Targets` must ascend: forward runs get dir +1 because they move up the
+/// list, so a descending list would give every row the wrong direction.
+#[test]
+fn targets_out_of_order_name_the_line_and_field() {
+    let text = edited(
+        "Targets :    0.000   100.000\r\n   200.000",
+        "Targets :    200.000   100.000\r\n   0.000",
+    );
+    let e = import::read_rtl(&text, "d.rtl", None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("d.rtl:6:2: Targets: expected positions in ascending order"),
+        "{e}"
+    );
+    assert!(e.contains("found `100.000` after 200"), "{e}");
+    // Also across a wrapped line, and a repeated position.
+    let text = edited("   200.000", "   100.000");
+    let e = import::read_rtl(&text, "d.rtl", None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("d.rtl:7:1: Targets: expected positions in ascending order"),
+        "{e}"
+    );
+}
+
+/// A run that stops before visiting every target is refused with the line
+/// of its last deviation, not read as a shorter run.
+#[test]
+fn incomplete_run_names_its_last_line() {
+    // Run 3 (lines 27–29) loses its third target.
+    let text = edited("3 3 1.0\r\n", "");
+    let e = import::read_rtl(&text, "d.rtl", None)
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        e,
+        "d.rtl:28: run 3 has 2 of the 3 targets (missing target 3); expected every run to visit every target"
+    );
+    // A backward run cut after its first reading.
+    let text = edited("2 2 2.0\r\n2 1 -1.0\r\n", "");
+    let e = import::read_rtl(&text, "d.rtl", None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("d.rtl:24: run 2 has 1 of the 3 targets (missing target 1, 2)"),
+        "{e}"
+    );
 }

@@ -17,9 +17,10 @@
 //! ```
 //! Odd runs go forward (targets ascending), even runs backward (targets
 //! listed in descending order); `target` is the 1-based index into
-//! `Targets`. The order is checked because a file that breaks it has been
-//! misread or edited, and the direction of each row depends on it. A
-//! leading UTF-8 byte order mark is skipped.
+//! `Targets`. The order is checked — `Targets` strictly ascending, each run
+//! in its direction's order, every run visiting every target — because a
+//! file that breaks it has been misread, cut or edited, and the direction
+//! of each row depends on it. A leading UTF-8 byte order mark is skipped.
 
 use super::ImportError;
 use crate::data::{Dataset, AXES};
@@ -183,6 +184,19 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                             let v: f64 = tok.parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| {
                                 err(ln, Some(field + 1), format!("Targets: expected a finite position in mm, found `{tok}`"))
                             })?;
+                            // Forward (odd) runs get dir +1 because they
+                            // move up the list: a list that is not
+                            // ascending would give every row the wrong
+                            // direction.
+                            if let Some(&prev) = targets.last() {
+                                if v <= prev {
+                                    return Err(err(
+                                        ln,
+                                        Some(field + 1),
+                                        format!("Targets: expected positions in ascending order (forward runs approach them in list order), found `{tok}` after {prev}"),
+                                    ));
+                                }
+                            }
                             targets.push(v);
                         }
                     }
@@ -344,6 +358,28 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                 runs_line,
                 None,
                 format!("Run-count is {runs} but run {r} has no deviations"),
+            ));
+        }
+    }
+    // Every run visits every target once: a run that stops early is a
+    // broken or cut-off file, not a shorter run (ISO 230-2 needs each
+    // target approached in every run).
+    for r in 1..=runs {
+        let seen: Vec<&(usize, usize, usize, f64)> = rows.iter().filter(|row| row.1 == r).collect();
+        if seen.len() < count {
+            let missing: Vec<String> = (0..count)
+                .filter(|t| !seen.iter().any(|row| row.2 == *t))
+                .map(|t| (t + 1).to_string())
+                .collect();
+            let last = seen.last().map_or(runs_line, |row| row.0);
+            return Err(err(
+                last,
+                None,
+                format!(
+                    "run {r} has {} of the {count} targets (missing target {}); expected every run to visit every target",
+                    seen.len(),
+                    missing.join(", ")
+                ),
             ));
         }
     }
