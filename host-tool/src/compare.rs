@@ -428,7 +428,13 @@ pub fn worst_regions(
 }
 
 /// Every column the residual can be plotted against, with its values:
-/// position axes, temperatures, tool length, time and directions.
+/// position axes, temperatures, tool length, time, directions, and every
+/// numeric auxiliary column (`humidity_pct`, a second laser's reading…:
+/// CONTRACT §1 keeps a column it does not know as an auxiliary channel and
+/// reports it — a residual that follows humidity is exactly what compare
+/// should show). An auxiliary column counts as numeric when every
+/// non-empty cell is a finite number and at least one is; empty cells are
+/// left out of its profile.
 pub fn channels(data: &Dataset) -> Vec<(String, Vec<f64>)> {
     let mut out = Vec::new();
     for a in data.axes() {
@@ -453,7 +459,30 @@ pub fn channels(data: &Dataset) -> Vec<(String, Vec<f64>)> {
             ));
         }
     }
+    for ch in &data.aux {
+        if let Some(values) = numeric_cells(&ch.cells) {
+            out.push((ch.name.clone(), values));
+        }
+    }
     out
+}
+
+/// The cells as numbers (NaN for an empty cell), or `None` when a
+/// non-empty cell is not a finite number or no cell has a value.
+fn numeric_cells(cells: &[String]) -> Option<Vec<f64>> {
+    let mut any = false;
+    let values = cells
+        .iter()
+        .map(|c| {
+            let c = c.trim();
+            if c.is_empty() {
+                return Some(f64::NAN);
+            }
+            any = true;
+            c.parse::<f64>().ok().filter(|v| v.is_finite())
+        })
+        .collect::<Option<Vec<f64>>>()?;
+    any.then_some(values)
 }
 
 /// The residual of one target against one channel: correlation, slope and
@@ -1176,6 +1205,18 @@ pub fn build_report(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn numeric_aux_cells() {
+        let s = |v: &[&str]| v.iter().map(|c| c.to_string()).collect::<Vec<_>>();
+        let v = numeric_cells(&s(&["41.5", "", " 43 "])).unwrap();
+        assert_eq!(v[0], 41.5);
+        assert!(v[1].is_nan());
+        assert_eq!(v[2], 43.0);
+        assert_eq!(numeric_cells(&s(&["41.5", "Anna"])), None);
+        assert_eq!(numeric_cells(&s(&["1", "NaN"])), None);
+        assert_eq!(numeric_cells(&s(&["", ""])), None);
+    }
 
     #[test]
     fn pick_evenly_keeps_both_ends() {

@@ -427,6 +427,69 @@ fn rows_left_out_are_counted_and_said() {
     }
 }
 
+/// A numeric auxiliary column (`humidity_pct`) is a channel like the
+/// contract's own: kept, and the residual's dependence on it reported. The
+/// simulated grid gets a humidity reading per row and an ex error of
+/// 0.8 µm per % humidity — which no polynomial in x, y, z holds — and a
+/// text column (`operator`), which is kept but is no channel.
+#[test]
+fn numeric_auxiliary_columns_are_channels() {
+    let dir = tmp_dir("compare", "aux");
+    let csv = simulate(&dir, "grid.csv", 7);
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut out = String::new();
+    let mut ex_col = None;
+    let mut row = 0usize;
+    for line in text.lines() {
+        if line.starts_with('#') {
+            out.push_str(line);
+        } else if ex_col.is_none() {
+            ex_col = line.split(',').position(|h| h == "ex_um");
+            out.push_str(&format!("{line},humidity_pct,operator"));
+        } else {
+            // A deterministic humidity that jumps around (no smooth
+            // function of position): 40…60 %.
+            let h = 40.0 + ((row * 7919) % 21) as f64;
+            let mut cells: Vec<String> = line.split(',').map(str::to_string).collect();
+            let i = ex_col.unwrap();
+            let ex: f64 = cells[i].parse().unwrap();
+            cells[i] = format!("{:.4}", ex + 0.8 * (h - 50.0));
+            out.push_str(&format!("{},{h},Anna", cells.join(",")));
+            row += 1;
+        }
+        out.push('\n');
+    }
+    let humid = dir.join("humid.csv");
+    std::fs::write(&humid, out).unwrap();
+    let model = dir.join("humid.model.json");
+    fit(&humid, &model);
+    let v = json(&run(&[
+        "compare",
+        s(&humid),
+        "--model",
+        s(&model),
+        "--json",
+    ]));
+    let chans = v["channels"].as_array().unwrap();
+    let h = chans
+        .iter()
+        .find(|c| c["channel"] == "humidity_pct" && c["target"] == "ex")
+        .expect("humidity_pct is a channel of ex");
+    let r = num(&h["corr"], "corr");
+    let slope = num(&h["slope_um_per_unit"], "slope");
+    assert!(r > 0.95, "ex residual follows humidity: r = {r}");
+    assert!((slope - 0.8).abs() < 0.05, "0.8 µm per %: {slope}");
+    assert_eq!(h["bins"].as_array().unwrap().len(), 10);
+    assert!(
+        !chans.iter().any(|c| c["channel"] == "operator"),
+        "a text column is no channel"
+    );
+    // The text output names it among the channels the residual follows.
+    let out = run(&["compare", s(&humid), "--model", s(&model)]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("ex vs humidity_pct: r = +0.99"), "{text}");
+}
+
 #[test]
 fn a_target_the_model_lacks_is_warned() {
     let dir = tmp_dir("compare", "target");
