@@ -645,3 +645,78 @@ fn every_numeric_option_is_validated() {
     );
     let _ = std::fs::remove_file(&out_csv);
 }
+
+/// `bidir` directly (not only through a golden hash): every line is run
+/// forward, then backward, as two passes; positions ascend then descend;
+/// the backward pass approaches from above (dir −1) except its first
+/// reading, taken where the forward pass stopped (still approached from
+/// below — the reason ISO 230-2 plans overrun the end targets).
+#[test]
+fn bidir_runs_each_line_forward_then_backward() {
+    let d = simulate::simulate(&perfect(&["line:x:200,bidir"], &[]));
+    let x = d.pos_mm[0].as_ref().unwrap();
+    let dir = d.dir[0].as_ref().unwrap();
+    let pass = d.pass_id.as_ref().unwrap();
+    assert_eq!(
+        x,
+        &vec![0.0, 200.0, 400.0, 600.0, 800.0, 800.0, 600.0, 400.0, 200.0, 0.0]
+    );
+    assert_eq!(pass, &vec![0, 0, 0, 0, 0, 1, 1, 1, 1, 1]);
+    assert_eq!(dir, &vec![1, 1, 1, 1, 1, 1, -1, -1, -1, -1]);
+    // The other axes sit still at mid-travel, and time runs on.
+    assert!(d.pos_mm[1].as_ref().unwrap().iter().all(|&y| y == 250.0));
+    let t = d.t_s.as_ref().unwrap();
+    assert!(t.windows(2).all(|w| w[1] > w[0]), "{t:?}");
+    // A plane with bidir (x 0, 400, 800 on the lines y = 0 and 400): each
+    // line both ways, 2 passes per line.
+    let d = simulate::simulate(&perfect(&["plane:xy:400,bidir"], &[]));
+    assert_eq!(d.len(), 3 * 2 * 2);
+    let pass = d.pass_id.as_ref().unwrap();
+    assert_eq!(pass.iter().max(), Some(&3));
+    let dir = d.dir[0].as_ref().unwrap();
+    for p in 0..4i64 {
+        let rows: Vec<usize> = (0..d.len()).filter(|&r| pass[r] == p).collect();
+        let xs: Vec<f64> = rows.iter().map(|&r| d.pos(0, r)).collect();
+        if p % 2 == 0 {
+            assert_eq!(xs, [0.0, 400.0, 800.0], "pass {p}");
+        } else {
+            assert_eq!(xs, [800.0, 400.0, 0.0], "pass {p}");
+            assert_eq!(dir[rows[1]], -1);
+            assert_eq!(dir[rows[2]], -1);
+        }
+    }
+}
+
+/// Returns to a reference point directly: before the first pass, after
+/// every N passes and at the end, each a pass of its own at exactly the
+/// reference position, approached the way the machine came.
+#[test]
+fn reference_point_rows_where_and_when_expected() {
+    let mut cfg = perfect(&["line:x:400,runs=3"], &[]);
+    cfg.reference = Some(RefReturn {
+        pos_mm: [0.0, 0.0, 0.0],
+        every_passes: 2,
+    });
+    cfg.check().unwrap();
+    let d = simulate::simulate(&cfg);
+    let at_ref: Vec<usize> = (0..d.len())
+        .filter(|&r| (0..3).all(|a| d.pos(a, r) == 0.0))
+        .collect();
+    // 3 lines of 3 points; the reference before line 1, after line 2
+    // (every 2 passes) and at the end.
+    assert_eq!(d.len(), 9 + 3);
+    assert_eq!(at_ref, vec![0, 7, 11]);
+    let pass = d.pass_id.as_ref().unwrap();
+    assert_eq!(pass, &vec![0, 1, 1, 1, 2, 2, 2, 3, 4, 4, 4, 5]);
+    // Each reference visit is its own pass: no line row shares its id.
+    for &r in &at_ref {
+        assert_eq!(pass.iter().filter(|&&p| p == pass[r]).count(), 1);
+    }
+    // Coming down from (800, 250, 250) every axis approaches from above.
+    for a in 0..3 {
+        assert_eq!(d.dir[a].as_ref().unwrap()[7], -1);
+        assert_eq!(d.dir[a].as_ref().unwrap()[0], 1, "the start counts as +1");
+    }
+    let t = d.t_s.as_ref().unwrap();
+    assert!(t.windows(2).all(|w| w[1] > w[0]));
+}
