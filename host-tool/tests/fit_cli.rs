@@ -321,6 +321,12 @@ fn bad_input_exits_1_and_usage_exits_2() {
 
     // Usage errors: clap's exit code 2.
     expect_exit(&["fit", c], 2, "--model");
+    // No training at all is refused, not quietly turned into 1 epoch.
+    expect_exit(
+        &["fit", c, "--model", "nn:4", "--max-epochs", "0"],
+        2,
+        "invalid value '0' for '--max-epochs <MAX_EPOCHS>'",
+    );
     expect_exit(
         &["fit", c, "--model", "cubic19", "--blocks", "1"],
         2,

@@ -35,8 +35,9 @@ pub struct Args {
     /// Number of hold-out blocks (whole passes or spatial slabs) for the held-out RMS.
     #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u16).range(2..=100))]
     pub blocks: u16,
-    /// Network training: maximum epochs (nn only).
-    #[arg(long, default_value_t = 1000)]
+    /// Network training: maximum epochs (nn only; at least 1).
+    #[arg(long, default_value_t = 1000,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
     pub max_epochs: usize,
     /// Network training: RNG seed of the initial weights (nn only).
     #[arg(long, default_value_t = 1)]
@@ -70,7 +71,7 @@ impl Args {
             blocks: usize::from(self.blocks),
             local: self.local,
             nn: NnOptions {
-                max_epochs: self.max_epochs.max(1),
+                max_epochs: self.max_epochs,
                 seed: self.seed,
                 ..NnOptions::default()
             },
