@@ -390,3 +390,85 @@ fn confounded_only_when_the_data_cannot_separate_the_pair() {
         assert!(d.candidates[0].significant, "{h:?}");
     }
 }
+
+/// Three effects on ONE target (a 5 mm lead on x, 8 µm backlash on x and
+/// an Abbe error, all on ex) are all found by the path, and the candidate
+/// list says so: each is `on_path` and `significant` with the `step` that
+/// added it and that step's ΔBIC (not the stale first-step score). The
+/// report draws the evidence of the path's steps: the periodogram with its
+/// peak, the forward/backward split of the reversal that was added, each
+/// step's component + residual, and the residual map before and after.
+#[test]
+fn three_effects_on_one_target_are_all_found_and_reported() {
+    let hidden = vec![Hidden::PeriodicX, Hidden::Reversal, Hidden::Abbe];
+    let data = generate(&SynthConfig {
+        seed: 11,
+        noise_um: NOISE_UM,
+        hidden: hidden.clone(),
+        ..SynthConfig::default()
+    });
+    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    let ex: Vec<_> = d.path.iter().filter(|s| s.target == "ex").collect();
+    for h in &hidden {
+        let (family, _, axis) = h.expected();
+        let prefix = match axis {
+            Some(a) => format!("{family}:target=ex,axis={a}"),
+            None => format!("{family}:target=ex"),
+        };
+        let k = ex
+            .iter()
+            .position(|s| s.add == prefix || s.add.starts_with(&format!("{prefix},")))
+            .unwrap_or_else(|| panic!("{h:?} not on the path {ex:?}"));
+        let c = d
+            .candidates
+            .iter()
+            .find(|c| c.add == ex[k].add)
+            .expect("the path's effect is a candidate");
+        assert!(c.on_path && c.significant, "{}", c.evidence);
+        assert_eq!(c.step, Some(k + 1));
+        assert_eq!(c.delta_bic, Some(ex[k].delta_bic));
+    }
+    // No stale entry of a path effect is left saying "not significant".
+    for s in &ex {
+        assert_eq!(
+            d.candidates.iter().filter(|c| c.add == s.add).count(),
+            1,
+            "{}",
+            s.add
+        );
+    }
+    assert!(ex.last().unwrap().rms_um <= 1.3 * NOISE_UM);
+    // Report.
+    let dir = std::env::temp_dir().join(format!("trueaxis-diag-report-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    trueaxis::diagnose::report::write(&d, &data, &dir).unwrap();
+    let svg = |name: &str| {
+        std::fs::read_to_string(dir.join(name)).unwrap_or_else(|_| panic!("{name} missing"))
+    };
+    let pg = svg("periodogram_ex_x.svg");
+    assert!(
+        pg.contains("Lomb–Scargle power") && pg.contains("5.00"),
+        "no 5 mm peak"
+    );
+    let rev = svg("reversal_ex_x.svg");
+    assert!(rev.contains("dir_x = +1") && rev.contains("dir_x = −1"));
+    for k in 1..=ex.len() {
+        let c = svg(&format!("component_ex_{k}.svg"));
+        assert!(
+            c.contains("component + residual")
+                && c.contains("fitted component")
+                && c.contains(&ex[k - 1].add),
+            "component_ex_{k}"
+        );
+    }
+    let map = svg("residual_map_ex.svg");
+    assert!(map.contains("ex residual, cubic19") && map.contains("ex residual after the path"));
+    let index = svg("index.html");
+    for k in 1..=ex.len() {
+        assert!(
+            index.contains(&format!("component_ex_{k}.svg")),
+            "index lacks step {k}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

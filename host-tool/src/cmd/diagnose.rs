@@ -147,7 +147,11 @@ pub fn text(d: &Diagnosis, data_path: &Path) -> String {
         s.push_str(&format!(
             "  {}. {}{}\n     {}\n",
             i + 1,
-            if c.significant { "[significant] " } else { "" },
+            match c.step {
+                Some(k) if c.on_path => format!("[path step {k}] "),
+                _ if c.significant => "[significant] ".into(),
+                _ => String::new(),
+            },
             match &c.replaces {
                 Some(old) => format!("{} (replacing {old})", c.add),
                 None => c.add.clone(),
@@ -187,22 +191,25 @@ pub fn text(d: &Diagnosis, data_path: &Path) -> String {
             s.push_str(&format!("  [{}] {}\n", w.code, w.detail));
         }
     }
-    if let Some(b) = d.best() {
+    if !d.path.is_empty() {
         let mut cmd = format!(
             "trueaxis fit {} --model {}",
             data_path.display(),
             d.model.split(" + ").next().unwrap_or("cubic19")
         );
-        // A candidate that replaces an effect of the model (the same effect
-        // with another lag, period, order or degree) takes its place.
+        // Every effect the path found, in order; one that replaces an effect
+        // of the model (the same effect with another lag, period, order or
+        // degree) takes its place.
         let mut adds: Vec<&str> = d.model.split(" + ").skip(1).collect();
-        match b.replaces.as_deref() {
-            Some(old) if adds.contains(&old) => {
-                for a in adds.iter_mut().filter(|a| **a == old) {
-                    *a = b.add.as_str();
+        for p in &d.path {
+            match p.replaces.as_deref() {
+                Some(old) if adds.contains(&old) => {
+                    for a in adds.iter_mut().filter(|a| **a == old) {
+                        *a = p.add.as_str();
+                    }
                 }
+                _ => adds.push(p.add.as_str()),
             }
-            _ => adds.push(b.add.as_str()),
         }
         for a in adds {
             cmd.push_str(&format!(" --add '{a}'"));

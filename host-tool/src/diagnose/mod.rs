@@ -154,8 +154,8 @@ pub struct Candidate {
     pub rms_um_after: Option<f64>,
     /// Smallest share of one of its columns outside the model's span.
     pub out_of_span_share: f64,
-    /// Passes every acceptance rule (at most one per target, and only the
-    /// best of its target).
+    /// Passes every acceptance rule: the best of its target at the path
+    /// step that added it (so every candidate on the path, and no other).
     pub significant: bool,
     /// The physical parameter and its plausibility.
     pub physical: Option<Physical>,
@@ -166,6 +166,12 @@ pub struct Candidate {
     /// searched again without it); null for a new effect. ΔBIC and gain are
     /// against the current model, so they say what the swap buys.
     pub replaces: Option<String>,
+    /// On the BIC-ordered path (added to the model by the diagnosis).
+    pub on_path: bool,
+    /// The path step (1-based, per target) at which it was added, and at
+    /// which its ΔBIC, gain and parameter were scored; null for candidates
+    /// not on the path, which are scored against the starting model.
+    pub step: Option<usize>,
 }
 
 /// One step of the BIC-ordered path.
@@ -209,18 +215,46 @@ pub struct Warning {
     pub detail: String,
 }
 
+/// One periodogram of the periodic search.
+#[derive(Clone, Debug)]
+pub struct PeriodogramEvidence {
+    /// Target index.
+    pub target: usize,
+    /// Axis index.
+    pub axis: usize,
+    /// The path step whose model's residual it is (1 = the starting model).
+    pub step: usize,
+    /// The periodogram.
+    pub pg: Periodogram,
+}
+
+/// The fitted component of one effect on the path.
+#[derive(Clone, Debug)]
+pub struct ComponentEvidence {
+    /// Target index.
+    pub target: usize,
+    /// Path step (1-based, per target).
+    pub step: usize,
+    /// The effect's `add` string.
+    pub add: String,
+    /// Its fitted component in the final model, per row of the target.
+    pub values: Vec<f64>,
+}
+
 /// Plot material for `--report` (not part of the JSON).
 #[derive(Clone, Debug, Default)]
 pub struct Evidence {
-    /// Per target: (axis, periodogram, rows used) of the periodic search.
-    pub periodograms: Vec<(usize, usize, Periodogram)>,
+    /// The periodic search's periodograms: every target and axis with dense
+    /// lines at the starting model, and the one that found each periodic
+    /// effect added at a later path step.
+    pub periodograms: Vec<PeriodogramEvidence>,
     /// Per target: data rows and residual before any path step.
     pub resid_before: Vec<(usize, Vec<usize>, Vec<f64>)>,
     /// Per target: residual after the whole path.
     pub resid_after: Vec<(usize, Vec<usize>, Vec<f64>)>,
-    /// Per target with a significant top candidate: its fitted component on
-    /// the target's rows (for component + residual plots).
-    pub components: Vec<(usize, String, Vec<f64>)>,
+    /// Every effect on the path (still in the final model): its fitted
+    /// component, for component + residual plots.
+    pub components: Vec<ComponentEvidence>,
 }
 
 /// The result of `diagnose` (CONTRACT §2 plus extensions).
@@ -281,6 +315,10 @@ impl TargetData<'_> {
 /// The fitted current model of one target.
 struct State {
     adds: Vec<String>,
+    /// The model's columns, and the `add` string each belongs to (None for
+    /// the seed's): for the fitted component of each effect in the report.
+    cols: Vec<Vec<f64>>,
+    owner: Vec<Option<String>>,
     basis: Basis,
     resid: Vec<f64>,
     rss: f64,
@@ -292,14 +330,17 @@ impl State {
     fn new(td: &TargetData, seed: &str, adds: &[String]) -> Result<State> {
         let axes = td.data.axes();
         let mut cols = Vec::new();
+        let mut owner = Vec::new();
         for exp in seed_monomials(seed, td.t, &axes)? {
             cols.push(td.col(&Feature::Monomial { exp })?);
+            owner.push(None);
         }
         for a in adds {
             let e = Effect::parse(a)?;
             if e.target == td.t {
                 for f in &e.features {
                     cols.push(td.col(f)?);
+                    owner.push(Some(a.clone()));
                 }
             }
         }
@@ -320,6 +361,8 @@ impl State {
         let held_out_rms = holdout.rms(&[]).unwrap_or(f64::NAN);
         Ok(State {
             adds: adds.to_vec(),
+            cols,
+            owner,
             basis,
             resid,
             rss,
@@ -330,6 +373,23 @@ impl State {
 
     fn rms(&self) -> f64 {
         (self.rss / self.resid.len() as f64).sqrt()
+    }
+
+    /// The fitted component of effect `add` in this model (its columns times
+    /// their coefficients in the full least-squares fit), per row.
+    fn component(&self, y: &[f64], add: &str) -> Option<Vec<f64>> {
+        let idx: Vec<usize> = (0..self.cols.len())
+            .filter(|&i| self.owner[i].as_deref() == Some(add))
+            .collect();
+        if idx.is_empty() {
+            return None;
+        }
+        let fit = small_fit(&self.cols, y);
+        Some(
+            (0..y.len())
+                .map(|r| idx.iter().map(|&i| fit.beta[i] * self.cols[i][r]).sum())
+                .collect(),
+        )
     }
 }
 
@@ -615,7 +675,12 @@ fn propose(
             ratio,
             if h > 1 { format!(", {h} harmonics") } else { String::new() }
         );
-        ev.periodograms.push((td.t, a, pg));
+        ev.periodograms.push(PeriodogramEvidence {
+            target: td.t,
+            axis: a,
+            step: 1,
+            pg,
+        });
         out.push(Proposal {
             family: "periodic",
             spec: spec_at(f, h),
@@ -990,12 +1055,10 @@ fn lag_aware_xtx_inv(
     Some(full.xtx_inv.view((0, 0), (k, k)).into_owned())
 }
 
-/// The scored candidates of one target, with the data needed for overlaps.
+/// The scored candidates of one target, with the columns needed for overlaps.
 struct Scored {
     cand: Candidate,
     partialled: Vec<Vec<f64>>,
-    cols: Vec<Vec<f64>>,
-    beta: Vec<f64>,
 }
 
 /// A replacement's comparison: `st` passed to `score` is the model without
@@ -1073,6 +1136,8 @@ fn score(
             physical: None,
             confounded_with: Vec::new(),
             replaces: repl.map(|r| r.old.clone()),
+            on_path: false,
+            step: None,
         };
         if ff.share < IN_SPAN_SHARE || ff.fit.rank == 0 {
             if repl.is_some() {
@@ -1106,8 +1171,6 @@ fn score(
                     ..base
                 },
                 partialled: ff.partialled,
-                cols: ff.cols,
-                beta: ff.fit.beta,
             });
             continue;
         }
@@ -1165,8 +1228,6 @@ fn score(
                 ..base
             },
             partialled: ff.partialled,
-            cols: ff.cols,
-            beta: ff.fit.beta,
         });
     }
     out
@@ -1603,62 +1664,108 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
         regions.extend(worst_regions(&td, &st0.resid));
         ev.resid_before
             .push((t, td.rows.clone(), st0.resid.clone()));
-        let scored = rank_target(&td, &st0, &opts.seed, &mut warnings, &mut ev);
-        // The path: add the significant best and look again.
+        let mut cur = rank_target(&td, &st0, &opts.seed, &mut warnings, &mut ev);
+        // The path: add the significant best and look again. The candidate
+        // list is the starting model's ranking; each effect added at a later
+        // step takes the place of its stale first-step entry (the same
+        // effect) with the scores of the step that added it.
         let mut st = st0;
-        let mut first = true;
-        let mut cur = scored;
-        for _ in 0..MAX_PATH_STEPS {
-            let Some(best) = cur.iter().find(|s| s.cand.significant) else {
+        let mut list: Option<Vec<Candidate>> = None;
+        let mut on_path: Vec<(usize, String)> = Vec::new();
+        for k in 1..=MAX_PATH_STEPS {
+            let Some(bi) = cur.iter().position(|s| s.cand.significant) else {
                 break;
             };
-            if first {
-                let comp: Vec<f64> = (0..td.rows.len())
-                    .map(|r| {
-                        best.cols
-                            .iter()
-                            .zip(&best.beta)
-                            .map(|(c, b)| c[r] * b)
-                            .sum()
-                    })
-                    .collect();
-                ev.components.push((t, best.cand.add.clone(), comp));
-            }
+            let best = &cur[bi].cand;
             let mut adds = st.adds.clone();
-            match &best.cand.replaces {
+            match &best.replaces {
                 Some(old) => {
                     for a in adds.iter_mut().filter(|a| *a == old) {
-                        a.clone_from(&best.cand.add);
+                        a.clone_from(&best.add);
                     }
                 }
-                None => adds.push(best.cand.add.clone()),
+                None => adds.push(best.add.clone()),
             }
             let next = State::new(&td, &opts.seed, &adds)?;
             if next.held_out_rms.is_nan() || next.held_out_rms >= st.held_out_rms {
+                // Cannot happen with the same blocks, but a candidate that
+                // does not lower the refit's held-out RMS is not added, and
+                // then it must not claim significance either.
+                cur[bi].cand.significant = false;
+                cur[bi].cand.evidence.push_str(
+                    " — but the refit's block-held-out RMS did not fall, so it is not added",
+                );
                 break;
             }
+            let mut best = cur.remove(bi).cand;
+            best.on_path = true;
+            best.step = Some(k);
             path.push(PathStep {
                 target: tn.clone(),
-                add: best.cand.add.clone(),
-                delta_bic: best.cand.delta_bic.unwrap_or(0.0),
+                add: best.add.clone(),
+                delta_bic: best.delta_bic.unwrap_or(0.0),
                 rms_um: next.rms(),
                 held_out_rms_um: next.held_out_rms,
-                replaces: best.cand.replaces.clone(),
+                replaces: best.replaces.clone(),
             });
-            warnings.extend(plausibility_warning(&best.cand));
-            if first {
-                candidates.extend(cur.drain(..).map(|s| s.cand));
-                first = false;
+            warnings.extend(plausibility_warning(&best));
+            on_path.push((k, best.add.clone()));
+            match list.as_mut() {
+                None => {
+                    let mut l = vec![best];
+                    l.extend(cur.drain(..).map(|s| s.cand));
+                    list = Some(l);
+                }
+                Some(l) => {
+                    let key = EffectKey::of(&best.add);
+                    let stale = l.iter().position(|c| {
+                        !c.on_path
+                            && key
+                                .as_ref()
+                                .zip(EffectKey::of(&c.add))
+                                .is_some_and(|(a, b)| a.matches(&b))
+                    });
+                    match stale {
+                        Some(i) => l[i] = best,
+                        None => l.push(best),
+                    }
+                }
             }
             st = next;
             if !opts.follow_path {
                 break;
             }
-            let mut scratch = Vec::new();
-            cur = rank_target(&td, &st, &opts.seed, &mut scratch, &mut Evidence::default());
+            let mut step_ev = Evidence::default();
+            cur = rank_target(&td, &st, &opts.seed, &mut Vec::new(), &mut step_ev);
+            // The periodogram that finds a periodic effect at the next step.
+            if let Some(b) = cur.iter().find(|s| s.cand.significant) {
+                if b.cand.effect == "periodic" {
+                    let axis = b
+                        .cand
+                        .axis
+                        .as_deref()
+                        .and_then(|a| AXES.iter().position(|x| *x == a));
+                    ev.periodograms.extend(
+                        step_ev
+                            .periodograms
+                            .into_iter()
+                            .filter(|p| Some(p.axis) == axis)
+                            .map(|p| PeriodogramEvidence { step: k + 1, ..p }),
+                    );
+                }
+            }
         }
-        if first {
-            candidates.extend(cur.into_iter().map(|s| s.cand));
+        let first = list.is_none();
+        candidates.extend(list.unwrap_or_else(|| cur.into_iter().map(|s| s.cand).collect()));
+        for (k, add) in &on_path {
+            if let Some(values) = st.component(&td.y, add) {
+                ev.components.push(ComponentEvidence {
+                    target: t,
+                    step: *k,
+                    add: add.clone(),
+                    values,
+                });
+            }
         }
         let nf = noise_floor(data, &td.rows, &st.resid);
         if let Some(nf) = &nf {
@@ -1668,10 +1775,17 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
         noise_method.insert(tn.clone(), nf.map(|n| n.method));
         ev.resid_after.push((t, td.rows.clone(), st.resid.clone()));
     }
+    // Significant (on the path) first, by step — so the best of the
+    // starting model leads — then the rest by ΔBIC.
     candidates.sort_by(|a, b| {
         b.significant
             .cmp(&a.significant)
             .then(b.identifiable.cmp(&a.identifiable))
+            .then(
+                a.step
+                    .unwrap_or(usize::MAX)
+                    .cmp(&b.step.unwrap_or(usize::MAX)),
+            )
             .then(
                 a.delta_bic
                     .unwrap_or(f64::INFINITY)

@@ -1,8 +1,10 @@
 //! `diagnose --report DIR`: the evidence as an HTML page with SVG plots (on
 //! the shared `crate::report` helpers) — the periodogram of the residual
-//! along each axis with its peak, the forward/backward split of the best
-//! reversal candidate, the top candidate's component plus residual against
-//! its channel, and the spatial residual map before and after the path.
+//! along each axis with its peak (and the one that found each periodic
+//! effect added later on the path), the forward/backward split of each
+//! reversal on the path (else of the best reversal candidate), each path
+//! effect's fitted component plus the final residual against its channel,
+//! and the spatial residual map before and after the path.
 
 use std::path::{Path, PathBuf};
 
@@ -36,6 +38,16 @@ fn channel(data: &Dataset, c: &Candidate) -> Option<(String, Vec<f64>)> {
             Some((format!("{} (mm)", AXES[a]), data.pos_mm[a].clone()?))
         }
     }
+}
+
+/// A forward/backward split to draw: the residual of `target` on `rows`,
+/// split by the approach direction along `axis`.
+struct ReversalPlot {
+    target: usize,
+    axis: usize,
+    rows: Vec<usize>,
+    resid: Vec<f64>,
+    caption: String,
 }
 
 /// The two axes with the longest travel, for the residual maps.
@@ -100,10 +112,10 @@ pub fn write(d: &Diagnosis, data: &Dataset, dir: &Path) -> Result<PathBuf> {
                 c.add.clone(),
                 c.delta_bic.map_or("—".into(), |v| format!("{v:.0}")),
                 c.gain.map_or("—".into(), |g| format!("{:.0} %", 100.0 * g)),
-                if c.significant {
-                    "yes".into()
-                } else {
-                    "no".into()
+                match c.step {
+                    Some(k) if c.on_path => format!("yes (path step {k})"),
+                    _ if c.significant => "yes".into(),
+                    _ => "no".into(),
                 },
                 c.evidence.clone(),
             ]
@@ -136,112 +148,167 @@ pub fn write(d: &Diagnosis, data: &Dataset, dir: &Path) -> Result<PathBuf> {
         }
     }
     page.heading("Evidence");
-    // Periodograms: the ones of targets whose best periodic candidate ranks
-    // in the top five, else all (a handful).
-    for (t, a, pg) in &d.evidence.periodograms {
-        let tn = TARGETS[*t];
-        let pts: Vec<(f64, f64)> = pg
-            .freq_per_mm
-            .iter()
-            .zip(&pg.power)
-            .map(|(f, p)| (*f, *p))
-            .collect();
+    // Periodograms: every target and axis with dense lines at the starting
+    // model (at most 3 × 3), plus the one that found each periodic effect
+    // added at a later path step.
+    for e in &d.evidence.periodograms {
+        let (tn, ax) = (TARGETS[e.target], AXES[e.axis]);
+        let pts: Vec<(f64, f64)> =
+            e.pg.freq_per_mm
+                .iter()
+                .zip(&e.pg.power)
+                .map(|(f, p)| (*f, *p))
+                .collect();
+        let at = if e.step > 1 {
+            format!(" at path step {}", e.step)
+        } else {
+            String::new()
+        };
         let mut plot = XyPlot::new(
-            format!("Periodogram of the {tn} residual along {}", AXES[*a]),
+            format!("Periodogram of the {tn} residual along {ax}{at}"),
             "frequency (cycles/mm)",
             "share of variance",
         )
         .with(Series::line("Lomb–Scargle power", pts));
-        if let Some(k) = pg.peak() {
+        if let Some(k) = e.pg.peak() {
             plot = plot.with_vline(
-                pg.freq_per_mm[k],
-                format!("{:.3} mm", 1.0 / pg.freq_per_mm[k]),
+                e.pg.freq_per_mm[k],
+                format!("{:.3} mm", 1.0 / e.pg.freq_per_mm[k]),
             );
         }
         page.figure(
-            format!("periodogram_{tn}_{}", AXES[*a]),
-            format!(
-                "Lomb–Scargle periodogram of the {tn} residual along {} (dense lines)",
-                AXES[*a]
-            ),
+            if e.step > 1 {
+                format!("periodogram_{tn}_{ax}_step{}", e.step)
+            } else {
+                format!("periodogram_{tn}_{ax}")
+            },
+            format!("Lomb–Scargle periodogram of the {tn} residual along {ax}{at} (dense lines)"),
             plot.to_svg()?,
         );
     }
-    // Forward/backward split of the best reversal candidate.
-    if let Some(c) = d
-        .candidates
-        .iter()
-        .find(|c| c.effect == "reversal" && c.identifiable)
-    {
-        let t = TARGETS.iter().position(|x| *x == c.target);
-        let a = c
-            .axis
-            .as_deref()
-            .and_then(|x| AXES.iter().position(|y| *y == x));
-        if let (Some(t), Some(a)) = (t, a) {
-            if let (Some((_, rows, res)), Some(dir), Some(pos)) = (
-                d.evidence.resid_before.iter().find(|e| e.0 == t),
-                data.dir[a].as_ref(),
-                data.pos_mm[a].as_ref(),
-            ) {
-                let mut up = Vec::new();
-                let mut down = Vec::new();
-                for (i, &r) in rows.iter().enumerate() {
-                    if dir[r] > 0 {
-                        up.push((pos[r], res[i]));
-                    } else {
-                        down.push((pos[r], res[i]));
-                    }
+    // Forward/backward split of each reversal on the path: the partial
+    // residual (final residual plus the fitted reversal component), so that
+    // the other effects found do not blur the step. Without one on the path,
+    // the best reversal candidate on the starting model's residual.
+    let index = |names: &[&str], x: &str| names.iter().position(|y| *y == x);
+    let mut reversals: Vec<ReversalPlot> = Vec::new();
+    for comp in d.evidence.components.iter() {
+        let Some(c) = d.candidates.iter().find(|c| c.on_path && c.add == comp.add) else {
+            continue;
+        };
+        let Some(a) = c.axis.as_deref().and_then(|x| index(&AXES, x)) else {
+            continue;
+        };
+        if c.effect != "reversal" {
+            continue;
+        }
+        let Some((_, rows, after)) = d.evidence.resid_after.iter().find(|e| e.0 == comp.target)
+        else {
+            continue;
+        };
+        reversals.push(ReversalPlot {
+            target: comp.target,
+            axis: a,
+            rows: rows.clone(),
+            resid: after.iter().zip(&comp.values).map(|(r, v)| r + v).collect(),
+            caption: format!(
+                "{}: final residual plus the fitted reversal, by approach direction (path step {})",
+                c.add, comp.step
+            ),
+        });
+    }
+    if reversals.is_empty() {
+        if let Some(c) = d
+            .candidates
+            .iter()
+            .find(|c| c.effect == "reversal" && c.identifiable)
+        {
+            let t = index(&TARGETS, &c.target);
+            let a = c.axis.as_deref().and_then(|x| index(&AXES, x));
+            if let (Some(t), Some(a)) = (t, a) {
+                if let Some((_, rows, res)) = d.evidence.resid_before.iter().find(|e| e.0 == t) {
+                    reversals.push(ReversalPlot {
+                        target: t,
+                        axis: a,
+                        rows: rows.clone(),
+                        resid: res.clone(),
+                        caption: format!(
+                            "{} (not added): the starting model's residual by approach direction",
+                            c.add
+                        ),
+                    });
                 }
-                let plot = XyPlot::new(
-                    format!("Forward/backward split of the {} residual", c.target),
-                    format!("{} (mm)", AXES[a]),
-                    "residual (µm)",
-                )
-                .with(Series::points(format!("dir_{} = +1", AXES[a]), up))
-                .with(Series::points(format!("dir_{} = −1", AXES[a]), down));
-                page.figure(
-                    format!("reversal_{}_{}", c.target, AXES[a]),
-                    format!("{}: the residual by approach direction", c.add),
-                    plot.to_svg()?,
-                );
             }
         }
     }
-    // Component + residual of each target's first path step.
-    for (t, add, comp) in &d.evidence.components {
-        let Some(c) = d.candidates.iter().find(|c| &c.add == add) else {
+    for ReversalPlot {
+        target: t,
+        axis: a,
+        rows,
+        resid: res,
+        caption,
+    } in &reversals
+    {
+        let (Some(dir), Some(pos)) = (data.dir[*a].as_ref(), data.pos_mm[*a].as_ref()) else {
+            continue;
+        };
+        let mut up = Vec::new();
+        let mut down = Vec::new();
+        for (i, &r) in rows.iter().enumerate() {
+            if dir[r] > 0 {
+                up.push((pos[r], res[i]));
+            } else {
+                down.push((pos[r], res[i]));
+            }
+        }
+        let plot = XyPlot::new(
+            format!("Forward/backward split of the {} residual", TARGETS[*t]),
+            format!("{} (mm)", AXES[*a]),
+            "residual (µm)",
+        )
+        .with(Series::points(format!("dir_{} = +1", AXES[*a]), up))
+        .with(Series::points(format!("dir_{} = −1", AXES[*a]), down));
+        page.figure(
+            format!("reversal_{}_{}", TARGETS[*t], AXES[*a]),
+            caption.clone(),
+            plot.to_svg()?,
+        );
+    }
+    // Component + residual of every effect on the path.
+    for comp in &d.evidence.components {
+        let t = comp.target;
+        let Some(c) = d.candidates.iter().find(|c| c.on_path && c.add == comp.add) else {
             continue;
         };
         let Some((label, ch)) = channel(data, c) else {
             continue;
         };
-        let Some((_, rows, after)) = d.evidence.resid_after.iter().find(|e| e.0 == *t) else {
+        let Some((_, rows, after)) = d.evidence.resid_after.iter().find(|e| e.0 == t) else {
             continue;
         };
         let partial: Vec<(f64, f64)> = rows
             .iter()
             .enumerate()
-            .map(|(i, &r)| (ch[r], comp[i] + after[i]))
+            .map(|(i, &r)| (ch[r], comp.values[i] + after[i]))
             .collect();
         let mut fitted: Vec<(f64, f64)> = rows
             .iter()
             .enumerate()
-            .map(|(i, &r)| (ch[r], comp[i]))
+            .map(|(i, &r)| (ch[r], comp.values[i]))
             .collect();
         fitted.sort_by(|a, b| a.0.total_cmp(&b.0));
         let plot = XyPlot::new(
-            format!("{}: component + residual", add),
+            format!("{}: component + residual", comp.add),
             label,
-            format!("{} (µm)", TARGETS[*t]),
+            format!("{} (µm)", TARGETS[t]),
         )
         .with(Series::points("component + residual", partial))
         .with(Series::points("fitted component", fitted));
         page.figure(
-            format!("component_{}", TARGETS[*t]),
+            format!("component_{}_{}", TARGETS[t], comp.step),
             format!(
-                "The fitted {} component of {} with the final residual added back",
-                c.effect, TARGETS[*t]
+                "Path step {} of {}: the fitted {} component with the final residual added back",
+                comp.step, TARGETS[t], c.effect
             ),
             plot.to_svg()?,
         );

@@ -35,6 +35,9 @@ pub enum Hidden {
     Squareness,
     /// ez += 3 µm · T5(u_z), a fifth-degree straightness.
     HigherOrder,
+    /// ex += 2 µm · sin(2π·x/5 mm + 0.3): a 5 mm lead on x (not in `ALL`:
+    /// for tests with several effects on one target).
+    PeriodicX,
 }
 
 impl Hidden {
@@ -59,6 +62,7 @@ impl Hidden {
             Hidden::Drift => ("drift", "ez", None),
             Hidden::Squareness => ("squareness", "ey", Some("x")),
             Hidden::HigherOrder => ("higher_order", "ez", Some("z")),
+            Hidden::PeriodicX => ("periodic", "ex", Some("x")),
         }
     }
 
@@ -247,6 +251,7 @@ pub fn generate(cfg: &SynthConfig) -> Dataset {
             let p = pts[r].0;
             match h {
                 Hidden::Periodic => err[1][r] += a * 2.5 * (TAU * p[1] / 5.08 + 0.7).sin(),
+                Hidden::PeriodicX => err[0][r] += a * 2.0 * (TAU * p[0] / 5.0 + 0.3).sin(),
                 Hidden::Thermal => err[0][r] += a * 11.5e-3 * p[0] * (lag_bed[r] - 20.0),
                 Hidden::Reversal => err[0][r] += a * 4.0 * f64::from(pts[r].1[0]),
                 Hidden::Abbe => err[0][r] += a * 40e-3 * tool[r],
