@@ -298,3 +298,71 @@ fn rows_left_out_are_counted_and_said() {
     assert!(err.contains(&note), "{err}");
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// Every family's `add` string, as diagnose prints it, is accepted verbatim
+/// by `fit --add` — including a thermal term with a lag and `times`, a
+/// third-order drift and a fifth-degree higher_order — and kept verbatim in
+/// the model file.
+#[test]
+fn fit_add_accepts_every_familys_add_string_verbatim() {
+    let dir = tmp_dir("every-add");
+    let csv = dir.join("all.csv");
+    write(
+        &SynthConfig {
+            seed: 3,
+            hidden: Hidden::ALL.to_vec(),
+            ..SynthConfig::default()
+        },
+        &csv,
+    );
+    let csv_s = csv.to_str().unwrap();
+    let (code, out, err) = trueaxis(&["diagnose", csv_s, "--model", "kinematic", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: Value = serde_json::from_str(&out).unwrap();
+    let adds: Vec<String> = v["candidates"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|c| c["identifiable"] == true)
+        .map(|c| c["add"].as_str().unwrap().to_string())
+        .collect();
+    let pick = |what: &str, ok: &dyn Fn(&str) -> bool| -> String {
+        adds.iter()
+            .find(|a| ok(a))
+            .unwrap_or_else(|| panic!("no {what} among {adds:?}"))
+            .clone()
+    };
+    let chosen = [
+        pick("periodic", &|a| a.starts_with("periodic:")),
+        pick("thermal with lag and times", &|a| {
+            a.starts_with("thermal:") && a.contains(",times=") && a.contains(",lag_s=")
+        }),
+        pick("reversal", &|a| a.starts_with("reversal:")),
+        pick("abbe", &|a| a.starts_with("abbe:")),
+        pick("drift of order 3", &|a| {
+            a.starts_with("drift:") && a.ends_with(",order=3")
+        }),
+        pick("squareness", &|a| a.starts_with("squareness:")),
+        pick("higher_order of degree 5", &|a| {
+            a.starts_with("higher_order:") && a.ends_with(",degree=5")
+        }),
+    ];
+    let model = dir.join("m.json");
+    let mut args = vec!["fit", csv_s, "--model", "kinematic"];
+    for a in &chosen {
+        args.push("--add");
+        args.push(a);
+    }
+    args.extend(["-o", model.to_str().unwrap(), "--json"]);
+    let (code, _, err) = trueaxis(&args);
+    assert_eq!(code, 0, "{chosen:?}: {err}");
+    let m: Value = serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    let kept: Vec<&str> = m["adds"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a.as_str().unwrap())
+        .collect();
+    assert_eq!(kept, chosen.iter().map(String::as_str).collect::<Vec<_>>());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
