@@ -98,6 +98,18 @@ fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
     let top = &cands[0];
     assert_eq!(top["effect"], "periodic");
     assert!((top["params"]["period_mm"].as_f64().unwrap() - 5.08).abs() < 0.01);
+    // Counts are integers; the fitted magnitude is in params too.
+    assert!(top["params"]["harmonics"].is_u64(), "{}", top["params"]);
+    assert!((top["params"]["amplitude_um"].as_f64().unwrap() - 2.5).abs() < 0.1);
+    for c in cands {
+        for k in ["harmonics", "order", "degree"] {
+            assert!(
+                c["params"].get(k).is_none_or(|v| v.is_u64()),
+                "{k} in {}",
+                c["params"]
+            );
+        }
+    }
     let codes = [
         "aliasing",
         "one_direction",
@@ -106,6 +118,7 @@ fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
         "confounded",
         "implausible_parameter",
         "above_noise_floor",
+        "no_temperature",
     ];
     for w in v["warnings"].as_array().unwrap() {
         assert!(codes.contains(&w["code"].as_str().unwrap()), "{w}");
@@ -135,6 +148,19 @@ fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
     assert_eq!(code, 0, "{err}");
     let h: Value = serde_json::from_str(&out).unwrap();
     assert_eq!(h["steps"].as_array().unwrap().len(), 1);
+    // Diagnosing that model with --report shows its history as well.
+    let report = dir.join("report");
+    let (code, _, err) = trueaxis(&[
+        "diagnose",
+        csv_s,
+        "--model",
+        model.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let svg = std::fs::read_to_string(report.join("history.svg")).expect("history.svg");
+    assert!(svg.contains("ey rms") && svg.contains("ey held-out rms"));
     // A usage error (unknown seed) is exit 1 with a message, not a panic.
     let (code, _, err) = trueaxis(&["diagnose", csv_s, "--model", "nn:8"]);
     assert_eq!(code, 1);

@@ -475,3 +475,37 @@ fn three_effects_on_one_target_are_all_found_and_reported() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A drift of order 2 (1.5 µm/h² · t²: no linear part at all) reports as
+/// its rate the mean over the session, 1.5 · 2.18 h = 3.27 µm/h, with an
+/// interval that covers it — the linear coefficient alone said ≈ 0 — and
+/// the magnitude is in `params` too.
+#[test]
+fn drift_rate_is_the_mean_over_the_session_for_any_order() {
+    let mut data = generate(&SynthConfig {
+        seed: 7,
+        noise_um: NOISE_UM,
+        ..SynthConfig::default()
+    });
+    let t_s = data.t_s.clone().unwrap();
+    let ez = data.err_um[2].as_mut().unwrap();
+    for (v, t) in ez.iter_mut().zip(&t_s) {
+        *v.as_mut().unwrap() += 1.5 * (t / 3600.0).powi(2);
+    }
+    let truth = 1.5 * t_s.iter().copied().fold(0.0, f64::max) / 3600.0;
+    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    let top = &d.candidates[0];
+    assert!(
+        top.significant && top.add.starts_with("drift:target=ez,order="),
+        "{}",
+        top.add
+    );
+    assert!(top.params["order"] >= 2.0);
+    let ph = top.physical.clone().unwrap();
+    assert_eq!(ph.name, "rate");
+    assert!(
+        ph.ci95[0] <= truth && truth <= ph.ci95[1],
+        "{truth}: {ph:?}"
+    );
+    assert_eq!(top.params["rate_um_per_h"], ph.value);
+}

@@ -92,3 +92,29 @@ fn a_constant_temperature_is_warned_and_not_tested() {
         .iter()
         .any(|c| c.channel.as_deref() == Some("T_bed_C")));
 }
+
+#[test]
+fn data_without_a_temperature_says_thermal_cannot_be_tested() {
+    let mut data = generate(&SynthConfig {
+        seed: 7,
+        ..SynthConfig::default()
+    });
+    data.temps.clear();
+    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    assert!(
+        warned(&d, "no_temperature", "thermal effects cannot be tested"),
+        "{:?}",
+        d.warnings
+    );
+    assert!(d.candidates.iter().all(|c| c.effect != "thermal"));
+    // With the sensors there, no such warning.
+    let d = diagnose(
+        &generate(&SynthConfig {
+            seed: 7,
+            ..SynthConfig::default()
+        }),
+        &Options::seed("cubic19"),
+    )
+    .unwrap();
+    assert!(d.warnings.iter().all(|w| w.code != "no_temperature"));
+}

@@ -86,7 +86,14 @@ impl Args {
         )
         .with_context(|| format!("{}: cannot diagnose", self.data.display()))?;
         if let Some(dir) = &self.report {
-            let index = diagnose::report::write(&d, &data, dir)?;
+            // A model file's history (MODEL.history.json beside it), when
+            // there is one: the report then shows the error falling too.
+            let model_path = Path::new(&self.model);
+            let history = model_path
+                .is_file()
+                .then(|| crate::history::load(model_path).ok())
+                .flatten();
+            let index = diagnose::report::write_with_history(&d, &data, dir, history.as_ref())?;
             if !self.json {
                 outln!("report: {}", index.display())?;
             }

@@ -135,7 +135,12 @@ pub struct Candidate {
     pub axis: Option<String>,
     /// Data channel it follows (`T_bed_C`, `dir_x`, `tool_mm`, `t_s`), if any.
     pub channel: Option<String>,
-    /// Its parameters (period, lag, …) and fitted magnitudes.
+    /// Its parameters (period, lag, harmonics, order, degree) and, for an
+    /// identifiable candidate, its fitted magnitude under the physical
+    /// parameter's name and unit (`cte_um_per_m_k`, `backlash_um`,
+    /// `amplitude_um`, `angle_urad`, `rate_um_per_h`, …). The counts
+    /// (`harmonics`, `order`, `degree`) are written as JSON integers.
+    #[serde(serialize_with = "ser_params")]
     pub params: BTreeMap<String, f64>,
     /// The string `fit --add` accepts.
     pub add: String,
@@ -174,6 +179,36 @@ pub struct Candidate {
     pub step: Option<usize>,
 }
 
+/// Parameters that are counts, written as JSON integers.
+const INTEGER_PARAMS: [&str; 3] = ["harmonics", "order", "degree"];
+
+fn ser_params<S: serde::Serializer>(
+    params: &BTreeMap<String, f64>,
+    ser: S,
+) -> std::result::Result<S::Ok, S::Error> {
+    use serde::ser::SerializeMap;
+    let mut m = ser.serialize_map(Some(params.len()))?;
+    for (k, v) in params {
+        if INTEGER_PARAMS.contains(&k.as_str()) && v.fract() == 0.0 && v.abs() < 1e15 {
+            m.serialize_entry(k, &(*v as i64))?;
+        } else {
+            m.serialize_entry(k, v)?;
+        }
+    }
+    m.end()
+}
+
+/// The `params` key of a physical parameter: its name and unit
+/// (`cte` in µm/m/K → `cte_um_per_m_k`).
+fn param_key(ph: &Physical) -> String {
+    let unit = ph
+        .unit
+        .replace('µ', "u")
+        .replace('/', "_per_")
+        .to_lowercase();
+    format!("{}_{unit}", ph.name)
+}
+
 /// One step of the BIC-ordered path.
 #[derive(Clone, Debug, Serialize)]
 pub struct PathStep {
@@ -209,7 +244,8 @@ pub struct Region {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Warning {
     /// `aliasing`, `one_direction`, `constant_temperature`, `in_model_span`,
-    /// `confounded`, `implausible_parameter`, `above_noise_floor`.
+    /// `confounded`, `implausible_parameter`, `above_noise_floor`,
+    /// `no_temperature`.
     pub code: String,
     /// What is wrong and what to measure.
     pub detail: String,
@@ -960,7 +996,39 @@ fn physical(td: &TargetData, p: &Proposal, ff: &FwlFit, sigma2: f64) -> Option<P
             let scale = 1000.0;
             lin(scale, "angle", "µrad", 300.0, "angular errors 10–60 µrad")
         }
-        "drift" => lin(1.0, "rate", "µm/h", 30.0, "≤ 30 µm/h"),
+        "drift" => {
+            // The mean rate over the session, (f(t_end) − f(t_start)) / span,
+            // a linear combination of every power's coefficient (the linear
+            // coefficient alone is not the rate once t² or t³ is in).
+            let t_s = td.data.t_s.as_ref()?;
+            let (lo, hi) = td
+                .rows
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |a, &r| {
+                    (a.0.min(t_s[r]), a.1.max(t_s[r]))
+                });
+            let (h0, h1) = (lo / 3600.0, hi / 3600.0);
+            if h1 <= h0 {
+                return None;
+            }
+            let g: Vec<f64> = (1..=beta.len())
+                .map(|p| (h1.powi(p as i32) - h0.powi(p as i32)) / (h1 - h0))
+                .collect();
+            let v: f64 = g.iter().zip(beta).map(|(g, b)| g * b).sum();
+            let var: f64 = (0..g.len())
+                .flat_map(|i| (0..g.len()).map(move |j| (i, j)))
+                .map(|(i, j)| g[i] * g[j] * cov(i, j))
+                .sum();
+            let se = var.max(0.0).sqrt();
+            Some(Physical {
+                name: "rate".into(),
+                unit: "µm/h".into(),
+                value: v,
+                ci95: [v - 1.96 * se, v + 1.96 * se],
+                plausible: v.abs() <= 30.0,
+                expected: "≤ 30 µm/h (mean over the session)".into(),
+            })
+        }
         "squareness" => {
             let a = p.axis?;
             lin(
@@ -1182,6 +1250,10 @@ fn score(
             ff.fit.xtx_inv = inv;
         }
         let phys = physical(td, &p, &ff, sigma2);
+        let mut base = base;
+        if let Some(ph) = &phys {
+            base.params.insert(param_key(ph), ph.value);
+        }
         let rms_after = (ff.fit.rss / n as f64).sqrt();
         let mut evidence = format!(
             "{}{}; ΔBIC {:.0}; block-held-out RMS {:.3} → {} µm (gain {})",
@@ -1606,6 +1678,12 @@ fn design_warnings(data: &Dataset) -> Vec<Warning> {
                 }
             }
         }
+    }
+    if data.temps.is_empty() {
+        w.push(Warning {
+            code: "no_temperature".into(),
+            detail: "no T_<name>_C column: thermal effects cannot be tested (an error that follows temperature may be found as drift, or not at all); record at least one temperature — the bed, the screw nut or the scale — through a warm-up".into(),
+        });
     }
     for ch in &data.temps {
         let lo = ch.temp_c.iter().copied().fold(f64::INFINITY, f64::min);

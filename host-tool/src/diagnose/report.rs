@@ -68,6 +68,17 @@ fn map_axes(data: &Dataset) -> Option<(usize, usize)> {
 
 /// Writes `DIR/index.html` and the SVGs; returns the page's path.
 pub fn write(d: &Diagnosis, data: &Dataset, dir: &Path) -> Result<PathBuf> {
+    write_with_history(d, data, dir, None)
+}
+
+/// [`write`], plus the model's history (the error falling fit by fit, as
+/// `trueaxis history` draws it) when the diagnosed model has one.
+pub fn write_with_history(
+    d: &Diagnosis,
+    data: &Dataset,
+    dir: &Path,
+    history: Option<&crate::history::History>,
+) -> Result<PathBuf> {
     let mut page = Page::new(format!("trueaxis diagnose — {}", data.source));
     page.heading("Diagnosis");
     page.paragraph(format!(
@@ -146,6 +157,38 @@ pub fn write(d: &Diagnosis, data: &Dataset, dir: &Path) -> Result<PathBuf> {
         for w in &d.warnings {
             page.paragraph(format!("[{}] {}", w.code, w.detail));
         }
+    }
+    if let Some(h) = history.filter(|h| !h.steps.is_empty()) {
+        page.subheading("History of the model");
+        page.table(
+            &["step", "added", "rms µm", "held-out rms µm"],
+            h.steps
+                .iter()
+                .map(|s| {
+                    let per = |m: &std::collections::BTreeMap<String, f64>| {
+                        m.iter()
+                            .map(|(t, v)| format!("{t} {v:.3}"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    };
+                    vec![
+                        s.step.to_string(),
+                        if s.added.is_empty() {
+                            s.spec()
+                        } else {
+                            format!("+ {}", s.added.join(" + "))
+                        },
+                        per(&s.rms_um),
+                        per(&s.held_out_rms_um),
+                    ]
+                })
+                .collect(),
+        );
+        page.figure(
+            "history",
+            "RMS and block-held-out RMS per target after each fit of this model",
+            crate::cmd::history::plot(h).to_svg()?,
+        );
     }
     page.heading("Evidence");
     // Periodograms: every target and axis with dense lines at the starting
