@@ -7,37 +7,35 @@
 //! MLP and an MLP with a temperature input, and a mix that leaves the f32
 //! fast path. Same mill and envelope as build/tables.rs; fixed seeds.
 
+use model_core::board::LimitError;
 use model_core::monomials::CUBIC19;
 use model_core::spec::PolyCoef;
 use model_core::{
-    EncodeError, Envelope, GridAxisSpec, GridSpec, InputScaling, LayerSpec, MlpInputSpec,
-    MlpSource, MlpSpec, TableSpec, TermSpec,
+    EncodeError, GridAxisSpec, GridSpec, LayerSpec, MlpInputSpec, MlpSource, MlpSpec, TableSpec,
+    TermSpec,
 };
 
-use crate::tables::{Rng, TRAVEL_MAX_NM};
+use crate::tables::{self, Rng, TRAVEL_MAX_NM};
 
-fn base(tag: u8) -> TableSpec {
-    TableSpec {
-        created_unix_s: 1_767_225_600,
-        source_hash: [0xC0 ^ tag; 32],
-        channels: vec!["T_bed_C".into(), "T_col_C".into()],
-        envelope: Envelope {
-            travel_min_nm: [0; 3],
-            travel_max_nm: TRAVEL_MAX_NM,
-            max_corr_nm: [400_000; 3],
-            max_slew_nm_per_ms: 50,
-            temp_min_mc: [10_000, 10_000, 0, 0],
-            temp_max_mc: [40_000, 40_000, 0, 0],
-            tool_min_nm: 0,
-            tool_max_nm: 300_000_000,
-        },
-        scaling: InputScaling {
-            centre_nm: TRAVEL_MAX_NM.map(|t| t / 2),
-            half_span_nm: TRAVEL_MAX_NM.map(|t| t / 2),
-        },
-        outputs: [true; 3],
-        terms: Vec::new(),
+/// build/tables.rs's mill with `channels` temperature channels (10–40 °C)
+/// and corrections up to 400 µm.
+fn base_with(tag: u8, channels: usize) -> TableSpec {
+    let mut s = tables::base(0xC0 ^ tag);
+    s.channels = ["T_bed_C", "T_col_C", "T_spindle_C", "T_air_C"][..channels]
+        .iter()
+        .map(|c| c.to_string())
+        .collect();
+    s.envelope.max_corr_nm = [400_000; 3];
+    for ch in 0..channels {
+        s.envelope.temp_min_mc[ch] = 10_000;
+        s.envelope.temp_max_mc[ch] = 40_000;
     }
+    s
+}
+
+/// The extra bench tables' base: two channels.
+fn base(tag: u8) -> TableSpec {
+    base_with(tag, 2)
 }
 
 /// Every monomial of total degree ≤ `deg`, coefficients shrinking with it.
@@ -252,5 +250,168 @@ pub fn all() -> Result<Vec<(&'static str, Vec<u8>)>, EncodeError> {
     s.terms
         .push(mlp(&mut rng, pos_inputs(), &[16], vec![0, 1, 2]));
     add("mixed", s)?;
+    Ok(out)
+}
+
+/// Seeded random tables in the calibration set of `cargo xtask bench-mcu
+/// --calibrate` (with the bench tables above: the set the ratio of the
+/// cost estimate to the count is reported on, BENCHMARKS.md).
+pub const CALIBRATION_TABLES: usize = 191;
+
+/// An integer in `lo..=hi`.
+fn int(rng: &mut Rng, lo: u32, hi: u32) -> u32 {
+    lo + (rng.next_u64() % u64::from(hi - lo + 1)) as u32
+}
+
+/// True with probability `p`.
+fn chance(rng: &mut Rng, p: f64) -> bool {
+    (rng.sym() + 1.0) / 2.0 < p
+}
+
+/// Up to `max` monomials of total degree ≤ `deg` (always the highest
+/// one, so the term has that degree), coefficients `scale`.
+fn sparse_poly(rng: &mut Rng, deg: u8, max: u32, scale: f64) -> Vec<PolyCoef> {
+    let mut all = poly(rng, deg, scale);
+    // The last monomial of `poly` has degree `deg`; keep it, shuffle the rest.
+    let top = all.pop().expect("a polynomial has a monomial");
+    for i in (1..all.len()).rev() {
+        all.swap(i, rng.next_u64() as usize % (i + 1));
+    }
+    all.truncate(int(rng, 0, max - 1) as usize);
+    all.push(top);
+    all
+}
+
+/// One random table of the calibration set: every term kind drawn with
+/// some probability, at every size the format allows — polynomials of
+/// degree 1–5 on 1–3 outputs, 1–4 periodic terms of 1–4 harmonics, 1–6
+/// reversals, 1–3 thermal and 1–2 Abbe terms of degree 0–5 with up to 25
+/// coefficients, 1–2 grids over 1–3 axes, an MLP with 3–7 inputs, one or
+/// two hidden layers of 4–32 units and 1–3 outputs; 1–4 temperature
+/// channels.
+fn calibration_spec(rng: &mut Rng, tag: u8) -> TableSpec {
+    let nch = int(rng, 1, 4) as usize;
+    let mut s = base_with(tag, nch);
+    let output = |rng: &mut Rng| int(rng, 0, 2) as u8;
+    if chance(rng, 0.6) {
+        let deg = int(rng, 1, 5) as u8;
+        for o in 0..3u8 {
+            if o == 0 || chance(rng, 0.7) {
+                s.terms.push(TermSpec::Poly {
+                    output: o,
+                    coefs: poly(rng, deg, 6_000.0),
+                });
+            }
+        }
+    }
+    if chance(rng, 0.4) {
+        for _ in 0..int(rng, 1, 4) {
+            let (o, axis, h) = (output(rng), output(rng), int(rng, 1, 4) as usize);
+            s.terms.push(periodic(rng, o, axis, h));
+        }
+    }
+    if chance(rng, 0.4) {
+        for _ in 0..int(rng, 1, 6) {
+            s.terms.push(TermSpec::Reversal {
+                output: output(rng),
+                axis: output(rng),
+                // One transition length per axis (the format requires it).
+                transition_nm: 20_000,
+                amplitude_nm: 3_000.0 * rng.sym(),
+            });
+        }
+    }
+    if chance(rng, 0.35) {
+        for _ in 0..int(rng, 1, 3) {
+            let deg = int(rng, 0, 5) as u8;
+            s.terms.push(TermSpec::Thermal {
+                output: output(rng),
+                channel: int(rng, 0, nch as u32 - 1) as u8,
+                t_ref_mc: 20_000,
+                coefs_nm_per_k: sparse_poly(rng, deg, 25, 1_500.0),
+            });
+        }
+    }
+    if chance(rng, 0.25) {
+        for _ in 0..int(rng, 1, 2) {
+            let deg = int(rng, 0, 5) as u8;
+            s.terms.push(TermSpec::Abbe {
+                output: output(rng),
+                coefs: sparse_poly(rng, deg, 25, 30e-6),
+            });
+        }
+    }
+    if chance(rng, 0.25) {
+        for _ in 0..int(rng, 1, 2) {
+            let mut axes = [GridAxisSpec {
+                nodes: 1,
+                origin_nm: 0,
+                step_nm: 1,
+            }; 3];
+            let used = int(rng, 1, 3);
+            let first = int(rng, 0, 2);
+            for k in 0..used {
+                let a = ((first + k) % 3) as usize;
+                let nodes = int(rng, 2, 9) as u16;
+                axes[a] = GridAxisSpec {
+                    nodes,
+                    origin_nm: 0,
+                    step_nm: TRAVEL_MAX_NM[a] / i32::from(nodes - 1),
+                };
+            }
+            let n: usize = axes.iter().map(|a| usize::from(a.nodes)).product();
+            s.terms.push(TermSpec::Grid(GridSpec {
+                output: output(rng),
+                axes,
+                values_nm: (0..n).map(|_| 4_000.0 * rng.sym()).collect(),
+            }));
+        }
+    }
+    if chance(rng, 0.35) {
+        let mut inputs = pos_inputs();
+        for ch in 0..int(rng, 0, nch as u32) as u8 {
+            inputs.push(MlpInputSpec {
+                source: MlpSource::Temp(ch),
+                min: 15_000.0,
+                max: 30_000.0,
+            });
+        }
+        let layers = int(rng, 1, 2) as usize;
+        let hidden: Vec<usize> = (0..layers).map(|_| int(rng, 4, 32) as usize).collect();
+        let outputs: Vec<u8> = (0..3u8).filter(|_| chance(rng, 0.6)).collect();
+        let outputs = if outputs.is_empty() {
+            vec![output(rng)]
+        } else {
+            outputs
+        };
+        s.terms.push(mlp(rng, inputs, &hidden, outputs));
+    }
+    if s.terms.is_empty() {
+        s.terms.push(TermSpec::Poly {
+            output: 0,
+            coefs: poly(rng, 3, 6_000.0),
+        });
+    }
+    s
+}
+
+/// (name, table bytes) of the calibration set's random tables: draws the
+/// board cannot hold (staging buffer, model capacity) are skipped for the
+/// next one — the estimate only has to be right for tables the board can
+/// load; those too slow for its loop are kept.
+pub fn calibration() -> Result<Vec<(String, Vec<u8>)>, EncodeError> {
+    let mut out = Vec::new();
+    let mut rng = Rng::new(0xCA1B_0000);
+    while out.len() < CALIBRATION_TABLES {
+        let i = out.len();
+        let bytes = calibration_spec(&mut rng, i as u8).encode()?;
+        let table = model_core::parse(&bytes).expect("an encoded table parses");
+        match model_core::board::check(&table) {
+            Ok(()) | Err(LimitError::TooSlow { .. }) => {
+                out.push((format!("cal_{i:03}"), bytes));
+            }
+            Err(_) => {}
+        }
+    }
     Ok(out)
 }

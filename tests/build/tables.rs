@@ -54,7 +54,9 @@ fn envelope() -> Envelope {
     }
 }
 
-fn base(seed_hash: u8) -> TableSpec {
+/// The mill's table without terms: one temperature channel (the bed),
+/// corrections up to 200 µm; `seed_hash` fills the source hash.
+pub fn base(seed_hash: u8) -> TableSpec {
     TableSpec {
         created_unix_s: 1_767_225_600,
         source_hash: [seed_hash; 32],

@@ -56,7 +56,9 @@ tasks:
   test        every test: fmt, clippy, host tests, no_std build, firmware, QEMU
   demo        the main job, end to end (writes into out/demo)
   test-qemu   only the QEMU suites and the end-to-end run (part of `test`)
-  bench-mcu   instruction counts per model update under QEMU (-icount shift=0)";
+  bench-mcu   instruction counts per model update under QEMU (-icount shift=0);
+              --calibrate: model-core's cost estimate against the counts of
+              the bench tables and 191 seeded random ones (BENCHMARKS.md)";
 
 /// The repository root (the parent of xtask/).
 pub fn root() -> PathBuf {

@@ -104,9 +104,12 @@ pub const BUDGETS: [(&str, u64); 4] = [
 
 /// Builds and runs the bench image (firmware release profile, `-icount
 /// shift=0`) and returns its figures: the one code path of `bench-mcu` and
-/// of the check in `cargo xtask test`.
-fn run_bench() -> Result<Vec<BenchResult>> {
-    let elf = build_bin("bench", Profile::Release)?;
+/// of the check in `cargo xtask test`. With `calibrate`, the image also
+/// evaluates the cost estimate's calibration set (the QEMU crate's
+/// `calibrate` feature: build/cost_tables.rs, `calibration`).
+fn run_bench(calibrate: bool) -> Result<Vec<BenchResult>> {
+    let features: &[&str] = if calibrate { &["calibrate"] } else { &[] };
+    let elf = build_package_bin(PACKAGE, "bench", Profile::Release, features)?;
     eprintln!("\n$ qemu bench (-icount shift=0)");
     let run = run_image(&elf, &QemuOpts::default())?;
     if !run.status.success() {
@@ -182,7 +185,7 @@ fn budget_of(name: &str) -> Option<u64> {
 
 /// The bench image in `cargo xtask test`: the budgets must hold.
 fn check_bench() -> Result<()> {
-    let results = run_bench()?;
+    let results = run_bench(false)?;
     print_bench_table(&results);
     check_budgets(&results)?;
     eprintln!("qemu: instruction budgets met ({} benches)", BUDGETS.len());
@@ -202,11 +205,20 @@ fn check_bench() -> Result<()> {
 /// model kind on stdout, `{"bench": "cubic19_f32", "instructions_per_update":
 /// N, "outputs": 3}`, a human summary with the budgets and the loop rate
 /// each allows at 168 MHz on stderr.
+///
+/// With `--calibrate`, the cost estimate against the counts instead
+/// ([`calibrate`]).
 pub fn bench_mcu(args: &[String]) -> Result<()> {
-    if let Some(a) = args.first() {
-        return Err(format!("bench-mcu takes no arguments (got `{a}`)"));
+    match args {
+        [] => {}
+        [a] if a == "--calibrate" => return calibrate(),
+        [a, ..] => {
+            return Err(format!(
+                "bench-mcu takes no argument but --calibrate (got `{a}`)"
+            ))
+        }
     }
-    let results = run_bench()?;
+    let results = run_bench(false)?;
     for r in &results {
         println!(
             "{{\"bench\": \"{}\", \"instructions_per_update\": {}, \"outputs\": 3}}",
@@ -215,6 +227,90 @@ pub fn bench_mcu(args: &[String]) -> Result<()> {
     }
     print_bench_table(&results);
     Ok(())
+}
+
+/// `cargo xtask bench-mcu --calibrate`: the bench image with the cost
+/// estimate's calibration set (the bench tables and 191 seeded random
+/// tables the board can load, build/cost_tables.rs) — on stdout, per table
+/// the worst call and model-core's estimate of `eval_f32` and `eval_fixed`
+/// and their ratio, then the smallest and largest ratio (the figures
+/// BENCHMARKS.md "Static cost estimate" quotes). Fails, like `cargo xtask
+/// test` on the bench tables, when an estimate is below its count or above
+/// 1.5 × it.
+fn calibrate() -> Result<()> {
+    let results = run_bench(true)?;
+    let rows = estimate_rows(&results)?;
+    println!(
+        "{:<22} {:>7} {:>8} {:>6} {:>7} {:>8} {:>6}",
+        "table", "f32", "estimate", "ratio", "fixed", "estimate", "ratio"
+    );
+    for r in &rows {
+        println!(
+            "{:<22} {:>7} {:>8} {:>6.3} {:>7} {:>8} {:>6.3}",
+            r.table,
+            r.f32.0,
+            r.f32.1,
+            ratio(r.f32),
+            r.fixed.0,
+            r.fixed.1,
+            ratio(r.fixed)
+        );
+    }
+    let random: Vec<&EstimateRow> = rows
+        .iter()
+        .filter(|r| r.table.starts_with("cal_"))
+        .collect();
+    for (what, set) in [("all", rows.iter().collect::<Vec<_>>()), ("random", random)] {
+        let (f32_lo, f32_hi) = ratio_range(set.iter().map(|r| r.f32));
+        let (fx_lo, fx_hi) = ratio_range(set.iter().map(|r| r.fixed));
+        println!(
+            "estimate / count, {what} {} tables: fixed {fx_lo:.2}–{fx_hi:.2}, f32 {f32_lo:.2}–{f32_hi:.2}",
+            set.len()
+        );
+    }
+    check_estimates(&results)
+}
+
+/// One table's worst call and estimate (count, estimate) on each path.
+#[derive(Debug, PartialEq)]
+struct EstimateRow {
+    table: String,
+    f32: (u64, u64),
+    fixed: (u64, u64),
+}
+
+/// Pairs the `<table>_f32` and `<table>_fixed` benches.
+fn estimate_rows(results: &[BenchResult]) -> Result<Vec<EstimateRow>> {
+    let get = |name: String| -> Result<(u64, u64)> {
+        let r = results
+            .iter()
+            .find(|r| r.name == name)
+            .ok_or_else(|| format!("no bench {name}"))?;
+        Ok((r.max, r.est.ok_or_else(|| format!("{name}: no estimate"))?))
+    };
+    results
+        .iter()
+        .filter_map(|r| r.name.strip_suffix("_f32"))
+        .map(|t| {
+            Ok(EstimateRow {
+                table: t.to_owned(),
+                f32: get(format!("{t}_f32"))?,
+                fixed: get(format!("{t}_fixed"))?,
+            })
+        })
+        .collect()
+}
+
+/// estimate / count.
+fn ratio((count, est): (u64, u64)) -> f64 {
+    est as f64 / count as f64
+}
+
+/// The smallest and largest [`ratio`].
+fn ratio_range(pairs: impl Iterator<Item = (u64, u64)>) -> (f64, f64) {
+    pairs
+        .map(ratio)
+        .fold((f64::INFINITY, 0.0), |(lo, hi), r| (lo.min(r), hi.max(r)))
 }
 
 /// The human summary of the bench figures, on stderr.
@@ -369,7 +465,7 @@ fn check_ticks(budget: &TickBudget, ticks: &[TickResult]) -> Result<Vec<String>>
 
 /// firmware/tickbench under QEMU: instructions of whole engine ticks.
 fn check_tickbench() -> Result<()> {
-    let elf = build_package_bin("trueaxis-tickbench", "tickbench", Profile::Release)?;
+    let elf = build_package_bin("trueaxis-tickbench", "tickbench", Profile::Release, &[])?;
     eprintln!("\n$ qemu tickbench (-icount shift=0)");
     let run = run_image(
         &elf,
@@ -700,14 +796,25 @@ fn target_dir() -> PathBuf {
 
 /// Builds one binary of the QEMU crate and returns the ELF's path.
 fn build_bin(bin: &str, profile: Profile) -> Result<PathBuf> {
-    build_package_bin(PACKAGE, bin, profile)
+    build_package_bin(PACKAGE, bin, profile, &[])
 }
 
-/// Builds binary `bin` of firmware-workspace package `package`.
-fn build_package_bin(package: &str, bin: &str, profile: Profile) -> Result<PathBuf> {
+/// Builds binary `bin` of firmware-workspace package `package` with
+/// `features`. (Cargo keeps each feature set's build apart and copies the
+/// one just built to the ELF's path, so switching sets rebuilds nothing.)
+fn build_package_bin(
+    package: &str,
+    bin: &str,
+    profile: Profile,
+    features: &[&str],
+) -> Result<PathBuf> {
     let mut args = vec!["build", "-p", package, "--target", THUMB, "--bin", bin];
     if profile == Profile::Release {
         args.push("--release");
+    }
+    let features = features.join(",");
+    if !features.is_empty() {
+        args.extend(["--features", &features]);
     }
     crate::run(&firmware_dir(), "cargo", &args)?;
     let elf = target_dir().join(THUMB).join(profile.dir()).join(bin);
@@ -1111,6 +1218,28 @@ mod tests {
         assert!(check_estimates(&[r(100, None)]).is_err());
         let log = "INFO  BENCH a_f32 total=64 calls=64 min=1 max=1 est=2\n";
         assert_eq!(parse_bench_log(log).unwrap()[0].est, Some(2));
+    }
+
+    #[test]
+    fn calibration_pairs_the_paths_and_reports_the_ratio_range() {
+        let log = "INFO  BENCH a_f32 total=100 calls=1 min=100 max=100 est=110\n\
+                   INFO  BENCH a_fixed total=200 calls=1 min=200 max=200 est=250\n\
+                   INFO  BENCH cal_000_f32 total=50 calls=1 min=50 max=50 est=60\n\
+                   INFO  BENCH cal_000_fixed total=80 calls=1 min=80 max=80 est=84\n";
+        let rows = estimate_rows(&parse_bench_log(log).unwrap()).unwrap();
+        assert_eq!(
+            rows[1],
+            EstimateRow {
+                table: "cal_000".into(),
+                f32: (50, 60),
+                fixed: (80, 84)
+            }
+        );
+        assert_eq!(ratio_range(rows.iter().map(|r| r.f32)), (1.1, 1.2));
+        assert_eq!(ratio_range(rows.iter().map(|r| r.fixed)), (1.05, 1.25));
+        // A table measured on one path only is an error, not a silent gap.
+        let one = parse_bench_log("INFO  BENCH b_f32 total=1 calls=1 min=1 max=1 est=1\n").unwrap();
+        assert!(estimate_rows(&one).unwrap_err().contains("b_fixed"));
     }
 
     #[test]
