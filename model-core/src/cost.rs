@@ -187,9 +187,12 @@ impl Features {
 
 /// Weights of one evaluation path, tenths of an instruction per unit of
 /// a feature (tenths keep the per-multiply-add costs exact enough in
-/// integers). Fitted by least squares on the bench counts of 200 tables,
+/// integers). Fitted by least squares on the bench counts of 200 tables
+/// (an earlier random set, not kept),
 /// negative weights set to zero, then scaled until every table's estimate
-/// was ≥ 1.05 × its count (see the module documentation).
+/// was ≥ 1.05 × its count. `cargo xtask bench-mcu --calibrate` prints the
+/// estimate against the count on the bench tables and 191 seeded random
+/// ones (BENCHMARKS.md, "Static cost estimate").
 #[derive(Clone, Copy, Debug)]
 struct Weights {
     /// Entry, holding the positions, the output clamp.
