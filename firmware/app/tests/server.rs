@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{call, decode_all, install};
+use common::{call, decode_all, install, stage};
 use model_core::link::{
     encode_frame, table_id, Faults, Injection, LinkError, Packet, Request, Response, Slot,
     LINK_TEMPS, MAX_FRAME_BYTES,
@@ -224,18 +224,7 @@ fn a_repeated_commit_gets_the_same_answer() {
         size: t2.len() as u32,
         crc32,
     };
-    call(&mut b, &mut p, 20, begin.clone());
-    for (i, c) in t2.chunks(200).enumerate() {
-        call(
-            &mut b,
-            &mut p,
-            21,
-            Request::UploadChunk {
-                offset: (i * 200) as u32,
-                data: c,
-            },
-        );
-    }
+    stage(&mut b, &mut p, 20, &t2, crc32);
     // The first commit's answer is lost on the way back...
     let Response::Committed(first) = call(&mut b, &mut p, 22, Request::Commit) else {
         panic!("commit refused")
@@ -304,26 +293,7 @@ fn refusals() {
 
     // Announced CRC does not match the bytes.
     let table = sample_table(0);
-    call(
-        &mut b,
-        &mut p,
-        2,
-        Request::UploadBegin {
-            size: table.len() as u32,
-            crc32: 1,
-        },
-    );
-    for (i, c) in table.chunks(256).enumerate() {
-        call(
-            &mut b,
-            &mut p,
-            3,
-            Request::UploadChunk {
-                offset: (i * 256) as u32,
-                data: c,
-            },
-        );
-    }
+    stage(&mut b, &mut p, 2, &table, 1);
     assert_eq!(
         call(&mut b, &mut p, 4, Request::Commit),
         Response::Error(LinkError::CrcMismatch)
@@ -347,26 +317,7 @@ fn refusals() {
     let mut bad = table.clone();
     bad[300] ^= 0x40;
     let crc32 = table_id(&bad);
-    call(
-        &mut b,
-        &mut p,
-        5,
-        Request::UploadBegin {
-            size: bad.len() as u32,
-            crc32,
-        },
-    );
-    for (i, c) in bad.chunks(256).enumerate() {
-        call(
-            &mut b,
-            &mut p,
-            6,
-            Request::UploadChunk {
-                offset: (i * 256) as u32,
-                data: c,
-            },
-        );
-    }
+    stage(&mut b, &mut p, 5, &bad, crc32);
     assert_eq!(
         call(&mut b, &mut p, 7, Request::Commit),
         Response::Error(LinkError::InvalidTable)
@@ -421,26 +372,7 @@ fn tables_beyond_the_firmware_capacity_are_refused_at_commit() {
     let mut b = SimBoard::new();
     let mut p = Port::new();
     let crc32 = table_id(&table);
-    call(
-        &mut b,
-        &mut p,
-        1,
-        Request::UploadBegin {
-            size: table.len() as u32,
-            crc32,
-        },
-    );
-    for (i, c) in table.chunks(256).enumerate() {
-        call(
-            &mut b,
-            &mut p,
-            2,
-            Request::UploadChunk {
-                offset: (i * 256) as u32,
-                data: c,
-            },
-        );
-    }
+    stage(&mut b, &mut p, 1, &table, crc32);
     assert_eq!(
         call(&mut b, &mut p, 3, Request::Commit),
         Response::Error(LinkError::InvalidTable)
@@ -465,18 +397,7 @@ fn tables_too_slow_for_the_loop_are_refused_at_commit() {
         size: slow.len() as u32,
         crc32: table_id(slow),
     };
-    call(&mut b, &mut p, 30, begin.clone());
-    for (i, c) in slow.chunks(256).enumerate() {
-        call(
-            &mut b,
-            &mut p,
-            31,
-            Request::UploadChunk {
-                offset: (i * 256) as u32,
-                data: c,
-            },
-        );
-    }
+    stage(&mut b, &mut p, 30, slow, table_id(slow));
     assert_eq!(
         call(&mut b, &mut p, 32, Request::Commit),
         Response::Error(LinkError::TooSlow {
@@ -503,26 +424,7 @@ fn commit_is_refused_while_axes_move() {
     install(&mut b, &mut p, &sample_table(0));
     let t2 = sample_table(1);
     let crc32 = table_id(&t2);
-    call(
-        &mut b,
-        &mut p,
-        1,
-        Request::UploadBegin {
-            size: t2.len() as u32,
-            crc32,
-        },
-    );
-    for (i, c) in t2.chunks(256).enumerate() {
-        call(
-            &mut b,
-            &mut p,
-            2,
-            Request::UploadChunk {
-                offset: (i * 256) as u32,
-                data: c,
-            },
-        );
-    }
+    stage(&mut b, &mut p, 1, &t2, crc32);
     b.tick(5);
     b.io.lock().unwrap().counts[1] += 1000;
     b.tick(5);

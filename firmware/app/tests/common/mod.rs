@@ -2,7 +2,8 @@
 #![allow(dead_code)]
 
 use model_core::link::{
-    decode_message, encode_frame, FrameDecoder, Packet, Request, Response, MAX_FRAME_BYTES,
+    decode_message, encode_frame, FrameDecoder, Packet, Request, Response, MAX_CHUNK_BYTES,
+    MAX_FRAME_BYTES,
 };
 use trueaxis_app::server::Port;
 use trueaxis_app::sim::SimBoard;
@@ -30,31 +31,38 @@ pub fn decode_all(bytes: &[u8]) -> Vec<Packet<Response>> {
     v
 }
 
-/// Uploads, commits and activates `table`.
-pub fn install(board: &mut SimBoard, port: &mut Port, table: &[u8]) -> Response {
-    let crc32 = model_core::link::table_id(table);
+/// Stages `table` on the board: `UploadBegin` announcing `crc32` (the
+/// table's identity, or a wrong one to test the refusal), then every chunk
+/// (as large as the link allows); each is acknowledged, the upload starting
+/// at byte 0. Requests `seq` and `seq + 1`.
+pub fn stage(board: &mut SimBoard, port: &mut Port, seq: u16, table: &[u8], crc32: u32) {
     let r = call(
         board,
         port,
-        1,
+        seq,
         Request::UploadBegin {
             size: table.len() as u32,
             crc32,
         },
     );
     assert_eq!(r, Response::UploadAck { next_offset: 0 });
-    for (i, c) in table.chunks(200).enumerate() {
+    for (i, c) in table.chunks(MAX_CHUNK_BYTES).enumerate() {
         let r = call(
             board,
             port,
-            2,
+            seq.wrapping_add(1),
             Request::UploadChunk {
-                offset: (i * 200) as u32,
+                offset: (i * MAX_CHUNK_BYTES) as u32,
                 data: c,
             },
         );
         assert!(matches!(r, Response::UploadAck { .. }), "{r:?}");
     }
+}
+
+/// Uploads, commits and activates `table`.
+pub fn install(board: &mut SimBoard, port: &mut Port, table: &[u8]) -> Response {
+    stage(board, port, 1, table, model_core::link::table_id(table));
     let r = call(board, port, 3, Request::Commit);
     assert!(matches!(r, Response::Committed(_)), "{r:?}");
     call(board, port, 4, Request::Activate)
