@@ -1,8 +1,10 @@
 //! The simulated board (feature `std`): the application core with fake
 //! encoders, thermistors, step outputs, clock and a RAM flash, served over
-//! TCP or any byte stream (a pseudo-terminal, for the serial-port path). The host tool's end-to-end tests run `trueaxis upload/status/
-//! monitor` against it (`--port tcp://127.0.0.1:PORT`), and the `sim-board`
-//! binary runs it by hand. Also the sample tables the tests upload.
+//! TCP or any byte stream (a pseudo-terminal, for the serial-port path).
+//! The host tool's end-to-end tests run `trueaxis upload/status/monitor`
+//! against it (`--port tcp://127.0.0.1:PORT`, and a pseudo-terminal), and
+//! the `sim-board` binary runs it by hand. Also the sample tables the tests
+//! upload.
 //!
 //! Time is simulated: the board ticks at its configured period, as many
 //! ticks as wall-clock time has passed (capped per poll, so a slow test
