@@ -23,6 +23,7 @@ use probe_rs::flashing::DownloadOptions;
 use probe_rs::probe::list::Lister;
 use probe_rs::{MemoryInterface, Permissions};
 
+use crate::cmd::input;
 use crate::cmd::out::outln;
 
 /// The firmware's memory map (repository root).
@@ -89,15 +90,7 @@ pub fn slots() -> Result<([u32; 2], u32)> {
 
 impl Args {
     pub fn run(self) -> Result<()> {
-        let bytes = std::fs::read(&self.table)
-            .with_context(|| format!("cannot read {}", self.table.display()))?;
-        let table = model_core::parse(&bytes)
-            .map_err(|e| anyhow::anyhow!("{}: not a valid table: {e}", self.table.display()))?;
-        // The board's own limits (staging buffer, model capacity), before
-        // anything touches it.
-        model_core::board::check(&table).map_err(|e| {
-            anyhow::anyhow!("{}: does not fit the board: {e}", self.table.display())
-        })?;
+        let bytes = input::load_board_table(&self.table)?;
         let (addr, slot_bytes) = slots()?;
         if bytes.len() as u64 + slot::BODY_AT as u64 > slot_bytes as u64 {
             bail!(

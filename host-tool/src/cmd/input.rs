@@ -6,10 +6,13 @@
 //! text and `--json` mode alike, without touching stdout's one document),
 //! and each command's JSON carries the count as `skipped_count` — the key
 //! `import --json` already uses. `trueaxis import DATA` lists every one.
+//!
+//! The commands that send a table to the board (upload, flash) read it
+//! here too, so both refuse the same tables with the same words.
 
 use std::path::Path;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 
 use crate::data::Dataset;
 use crate::import;
@@ -54,6 +57,19 @@ pub fn skipped_note(data: &Dataset) -> Option<String> {
         named.join("; "),
         data.source
     ))
+}
+
+/// Reads the table file at `path` for the board: a valid table
+/// (model-core's parser) that the board's own limits admit
+/// (`model_core::board`: staging buffer, model capacity, loop budget) —
+/// checked before anything touches the board. Returns its bytes.
+pub fn load_board_table(path: &Path) -> Result<Vec<u8>> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let table = model_core::parse(&bytes)
+        .map_err(|e| anyhow::anyhow!("{}: not a valid table: {e}", path.display()))?;
+    model_core::board::check(&table)
+        .map_err(|e| anyhow::anyhow!("{}: does not fit the board: {e}", path.display()))?;
+    Ok(bytes)
 }
 
 /// Adds `skipped_count` to a command's JSON document (an object).

@@ -11,6 +11,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use crate::cmd::input;
 use crate::cmd::out::outln;
 use crate::link::{slot_json, slot_text, Client, Timing};
 
@@ -29,15 +30,7 @@ pub struct Args {
 
 impl Args {
     pub fn run(self) -> Result<()> {
-        let bytes = std::fs::read(&self.table)
-            .with_context(|| format!("cannot read {}", self.table.display()))?;
-        let table = model_core::parse(&bytes)
-            .map_err(|e| anyhow::anyhow!("{}: not a valid table: {e}", self.table.display()))?;
-        // The board's own limits (staging buffer, model capacity), before
-        // anything touches it.
-        model_core::board::check(&table).map_err(|e| {
-            anyhow::anyhow!("{}: does not fit the board: {e}", self.table.display())
-        })?;
+        let bytes = input::load_board_table(&self.table)?;
         let mut client = Client::open(&self.port, Timing::default())?;
         let bar = if self.json {
             ProgressBar::hidden()
