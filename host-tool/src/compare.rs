@@ -772,6 +772,30 @@ pub fn pick_evenly(n: usize, max: usize) -> Vec<usize> {
     v
 }
 
+/// Heat map of `vals` (µm per row, `None` where there is none) on the rows
+/// of `plane`, against its two in-plane axes.
+fn plane_map(
+    data: &Dataset,
+    plane: &Plane,
+    title: String,
+    vals: impl Fn(usize) -> Option<f64>,
+) -> HeatMap {
+    let others: Vec<usize> = (0..3).filter(|&a| a != plane.normal).collect();
+    let pts: Vec<(f64, f64, f64)> = plane
+        .rows
+        .iter()
+        .filter_map(|&r| vals(r).map(|v| (data.pos(others[0], r), data.pos(others[1], r), v)))
+        .collect();
+    HeatMap::from_points(
+        title,
+        format!("{} (mm)", AXES[others[0]]),
+        format!("{} (mm)", AXES[others[1]]),
+        "µm",
+        &pts,
+        SNAP_MM,
+    )
+}
+
 /// Writes the HTML report of a comparison to `dir` (index.html + SVGs) and
 /// returns the path of index.html.
 pub fn write_report(
@@ -904,28 +928,21 @@ pub fn build_report(
     // page says so when planes are left out); before vs after on the middle
     // plane of the first orientation.
     let planes = planes(data);
-    let mut normals: Vec<usize> = Vec::new();
-    for p in &planes {
-        if !normals.contains(&p.normal) {
-            normals.push(p.normal);
-        }
-    }
-    if let Some(&first_normal) = normals.first() {
-        let groups: Vec<(usize, Vec<&Plane>)> = normals
-            .iter()
-            .map(|&n| (n, planes.iter().filter(|p| p.normal == n).collect()))
-            .collect();
+    // `planes` lists the planes of each orientation together.
+    let groups: Vec<&[Plane]> = planes.chunk_by(|a, b| a.normal == b.normal).collect();
+    if let Some(first) = groups.first() {
         page.heading("Residual maps on measured planes");
         page.paragraph("Mean residual per grid position (both directions and repeats averaged); grey cells were not measured. Red: the machine is further along the error's axis than the model says.");
         if data.axes().len() == 3 {
-            for (normal, same) in &groups {
-                let shown = pick_evenly(same.len(), MAX_PLANES_PER_NORMAL).len();
-                page.paragraph(if shown < same.len() {
+            for same in &groups {
+                let normal = AXES[same[0].normal];
+                let shown = pick_evenly(same.len(), MAX_PLANES_PER_NORMAL);
+                page.paragraph(if shown.len() < same.len() {
                     format!(
-                        "Planes {} = const: {} measured, {shown} shown (at most {MAX_PLANES_PER_NORMAL} per orientation, evenly spaced, first and last included): {} mm.",
-                        AXES[*normal],
+                        "Planes {normal} = const: {} measured, {} shown (at most {MAX_PLANES_PER_NORMAL} per orientation, evenly spaced, first and last included): {} mm.",
                         same.len(),
-                        pick_evenly(same.len(), MAX_PLANES_PER_NORMAL)
+                        shown.len(),
+                        shown
                             .iter()
                             .map(|&i| plot_num(same[i].at_mm))
                             .collect::<Vec<_>>()
@@ -933,8 +950,7 @@ pub fn build_report(
                     )
                 } else {
                     format!(
-                        "Planes {} = const: {} measured, all shown.",
-                        AXES[*normal],
+                        "Planes {normal} = const: {} measured, all shown.",
                         same.len()
                     )
                 });
@@ -942,76 +958,47 @@ pub fn build_report(
         }
         for t in data.targets() {
             let res = residuals(data, predicted, t);
-            for (normal, same) in &groups {
-                let normal = *normal;
-                let others: Vec<usize> = (0..3).filter(|&a| a != normal).collect();
+            for same in &groups {
                 for i in pick_evenly(same.len(), MAX_PLANES_PER_NORMAL) {
-                    let plane = same[i];
-                    let pts: Vec<(f64, f64, f64)> = plane
-                        .rows
-                        .iter()
-                        .filter_map(|&r| {
-                            res[r].map(|v| (data.pos(others[0], r), data.pos(others[1], r), v))
-                        })
-                        .collect();
+                    let plane = &same[i];
                     let title = if data.axes().len() == 3 {
                         format!(
                             "{} residual at {} = {} mm",
                             TARGETS[t],
-                            AXES[normal],
+                            AXES[plane.normal],
                             plot_num(plane.at_mm)
                         )
                     } else {
                         format!("{} residual", TARGETS[t])
                     };
-                    let map = HeatMap::from_points(
-                        title,
-                        format!("{} (mm)", AXES[others[0]]),
-                        format!("{} (mm)", AXES[others[1]]),
-                        "µm",
-                        &pts,
-                        SNAP_MM,
-                    );
                     page.figure(
-                        format!("map_{}_{}{}", TARGETS[t], AXES[normal], i),
+                        format!("map_{}_{}{}", TARGETS[t], AXES[plane.normal], i),
                         format!("Residual of {} on a measured plane.", TARGETS[t]),
-                        map.to_svg()?,
+                        plane_map(data, plane, title, |r| res[r]).to_svg()?,
                     );
                 }
             }
-            let normal = first_normal;
-            let same = &groups[0].1;
-            let others: Vec<usize> = (0..3).filter(|&a| a != normal).collect();
             // Before vs after on the middle plane, one colour scale.
-            let plane = same[same.len() / 2];
-            let mk = |title: String, vals: &dyn Fn(usize) -> Option<f64>| {
-                let pts: Vec<(f64, f64, f64)> = plane
-                    .rows
-                    .iter()
-                    .filter_map(|&r| {
-                        vals(r).map(|v| (data.pos(others[0], r), data.pos(others[1], r), v))
-                    })
-                    .collect();
-                HeatMap::from_points(
-                    title,
-                    format!("{} (mm)", AXES[others[0]]),
-                    format!("{} (mm)", AXES[others[1]]),
-                    "µm",
-                    &pts,
-                    SNAP_MM,
-                )
-            };
-            let raw = data.err_um[t].clone().unwrap_or_default();
-            let before = mk(format!("{} before (raw error)", TARGETS[t]), &|r| {
-                raw.get(r).copied().flatten()
-            });
-            let after = mk(format!("{} after (residual)", TARGETS[t]), &|r| res[r]);
+            let plane = &first[first.len() / 2];
+            let raw = data.err_um[t].as_ref();
+            let before = plane_map(
+                data,
+                plane,
+                format!("{} before (raw error)", TARGETS[t]),
+                |r| raw.and_then(|c| c[r]),
+            );
+            let after = plane_map(
+                data,
+                plane,
+                format!("{} after (residual)", TARGETS[t]),
+                |r| res[r],
+            );
             page.figure(
                 format!("map_before_after_{}", TARGETS[t]),
                 format!(
                     "{} before and after compensation on the plane {} = {} mm, on one colour scale.",
                     TARGETS[t],
-                    AXES[normal],
+                    AXES[plane.normal],
                     plot_num(plane.at_mm)
                 ),
                 heat_map_pair(&before, &after)?,

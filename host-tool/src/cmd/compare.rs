@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 
 use crate::cmd::input;
-use crate::cmd::out::outln;
+use crate::cmd::out;
 use crate::compare::{self, Comparison, Warning};
 use crate::data::Dataset;
 use crate::model::ModelFile;
@@ -151,9 +151,9 @@ impl Args {
             for w in &c.warnings {
                 eprintln!("warning ({}): {}", w.code, w.detail);
             }
-            outln!("{}", serde_json::to_string(&c)?)?;
+            out::json(&c)?;
         } else {
-            crate::cmd::out::print(&text(&c))?;
+            out::print(&text(&c))?;
         }
         Ok(())
     }
