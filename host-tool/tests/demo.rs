@@ -60,9 +60,11 @@ fn demo_finds_both_hidden_effects_and_its_table_compensates_the_data() {
         );
     }
     assert_eq!(summary["improve"]["outcome"], "at the noise floor");
-    assert_eq!(summary["simulate"]["rows"].as_u64().unwrap() as usize, {
-        import::load(&demo.data_csv()).unwrap().len()
-    });
+    let data = import::load(&demo.data_csv()).unwrap();
+    assert_eq!(
+        summary["simulate"]["rows"].as_u64().unwrap() as usize,
+        data.len()
+    );
 
     // The files of the documented layout.
     for p in [
@@ -83,7 +85,6 @@ fn demo_finds_both_hidden_effects_and_its_table_compensates_the_data() {
     // The dense line along X is bidirectional, as the docs say: both
     // approach directions at its positions between the grid's (reversal
     // needs both to be identifiable).
-    let data = import::load(&demo.data_csv()).unwrap();
     let dir_x = data.dir[0].as_ref().expect("dir_x");
     let on_line: Vec<i8> = (0..data.len())
         .filter(|&r| {

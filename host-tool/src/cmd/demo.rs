@@ -224,23 +224,15 @@ impl Demo {
         Ok(e)
     }
 
-    /// The whole story, printed on stdout as it goes. Returns the text.
-    pub fn run(&self) -> Result<String> {
-        self.run_with(Story::Stdout).map(|(story, _)| story)
-    }
-
-    /// The whole story, told on `to` as it goes. Returns the text and the
-    /// summary that `demo --json` prints: every stage's numbers (per-target
-    /// RMS before and after, each step of the diagnosis with the effect it
-    /// named, the export's bytes, CRC and accuracy) and the files written.
-    pub fn run_with(&self, to: Story) -> Result<(String, serde_json::Value)> {
+    /// The whole story, told on `to` as it goes. Returns the summary that
+    /// `demo --json` prints: every stage's numbers (per-target RMS before
+    /// and after, each step of the diagnosis with the effect it named, the
+    /// export's bytes, CRC and accuracy) and the files written.
+    pub fn run(&self, to: Story) -> Result<serde_json::Value> {
         use serde_json::json;
         std::fs::create_dir_all(&self.out)
             .with_context(|| format!("cannot create {}", self.out.display()))?;
-        let mut story = String::new();
-        let mut say = |s: String| -> Result<()> {
-            story.push_str(&s);
-            story.push('\n');
+        let say = |s: String| -> Result<()> {
             match to {
                 Story::Stdout => crate::cmd::out::print(&(s + "\n")),
                 Story::Stderr => {
@@ -445,26 +437,17 @@ impl Demo {
             },
             "elapsed_s": elapsed_s,
         });
-        Ok((story, summary))
+        Ok(summary)
     }
-}
-
-/// Runs the demo into `out` (what the CLI and the tests call).
-pub fn run_demo(out: &Path) -> Result<String> {
-    Demo {
-        out: out.to_path_buf(),
-    }
-    .run()
 }
 
 impl Args {
     pub fn run(self) -> Result<()> {
         let demo = Demo { out: self.out };
         if self.json {
-            let (_, summary) = demo.run_with(Story::Stderr)?;
-            crate::cmd::out::json(&summary)
+            crate::cmd::out::json(&demo.run(Story::Stderr)?)
         } else {
-            demo.run().map(|_| ())
+            demo.run(Story::Stdout).map(|_| ())
         }
     }
 }
