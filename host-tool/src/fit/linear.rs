@@ -152,9 +152,15 @@ pub fn fit(
     let mut outputs = Vec::new();
     // Targets with the same features measured on the same rows (a seed
     // model on a full grid) share one solve; the rest are fitted alone.
-    let mut jobs: Vec<(Vec<usize>, Vec<Feature>, Vec<usize>)> = Vec::new();
+    struct Job {
+        targets: Vec<usize>,
+        features: Vec<Feature>,
+        rows: Vec<usize>,
+    }
+    let mut jobs: Vec<Job> = Vec::new();
     for t in data.targets() {
-        if data.measured(t).next().is_none() {
+        let rows: Vec<usize> = data.measured(t).map(|(r, _)| r).collect();
+        if rows.is_empty() {
             stats.warnings.push(format!(
                 "{}: the column has no values; not modelled",
                 TARGETS[t]
@@ -162,30 +168,40 @@ pub fn fit(
             continue;
         }
         let features = features_for(seed, adds, t, &axes)?;
-        let rows: Vec<usize> = data.measured(t).map(|(r, _)| r).collect();
-        match jobs.iter_mut().find(|j| j.1 == features && j.2 == rows) {
-            Some(job) => job.0.push(t),
-            None => jobs.push((vec![t], features, rows)),
+        match jobs
+            .iter_mut()
+            .find(|j| j.features == features && j.rows == rows)
+        {
+            Some(job) => job.targets.push(t),
+            None => jobs.push(Job {
+                targets: vec![t],
+                features,
+                rows,
+            }),
         }
     }
-    let mut fits: Vec<(usize, Vec<Feature>, TargetFit)> = Vec::new();
-    for (targets, features, rows) in jobs {
+    let mut fits: Vec<TargetFit> = Vec::new();
+    for Job {
+        targets,
+        features,
+        rows,
+    } in jobs
+    {
         let label: Vec<&str> = targets.iter().map(|&t| TARGETS[t]).collect();
-        let tfs = match fit_targets(data, &norm, &features, &targets, &rows, &label.join(", ")) {
-            Ok(tfs) => tfs,
+        match fit_targets(data, &norm, &features, &targets, &rows, &label.join(", ")) {
+            Ok(tfs) => fits.extend(tfs),
             // Name the first target that fails on its own, as a lone fit would.
-            Err(_) if targets.len() > 1 => targets
-                .iter()
-                .map(|&t| fit_target(data, &norm, &features, t, &rows, TARGETS[t]))
-                .collect::<Result<_>>()?,
+            Err(_) if targets.len() > 1 => {
+                for &t in &targets {
+                    fits.push(fit_target(data, &norm, &features, t, &rows, TARGETS[t])?);
+                }
+            }
             Err(e) => return Err(e),
-        };
-        for (t, tf) in targets.into_iter().zip(tfs) {
-            fits.push((t, features.clone(), tf));
         }
     }
-    fits.sort_by_key(|f| f.0);
-    for (t, features, tf) in fits {
+    fits.sort_by_key(|tf| tf.output.target);
+    for tf in fits {
+        let (t, features) = (tf.output.target, &tf.output.features);
         let name = TARGETS[t].to_string();
         stats.terms = stats.terms.max(features.len());
         stats.terms_per_target.insert(name.clone(), features.len());
@@ -208,7 +224,7 @@ pub fn fit(
                 tf.condition_number
             ));
         }
-        match holdout::held_out_rms_k(data, &tf.rows, &features, t, &norm, blocks) {
+        match holdout::held_out_rms_k(data, &tf.rows, features, t, &norm, blocks) {
             Ok(h) => {
                 stats.held_out_rms_um.insert(name.clone(), h);
             }

@@ -365,11 +365,9 @@ impl Samples {
 /// The weight of a sample is the same for all its outputs (u_um is per
 /// row), which is what lets the outputs share one Gram matrix.
 struct Lm {
-    nz: usize,
-    /// Hidden neuron of each hidden parameter (weights h·nin + i, then biases).
+    /// Hidden neuron of each hidden parameter (weights h·nin + i, then
+    /// biases): nz = nh·(nin + 1) entries, the z part of m_s.
     hid: Vec<usize>,
-    /// Rows of the Gram matrix: z (nz) then ã (nh + 1).
-    nm: usize,
     /// Samples grouped by measurement pattern: (bitmask of outputs, first
     /// column, end column) of `mt`.
     groups: Vec<(u32, usize, usize)>,
@@ -378,12 +376,11 @@ struct Lm {
     /// √w of each sample, targets per (sample, output) (NaN: not measured).
     sw: Vec<f64>,
     target: Vec<f64>,
-    /// m_s per column (nm × samples, column-major: each sample contiguous).
+    /// m_s per column (nm × samples, column-major: each sample contiguous);
+    /// nm = nz + nh + 1 rows, z then ã.
     mt: DMatrix<f64>,
     /// One Gram matrix (nm × nm) per group.
     gram: Vec<DMatrix<f64>>,
-    /// Number of residuals (measured values).
-    m: usize,
     jtj: DMatrix<f64>,
     g: DVector<f64>,
     /// Activations and outputs of the current network on the training set.
@@ -417,18 +414,15 @@ impl Lm {
         }
         let np = Net::n_params(nin, nh, nout);
         Lm {
-            nz,
             hid: (0..nz)
                 .map(|k| if k < nh * nin { k / nin } else { k - nh * nin })
                 .collect(),
-            nm,
             gram: vec![DMatrix::zeros(nm, nm); groups.len()],
             mt: DMatrix::zeros(nm, order.len()),
             groups,
             order,
             sw,
             target,
-            m: train.n_entries(),
             jtj: DMatrix::zeros(np, np),
             g: DVector::zeros(np),
             act: vec![0.0; n * nh],
@@ -440,7 +434,7 @@ impl Lm {
     /// `self.act` / `self.out`.
     fn normal_equations(&mut self, train: &Samples, net: &Net) {
         let (nin, nh, nout) = (net.nin, net.nh, net.nout);
-        let (nz, nm) = (self.nz, self.nm);
+        let (nz, nm) = (self.hid.len(), self.mt.nrows());
         let (w2o, b2o) = (net.w2_off(), net.b2_off());
         let w2 = &net.p[w2o..b2o];
         let hid = &self.hid;
@@ -665,7 +659,7 @@ fn run_lm(
     let mut trial = net.clone();
     let (mut t_act, mut t_out) = (vec![0.0; lm.act.len()], vec![0.0; lm.out.len()]);
     let (mut v_act, mut v_out) = (vec![0.0; val.n * nh], vec![0.0; val.n * nout]);
-    let n_val = val.n_entries();
+    let (n_train, n_val) = (train.n_entries(), val.n_entries());
     let has_val = n_val > 0;
     let mut val_sse = |net: &Net| {
         val.forward(net, &mut v_act, &mut v_out);
@@ -735,7 +729,7 @@ fn run_lm(
         let info = Epoch {
             restart,
             epoch,
-            train_mse: sse / lm.m.max(1) as f64,
+            train_mse: sse / n_train.max(1) as f64,
             val_mse: v / n_val.max(1) as f64,
             mu,
         };
@@ -752,7 +746,7 @@ fn run_lm(
     let score = if has_val {
         best_val / n_val as f64
     } else {
-        sse / lm.m.max(1) as f64
+        sse / n_train.max(1) as f64
     };
     net.p = best;
     Run {
@@ -1166,7 +1160,7 @@ mod tests {
             "Jᵀe differs"
         );
         assert_eq!(lm.groups.len(), 4, "{:?}", lm.groups);
-        assert_eq!(lm.m, e.len());
+        assert_eq!(s.n_entries(), e.len());
     }
 
     #[test]
