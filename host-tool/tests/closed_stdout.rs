@@ -5,10 +5,9 @@
 
 mod common;
 
-use std::path::Path;
 use std::process::{Command, Stdio};
 
-use common::{json, run, s, tmp_dir};
+use common::{data_file, fit_cubic19, s, simulate_grid, tmp_dir};
 
 /// Runs `trueaxis args` with stdout a pipe nobody reads; returns the exit
 /// code and stderr.
@@ -27,50 +26,25 @@ fn run_into_closed_pipe(args: &[&str]) -> (Option<i32>, String) {
     )
 }
 
-fn data(name: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-        .display()
-        .to_string()
-}
-
 #[test]
 fn every_command_exits_0_quietly_when_stdout_is_closed() {
     let dir = tmp_dir("closed-stdout", "all");
-    let csv = dir.join("d.csv");
+    let csv = simulate_grid(&dir, "d.csv", 1);
     let model = dir.join("m.json");
-    json(&run(&[
-        "simulate",
-        "--plan",
-        "grid:100",
-        "--seed",
-        "1",
-        "-o",
-        s(&csv),
-        "--json",
-    ]));
-    json(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&model),
-        "--json",
-    ]));
+    fit_cubic19(&csv, &model);
     let csv2 = dir.join("d2.csv");
     let model2 = dir.join("m2.json");
     let table = dir.join("t.bin");
     let model3 = dir.join("m3.json");
-    let iso = data("iso_worked.rtl");
+    let iso_rtl = data_file("iso_worked.rtl");
+    let iso = s(&iso_rtl);
     let cases: Vec<Vec<&str>> = vec![
         vec!["compare", s(&csv), "--model", s(&model), "--json"],
         vec!["compare", s(&csv), "--model", s(&model)],
-        vec!["iso230", &iso, "--json"],
-        vec!["iso230", &iso],
-        vec!["import", &iso, "--json"],
-        vec!["import", &iso],
+        vec!["iso230", iso, "--json"],
+        vec!["iso230", iso],
+        vec!["import", iso, "--json"],
+        vec!["import", iso],
         vec!["simulate", "--plan", "line:x:100", "-o", s(&csv2)],
         vec!["fit", s(&csv), "--model", "cubic19", "-o", s(&model2)],
         vec!["diagnose", s(&csv), "--model", "cubic19", "--json"],

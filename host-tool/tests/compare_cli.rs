@@ -10,42 +10,35 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use common::{expect_exit, json, run, s, tmp_dir, with_blank_error_row};
+use common::{
+    expect_exit, fit_cubic19, json, run, s, simulate_grid, tmp_dir, with_blank_error_row,
+};
 use serde_json::Value;
 use trueaxis::import;
 use trueaxis::model::ModelFile;
 
-/// The preset mill on a 100 mm grid (9 × 6 × 6 = 324 points, ex ey ez),
-/// σ = 0.2 µm noise, fixed seed.
-fn simulate(dir: &Path, name: &str, seed: u64) -> PathBuf {
-    let csv = dir.join(name);
-    let seed = seed.to_string();
+/// `trueaxis compare CSV --model MODEL --report REP --json`; returns its JSON.
+fn compare_report(csv: &Path, model: &Path, rep: &Path) -> Value {
     json(&run(&[
-        "simulate",
-        "--plan",
-        "grid:100",
-        "--seed",
-        &seed,
-        "-o",
-        s(&csv),
-        "--json",
-    ]));
-    csv
-}
-
-/// Fits cubic19 and returns the model path and `fit --json`.
-fn fit(csv: &Path, model: &Path) -> Value {
-    json(&run(&[
-        "fit",
+        "compare",
         s(csv),
         "--model",
-        "cubic19",
-        "-o",
         s(model),
+        "--report",
+        s(rep),
         "--json",
     ]))
+}
+
+/// Names of the files in the report directory `rep` that start with `prefix`.
+fn report_files(rep: &Path, prefix: &str) -> Vec<String> {
+    std::fs::read_dir(rep)
+        .unwrap()
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.starts_with(prefix))
+        .collect()
 }
 
 /// The `column` of a CSV as numbers, read with the csv crate directly (not
@@ -103,9 +96,9 @@ fn num(v: &Value, what: &str) -> f64 {
 #[test]
 fn json_has_the_contract_keys_and_numbers_that_recompute() {
     let dir = tmp_dir("compare", "json");
-    let csv = simulate(&dir, "grid.csv", 7);
+    let csv = simulate_grid(&dir, "grid.csv", 7);
     let model = dir.join("grid.model.json");
-    let f = fit(&csv, &model);
+    let f = fit_cubic19(&csv, &model);
     let v = json(&run(&["compare", s(&csv), "--model", s(&model), "--json"]));
 
     assert_eq!(v["model"], "cubic19");
@@ -228,19 +221,11 @@ fn json_has_the_contract_keys_and_numbers_that_recompute() {
 #[test]
 fn report_opens_offline_with_every_figure() {
     let dir = tmp_dir("compare", "report");
-    let csv = simulate(&dir, "grid.csv", 7);
+    let csv = simulate_grid(&dir, "grid.csv", 7);
     let model = dir.join("grid.model.json");
-    fit(&csv, &model);
+    fit_cubic19(&csv, &model);
     let rep = dir.join("rep");
-    let v = json(&run(&[
-        "compare",
-        s(&csv),
-        "--model",
-        s(&model),
-        "--report",
-        s(&rep),
-        "--json",
-    ]));
+    let v = compare_report(&csv, &model, &rep);
     let index = rep.join("index.html");
     assert_eq!(v["report"], s(&index));
     let html = std::fs::read_to_string(&index).unwrap();
@@ -289,24 +274,12 @@ fn report_maps_every_plane_in_every_orientation() {
         "--json",
     ]));
     let model = dir.join("planes.model.json");
-    fit(&csv, &model);
+    fit_cubic19(&csv, &model);
     let rep = dir.join("rep");
-    json(&run(&[
-        "compare",
-        s(&csv),
-        "--model",
-        s(&model),
-        "--report",
-        s(&rep),
-        "--json",
-    ]));
+    compare_report(&csv, &model, &rep);
     for t in ["ex", "ey", "ez"] {
         for normal in ["x", "y", "z"] {
-            let maps: Vec<String> = std::fs::read_dir(&rep)
-                .unwrap()
-                .filter_map(|e| e.ok()?.file_name().into_string().ok())
-                .filter(|n| n.starts_with(&format!("map_{t}_{normal}")))
-                .collect();
+            let maps = report_files(&rep, &format!("map_{t}_{normal}"));
             assert_eq!(maps.len(), 1, "{t} normal {normal}: {maps:?}");
         }
     }
@@ -322,24 +295,15 @@ fn report_maps_every_plane_in_every_orientation() {
 #[test]
 fn report_caps_planes_per_orientation_and_says_so() {
     let dir = tmp_dir("compare", "cap");
-    let csv = simulate(&dir, "grid.csv", 7);
+    let csv = simulate_grid(&dir, "grid.csv", 7);
     let model = dir.join("grid.model.json");
-    fit(&csv, &model);
+    fit_cubic19(&csv, &model);
     let rep = dir.join("rep");
-    json(&run(&[
-        "compare",
-        s(&csv),
-        "--model",
-        s(&model),
-        "--report",
-        s(&rep),
-        "--json",
-    ]));
+    compare_report(&csv, &model, &rep);
     let count = |prefix: &str| {
-        std::fs::read_dir(&rep)
-            .unwrap()
-            .filter_map(|e| e.ok()?.file_name().into_string().ok())
-            .filter(|n| n.starts_with(prefix) && n.ends_with(".svg"))
+        report_files(&rep, prefix)
+            .iter()
+            .filter(|n| n.ends_with(".svg"))
             .count()
     };
     for normal in ["x", "y", "z"] {
@@ -367,10 +331,10 @@ fn no_network(text: &str) -> bool {
 #[test]
 fn other_data_warns_data_hash_mismatch() {
     let dir = tmp_dir("compare", "hash");
-    let csv = simulate(&dir, "a.csv", 7);
-    let other = simulate(&dir, "b.csv", 8);
+    let csv = simulate_grid(&dir, "a.csv", 7);
+    let other = simulate_grid(&dir, "b.csv", 8);
     let model = dir.join("a.model.json");
-    fit(&csv, &model);
+    fit_cubic19(&csv, &model);
     let out = run(&["compare", s(&other), "--model", s(&model), "--json"]);
     let v = json(&out);
     let w = v["warnings"].as_array().unwrap();
@@ -395,9 +359,9 @@ fn other_data_warns_data_hash_mismatch() {
 #[test]
 fn rows_left_out_are_counted_and_said() {
     let dir = tmp_dir("compare", "skipped");
-    let csv = simulate(&dir, "grid.csv", 7);
+    let csv = simulate_grid(&dir, "grid.csv", 7);
     let model = dir.join("grid.model.json");
-    fit(&csv, &model);
+    fit_cubic19(&csv, &model);
     let clean = run(&["compare", s(&csv), "--model", s(&model), "--json"]);
     assert_eq!(json(&clean)["skipped_count"], 0);
     assert!(!String::from_utf8_lossy(&clean.stderr).contains("left out"));
@@ -435,7 +399,7 @@ fn rows_left_out_are_counted_and_said() {
 #[test]
 fn numeric_auxiliary_columns_are_channels() {
     let dir = tmp_dir("compare", "aux");
-    let csv = simulate(&dir, "grid.csv", 7);
+    let csv = simulate_grid(&dir, "grid.csv", 7);
     let text = std::fs::read_to_string(&csv).unwrap();
     let mut out = String::new();
     let mut ex_col = None;
@@ -462,7 +426,7 @@ fn numeric_auxiliary_columns_are_channels() {
     let humid = dir.join("humid.csv");
     std::fs::write(&humid, out).unwrap();
     let model = dir.join("humid.model.json");
-    fit(&humid, &model);
+    fit_cubic19(&humid, &model);
     let v = json(&run(&[
         "compare",
         s(&humid),
@@ -493,7 +457,7 @@ fn numeric_auxiliary_columns_are_channels() {
 #[test]
 fn a_target_the_model_lacks_is_warned() {
     let dir = tmp_dir("compare", "target");
-    let csv = simulate(&dir, "grid.csv", 7);
+    let csv = simulate_grid(&dir, "grid.csv", 7);
     // The same data with ex only → a model of ex only.
     let mut data = import::load(&csv).unwrap();
     data.err_um[1] = None;
@@ -501,7 +465,7 @@ fn a_target_the_model_lacks_is_warned() {
     let ex_only = dir.join("ex.csv");
     import::write_csv(&data, std::fs::File::create(&ex_only).unwrap()).unwrap();
     let model = dir.join("ex.model.json");
-    fit(&ex_only, &model);
+    fit_cubic19(&ex_only, &model);
     let v = json(&run(&["compare", s(&csv), "--model", s(&model), "--json"]));
     let keys: Vec<&String> = v["rms_um"].as_object().unwrap().keys().collect();
     assert_eq!(keys, ["ex"]);
@@ -522,9 +486,9 @@ fn a_target_the_model_lacks_is_warned() {
 #[test]
 fn bad_input_exits_1_and_usage_exits_2() {
     let dir = tmp_dir("compare", "bad");
-    let csv = simulate(&dir, "grid.csv", 7);
+    let csv = simulate_grid(&dir, "grid.csv", 7);
     let model = dir.join("grid.model.json");
-    let fit_json = fit(&csv, &model);
+    let fit_json = fit_cubic19(&csv, &model);
 
     // The model file is missing.
     let missing = dir.join("missing.model.json");
@@ -617,15 +581,7 @@ fn hand_made_line_shows_the_missing_reversal() {
     let dir = tmp_dir("compare", "line");
     let csv = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/line_x.csv");
     let plain = dir.join("plain.model.json");
-    json(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&plain),
-        "--json",
-    ]));
+    fit_cubic19(&csv, &plain);
     let v = json(&run(&["compare", s(&csv), "--model", s(&plain), "--json"]));
     assert_eq!(v["rows"], 42);
     let r = num(&v["rms_um"]["ex"], "rms");

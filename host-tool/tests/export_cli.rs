@@ -21,7 +21,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{expect_exit, json, run, run_env, s, tmp_dir};
+use common::{expect_exit, fit_cubic19, json, run, run_env, s, simulate_grid, tmp_dir};
 use model_core::{Inputs, Model, MAX_TEMPS};
 use serde_json::Value;
 use trueaxis::data::{Dataset, TempChannel};
@@ -55,27 +55,9 @@ fn crc32_ieee(bytes: &[u8]) -> u32 {
 /// The preset mill on a 100 mm grid (324 points, ex ey ez), seed 7, fitted
 /// with cubic19. Returns (data, model).
 fn grid_model(dir: &Path) -> (PathBuf, PathBuf) {
-    let csv = dir.join("grid.csv");
-    json(&run(&[
-        "simulate",
-        "--plan",
-        "grid:100",
-        "--seed",
-        "7",
-        "-o",
-        s(&csv),
-        "--json",
-    ]));
+    let csv = simulate_grid(dir, "grid.csv", 7);
     let model = dir.join("grid.model.json");
-    json(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&model),
-        "--json",
-    ]));
+    fit_cubic19(&csv, &model);
     (csv, model)
 }
 

@@ -37,16 +37,10 @@
 
 mod common;
 
-use std::path::PathBuf;
 use std::process::Command;
 
+use common::data_file;
 use trueaxis::{import, iso230};
-
-fn data(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
 
 const TOL: f64 = 1e-6;
 
@@ -89,7 +83,7 @@ fn check_worked(r: &iso230::Iso230) {
 #[test]
 fn worked_example_from_csv_and_rtl() {
     for f in ["iso_worked.csv", "iso_worked.rtl"] {
-        let d = import::load(&data(f)).unwrap();
+        let d = import::load(&data_file(f)).unwrap();
         let r = iso230::evaluate(&d, 0).unwrap();
         check_worked(&r);
         assert_eq!(r.rows_used, 12, "{f}");
@@ -103,7 +97,7 @@ fn cli_json_keys_and_plot() {
     let out = Command::new(env!("CARGO_BIN_EXE_trueaxis"))
         .args([
             "iso230",
-            data("iso_worked.csv").to_str().unwrap(),
+            data_file("iso_worked.csv").to_str().unwrap(),
             "--axis",
             "x",
             "--json",
@@ -167,7 +161,7 @@ fn cli_json_keys_and_plot() {
 #[test]
 fn human_table_without_json() {
     let out = Command::new(env!("CARGO_BIN_EXE_trueaxis"))
-        .args(["iso230", data("iso_worked.rtl").to_str().unwrap()])
+        .args(["iso230", data_file("iso_worked.rtl").to_str().unwrap()])
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(0));
@@ -199,7 +193,7 @@ fn one_direction_only_is_bad_input() {
 fn rows_left_out_on_load_are_counted_and_said() {
     let dir = common::tmp_dir("iso230", "skipped");
     let holed = dir.join("holed.csv");
-    let line = common::with_blank_error_row(&data("iso_worked.csv"), &holed);
+    let line = common::with_blank_error_row(&data_file("iso_worked.csv"), &holed);
     let out = common::run(&["iso230", common::s(&holed), "--json"]);
     let v = common::json(&out);
     assert_eq!(v["skipped_count"], 1);
@@ -211,7 +205,11 @@ fn rows_left_out_on_load_are_counted_and_said() {
         err.contains(&format!("(line {line}: no error value on this row)")),
         "{err}"
     );
-    let clean = common::run(&["iso230", data("iso_worked.csv").to_str().unwrap(), "--json"]);
+    let clean = common::run(&[
+        "iso230",
+        data_file("iso_worked.csv").to_str().unwrap(),
+        "--json",
+    ]);
     assert_eq!(common::json(&clean)["skipped_count"], 0);
     let _ = std::fs::remove_dir_all(dir);
 }
@@ -223,7 +221,7 @@ fn rows_left_out_on_load_are_counted_and_said() {
 #[test]
 fn axis_option_reaches_the_rtl_reader() {
     let dir = common::tmp_dir("iso230", "axis");
-    let text = std::fs::read_to_string(data("iso_worked.rtl")).unwrap();
+    let text = std::fs::read_to_string(data_file("iso_worked.rtl")).unwrap();
     assert!(text.contains("Axis: X\r\n"));
     let no_axis = dir.join("no_axis.rtl");
     std::fs::write(&no_axis, text.replace("Axis: X\r\n", "")).unwrap();

@@ -851,6 +851,17 @@ mod tests {
         }
     }
 
+    /// A network's training record (export does not read it).
+    fn training() -> NnTraining {
+        NnTraining {
+            epochs: 1,
+            best_epoch: 1,
+            stop: "test".into(),
+            seed: 1,
+            split_rows: [1, 1, 1],
+        }
+    }
+
     fn norm() -> Norm {
         Norm {
             centre_mm: [400.0, 250.0, 250.0],
@@ -1023,13 +1034,7 @@ mod tests {
                 b1: (0..hidden).map(|_| 0.5 * r()).collect(),
                 w2: (0..3 * hidden).map(|_| 0.3 * r()).collect(),
                 b2: vec![0.01, -0.02, 0.03],
-                training: NnTraining {
-                    epochs: 1,
-                    best_epoch: 1,
-                    stop: "test".into(),
-                    seed: 1,
-                    split_rows: [1, 1, 1],
-                },
+                training: training(),
             })
         };
         // 3-16-3: within the board's budget.
@@ -1067,13 +1072,7 @@ mod tests {
             b1: vec![0.1, -0.2, 0.05],
             w2: vec![0.7, -0.4, 0.2, -0.3, 0.9, 0.1],
             b2: vec![0.05, -0.1],
-            training: NnTraining {
-                epochs: 1,
-                best_epoch: 1,
-                stop: "test".into(),
-                seed: 1,
-                split_rows: [1, 1, 1],
-            },
+            training: training(),
         });
         let e = export(&file(nn), &TableOptions::default()).unwrap();
         assert!(

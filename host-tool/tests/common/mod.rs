@@ -1,6 +1,7 @@
 //! What the end-to-end CLI tests share: a scratch directory per test, the
-//! built `trueaxis` binary run with arguments (and environment), and its
-//! stdout read as the one JSON document `--json` promises.
+//! built `trueaxis` binary run with arguments (and environment), its
+//! stdout read as the one JSON document `--json` promises, and the usual
+//! first two steps (a simulated grid, its cubic19 fit).
 //!
 //! Each test binary uses only part of it.
 #![allow(dead_code)]
@@ -45,6 +46,45 @@ pub fn json(out: &Output) -> Value {
         String::from_utf8_lossy(&out.stderr)
     );
     serde_json::from_slice(&out.stdout).expect("exactly one JSON document on stdout")
+}
+
+/// `trueaxis simulate --plan grid:100 --seed SEED -o DIR/NAME --json`: the
+/// preset mill on a 100 mm grid (9 × 6 × 6 = 324 points, ex ey ez),
+/// σ = 0.2 µm noise. Returns the CSV's path.
+pub fn simulate_grid(dir: &Path, name: &str, seed: u64) -> PathBuf {
+    let csv = dir.join(name);
+    let seed = seed.to_string();
+    json(&run(&[
+        "simulate",
+        "--plan",
+        "grid:100",
+        "--seed",
+        &seed,
+        "-o",
+        s(&csv),
+        "--json",
+    ]));
+    csv
+}
+
+/// `trueaxis fit CSV --model cubic19 -o MODEL --json`; returns its JSON.
+pub fn fit_cubic19(csv: &Path, model: &Path) -> Value {
+    json(&run(&[
+        "fit",
+        s(csv),
+        "--model",
+        "cubic19",
+        "-o",
+        s(model),
+        "--json",
+    ]))
+}
+
+/// A checked-in input file, `tests/data/NAME`.
+pub fn data_file(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
 }
 
 /// Runs `trueaxis` expecting exit `code`, every one of `needles` in stderr
