@@ -438,6 +438,26 @@ mod tests {
     }
 
     #[test]
+    fn a_failed_shared_solve_names_the_target_as_a_lone_fit_would() {
+        // ex, ey and ez measured on the same 9 distinct points share one
+        // solve; when it fails, the message names the first target alone
+        // (the lone fit's "ex: …"), not the group ("ex, ey, ez: …").
+        let d = mill_grid();
+        let keep: Vec<usize> = (0..d.len())
+            .filter(|&r| d.pos(0, r) <= 100.0 && d.pos(1, r) <= 100.0 && d.pos(2, r) == 0.0)
+            .collect();
+        let mut d = holdout::subset(&d, &keep);
+        for t in 0..3 {
+            set_target(&mut d, t, |_, u| u[0] + u[1]);
+        }
+        let e = fit(&d, "cubic19", &[], 5).unwrap_err().to_string();
+        assert!(
+            e.starts_with("ex: 9 distinct points but the model has 19 terms"),
+            "{e}"
+        );
+    }
+
+    #[test]
     fn collinear_effect_is_named() {
         let mut d = mill_grid();
         set_target(&mut d, 0, |_, u| u[1]);
