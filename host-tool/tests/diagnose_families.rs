@@ -424,7 +424,7 @@ fn three_effects_on_one_target_are_all_found_and_reported() {
             .iter()
             .find(|c| c.add == ex[k].add)
             .expect("the path's effect is a candidate");
-        assert!(c.on_path && c.significant, "{}", c.evidence);
+        assert!(c.on_path() && c.significant, "{}", c.evidence);
         assert_eq!(c.step, Some(k + 1));
         assert_eq!(c.delta_bic, Some(ex[k].delta_bic));
     }

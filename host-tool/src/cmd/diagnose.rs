@@ -155,9 +155,9 @@ pub fn text(d: &Diagnosis, data_path: &Path) -> String {
             "  {}. {}{}\n     {}\n",
             i + 1,
             match c.step {
-                Some(k) if c.on_path => format!("[path step {k}] "),
-                _ if c.significant => "[significant] ".into(),
-                _ => String::new(),
+                Some(k) => format!("[path step {k}] "),
+                None if c.significant => "[significant] ".into(),
+                None => String::new(),
             },
             match &c.replaces {
                 Some(old) => format!("{} (replacing {old})", c.add),
@@ -207,16 +207,9 @@ pub fn text(d: &Diagnosis, data_path: &Path) -> String {
         // Every effect the path found, in order; one that replaces an effect
         // of the model (the same effect with another lag, period, order or
         // degree) takes its place.
-        let mut adds: Vec<&str> = d.model.split(" + ").skip(1).collect();
+        let mut adds: Vec<String> = d.model.split(" + ").skip(1).map(String::from).collect();
         for p in &d.path {
-            match p.replaces.as_deref() {
-                Some(old) if adds.contains(&old) => {
-                    for a in adds.iter_mut().filter(|a| **a == old) {
-                        *a = p.add.as_str();
-                    }
-                }
-                _ => adds.push(p.add.as_str()),
-            }
+            diagnose::swap_in(&mut adds, &p.add, p.replaces.as_deref());
         }
         for a in adds {
             cmd.push_str(&format!(" --add '{a}'"));

@@ -71,6 +71,14 @@ pub fn plot(h: &History) -> XyPlot {
 pub fn write_report(h: &History, name: &str, dir: &std::path::Path) -> Result<PathBuf> {
     let mut page = Page::new(format!("trueaxis history — {name}"));
     page.heading("History");
+    add_to_page(&mut page, h)?;
+    page.write(dir)
+}
+
+/// The history's table (one row per step and target) and the plot of the
+/// error falling (`history.svg`) on `page`: this command's report, and
+/// `diagnose --report` on a model that has a history.
+pub fn add_to_page(page: &mut Page, h: &History) -> Result<()> {
     let rows = h
         .steps
         .iter()
@@ -101,5 +109,5 @@ pub fn write_report(h: &History, name: &str, dir: &std::path::Path) -> Result<Pa
         "RMS and block-held-out RMS per target after each fit",
         plot(h).to_svg()?,
     );
-    page.write(dir)
+    Ok(())
 }

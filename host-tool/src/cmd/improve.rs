@@ -57,13 +57,12 @@ pub struct AddedEffect {
 pub struct ImproveStep {
     /// 1-based.
     pub step: usize,
-    /// The best effect added at this step (none for the seed).
-    pub added: Option<String>,
-    /// Its evidence, as diagnose gave it.
-    pub evidence: Option<String>,
     /// Every effect added at this step: the best significant candidate of
     /// each target (targets are fitted independently, so one step can
-    /// serve all of them).
+    /// serve all of them), best first; none for the seed. The JSON also
+    /// has the first one's `add` and `evidence` as `added` and `evidence`
+    /// (null for the seed).
+    #[serde(flatten, serialize_with = "ser_added")]
     pub added_effects: Vec<AddedEffect>,
     /// In-sample RMS per target after the fit, µm.
     pub rms_um: BTreeMap<String, f64>,
@@ -80,6 +79,27 @@ pub struct ImproveStep {
     /// floor, with the ratio: `at_noise_floor` says no candidate is
     /// significant, this says whether the data is really explained.
     pub above_noise_floor: BTreeMap<String, f64>,
+}
+
+/// `"added"`, `"evidence"` (the best effect's, or null) and
+/// `"added_effects"` — kept in one field so that they cannot disagree.
+fn ser_added<S: serde::Serializer>(
+    added: &[AddedEffect],
+    ser: S,
+) -> std::result::Result<S::Ok, S::Error> {
+    #[derive(Serialize)]
+    struct Added<'a> {
+        added: Option<&'a str>,
+        evidence: Option<&'a str>,
+        added_effects: &'a [AddedEffect],
+    }
+    let best = added.first();
+    Added {
+        added: best.map(|a| a.add.as_str()),
+        evidence: best.map(|a| a.evidence.as_str()),
+        added_effects: added,
+    }
+    .serialize(ser)
 }
 
 impl ImproveStep {
@@ -148,14 +168,11 @@ pub fn improve(
             .iter()
             .filter_map(|(t, rms)| {
                 let nf = d.noise_floor_um.get(t).copied().flatten()?;
-                let ratio = rms / nf;
-                (ratio > diagnose::ABOVE_NOISE_RATIO).then(|| (t.clone(), ratio))
+                Some((t.clone(), diagnose::above_noise(*rms, nf)?))
             })
             .collect();
         let step = ImproveStep {
             step: steps.len() + 1,
-            added: added.first().map(|a| a.add.clone()),
-            evidence: added.first().map(|a| a.evidence.clone()),
             added_effects: std::mem::take(&mut added),
             rms_um: model.stats.rms_um.clone(),
             held_out_rms_um: d.held_out_rms_um.clone(),
@@ -175,21 +192,7 @@ pub fn improve(
                 if !seen.insert(c.target.clone()) {
                     continue;
                 }
-                let changed = match &c.replaces {
-                    Some(old) => match adds.iter_mut().find(|a| *a == old) {
-                        Some(a) => {
-                            a.clone_from(&c.add);
-                            true
-                        }
-                        None => false,
-                    },
-                    None if !adds.contains(&c.add) => {
-                        adds.push(c.add.clone());
-                        true
-                    }
-                    None => false,
-                };
-                if changed {
+                if diagnose::swap_in(&mut adds, &c.add, c.replaces.as_deref()) {
                     added.push(AddedEffect {
                         target: c.target.clone(),
                         add: c.add.clone(),
@@ -331,10 +334,8 @@ impl Args {
             if json || write_err.is_some() {
                 return;
             }
-            let what = s
-                .added
-                .as_deref()
-                .map_or(format!("fit {seed}"), |a| format!("add {a}"));
+            let best = s.added_effects.first();
+            let what = best.map_or(format!("fit {seed}"), |a| format!("add {}", a.add));
             let mut text = format!("step {}: {what}\n", s.step);
             for (t, rms) in &s.rms_um {
                 text.push_str(&format!(
@@ -349,8 +350,8 @@ impl Args {
                         .map_or("—".into(), |v| format!("{v:.4}"))
                 ));
             }
-            if let Some(e) = &s.evidence {
-                text.push_str(&format!("  because: {e}\n"));
+            if let Some(a) = best {
+                text.push_str(&format!("  because: {}\n", a.evidence));
             }
             write_err = out::print(&text).err();
         })

@@ -171,12 +171,37 @@ pub struct Candidate {
     /// searched again without it); null for a new effect. ΔBIC and gain are
     /// against the current model, so they say what the swap buys.
     pub replaces: Option<String>,
-    /// On the BIC-ordered path (added to the model by the diagnosis).
-    pub on_path: bool,
     /// The path step (1-based, per target) at which it was added, and at
-    /// which its ΔBIC, gain and parameter were scored; null for candidates
-    /// not on the path, which are scored against the starting model.
+    /// which its ΔBIC, gain and parameter were scored; None for candidates
+    /// not on the path, which are scored against the starting model. The
+    /// JSON has it as `step` and, for readers, `on_path` (step ≠ null).
+    #[serde(flatten, serialize_with = "ser_step")]
     pub step: Option<usize>,
+}
+
+impl Candidate {
+    /// On the BIC-ordered path (added to the model by the diagnosis).
+    pub fn on_path(&self) -> bool {
+        self.step.is_some()
+    }
+}
+
+/// `"on_path": bool, "step": k | null` — one field in Rust, so the two
+/// cannot disagree.
+fn ser_step<S: serde::Serializer>(
+    step: &Option<usize>,
+    ser: S,
+) -> std::result::Result<S::Ok, S::Error> {
+    #[derive(Serialize)]
+    struct OnPath {
+        on_path: bool,
+        step: Option<usize>,
+    }
+    OnPath {
+        on_path: step.is_some(),
+        step: *step,
+    }
+    .serialize(ser)
 }
 
 /// Parameters that are counts, written as JSON integers.
@@ -412,21 +437,48 @@ impl State {
     }
 
     /// The fitted component of effect `add` in this model (its columns times
-    /// their coefficients in the full least-squares fit), per row.
-    fn component(&self, y: &[f64], add: &str) -> Option<Vec<f64>> {
+    /// their coefficients in `fit`, the model's full least-squares fit), per
+    /// row.
+    fn component(&self, fit: &linalg::SmallFit, add: &str) -> Option<Vec<f64>> {
         let idx: Vec<usize> = (0..self.cols.len())
             .filter(|&i| self.owner[i].as_deref() == Some(add))
             .collect();
         if idx.is_empty() {
             return None;
         }
-        let fit = small_fit(&self.cols, y);
         Some(
-            (0..y.len())
+            (0..self.resid.len())
                 .map(|r| idx.iter().map(|&i| fit.beta[i] * self.cols[i][r]).sum())
                 .collect(),
         )
     }
+}
+
+/// Puts effect `add` into the model's effect list: in the place of
+/// `replaces` (the same effect with its nonlinear parameter searched again)
+/// when that is in the list, else at the end unless it is there already.
+/// Returns whether the list changed. The path, `improve` and the `next:`
+/// command all change a model this way.
+pub fn swap_in(adds: &mut Vec<String>, add: &str, replaces: Option<&str>) -> bool {
+    if let Some(old) = replaces.filter(|o| adds.iter().any(|a| a == o)) {
+        for a in adds.iter_mut().filter(|a| *a == old) {
+            *a = add.to_string();
+        }
+        true
+    } else if adds.iter().any(|a| a == add) {
+        false
+    } else {
+        adds.push(add.to_string());
+        true
+    }
+}
+
+/// The residual RMS as a multiple of the noise floor, when it is above
+/// `ABOVE_NOISE_RATIO` (the `above_noise_floor` rule, for the warning and
+/// for `improve`).
+pub fn above_noise(rms_um: f64, noise_um: f64) -> Option<f64> {
+    let ratio = rms_um / noise_um;
+    (ratio > ABOVE_NOISE_RATIO).then_some(ratio)
 }
 
 /// What makes two effects "the same effect" for the path: family, target,
@@ -1204,7 +1256,6 @@ fn score(
             physical: None,
             confounded_with: Vec::new(),
             replaces: repl.map(|r| r.old.clone()),
-            on_path: false,
             step: None,
         };
         if ff.share < IN_SPAN_SHARE || ff.fit.rank == 0 {
@@ -1305,16 +1356,6 @@ fn score(
     out
 }
 
-/// How much two candidates' (partialled) column spaces share: the mean
-/// squared cosine of their principal angles over the smaller span
-/// (`Basis::overlap`). The largest share of any single column, used before,
-/// called `thermal…,times=z,offset=1` 100 % inside `drift:order=3` because
-/// its plain ΔT column is — though its ΔT·z column is not, and the data told
-/// the two apart.
-fn overlap(a: &[Vec<f64>], b: &[Vec<f64>], n: usize) -> f64 {
-    Basis::new(a, n).overlap(&Basis::new(b, n))
-}
-
 /// Scores one target at one model state; marks confounding and the best
 /// candidate's significance. Returns the scored list sorted best first.
 fn rank_target(
@@ -1391,10 +1432,21 @@ fn rank_target(
         .filter(|&i| sc[i].cand.identifiable && sc[i].cand.delta_bic.is_some_and(|d| d < 0.0))
         .take(12)
         .collect();
+    // How much two candidates' (partialled) column spaces share: the mean
+    // squared cosine of their principal angles over the smaller span
+    // (`Basis::overlap`). The largest share of any single column, used
+    // before, called `thermal…,times=z,offset=1` 100 % inside
+    // `drift:order=3` because its plain ΔT column is — though its ΔT·z
+    // column is not, and the data told the two apart. One basis per
+    // contender, not one per pair.
+    let spans: Vec<Basis> = top
+        .iter()
+        .map(|&i| Basis::new(&sc[i].partialled, n))
+        .collect();
     let mut competing_best: Option<f64> = None;
     for (ii, &i) in top.iter().enumerate() {
-        for &j in &top[ii + 1..] {
-            let ov = overlap(&sc[i].partialled, &sc[j].partialled, n);
+        for (jj, &j) in top.iter().enumerate().skip(ii + 1) {
+            let ov = spans[ii].overlap(&spans[jj]);
             if ii == 0 && ov >= COMPETING_OVERLAP && competing_best.is_none() {
                 competing_best = sc[j].cand.delta_bic;
             }
@@ -1516,10 +1568,7 @@ fn above_noise_warning(
     nf: &NoiseFloor,
     after_path: bool,
 ) -> Option<Warning> {
-    let ratio = rms / nf.sigma_um;
-    if ratio.is_nan() || ratio <= ABOVE_NOISE_RATIO {
-        return None;
-    }
+    let ratio = above_noise(rms, nf.sigma_um)?;
     Some(Warning {
         code: "above_noise_floor".into(),
         detail: format!(
@@ -1756,14 +1805,7 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
             };
             let best = &cur[bi].cand;
             let mut adds = st.adds.clone();
-            match &best.replaces {
-                Some(old) => {
-                    for a in adds.iter_mut().filter(|a| *a == old) {
-                        a.clone_from(&best.add);
-                    }
-                }
-                None => adds.push(best.add.clone()),
-            }
+            swap_in(&mut adds, &best.add, best.replaces.as_deref());
             let next = State::new(&td, &opts.seed, &adds)?;
             if next.held_out_rms.is_nan() || next.held_out_rms >= st.held_out_rms {
                 // Cannot happen with the same blocks, but a candidate that
@@ -1776,7 +1818,6 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
                 break;
             }
             let mut best = cur.remove(bi).cand;
-            best.on_path = true;
             best.step = Some(k);
             path.push(PathStep {
                 target: tn.clone(),
@@ -1797,7 +1838,7 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
                 Some(l) => {
                     let key = EffectKey::of(&best.add);
                     let stale = l.iter().position(|c| {
-                        !c.on_path
+                        !c.on_path()
                             && key
                                 .as_ref()
                                 .zip(EffectKey::of(&c.add))
@@ -1835,8 +1876,9 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
         }
         let first = list.is_none();
         candidates.extend(list.unwrap_or_else(|| cur.into_iter().map(|s| s.cand).collect()));
+        let fit = (!on_path.is_empty()).then(|| small_fit(&st.cols, &td.y));
         for (k, add) in &on_path {
-            if let Some(values) = st.component(&td.y, add) {
+            if let Some(values) = fit.as_ref().and_then(|f| st.component(f, add)) {
                 ev.components.push(ComponentEvidence {
                     target: t,
                     step: *k,
@@ -1965,4 +2007,57 @@ pub fn library(data: &Dataset, opts: &Options) -> Result<Vec<TargetLibrary>> {
 fn dedup_warnings(w: &mut Vec<Warning>) {
     let mut seen = std::collections::BTreeSet::new();
     w.retain(|x| seen.insert((x.code.clone(), x.detail.clone())));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn swap_in_replaces_in_place_and_never_adds_twice() {
+        let old = "thermal:target=ex,channel=bed,lag_s=3600";
+        let new = "thermal:target=ex,channel=bed,lag_s=600";
+        let mut adds = vec![old.to_string(), "reversal:target=ex,axis=x".to_string()];
+        assert!(swap_in(&mut adds, new, Some(old)));
+        assert_eq!(adds, [new, "reversal:target=ex,axis=x"]);
+        // Already there: unchanged.
+        assert!(!swap_in(&mut adds, "reversal:target=ex,axis=x", None));
+        assert_eq!(adds.len(), 2);
+        // A new effect goes to the end.
+        assert!(swap_in(&mut adds, "drift:target=ez", None));
+        assert_eq!(adds.last().map(String::as_str), Some("drift:target=ez"));
+    }
+
+    #[test]
+    fn on_path_is_written_from_the_step() {
+        let c = Candidate {
+            effect: "drift".into(),
+            target: "ez".into(),
+            axis: None,
+            channel: Some("t_s".into()),
+            params: BTreeMap::from([("order".to_string(), 2.0)]),
+            add: "drift:target=ez,order=2".into(),
+            held_out_rms_um_after: None,
+            gain: None,
+            identifiable: true,
+            evidence: String::new(),
+            delta_bic: None,
+            rms_um_after: None,
+            out_of_span_share: 1.0,
+            significant: true,
+            physical: None,
+            confounded_with: Vec::new(),
+            replaces: None,
+            step: Some(2),
+        };
+        let v = serde_json::to_value(&c).unwrap();
+        assert_eq!(
+            (v["on_path"].as_bool(), v["step"].as_u64()),
+            (Some(true), Some(2))
+        );
+        assert!(v["params"]["order"].is_u64());
+        let v = serde_json::to_value(&Candidate { step: None, ..c }).unwrap();
+        assert_eq!(v["on_path"], false);
+        assert!(v["step"].is_null());
+    }
 }

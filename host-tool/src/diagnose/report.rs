@@ -124,9 +124,9 @@ pub fn write_with_history(
                 c.delta_bic.map_or("—".into(), |v| format!("{v:.0}")),
                 c.gain.map_or("—".into(), |g| format!("{:.0} %", 100.0 * g)),
                 match c.step {
-                    Some(k) if c.on_path => format!("yes (path step {k})"),
-                    _ if c.significant => "yes".into(),
-                    _ => "no".into(),
+                    Some(k) => format!("yes (path step {k})"),
+                    None if c.significant => "yes".into(),
+                    None => "no".into(),
                 },
                 c.evidence.clone(),
             ]
@@ -160,35 +160,7 @@ pub fn write_with_history(
     }
     if let Some(h) = history.filter(|h| !h.steps.is_empty()) {
         page.subheading("History of the model");
-        page.table(
-            &["step", "added", "rms µm", "held-out rms µm"],
-            h.steps
-                .iter()
-                .map(|s| {
-                    let per = |m: &std::collections::BTreeMap<String, f64>| {
-                        m.iter()
-                            .map(|(t, v)| format!("{t} {v:.3}"))
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    };
-                    vec![
-                        s.step.to_string(),
-                        if s.added.is_empty() {
-                            s.spec()
-                        } else {
-                            format!("+ {}", s.added.join(" + "))
-                        },
-                        per(&s.rms_um),
-                        per(&s.held_out_rms_um),
-                    ]
-                })
-                .collect(),
-        );
-        page.figure(
-            "history",
-            "RMS and block-held-out RMS per target after each fit of this model",
-            crate::cmd::history::plot(h).to_svg()?,
-        );
+        crate::cmd::history::add_to_page(&mut page, h)?;
     }
     page.heading("Evidence");
     // Periodograms: every target and axis with dense lines at the starting
@@ -236,7 +208,11 @@ pub fn write_with_history(
     let index = |names: &[&str], x: &str| names.iter().position(|y| *y == x);
     let mut reversals: Vec<ReversalPlot> = Vec::new();
     for comp in d.evidence.components.iter() {
-        let Some(c) = d.candidates.iter().find(|c| c.on_path && c.add == comp.add) else {
+        let Some(c) = d
+            .candidates
+            .iter()
+            .find(|c| c.on_path() && c.add == comp.add)
+        else {
             continue;
         };
         let Some(a) = c.axis.as_deref().and_then(|x| index(&AXES, x)) else {
@@ -320,7 +296,11 @@ pub fn write_with_history(
     // Component + residual of every effect on the path.
     for comp in &d.evidence.components {
         let t = comp.target;
-        let Some(c) = d.candidates.iter().find(|c| c.on_path && c.add == comp.add) else {
+        let Some(c) = d
+            .candidates
+            .iter()
+            .find(|c| c.on_path() && c.add == comp.add)
+        else {
             continue;
         };
         let Some((label, ch)) = channel(data, c) else {
