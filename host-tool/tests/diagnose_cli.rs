@@ -6,17 +6,16 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
+use std::process::Output;
 
+use common::{json, run, s};
 use serde_json::Value;
 use trueaxis::diagnose::synth::{generate, Hidden, Plan, SynthConfig};
 use trueaxis::diagnose::{diagnose, Options};
 
-fn tmp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("trueaxis-diag-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn tmp_dir(name: &str) -> std::path::PathBuf {
+    common::tmp_dir("diag", name)
 }
 
 fn write(cfg: &SynthConfig, path: &Path) {
@@ -25,16 +24,29 @@ fn write(cfg: &SynthConfig, path: &Path) {
     trueaxis::import::write_csv(&data, &mut f).unwrap();
 }
 
-fn trueaxis(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_trueaxis"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+/// `trueaxis diagnose CSV --model MODEL --json`.
+fn diagnose_json(csv: &Path, model: &str) -> Output {
+    run(&["diagnose", s(csv), "--model", model, "--json"])
+}
+
+/// `trueaxis improve CSV --model cubic19 -o MODEL --json`.
+fn improve_json(csv: &Path, model: &Path) -> Output {
+    run(&[
+        "improve",
+        s(csv),
+        "--model",
+        "cubic19",
+        "-o",
+        s(model),
+        "--json",
+    ])
+}
+
+/// Stderr of a run that must succeed.
+fn stderr_ok(out: &Output) -> String {
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "exit {:?}: {err}", out.status.code());
+    err
 }
 
 fn is_num_map(v: &Value) -> bool {
@@ -57,10 +69,7 @@ fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
         },
         &csv,
     );
-    let csv_s = csv.to_str().unwrap();
-    let (code, out, err) = trueaxis(&["diagnose", csv_s, "--model", "cubic19", "--json"]);
-    assert_eq!(code, 0, "{err}");
-    let v: Value = serde_json::from_str(&out).expect("one JSON document");
+    let v = json(&diagnose_json(&csv, "cubic19"));
     assert_eq!(v["model"], "cubic19");
     assert!(
         is_num_map(&v["rms_um"]) && is_num_map(&v["held_out_rms_um"]),
@@ -94,6 +103,8 @@ fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
         assert!(c["gain"].is_number() || c["gain"].is_null());
         assert!(c["identifiable"].is_boolean());
         assert!(c["evidence"].is_string());
+        // Extension: on_path is written from the step.
+        assert_eq!(c["on_path"].as_bool(), Some(!c["step"].is_null()), "{c}");
     }
     let top = &cands[0];
     assert_eq!(top["effect"], "periodic");
@@ -130,41 +141,38 @@ fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
     // The add string goes to fit verbatim, and the fit starts a history.
     let model = dir.join("m.json");
     let add = top["add"].as_str().unwrap();
-    let (code, out, err) = trueaxis(&[
+    let fit = json(&run(&[
         "fit",
-        csv_s,
+        s(&csv),
         "--model",
         "cubic19",
         "--add",
         add,
         "-o",
-        model.to_str().unwrap(),
+        s(&model),
         "--json",
-    ]);
-    assert_eq!(code, 0, "{err}");
-    let fit: Value = serde_json::from_str(&out).unwrap();
+    ]));
     assert!(fit["rms_um"]["ey"].as_f64().unwrap() < 0.4, "{fit}");
-    let (code, out, err) = trueaxis(&["history", model.to_str().unwrap(), "--json"]);
-    assert_eq!(code, 0, "{err}");
-    let h: Value = serde_json::from_str(&out).unwrap();
+    let h = json(&run(&["history", s(&model), "--json"]));
     assert_eq!(h["steps"].as_array().unwrap().len(), 1);
     // Diagnosing that model with --report shows its history as well.
     let report = dir.join("report");
-    let (code, _, err) = trueaxis(&[
+    stderr_ok(&run(&[
         "diagnose",
-        csv_s,
+        s(&csv),
         "--model",
-        model.to_str().unwrap(),
+        s(&model),
         "--report",
-        report.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
+        s(&report),
+    ]));
     let svg = std::fs::read_to_string(report.join("history.svg")).expect("history.svg");
     assert!(svg.contains("ey rms") && svg.contains("ey held-out rms"));
     // A usage error (unknown seed) is exit 1 with a message, not a panic.
-    let (code, _, err) = trueaxis(&["diagnose", csv_s, "--model", "nn:8"]);
-    assert_eq!(code, 1);
-    assert!(err.contains("linear seeds"), "{err}");
+    common::expect_exit(
+        &["diagnose", s(&csv), "--model", "nn:8"],
+        1,
+        &["linear seeds"],
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -181,17 +189,7 @@ fn improve_runs_to_the_noise_floor_and_keeps_the_history() {
         &csv,
     );
     let model = dir.join("m.json");
-    let (code, out, err) = trueaxis(&[
-        "improve",
-        csv.to_str().unwrap(),
-        "--model",
-        "cubic19",
-        "-o",
-        model.to_str().unwrap(),
-        "--json",
-    ]);
-    assert_eq!(code, 0, "{err}");
-    let v: Value = serde_json::from_str(&out).unwrap();
+    let v = json(&improve_json(&csv, &model));
     assert_eq!(v["verdict"], "at_noise_floor", "{v}");
     // The two effects are on different targets (fitted independently), so
     // one step adds the best of each: seed, then both.
@@ -204,6 +202,13 @@ fn improve_runs_to_the_noise_floor_and_keeps_the_history() {
         .map(|a| a["add"].as_str().unwrap())
         .collect();
     assert_eq!(added.len(), 2, "{added:?}");
+    // `added` and `evidence` are the first (best) of them; null for the seed.
+    assert!(steps[0]["added"].is_null() && steps[0]["evidence"].is_null());
+    assert_eq!(steps[1]["added"], added[0]);
+    assert_eq!(
+        steps[1]["evidence"],
+        steps[1]["added_effects"][0]["evidence"]
+    );
     assert!(
         added
             .iter()
@@ -234,8 +239,9 @@ fn improve_runs_to_the_noise_floor_and_keeps_the_history() {
             assert!(!trueaxis::diagnose::same_effect(a, b), "{adds:?}");
         }
     }
-    let (code, out, _) = trueaxis(&["history", model.to_str().unwrap()]);
-    assert_eq!(code, 0);
+    let out = run(&["history", s(&model)]);
+    stderr_ok(&out);
+    let out = String::from_utf8_lossy(&out.stdout);
     assert!(
         out.contains("2 step(s)") && out.contains("reversal:target=ex,axis=x"),
         "{out}"
@@ -288,39 +294,26 @@ fn one_direction_data_warns_one_direction() {
 fn rows_left_out_are_counted_and_said() {
     let dir = tmp_dir("skipped");
     let csv = dir.join("grid.csv");
-    let csv_s = csv.to_str().unwrap();
-    let (code, _, err) = trueaxis(&["simulate", "--plan", "grid:100", "-o", csv_s]);
-    assert_eq!(code, 0, "{err}");
+    stderr_ok(&run(&["simulate", "--plan", "grid:100", "-o", s(&csv)]));
     let holed = dir.join("holed.csv");
     let line = common::with_blank_error_row(&csv, &holed);
-    let holed_s = holed.to_str().unwrap();
-    let note =
-        format!("note: 1 row of {holed_s} was left out (line {line}: no error value on this row)");
+    let note = format!(
+        "note: 1 row of {} was left out (line {line}: no error value on this row)",
+        s(&holed)
+    );
 
-    let (code, out, err) = trueaxis(&["diagnose", holed_s, "--model", "cubic19", "--json"]);
-    assert_eq!(code, 0, "{err}");
-    let v: Value = serde_json::from_str(&out).unwrap();
-    assert_eq!(v["skipped_count"], 1);
+    let out = diagnose_json(&holed, "cubic19");
+    assert_eq!(json(&out)["skipped_count"], 1);
+    let err = stderr_ok(&out);
     assert!(err.contains(&note), "{err}");
-    let (code, out, err) = trueaxis(&["diagnose", csv_s, "--model", "cubic19", "--json"]);
-    assert_eq!(code, 0, "{err}");
-    let v: Value = serde_json::from_str(&out).unwrap();
-    assert_eq!(v["skipped_count"], 0);
+    let out = diagnose_json(&csv, "cubic19");
+    assert_eq!(json(&out)["skipped_count"], 0);
+    let err = stderr_ok(&out);
     assert!(!err.contains("left out"), "{err}");
 
-    let model = dir.join("m.json");
-    let (code, out, err) = trueaxis(&[
-        "improve",
-        holed_s,
-        "--model",
-        "cubic19",
-        "-o",
-        model.to_str().unwrap(),
-        "--json",
-    ]);
-    assert_eq!(code, 0, "{err}");
-    let v: Value = serde_json::from_str(&out).unwrap();
-    assert_eq!(v["skipped_count"], 1);
+    let out = improve_json(&holed, &dir.join("m.json"));
+    assert_eq!(json(&out)["skipped_count"], 1);
+    let err = stderr_ok(&out);
     assert!(err.contains(&note), "{err}");
     let _ = std::fs::remove_dir_all(dir);
 }
@@ -341,10 +334,7 @@ fn fit_add_accepts_every_familys_add_string_verbatim() {
         },
         &csv,
     );
-    let csv_s = csv.to_str().unwrap();
-    let (code, out, err) = trueaxis(&["diagnose", csv_s, "--model", "kinematic", "--json"]);
-    assert_eq!(code, 0, "{err}");
-    let v: Value = serde_json::from_str(&out).unwrap();
+    let v = json(&diagnose_json(&csv, "kinematic"));
     let adds: Vec<String> = v["candidates"]
         .as_array()
         .unwrap()
@@ -374,14 +364,13 @@ fn fit_add_accepts_every_familys_add_string_verbatim() {
         }),
     ];
     let model = dir.join("m.json");
-    let mut args = vec!["fit", csv_s, "--model", "kinematic"];
+    let mut args = vec!["fit", s(&csv), "--model", "kinematic"];
     for a in &chosen {
         args.push("--add");
         args.push(a);
     }
-    args.extend(["-o", model.to_str().unwrap(), "--json"]);
-    let (code, _, err) = trueaxis(&args);
-    assert_eq!(code, 0, "{chosen:?}: {err}");
+    args.extend(["-o", s(&model), "--json"]);
+    json(&run(&args));
     let m: Value = serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
     let kept: Vec<&str> = m["adds"]
         .as_array()
