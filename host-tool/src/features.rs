@@ -361,6 +361,27 @@ fn parse_u8(v: &str, key: &str, lo: u8, hi: u8) -> Result<u8> {
     Ok(x)
 }
 
+/// The grammar of an `--add` string, `<family>:<key>=<value>,…`, split into
+/// its family and trimmed key/value pairs (a key given twice is an error).
+/// `Effect::parse` gives the pairs their meaning; `diagnose` compares
+/// effects by them.
+pub fn split_spec(s: &str) -> Result<(&str, Vec<(&str, &str)>)> {
+    let (family, rest) = s.split_once(':').ok_or_else(|| {
+        anyhow!("expected `<family>:<key>=<value>,…`, e.g. `periodic:target=ey,axis=y,period_mm=5`")
+    })?;
+    let mut kv: Vec<(&str, &str)> = Vec::new();
+    for part in rest.split(',').filter(|p| !p.is_empty()) {
+        let (k, v) = part
+            .split_once('=')
+            .ok_or_else(|| anyhow!("`{part}`: expected key=value"))?;
+        if kv.iter().any(|(k2, _)| *k2 == k.trim()) {
+            bail!("key `{}` given twice", k.trim());
+        }
+        kv.push((k.trim(), v.trim()));
+    }
+    Ok((family, kv))
+}
+
 impl Effect {
     /// Parses `--add` syntax. Errors say which key is missing or malformed
     /// and what was expected.
@@ -369,21 +390,7 @@ impl Effect {
     }
 
     fn parse_inner(s: &str) -> Result<Effect> {
-        let (family, rest) = s.split_once(':').ok_or_else(|| {
-            anyhow!(
-                "expected `<family>:<key>=<value>,…`, e.g. `periodic:target=ey,axis=y,period_mm=5`"
-            )
-        })?;
-        let mut kv: Vec<(&str, &str)> = Vec::new();
-        for part in rest.split(',').filter(|p| !p.is_empty()) {
-            let (k, v) = part
-                .split_once('=')
-                .ok_or_else(|| anyhow!("`{part}`: expected key=value"))?;
-            if kv.iter().any(|(k2, _)| *k2 == k.trim()) {
-                bail!("key `{}` given twice", k.trim());
-            }
-            kv.push((k.trim(), v.trim()));
-        }
+        let (family, kv) = split_spec(s)?;
         let get = |key: &str| kv.iter().find(|(k, _)| *k == key).map(|(_, v)| *v);
         let need = |key: &str| get(key).ok_or_else(|| anyhow!("missing `{key}=`"));
         let allowed: &[&str] = match family {

@@ -497,14 +497,14 @@ struct EffectKey {
 }
 
 impl EffectKey {
-    /// The key of a `fit --add` string (None when it does not parse).
+    /// The key of a `fit --add` string (None when it does not parse): the
+    /// pairs as `features::split_spec` reads them, the one grammar.
     fn of(spec: &str) -> Option<EffectKey> {
-        let (family, rest) = spec.split_once(':')?;
+        let (family, kv) = crate::features::split_spec(spec).ok()?;
         let get = |key: &str| {
-            rest.split(',')
-                .filter_map(|kv| kv.split_once('='))
-                .find(|(k, _)| k.trim() == key)
-                .map(|(_, v)| v.trim().to_string())
+            kv.iter()
+                .find(|(k, _)| *k == key)
+                .map(|(_, v)| v.to_string())
         };
         Some(EffectKey {
             family: family.to_string(),
@@ -2026,6 +2026,30 @@ mod tests {
         // A new effect goes to the end.
         assert!(swap_in(&mut adds, "drift:target=ez", None));
         assert_eq!(adds.last().map(String::as_str), Some("drift:target=ez"));
+    }
+
+    #[test]
+    fn same_effect_reads_specs_with_effect_parse_grammar() {
+        // Spaces around keys and values, key order: the same effect.
+        assert!(same_effect(
+            "thermal:target=ex,channel=bed,lag_s=3600",
+            "thermal: lag_s = 600 , channel=bed,target=ex"
+        ));
+        // Another channel, target or `times`: another effect.
+        assert!(!same_effect(
+            "thermal:target=ex,channel=bed,lag_s=0",
+            "thermal:target=ex,channel=spindle,lag_s=0"
+        ));
+        assert!(!same_effect("abbe:target=ex,times=y", "abbe:target=ex"));
+        // Periods within 10 % are one lead re-found; farther, two effects.
+        let p = |mm: &str| format!("periodic:target=ey,axis=y,period_mm={mm}");
+        assert!(same_effect(&p("5"), &p("5.4")));
+        assert!(!same_effect(&p("5"), &p("10")));
+        // What Effect::parse refuses is nobody's duplicate.
+        let twice = "reversal:target=ex,axis=x,axis=y";
+        assert!(Effect::parse(twice).is_err());
+        assert!(!same_effect(twice, "reversal:target=ex,axis=x"));
+        assert!(!same_effect("reversal", "reversal"));
     }
 
     #[test]
