@@ -180,9 +180,7 @@ impl Client {
     /// timeout: requests are idempotent or resumable by design — uploads
     /// resume, a repeated chunk is acknowledged again, and a repeated
     /// `Commit` whose first answer was lost gets the same `Committed` (the
-    /// board remembers its last commit). The exception is `Rollback`: a
-    /// repeat after a lost answer is refused (`NothingToRollBackTo`)
-    /// although the first one happened; nothing here sends one.
+    /// board remembers its last commit), and so does a repeated `Rollback`.
     pub fn call(&mut self, req: &Request<'_>) -> Result<Response, ClientError> {
         let timeout = if matches!(req, Request::Commit | Request::Rollback) {
             self.timing.commit_timeout
@@ -405,6 +403,52 @@ impl Client {
             retries: self.retries,
         })
     }
+
+    /// Rolls the board back to its standby table: the active (newest)
+    /// table is revoked, the other slot's becomes active, and the board is
+    /// asked again which table it runs. Refused before anything is sent
+    /// when the board holds no standby table (`NothingToRollBackTo`, as the
+    /// board would answer) — so a rollback is never mistaken for the
+    /// board's answer to an earlier one, which it repeats unchanged.
+    pub fn rollback(&mut self) -> Result<RollbackReport, ClientError> {
+        let id = self.identify()?;
+        let refused = |error| ClientError::Refused {
+            what: "rollback",
+            error,
+        };
+        let revoked = id.active.ok_or(refused(LinkError::NothingToRollBackTo))?;
+        let standby = id.standby.ok_or(refused(LinkError::NothingToRollBackTo))?;
+        let active = match self.request(&Request::Rollback)? {
+            Response::RolledBack(info) => info,
+            r => return Err(unexpected("rollback", r)),
+        };
+        let id = self.identify()?;
+        if active != standby || id.active != Some(standby) {
+            return Err(ClientError::Verify {
+                want: standby.crc32,
+                got: match id.active {
+                    Some(a) => format!("CRC {:#010x} (slot {:?} seq {})", a.crc32, a.slot, a.seq),
+                    None => "no active table".into(),
+                },
+            });
+        }
+        Ok(RollbackReport {
+            revoked,
+            active,
+            retries: self.retries,
+        })
+    }
+}
+
+/// What [`Client::rollback`] did.
+#[derive(Debug, Clone, Copy)]
+pub struct RollbackReport {
+    /// The table that was active and is now revoked.
+    pub revoked: SlotInfo,
+    /// The table running now (the former standby).
+    pub active: SlotInfo,
+    /// Requests repeated.
+    pub retries: u32,
 }
 
 /// What [`Client::upload`] did.

@@ -45,6 +45,8 @@ enum Command {
     Upload(cmd::upload::Args),
     /// Show the board's identity and status.
     Status(cmd::status::Args),
+    /// Return the board to the table it ran before the last upload.
+    Rollback(cmd::rollback::Args),
     /// Live telemetry from the board.
     Monitor(cmd::monitor::Args),
     /// Write a table into a flash slot through a debug probe (probe-rs).
@@ -67,6 +69,7 @@ fn main() -> ExitCode {
         Command::Export(a) => a.run(),
         Command::Upload(a) => a.run(),
         Command::Status(a) => a.run(),
+        Command::Rollback(a) => a.run(),
         Command::Monitor(a) => a.run(),
         Command::Flash(a) => a.run(),
         Command::Demo(a) => a.run(),

@@ -247,19 +247,19 @@ fn a_cut_upload_keeps_the_old_table_and_the_next_upload_resumes() {
 }
 
 /// A TCP proxy between the host and the board that drops the board's first
-/// answer to a `Commit` (a frame lost on the way back) and passes every
-/// other byte through.
-fn lossy_commit_proxy(board: &str) -> String {
+/// answer to a request `lost` picks (a frame lost on the way back) and
+/// passes every other byte through.
+fn lossy_proxy(board: &str, lost: fn(&Request) -> bool) -> String {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = format!("tcp://{}", listener.local_addr().unwrap());
     let board = board.strip_prefix("tcp://").unwrap().to_string();
     std::thread::spawn(move || {
         let (host, _) = listener.accept().unwrap();
         let up = TcpStream::connect(board).unwrap();
-        let commit_seq = Arc::new(std::sync::Mutex::new(None::<u16>));
-        // Host → board: note the sequence number of the first commit.
+        let lost_seq = Arc::new(std::sync::Mutex::new(None::<u16>));
+        // Host → board: note the sequence number of the first such request.
         let (mut from_host, mut to_board) = (host.try_clone().unwrap(), up.try_clone().unwrap());
-        let seen = commit_seq.clone();
+        let seen = lost_seq.clone();
         std::thread::spawn(move || {
             let mut dec: FrameDecoder = FrameDecoder::new();
             let mut buf = [0u8; 1024];
@@ -275,7 +275,7 @@ fn lossy_commit_proxy(board: &str) -> String {
                         continue;
                     };
                     let mut s = seen.lock().unwrap();
-                    if matches!(p.msg, Request::Commit) && s.is_none() {
+                    if lost(&p.msg) && s.is_none() {
                         *s = Some(p.seq);
                     }
                 }
@@ -287,7 +287,7 @@ fn lossy_commit_proxy(board: &str) -> String {
             // connection at a time).
             let _ = to_board.shutdown(std::net::Shutdown::Both);
         });
-        // Board → host: every frame but the answer to that commit.
+        // Board → host: every frame but the answer to that request.
         let (mut from_board, mut to_host) = (up, host);
         let mut dec: FrameDecoder = FrameDecoder::new();
         let mut buf = [0u8; 1024];
@@ -301,7 +301,7 @@ fn lossy_commit_proxy(board: &str) -> String {
                 let Ok(p) = f.and_then(model_core::link::decode_message::<Packet<Response>>) else {
                     continue;
                 };
-                if !dropped && Some(p.seq) == *commit_seq.lock().unwrap() {
+                if !dropped && Some(p.seq) == *lost_seq.lock().unwrap() {
                     dropped = true;
                     continue;
                 }
@@ -319,7 +319,7 @@ fn lossy_commit_proxy(board: &str) -> String {
 #[test]
 fn an_upload_whose_commit_answer_is_lost_still_succeeds() {
     let board = Board::start();
-    let proxy = lossy_commit_proxy(&board.port);
+    let proxy = lossy_proxy(&board.port, |r| matches!(r, Request::Commit));
     let table = sample_table(0);
     let timing = Timing {
         timeout: Duration::from_millis(300),
@@ -337,6 +337,66 @@ fn an_upload_whose_commit_answer_is_lost_still_succeeds() {
     let s = json_ok(&["status", "--port", &board.port, "--json"]);
     assert_eq!(s["active"]["crc32"], crc_hex(&table));
     assert_eq!(s["active"]["seq"], 1, "written once");
+}
+
+/// `trueaxis rollback`: back to the previous table, refused (exit 1, the
+/// active table kept) when there is none, and complete when the board's
+/// answer is lost on the way back (the retry gets the same answer).
+#[test]
+fn rollback_returns_to_the_previous_table_even_when_its_answer_is_lost() {
+    let board = Board::start();
+    let (t0, t1) = (sample_table(0), sample_table(1));
+    let (p0, p1) = (table_file("rb0", &t0), table_file("rb1", &t1));
+    let upload = |p: &PathBuf| {
+        json_ok(&[
+            "upload",
+            p.to_str().unwrap(),
+            "--port",
+            &board.port,
+            "--json",
+        ])
+    };
+    let refused = || {
+        let out = trueaxis(&["rollback", "--port", &board.port, "--json"]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(out.stdout.is_empty());
+        assert!(
+            err.contains(&board.port) && err.contains("no valid table in the other slot"),
+            "{err}"
+        );
+    };
+    upload(&p0);
+    refused();
+    upload(&p1);
+    let r = json_ok(&["rollback", "--port", &board.port, "--json"]);
+    assert_eq!(r["revoked"]["crc32"], crc_hex(&t1));
+    assert_eq!(r["active"]["crc32"], crc_hex(&t0));
+    assert_eq!(r["active"]["seq"], 1);
+    assert_eq!(r["verified"], true);
+    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    assert_eq!(s["active"], r["active"]);
+    assert!(s["standby"].is_null(), "{s}");
+    // The revoked table is gone: a second rollback has nothing to go to.
+    refused();
+
+    // The rollback's answer is lost: the client's retry gets the same one.
+    upload(&p1);
+    let proxy = lossy_proxy(&board.port, |r| matches!(r, Request::Rollback));
+    let timing = Timing {
+        timeout: Duration::from_millis(300),
+        tries: 4,
+        commit_timeout: Duration::from_millis(500),
+    };
+    let mut c = Client::open(&proxy, timing).unwrap();
+    let r = c.rollback().unwrap();
+    assert!(r.retries >= 1, "the rollback's answer was not dropped");
+    assert_eq!(r.revoked.crc32, table_id(&t1));
+    assert_eq!((r.active.crc32, r.active.seq), (table_id(&t0), 1));
+    drop(c);
+    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    assert_eq!(s["active"]["crc32"], crc_hex(&t0));
+    assert!(s["standby"].is_null(), "{s}");
 }
 
 #[test]

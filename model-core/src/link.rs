@@ -32,7 +32,9 @@
 //! writes it to the free flash slot with a higher sequence number and
 //! verifies it) → `Committed`; `Activate` (the running correction switches
 //! to the newest committed table) → `Activated`. `Rollback` revokes the
-//! newest slot and goes back to the other one.
+//! newest slot and goes back to the other one. A `Commit` or `Rollback`
+//! repeated after its answer was lost gets the same answer and writes
+//! nothing (the board remembers the last one until the next upload).
 
 use serde::{Deserialize, Serialize};
 
@@ -119,7 +121,8 @@ pub enum Request<'a> {
     Commit,
     /// Switch the running correction to the newest committed table.
     Activate,
-    /// Revoke the newest table and fall back to the other slot.
+    /// Revoke the newest table and fall back to the other slot (a repeat
+    /// after a lost answer gets the same answer).
     Rollback,
     /// Clear latched faults whose cause is gone.
     ClearFaults,

@@ -94,6 +94,13 @@ struct Upload {
     received: u32,
 }
 
+/// A commit or rollback that took effect, with the table it left active.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Done {
+    Committed(SlotInfo),
+    RolledBack(SlotInfo),
+}
+
 /// The link server.
 #[derive(Debug)]
 pub struct Server<'b, 'm, F> {
@@ -102,11 +109,13 @@ pub struct Server<'b, 'm, F> {
     /// Model buffers not in use by the engine (at least one once booted).
     spares: [Option<&'m mut ModelBuf>; 2],
     upload: Option<Upload>,
-    /// The table the last `Commit` wrote, kept so that a retried commit —
-    /// the host's retry after the answer was lost — gets the same success
-    /// instead of `NoUpload` (the upload it refers to is spent). Forgotten
-    /// at the next `UploadBegin` and at a rollback.
-    last_commit: Option<SlotInfo>,
+    /// What the last `Commit` or `Rollback` did, kept so that the host's
+    /// retry after the answer was lost gets the same success instead of
+    /// `NoUpload` (the upload a commit refers to is spent) or
+    /// `NothingToRollBackTo` (the revoked table is gone), and nothing is
+    /// written twice. Forgotten at the next `UploadBegin`; replaced by the
+    /// next commit or rollback.
+    last_done: Option<Done>,
     cfg: ServerConfig,
     rx_bad_frames: u32,
 }
@@ -127,7 +136,7 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
             stage,
             spares: [Some(a), Some(b)],
             upload: None,
-            last_commit: None,
+            last_done: None,
             cfg,
             rx_bad_frames: 0,
         }
@@ -253,7 +262,7 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                 if size == 0 {
                     return Err(LinkError::BadChunk);
                 }
-                self.last_commit = None;
+                self.last_done = None;
                 match self.upload {
                     // Same table: resume where we are.
                     Some(u) if u.size == size && u.crc32 == crc32 => {}
@@ -294,8 +303,8 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                     // Idempotent: a commit repeated after its answer was
                     // lost (no upload since) gets the same answer, as long
                     // as that table is still the newest stored one.
-                    return match self.last_commit {
-                        Some(info) if self.store.active() == Some(info) => {
+                    return match self.last_done {
+                        Some(Done::Committed(info)) if self.store.active() == Some(info) => {
                             Ok(Response::Committed(info))
                         }
                         _ => Err(LinkError::NoUpload),
@@ -340,17 +349,28 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                 // byte 0, a repeated commit gets the same answer (above).
                 self.upload = None;
                 let info = r.map_err(store_error)?;
-                self.last_commit = Some(info);
+                self.last_done = Some(Done::Committed(info));
                 Response::Committed(info)
             }
             Request::Activate => Response::Activated(self.activate_newest(engine)?),
             Request::Rollback => {
+                // Idempotent: a rollback repeated after its answer was lost
+                // (no upload or commit since) gets the same answer while
+                // that table is still the active one — it revokes nothing
+                // more (with two slots there is nothing left to revoke).
+                if let Some(Done::RolledBack(info)) = self.last_done {
+                    if self.store.active() == Some(info) {
+                        return Ok(Response::RolledBack(info));
+                    }
+                }
                 self.require_quiet(now_us, engine)?;
-                self.last_commit = None;
+                self.last_done = None;
                 let r = self.store.rollback();
                 engine.with_engine(|e| e.resync_clock());
                 r.map_err(store_error)?;
-                Response::RolledBack(self.activate_newest(engine)?)
+                let info = self.activate_newest(engine)?;
+                self.last_done = Some(Done::RolledBack(info));
+                Response::RolledBack(info)
             }
             Request::ClearFaults => {
                 engine.with_engine(|e| e.clear_faults());

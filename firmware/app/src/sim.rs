@@ -272,6 +272,12 @@ impl SimBoard {
         self.engine.borrow()
     }
 
+    /// Flash erase/write operations since the board was made (to assert
+    /// that a request wrote nothing).
+    pub fn flash_ops(&self) -> usize {
+        self.server.store().flash().ops()
+    }
+
     /// Power off: the flash contents, to boot another board on.
     pub fn into_flash(self) -> SimFlash {
         self.server.into_store().into_flash()

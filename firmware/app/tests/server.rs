@@ -258,6 +258,53 @@ fn a_repeated_commit_gets_the_same_answer() {
     ));
 }
 
+/// The same for a rollback: its retry after a lost answer gets the same
+/// `RolledBack`, not `NothingToRollBackTo` (the revoked table is gone),
+/// and writes nothing. Once a new upload began, the board has moved on.
+#[test]
+fn a_repeated_rollback_gets_the_same_answer() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    let (t1, t2) = (sample_table(0), sample_table(1));
+    install(&mut b, &mut p, &t1);
+    install(&mut b, &mut p, &t2);
+    // The first rollback's answer is lost on the way back...
+    let Response::RolledBack(first) = call(&mut b, &mut p, 30, Request::Rollback) else {
+        panic!("rollback refused")
+    };
+    assert_eq!(first.crc32, table_id(&t1));
+    let ops = b.flash_ops();
+    // ... so the host sends it again: the same answer, nothing written,
+    // the first table still the one correcting.
+    assert_eq!(
+        call(&mut b, &mut p, 31, Request::Rollback),
+        Response::RolledBack(first)
+    );
+    assert_eq!(b.flash_ops(), ops);
+    assert_eq!(b.engine().active(), Some(first));
+    // A rollback is not a commit: a commit after it has no upload.
+    assert_eq!(
+        call(&mut b, &mut p, 32, Request::Commit),
+        Response::Error(LinkError::NoUpload)
+    );
+    // A new upload forgets it: the next rollback is judged afresh, and
+    // with one valid table there is nothing to roll back to.
+    let crc32 = table_id(&t2);
+    call(
+        &mut b,
+        &mut p,
+        33,
+        Request::UploadBegin {
+            size: t2.len() as u32,
+            crc32,
+        },
+    );
+    assert_eq!(
+        call(&mut b, &mut p, 34, Request::Rollback),
+        Response::Error(LinkError::NothingToRollBackTo)
+    );
+}
+
 #[test]
 fn refusals() {
     let mut b = SimBoard::new();

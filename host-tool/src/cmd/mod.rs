@@ -13,6 +13,7 @@ pub mod input;
 pub mod iso230;
 pub mod monitor;
 pub mod out;
+pub mod rollback;
 pub mod simulate;
 pub mod status;
 pub mod upload;

@@ -205,7 +205,11 @@ fn upload_activate(link: &mut LinkClient, t: &HostTable) -> Result<SlotInfo, Str
 fn upload_with_trueaxis(bin: &Path, port: u16, table: &Path) -> Result<(), String> {
     let port_arg = format!("tcp://127.0.0.1:{port}");
     let table_s = table.to_string_lossy();
-    let args = ["upload", &table_s, "--port", &port_arg, "--json"];
+    run_trueaxis(bin, &["upload", &table_s, "--port", &port_arg, "--json"])
+}
+
+/// Runs `trueaxis <args>`, passing its output on; an error unless it exits 0.
+fn run_trueaxis(bin: &Path, args: &[&str]) -> Result<(), String> {
     eprintln!("e2e: $ {} {}", bin.display(), args.join(" "));
     let out = Command::new(bin)
         .args(args)
@@ -214,7 +218,7 @@ fn upload_with_trueaxis(bin: &Path, port: u16, table: &Path) -> Result<(), Strin
     eprint!("{}", String::from_utf8_lossy(&out.stderr));
     println!("{}", String::from_utf8_lossy(&out.stdout).trim_end());
     if !out.status.success() {
-        return Err(format!("`trueaxis upload` failed ({})", out.status));
+        return Err(format!("`trueaxis {}` failed ({})", args[0], out.status));
     }
     Ok(())
 }
@@ -465,9 +469,23 @@ pub fn check(cli: &Cli) -> Result<(), String> {
     eprintln!("e2e: the cut upload resumes at byte {sent} of {size}");
     upload_activate(&mut link, &o)?;
     compare_trajectory(&mut link, &o, &points[..100])?;
-    match req_when_quiet(&mut link, &Request::Rollback)? {
-        Response::RolledBack(info) if info.len as usize == t.bytes.len() => {}
-        other => return err("Rollback", other),
+    match &cli.trueaxis {
+        Some(bin) => {
+            drop(link);
+            let port_arg = format!("tcp://127.0.0.1:{}", cli.port);
+            run_trueaxis(bin, &["rollback", "--port", &port_arg, "--json"])?;
+            link = connect(cli.port)?;
+        }
+        None => match req_when_quiet(&mut link, &Request::Rollback)? {
+            Response::RolledBack(info) if info.len as usize == t.bytes.len() => {}
+            other => return err("Rollback", other),
+        },
+    }
+    let (active, standby) = slots(&mut link)?;
+    if active.map(|a| a.crc32) != Some(t.crc32) || standby.is_some() {
+        return Err(format!(
+            "after the rollback the active table is {active:?}, the standby {standby:?}"
+        ));
     }
     compare_trajectory(&mut link, &t, &points[..100])?;
     eprintln!("e2e: second table activated and rolled back, corrections follow each");
