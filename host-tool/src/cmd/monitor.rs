@@ -8,14 +8,14 @@ use std::time::Duration;
 use anyhow::Result;
 
 use crate::cmd::out::outln;
-use crate::link::{telemetry_json, Client, Timing};
+use crate::cmd::BoardPort;
+use crate::link::telemetry_json;
 
 /// Arguments of `trueaxis monitor`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Serial port of the board (`/dev/ttyACM0`, `COM3`) or `tcp://HOST:PORT`.
-    #[arg(long)]
-    pub port: String,
+    #[command(flatten)]
+    pub board: BoardPort,
     /// Number of samples (default: until interrupted; 1 with --json).
     #[arg(long)]
     pub count: Option<u64>,
@@ -29,7 +29,7 @@ pub struct Args {
 
 impl Args {
     pub fn run(self) -> Result<()> {
-        let mut client = Client::open(&self.port, Timing::default())?;
+        let mut client = self.board.open()?;
         let count = self.count.or(self.json.then_some(1));
         let mut samples = Vec::new();
         let mut k = 0u64;
@@ -61,7 +61,7 @@ impl Args {
         if self.json {
             outln!(
                 "{}",
-                serde_json::json!({ "port": self.port, "samples": samples })
+                serde_json::json!({ "port": self.board.port, "samples": samples })
             )?;
         }
         Ok(())

@@ -9,14 +9,14 @@
 use anyhow::{Context, Result};
 
 use crate::cmd::out::outln;
-use crate::link::{slot_json, slot_text, Client, Timing};
+use crate::cmd::BoardPort;
+use crate::link::{slot_json, slot_text};
 
 /// Arguments of `trueaxis rollback`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Serial port of the board (`/dev/ttyACM0`, `COM3`) or `tcp://HOST:PORT`.
-    #[arg(long)]
-    pub port: String,
+    #[command(flatten)]
+    pub board: BoardPort,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -24,15 +24,15 @@ pub struct Args {
 
 impl Args {
     pub fn run(self) -> Result<()> {
-        let mut client = Client::open(&self.port, Timing::default())?;
+        let mut client = self.board.open()?;
         let report = client
             .rollback()
-            .with_context(|| format!("rollback on {}", self.port))?;
+            .with_context(|| format!("rollback on {}", self.board.port))?;
         if self.json {
             outln!(
                 "{}",
                 serde_json::json!({
-                    "port": self.port,
+                    "port": self.board.port,
                     "revoked": slot_json(&report.revoked),
                     "active": slot_json(&report.active),
                     "retries": report.retries,
@@ -42,7 +42,7 @@ impl Args {
         } else {
             outln!(
                 "rolled back on {}: revoked {}; active {}, verified",
-                self.port,
+                self.board.port,
                 slot_text(&report.revoked),
                 slot_text(&report.active)
             )?;

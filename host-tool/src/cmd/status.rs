@@ -5,14 +5,14 @@
 use anyhow::Result;
 
 use crate::cmd::out::outln;
-use crate::link::{slot_json, slot_text, telemetry_json, Client, Timing};
+use crate::cmd::BoardPort;
+use crate::link::{slot_json, slot_text, telemetry_json};
 
 /// Arguments of `trueaxis status`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Serial port of the board (`/dev/ttyACM0`, `COM3`) or `tcp://HOST:PORT`.
-    #[arg(long)]
-    pub port: String,
+    #[command(flatten)]
+    pub board: BoardPort,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -20,7 +20,7 @@ pub struct Args {
 
 impl Args {
     pub fn run(self) -> Result<()> {
-        let mut client = Client::open(&self.port, Timing::default())?;
+        let mut client = self.board.open()?;
         let id = client.identify()?;
         let t = client.status()?;
         let fw = format!("{}.{}.{}", id.firmware[0], id.firmware[1], id.firmware[2]);
@@ -28,7 +28,7 @@ impl Args {
             outln!(
                 "{}",
                 serde_json::json!({
-                    "port": self.port,
+                    "port": self.board.port,
                     "firmware": fw,
                     "protocol": id.protocol,
                     "table_format": id.table_format,
@@ -42,7 +42,7 @@ impl Args {
         }
         outln!(
             "board on {}: firmware {fw}, link protocol {}, table format {}",
-            self.port,
+            self.board.port,
             id.protocol,
             id.table_format
         )?;

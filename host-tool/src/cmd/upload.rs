@@ -13,16 +13,16 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::cmd::input;
 use crate::cmd::out::outln;
-use crate::link::{slot_json, slot_text, Client, Timing};
+use crate::cmd::BoardPort;
+use crate::link::{slot_json, slot_text};
 
 /// Arguments of `trueaxis upload`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The table (from `trueaxis export`).
     pub table: PathBuf,
-    /// Serial port of the board (`/dev/ttyACM0`, `COM3`) or `tcp://HOST:PORT`.
-    #[arg(long)]
-    pub port: String,
+    #[command(flatten)]
+    pub board: BoardPort,
     /// Write one JSON document to stdout instead of text (and no progress bar).
     #[arg(long)]
     pub json: bool,
@@ -31,7 +31,7 @@ pub struct Args {
 impl Args {
     pub fn run(self) -> Result<()> {
         let bytes = input::load_board_table(&self.table)?;
-        let mut client = Client::open(&self.port, Timing::default())?;
+        let mut client = self.board.open()?;
         let bar = if self.json {
             ProgressBar::hidden()
         } else {
@@ -43,13 +43,15 @@ impl Args {
         bar.set_message("uploading");
         let report = client
             .upload(&bytes, |done, _| bar.set_position(done))
-            .with_context(|| format!("upload of {} to {}", self.table.display(), self.port))?;
+            .with_context(|| {
+                format!("upload of {} to {}", self.table.display(), self.board.port)
+            })?;
         bar.finish_and_clear();
         if self.json {
             outln!(
                 "{}",
                 serde_json::json!({
-                    "port": self.port,
+                    "port": self.board.port,
                     "bytes": report.bytes,
                     "crc32": format!("{:#010x}", report.crc32),
                     "resumed_at": report.resumed_at,
@@ -68,7 +70,7 @@ impl Args {
                 "uploaded {} bytes (CRC {:#010x}) to {}: committed to {}, active and verified",
                 report.bytes,
                 report.crc32,
-                self.port,
+                self.board.port,
                 slot_text(&report.committed)
             )?;
         }
