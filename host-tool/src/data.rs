@@ -15,6 +15,13 @@ pub const AXES: [&str; 3] = ["x", "y", "z"];
 /// Target (error) names, in index order 0, 1, 2: `ex`, `ey`, `ez`.
 pub const TARGETS: [&str; 3] = ["ex", "ey", "ez"];
 
+/// The temperatures a `T_<name>_C` reading may have, °C: a machine shop's
+/// sensors (air, bed, spindle housing, coolant) read well inside −50…150 °C.
+/// The importers refuse a value outside it as a unit mistake — most often
+/// kelvin (250…400 read as °C), which would otherwise be fitted silently
+/// and make the thermal terms meaningless.
+pub const TEMP_PLAUSIBLE_C: (f64, f64) = (-50.0, 150.0);
+
 /// A temperature sensor column `T_<name>_C`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TempChannel {

@@ -283,7 +283,15 @@ fn random_datasets_round_trip_bit_for_bit() {
         d.t_s = Some((0..n).map(|_| f(1.0)).collect());
         d.temps = vec![TempChannel {
             name: "bed".into(),
-            temp_c: (0..n).map(|_| f(1.0)).collect(),
+            // Any double a sensor can read (−50…150 °C, the importer
+            // refuses the rest), with full mantissas, −0 and a subnormal.
+            temp_c: (0..n)
+                .map(|i| match i {
+                    0 => -0.0,
+                    1 => f64::from_bits(3),
+                    _ => -50.0 + 200.0 * (f(1.0).to_bits() >> 11) as f64 / (1u64 << 53) as f64,
+                })
+                .collect(),
         }];
         d.pass_id = Some((0..n).map(|i| i as i64 - 5).collect());
         d.aux = vec![AuxChannel {
@@ -323,5 +331,32 @@ fn crlf_bom_and_other_separators() {
     assert_eq!(
         e.to_string(),
         "semi.csv:1:1: expected comma-separated columns; this header is separated by `;`"
+    );
+}
+
+#[test]
+fn implausible_temperatures() {
+    // °C outside −50…150 is a unit mistake; 250…400 is named as kelvin.
+    fails_at(
+        "bad_kelvin.csv",
+        3,
+        Some(3),
+        "column `T_bed_C`: expected a temperature in °C between -50 and 150, found `293.40` — 293.4 looks like kelvin (20.25 °C)",
+    );
+    fails_at(
+        "bad_temp.csv",
+        3,
+        Some(4),
+        "column `T_spindle_C`: expected a temperature in °C between -50 and 150, found `-60`",
+    );
+    // Every command that reads data refuses it the same way (fit here).
+    let path = data("bad_kelvin.csv");
+    let out = trueaxis(&["fit", path.to_str().unwrap(), "--model", "cubic19"]);
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains(&format!("{}:3:3: ", path.display()))
+            && stderr.contains("looks like kelvin"),
+        "{stderr}"
     );
 }

@@ -11,7 +11,7 @@ use std::io::{Read, Write};
 use anyhow::Context;
 
 use super::ImportError;
-use crate::data::{AuxChannel, Dataset, SkippedRow, TempChannel, AXES, TARGETS};
+use crate::data::{AuxChannel, Dataset, SkippedRow, TempChannel, AXES, TARGETS, TEMP_PLAUSIBLE_C};
 
 /// What a column means.
 #[derive(Clone, Debug, PartialEq)]
@@ -122,6 +122,27 @@ fn parse_num(cell: &str, col_name: &str) -> Result<f64, String> {
     if !v.is_finite() {
         return Err(format!(
             "column `{col_name}`: expected a finite number, found `{cell}`"
+        ));
+    }
+    Ok(v)
+}
+
+/// Parses a temperature in °C and checks that it is plausible
+/// ([`TEMP_PLAUSIBLE_C`]); a value in 250…400 is named as likely kelvin.
+fn parse_temp(cell: &str, col_name: &str) -> Result<f64, String> {
+    let v = parse_num(cell, col_name)?;
+    let (lo, hi) = TEMP_PLAUSIBLE_C;
+    if !(lo..=hi).contains(&v) {
+        let hint = if (250.0..=400.0).contains(&v) {
+            format!(
+                " — {v} looks like kelvin ({:.2} °C); convert the column to °C (°C = K − 273.15)",
+                v - 273.15
+            )
+        } else {
+            String::new()
+        };
+        return Err(format!(
+            "column `{col_name}`: expected a temperature in °C between {lo} and {hi}, found `{cell}`{hint}"
         ));
     }
     Ok(v)
@@ -386,9 +407,8 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
                     Cell::F(v)
                 }
                 Col::Aux => Cell::S(cell.to_string()),
-                Col::Pos(_) | Col::Time | Col::Tool | Col::Temp(_) => {
-                    Cell::F(parse_num(cell, h).map_err(at)?)
-                }
+                Col::Temp(_) => Cell::F(parse_temp(cell, h).map_err(at)?),
+                Col::Pos(_) | Col::Time | Col::Tool => Cell::F(parse_num(cell, h).map_err(at)?),
             });
         }
         if skip_reason.is_none()
