@@ -364,7 +364,59 @@ impl ModelFile {
                 m.format
             );
         }
+        m.validate().map_err(|e| {
+            anyhow::anyhow!("{}: not a valid trueaxis model file: {e}", path.display())
+        })?;
         Ok(m)
+    }
+
+    /// Checks everything the file's types do not: indices in range, every
+    /// list as long as what it describes, every number finite, spans and
+    /// steps positive, the seed and effect strings valid and agreeing with
+    /// the model's kind. `Err` names the JSON path of the first bad field
+    /// and what was expected. An axis the data did not vary is written by
+    /// `fit` as centre 0, half span 1 (`Norm`), or left out of a grid's or
+    /// network's axes, so those pass.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        let seed =
+            crate::fit::Seed::parse(self.seed.strip_suffix(" --local").unwrap_or(&self.seed))
+                .map_err(|e| format!("seed: {e:#}"))?;
+        for (i, a) in self.adds.iter().enumerate() {
+            crate::features::Effect::parse(a).map_err(|e| format!("adds[{i}]: {e:#}"))?;
+        }
+        let local_seed = self.seed.ends_with(" --local");
+        let kind_ok = match (&self.model, &seed) {
+            (FittedModel::Linear(_), crate::fit::Seed::Poly(_)) => !local_seed,
+            (FittedModel::Local(_), crate::fit::Seed::Poly(_)) => {
+                local_seed && self.adds.is_empty()
+            }
+            (FittedModel::Nn(m), crate::fit::Seed::Nn(h)) => *h == m.hidden && self.adds.is_empty(),
+            (FittedModel::Grid(m), crate::fit::Seed::Grid(s)) => {
+                *s == m.step_mm && self.adds.is_empty()
+            }
+            _ => false,
+        };
+        if !kind_ok {
+            return Err(format!(
+                "seed `{}`{} does not describe the model of kind `{}` it holds",
+                self.seed,
+                if self.adds.is_empty() {
+                    String::new()
+                } else {
+                    format!(" with {} --add effects", self.adds.len())
+                },
+                self.model.kind()
+            ));
+        }
+        match &self.model {
+            FittedModel::Linear(m) => {
+                check_norm(&m.norm, "model.norm")?;
+                check_linear_outputs(&m.outputs, "model.outputs")
+            }
+            FittedModel::Local(m) => check_local(m),
+            FittedModel::Nn(m) => check_nn(m),
+            FittedModel::Grid(m) => check_grid(m),
+        }
     }
 
     /// Writes MODEL.json (pretty-printed).
@@ -385,12 +437,7 @@ impl ModelFile {
             "rms_um": s.rms_um,
             "held_out_rms_um": s.held_out_rms_um,
             "max_abs_um": s.max_abs_um,
-            "kind": match self.model {
-                FittedModel::Linear(_) => "linear",
-                FittedModel::Nn(_) => "nn",
-                FittedModel::Grid(_) => "grid",
-                FittedModel::Local(_) => "local",
-            },
+            "kind": self.model.kind(),
             "terms_per_target": s.terms_per_target,
             "rows": s.rows,
             "condition_number": s.condition_number,
@@ -403,6 +450,362 @@ impl ModelFile {
         }
         v
     }
+}
+
+impl FittedModel {
+    /// The `kind` tag of MODEL.json.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            FittedModel::Linear(_) => "linear",
+            FittedModel::Nn(_) => "nn",
+            FittedModel::Grid(_) => "grid",
+            FittedModel::Local(_) => "local",
+        }
+    }
+}
+
+type Check = std::result::Result<(), String>;
+
+/// `Err("<at>: <value>, expected <want>")` unless `ok`.
+fn need(ok: bool, at: impl FnOnce() -> String, what: impl FnOnce() -> String) -> Check {
+    if ok {
+        Ok(())
+    } else {
+        Err(format!("{}: {}", at(), what()))
+    }
+}
+
+fn check_finite(v: &[f64], at: &str) -> Check {
+    match v.iter().position(|x| !x.is_finite()) {
+        None => Ok(()),
+        Some(i) => Err(format!("{at}[{i}]: {}, expected a finite number", v[i])),
+    }
+}
+
+fn check_len(len: usize, want: usize, at: &str, of: &str) -> Check {
+    need(
+        len == want,
+        || at.to_string(),
+        || format!("{len} entries, expected {want} ({of})"),
+    )
+}
+
+/// An index into `names` (axes or targets).
+fn check_index(i: usize, names: &[&str], at: impl FnOnce() -> String) -> Check {
+    need(i < names.len(), at, || {
+        let list: Vec<String> = names
+            .iter()
+            .enumerate()
+            .map(|(k, n)| format!("{k} ({n})"))
+            .collect();
+        format!("{i}, expected {}", list.join(", "))
+    })
+}
+
+/// Indices in range and none twice.
+fn check_indices(v: &[usize], names: &[&str], at: &str) -> Check {
+    for (k, &i) in v.iter().enumerate() {
+        check_index(i, names, || format!("{at}[{k}]"))?;
+        need(
+            !v[..k].contains(&i),
+            || format!("{at}[{k}]"),
+            || format!("{} ({}) appears twice", i, names[i]),
+        )?;
+    }
+    Ok(())
+}
+
+fn check_norm(n: &Norm, at: &str) -> Check {
+    check_finite(&n.centre_mm, &format!("{at}.centre_mm"))?;
+    for (a, &h) in n.half_span_mm.iter().enumerate() {
+        need(
+            h.is_finite() && h > 0.0,
+            || format!("{at}.half_span_mm[{a}]"),
+            || {
+                format!(
+                    "{h}, expected a positive number of mm (1 for an axis absent from the data)"
+                )
+            },
+        )?;
+    }
+    Ok(())
+}
+
+fn check_feature(f: &Feature, at: &str) -> Check {
+    match f {
+        Feature::Monomial { .. } | Feature::Abbe { .. } => Ok(()),
+        Feature::Periodic {
+            axis,
+            period_mm,
+            harmonic,
+            ..
+        } => {
+            check_index(*axis, &AXES, || format!("{at}.axis"))?;
+            need(
+                period_mm.is_finite() && *period_mm > 0.0,
+                || format!("{at}.period_mm"),
+                || format!("{period_mm}, expected a positive number of mm"),
+            )?;
+            need(
+                *harmonic >= 1,
+                || format!("{at}.harmonic"),
+                || "0, expected ≥ 1".into(),
+            )
+        }
+        Feature::Thermal {
+            channel,
+            t_ref_c,
+            lag_s,
+            ..
+        } => {
+            need(
+                !channel.is_empty(),
+                || format!("{at}.channel"),
+                || "empty, expected a channel name (`bed` for T_bed_C)".into(),
+            )?;
+            need(
+                t_ref_c.is_finite(),
+                || format!("{at}.t_ref_c"),
+                || format!("{t_ref_c}, expected a finite °C"),
+            )?;
+            need(
+                lag_s.is_finite() && *lag_s >= 0.0,
+                || format!("{at}.lag_s"),
+                || format!("{lag_s}, expected a number of s ≥ 0"),
+            )
+        }
+        Feature::Reversal { axis } => check_index(*axis, &AXES, || format!("{at}.axis")),
+        Feature::Drift { power } => need(
+            *power >= 1,
+            || format!("{at}.power"),
+            || "0, expected ≥ 1".into(),
+        ),
+    }
+}
+
+fn check_linear_outputs(outputs: &[LinearOutput], at: &str) -> Check {
+    need(
+        !outputs.is_empty(),
+        || at.to_string(),
+        || "empty, expected one entry per target the model predicts".into(),
+    )?;
+    let targets: Vec<usize> = outputs.iter().map(|o| o.target).collect();
+    for (k, o) in outputs.iter().enumerate() {
+        let at = format!("{at}[{k}]");
+        check_index(o.target, &TARGETS, || format!("{at}.target"))?;
+        need(
+            !targets[..k].contains(&o.target),
+            || format!("{at}.target"),
+            || format!("{} ({}) appears twice", o.target, TARGETS[o.target]),
+        )?;
+        need(
+            !o.features.is_empty(),
+            || format!("{at}.features"),
+            || "empty, expected at least one term".into(),
+        )?;
+        for (j, f) in o.features.iter().enumerate() {
+            check_feature(f, &format!("{at}.features[{j}]"))?;
+        }
+        let n = o.features.len();
+        check_len(
+            o.coef_um.len(),
+            n,
+            &format!("{at}.coef_um"),
+            "one per feature",
+        )?;
+        check_finite(&o.coef_um, &format!("{at}.coef_um"))?;
+        check_len(
+            o.coef_sd_um.len(),
+            n,
+            &format!("{at}.coef_sd_um"),
+            "one per feature",
+        )?;
+    }
+    Ok(())
+}
+
+fn check_local(m: &LocalModel) -> Check {
+    check_norm(&m.norm, "model.norm")?;
+    let n_patches = m.patches.len();
+    match m.shape.as_str() {
+        "cuboid" => {
+            let s = m.stack_axis.ok_or_else(|| {
+                "model.stack_axis: null, expected the axis the planes are stacked along (cuboid)"
+                    .to_string()
+            })?;
+            check_index(s, &AXES, || "model.stack_axis".into())?;
+            check_finite(&m.planes_mm, "model.planes_mm")?;
+            need(
+                m.planes_mm.len() >= 2 && m.planes_mm.windows(2).all(|w| w[0] < w[1]),
+                || "model.planes_mm".into(),
+                || format!("{:?}, expected at least 2 ascending positions", m.planes_mm),
+            )?;
+            check_len(
+                n_patches,
+                m.planes_mm.len() - 1,
+                "model.patches",
+                "one per pair of neighbouring planes",
+            )?;
+        }
+        "plane" | "line" => {
+            need(
+                m.stack_axis.is_none(),
+                || "model.stack_axis".into(),
+                || format!("{:?}, expected null for shape `{}`", m.stack_axis, m.shape),
+            )?;
+            check_len(
+                n_patches,
+                1,
+                "model.patches",
+                "one patch for a plane or line",
+            )?;
+        }
+        other => {
+            return Err(format!(
+                "model.shape: `{other}`, expected cuboid, plane or line"
+            ))
+        }
+    }
+    let mut first: Option<Vec<usize>> = None;
+    for (i, p) in m.patches.iter().enumerate() {
+        let at = format!("model.patches[{i}]");
+        need(
+            p.lo_mm.is_finite(),
+            || format!("{at}.lo_mm"),
+            || format!("{}, expected a finite number", p.lo_mm),
+        )?;
+        need(
+            p.hi_mm.is_finite(),
+            || format!("{at}.hi_mm"),
+            || format!("{}, expected a finite number", p.hi_mm),
+        )?;
+        check_linear_outputs(&p.outputs, &format!("{at}.outputs"))?;
+        let mut t: Vec<usize> = p.outputs.iter().map(|o| o.target).collect();
+        t.sort_unstable();
+        match &first {
+            None => first = Some(t),
+            Some(f) => need(
+                *f == t,
+                || format!("{at}.outputs"),
+                || {
+                    "targets differ from patch 0's, expected every patch to model the same targets"
+                        .into()
+                },
+            )?,
+        }
+    }
+    Ok(())
+}
+
+fn check_nn(m: &NnModel) -> Check {
+    let (nin, nh, nout) = (m.inputs.len(), m.hidden, m.outputs.len());
+    need(
+        nin >= 1,
+        || "model.inputs".into(),
+        || "empty, expected at least one axis".into(),
+    )?;
+    need(
+        nout >= 1,
+        || "model.outputs".into(),
+        || "empty, expected at least one target".into(),
+    )?;
+    need(
+        nh >= 1,
+        || "model.hidden".into(),
+        || "0, expected at least 1 neuron".into(),
+    )?;
+    check_indices(&m.inputs, &AXES, "model.inputs")?;
+    check_indices(&m.outputs, &TARGETS, "model.outputs")?;
+    let ranges = [
+        ("in_min_mm", &m.in_min_mm, nin, "one per input"),
+        ("in_max_mm", &m.in_max_mm, nin, "one per input"),
+        ("out_min_um", &m.out_min_um, nout, "one per output"),
+        ("out_max_um", &m.out_max_um, nout, "one per output"),
+        ("w1", &m.w1, nh * nin, "hidden × inputs"),
+        ("b1", &m.b1, nh, "one per hidden neuron"),
+        ("w2", &m.w2, nout * nh, "outputs × hidden"),
+        ("b2", &m.b2, nout, "one per output"),
+    ];
+    for (name, v, want, of) in ranges {
+        let at = format!("model.{name}");
+        check_len(v.len(), want, &at, of)?;
+        check_finite(v, &at)?;
+    }
+    for (k, (lo, hi)) in m.in_min_mm.iter().zip(&m.in_max_mm).enumerate() {
+        need(
+            lo <= hi,
+            || format!("model.in_max_mm[{k}]"),
+            || format!("{hi}, expected ≥ in_min_mm[{k}] = {lo}"),
+        )?;
+    }
+    for (k, (lo, hi)) in m.out_min_um.iter().zip(&m.out_max_um).enumerate() {
+        need(
+            lo <= hi,
+            || format!("model.out_max_um[{k}]"),
+            || format!("{hi}, expected ≥ out_min_um[{k}] = {lo}"),
+        )?;
+    }
+    Ok(())
+}
+
+fn check_grid(m: &GridModel) -> Check {
+    let d = m.axes.len();
+    need(
+        (1..=3).contains(&d),
+        || "model.axes".into(),
+        || format!("{d} entries, expected 1 to 3 axes"),
+    )?;
+    check_indices(&m.axes, &AXES, "model.axes")?;
+    check_len(m.origin_mm.len(), d, "model.origin_mm", "one per grid axis")?;
+    check_finite(&m.origin_mm, "model.origin_mm")?;
+    check_len(m.counts.len(), d, "model.counts", "one per grid axis")?;
+    need(
+        m.step_mm.is_finite() && m.step_mm > 0.0,
+        || "model.step_mm".into(),
+        || format!("{}, expected a positive number of mm", m.step_mm),
+    )?;
+    for (k, &n) in m.counts.iter().enumerate() {
+        need(
+            n >= 2,
+            || format!("model.counts[{k}]"),
+            || format!("{n}, expected at least 2 nodes"),
+        )?;
+    }
+    let max = crate::fit::grid::MAX_NODES;
+    let nodes = m
+        .counts
+        .iter()
+        .try_fold(1usize, |acc, &n| acc.checked_mul(n))
+        .filter(|&t| t <= max)
+        .ok_or_else(|| {
+            format!(
+                "model.counts: {:?}, expected at most {max} nodes in all",
+                m.counts
+            )
+        })?;
+    need(
+        !m.outputs.is_empty(),
+        || "model.outputs".into(),
+        || "empty, expected one entry per target the model predicts".into(),
+    )?;
+    let targets: Vec<usize> = m.outputs.iter().map(|o| o.target).collect();
+    for (k, o) in m.outputs.iter().enumerate() {
+        check_index(o.target, &TARGETS, || format!("model.outputs[{k}].target"))?;
+        need(
+            !targets[..k].contains(&o.target),
+            || format!("model.outputs[{k}].target"),
+            || format!("{} ({}) appears twice", o.target, TARGETS[o.target]),
+        )?;
+        let at = format!("model.outputs[{k}].values_um");
+        check_len(
+            o.values_um.len(),
+            nodes,
+            &at,
+            "one per node: the product of counts",
+        )?;
+        check_finite(&o.values_um, &at)?;
+    }
+    Ok(())
 }
 
 /// Residuals (row, measured − model in µm) per target; `None` for a target

@@ -12,6 +12,7 @@ use crate::cmd::input;
 use crate::cmd::out::{self, outln};
 use crate::diagnose::{self, Diagnosis, Options, Verdict};
 use crate::features::Effect;
+use crate::model::ModelFile;
 
 /// Arguments of `trueaxis diagnose`.
 #[derive(clap::Args, Debug)]
@@ -38,23 +39,10 @@ pub struct Args {
 /// scored by partialling the model's columns out of theirs.
 pub fn model_spec(model: &str) -> Result<(String, Vec<String>)> {
     let (seed, adds) = if model.ends_with(".json") || Path::new(model).is_file() {
-        let text = std::fs::read_to_string(model)
-            .with_context(|| format!("cannot read model file {model}"))?;
-        let v: serde_json::Value = serde_json::from_str(&text)
-            .with_context(|| format!("{model}: not a trueaxis model file"))?;
-        let seed = v["seed"]
-            .as_str()
-            .with_context(|| format!("{model}: no `seed` field (not a trueaxis model file?)"))?
-            .to_string();
-        let adds = v["adds"]
-            .as_array()
-            .map(|a| {
-                a.iter()
-                    .filter_map(|s| s.as_str().map(str::to_string))
-                    .collect()
-            })
-            .unwrap_or_default();
-        (seed, adds)
+        // Read and checked as every command reads a MODEL.json: a damaged
+        // file is refused here too, not half-used.
+        let m = ModelFile::load(model)?;
+        (m.seed, m.adds)
     } else {
         (model.to_string(), Vec::new())
     };

@@ -146,6 +146,10 @@ fn created_unix_s() -> Result<i64> {
 
 impl Args {
     pub fn run(self) -> Result<()> {
+        crate::cmd::input::refuse_overwrite(
+            &[("the model file", &self.model)],
+            &[("-o", &self.output)],
+        )?;
         let model = ModelFile::load(&self.model)?;
         let (doc, warnings, text) = match self.format {
             Format::Table => {

@@ -12,6 +12,7 @@ use crate::cmd::input;
 use crate::cmd::out::{self, outln};
 use crate::features::Effect;
 use crate::fit::{self, nn::NnOptions, FitOptions};
+use crate::history::history_path;
 
 /// Arguments of `trueaxis fit`.
 #[derive(clap::Args, Debug)]
@@ -66,6 +67,14 @@ impl Args {
             .iter()
             .map(|s| Effect::parse(s))
             .collect::<Result<Vec<_>>>()?;
+        let out = self
+            .output
+            .clone()
+            .unwrap_or_else(|| default_model_path(&self.data));
+        input::refuse_overwrite(
+            &[("the data file", &self.data)],
+            &[("-o", &out), ("the history file", &history_path(&out))],
+        )?;
         let data = input::load_data(&self.data, None)?;
         let opts = FitOptions {
             blocks: usize::from(self.blocks),
@@ -81,10 +90,6 @@ impl Args {
         // but the model has 4 terms`); the file is named here.
         let model = fit::fit(&data, &self.model, &adds, &opts)
             .with_context(|| format!("{}: cannot fit {}", self.data.display(), self.model))?;
-        let out = self
-            .output
-            .clone()
-            .unwrap_or_else(|| default_model_path(&self.data));
         model.save(&out)?;
         crate::history::record(&out, &model)?;
         for w in &model.stats.warnings {

@@ -320,11 +320,18 @@ impl Args {
                 "improve starts from a seed (cubic19 or kinematic), not from a model with effects"
             );
         }
-        let data = input::load_data(&self.data, None)?;
         let out = self
             .output
             .clone()
             .unwrap_or_else(|| default_model_path(&self.data));
+        input::refuse_overwrite(
+            &[("the data file", &self.data)],
+            &[
+                ("-o", &out),
+                ("the history file", &history::history_path(&out)),
+            ],
+        )?;
+        let data = input::load_data(&self.data, None)?;
         let json = self.json;
         // Steps are printed as they complete; a failed write (stdout closed)
         // stops the printing, not the loop — the model file is the result —

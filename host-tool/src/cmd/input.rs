@@ -72,6 +72,47 @@ pub fn load_board_table(path: &Path) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
+/// True when `a` and `b` name the same existing file (the same path after
+/// resolving `..` and symbolic links, or — on Unix — a hard link to it).
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    let (Ok(ma), Ok(mb)) = (std::fs::metadata(a), std::fs::metadata(b)) else {
+        // A file that does not exist yet cannot be one that does.
+        return false;
+    };
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if ma.dev() == mb.dev() && ma.ino() == mb.ino() {
+            return true;
+        }
+    }
+    let _ = (ma, mb);
+    matches!(
+        (std::fs::canonicalize(a), std::fs::canonicalize(b)),
+        (Ok(x), Ok(y)) if x == y
+    )
+}
+
+/// Refuses, before anything is written, a command whose output would
+/// replace one of its inputs (`fit d.csv -o d.csv` put the model JSON where
+/// the measurements were; `export m.json -o m.json` the table over the
+/// model). `outputs` are (what, path) pairs, e.g. `("-o", …)` or `("the
+/// history file", …)`; `inputs` likewise (`("the data file", …)`).
+pub fn refuse_overwrite(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Result<()> {
+    for (what_out, out) in outputs {
+        for (what_in, inp) in inputs {
+            if same_file(out, inp) {
+                anyhow::bail!(
+                    "{what_out} {} is {what_in} {}: writing it would destroy the input; nothing was written — choose another output path",
+                    out.display(),
+                    inp.display()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Adds `skipped_count` to a command's JSON document (an object).
 pub fn add_skipped_count(doc: &mut serde_json::Value, data: &Dataset) {
     if let Some(obj) = doc.as_object_mut() {
@@ -83,6 +124,48 @@ pub fn add_skipped_count(doc: &mut serde_json::Value, data: &Dataset) {
 mod tests {
     use super::*;
     use crate::data::SkippedRow;
+
+    #[test]
+    fn an_output_that_is_an_input_is_refused() {
+        let dir = std::env::temp_dir().join(format!("trueaxis-input-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("sub")).unwrap();
+        let data = dir.join("d.csv");
+        std::fs::write(&data, "x_mm,ex_um\n0,1\n").unwrap();
+        let other = dir.join("m.json");
+        // Not yet existing, or another file: fine.
+        assert!(refuse_overwrite(&[("the data file", &data)], &[("-o", &other)]).is_ok());
+        std::fs::write(&other, "{}").unwrap();
+        assert!(refuse_overwrite(&[("the data file", &data)], &[("-o", &other)]).is_ok());
+        // The same file by another spelling of its path.
+        let spelled = dir.join("sub").join("..").join("d.csv");
+        let e = refuse_overwrite(
+            &[("the data file", &data)],
+            &[("-o", &other), ("the history file", &spelled)],
+        )
+        .unwrap_err()
+        .to_string();
+        assert_eq!(
+            e,
+            format!(
+                "the history file {} is the data file {}: writing it would destroy the input; nothing was written — choose another output path",
+                spelled.display(),
+                data.display()
+            )
+        );
+        #[cfg(unix)]
+        {
+            let link = dir.join("hard.csv");
+            let _ = std::fs::remove_file(&link);
+            std::fs::hard_link(&data, &link).unwrap();
+            assert!(same_file(&link, &data));
+            let sym = dir.join("sym.csv");
+            let _ = std::fs::remove_file(&sym);
+            std::os::unix::fs::symlink(&data, &sym).unwrap();
+            assert!(same_file(&sym, &data));
+        }
+        assert_eq!(std::fs::read_to_string(&data).unwrap(), "x_mm,ex_um\n0,1\n");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn note_names_three_rows_and_counts_the_rest() {

@@ -154,7 +154,25 @@ pub fn predict_points(
         tool_mm: Some(col(&|p| p.tool_mm)),
         ..Dataset::default()
     };
-    model.predict(&data)
+    let pred = model.predict(&data)?;
+    // A table or controller file cannot hold a non-finite correction, and
+    // the envelope and accuracy check would step over NaN (f64::max ignores
+    // it): refuse here, naming the point.
+    for (t, v) in pred.iter().enumerate() {
+        let Some(v) = v else { continue };
+        if let Some(i) = v.iter().position(|e| !e.is_finite()) {
+            let p = &points[i];
+            bail!(
+                "{}: the model predicts {} µm at x = {} mm, y = {} mm, z = {} mm — not a finite number; nothing was written",
+                TARGETS[t],
+                v[i],
+                p.pos_mm[0],
+                p.pos_mm[1],
+                p.pos_mm[2]
+            );
+        }
+    }
+    Ok(pred)
 }
 
 /// The error of one axis sampled along its travel, for the controller

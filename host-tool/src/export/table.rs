@@ -491,6 +491,15 @@ fn without_lag(model: &FittedModel) -> FittedModel {
     m
 }
 
+/// The larger of `a` and `b`, NaN when either is.
+fn nan_max(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.max(b)
+    }
+}
+
 /// Exports `file` as a table and runs the accuracy check.
 // Per-axis and per-output arrays are indexed together; index loops read clearer.
 #[allow(clippy::needless_range_loop)]
@@ -801,8 +810,10 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
             // export would fail on the clamp rather than on the arithmetic.
             let lim = f64::from(max_corr_nm[t]);
             let want = h[i].clamp(-lim, lim);
-            max_f32 = max_f32.max((f64::from(f32_out.corr_nm[t]) - want).abs());
-            max_fixed = max_fixed.max((f64::from(fixed_out.corr_nm[t]) - want).abs());
+            // NaN-sticky (f64::max would drop it): a non-finite
+            // difference fails the check instead of reading as 0 nm.
+            max_f32 = nan_max(max_f32, (f64::from(f32_out.corr_nm[t]) - want).abs());
+            max_fixed = nan_max(max_fixed, (f64::from(fixed_out.corr_nm[t]) - want).abs());
         }
     }
     let travel_mm = travel.map(|t| t.map(|(lo, hi)| [f64::from(lo) * 1e-6, f64::from(hi) * 1e-6]));
