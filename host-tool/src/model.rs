@@ -46,6 +46,14 @@ pub struct DataRef {
     pub sha256: String,
     /// Number of rows.
     pub rows: usize,
+    /// The measured range of each temperature channel, °C, by channel name
+    /// (`{"bed": [20.0, 23.0]}`; `{}` for data without `T_*_C` columns).
+    /// `export` makes it the table's default temperature envelope, so the
+    /// thermal terms are not extrapolated. `None` (the key absent) in files
+    /// written before it was recorded: export then falls back to 10…40 °C
+    /// with the warning `temp_range_unknown`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub temp_range_c: Option<BTreeMap<String, [f64; 2]>>,
 }
 
 /// Statistics of a fit. Maps are keyed by target name (`ex`, `ey`, `ez`) and

@@ -374,7 +374,24 @@ fn thermal_lag_is_refused_without_drop_lag_and_drift_is_left_out() {
     let t = model_core::parse(&bytes).unwrap();
     assert_eq!(t.channel_name(0), Some("bed"));
     let env = t.envelope();
-    assert_eq!((env.temp_min_mc[0], env.temp_max_mc[0]), (10_000, 40_000));
+    // The temperature envelope is the range the bed was measured over (no
+    // margin, like the travel), not a workshop's 10…40 °C.
+    let data = import::load(&csv).unwrap();
+    let bed = &data.temp("bed").unwrap().temp_c;
+    let (lo, hi) = (
+        bed.iter().copied().fold(f64::INFINITY, f64::min),
+        bed.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+    );
+    assert_eq!((lo, hi), (20.0, 21.71), "the data's own range");
+    assert_eq!((env.temp_min_mc[0], env.temp_max_mc[0]), (20_000, 21_710));
+    assert_eq!(
+        v["envelope"]["temp_range_c"],
+        serde_json::json!([20.0, 21.71])
+    );
+    assert_eq!(
+        v["envelope"]["temp_range_c_by_channel"],
+        serde_json::json!({"bed": [20.0, 21.71]})
+    );
     // Polynomial, thermal, reversal — no drift term.
     assert_eq!(t.term_count(), 3);
     assert_eq!(v["terms"], 3);
@@ -949,8 +966,508 @@ fn source_date_epoch_makes_the_table_reproducible() {
             "-o",
             s(&dir.join("a.bin")),
         ],
-        1,
-        &["--axis x applies to the one-axis controller formats"],
+        2,
+        &["--axis applies to --format linuxcnc and sinumerik only, not to --format table"],
     );
     assert!(!dir.join("a.bin").exists());
+}
+
+// ---------------------------------------------------------------------------
+// Envelope defaults, limits and flags (user test R7–R11).
+
+/// `fit thermal.csv` with reversal + thermal (no lag) on ex.
+fn thermal_model(dir: &Path) -> (PathBuf, PathBuf) {
+    let csv = thermal_csv(dir);
+    let model = dir.join("thermal_nolag.model.json");
+    json(&run(&[
+        "fit",
+        s(&csv),
+        "--model",
+        "cubic19",
+        "--add",
+        "reversal:target=ex,axis=x",
+        "--add",
+        "thermal:target=ex,channel=bed,times=x",
+        "-o",
+        s(&model),
+        "--json",
+    ]));
+    (csv, model)
+}
+
+/// The model remembers the measured temperature range; the table's default
+/// envelope is that range, so outside it the firmware holds the edge value
+/// and flags it instead of extrapolating the thermal term — and the
+/// default max |correction| is 1.5 × the largest inside the data, not over
+/// 10…40 °C. `--temp-range-c` still overrides; a model file from before
+/// the range was recorded falls back to 10…40 °C with a warning.
+#[test]
+fn temperature_envelope_defaults_to_the_measured_range() {
+    let dir = tmp_dir("export", "temp_env");
+    let (_, model) = thermal_model(&dir);
+    let text = std::fs::read_to_string(&model).unwrap();
+    let mj: Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(
+        mj["data"]["temp_range_c"],
+        serde_json::json!({"bed": [20.0, 21.71]}),
+        "fit records the measured range"
+    );
+    let bin = dir.join("t.bin");
+    let v = json(&run(&["export", s(&model), "-o", s(&bin), "--json"]));
+    assert_eq!(
+        v["envelope"]["temp_range_c"],
+        serde_json::json!([20.0, 21.71])
+    );
+    assert!(v["warnings"].as_array().unwrap().is_empty(), "{v}");
+    // Largest |correction| over the data's temperatures, both directions.
+    let mf = ModelFile::load(&model).unwrap();
+    let xs: Vec<f64> = (0..=2000).map(|i| 0.1 * f64::from(i)).collect();
+    let mut largest = 0.0f64;
+    for dir in [1i8, -1] {
+        for t in [20.0, 21.71] {
+            for e in predict_ex(&mf, &xs, dir, Some(t)) {
+                largest = largest.max(e.abs());
+            }
+        }
+    }
+    let max_corr = num(&v["envelope"]["max_corr_um"][0]);
+    assert!(
+        (max_corr - 1.5 * largest).abs() < 0.01,
+        "{max_corr} vs 1.5 × {largest}"
+    );
+    // The firmware at 40 °C holds the value at 21.71 °C and flags it.
+    let bytes = std::fs::read(&bin).unwrap();
+    let t = model_core::parse(&bytes).unwrap();
+    let fw = Model::load(&t).unwrap();
+    let at = |mc: i32| {
+        let mut temp_mc = [0; MAX_TEMPS];
+        temp_mc[0] = mc;
+        fw.eval_fixed(&Inputs {
+            pos_nm: [200_000_000, 0, 0],
+            rev_q30: [1 << 30, 0, 0],
+            temp_mc,
+            tool_nm: 0,
+        })
+    };
+    let (edge, hot) = (at(21_710), at(40_000));
+    assert_eq!(hot.corr_nm[0], edge.corr_nm[0]);
+    assert!(hot.flags.contains(model_core::Flags::TEMP_OUT_OF_RANGE));
+    assert!(!edge.flags.contains(model_core::Flags::TEMP_OUT_OF_RANGE));
+
+    // --temp-range-c overrides, for every channel.
+    let v = json(&run(&[
+        "export",
+        s(&model),
+        "-o",
+        s(&bin),
+        "--temp-range-c",
+        "-5..45",
+        "--json",
+    ]));
+    assert_eq!(
+        v["envelope"]["temp_range_c"],
+        serde_json::json!([-5.0, 45.0])
+    );
+    let env = model_core::parse(&std::fs::read(&bin).unwrap())
+        .unwrap()
+        .envelope();
+    assert_eq!((env.temp_min_mc[0], env.temp_max_mc[0]), (-5_000, 45_000));
+
+    // A model file written before the range was recorded: still loads,
+    // falls back to 10…40 °C and says so.
+    let mut old = mj.clone();
+    old["data"].as_object_mut().unwrap().remove("temp_range_c");
+    let old_model = dir.join("old.model.json");
+    std::fs::write(&old_model, serde_json::to_string_pretty(&old).unwrap()).unwrap();
+    let out = run(&["export", s(&old_model), "-o", s(&bin), "--json"]);
+    let v = json(&out);
+    assert_eq!(
+        v["envelope"]["temp_range_c"],
+        serde_json::json!([10.0, 40.0])
+    );
+    let w = v["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|w| w["code"] == "temp_range_unknown")
+        .unwrap_or_else(|| panic!("{v}"));
+    assert!(
+        w["detail"].as_str().unwrap().contains("T_bed_C")
+            && w["detail"].as_str().unwrap().contains("--temp-range-c"),
+        "{w}"
+    );
+    assert!(String::from_utf8_lossy(&out.stderr).contains("warning (temp_range_unknown)"));
+}
+
+/// A model whose largest correction is ~3 mm (R8): the default limit is
+/// 1.5 × that, above the 4 mm every export allows. The message says which
+/// number is which and names --max-corr-um; the same rule refuses the
+/// controller files, and an explicit --max-corr-um below what a
+/// controller file would hold refuses it too (it cannot clamp).
+#[test]
+fn max_correction_limit_applies_to_every_format() {
+    let dir = tmp_dir("export", "maxcorr");
+    let csv = dir.join("big.csv");
+    let mut text = String::from("x_mm,ex_um\n");
+    for i in 0..=80 {
+        let x = f64::from(i) * 10.0;
+        let e =
+            3000.0 * (2.0 * std::f64::consts::PI * x / 1600.0).sin() + 500.0 * (x / 800.0).powi(2);
+        text.push_str(&format!("{x},{e:.1}\n"));
+    }
+    std::fs::write(&csv, text).unwrap();
+    let model = dir.join("big.model.json");
+    fit_cubic19(&csv, &model);
+    let mf = ModelFile::load(&model).unwrap();
+    let xs: Vec<f64> = (0..=8000).map(|i| 0.1 * f64::from(i)).collect();
+    let largest = predict_ex(&mf, &xs, 1, None)
+        .iter()
+        .fold(0.0f64, |m, e| m.max(e.abs()));
+    assert!(
+        (2500.0..4000.0).contains(&largest) && 1.5 * largest > 4000.0,
+        "{largest}"
+    );
+    let out = dir.join("big.out");
+    for format in ["table", "linuxcnc", "sinumerik"] {
+        // The table's figure is over its sweep; a controller file's over
+        // its points (a hair less).
+        let (default, own) = if format == "table" {
+            (format!("{:.1}", 1.5 * largest), format!("{largest:.1}"))
+        } else {
+            ("460".to_string(), "306".to_string())
+        };
+        let err = expect_exit(
+            &["export", s(&model), "--format", format, "-o", s(&out)],
+            1,
+            &[
+                &format!("ex: the default max |correction| {default}"),
+                &format!("(1.5 × the model's largest correction, {own}"),
+                "exceeds the table's limit of 4000 µm",
+                "--max-corr-um",
+            ],
+        );
+        assert!(!out.exists(), "{format}: {err}");
+    }
+    // An explicit limit: the table clamps (warned); a controller file
+    // would hold more than it, so it is refused and not written.
+    let v = json(&run(&[
+        "export",
+        s(&model),
+        "-o",
+        s(&out),
+        "--max-corr-um",
+        "4000",
+        "--json",
+    ]));
+    assert_eq!(v["envelope"]["max_corr_um"][0], 4000.0);
+    std::fs::remove_file(&out).unwrap();
+    for format in ["linuxcnc", "sinumerik"] {
+        expect_exit(
+            &[
+                "export",
+                s(&model),
+                "--format",
+                format,
+                "--max-corr-um",
+                "100",
+                "-o",
+                s(&out),
+            ],
+            1,
+            &["above --max-corr-um 100", "cannot clamp", "was not written"],
+        );
+        assert!(!out.exists());
+    }
+
+    // A small model: the controller file's limit is reported, and follows
+    // the flag; below its largest trim it is refused.
+    let line = line_model(&dir);
+    let comp = dir.join("x.comp");
+    let v = json(&run(&[
+        "export",
+        s(&line),
+        "--format",
+        "linuxcnc",
+        "-o",
+        s(&comp),
+        "--json",
+    ]));
+    let rows = read_linuxcnc(&std::fs::read_to_string(&comp).unwrap());
+    let largest_mm = rows
+        .iter()
+        .fold(0.0f64, |m, r| m.max(r[1].abs()).max(r[2].abs()));
+    let got = num(&v["max_corr_um"]);
+    assert!(
+        (got - 1.5 * 1000.0 * largest_mm).abs() < 0.01,
+        "{got} vs {largest_mm} mm"
+    );
+    let v = json(&run(&[
+        "export",
+        s(&line),
+        "--format",
+        "linuxcnc",
+        "--max-corr-um",
+        "50",
+        "-o",
+        s(&comp),
+        "--json",
+    ]));
+    assert_eq!(v["max_corr_um"], 50.0);
+    std::fs::remove_file(&comp).unwrap();
+    expect_exit(
+        &[
+            "export",
+            s(&line),
+            "--format",
+            "linuxcnc",
+            "--max-corr-um",
+            "1",
+            "-o",
+            s(&comp),
+        ],
+        1,
+        &[
+            "ex: the linuxcnc file would hold corrections up to",
+            "above --max-corr-um 1",
+        ],
+    );
+    assert!(!comp.exists());
+}
+
+/// A flag of another format is a usage error (exit 2) naming the flag and
+/// the formats it applies to — not silently ignored; --allow-error-nm
+/// must be a finite number ≥ 0 (NaN would switch the check off).
+#[test]
+fn flags_of_another_format_and_bad_limits_are_usage_errors() {
+    let dir = tmp_dir("export", "flags");
+    let model = line_model(&dir);
+    let out = dir.join("never.out");
+    let o = s(&out);
+    let m = s(&model);
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["--points", "21"],
+            "--points applies to --format linuxcnc and sinumerik only, not to --format table",
+        ),
+        (
+            &["--axis", "x"],
+            "--axis applies to --format linuxcnc and sinumerik only, not to --format table",
+        ),
+        (
+            &["--sinumerik-axis", "X1"],
+            "--sinumerik-axis applies to --format sinumerik only, not to --format table",
+        ),
+        (
+            &["--format", "linuxcnc", "--sinumerik-axis", "X1"],
+            "--sinumerik-axis applies to --format sinumerik only, not to --format linuxcnc",
+        ),
+        (
+            &["--format", "linuxcnc", "--temp-range-c", "15..30"],
+            "--temp-range-c applies to --format table only, not to --format linuxcnc",
+        ),
+        (
+            &["--format", "sinumerik", "--drop-lag"],
+            "--drop-lag applies to --format table only, not to --format sinumerik",
+        ),
+        (
+            &["--format", "linuxcnc", "--allow-error-nm", "2"],
+            "--allow-error-nm applies to --format table only",
+        ),
+        (
+            &["--format", "sinumerik", "--max-slew-nm-per-ms", "10"],
+            "--max-slew-nm-per-ms applies to --format table only",
+        ),
+        (
+            &["--format", "linuxcnc", "--max-feed-mm-per-min", "5000"],
+            "--max-feed-mm-per-min applies to --format table only",
+        ),
+        (
+            &["--format", "linuxcnc", "--reversal-transition-um", "5"],
+            "--reversal-transition-um applies to --format table only",
+        ),
+        (
+            &["--format", "linuxcnc", "--tool-range-mm", "0..100"],
+            "--tool-range-mm applies to --format table only",
+        ),
+        (
+            &["--allow-error-nm", "nan"],
+            "invalid value 'nan' for '--allow-error-nm",
+        ),
+        (
+            &["--allow-error-nm", "inf"],
+            "invalid value 'inf' for '--allow-error-nm",
+        ),
+        (
+            &["--allow-error-nm", "-1"],
+            "invalid value '-1' for '--allow-error-nm",
+        ),
+    ];
+    for (extra, needle) in cases {
+        let mut a = vec!["export", m, "-o", o, "--json"];
+        a.extend_from_slice(extra);
+        expect_exit(&a, 2, &[needle]);
+        assert!(!out.exists(), "{extra:?}");
+    }
+    // The flags of each format are still accepted with it.
+    for extra in [
+        &[
+            "--format",
+            "sinumerik",
+            "--sinumerik-axis",
+            "X1",
+            "--points",
+            "21",
+            "--axis",
+            "x",
+            "--max-corr-um",
+            "50",
+        ][..],
+        &[
+            "--temp-range-c",
+            "15..30",
+            "--allow-error-nm",
+            "2",
+            "--max-slew-nm-per-ms",
+            "100",
+            "--max-feed-mm-per-min",
+            "5000",
+            "--reversal-transition-um",
+            "5",
+            "--drop-lag",
+            "--tool-range-mm",
+            "0..0",
+            "--max-corr-um",
+            "50",
+        ][..],
+    ] {
+        let mut a = vec!["export", m, "-o", o, "--json"];
+        a.extend_from_slice(extra);
+        json(&run(&a));
+        std::fs::remove_file(&out).unwrap();
+    }
+}
+
+/// A periodic term left out of a controller file (period shorter than 4
+/// table steps) counts in `max_interp_error_um` — the file differs from
+/// the model by that much — and a zero backlash prints as 0, not −0.
+#[test]
+fn interpolation_error_counts_the_terms_left_out() {
+    let dir = tmp_dir("export", "interp");
+    let n = 1001;
+    let y: Vec<f64> = (0..n).map(|i| 0.5 * i as f64).collect();
+    let ey: Vec<Option<f64>> = y
+        .iter()
+        .map(|&p| {
+            let e = 1e-3 * p + 3.0 * (2.0 * std::f64::consts::PI * p / 5.08).sin();
+            Some((e * 1e4).round() / 1e4)
+        })
+        .collect();
+    let data = Dataset {
+        source: "periodic line".into(),
+        pos_mm: [None, Some(y), None],
+        err_um: [None, Some(ey), None],
+        ..Dataset::default()
+    };
+    let csv = dir.join("y.csv");
+    import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
+    let model = dir.join("y.model.json");
+    json(&run(&[
+        "fit",
+        s(&csv),
+        "--model",
+        "cubic19",
+        "--add",
+        "periodic:target=ey,axis=y,period_mm=5.08",
+        "-o",
+        s(&model),
+        "--json",
+    ]));
+    let ini = dir.join("y.ini");
+    let out = run(&[
+        "export",
+        s(&model),
+        "--format",
+        "sinumerik",
+        "-o",
+        s(&ini),
+        "--json",
+    ]);
+    let v = json(&out);
+    assert!(
+        v["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|w| w["code"] == "periodic_left_out"),
+        "{v}"
+    );
+    let e = num(&v["max_interp_error_um"]);
+    assert!((2.95..3.05).contains(&e), "the 3 µm wave left out: {e}");
+    let raw = String::from_utf8_lossy(&out.stdout);
+    assert!(raw.contains(r#""md32450_backlash_mm":0.0"#), "{raw}");
+    assert!(raw.contains(r#""backlash_um":0.0"#), "{raw}");
+    let out = run(&["export", s(&model), "--format", "sinumerik", "-o", s(&ini)]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("differs from the full model by at most 3.0")
+            && text.contains("(terms left out included)"),
+        "{text}"
+    );
+    assert!(text.contains("$MA_BACKLASH = 0.000000 mm"), "{text}");
+    assert!(
+        text.contains("mean reversal (fwd − rev) 0.000 µm"),
+        "{text}"
+    );
+    assert!(!text.contains("-0.0"), "{text}");
+}
+
+/// A grid table over what the firmware's model can load is refused (exit
+/// 1, nothing written) with the step to fit instead; one over the board's
+/// smaller store is written but warned with the same hint; the hinted step
+/// fits.
+#[test]
+fn grid_over_capacity_is_refused_with_a_coarser_step() {
+    let dir = tmp_dir("export", "gridcap");
+    let csv = simulate_grid(&dir, "g.csv", 7);
+    let fit = |step: &str| {
+        let model = dir.join(format!("g{step}.model.json"));
+        json(&run(&[
+            "fit",
+            s(&csv),
+            "--model",
+            &format!("grid:{step}"),
+            "-o",
+            s(&model),
+            "--json",
+        ]));
+        model
+    };
+    let bin = dir.join("g.bin");
+    expect_exit(
+        &["export", s(&fit("60")), "-o", s(&bin)],
+        1,
+        &[
+            "model needs 4500 grid values, capacity is 2048; nothing was written",
+            "fit a coarser grid: grid:60 holds 4500 values over 3 output(s); grid:108 or coarser (972 values) fits the board's 1024",
+        ],
+    );
+    assert!(!bin.exists());
+    let out = run(&["export", s(&fit("90")), "-o", s(&bin), "--json"]);
+    let v = json(&out);
+    assert_eq!(v["board"]["fits"], false);
+    let w = v["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|w| w["code"] == "board_refuses")
+        .unwrap_or_else(|| panic!("{v}"));
+    assert!(
+        w["detail"]
+            .as_str()
+            .unwrap()
+            .contains("grid:108 or coarser"),
+        "{w}"
+    );
+    let v = json(&run(&["export", s(&fit("108")), "-o", s(&bin), "--json"]));
+    assert_eq!(v["board"]["fits"], true, "{v}");
 }

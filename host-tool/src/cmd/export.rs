@@ -9,7 +9,7 @@ use anyhow::{bail, Context, Result};
 use serde_json::json;
 
 use crate::cmd::out::outln;
-use crate::data::AXES;
+use crate::data::{AXES, TARGETS};
 use crate::export::table::{self, TableExport, TableOptions};
 use crate::export::{crc32_hex, linuxcnc, sample_axis, sinumerik, Warning};
 use crate::model::ModelFile;
@@ -25,7 +25,9 @@ pub enum Format {
     Sinumerik,
 }
 
-/// Arguments of `trueaxis export`.
+/// Arguments of `trueaxis export`. Each flag applies to the formats named
+/// in its help; one given with another format is a usage error (exit 2),
+/// never silently ignored.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The fitted model (MODEL.json written by `trueaxis fit`).
@@ -36,49 +38,85 @@ pub struct Args {
     /// Output format.
     #[arg(long, value_enum, default_value_t = Format::Table)]
     pub format: Format,
-    /// Axis of a one-axis controller file (linuxcnc, sinumerik); default:
+    /// [linuxcnc, sinumerik] Axis of the one-axis controller file; default:
     /// the only axis the model uses.
     #[arg(long, value_parser = ["x", "y", "z"])]
     pub axis: Option<String>,
-    /// Points of a controller table (LinuxCNC reads at most 256; a Sinumerik
-    /// 808D at most 200). Default: 201 for linuxcnc, 200 for sinumerik.
-    #[arg(long)]
+    /// [linuxcnc, sinumerik] Points of the controller table (LinuxCNC reads
+    /// at most 256; a Sinumerik 808D at most 200). Default: 201 for
+    /// linuxcnc, 200 for sinumerik.
+    #[arg(long, allow_negative_numbers = true)]
     pub points: Option<usize>,
-    /// Sinumerik axis name in the table's variables.
-    #[arg(long, default_value = "AX1")]
-    pub sinumerik_axis: String,
-    /// Largest |correction| the firmware may apply, µm (default: 1.5 × the
-    /// model's largest over the envelope).
+    /// [sinumerik] Sinumerik axis name in the table's variables [default: AX1].
     #[arg(long)]
+    pub sinumerik_axis: Option<String>,
+    /// [every format] Largest |correction| the export may hold, µm (default:
+    /// 1.5 × the largest the model asks for, at least 1; at most 4000). The
+    /// firmware table clamps there (warned when below the model's largest);
+    /// a controller file, which cannot clamp, is refused then.
+    #[arg(long, allow_negative_numbers = true)]
     pub max_corr_um: Option<f64>,
-    /// Largest change of the correction, nm/ms (default: 1.5 × the model's
-    /// largest gradient × --max-feed-mm-per-min).
-    #[arg(long)]
+    /// [table] Largest change of the correction, nm/ms (default: 1.5 × the
+    /// model's largest gradient × --max-feed-mm-per-min).
+    #[arg(long, allow_negative_numbers = true)]
     pub max_slew_nm_per_ms: Option<f64>,
-    /// The machine's fastest feed, mm/min, for the default slew limit.
-    #[arg(long, default_value_t = 10_000.0)]
-    pub max_feed_mm_per_min: f64,
-    /// Travel over which a reversal (backlash) correction ramps, µm.
-    #[arg(long, default_value_t = 20.0)]
-    pub reversal_transition_um: f64,
-    /// Valid temperature range of every channel, °C, as `LO..HI`.
-    #[arg(long, default_value = "10..40")]
-    pub temp_range_c: String,
-    /// Valid tool-arm range, mm, as `LO..HI` (default 0..300 with an Abbe
-    /// term, else 0..0).
-    #[arg(long)]
+    /// [table] The machine's fastest feed, mm/min, for the default slew
+    /// limit [default: 10000].
+    #[arg(long, allow_negative_numbers = true)]
+    pub max_feed_mm_per_min: Option<f64>,
+    /// [table] Travel over which a reversal (backlash) correction ramps, µm
+    /// [default: 20].
+    #[arg(long, allow_negative_numbers = true)]
+    pub reversal_transition_um: Option<f64>,
+    /// [table] Valid temperature range of every channel, °C, as `LO..HI`
+    /// (default: per channel the range measured in the fitted data).
+    #[arg(long, allow_hyphen_values = true)]
+    pub temp_range_c: Option<String>,
+    /// [table] Valid tool-arm range, mm, as `LO..HI` (default 0..300 with an
+    /// Abbe term, else 0..0).
+    #[arg(long, allow_hyphen_values = true)]
     pub tool_range_mm: Option<String>,
-    /// Export a thermal term with a lag as its steady state (the table has
-    /// no lag); without it such a model is refused.
+    /// [table] Export a thermal term with a lag as its steady state (the
+    /// table has no lag); without it such a model is refused.
     #[arg(long)]
     pub drop_lag: bool,
-    /// Largest accepted difference between the firmware's evaluation (f32
-    /// and fixed point) and the host model, nm; above it export fails.
-    #[arg(long, default_value_t = 1.0)]
-    pub allow_error_nm: f64,
+    /// [table] Largest accepted difference between the firmware's evaluation
+    /// (f32 and fixed point) and the host model, nm (a finite number ≥ 0);
+    /// above it export fails [default: 1].
+    #[arg(long, value_parser = parse_allow_error_nm, allow_negative_numbers = true)]
+    pub allow_error_nm: Option<f64>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// `--allow-error-nm`: a finite number ≥ 0 — NaN or inf would switch the
+/// accuracy check off.
+fn parse_allow_error_nm(s: &str) -> std::result::Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("expected a number of nm, found `{s}`"))?;
+    if !(v.is_finite() && v >= 0.0) {
+        return Err(format!(
+            "expected a finite number of nm ≥ 0, found `{s}` (NaN, inf or a negative limit would switch the accuracy check off or fail every table)"
+        ));
+    }
+    Ok(v)
+}
+
+/// The formats each format-specific flag applies to (the rest apply to
+/// every format).
+const TABLE_ONLY: &[Format] = &[Format::Table];
+const CONTROLLERS: &[Format] = &[Format::Linuxcnc, Format::Sinumerik];
+const SINUMERIK_ONLY: &[Format] = &[Format::Sinumerik];
+
+fn format_name(f: Format) -> &'static str {
+    match f {
+        Format::Table => "table",
+        Format::Linuxcnc => "linuxcnc",
+        Format::Sinumerik => "sinumerik",
+    }
 }
 
 fn parse_range(s: &str, what: &str) -> Result<(f64, f64)> {
@@ -99,6 +137,17 @@ fn parse_range(s: &str, what: &str) -> Result<(f64, f64)> {
     Ok((lo, hi))
 }
 
+/// `v` with `decimals` decimals, without a "−0.000" for a value that
+/// rounds to zero.
+fn fmt_no_neg_zero(v: f64, decimals: usize) -> String {
+    let s = format!("{v:.decimals$}");
+    if s.starts_with('-') && s[1..].chars().all(|c| c == '0' || c == '.') {
+        s[1..].to_string()
+    } else {
+        s
+    }
+}
+
 fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -115,6 +164,9 @@ pub fn export_table(
     opts: &TableOptions,
     allow_error_nm: f64,
 ) -> Result<TableExport> {
+    if !(allow_error_nm.is_finite() && allow_error_nm >= 0.0) {
+        bail!("--allow-error-nm must be a finite number ≥ 0, got {allow_error_nm}");
+    }
     let e = table::export(model, opts)?;
     let worst = e.max_f32_error_nm.max(e.max_fixed_error_nm);
     if worst.is_nan() || worst > allow_error_nm {
@@ -145,7 +197,98 @@ fn created_unix_s() -> Result<i64> {
 }
 
 impl Args {
+    /// The format-specific flags given, with the formats each applies to.
+    fn given_flags(&self) -> Vec<(&'static str, &'static [Format], &'static str)> {
+        let table_why = "a one-axis controller file has no envelope, temperature, tool or lag input and no firmware accuracy check";
+        let mut v = Vec::new();
+        let mut flag = |given: bool, name, formats, why| {
+            if given {
+                v.push((name, formats, why));
+            }
+        };
+        flag(
+            self.axis.is_some(),
+            "--axis",
+            CONTROLLERS,
+            "a firmware table holds every axis of the model",
+        );
+        flag(
+            self.points.is_some(),
+            "--points",
+            CONTROLLERS,
+            "a firmware table evaluates the model itself, not points of it",
+        );
+        flag(
+            self.sinumerik_axis.is_some(),
+            "--sinumerik-axis",
+            SINUMERIK_ONLY,
+            "only the Sinumerik program names its axis",
+        );
+        flag(
+            self.max_slew_nm_per_ms.is_some(),
+            "--max-slew-nm-per-ms",
+            TABLE_ONLY,
+            table_why,
+        );
+        flag(
+            self.max_feed_mm_per_min.is_some(),
+            "--max-feed-mm-per-min",
+            TABLE_ONLY,
+            table_why,
+        );
+        flag(
+            self.reversal_transition_um.is_some(),
+            "--reversal-transition-um",
+            TABLE_ONLY,
+            table_why,
+        );
+        flag(
+            self.temp_range_c.is_some(),
+            "--temp-range-c",
+            TABLE_ONLY,
+            table_why,
+        );
+        flag(
+            self.tool_range_mm.is_some(),
+            "--tool-range-mm",
+            TABLE_ONLY,
+            table_why,
+        );
+        flag(self.drop_lag, "--drop-lag", TABLE_ONLY, table_why);
+        flag(
+            self.allow_error_nm.is_some(),
+            "--allow-error-nm",
+            TABLE_ONLY,
+            table_why,
+        );
+        v
+    }
+
+    /// A flag that does not apply to `--format`, as the usage error (exit
+    /// 2) it is: a silently ignored flag is a setting the user believes in
+    /// and the machine does not have.
+    fn check_flags(&self) {
+        let Some((name, formats, why)) = self
+            .given_flags()
+            .into_iter()
+            .find(|(_, formats, _)| !formats.contains(&self.format))
+        else {
+            return;
+        };
+        let list: Vec<&str> = formats.iter().map(|&f| format_name(f)).collect();
+        let msg = format!(
+            "{name} applies to --format {} only, not to --format {} ({why})",
+            list.join(" and "),
+            format_name(self.format)
+        );
+        let mut cmd = <Args as clap::Args>::augment_args(clap::Command::new("export"))
+            .bin_name("trueaxis export");
+        cmd.error(clap::error::ErrorKind::ArgumentConflict, msg)
+            .exit()
+    }
+
     pub fn run(self) -> Result<()> {
+        self.check_flags();
         crate::cmd::input::refuse_overwrite(
             &[("the model file", &self.model)],
             &[("-o", &self.output)],
@@ -153,17 +296,16 @@ impl Args {
         let model = ModelFile::load(&self.model)?;
         let (doc, warnings, text) = match self.format {
             Format::Table => {
-                if let Some(a) = &self.axis {
-                    bail!(
-                        "--axis {a} applies to the one-axis controller formats (linuxcnc, sinumerik); a firmware table holds every axis of the model"
-                    );
-                }
                 let opts = TableOptions {
                     max_corr_um: self.max_corr_um,
                     max_slew_nm_per_ms: self.max_slew_nm_per_ms,
-                    max_feed_mm_per_min: self.max_feed_mm_per_min,
-                    reversal_transition_um: self.reversal_transition_um,
-                    temp_range_c: parse_range(&self.temp_range_c, "--temp-range-c")?,
+                    max_feed_mm_per_min: self.max_feed_mm_per_min.unwrap_or(10_000.0),
+                    reversal_transition_um: self.reversal_transition_um.unwrap_or(20.0),
+                    temp_range_c: self
+                        .temp_range_c
+                        .as_deref()
+                        .map(|s| parse_range(s, "--temp-range-c"))
+                        .transpose()?,
                     tool_range_mm: self
                         .tool_range_mm
                         .as_deref()
@@ -172,7 +314,12 @@ impl Args {
                     drop_lag: self.drop_lag,
                     created_unix_s: created_unix_s()?,
                 };
-                let e = export_table(&model, &self.output, &opts, self.allow_error_nm)?;
+                let e = export_table(
+                    &model,
+                    &self.output,
+                    &opts,
+                    self.allow_error_nm.unwrap_or(1.0),
+                )?;
                 let text = format!(
                     "{}: {} bytes, crc32 {}, {} terms; firmware vs model over {} points: f32 {:.3} nm, fixed {:.3} nm\n",
                     self.output.display(),
@@ -226,11 +373,29 @@ impl Args {
             );
         }
         let s = sample_axis(model, axis, points)?;
-        let (body, name) = if linux {
-            (
-                linuxcnc::write(&s.nominal_mm, &s.err_fwd_um, &s.err_rev_um)?,
-                "linuxcnc",
-            )
+        let name = format_name(self.format);
+        // The same max-correction rule as the firmware table, on the values
+        // the file holds (the controller interpolates between them, so they
+        // bound what it applies). A controller file cannot clamp: above an
+        // explicit --max-corr-um it is refused, not written.
+        let largest_nm = s
+            .err_fwd_um
+            .iter()
+            .chain(&s.err_rev_um)
+            .fold(0.0f64, |m, v| m.max(1000.0 * v.abs()));
+        let max_corr_nm = crate::export::max_corr_limit_nm(axis, largest_nm, self.max_corr_um)
+            .map_err(|e| anyhow::anyhow!("{e:#}; {} was not written", self.output.display()))?;
+        if largest_nm > max_corr_nm {
+            bail!(
+                "{}: the {name} file would hold corrections up to {:.3} µm, above --max-corr-um {}: a controller's compensation table cannot clamp, so {} was not written — check the model, or raise --max-corr-um",
+                TARGETS[axis],
+                largest_nm / 1000.0,
+                max_corr_nm / 1000.0,
+                self.output.display()
+            );
+        }
+        let body = if linux {
+            linuxcnc::write(&s.nominal_mm, &s.err_fwd_um, &s.err_rev_um)?
         } else {
             let mean: Vec<f64> = s
                 .err_fwd_um
@@ -240,10 +405,12 @@ impl Args {
                 .collect();
             let step =
                 (s.nominal_mm[s.nominal_mm.len() - 1] - s.nominal_mm[0]) / (points - 1) as f64;
-            (
-                sinumerik::write(&self.sinumerik_axis, s.nominal_mm[0], step, &mean)?,
-                "sinumerik",
-            )
+            sinumerik::write(
+                self.sinumerik_axis.as_deref().unwrap_or("AX1"),
+                s.nominal_mm[0],
+                step,
+                &mean,
+            )?
         };
         write_file(&self.output, body.as_bytes())?;
         // The reversal part (forward − reverse), which Sinumerik keeps in MD32450.
@@ -253,7 +420,8 @@ impl Args {
             .zip(&s.err_rev_um)
             .map(|(f, r)| f - r)
             .collect();
-        let backlash_mean_um = backlash.iter().sum::<f64>() / backlash.len() as f64;
+        // + 0.0 turns a −0 into 0 (a −0.0 in JSON or text reads as a sign).
+        let backlash_mean_um = backlash.iter().sum::<f64>() / backlash.len() as f64 + 0.0;
         let step_mm = (s.nominal_mm[points - 1] - s.nominal_mm[0]) / (points - 1) as f64;
         // What the file says: Sinumerik's _MIN/_STEP are rounded to the
         // written 1 nm and _MAX follows from them (see `sinumerik::write`).
@@ -270,7 +438,8 @@ impl Args {
         // machine part (normal situation)": the slide falls short in the
         // direction of travel, e_fwd < 0 < e_rev. So the value is rev − fwd,
         // the opposite sign of `backlash_um`, in mm.
-        let md32450_mm = -backlash_mean_um * 1e-3;
+        // Rounded to the 1 nm the value is given in, without a −0.
+        let md32450_mm = sinumerik::written_mm(-backlash_mean_um * 1e-3) + 0.0;
         let mut doc = json!({
             "format": name,
             "output": self.output.display().to_string(),
@@ -283,6 +452,8 @@ impl Args {
             "bytes": body.len(),
             "crc32": crc32_hex(body.as_bytes()),
             "max_interp_error_um": s.max_interp_error_um,
+            // Whole nm, rounded up as the table's.
+            "max_corr_um": max_corr_nm.ceil() / 1000.0,
             "backlash_um": backlash_mean_um,
             "warnings": s.warnings,
         });
@@ -290,16 +461,22 @@ impl Args {
             doc["md32450_backlash_mm"] = json!(md32450_mm);
         }
         let text = format!(
-            "{}: {name} table for {}, {points} points {:.3}…{:.3} mm (step {step_mm:.4} mm); linear interpolation loses at most {:.3} µm against the model; mean reversal (fwd − rev) {backlash_mean_um:.3} µm{}\n",
+            "{}: {name} table for {}, {points} points {:.3}…{:.3} mm (step {step_mm:.4} mm); the controller's interpolation of it differs from the full model by at most {:.3} µm{}; mean reversal (fwd − rev) {} µm{}\n",
             self.output.display(),
             AXES[axis],
             min_mm,
             max_mm,
             s.max_interp_error_um,
+            if s.warnings.iter().any(|w| w.code.ends_with("_left_out")) {
+                " (terms left out included)"
+            } else {
+                ""
+            },
+            fmt_no_neg_zero(backlash_mean_um, 3),
             if linux {
                 String::new()
             } else {
-                format!(" — the table holds the mean of both directions; set MD32450 $MA_BACKLASH = {md32450_mm:.6} mm (rev − fwd: positive when the axis falls short in the direction of travel, Siemens' normal case)")
+                format!(" — the table holds the mean of both directions; set MD32450 $MA_BACKLASH = {} mm (rev − fwd: positive when the axis falls short in the direction of travel, Siemens' normal case)", fmt_no_neg_zero(md32450_mm, 6))
             }
         );
         Ok((doc, s.warnings.clone(), text))

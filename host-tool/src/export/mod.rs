@@ -193,8 +193,10 @@ pub struct AxisSamples {
     /// What was left out of the model and why.
     pub warnings: Vec<Warning>,
     /// Largest difference between linear interpolation of the samples and
-    /// the model (as sampled) on a 16× finer sweep, µm — what the
-    /// controller's table loses against the model.
+    /// the full model (left-out periodic and drift terms included) at the
+    /// same state, on a sweep at least 16× finer than the table and fine
+    /// enough for the shortest period, µm — what the controller's table
+    /// loses against the model.
     pub max_interp_error_um: f64,
 }
 
@@ -291,7 +293,28 @@ pub fn sample_axis(file: &ModelFile, axis: usize, points: usize) -> Result<AxisS
             ),
         ));
     }
-    let fine = 16;
+    // At least 16 sweep points per table step and 16 per shortest period
+    // (so a left-out short wave is seen at its full amplitude), at most
+    // about 200 000 points in all.
+    let shortest_mm = match &file.model {
+        FittedModel::Linear(m) => m
+            .outputs
+            .iter()
+            .flat_map(|o| &o.features)
+            .filter_map(|f| match f {
+                Feature::Periodic {
+                    axis: a,
+                    period_mm,
+                    harmonic,
+                    ..
+                } if *a == axis => Some(period_mm / f64::from(*harmonic)),
+                _ => None,
+            })
+            .fold(f64::INFINITY, f64::min),
+        _ => f64::INFINITY,
+    };
+    let fine =
+        ((16.0 * step / shortest_mm).ceil() as usize).clamp(16, (100_000 / (points - 1)).max(16));
     let n_fine = (points - 1) * fine + 1;
     let mut pts = Vec::with_capacity(2 * n_fine);
     for dir in [1i8, -1] {
@@ -314,7 +337,13 @@ pub fn sample_axis(file: &ModelFile, axis: usize, points: usize) -> Result<AxisS
     let Some(e) = &pred[target] else {
         bail!("the model predicts no {}", TARGETS[target]);
     };
+    // The full model at the same points (what was left out included).
+    let full = predict_points(&file.model, &names, &pts)?;
+    let Some(e_full) = &full[target] else {
+        bail!("the model predicts no {}", TARGETS[target]);
+    };
     let (fwd_fine, rev_fine) = e.split_at(n_fine);
+    let (fwd_full, rev_full) = e_full.split_at(n_fine);
     let take = |v: &[f64]| -> Vec<f64> { v.iter().step_by(fine).copied().collect() };
     let nominal_mm: Vec<f64> = pts[..n_fine]
         .iter()
@@ -323,9 +352,10 @@ pub fn sample_axis(file: &ModelFile, axis: usize, points: usize) -> Result<AxisS
         .collect();
     let err_fwd_um = take(fwd_fine);
     let err_rev_um = take(rev_fine);
-    // Interpolation loss: linear between the table's points vs the model.
+    // Interpolation loss: linear between the table's points vs the full
+    // model (`predict_points` has refused non-finite values).
     let mut max_interp_error_um = 0.0f64;
-    for (fine_v, coarse) in [(fwd_fine, &err_fwd_um), (rev_fine, &err_rev_um)] {
+    for (fine_v, coarse) in [(fwd_full, &err_fwd_um), (rev_full, &err_rev_um)] {
         for (i, v) in fine_v.iter().enumerate() {
             let k = (i / fine).min(points - 2);
             let t = (i - k * fine) as f64 / fine as f64;
@@ -342,6 +372,54 @@ pub fn sample_axis(file: &ModelFile, axis: usize, points: usize) -> Result<AxisS
         warnings,
         max_interp_error_um,
     })
+}
+
+/// The largest |correction| any export may hold, µm: the firmware table's
+/// limit (`model_core::table::MAX_CORR_LIMIT_NM`), applied to the
+/// controller files as well.
+pub const MAX_CORR_LIMIT_UM: f64 = model_core::table::MAX_CORR_LIMIT_NM as f64 / 1000.0;
+
+/// The max |correction| limit of output `target`, nm, shared by every
+/// format: `given_um` (`--max-corr-um`) when set, else 1.5 × `model_max_nm`
+/// (the largest |correction| the export holds), at least 1 µm. Refused
+/// (`Err`) when not positive and finite, or above [`MAX_CORR_LIMIT_UM`];
+/// the message says which number that is and what to do. Whether a
+/// `given_um` below the model's largest is a warning (the firmware table
+/// clamps) or a refusal (a controller file cannot) is the caller's.
+pub fn max_corr_limit_nm(target: usize, model_max_nm: f64, given_um: Option<f64>) -> Result<f64> {
+    let cap = MAX_CORR_LIMIT_UM;
+    let name = TARGETS[target];
+    match given_um {
+        Some(u) => {
+            if !(u.is_finite() && u > 0.0) {
+                bail!("--max-corr-um must be positive, got {u}");
+            }
+            if u > cap {
+                bail!("{name}: --max-corr-um {u} exceeds the table's limit of {cap} µm");
+            }
+            Ok(u * 1000.0)
+        }
+        None => {
+            let limit_nm = (1.5 * model_max_nm).max(1000.0);
+            if limit_nm > cap * 1000.0 {
+                let m = model_max_nm / 1000.0;
+                let why = if m > cap {
+                    format!(
+                        "the model's own largest correction ({m:.1} µm) is above it — check the model and the data's units (an error column in nm, a temperature in K) before anything else; --max-corr-um (at most {cap}) would clamp it"
+                    )
+                } else {
+                    format!(
+                        "give the limit yourself with --max-corr-um (at most {cap}; at or above the model's {m:.1} µm nothing is clamped)"
+                    )
+                };
+                bail!(
+                    "{name}: the default max |correction| {:.1} µm (1.5 × the model's largest correction, {m:.1} µm) exceeds the table's limit of {cap} µm; {why}",
+                    limit_nm / 1000.0
+                );
+            }
+            Ok(limit_nm)
+        }
+    }
 }
 
 /// Standard CRC-32 (IEEE, as zlib and the table format use), hex `0x…`.

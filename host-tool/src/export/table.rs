@@ -27,9 +27,14 @@
 //! 1.5 × the largest |correction| found on the accuracy sweep (or
 //! `max_corr_um`). Max slew = 1.5 × the largest gradient found on the sweep
 //! (including a reversal's ramp over `reversal_transition_um`) × the
-//! maximum feed (or `max_slew_nm_per_ms`). Temperatures: `temp_range_c`
-//! (default 10…40 °C, a workshop), tool arm: `tool_range_mm` (default
-//! 0…300 mm when the model has an Abbe term, else 0…0).
+//! maximum feed (or `max_slew_nm_per_ms`). Temperatures: per channel the
+//! range measured in the fitted data (MODEL.json `data.temp_range_c`), no
+//! margin, like the travel — outside it the firmware holds the edge value
+//! and flags it instead of extrapolating the thermal terms; `temp_range_c`
+//! sets one range for every channel instead; a model file that does not
+//! record the measured range falls back to 10…40 °C with the warning
+//! `temp_range_unknown`. Tool arm: `tool_range_mm` (default 0…300 mm when
+//! the model has an Abbe term, else 0…0).
 //!
 //! **Accuracy check.** The encoded bytes are parsed and loaded into
 //! model-core's `Model` exactly as the firmware does, and its f32 and
@@ -54,7 +59,7 @@ use model_core::spec::{
     GridAxisSpec, GridSpec, LayerSpec, MlpInputSpec, MlpSource, MlpSpec, PolyCoef, TableSpec,
     TermSpec,
 };
-use model_core::table::{Envelope, InputScaling, MAX_CORR_LIMIT_NM, MAX_DEGREE};
+use model_core::table::{Envelope, InputScaling, MAX_DEGREE};
 use model_core::{Inputs, Model, MAX_TEMPS};
 
 use super::{axis_travel_mm, predict_points, Point, Warning};
@@ -73,8 +78,9 @@ pub struct TableOptions {
     pub max_feed_mm_per_min: f64,
     /// Travel over which a reversal term ramps from one side to the other, µm.
     pub reversal_transition_um: f64,
-    /// Valid temperature range for every channel, °C.
-    pub temp_range_c: (f64, f64),
+    /// Valid temperature range for every channel, °C; `None` = per
+    /// channel the range measured in the fitted data.
+    pub temp_range_c: Option<(f64, f64)>,
     /// Valid tool-arm range, mm; `None` = 0…300 with an Abbe term, else 0…0.
     pub tool_range_mm: Option<(f64, f64)>,
     /// Export a thermal model with a lag as its steady state (lag 0).
@@ -90,7 +96,7 @@ impl Default for TableOptions {
             max_slew_nm_per_ms: None,
             max_feed_mm_per_min: 10_000.0,
             reversal_transition_um: 20.0,
-            temp_range_c: (10.0, 40.0),
+            temp_range_c: None,
             tool_range_mm: None,
             drop_lag: false,
             created_unix_s: 0,
@@ -172,8 +178,11 @@ pub struct EnvelopeJson {
     pub max_corr_um: [f64; 3],
     /// nm/ms.
     pub max_slew_nm_per_ms: i32,
-    /// °C, for every channel.
-    pub temp_range_c: [f64; 2],
+    /// °C: the lowest and highest end over the channels the table reads
+    /// (`null` when it reads none and no range was given).
+    pub temp_range_c: Option<[f64; 2]>,
+    /// °C, per channel the table reads.
+    pub temp_range_c_by_channel: std::collections::BTreeMap<String, [f64; 2]>,
     /// mm.
     pub tool_range_mm: [f64; 2],
 }
@@ -447,6 +456,92 @@ fn terms_of(
     Ok((terms, channels, warnings))
 }
 
+/// What to fit instead of a model too large for the firmware or the board,
+/// as the end of a message: for a grid, the finest whole-mm step whose
+/// nodes over the same travel fit the board's grid store
+/// (`model_core::board::MODEL_GRID` values over all outputs).
+fn smaller_model_hint(model: &FittedModel) -> String {
+    match model {
+        FittedModel::Grid(g) => {
+            let outputs = g.outputs.len().max(1);
+            let spans: Vec<f64> = g
+                .counts
+                .iter()
+                .map(|&n| g.step_mm * (n.max(1) - 1) as f64)
+                .collect();
+            let values = |step: f64| -> usize {
+                outputs
+                    * spans
+                        .iter()
+                        .map(|&sp| (((sp / step) - 1e-9).ceil() as usize + 1).max(2))
+                        .product::<usize>()
+            };
+            let cap = model_core::board::MODEL_GRID;
+            let mut step = g.step_mm.floor() + 1.0;
+            while values(step) > cap && step < 1e4 {
+                step += 1.0;
+            }
+            format!(
+                " — fit a coarser grid: grid:{} holds {} values over {} output(s); grid:{step} or coarser ({} values) fits the board's {cap}",
+                g.step_mm,
+                values(g.step_mm),
+                outputs,
+                values(step)
+            )
+        }
+        FittedModel::Nn(_) => " — fit a smaller network (fewer hidden neurons)".into(),
+        _ => " — fit a smaller model".into(),
+    }
+}
+
+/// The fallback temperature range of a model file that does not record the
+/// measured one (written before it was recorded), °C.
+const FALLBACK_TEMP_RANGE_C: (f64, f64) = (10.0, 40.0);
+
+/// The temperature range of each of `channels`, °C: `given` for every
+/// channel, else the range measured in the fitted data (rounded outwards to
+/// the table's 1 m°C), else 10…40 °C with the warning `temp_range_unknown`.
+fn temp_ranges(
+    file: &ModelFile,
+    channels: &[String],
+    given: Option<(f64, f64)>,
+    warnings: &mut Vec<Warning>,
+) -> Result<Vec<(f64, f64)>> {
+    if let Some((lo, hi)) = given {
+        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+            bail!("temperature range {lo}…{hi} °C is empty");
+        }
+        return Ok(vec![(lo, hi); channels.len()]);
+    }
+    let mut out = Vec::with_capacity(channels.len());
+    let mut unknown = Vec::new();
+    for c in channels {
+        match file.data.temp_range_c.as_ref().and_then(|m| m.get(c)) {
+            Some(&[lo, hi]) if lo.is_finite() && hi.is_finite() && lo <= hi => {
+                out.push((
+                    (lo * 1000.0).floor() / 1000.0,
+                    (hi * 1000.0).ceil() / 1000.0,
+                ));
+            }
+            _ => {
+                unknown.push(format!("T_{c}_C"));
+                out.push(FALLBACK_TEMP_RANGE_C);
+            }
+        }
+    }
+    if !unknown.is_empty() {
+        let (lo, hi) = FALLBACK_TEMP_RANGE_C;
+        warnings.push(Warning::new(
+            "temp_range_unknown",
+            format!(
+                "the model file does not record the temperatures measured on {} (written by an older trueaxis): the table accepts {lo}…{hi} °C there, which may extrapolate the thermal terms beyond the data — refit the model, or give the measured range with --temp-range-c",
+                unknown.join(", ")
+            ),
+        ));
+    }
+    Ok(out)
+}
+
 /// True when the model has a term of this kind (for the sweep's states).
 fn has(model: &FittedModel, pred: impl Fn(&Feature) -> bool) -> bool {
     match model {
@@ -547,10 +642,7 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
         }
     }
 
-    let (t_lo, t_hi) = opts.temp_range_c;
-    if t_lo.is_nan() || t_hi.is_nan() || t_lo > t_hi {
-        bail!("temperature range {t_lo}…{t_hi} °C is empty");
-    }
+    let temp_ranges = temp_ranges(file, &channels, opts.temp_range_c, &mut warnings)?;
     let has_abbe = has(&model, |f| matches!(f, Feature::Abbe { .. }));
     let (tool_lo, tool_hi) =
         opts.tool_range_mm
@@ -603,17 +695,18 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
         }
     }
     let dirs: Vec<i8> = if has_rev { vec![1, -1] } else { vec![1] };
-    let temps: Vec<f64> = if channels.is_empty() {
-        vec![0.0]
+    // 0 = every channel at its low end, 1 = at its high end.
+    let temps: Vec<usize> = if channels.is_empty() {
+        vec![0]
     } else {
-        vec![t_lo, t_hi]
+        vec![0, 1]
     };
     let tools: Vec<f64> = if has_abbe {
         vec![tool_lo, tool_hi]
     } else {
         vec![tool_lo]
     };
-    let mut states: Vec<(i8, f64, f64)> = Vec::new();
+    let mut states: Vec<(i8, usize, f64)> = Vec::new();
     for &d in &dirs {
         for &t in &temps {
             for &tool in &tools {
@@ -623,11 +716,14 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
     }
     let first_last = [states[0], states[states.len() - 1]];
     let mut points = Vec::with_capacity(grid_pos.len() * states.len() + 2 * line_pos.len());
-    let mut push = |p: &[f64; 3], (d, t, tool): (i8, f64, f64)| {
+    let mut push = |p: &[f64; 3], (d, t, tool): (i8, usize, f64)| {
         points.push(Point {
             pos_mm: *p,
             dir: [d; 3],
-            temp_c: vec![(t * 1000.0).round() / 1000.0; channels.len()],
+            temp_c: temp_ranges
+                .iter()
+                .map(|r| ((if t == 0 { r.0 } else { r.1 }) * 1000.0).round() / 1000.0)
+                .collect(),
             tool_mm: (tool * 1e6).round() * 1e-6,
         });
     };
@@ -655,28 +751,17 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
     for t in 0..3 {
         let Some(h) = &host[t] else { continue };
         let m = h.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let limit = match opts.max_corr_um {
-            Some(u) => {
-                if !(u.is_finite() && u > 0.0) {
-                    bail!("--max-corr-um must be positive");
-                }
-                if u * 1000.0 < m {
-                    warnings.push(Warning::new(
-                        "max_corr_below_model",
-                        format!("{}: --max-corr-um {u} is below the model's {:.3} µm: the firmware will clamp", TARGETS[t], m / 1000.0),
-                    ));
-                }
-                u * 1000.0
-            }
-            None => (1.5 * m).max(1000.0),
-        };
-        if limit > f64::from(MAX_CORR_LIMIT_NM) {
-            bail!(
-                "{}: max correction {:.1} µm exceeds the table's limit of {} µm",
-                TARGETS[t],
-                limit / 1000.0,
-                MAX_CORR_LIMIT_NM / 1000
-            );
+        let limit = super::max_corr_limit_nm(t, m, opts.max_corr_um)?;
+        if limit < m {
+            warnings.push(Warning::new(
+                "max_corr_below_model",
+                format!(
+                    "{}: --max-corr-um {} is below the model's {:.3} µm: the firmware will clamp",
+                    TARGETS[t],
+                    limit / 1000.0,
+                    m / 1000.0
+                ),
+            ));
         }
         max_corr_nm[t] = limit.ceil() as i32;
     }
@@ -742,9 +827,9 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
         env.travel_min_nm[a] = lo;
         env.travel_max_nm[a] = hi;
     }
-    for ch in 0..channels.len() {
-        env.temp_min_mc[ch] = mc(t_lo)?;
-        env.temp_max_mc[ch] = mc(t_hi)?;
+    for (ch, &(lo, hi)) in temp_ranges.iter().enumerate() {
+        env.temp_min_mc[ch] = mc(lo)?;
+        env.temp_max_mc[ch] = mc(hi)?;
     }
     let mut source_hash = [0u8; 32];
     for (i, b) in source_hash.iter_mut().enumerate() {
@@ -770,8 +855,14 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
     let table = model_core::parse(&bytes)
         .map_err(|e| anyhow::anyhow!("the encoded table does not parse: {e}"))?;
     let crc = table.crc32();
-    let fw = Model::load(&table)
-        .map_err(|e| anyhow::anyhow!("the firmware cannot load the table: {e}"))?;
+    // A table the firmware's model cannot even hold is refused (nothing is
+    // written): no controller could run it, and the check below needs it.
+    let fw = Model::load(&table).map_err(|e| {
+        anyhow::anyhow!(
+            "the firmware cannot load the table: {e}; nothing was written{}",
+            smaller_model_hint(&model)
+        )
+    })?;
     // The board's own limits: the table is written anyway (it is valid),
     // but upload and flash will refuse it, so say so now.
     let board = BoardFit::of(&table);
@@ -779,7 +870,8 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
         warnings.push(Warning::new(
             "board_refuses",
             format!(
-                "the compensation board would refuse this table ({why}); `trueaxis upload` and `flash` refuse it too — fit a smaller model"
+                "the compensation board would refuse this table ({why}); `trueaxis upload` and `flash` refuse it too{}",
+                smaller_model_hint(&model)
             ),
         ));
     }
@@ -828,7 +920,19 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
             travel_mm,
             max_corr_um: max_corr_nm.map(|v| f64::from(v) / 1000.0),
             max_slew_nm_per_ms,
-            temp_range_c: [t_lo, t_hi],
+            temp_range_c: match opts.temp_range_c {
+                Some((lo, hi)) => Some([lo, hi]),
+                None => temp_ranges
+                    .iter()
+                    .copied()
+                    .reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)))
+                    .map(|(lo, hi)| [lo, hi]),
+            },
+            temp_range_c_by_channel: channels
+                .iter()
+                .zip(&temp_ranges)
+                .map(|(c, &(lo, hi))| (c.clone(), [lo, hi]))
+                .collect(),
             tool_range_mm: [tool_lo, tool_hi],
         },
         board,
@@ -856,6 +960,7 @@ mod tests {
                 source: "test".into(),
                 sha256: "ab".repeat(32),
                 rows: 0,
+                temp_range_c: Some(Default::default()),
             },
             model,
             stats: FitStats::default(),

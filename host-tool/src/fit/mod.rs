@@ -143,6 +143,16 @@ pub fn fit(data: &Dataset, seed: &str, adds: &[Effect], opts: &FitOptions) -> Re
             source: data.source.clone(),
             sha256: data.content_hash(),
             rows: data.len(),
+            temp_range_c: Some(
+                data.temps
+                    .iter()
+                    .map(|c| {
+                        let lo = c.temp_c.iter().copied().fold(f64::INFINITY, f64::min);
+                        let hi = c.temp_c.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                        (c.name.clone(), [lo, hi])
+                    })
+                    .collect(),
+            ),
         },
         model,
         stats,
