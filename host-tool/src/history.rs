@@ -98,13 +98,34 @@ pub fn load(model_path: &Path) -> Result<History> {
 /// Appends `step` (its `step` and `added` fields are filled in here) to the
 /// history of `model_path` by the rules at the top of this module, writes
 /// it, and returns it.
-pub fn record_step(model_path: &Path, mut step: Step) -> Result<History> {
-    // A missing or unreadable old history starts a new one: the model file
-    // just written is what counts, and the history is derived information.
-    let mut h = load(model_path).unwrap_or(History {
-        format: HISTORY_FORMAT.into(),
-        steps: Vec::new(),
-    });
+pub fn record_step(model_path: &Path, step: Step) -> Result<History> {
+    let h = next(model_path, step)?;
+    let p = history_path(model_path);
+    let text = serde_json::to_string_pretty(&h)?;
+    std::fs::write(&p, text + "\n").with_context(|| format!("cannot write {}", p.display()))?;
+    Ok(h)
+}
+
+/// The history of `model_path` with `step` appended (nothing written). No
+/// history file starts a new one; a file that is there but not a history
+/// this trueaxis reads (damaged, or another format) is an error — it is
+/// never replaced silently.
+fn next(model_path: &Path, mut step: Step) -> Result<History> {
+    let p = history_path(model_path);
+    let mut h = if p.exists() {
+        load(model_path).with_context(|| {
+            format!(
+                "the history beside {} cannot be continued; move {} away (a new history then starts) or choose another -o — nothing was written",
+                model_path.display(),
+                p.display()
+            )
+        })?
+    } else {
+        History {
+            format: HISTORY_FORMAT.into(),
+            steps: Vec::new(),
+        }
+    };
     let continues = h.steps.last().is_some_and(|last| {
         last.seed == step.seed
             && last.data_sha256 == step.data_sha256
@@ -131,16 +152,17 @@ pub fn record_step(model_path: &Path, mut step: Step) -> Result<History> {
     };
     step.step = h.steps.len() + 1;
     h.steps.push(step);
-    let p = history_path(model_path);
-    let text = serde_json::to_string_pretty(&h)?;
-    std::fs::write(&p, text + "\n").with_context(|| format!("cannot write {}", p.display()))?;
     Ok(h)
 }
 
-/// Appends the fit of `model` (just written to `model_path`) to its history.
-/// This is the one call `fit` makes.
-pub fn record(model_path: &Path, model: &crate::model::ModelFile) -> Result<History> {
-    record_step(
+/// Writes `model` to `model_path` and appends its fit to the history beside
+/// it — the one call `fit` and `improve` make. Both or neither: the new
+/// history is worked out first (a damaged history file stops here, before
+/// anything is written), both files are written in full to temporary files
+/// beside them, and only then renamed over the old ones, so a failed write
+/// leaves the old model and history as they were.
+pub fn save_with_model(model_path: &Path, model: &crate::model::ModelFile) -> Result<History> {
+    let h = next(
         model_path,
         Step {
             step: 0,
@@ -152,7 +174,40 @@ pub fn record(model_path: &Path, model: &crate::model::ModelFile) -> Result<Hist
             held_out_rms_um: model.stats.held_out_rms_um.clone(),
             data_sha256: model.data.sha256.clone(),
         },
-    )
+    )?;
+    let hist = history_path(model_path);
+    let files = [
+        (
+            model_path.to_path_buf(),
+            serde_json::to_string_pretty(model)?,
+        ),
+        (hist, serde_json::to_string_pretty(&h)?),
+    ];
+    let tmp = |p: &Path| {
+        let mut name = p.file_name().unwrap_or_default().to_os_string();
+        name.push(format!(".tmp-{}", std::process::id()));
+        p.with_file_name(name)
+    };
+    let mut written = Vec::new();
+    for (p, text) in &files {
+        let t = tmp(p);
+        if let Err(e) = std::fs::write(&t, format!("{text}\n")) {
+            let _ = std::fs::remove_file(&t);
+            for w in &written {
+                let _ = std::fs::remove_file(w);
+            }
+            return Err(anyhow::Error::new(e).context(format!(
+                "cannot write {} — nothing was written",
+                p.display()
+            )));
+        }
+        written.push(t);
+    }
+    for ((p, _), t) in files.iter().zip(&written) {
+        std::fs::rename(t, p)
+            .with_context(|| format!("cannot write {} (renaming {})", p.display(), t.display()))?;
+    }
+    Ok(h)
 }
 
 /// The history as a text table: one row per step and target.

@@ -116,3 +116,55 @@ fn export_refuses_to_write_over_the_model() {
         unchanged(&model, &text);
     }
 }
+
+#[test]
+fn a_damaged_history_stops_the_fit_before_anything_is_written() {
+    // MODEL.history.json that is not a history used to be replaced
+    // silently by a new one; a history that could not be written (here a
+    // directory in its place) left m.json written without its step.
+    let dir = tmp_dir("overwrite", "history");
+    let csv = dir.join("d.csv");
+    std::fs::write(&csv, CSV).unwrap();
+    let model = dir.join("m.json");
+    fit_cubic19(&csv, &model);
+    let text = std::fs::read_to_string(&model).unwrap();
+    let hist = dir.join("m.history.json");
+    std::fs::write(&hist, "garbage\n").unwrap();
+    let want = format!(
+        "the history beside {} cannot be continued; move {} away (a new history then starts) or choose another -o — nothing was written: {}: not a trueaxis history file",
+        s(&model),
+        s(&hist),
+        s(&hist)
+    );
+    for cmd in ["fit", "improve"] {
+        expect_exit(
+            &[cmd, s(&csv), "--model", "cubic19", "-o", s(&model)],
+            1,
+            &[&want],
+        );
+        unchanged(&model, &text);
+        unchanged(&hist, "garbage\n");
+    }
+    // Moved away, the next fit starts a new history.
+    std::fs::remove_file(&hist).unwrap();
+    fit_cubic19(&csv, &model);
+    let h: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&hist).unwrap()).unwrap();
+    assert_eq!(h["steps"].as_array().unwrap().len(), 1);
+
+    // A directory where the history goes: no model file either.
+    let m2 = dir.join("m2.json");
+    std::fs::create_dir(dir.join("m2.history.json")).unwrap();
+    expect_exit(
+        &["fit", s(&csv), "--model", "cubic19", "-o", s(&m2)],
+        1,
+        &["the history beside", "nothing was written"],
+    );
+    assert!(!m2.exists(), "no model without its history step");
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains(".tmp-"))
+        .collect();
+    assert!(left.is_empty(), "temporary files left: {left:?}");
+}

@@ -64,7 +64,7 @@ impl Args {
             }
         }
         let data = input::load_data(&self.data, None)?;
-        let d = diagnose::diagnose(
+        let mut d = diagnose::diagnose(
             &data,
             &Options {
                 seed,
@@ -73,6 +73,12 @@ impl Args {
             },
         )
         .with_context(|| format!("{}: cannot diagnose", self.data.display()))?;
+        for (code, detail) in input::aux_warnings(&data) {
+            d.warnings.push(diagnose::Warning {
+                code: code.into(),
+                detail,
+            });
+        }
         if let Some(dir) = &self.report {
             // A model file's history (MODEL.history.json beside it), when
             // there is one: the report then shows the error falling too.

@@ -88,10 +88,14 @@ impl Args {
         };
         // The fit's own messages name the target (`ex: 3 distinct points
         // but the model has 4 terms`); the file is named here.
-        let model = fit::fit(&data, &self.model, &adds, &opts)
+        let mut model = fit::fit(&data, &self.model, &adds, &opts)
             .with_context(|| format!("{}: cannot fit {}", self.data.display(), self.model))?;
-        model.save(&out)?;
-        crate::history::record(&out, &model)?;
+        // Fit's warnings are strings (MODEL.json `stats.warnings`); the
+        // code leads, as `warning (code): …` elsewhere.
+        for (code, detail) in input::aux_warnings(&data) {
+            model.stats.warnings.push(format!("{code}: {detail}"));
+        }
+        crate::history::save_with_model(&out, &model)?;
         for w in &model.stats.warnings {
             eprintln!("warning: {w}");
         }

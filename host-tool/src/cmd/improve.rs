@@ -133,6 +133,9 @@ pub struct Improvement {
     pub steps: Vec<ImproveStep>,
     /// The last diagnosis' verdict.
     pub verdict: Verdict,
+    /// What the user should know about the data (`aux_misspelled`,
+    /// `aux_columns`), as diagnose's `warnings`.
+    pub warnings: Vec<diagnose::Warning>,
 }
 
 /// Runs the loop on `data`, writing each fit to `out` (and its history);
@@ -152,8 +155,7 @@ pub fn improve(
             .map(|a| Effect::parse(a))
             .collect::<Result<Vec<_>>>()?;
         let model = fit::fit(data, seed, &effects, &FitOptions::default())?;
-        model.save(out)?;
-        history::record(out, &model)?;
+        history::save_with_model(out, &model)?;
         let d = diagnose::diagnose(
             data,
             &Options {
@@ -208,6 +210,7 @@ pub fn improve(
                 model_file: out.display().to_string(),
                 steps,
                 verdict: d.verdict,
+                warnings: Vec::new(),
             });
         }
     }
@@ -332,6 +335,17 @@ impl Args {
             ],
         )?;
         let data = input::load_data(&self.data, None)?;
+        let warnings: Vec<diagnose::Warning> = input::aux_warnings(&data)
+            .into_iter()
+            .map(|(code, detail)| diagnose::Warning {
+                code: code.into(),
+                detail,
+            })
+            .collect();
+        // On stderr in both modes, before the steps (as fit's warnings).
+        for w in &warnings {
+            eprintln!("warning ({}): {}", w.code, w.detail);
+        }
         let json = self.json;
         // Steps are printed as they complete; a failed write (stdout closed)
         // stops the printing, not the loop — the model file is the result —
@@ -363,6 +377,7 @@ impl Args {
             write_err = out::print(&text).err();
         })
         .with_context(|| format!("{}: cannot improve {seed}", self.data.display()))?;
+        let r = Improvement { warnings, ..r };
         if let Some(e) = write_err {
             return Err(e);
         }

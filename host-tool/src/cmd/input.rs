@@ -72,6 +72,52 @@ pub fn load_board_table(path: &Path) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
+/// What `fit`, `improve` and `diagnose` say about the data's auxiliary
+/// columns (CONTRACT §1: kept and reported), as (code, detail):
+/// `aux_misspelled` for those whose name looks like a contract column
+/// written another way (`ey [um]` → `ey_um`, `T_bed` → `T_bed_C`, see
+/// `import::probable_column`), `aux_columns` for the rest. Neither is used
+/// by any model; both are written back by `import`.
+pub fn aux_warnings(data: &Dataset) -> Vec<(&'static str, String)> {
+    let mut meant = Vec::new();
+    let mut other = Vec::new();
+    for c in &data.aux {
+        match import::probable_column(&c.name) {
+            Some(known) => meant.push(format!("`{}` (probably `{known}`)", c.name)),
+            None => other.push(format!("`{}`", c.name)),
+        }
+    }
+    let mut w = Vec::new();
+    if !meant.is_empty() {
+        w.push((
+            "aux_misspelled",
+            format!(
+                "{}: {} kept as auxiliary and not fitted, though the name looks like a contract column written another way: {} — rename the header to the contract name to use it",
+                data.source,
+                if meant.len() == 1 { "a column is" } else { "columns are" },
+                meant.join(", ")
+            ),
+        ));
+    }
+    if !other.is_empty() {
+        w.push((
+            "aux_columns",
+            format!(
+                "{}: auxiliary {} {} kept, not used by any model: {}",
+                data.source,
+                if other.len() == 1 {
+                    "column"
+                } else {
+                    "columns"
+                },
+                if other.len() == 1 { "is" } else { "are" },
+                other.join(", ")
+            ),
+        ));
+    }
+    w
+}
+
 /// True when `a` and `b` name the same existing file (the same path after
 /// resolving `..` and symbolic links, or — on Unix — a hard link to it).
 pub fn same_file(a: &Path, b: &Path) -> bool {
@@ -124,6 +170,33 @@ pub fn add_skipped_count(doc: &mut serde_json::Value, data: &Dataset) {
 mod tests {
     use super::*;
     use crate::data::SkippedRow;
+
+    #[test]
+    fn aux_columns_are_reported_with_the_column_they_probably_meant() {
+        let aux = |name: &str| crate::data::AuxChannel {
+            name: name.into(),
+            cells: vec![],
+        };
+        let mut d = Dataset {
+            source: "r5.csv".into(),
+            ..Dataset::default()
+        };
+        assert!(aux_warnings(&d).is_empty());
+        d.aux = vec![aux("ey [um]"), aux("feed"), aux("T_bed")];
+        assert_eq!(
+            aux_warnings(&d),
+            vec![
+                (
+                    "aux_misspelled",
+                    "r5.csv: columns are kept as auxiliary and not fitted, though the name looks like a contract column written another way: `ey [um]` (probably `ey_um`), `T_bed` (probably `T_bed_C`) — rename the header to the contract name to use it".to_string()
+                ),
+                (
+                    "aux_columns",
+                    "r5.csv: auxiliary column is kept, not used by any model: `feed`".to_string()
+                ),
+            ]
+        );
+    }
 
     #[test]
     fn an_output_that_is_an_input_is_refused() {

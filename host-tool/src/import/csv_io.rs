@@ -110,7 +110,65 @@ fn classify(name: &str) -> Result<Col, String> {
             }
         }
     }
+    // The other names differing only in case are refused like `X_mm`: a
+    // `dir_X` kept as an auxiliary channel would silently drop the
+    // directions the user meant to give.
+    for fixed in ["dir_x", "dir_y", "dir_z", "pass_id", "session_id"] {
+        if lower == fixed {
+            return Err(format!(
+                "column `{name}`: expected `{fixed}` (column names are case-sensitive)"
+            ));
+        }
+    }
+    if lower.len() > 4 && lower.starts_with("t_") && lower.ends_with("_c") {
+        return Err(format!(
+            "column `{name}`: expected `T_{}_C` (column names are case-sensitive)",
+            &name[2..name.len() - 2]
+        ));
+    }
     Ok(Col::Aux)
+}
+
+/// The contract column an auxiliary column's name probably meant, when it
+/// differs from one by more than case (which [`classify`] refuses): by
+/// spaces, brackets or other punctuation, a `µ` for `u`, or a missing unit
+/// suffix — `ey [um]`, `ey(um)`, `y (mm)`, `Ex` → `ex_um`; `T_bed`,
+/// `T_bed [C]`, `temp bed` → `T_bed_C`. `None` for a name like none of them
+/// (`feed`, `t_start`).
+pub fn probable_column(name: &str) -> Option<String> {
+    let mut canon = String::new();
+    for c in name.chars() {
+        let c = match c {
+            'µ' | 'μ' => 'u',
+            c => c.to_ascii_lowercase(),
+        };
+        if c.is_ascii_alphanumeric() {
+            canon.push(c);
+        } else if !canon.is_empty() && !canon.ends_with('_') {
+            canon.push('_');
+        }
+    }
+    let canon = canon.trim_end_matches('_');
+    let fixed = ["dir_x", "dir_y", "dir_z", "pass_id", "session_id"];
+    for (stem, unit) in STEMS {
+        if canon == stem || canon == format!("{stem}_{unit}") {
+            return Some(format!("{stem}_{unit}"));
+        }
+    }
+    if let Some(f) = fixed.iter().find(|f| **f == canon) {
+        return Some(f.to_string());
+    }
+    let sensor = if let Some(mid) = canon.strip_prefix("t_").and_then(|r| r.strip_suffix("_c")) {
+        Some(mid)
+    } else if name.starts_with("T_") {
+        canon.strip_prefix("t_")
+    } else {
+        canon
+            .strip_prefix("temperature_")
+            .or_else(|| canon.strip_prefix("temp_"))
+            .map(|r| r.strip_suffix("_c").unwrap_or(r))
+    };
+    sensor.filter(|s| !s.is_empty()).map(|s| format!("T_{s}_C"))
 }
 
 /// Parses a finite number or says what was expected.
@@ -618,6 +676,50 @@ mod tests {
         assert_eq!(classify("t_start"), Ok(Col::Aux));
         assert_eq!(classify("u_raw"), Ok(Col::Aux));
         assert!(classify("x_ref").is_err(), "position stems are strict");
+        // Every contract name in the wrong case is refused the same way.
+        for (bad, want) in [
+            ("dir_X", "dir_x"),
+            ("Dir_x", "dir_x"),
+            ("DIR_Z", "dir_z"),
+            ("Pass_ID", "pass_id"),
+            ("session_ID", "session_id"),
+            ("t_bed_C", "T_bed_C"),
+            ("t_bed_c", "T_bed_C"),
+        ] {
+            assert_eq!(
+                classify(bad),
+                Err(format!(
+                    "column `{bad}`: expected `{want}` (column names are case-sensitive)"
+                )),
+            );
+        }
+        assert_eq!(classify("t_calib"), Ok(Col::Aux));
+    }
+
+    #[test]
+    fn probable_column_names_the_contract_column() {
+        for (aux, want) in [
+            ("ey [um]", Some("ey_um")),
+            ("ey(um)", Some("ey_um")),
+            ("ey [µm]", Some("ey_um")),
+            ("Ex", Some("ex_um")),
+            ("y (mm)", Some("y_mm")),
+            ("X mm", Some("x_mm")),
+            ("T_bed", Some("T_bed_C")),
+            ("T_bed [C]", Some("T_bed_C")),
+            ("temp bed", Some("T_bed_C")),
+            ("Temperature_spindle (C)", Some("T_spindle_C")),
+            ("dir x", Some("dir_x")),
+            ("pass id", Some("pass_id")),
+            ("feed", None),
+            ("t_start", None),
+            ("u_raw", None),
+            ("operator note", None),
+        ] {
+            assert_eq!(probable_column(aux).as_deref(), want, "{aux}");
+            // Every one of them is an auxiliary column for the reader.
+            assert_eq!(classify(aux), Ok(Col::Aux), "{aux}");
+        }
     }
 
     #[test]

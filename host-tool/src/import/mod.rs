@@ -16,7 +16,7 @@ use anyhow::Context;
 
 use crate::data::Dataset;
 
-pub use csv_io::{column_names, read_csv, write_csv};
+pub use csv_io::{column_names, probable_column, read_csv, write_csv};
 pub use rtl::read_rtl;
 
 /// A problem in an input file, located as precisely as the format allows.
