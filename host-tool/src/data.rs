@@ -107,6 +107,27 @@ impl Dataset {
         (0..3).filter(|&a| self.pos_mm[a].is_some()).collect()
     }
 
+    /// Indices of the axes present that move: more than one position in the
+    /// data. An axis held at one position (a single-axis line with y = z =
+    /// 250 mm on every row) carries no information about how the error
+    /// changes along it, so the models treat it like an axis absent from the
+    /// data (no terms in it; grid nodes and network inputs only on moving
+    /// axes).
+    pub fn varying_axes(&self) -> Vec<usize> {
+        self.axes()
+            .into_iter()
+            .filter(|&a| self.constant_position(a).is_none())
+            .collect()
+    }
+
+    /// The position of `axis` when it is present and every row holds the
+    /// same value, mm; `None` when the axis is absent or moves.
+    pub fn constant_position(&self, axis: usize) -> Option<f64> {
+        let col = self.pos_mm[axis].as_ref()?;
+        let first = *col.first()?;
+        col.iter().all(|&p| p == first).then_some(first)
+    }
+
     /// Indices (0 = ex, 1 = ey, 2 = ez) of the targets present.
     pub fn targets(&self) -> Vec<usize> {
         (0..3).filter(|&t| self.err_um[t].is_some()).collect()

@@ -24,7 +24,9 @@ use crate::data::{Dataset, AXES, TARGETS};
 pub struct Norm {
     /// Centre of the travel per axis, mm.
     pub centre_mm: [f64; 3],
-    /// Half the travel per axis, mm (1 for an axis not in the data).
+    /// Half the travel per axis, mm (1 for an axis not in the data; 0.001
+    /// for an axis held at one position, whose u is then 0 on the data —
+    /// never 0, so u is finite everywhere).
     pub half_span_mm: [f64; 3],
 }
 
@@ -293,8 +295,10 @@ pub fn lagged(temp_c: &[f64], t_s: &[f64], session: Option<&[i64]>, tau_s: f64) 
 // other axes first) read and export the same.
 pub use model_core::monomials::{kinematic, CUBIC19};
 
-/// Monomials of a seed spec for target `t`, restricted to the axes present
-/// (a monomial in an absent axis is constant and would duplicate `1`).
+/// Monomials of a seed spec for target `t`, restricted to `axes` — the
+/// data's varying axes (`Dataset::varying_axes`): a monomial in an absent
+/// axis, or in one held at a single position, is constant on the data and
+/// would duplicate `1` (or vanish).
 pub fn seed_monomials(spec: &str, t: usize, axes: &[usize]) -> Result<Vec<[u8; 3]>> {
     let all: Vec<[u8; 3]> = match spec {
         "cubic19" => CUBIC19.to_vec(),

@@ -389,7 +389,9 @@ struct State {
 
 impl State {
     fn new(td: &TargetData, seed: &str, adds: &[String]) -> Result<State> {
-        let axes = td.data.axes();
+        // The seed's terms as `fit` has them: none in an axis held at one
+        // position (those would be zero columns).
+        let axes = td.data.varying_axes();
         let mut cols = Vec::new();
         let mut owner = Vec::new();
         for exp in seed_monomials(seed, td.t, &axes)? {

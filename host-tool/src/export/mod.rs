@@ -73,10 +73,22 @@ pub fn axis_travel_mm(model: &FittedModel, axis: usize) -> Option<(f64, f64)> {
                 m.origin_mm[i] + m.step_mm * (m.counts[i].max(1) - 1) as f64,
             )
         }),
-        FittedModel::Local(m) => Some((
-            m.norm.centre_mm[axis] - m.norm.half_span_mm[axis],
-            m.norm.centre_mm[axis] + m.norm.half_span_mm[axis],
-        )),
+        FittedModel::Local(m) => {
+            // Like a linear model: only axes a patch's terms (or the choice
+            // of patch) depend on; a line's other axes are not used.
+            let used = m.stack_axis == Some(axis)
+                || m.patches
+                    .iter()
+                    .flat_map(|p| p.outputs.iter())
+                    .flat_map(|o| o.features.iter())
+                    .any(|f| feature_uses_axis(f, axis));
+            used.then(|| {
+                (
+                    m.norm.centre_mm[axis] - m.norm.half_span_mm[axis],
+                    m.norm.centre_mm[axis] + m.norm.half_span_mm[axis],
+                )
+            })
+        }
     }
 }
 

@@ -38,13 +38,12 @@ pub fn geometry(data: &Dataset, step_mm: f64) -> Result<(Vec<usize>, Vec<f64>, V
     let mut axes = Vec::new();
     let mut origin = Vec::new();
     let mut counts = Vec::new();
-    for a in data.axes() {
+    // Nodes only along axes that move (an axis held at one position is
+    // treated like an absent one).
+    for a in data.varying_axes() {
         let col = data.pos_mm[a].as_ref().expect("axes() lists present axes");
         let lo = col.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = col.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        if hi - lo <= 0.0 {
-            continue;
-        }
         // Nodes from lo in steps, the last at or beyond hi (1 nm tolerance).
         let n = ((hi - lo) / step_mm - 1e-9).ceil() as usize + 1;
         axes.push(a);

@@ -11,7 +11,8 @@
 use anyhow::{bail, Result};
 use nalgebra::DMatrix;
 
-use crate::data::{Dataset, TARGETS};
+use crate::data::{Dataset, AXES, TARGETS};
+use crate::export::feature_uses_axis;
 use crate::features::{seed_monomials, Effect, Feature, Norm};
 use crate::holdout;
 use crate::lsq::{self, LsqError, ILL_CONDITIONED};
@@ -104,7 +105,20 @@ fn fit_targets(
                         let names: Vec<String> =
                             g.iter().map(|&j| features[j].to_string()).collect();
                         if g.len() == 1 {
-                            format!("{} is zero at every measured point", names[0])
+                            // A term in an axis held at one position is a
+                            // zero column (u = 0 there), not a zero position.
+                            let held = (0..3).find_map(|a| {
+                                feature_uses_axis(&features[g[0]], a)
+                                    .then(|| data.constant_position(a).map(|p| (a, p)))
+                                    .flatten()
+                            });
+                            match held {
+                                Some((a, p)) => format!(
+                                    "{} cannot be fitted: {} is {p} mm at every measured point",
+                                    names[0], AXES[a]
+                                ),
+                                None => format!("{} is zero at every measured point", names[0]),
+                            }
                         } else {
                             format!("{{{}}} are collinear", names.join(", "))
                         }
@@ -147,7 +161,15 @@ pub fn fit(
     blocks: usize,
 ) -> Result<(FittedModel, FitStats)> {
     let norm = Norm::from_data(data);
-    let axes = data.axes();
+    // An axis held at one position is treated like an absent one (its
+    // monomials would be zero columns); `fit::fit` says so in a warning.
+    let axes = data.varying_axes();
+    if axes.is_empty() {
+        bail!(
+            "{}: every measured point lies at one position; a polynomial needs travel on some axis",
+            data.source
+        );
+    }
     let mut stats = FitStats::default();
     let mut outputs = Vec::new();
     // Targets with the same features measured on the same rows (a seed
@@ -425,14 +447,14 @@ mod tests {
         let mut keep2 = keep.clone();
         keep2.extend(&keep);
         let mut d = holdout::subset(&d, &keep2);
-        // 3-D axes present but z constant → z monomials drop? No: z column
-        // exists, so cubic19 keeps them and the points are too few anyway.
+        // z is held at 0 mm: treated like an absent axis, so cubic19 keeps
+        // its 10 terms in x and y — still more than the 9 points.
         set_target(&mut d, 0, |_, u| u[0]);
         d.err_um[1] = None;
         d.err_um[2] = None;
         let e = fit(&d, "cubic19", &[], 5).unwrap_err().to_string();
         assert!(
-            e.contains("9 distinct points") && e.contains("19 terms"),
+            e.contains("9 distinct points") && e.contains("10 terms"),
             "{e}"
         );
     }
@@ -452,7 +474,48 @@ mod tests {
         }
         let e = fit(&d, "cubic19", &[], 5).unwrap_err().to_string();
         assert!(
-            e.starts_with("ex: 9 distinct points but the model has 19 terms"),
+            e.starts_with("ex: 9 distinct points but the model has 10 terms"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn an_axis_held_at_one_position_is_left_out_like_an_absent_one() {
+        // The x line of the mill grid at y = z = 250 mm: cubic19 is the
+        // cubic in x (the y and z monomials would be zero columns), exactly
+        // the fit of the same data without the y and z columns.
+        let g = mill_grid();
+        let keep: Vec<usize> = (0..g.len())
+            .filter(|&r| g.pos(1, r) == 250.0 && g.pos(2, r) == 250.0)
+            .collect();
+        let mut d = holdout::subset(&g, &keep);
+        set_target(&mut d, 0, |_, u| 1.0 + 2.0 * u[0] - 0.5 * u[0].powi(3));
+        d.err_um[1] = None;
+        d.err_um[2] = None;
+        assert_eq!(d.varying_axes(), vec![0]);
+        let (m, s) = fit(&d, "cubic19", &[], 5).unwrap();
+        let FittedModel::Linear(m) = m else { panic!() };
+        let mut absent = d.clone();
+        absent.pos_mm[1] = None;
+        absent.pos_mm[2] = None;
+        let (ma, _) = fit(&absent, "cubic19", &[], 5).unwrap();
+        let FittedModel::Linear(ma) = ma else {
+            panic!()
+        };
+        assert_eq!(m.outputs[0].features, ma.outputs[0].features);
+        assert_eq!(m.outputs[0].features.len(), 4);
+        for (a, b) in m.outputs[0].coef_um.iter().zip(&ma.outputs[0].coef_um) {
+            assert!((a - b).abs() < 1e-9, "{a} {b}");
+        }
+        assert_eq!(s.terms, 4);
+        // The held axis' normalisation stays finite: u = 0 on the data.
+        assert_eq!(m.norm.centre_mm[1], 250.0);
+        assert!(m.norm.half_span_mm[1] > 0.0);
+        // A data set at one position has nothing to fit a polynomial to.
+        let one = holdout::subset(&d, &[3, 3, 3]);
+        let e = fit(&one, "cubic19", &[], 5).unwrap_err().to_string();
+        assert!(
+            e.contains("every measured point lies at one position"),
             "{e}"
         );
     }

@@ -17,7 +17,7 @@ pub mod nn;
 
 use anyhow::{bail, Result};
 
-use crate::data::{Dataset, TARGETS};
+use crate::data::{Dataset, AXES, TARGETS};
 use crate::features::Effect;
 use crate::holdout;
 use crate::model::{DataRef, ModelFile, MODEL_FORMAT};
@@ -108,7 +108,7 @@ pub fn fit(data: &Dataset, seed: &str, adds: &[Effect], opts: &FitOptions) -> Re
         }
     }
     let blocks = opts.blocks.max(2);
-    let (model, stats, seed_name) = match parsed {
+    let (model, mut stats, seed_name) = match parsed {
         Seed::Poly(name) if opts.local => {
             if !adds.is_empty() {
                 bail!("--add is not supported with --local (the local patches use the seed's own terms)");
@@ -135,6 +135,16 @@ pub fn fit(data: &Dataset, seed: &str, adds: &[Effect], opts: &FitOptions) -> Re
             (m, s, seed.to_string())
         }
     };
+    // Every model kind leaves out an axis held at one position (no terms,
+    // grid nodes or network input along it): say so, with the position.
+    for a in data.axes() {
+        if let Some(p) = data.constant_position(a) {
+            stats.warnings.push(format!(
+                "{ax}: every measured point is at {ax} = {p} mm; {ax} is not modelled (the correction does not depend on {ax}, as for an axis absent from the data)",
+                ax = AXES[a]
+            ));
+        }
+    }
     Ok(ModelFile {
         format: MODEL_FORMAT.to_string(),
         seed: seed_name,

@@ -549,15 +549,15 @@ fn prepare(data: &Dataset) -> Result<Prepared> {
         out_min: Vec::new(),
         out_max: Vec::new(),
     };
-    for a in data.axes() {
+    // Inputs only for axes that move (an axis held at one position is
+    // treated like an absent one).
+    for a in data.varying_axes() {
         let col = data.pos_mm[a].as_ref().expect("present axis");
         let lo = col.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = col.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        if hi > lo {
-            p.inputs.push(a);
-            p.in_min.push(lo);
-            p.in_max.push(hi);
-        }
+        p.inputs.push(a);
+        p.in_min.push(lo);
+        p.in_max.push(hi);
     }
     if p.inputs.is_empty() {
         bail!(
