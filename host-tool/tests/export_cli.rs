@@ -1471,3 +1471,50 @@ fn grid_over_capacity_is_refused_with_a_coarser_step() {
     let v = json(&run(&["export", s(&fit("108")), "-o", s(&bin), "--json"]));
     assert_eq!(v["board"]["fits"], true, "{v}");
 }
+
+/// A controller file is evaluated at the thermal reference temperature; one
+/// outside the measured range is an extrapolation and is warned.
+#[test]
+fn controller_file_warns_about_a_reference_outside_the_data() {
+    let dir = tmp_dir("export", "tref");
+    let csv = thermal_csv(&dir);
+    let comp = dir.join("x.comp");
+    for (t_ref, warned) in [("20", false), ("25", true)] {
+        let model = dir.join(format!("tref{t_ref}.model.json"));
+        json(&run(&[
+            "fit",
+            s(&csv),
+            "--model",
+            "cubic19",
+            "--add",
+            &format!("thermal:target=ex,channel=bed,times=x,t_ref_c={t_ref}"),
+            "-o",
+            s(&model),
+            "--json",
+        ]));
+        let out = run(&[
+            "export",
+            s(&model),
+            "--format",
+            "linuxcnc",
+            "-o",
+            s(&comp),
+            "--json",
+        ]);
+        let v = json(&out);
+        let w = v["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|w| w["code"] == "thermal_reference_outside_data");
+        assert_eq!(w.is_some(), warned, "t_ref {t_ref}: {v}");
+        if let Some(w) = w {
+            assert!(
+                w["detail"].as_str().unwrap().contains(
+                    "T_bed_C = 25 °C, where the file is evaluated, is outside the 20…21.71 °C"
+                ),
+                "{w}"
+            );
+        }
+    }
+}

@@ -305,6 +305,22 @@ pub fn sample_axis(file: &ModelFile, axis: usize, points: usize) -> Result<AxisS
             ),
         ));
     }
+    // A reference outside the temperatures the data were measured at: the
+    // file holds the model extrapolated there.
+    if let Some(ranges) = &file.data.temp_range_c {
+        for (c, t) in &chans {
+            if let Some(&[lo, hi]) = ranges.get(c) {
+                if *t < lo || *t > hi {
+                    warnings.push(Warning::new(
+                        "thermal_reference_outside_data",
+                        format!(
+                            "T_{c}_C = {t} °C, where the file is evaluated, is outside the {lo}…{hi} °C the data were measured at: the values are the model extrapolated to it — measure at the reference temperature, or fit with t_ref_c inside the measured range"
+                        ),
+                    ));
+                }
+            }
+        }
+    }
     // At least 16 sweep points per table step and 16 per shortest period
     // (so a left-out short wave is seen at its full amplitude), at most
     // about 200 000 points in all.
