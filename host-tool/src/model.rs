@@ -392,6 +392,15 @@ impl ModelFile {
         for (i, a) in self.adds.iter().enumerate() {
             crate::features::Effect::parse(a).map_err(|e| format!("adds[{i}]: {e:#}"))?;
         }
+        // Export's default temperature envelope: a range it cannot use
+        // would fall back to 10…40 °C as if the file were from before it.
+        for (name, [lo, hi]) in self.data.temp_range_c.iter().flatten() {
+            need(
+                lo.is_finite() && hi.is_finite() && lo <= hi,
+                || format!("data.temp_range_c.{name}"),
+                || format!("[{lo}, {hi}], expected finite °C, low ≤ high"),
+            )?;
+        }
         let local_seed = self.seed.ends_with(" --local");
         let kind_ok = match (&self.model, &seed) {
             (FittedModel::Linear(_), crate::fit::Seed::Poly(_)) => !local_seed,

@@ -202,6 +202,11 @@ fn linear_model_fields_are_checked_with_their_json_path() {
         ),
         ("/seed", "cubic91".into(), "seed: unknown model `cubic91`"),
         (
+            "/data/temp_range_c",
+            serde_json::json!({"bed": [25.0, 20.0]}),
+            "data.temp_range_c.bed: [25, 20], expected finite °C, low ≤ high",
+        ),
+        (
             "/seed",
             "nn:8".into(),
             "seed `nn:8` with 1 --add effects does not describe the model of kind `linear`",
@@ -341,9 +346,11 @@ fn nn_grid_and_local_fields_are_checked() {
 
 #[test]
 fn every_kind_fitted_where_only_x_varies_loads() {
-    // A line along x (both directions) without y_mm/z_mm columns: the axes
-    // absent from the data are written as `fit` writes them (norm centre
-    // 0, half span 1; no grid or network axis), and the file must load.
+    // A line along x (both directions) at y = z = 250 mm, and the same data
+    // without y_mm/z_mm columns: the axes not fitted are written as `fit`
+    // writes them (norm half span 0.001 mm at the held position, or centre
+    // 0 and half span 1 when absent; no grid or network axis along them),
+    // and the file must load.
     let dir = tmp_dir("model-file", "line");
     let csv = simulate(&dir, "line.csv", "line:x:5,bidir");
     let text = std::fs::read_to_string(&csv).unwrap();
@@ -363,7 +370,7 @@ fn every_kind_fitted_where_only_x_varies_loads() {
     }
     let xonly = dir.join("xonly.csv");
     std::fs::write(&xonly, out + "\n").unwrap();
-    for data in [&xonly] {
+    for data in [&csv, &xonly] {
         for (i, (spec, extra)) in [
             ("cubic19", &[][..]),
             ("kinematic", &["--add", "reversal:target=ex,axis=x"][..]),
