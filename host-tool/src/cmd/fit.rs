@@ -34,14 +34,14 @@ pub struct Args {
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// Number of hold-out blocks (whole passes or spatial slabs) for the held-out RMS.
-    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u16).range(2..=100))]
+    #[arg(long, default_value_t = 5, allow_negative_numbers = true, value_parser = clap::value_parser!(u16).range(2..=100))]
     pub blocks: u16,
     /// Network training: maximum epochs (nn only; at least 1).
-    #[arg(long, default_value_t = 1000,
+    #[arg(long, default_value_t = 1000, allow_negative_numbers = true,
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
     pub max_epochs: usize,
     /// Network training: RNG seed of the initial weights (nn only).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     pub seed: u64,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]

@@ -17,10 +17,10 @@ pub struct Args {
     #[command(flatten)]
     pub board: BoardPort,
     /// Number of samples (default: until interrupted; 1 with --json).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub count: Option<u64>,
     /// Time between samples, ms.
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = 200, allow_negative_numbers = true)]
     pub interval_ms: u64,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]

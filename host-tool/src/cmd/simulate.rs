@@ -31,25 +31,25 @@ pub struct Args {
     #[arg(long)]
     pub effect: Vec<String>,
     /// Standard deviation of the Gaussian measurement noise, µm.
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = 0.2, allow_negative_numbers = true)]
     pub noise_um: f64,
     /// Seed of the random stream (noise, ISO 230-2 targets).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     pub seed: u64,
     /// Reference point `X,Y,Z` (mm) the machine returns to between passes.
-    #[arg(long = "ref", value_name = "X,Y,Z")]
+    #[arg(long = "ref", value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub reference: Option<String>,
     /// Return to the reference point after every N passes.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     pub ref_every: usize,
     /// Tool length (Abbe arm along the spindle) when no abbe effect varies it, mm.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub tool_mm: f64,
     /// Traverse feed between points, mm/s (sets t_s).
-    #[arg(long, default_value_t = 25.0)]
+    #[arg(long, default_value_t = 25.0, allow_negative_numbers = true)]
     pub feed_mm_s: f64,
     /// Time spent at each point (settle + read), s.
-    #[arg(long, default_value_t = 3.0)]
+    #[arg(long, default_value_t = 3.0, allow_negative_numbers = true)]
     pub dwell_s: f64,
     /// Output CSV.
     #[arg(short, long)]
