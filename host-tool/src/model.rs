@@ -382,9 +382,10 @@ impl ModelFile {
     /// list as long as what it describes, every number finite, spans and
     /// steps positive, the seed and effect strings valid and agreeing with
     /// the model's kind. `Err` names the JSON path of the first bad field
-    /// and what was expected. An axis the data did not vary is written by
-    /// `fit` as centre 0, half span 1 (`Norm`), or left out of a grid's or
-    /// network's axes, so those pass.
+    /// and what was expected. An axis the data did not have is written by
+    /// `fit` as centre 0, half span 1 (`Norm`), one held at one position as
+    /// that position, half span 0.001 mm, and neither is a grid or network
+    /// axis — so those pass.
     pub fn validate(&self) -> std::result::Result<(), String> {
         let seed =
             crate::fit::Seed::parse(self.seed.strip_suffix(" --local").unwrap_or(&self.seed))
@@ -540,7 +541,7 @@ fn check_norm(n: &Norm, at: &str) -> Check {
             || format!("{at}.half_span_mm[{a}]"),
             || {
                 format!(
-                    "{h}, expected a positive number of mm (1 for an axis absent from the data)"
+                    "{h}, expected a positive number of mm (1 for an axis absent from the data, 0.001 for one held at one position)"
                 )
             },
         )?;
