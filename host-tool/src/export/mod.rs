@@ -430,19 +430,28 @@ pub fn max_corr_limit_nm(target: usize, model_max_nm: f64, given_um: Option<f64>
         None => {
             let limit_nm = (1.5 * model_max_nm).max(1000.0);
             if limit_nm > cap * 1000.0 {
-                let m = model_max_nm / 1000.0;
-                let why = if m > cap {
+                // A wildly wrong model (1e300 µm) reads as 1.5e300, not as
+                // 300 digits.
+                let um = |x: f64| {
+                    if x < 1e6 {
+                        format!("{x:.1}")
+                    } else {
+                        format!("{x:.2e}")
+                    }
+                };
+                let m = um(model_max_nm / 1000.0);
+                let why = if model_max_nm / 1000.0 > cap {
                     format!(
-                        "the model's own largest correction ({m:.1} µm) is above it — check the model and the data's units (an error column in nm, a temperature in K) before anything else; --max-corr-um (at most {cap}) would clamp it"
+                        "the model's own largest correction ({m} µm) is above it — check the model and the data's units (an error column in nm, a temperature in K) before anything else; --max-corr-um (at most {cap}) would clamp it"
                     )
                 } else {
                     format!(
-                        "give the limit yourself with --max-corr-um (at most {cap}; at or above the model's {m:.1} µm nothing is clamped)"
+                        "give the limit yourself with --max-corr-um (at most {cap}; at or above the model's {m} µm nothing is clamped)"
                     )
                 };
                 bail!(
-                    "{name}: the default max |correction| {:.1} µm (1.5 × the model's largest correction, {m:.1} µm) exceeds the table's limit of {cap} µm; {why}",
-                    limit_nm / 1000.0
+                    "{name}: the default max |correction| {} µm (1.5 × the model's largest correction, {m} µm) exceeds the table's limit of {cap} µm; {why}",
+                    um(limit_nm / 1000.0)
                 );
             }
             Ok(limit_nm)
@@ -453,4 +462,30 @@ pub fn max_corr_limit_nm(target: usize, model_max_nm: f64, given_um: Option<f64>
 /// Standard CRC-32 (IEEE, as zlib and the table format use), hex `0x…`.
 pub fn crc32_hex(bytes: &[u8]) -> String {
     format!("0x{:08x}", model_core::table::CRC32.checksum(bytes))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_wildly_wrong_model_is_named_in_exponent_form() {
+        // 1e300 µm, as a damaged or mis-scaled model file gives: the
+        // message stays a line, not 300 digits.
+        let e = max_corr_limit_nm(0, 1e303, None).unwrap_err().to_string();
+        assert!(
+            e.contains("default max |correction| 1.50e300 µm") && e.contains("(1.00e300 µm)"),
+            "{e}"
+        );
+        assert!(e.len() < 400, "{e}");
+        // Ordinary sizes keep one decimal.
+        let e = max_corr_limit_nm(1, 3_068_000.0, None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("ey: the default max |correction| 4602.0 µm")
+                && e.contains("largest correction, 3068.0 µm"),
+            "{e}"
+        );
+    }
 }
