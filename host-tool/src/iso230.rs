@@ -132,15 +132,19 @@ fn min(it: impl Iterator<Item = f64>) -> f64 {
 }
 
 /// The axis to evaluate when none is named: the only axis with both a
-/// position and an error column and a direction column.
+/// position and an error column and a direction column whose position
+/// moves (an axis held at one position — y and z of a run along x — has
+/// no targets to evaluate).
 pub fn default_axis(data: &Dataset) -> Result<usize> {
-    let cands: Vec<usize> = (0..3)
-        .filter(|&a| data.pos_mm[a].is_some() && data.err_um[a].is_some() && data.dir[a].is_some())
+    let cands: Vec<usize> = data
+        .varying_axes()
+        .into_iter()
+        .filter(|&a| data.err_um[a].is_some() && data.dir[a].is_some())
         .collect();
     match cands.as_slice() {
         [a] => Ok(*a),
         [] => bail!(
-            "{}: no axis has a position, an error and a direction column (x_mm, ex_um, dir_x); ISO 230-2 needs all three",
+            "{}: no moving axis has a position, an error and a direction column (x_mm, ex_um, dir_x); ISO 230-2 needs all three",
             data.source
         ),
         _ => bail!(

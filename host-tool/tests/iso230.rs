@@ -170,6 +170,33 @@ fn human_table_without_json() {
     assert!(s.contains("A  =   10.743 µm"), "{s}");
 }
 
+/// A run along x at fixed y and z (what `simulate --plan iso230:x`, and a
+/// laser on one axis, writes: all three axes have position, error and
+/// direction columns): x is the axis, without `--axis`. Two moving axes
+/// still need `--axis`.
+#[test]
+fn the_default_axis_is_the_one_that_moves() {
+    let mut text = String::from("x_mm,y_mm,z_mm,ex_um,ey_um,ez_um,dir_x,dir_y,dir_z\n");
+    for (x, e, d) in [
+        (0, 1.0, 1),
+        (100, 3.0, 1),
+        (0, -1.0, -1),
+        (100, 2.0, -1),
+        (0, 2.0, 1),
+        (100, 5.0, 1),
+        (0, 0.0, -1),
+        (100, 2.0, -1),
+    ] {
+        text.push_str(&format!("{x},250,40,{e},0.1,0.2,{d},1,1\n"));
+    }
+    let d = import::read_csv(text.as_bytes(), "line.csv").unwrap();
+    assert_eq!(iso230::default_axis(&d).unwrap(), 0);
+    let moving_y = text.replacen("0,250,40,1,", "0,251,40,1,", 1);
+    let d = import::read_csv(moving_y.as_bytes(), "xy.csv").unwrap();
+    let e = iso230::default_axis(&d).unwrap_err().to_string();
+    assert!(e.contains("several axes could be evaluated (x, y)"), "{e}");
+}
+
 #[test]
 fn one_direction_only_is_bad_input() {
     // Only the forward runs of the worked example.
