@@ -363,15 +363,38 @@ impl ModelFile {
         let path = path.as_ref();
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read model file {}", path.display()))?;
-        let m: ModelFile = serde_json::from_str(&text)
-            .with_context(|| format!("{}: not a trueaxis model file", path.display()))?;
-        if m.format != MODEL_FORMAT {
+        let value: serde_json::Value = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a trueaxis model file (not JSON)", path.display()))?;
+        // Another trueaxis file, or another command's output, given where a
+        // model belongs: say which, not what serde missed in it.
+        let format = value.get("format").and_then(|f| f.as_str());
+        let other = match format {
+            Some(MODEL_FORMAT) => None,
+            Some(crate::history::HISTORY_FORMAT) => Some(
+                "it is a fit history (MODEL.history.json); give the model file next to it"
+                    .to_string(),
+            ),
+            Some(f) if f.starts_with("trueaxis-model/") => bail!(
+                "{}: model format `{f}`, this trueaxis reads `{MODEL_FORMAT}`",
+                path.display()
+            ),
+            Some(f) => Some(format!("its format is `{f}`")),
+            None if value.get("candidates").is_some() => {
+                Some("it looks like the output of `trueaxis diagnose --json`".into())
+            }
+            None if value.get("rms_um").is_some() => {
+                Some("it looks like the output of `trueaxis compare` or `fit --json`".into())
+            }
+            None => Some(format!("no `\"format\": \"{MODEL_FORMAT}\"` field")),
+        };
+        if let Some(why) = other {
             bail!(
-                "{}: model format `{}`, this trueaxis reads `{MODEL_FORMAT}`",
-                path.display(),
-                m.format
+                "{}: not a trueaxis model file: {why} (a model file is what `trueaxis fit -o MODEL.json` writes)",
+                path.display()
             );
         }
+        let m: ModelFile = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a trueaxis model file", path.display()))?;
         m.validate().map_err(|e| {
             anyhow::anyhow!("{}: not a valid trueaxis model file: {e}", path.display())
         })?;

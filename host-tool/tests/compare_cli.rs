@@ -503,7 +503,26 @@ fn bad_input_exits_1_and_usage_exits_2() {
     expect_exit(
         &["compare", s(&csv), "--model", s(&not_model), "--json"],
         1,
-        &[s(&not_model), "not a trueaxis model file"],
+        &[
+            s(&not_model),
+            "not a trueaxis model file: it looks like the output of `trueaxis compare` or `fit --json`",
+        ],
+    );
+    // The fit history beside the model, and diagnose's output: named as
+    // what they are, not as what serde missed in them.
+    let history = dir.join("m.history.json");
+    std::fs::write(&history, r#"{"format": "trueaxis-history/1", "steps": []}"#).unwrap();
+    expect_exit(
+        &["compare", s(&csv), "--model", s(&history)],
+        1,
+        &["it is a fit history (MODEL.history.json)"],
+    );
+    let diagnosis = dir.join("diagnosis.json");
+    std::fs::write(&diagnosis, r#"{"candidates": [], "rms_um": {}}"#).unwrap();
+    expect_exit(
+        &["compare", s(&csv), "--model", s(&diagnosis)],
+        1,
+        &["it looks like the output of `trueaxis diagnose --json`"],
     );
     // A truncated model file.
     let text = std::fs::read_to_string(&model).unwrap();
