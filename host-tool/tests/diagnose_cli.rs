@@ -381,3 +381,21 @@ fn fit_add_accepts_every_familys_add_string_verbatim() {
     assert_eq!(kept, chosen.iter().map(String::as_str).collect::<Vec<_>>());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Too few rows for the seed: exit 1, the file named once ("F: cannot
+/// diagnose: ex has …", not "F: cannot diagnose: F: ex has …").
+#[test]
+fn too_few_rows_name_the_file_once() {
+    let dir = tmp_dir("few");
+    let csv = dir.join("few.csv");
+    std::fs::write(&csv, "x_mm,ex_um\n0,1\n10,2\n20,1.5\n30,2.5\n40,3\n").unwrap();
+    let err = common::expect_exit(
+        &["diagnose", s(&csv), "--model", "cubic19"],
+        1,
+        &[&format!(
+            "{}: cannot diagnose: ex has 5 measured rows, too few for a model with 4 independent terms",
+            s(&csv)
+        )],
+    );
+    assert_eq!(err.matches(s(&csv)).count(), 1, "{err}");
+}

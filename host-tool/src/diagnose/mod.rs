@@ -410,9 +410,10 @@ impl State {
         let n = td.rows.len();
         let basis = Basis::new(&cols, n);
         if n < basis.rank() + 3 {
+            // The caller names the file (`cmd::diagnose`: "DATA: cannot
+            // diagnose: …").
             bail!(
-                "{}: {} has {} measured rows, too few for a model with {} independent terms",
-                td.data.source,
+                "{} has {} measured rows, too few for a model with {} independent terms",
                 TARGETS[td.t],
                 n,
                 basis.rank()
