@@ -653,3 +653,33 @@ fn hand_made_line_shows_the_missing_reversal() {
     close(before, rms(&csv_column(&csv, "ex_um")), "before rms");
     assert!(num(&v["targets"]["ex"]["improvement"], "improvement") > 1e4);
 }
+
+/// Data without a column the model's effect terms need: exit 1, the data
+/// file named with what is missing.
+#[test]
+fn data_lacking_an_effect_input_is_named() {
+    let dir = tmp_dir("compare", "lacking");
+    let csv = simulate_grid(&dir, "grid.csv", 4);
+    let model = dir.join("m.json");
+    json(&run(&[
+        "fit",
+        s(&csv),
+        "--model",
+        "cubic19",
+        "--add",
+        "periodic:target=ey,axis=y,period_mm=7.3",
+        "-o",
+        s(&model),
+        "--json",
+    ]));
+    let xonly = dir.join("xonly.csv");
+    std::fs::write(&xonly, "x_mm,ex_um\n0,1\n100,2\n200,1.5\n300,2.5\n").unwrap();
+    expect_exit(
+        &["compare", s(&xonly), "--model", s(&model)],
+        1,
+        &[&format!(
+            "{}: the model cannot be evaluated on it: periodic term on y: the data has no y_mm column",
+            s(&xonly)
+        )],
+    );
+}

@@ -6,7 +6,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 
 use crate::cmd::input;
 use crate::cmd::out;
@@ -37,7 +37,10 @@ pub fn run_compare(
     model: &ModelFile,
     report: Option<&std::path::Path>,
 ) -> Result<Comparison> {
-    let predicted = model.model.predict(data)?;
+    let predicted = model
+        .model
+        .predict(data)
+        .with_context(|| format!("{}: the model cannot be evaluated on it", data.source))?;
     let held_out = [0, 1, 2].map(|t| {
         model
             .stats
