@@ -29,9 +29,10 @@
 //! **Upload.** `UploadBegin{size, crc32}` → `UploadAck{next_offset}`;
 //! `UploadChunk{offset, data}` (at most [`MAX_CHUNK_BYTES`]) →
 //! `UploadAck{next_offset}`; `Commit` (the board validates the whole table,
-//! writes it to the free flash slot with a higher sequence number and
-//! verifies it) → `Committed`; `Activate` (the running correction switches
-//! to the newest committed table) → `Activated`. `Rollback` revokes the
+//! writes it to the free flash slot with a higher sequence number,
+//! verifies it and runs it) → `Committed`; `Activate` (the running
+//! correction switches to the newest committed table; after a `Commit`
+//! nothing changes) → `Activated`. `Rollback` revokes the
 //! newest slot and goes back to the other one. A `Commit` or `Rollback`
 //! repeated after its answer was lost gets the same answer and writes
 //! nothing (the board remembers the last one until the next upload).
@@ -117,7 +118,7 @@ pub enum Request<'a> {
         #[serde(borrow)]
         data: &'a [u8],
     },
-    /// Validate the uploaded table and write it to the free slot.
+    /// Validate the uploaded table, write it to the free slot and run it.
     Commit,
     /// Switch the running correction to the newest committed table.
     Activate,

@@ -348,7 +348,14 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                 // way the staged upload is spent; a new upload starts from
                 // byte 0, a repeated commit gets the same answer (above).
                 self.upload = None;
-                let info = r.map_err(store_error)?;
+                r.map_err(store_error)?;
+                // The committed table (now the newest) runs at once. Boot runs the newest
+                // table, and the slot not running is the one the next
+                // commit erases: a committed table left waiting for an
+                // `Activate` that a dropped link never delivers would be
+                // started by the next reset or rollback, while the next
+                // upload erased the table actually running.
+                let info = self.activate_newest(engine)?;
                 self.last_done = Some(Done::Committed(info));
                 Response::Committed(info)
             }

@@ -258,6 +258,46 @@ fn a_repeated_commit_gets_the_same_answer() {
     ));
 }
 
+/// A committed table runs at once, without waiting for `Activate`: when
+/// the link drops between the two, the board must not keep a newest table
+/// that does not run — boot and rollback would start it, and the next
+/// commit would erase the slot of the table actually running.
+#[test]
+fn a_commit_runs_its_table_without_waiting_for_activate() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    let (t1, t2, t3) = (sample_table(0), sample_table(1), sample_table(2));
+    install(&mut b, &mut p, &t1);
+    // t2 committed; its Activate never arrives.
+    stage(&mut b, &mut p, 40, &t2, table_id(&t2));
+    let Response::Committed(c2) = call(&mut b, &mut p, 42, Request::Commit) else {
+        panic!("commit refused")
+    };
+    assert_eq!(b.engine().active(), Some(c2));
+    let Response::Identity(id) = call(&mut b, &mut p, 43, Request::Identify) else {
+        panic!()
+    };
+    assert_eq!(id.active, Some(c2));
+    assert_eq!(id.standby.map(|s| s.crc32), Some(table_id(&t1)));
+    // The next commit goes over t1's slot, not over the table that runs.
+    stage(&mut b, &mut p, 44, &t3, table_id(&t3));
+    let Response::Committed(c3) = call(&mut b, &mut p, 46, Request::Commit) else {
+        panic!("commit refused")
+    };
+    assert_ne!(c3.slot, c2.slot);
+    assert_eq!(b.engine().active(), Some(c3));
+    // A late Activate changes nothing; a rollback returns to t2.
+    assert_eq!(
+        call(&mut b, &mut p, 47, Request::Activate),
+        Response::Activated(c3)
+    );
+    let Response::RolledBack(r) = call(&mut b, &mut p, 48, Request::Rollback) else {
+        panic!("rollback refused")
+    };
+    assert_eq!(r, c2);
+    assert_eq!(b.engine().active(), Some(c2));
+}
+
 /// The same for a rollback: its retry after a lost answer gets the same
 /// `RolledBack`, not `NothingToRollBackTo` (the revoked table is gone),
 /// and writes nothing. Once a new upload began, the board has moved on.
