@@ -339,6 +339,47 @@ fn an_upload_whose_commit_answer_is_lost_still_succeeds() {
     assert_eq!(s["active"]["seq"], 1, "written once");
 }
 
+/// Uploading the table that already runs writes nothing: written again it
+/// would fill the other slot too and erase the table a rollback returns to.
+#[test]
+fn uploading_the_running_table_keeps_the_standby() {
+    let board = Board::start();
+    let (t0, t1) = (sample_table(0), sample_table(1));
+    let (p0, p1) = (table_file("aa0", &t0), table_file("aa1", &t1));
+    for p in [&p0, &p1] {
+        let u = json_ok(&[
+            "upload",
+            p.to_str().unwrap(),
+            "--port",
+            &board.port,
+            "--json",
+        ]);
+        assert_eq!(u["already_active"], false);
+    }
+    let u = json_ok(&[
+        "upload",
+        p1.to_str().unwrap(),
+        "--port",
+        &board.port,
+        "--json",
+    ]);
+    assert_eq!(u["already_active"], true);
+    assert_eq!(u["chunks"], 0);
+    assert_eq!(u["active"]["crc32"], crc_hex(&t1));
+    assert_eq!(u["active"]["seq"], 2, "nothing written");
+    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    assert_eq!(s["active"]["seq"], 2);
+    assert_eq!(s["standby"]["crc32"], crc_hex(&t0));
+    let out = trueaxis(&["upload", p1.to_str().unwrap(), "--port", &board.port]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success());
+    assert!(
+        text.contains("already runs on")
+            && text.contains("nothing written, the standby table kept"),
+        "{text}"
+    );
+}
+
 /// `trueaxis rollback`: back to the previous table, refused (exit 1, the
 /// active table kept) when there is none, and complete when the board's
 /// answer is lost on the way back (the retry gets the same answer).

@@ -60,7 +60,16 @@ impl Args {
                     "committed": slot_json(&report.committed),
                     "active": slot_json(&report.activated),
                     "verified": true,
+                    "already_active": report.already_active,
                 })
+            )?;
+        } else if report.already_active {
+            outln!(
+                "{} (CRC {:#010x}) already runs on {}: {}; nothing written, the standby table kept",
+                self.table.display(),
+                report.crc32,
+                self.board.port,
+                slot_text(&report.activated)
             )?;
         } else {
             if report.resumed_at > 0 {
