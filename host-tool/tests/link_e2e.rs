@@ -593,3 +593,26 @@ fn flash_without_a_probe_is_a_clear_error() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("no debug probe attached"), "{err}");
 }
+
+/// The link lost in the middle of an upload (here: the board hangs up at
+/// once): exit 1, and the message says how to find out whether the board
+/// runs the new table already — a lost answer to the last chunk or the
+/// commit leaves that open.
+#[test]
+fn a_lost_link_during_upload_says_how_to_check_the_board() {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = format!("tcp://{}", listener.local_addr().unwrap());
+    let hang_up = std::thread::spawn(move || drop(listener.accept()));
+    let path = table_file("lost", &sample_table(0));
+    let out = trueaxis(&["upload", path.to_str().unwrap(), "--port", &port, "--json"]);
+    hang_up.join().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(out.stdout.is_empty());
+    assert!(
+        err.contains(&format!(
+            "the board may run the new table already: `trueaxis status --port {port}` tells"
+        )),
+        "{err}"
+    );
+}

@@ -8,13 +8,13 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::cmd::input;
 use crate::cmd::out::outln;
 use crate::cmd::BoardPort;
-use crate::link::{slot_json, slot_text};
+use crate::link::{slot_json, slot_text, ClientError};
 
 /// Arguments of `trueaxis upload`.
 #[derive(clap::Args, Debug)]
@@ -41,11 +41,27 @@ impl Args {
             )
         };
         bar.set_message("uploading");
-        let report = client
-            .upload(&bytes, |done, _| bar.set_position(done))
-            .with_context(|| {
-                format!("upload of {} to {}", self.table.display(), self.board.port)
-            })?;
+        let report = match client.upload(&bytes, |done, _| bar.set_position(done)) {
+            Ok(r) => r,
+            Err(e) => {
+                // A link lost after the last chunk may have lost only the
+                // answer: the board commits and runs a table in one step.
+                let lost = matches!(e, ClientError::Io { .. } | ClientError::Timeout { .. });
+                let hint = if lost {
+                    format!(
+                        " (if the link was lost after the last chunk, the board may run the new table already: `trueaxis status --port {}` tells; running this upload again resumes it or finds it running)",
+                        self.board.port
+                    )
+                } else {
+                    String::new()
+                };
+                return Err(anyhow::Error::new(e).context(format!(
+                    "upload of {} to {}{hint}",
+                    self.table.display(),
+                    self.board.port
+                )));
+            }
+        };
         bar.finish_and_clear();
         if self.json {
             outln!(
