@@ -18,7 +18,7 @@ use model_core::link::{
 #[derive(Debug, thiserror::Error)]
 pub enum ClientError {
     /// The port could not be opened.
-    #[error("cannot open {port}: {source}")]
+    #[error("cannot open {port}")]
     Open {
         /// As given.
         port: String,
@@ -26,7 +26,7 @@ pub enum ClientError {
         source: io::Error,
     },
     /// Reading or writing failed.
-    #[error("link I/O on {port}: {source}")]
+    #[error("link I/O on {port}")]
     Io {
         /// As given.
         port: String,
@@ -66,6 +66,10 @@ pub enum ClientError {
     /// The board speaks another protocol or table format.
     #[error("incompatible board: {0}")]
     Incompatible(String),
+    /// A rollback the host refused before sending anything: the board
+    /// holds no second valid table.
+    #[error("nothing to roll back to: the board holds {0}; the active table is unchanged")]
+    NothingToRollBackTo(String),
     /// After activation the board does not report the uploaded table.
     #[error("verification failed: the board reports {got}, expected CRC {want:#010x}")]
     Verify {
@@ -427,12 +431,16 @@ impl Client {
     /// board's answer to an earlier one, which it repeats unchanged.
     pub fn rollback(&mut self) -> Result<RollbackReport, ClientError> {
         let id = self.identify()?;
-        let refused = |error| ClientError::Refused {
-            what: "rollback",
-            error,
+        let (revoked, standby) = match (id.active, id.standby) {
+            (Some(a), Some(s)) => (a, s),
+            (Some(a), None) => {
+                return Err(ClientError::NothingToRollBackTo(format!(
+                    "one valid table ({})",
+                    slot_text(&a)
+                )))
+            }
+            (None, _) => return Err(ClientError::NothingToRollBackTo("no active table".into())),
         };
-        let revoked = id.active.ok_or(refused(LinkError::NothingToRollBackTo))?;
-        let standby = id.standby.ok_or(refused(LinkError::NothingToRollBackTo))?;
         let active = match self.request(&Request::Rollback)? {
             Response::RolledBack(info) => info,
             r => return Err(unexpected("rollback", r)),
@@ -452,6 +460,16 @@ impl Client {
             active,
             retries: self.retries,
         })
+    }
+
+    /// Clears the board's latched faults (`ClearFaults`): the correction
+    /// slews back to the model's; a fault whose cause remains is raised
+    /// again at the next tick.
+    pub fn clear_faults(&mut self) -> Result<(), ClientError> {
+        match self.request(&Request::ClearFaults)? {
+            Response::Ok => Ok(()),
+            r => Err(unexpected("clear faults", r)),
+        }
     }
 }
 

@@ -24,7 +24,7 @@ use model_core::link::{
 use model_core::{parse, Inputs, Model};
 use serde_json::Value;
 use trueaxis::link::{Client, Timing};
-use trueaxis_app::sim::{sample_table, SimBoard};
+use trueaxis_app::sim::{sample_spec, sample_table, SimBoard};
 
 /// A simulated board on a loopback port; stopped on drop.
 struct Board {
@@ -403,7 +403,10 @@ fn rollback_returns_to_the_previous_table_even_when_its_answer_is_lost() {
         assert_eq!(out.status.code(), Some(1), "{err}");
         assert!(out.stdout.is_empty());
         assert!(
-            err.contains(&board.port) && err.contains("no valid table in the other slot"),
+            err.contains(&board.port)
+                && err.contains("nothing to roll back to: the board holds one valid table (slot ")
+                && err.contains("the active table is unchanged")
+                && !err.contains("the board refused"),
             "{err}"
         );
     };
@@ -577,7 +580,144 @@ fn status_without_a_board_fails_with_the_port_named() {
     drop(listener);
     let out = trueaxis(&["status", "--port", &port]);
     assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains(&port));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(&format!("cannot open {port}: ")), "{err}");
+    // The cause once, not `refused (os error 111): refused (os error 111)`.
+    assert_eq!(err.matches("os error").count(), 1, "{err}");
+}
+
+/// A port that is not a board: `tcp:/` (one slash) gets a hint, a file or
+/// /dev/null is "not a serial device" rather than "Not a typewriter" alone.
+#[test]
+fn ports_that_are_not_a_board_are_named_as_such() {
+    let out = trueaxis(&["status", "--port", "tcp:/127.0.0.1:1"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("cannot open tcp:/127.0.0.1:1: a TCP port is written tcp://HOST:PORT"),
+        "{err}"
+    );
+    let file = table_file("not_a_port", b"x_mm,err_um\n");
+    for port in [file.to_str().unwrap(), "/dev/null"] {
+        let out = trueaxis(&["status", "--port", port]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains(&format!("{port} is not a serial device")),
+            "{port}: {err}"
+        );
+    }
+}
+
+/// A closed link is said once (`link I/O on PORT: link closed`).
+#[test]
+fn a_closed_link_is_said_once() {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = format!("tcp://{}", listener.local_addr().unwrap());
+    let t = std::thread::spawn(move || {
+        let (mut c, _) = listener.accept().unwrap();
+        let mut b = [0u8; 64];
+        let _ = c.read(&mut b);
+    });
+    let out = trueaxis(&["status", "--port", &port]);
+    t.join().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&format!("link I/O on {port}: link closed")),
+        "{err}"
+    );
+    assert_eq!(err.matches("link closed").count(), 1, "{err}");
+}
+
+/// A table whose temperature envelope (30-50 °C) excludes the board's
+/// 20 °C: status and monitor name TEMP_OUT_OF_RANGE (bit 4) and show the
+/// temperatures in °C.
+#[test]
+fn status_and_monitor_name_the_model_flags_and_show_temperatures() {
+    let board = Board::start();
+    let mut spec = sample_spec(0);
+    spec.envelope.temp_min_mc = [30_000, 30_000, 0, 0];
+    let table = spec.encode().unwrap();
+    let path = table_file("warm", &table);
+    json_ok(&[
+        "upload",
+        path.to_str().unwrap(),
+        "--port",
+        &board.port,
+        "--json",
+    ]);
+    std::thread::sleep(Duration::from_millis(50));
+    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    let t = &s["telemetry"];
+    assert_eq!(t["model_flags"], 16, "{s}");
+    assert_eq!(
+        t["model_flags_names"],
+        serde_json::json!(["temp_out_of_range"])
+    );
+    assert_eq!(t["temp_mc"][0], 20_000);
+    let out = trueaxis(&["status", "--port", &board.port]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("model flags: temp_out_of_range\n"), "{text}");
+    assert!(text.contains("temperatures:  20.000, 20.000"), "{text}");
+    assert!(text.contains(" °C\n"), "{text}");
+    let m = json_ok(&["monitor", "--port", &board.port, "--json"]);
+    assert_eq!(
+        m["samples"][0]["model_flags_names"],
+        serde_json::json!(["temp_out_of_range"])
+    );
+    let out = trueaxis(&["monitor", "--port", &board.port, "--count", "1"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("model_flags=temp_out_of_range "), "{text}");
+    assert!(text.contains("temps=[20.000, "), "{text}");
+}
+
+/// `status --clear-faults`: the fault latched at boot (no table) is
+/// reported as cleared and is gone from `faults_latched`; text says the
+/// correction resumes.
+#[test]
+fn status_clear_faults_clears_the_latched_faults() {
+    let board = Board::start();
+    let path = table_file("clear", &sample_table(0));
+    json_ok(&[
+        "upload",
+        path.to_str().unwrap(),
+        "--port",
+        &board.port,
+        "--json",
+    ]);
+    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    assert!(s["cleared_faults"].is_null(), "{s}");
+    assert_eq!(s["telemetry"]["faults"], serde_json::json!([]), "{s}");
+    assert_eq!(
+        s["telemetry"]["faults_latched"],
+        serde_json::json!(["no_table"]),
+        "{s}"
+    );
+    let s = json_ok(&["status", "--port", &board.port, "--json", "--clear-faults"]);
+    assert_eq!(s["cleared_faults"], serde_json::json!(["no_table"]), "{s}");
+    assert_eq!(
+        s["telemetry"]["faults_latched"],
+        serde_json::json!([]),
+        "{s}"
+    );
+    let out = trueaxis(&["status", "--port", &board.port, "--clear-faults"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("cleared latched faults: none (the correction slews back"),
+        "{text}"
+    );
+    assert!(text.contains("faults: none (latched: none)"), "{text}");
 }
 
 #[test]

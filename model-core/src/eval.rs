@@ -100,6 +100,25 @@ impl Flags {
     pub const fn out_of_travel(axis: usize) -> Flags {
         Flags(1 << (axis & 3))
     }
+    /// Name of each bit, bit 0 first (`docs/cli.md`, `trueaxis status`).
+    pub const NAMES: [&'static str; 7] = [
+        "out_of_travel_x",
+        "out_of_travel_y",
+        "out_of_travel_z",
+        "clamped",
+        "temp_out_of_range",
+        "not_finite",
+        "tool_out_of_range",
+    ];
+    /// The names of the set bits, bit 0 first (bits without a name are
+    /// left out; compare with [`Flags::bits`] to see them).
+    pub fn names(self) -> impl Iterator<Item = &'static str> {
+        Flags::NAMES
+            .into_iter()
+            .enumerate()
+            .filter(move |(i, _)| self.0 & (1 << i) != 0)
+            .map(|(_, n)| n)
+    }
 }
 
 impl core::ops::BitOr for Flags {
@@ -2104,6 +2123,14 @@ fn grid_cell(ax: &GridAxis, p: i32) -> (usize, i32) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn flag_names_follow_the_bits() {
+        assert!(Flags::from_bits(0x7f).names().eq(Flags::NAMES));
+        let f = Flags::TEMP_OUT_OF_RANGE | Flags::OUT_OF_TRAVEL_Y;
+        assert!(f.names().eq(["out_of_travel_y", "temp_out_of_range"]));
+        assert_eq!(Flags::from_bits(1 << 9).names().count(), 0);
+    }
 
     #[test]
     fn graded_order_and_parents() {

@@ -1,5 +1,6 @@
 //! `trueaxis monitor --port PORT` — live telemetry: one line per sample
-//! (positions, model and output corrections, loop timing, faults). With
+//! (positions, temperatures, model and output corrections, model flags,
+//! loop timing, faults). With
 //! `--json`, the samples are collected and written as one JSON document
 //! (`{"samples": [...]}`) at the end, so `--count` defaults to 1 there.
 
@@ -8,8 +9,7 @@ use std::time::Duration;
 use anyhow::Result;
 
 use crate::cmd::out::outln;
-use crate::cmd::BoardPort;
-use crate::link::telemetry_json;
+use crate::cmd::{model_flag_names, telemetry_json, temps_text, BoardPort};
 
 /// Arguments of `trueaxis monitor`.
 #[derive(clap::Args, Debug)]
@@ -43,11 +43,20 @@ impl Args {
             } else {
                 let faults: Vec<_> = t.faults.names().collect();
                 outln!(
-                    "t={:>10.3}s pos_nm={:?} corr_nm={:?} model_nm={:?} worst_loop_us={} faults={}",
+                    "t={:>10.3}s pos_nm={:?} temps=[{}] corr_nm={:?} model_nm={:?} model_flags={} worst_loop_us={} faults={}",
                     t.uptime_us as f64 / 1e6,
                     t.pos_nm,
+                    temps_text(&t.temp_mc),
                     t.corr_nm,
                     t.model_corr_nm,
+                    {
+                        let f = model_flag_names(t.model_flags);
+                        if f.is_empty() {
+                            "none".into()
+                        } else {
+                            f.join(",")
+                        }
+                    },
                     t.worst_loop_us,
                     if faults.is_empty() {
                         "none".into()

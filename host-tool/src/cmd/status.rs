@@ -1,12 +1,14 @@
 //! `trueaxis status --port PORT` — the board's identity (firmware,
 //! protocol and table-format versions, active and standby tables) and its
-//! telemetry (positions, corrections, loop timing, faults).
+//! telemetry (positions, temperatures, corrections, model flags, loop
+//! timing, faults). `--clear-faults` first clears the board's latched
+//! faults (`ClearFaults`), then reports.
 
 use anyhow::Result;
 
 use crate::cmd::out::outln;
-use crate::cmd::BoardPort;
-use crate::link::{slot_json, slot_text, telemetry_json};
+use crate::cmd::{model_flag_names, names_or_none, telemetry_json, temps_text, BoardPort};
+use crate::link::{slot_json, slot_text};
 
 /// Arguments of `trueaxis status`.
 #[derive(clap::Args, Debug)]
@@ -16,12 +18,24 @@ pub struct Args {
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Clear the board's latched faults first (the correction slews back
+    /// to the model's; a fault whose cause remains comes back at the next
+    /// tick), then report.
+    #[arg(long)]
+    pub clear_faults: bool,
 }
 
 impl Args {
     pub fn run(self) -> Result<()> {
         let mut client = self.board.open()?;
         let id = client.identify()?;
+        let cleared = if self.clear_faults {
+            let before = client.status()?;
+            client.clear_faults()?;
+            Some(before.faults_latched.names().collect::<Vec<_>>())
+        } else {
+            None
+        };
         let t = client.status()?;
         let fw = format!("{}.{}.{}", id.firmware[0], id.firmware[1], id.firmware[2]);
         if self.json {
@@ -36,6 +50,7 @@ impl Args {
                     "active": id.active.as_ref().map(slot_json),
                     "standby": id.standby.as_ref().map(slot_json),
                     "telemetry": telemetry_json(&t),
+                    "cleared_faults": cleared,
                 })
             )?;
             return Ok(());
@@ -49,6 +64,12 @@ impl Args {
         match &id.active {
             Some(a) => outln!("active table:  {}", slot_text(a))?,
             None => outln!("active table:  none (correction held at zero)")?,
+        }
+        if let Some(c) = &cleared {
+            outln!(
+                "cleared latched faults: {} (the correction slews back to the model's; a fault whose cause remains comes back at the next tick)",
+                names_or_none(c)
+            )?;
         }
         if let Some(s) = &id.standby {
             outln!("standby table: {} (rollback target)", slot_text(s))?;
@@ -66,25 +87,22 @@ impl Args {
             t.pos_nm,
             if t.injecting { " (injected)" } else { "" }
         )?;
+        outln!("temperatures:  {}", temps_text(&t.temp_mc))?;
         outln!(
             "correction nm: {:?} (model {:?})",
             t.corr_nm,
             t.model_corr_nm
         )?;
+        outln!(
+            "model flags: {}",
+            names_or_none(&model_flag_names(t.model_flags))
+        )?;
         let faults: Vec<_> = t.faults.names().collect();
         let latched: Vec<_> = t.faults_latched.names().collect();
         outln!(
             "faults: {} (latched: {})",
-            if faults.is_empty() {
-                "none".into()
-            } else {
-                faults.join(", ")
-            },
-            if latched.is_empty() {
-                "none".into()
-            } else {
-                latched.join(", ")
-            }
+            names_or_none(&faults),
+            names_or_none(&latched)
         )?;
         Ok(())
     }
