@@ -324,23 +324,7 @@ pub fn sample_axis(file: &ModelFile, axis: usize, points: usize) -> Result<AxisS
     // At least 16 sweep points per table step and 16 per shortest period
     // (so a left-out short wave is seen at its full amplitude), at most
     // about 200 000 points in all.
-    let shortest_mm = match &file.model {
-        FittedModel::Linear(m) => m
-            .outputs
-            .iter()
-            .flat_map(|o| &o.features)
-            .filter_map(|f| match f {
-                Feature::Periodic {
-                    axis: a,
-                    period_mm,
-                    harmonic,
-                    ..
-                } if *a == axis => Some(period_mm / f64::from(*harmonic)),
-                _ => None,
-            })
-            .fold(f64::INFINITY, f64::min),
-        _ => f64::INFINITY,
-    };
+    let shortest_mm = table::shortest_period_mm(&file.model, axis).unwrap_or(f64::INFINITY);
     let fine =
         ((16.0 * step / shortest_mm).ceil() as usize).clamp(16, (100_000 / (points - 1)).max(16));
     let n_fine = (points - 1) * fine + 1;

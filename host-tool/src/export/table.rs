@@ -551,7 +551,7 @@ fn has(model: &FittedModel, pred: impl Fn(&Feature) -> bool) -> bool {
 }
 
 /// Shortest period on `axis` among the model's periodic terms, mm.
-fn shortest_period_mm(model: &FittedModel, axis: usize) -> Option<f64> {
+pub(super) fn shortest_period_mm(model: &FittedModel, axis: usize) -> Option<f64> {
     let FittedModel::Linear(m) = model else {
         return None;
     };
