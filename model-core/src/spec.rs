@@ -348,6 +348,14 @@ impl TableSpec {
                     if m.hidden.is_empty() || m.hidden.len() > table::MAX_HIDDEN_LAYERS {
                         return Err(shape("an MLP needs 1 or 2 hidden layers"));
                     }
+                    if m.hidden
+                        .iter()
+                        .any(|l| l.bias.len() > table::MAX_HIDDEN_UNITS)
+                    {
+                        return Err(shape(
+                            "an MLP hidden layer holds at most 32 units (the table format's and the firmware's limit): fit a smaller network",
+                        ));
+                    }
                     if m.out_min_nm.len() != n_out || m.out_max_nm.len() != n_out {
                         return Err(shape("output scaling length differs from the output count"));
                     }

@@ -661,3 +661,33 @@ fn golden_tables_decode_to_their_specs() {
         assert_eq!(back.eval_f64(&inp), spec.eval_f64(&inp), "{name}");
     }
 }
+
+/// A hidden layer wider than the format's 32 units is refused by `encode`
+/// with what the limit is, not by the parse of the bytes it wrote ("term
+/// field at offset … out of range").
+#[test]
+fn an_mlp_wider_than_32_units_is_refused_at_encode() {
+    use model_core::{EncodeError, TermSpec};
+    let (_, mut spec) = golden_specs()
+        .into_iter()
+        .find(|(_, s)| s.terms.iter().any(|t| matches!(t, TermSpec::Mlp(_))))
+        .expect("a golden spec with an MLP");
+    let m = spec
+        .terms
+        .iter_mut()
+        .find_map(|t| match t {
+            TermSpec::Mlp(m) => Some(m),
+            _ => None,
+        })
+        .unwrap();
+    let (n_in, units) = (m.inputs.len(), 33);
+    m.hidden[0].weights = vec![0.01; units * n_in];
+    m.hidden[0].bias = vec![0.0; units];
+    let next = m.hidden.get_mut(1).unwrap_or(&mut m.output);
+    next.weights = vec![0.01; next.bias.len() * units];
+    let e = spec.encode().unwrap_err();
+    assert!(
+        matches!(e, EncodeError::Shape { what, .. } if what.contains("at most 32 units")),
+        "{e:?}"
+    );
+}
