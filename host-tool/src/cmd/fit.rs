@@ -58,6 +58,18 @@ pub fn default_model_path(data: &std::path::Path) -> PathBuf {
     data.with_file_name(name)
 }
 
+/// Where `fit` and `improve` write the model (`-o`, else
+/// [`default_model_path`]), refused when it or its history file is the
+/// data file.
+pub fn model_output(data: &std::path::Path, output: Option<PathBuf>) -> Result<PathBuf> {
+    let out = output.unwrap_or_else(|| default_model_path(data));
+    input::refuse_overwrite(
+        &[("the data file", data)],
+        &[("-o", &out), ("the history file", &history_path(&out))],
+    )?;
+    Ok(out)
+}
+
 impl Args {
     pub fn run(self) -> Result<()> {
         // Parse everything that can be wrong with the command before reading data.
@@ -67,14 +79,7 @@ impl Args {
             .iter()
             .map(|s| Effect::parse(s))
             .collect::<Result<Vec<_>>>()?;
-        let out = self
-            .output
-            .clone()
-            .unwrap_or_else(|| default_model_path(&self.data));
-        input::refuse_overwrite(
-            &[("the data file", &self.data)],
-            &[("-o", &out), ("the history file", &history_path(&out))],
-        )?;
+        let out = model_output(&self.data, self.output.clone())?;
         let data = input::load_data(&self.data, None)?;
         let opts = FitOptions {
             blocks: usize::from(self.blocks),

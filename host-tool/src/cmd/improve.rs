@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use serde::Serialize;
 
-use crate::cmd::fit::default_model_path;
+use crate::cmd::fit::model_output;
 use crate::cmd::input;
 use crate::cmd::out::{self, outln};
 use crate::data::Dataset;
@@ -323,17 +323,7 @@ impl Args {
                 "improve starts from a seed (cubic19 or kinematic), not from a model with effects"
             );
         }
-        let out = self
-            .output
-            .clone()
-            .unwrap_or_else(|| default_model_path(&self.data));
-        input::refuse_overwrite(
-            &[("the data file", &self.data)],
-            &[
-                ("-o", &out),
-                ("the history file", &history::history_path(&out)),
-            ],
-        )?;
+        let out = model_output(&self.data, self.output.clone())?;
         let data = input::load_data(&self.data, None)?;
         let warnings: Vec<diagnose::Warning> = input::aux_warnings(&data)
             .into_iter()
