@@ -21,5 +21,5 @@ if [ ! -x "$VENV/bin/python" ]; then
   "$VENV/bin/pip" install --quiet numpy scikit-learn pysindy
 fi
 rm -rf "$OUT" && mkdir -p "$OUT"
-cargo run --quiet --release -p trueaxis --example diagnose_montecarlo -- --trials "$TRIALS" --out "$OUT"
+cargo run --quiet --release -p trueaxis-engine --example diagnose_montecarlo -- --trials "$TRIALS" --out "$OUT"
 "$VENV/bin/python" "$HERE/peers.py" "$OUT"

@@ -20,6 +20,6 @@ fi
 out=${OUT_DIR:-$root/out/nn_vs_sklearn}
 mkdir -p "$out"
 cd "$root"
-cargo run --quiet --release -p trueaxis --example lm_bench -- "$out" "$seed" 16 6 1000 ${2:-} > "$out/lm.jsonl"
+cargo run --quiet --release -p trueaxis-engine --example lm_bench -- "$out" "$seed" 16 6 1000 ${2:-} > "$out/lm.jsonl"
 "$venv/bin/python" "$here/compare.py" "$out" "$seed"
 "$venv/bin/python" -c "import sklearn, numpy, platform; print('python', platform.python_version(), 'numpy', numpy.__version__, 'scikit-learn', sklearn.__version__)"

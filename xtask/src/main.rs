@@ -293,7 +293,7 @@ fn test(args: &[String]) -> Result<()> {
         ],
     )?;
 
-    // Host tests (model-core, host-tool, xtask).
+    // Host tests (model-core, the host engine and CLI, xtask).
     run(&root, "cargo", &["test", "--workspace"])?;
 
     // model-core must stay no_std: build and lint it for the MCU.

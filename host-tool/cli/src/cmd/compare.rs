@@ -1,0 +1,163 @@
+//! `trueaxis compare` — how well does a fitted model match measurements, and
+//! where does it fail? Statistics per target, worst regions, residual
+//! against every axis and channel (`trueaxis_engine::compare`), an optional HTML
+//! report, and a warning when the data are not the data the model was
+//! fitted to.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+
+use crate::cmd::input;
+use crate::cmd::out;
+use trueaxis_engine::compare::{self, Comparison, Warning};
+use trueaxis_engine::data::Dataset;
+use trueaxis_engine::model::ModelFile;
+
+/// Arguments of `trueaxis compare`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Measurement data (.csv or .rtl).
+    pub data: PathBuf,
+    /// The fitted model (MODEL.json written by `trueaxis fit`).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Write an HTML report with SVG plots to this directory (index.html).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Write one JSON document to stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs the comparison of `data` with `model` (and writes the report when
+/// `report` is given). The building block `compare` and `demo` share.
+pub fn run_compare(
+    data: &Dataset,
+    model: &ModelFile,
+    report: Option<&std::path::Path>,
+) -> Result<Comparison> {
+    let predicted = model
+        .model
+        .predict(data)
+        .with_context(|| format!("{}: the model cannot be evaluated on it", data.source))?;
+    let held_out = [0, 1, 2].map(|t| {
+        model
+            .stats
+            .held_out_rms_um
+            .get(trueaxis_engine::data::TARGETS[t])
+            .copied()
+    });
+    let mut c = compare::compare(data, &model.spec(), &predicted, held_out);
+    let hash = data.content_hash();
+    if !model.data.sha256.is_empty() && hash != model.data.sha256 {
+        c.warnings.push(Warning {
+            code: "data_hash_mismatch".into(),
+            detail: format!(
+                "the data ({}, sha256 {}…) are not the data the model was fitted to ({}, sha256 {}…): the statistics describe a validation, not the fit",
+                data.source,
+                &hash[..12.min(hash.len())],
+                model.data.source,
+                &model.data.sha256[..12.min(model.data.sha256.len())]
+            ),
+        });
+    }
+    if let Some(dir) = report {
+        let index = crate::report::compare::write_report(dir, data, &predicted, &c)?;
+        c.report = Some(index.display().to_string());
+    }
+    Ok(c)
+}
+
+/// The comparison as readable text.
+pub fn text(c: &Comparison) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let _ = writeln!(s, "{} vs {} ({} rows)", c.data, c.model, c.rows);
+    let _ = writeln!(
+        s,
+        "{:<6} {:>7} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "target",
+        "points",
+        "before µm",
+        "RMS µm",
+        "held-out",
+        "max|e| µm",
+        "PV µm",
+        "p95 µm",
+        "better"
+    );
+    for (name, r) in &c.targets {
+        let _ = writeln!(
+            s,
+            "{:<6} {:>7} {:>10.3} {:>10.3} {:>10} {:>10.3} {:>10.3} {:>10.3} {:>9.1}×",
+            name,
+            r.after.points,
+            r.before.rms_um,
+            r.after.rms_um,
+            r.held_out_rms_um
+                .map_or("—".to_string(), |v| format!("{v:.3}")),
+            r.after.max_abs_um,
+            r.after.pv_um,
+            r.after.p95_abs_um,
+            r.improvement
+        );
+    }
+    if !c.worst_regions.is_empty() {
+        let _ = writeln!(s, "worst regions:");
+        for r in &c.worst_regions {
+            let bbox = compare::bbox_text(&r.bbox_mm);
+            let _ = writeln!(
+                s,
+                "  {} {bbox}: RMS {:.3} µm ({:.2}× the overall), {:.0} % of the squared residual",
+                r.target,
+                r.rms_um,
+                r.ratio,
+                100.0 * r.share
+            );
+        }
+    }
+    let strong: Vec<_> = c
+        .channels
+        .iter()
+        .filter(|p| p.corr.is_some_and(|r| r.abs() >= 0.3))
+        .collect();
+    if !strong.is_empty() {
+        let _ = writeln!(s, "residual correlated with a channel (|r| ≥ 0.3):");
+        for p in strong {
+            let _ = writeln!(
+                s,
+                "  {} vs {}: r = {:+.2}, slope {:+.4} µm per unit",
+                p.target,
+                p.channel,
+                p.corr.unwrap_or(0.0),
+                p.slope_um_per_unit.unwrap_or(0.0)
+            );
+        }
+    }
+    for w in &c.warnings {
+        let _ = writeln!(s, "warning ({}): {}", w.code, w.detail);
+    }
+    if let Some(r) = &c.report {
+        let _ = writeln!(s, "report: {r}");
+    }
+    s
+}
+
+impl Args {
+    pub fn run(self) -> Result<()> {
+        let data = input::load_data(&self.data, None)?;
+        let model = ModelFile::load(&self.model)?;
+        let c = run_compare(&data, &model, self.report.as_deref())?;
+        if self.json {
+            // In the JSON too, but also on stderr so a script's log shows them.
+            for w in &c.warnings {
+                eprintln!("warning ({}): {}", w.code, w.detail);
+            }
+            out::json(&c)?;
+        } else {
+            out::print(&text(&c))?;
+        }
+        Ok(())
+    }
+}

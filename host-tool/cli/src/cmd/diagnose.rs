@@ -1,0 +1,215 @@
+//! `trueaxis diagnose DATA --model SPEC|MODEL.json [--add EFFECT]…
+//! [--report DIR] [--json]`: where the model fails and which physical
+//! effect it is missing (the work is in `trueaxis_engine::diagnose`). With `--json`
+//! one document in the shape of docs/cli.md; otherwise a readable
+//! summary that ends with the `fit --add` command to run next.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+
+use crate::cmd::input;
+use crate::cmd::out::{self, outln};
+use trueaxis_engine::diagnose::{self, Diagnosis, Options, Verdict};
+use trueaxis_engine::features::Effect;
+use trueaxis_engine::model::ModelFile;
+
+/// Arguments of `trueaxis diagnose`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The measurement file (contract CSV or Renishaw .rtl).
+    pub data: PathBuf,
+    /// Seed spec (cubic19, kinematic) or a MODEL.json written by `fit`
+    /// (its seed and added effects are used).
+    #[arg(long)]
+    pub model: String,
+    /// An effect already in the model (`fit --add` syntax); repeatable.
+    #[arg(long = "add", value_name = "EFFECT")]
+    pub add: Vec<String>,
+    /// Write the evidence plots (SVG) and an index.html into this directory.
+    #[arg(long, value_name = "DIR")]
+    pub report: Option<PathBuf>,
+    /// Write one JSON document to stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Seed and effects of `--model`: a seed spec, or the `seed` and `adds` of
+/// a MODEL.json. Only linear seeds can be diagnosed: the candidates are
+/// scored by partialling the model's columns out of theirs.
+pub fn model_spec(model: &str) -> Result<(String, Vec<String>)> {
+    let (seed, adds) = if model.ends_with(".json") || Path::new(model).is_file() {
+        // Read and checked as every command reads a MODEL.json: a damaged
+        // file is refused here too, not half-used.
+        let m = ModelFile::load(model)?;
+        (m.seed, m.adds)
+    } else {
+        (model.to_string(), Vec::new())
+    };
+    if seed != "cubic19" && seed != "kinematic" {
+        bail!(
+            "diagnose works on linear seeds (cubic19, kinematic); the model is `{seed}` — fit a cubic19 or kinematic model to find missing effects"
+        );
+    }
+    Ok((seed, adds))
+}
+
+impl Args {
+    pub fn run(self) -> Result<()> {
+        let (seed, mut adds) = model_spec(&self.model)?;
+        for a in &self.add {
+            let e = Effect::parse(a)?;
+            if !adds.contains(&e.spec) {
+                adds.push(e.spec);
+            }
+        }
+        let data = input::load_data(&self.data, None)?;
+        let mut d = diagnose::diagnose(
+            &data,
+            &Options {
+                seed,
+                adds,
+                follow_path: true,
+            },
+        )
+        .with_context(|| format!("{}: cannot diagnose", self.data.display()))?;
+        for (code, detail) in input::aux_warnings(&data) {
+            d.warnings.push(diagnose::Warning {
+                code: code.into(),
+                detail,
+            });
+        }
+        if let Some(dir) = &self.report {
+            // A model file's history (MODEL.history.json beside it), when
+            // there is one: the report then shows the error falling too.
+            let model_path = Path::new(&self.model);
+            let history = model_path
+                .is_file()
+                .then(|| trueaxis_engine::history::load(model_path).ok())
+                .flatten();
+            let index =
+                crate::report::diagnose::write_with_history(&d, &data, dir, history.as_ref())?;
+            if !self.json {
+                outln!("report: {}", index.display())?;
+            }
+        }
+        if self.json {
+            let mut doc = serde_json::to_value(&d)?;
+            input::add_skipped_count(&mut doc, &data);
+            out::json_pretty(&doc)?;
+        } else {
+            crate::cmd::out::print(&text(&d, &self.data))?;
+        }
+        Ok(())
+    }
+}
+
+/// The human summary.
+pub fn text(d: &Diagnosis, data_path: &Path) -> String {
+    let mut s = String::new();
+    s.push_str(&format!(
+        "{}: model {} (hold-out: {})\n",
+        data_path.display(),
+        d.model,
+        d.hold_out
+    ));
+    s.push_str(&format!(
+        "  {:<6} {:>10} {:>16} {:>14}\n",
+        "target", "rms µm", "held-out rms µm", "noise floor µm"
+    ));
+    for (t, rms) in &d.rms_um {
+        let nf = d
+            .noise_floor_um
+            .get(t)
+            .copied()
+            .flatten()
+            .map_or("—".to_string(), |v| format!("{v:.4}"));
+        s.push_str(&format!(
+            "  {:<6} {:>10.4} {:>16.4} {:>14}\n",
+            t,
+            rms,
+            d.held_out_rms_um.get(t).copied().unwrap_or(f64::NAN),
+            nf
+        ));
+    }
+    match d.verdict {
+        Verdict::MissingEffect => s.push_str("verdict: missing_effect\n"),
+        Verdict::AtNoiseFloor => {
+            s.push_str("verdict: at_noise_floor — no candidate is significant\n")
+        }
+    }
+    s.push_str("candidates (best first):\n");
+    for (i, c) in d
+        .candidates
+        .iter()
+        .filter(|c| c.identifiable)
+        .take(8)
+        .enumerate()
+    {
+        s.push_str(&format!(
+            "  {}. {}{}\n     {}\n",
+            i + 1,
+            match c.step {
+                Some(k) => format!("[path step {k}] "),
+                None if c.significant => "[significant] ".into(),
+                None => String::new(),
+            },
+            match &c.replaces {
+                Some(old) => format!("{} (replacing {old})", c.add),
+                None => c.add.clone(),
+            },
+            c.evidence
+        ));
+    }
+    if !d.path.is_empty() {
+        s.push_str("path (BIC-ordered, until the held-out RMS stops improving):\n");
+        for p in &d.path {
+            s.push_str(&format!(
+                "  {} + {}: rms {:.4} µm, held-out {:.4} µm\n",
+                p.target, p.add, p.rms_um, p.held_out_rms_um
+            ));
+        }
+    }
+    if !d.worst_regions.is_empty() {
+        s.push_str("worst regions:\n");
+        for r in &d.worst_regions {
+            let bbox: Vec<String> = r
+                .bbox_mm
+                .iter()
+                .map(|(a, [lo, hi])| format!("{a} {lo:.0}…{hi:.0}"))
+                .collect();
+            s.push_str(&format!(
+                "  {} {}: rms {:.3} µm ({} points)\n",
+                r.target,
+                bbox.join(", "),
+                r.rms_um,
+                r.points
+            ));
+        }
+    }
+    if !d.warnings.is_empty() {
+        s.push_str("warnings:\n");
+        for w in &d.warnings {
+            s.push_str(&format!("  [{}] {}\n", w.code, w.detail));
+        }
+    }
+    if !d.path.is_empty() {
+        let mut cmd = format!(
+            "trueaxis fit {} --model {}",
+            data_path.display(),
+            d.model.split(" + ").next().unwrap_or("cubic19")
+        );
+        // Every effect the path found, in order; one that replaces an effect
+        // of the model (the same effect with another lag, period, order or
+        // degree) takes its place.
+        let mut adds: Vec<String> = d.model.split(" + ").skip(1).map(String::from).collect();
+        for p in &d.path {
+            diagnose::swap_in(&mut adds, &p.add, p.replaces.as_deref());
+        }
+        for a in adds {
+            cmd.push_str(&format!(" --add '{a}'"));
+        }
+        s.push_str(&format!("next: {cmd}\n"));
+    }
+    s
+}

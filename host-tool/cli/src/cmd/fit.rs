@@ -1,0 +1,154 @@
+//! `trueaxis fit` — fit a compensation model to measurements and write
+//! MODEL.json. The work is in `trueaxis_engine::fit`; this file maps the command line
+//! onto it and prints the result (text, or docs/cli.md's JSON with `--json`).
+//! Warnings (ill-conditioning, unmeasured grid nodes, epoch limit) go to
+//! stderr in both modes and into the JSON's `warnings`.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+
+use crate::cmd::input;
+use crate::cmd::out::{self, outln};
+use trueaxis_engine::features::Effect;
+use trueaxis_engine::fit::{self, nn::NnOptions, FitOptions};
+use trueaxis_engine::history::history_path;
+
+/// Arguments of `trueaxis fit`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The measurement file (contract CSV or Renishaw .rtl).
+    pub data: PathBuf,
+    /// Model spec: cubic19, kinematic, nn:<hidden> or grid:<step_mm>.
+    #[arg(long)]
+    pub model: String,
+    /// Add a physical effect (`periodic:target=ey,axis=y,period_mm=5`, as
+    /// printed by `diagnose`); repeatable.
+    #[arg(long = "add", value_name = "EFFECT")]
+    pub add: Vec<String>,
+    /// Fit the seed's local polynomials (cuboid between measured planes,
+    /// plane, or line) instead of one global polynomial.
+    #[arg(long)]
+    pub local: bool,
+    /// Where to write the model (default: `<data>.model.json` beside the data).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Number of hold-out blocks (whole passes or spatial slabs) for the held-out RMS.
+    #[arg(long, default_value_t = 5, allow_negative_numbers = true, value_parser = clap::value_parser!(u16).range(2..=100))]
+    pub blocks: u16,
+    /// Network training: maximum epochs (nn only; at least 1).
+    #[arg(long, default_value_t = 1000, allow_negative_numbers = true,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    pub max_epochs: usize,
+    /// Network training: RNG seed of the initial weights (nn only).
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
+    pub seed: u64,
+    /// Write one JSON document to stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `<data>.model.json` beside the data file.
+pub fn default_model_path(data: &std::path::Path) -> PathBuf {
+    let mut name = data
+        .file_name()
+        .map(|n| n.to_os_string())
+        .unwrap_or_default();
+    name.push(".model.json");
+    data.with_file_name(name)
+}
+
+/// Where `fit` and `improve` write the model (`-o`, else
+/// [`default_model_path`]), refused when it or its history file is the
+/// data file.
+pub fn model_output(data: &std::path::Path, output: Option<PathBuf>) -> Result<PathBuf> {
+    let out = output.unwrap_or_else(|| default_model_path(data));
+    input::refuse_overwrite(
+        &[("the data file", data)],
+        &[("-o", &out), ("the history file", &history_path(&out))],
+    )?;
+    Ok(out)
+}
+
+impl Args {
+    pub fn run(self) -> Result<()> {
+        // Parse everything that can be wrong with the command before reading data.
+        fit::Seed::parse(&self.model)?;
+        let adds = self
+            .add
+            .iter()
+            .map(|s| Effect::parse(s))
+            .collect::<Result<Vec<_>>>()?;
+        let out = model_output(&self.data, self.output.clone())?;
+        let data = input::load_data(&self.data, None)?;
+        let opts = FitOptions {
+            blocks: usize::from(self.blocks),
+            local: self.local,
+            nn: NnOptions {
+                max_epochs: self.max_epochs,
+                seed: self.seed,
+                ..NnOptions::default()
+            },
+            progress: crate::cmd::progress::bar(!self.json),
+        };
+        // The fit's own messages name the target (`ex: 3 distinct points
+        // but the model has 4 terms`); the file is named here.
+        let mut model = fit::fit(&data, &self.model, &adds, &opts)
+            .with_context(|| format!("{}: cannot fit {}", self.data.display(), self.model))?;
+        // Fit's warnings are strings (MODEL.json `stats.warnings`); the
+        // code leads, as `warning (code): …` elsewhere.
+        for (code, detail) in input::aux_warnings(&data) {
+            model.stats.warnings.push(format!("{code}: {detail}"));
+        }
+        trueaxis_engine::history::save_with_model(&out, &model)?;
+        for w in &model.stats.warnings {
+            eprintln!("warning: {w}");
+        }
+        if self.json {
+            let mut doc = model.summary_json(Some(&out));
+            input::add_skipped_count(&mut doc, &data);
+            out::json(&doc)?;
+            return Ok(());
+        }
+        let s = &model.stats;
+        outln!(
+            "{}: {} on {} rows, {} terms per target",
+            self.data.display(),
+            model.spec(),
+            data.len(),
+            s.terms
+        )?;
+        outln!(
+            "  {:<4} {:>7} {:>12} {:>16} {:>12} {:>10}",
+            "",
+            "rows",
+            "rms µm",
+            "held-out rms µm",
+            "max |e| µm",
+            "cond"
+        )?;
+        for (t, rms) in &s.rms_um {
+            let opt = |m: &std::collections::BTreeMap<String, f64>, prec: usize| {
+                m.get(t).map_or("—".to_string(), |v| {
+                    if prec == 0 {
+                        format!("{v:.2e}")
+                    } else {
+                        format!("{v:.prec$}")
+                    }
+                })
+            };
+            outln!(
+                "  {:<4} {:>7} {:>12.4} {:>16} {:>12.4} {:>10}",
+                t,
+                s.rows.get(t).copied().unwrap_or(0),
+                rms,
+                opt(&s.held_out_rms_um, 4),
+                s.max_abs_um.get(t).copied().unwrap_or(0.0),
+                opt(&s.condition_number, 0),
+            )?;
+        }
+        outln!("  hold-out: {}", s.holdout)?;
+        outln!("  model written to {}", out.display())?;
+        Ok(())
+    }
+}

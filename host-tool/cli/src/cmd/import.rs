@@ -1,0 +1,90 @@
+//! `trueaxis import` — validate a measurement file (Renishaw .rtl or the
+//! contract CSV) and write it as the trueaxis CSV (docs/cli.md § Measurement CSV). Bad input
+//! exits 1 with `file:line:column: what was expected`; rows left out are
+//! listed, never dropped silently.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use serde_json::json;
+
+use crate::cmd::out::outln;
+use trueaxis_engine::data::AXES;
+use trueaxis_engine::import;
+
+/// Arguments of `trueaxis import`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The measurement file: `.rtl` (Renishaw linear laser) or `.csv`.
+    pub file: PathBuf,
+    /// Where to write the contract CSV (omit to only validate).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Axis of an .rtl file whose USER-TEXT:: has no `Axis:` line (x, y, z).
+    #[arg(long, value_parser = ["x", "y", "z"])]
+    pub axis: Option<String>,
+    /// Write one JSON document to stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl Args {
+    pub fn run(self) -> Result<()> {
+        let axis = self
+            .axis
+            .as_deref()
+            .and_then(|a| AXES.iter().position(|x| *x == a));
+        if let Some(out) = &self.output {
+            crate::cmd::input::refuse_overwrite(&[("the input file", &self.file)], &[("-o", out)])?;
+        }
+        let data = import::load_with_axis(&self.file, axis)?;
+        if let Some(out) = &self.output {
+            let f = std::fs::File::create(out)
+                .with_context(|| format!("cannot create {}", out.display()))?;
+            let mut w = std::io::BufWriter::new(f);
+            import::write_csv(&data, &mut w)?;
+            w.flush()
+                .with_context(|| format!("cannot write {}", out.display()))?;
+        }
+        let columns = import::column_names(&data);
+        if self.json {
+            let doc = json!({
+                "input": self.file.display().to_string(),
+                "output": self.output.as_ref().map(|p| p.display().to_string()),
+                "rows": data.len(),
+                "columns": columns,
+                "aux": data.aux.iter().map(|c| c.name.clone()).collect::<Vec<_>>(),
+                "metadata": data.metadata.iter().map(|(k, v)| json!({"key": k, "value": v})).collect::<Vec<_>>(),
+                "skipped_count": data.skipped.len(),
+                "skipped": data.skipped.iter().map(|s| json!({"line": s.line, "reason": s.reason})).collect::<Vec<_>>(),
+                "sha256": data.content_hash(),
+            });
+            outln!("{doc}")?;
+        } else {
+            outln!(
+                "{}: {} rows, columns {}",
+                self.file.display(),
+                data.len(),
+                columns.join(", ")
+            )?;
+            for (k, v) in &data.metadata {
+                outln!("  # {k}: {v}")?;
+            }
+            if !data.aux.is_empty() {
+                let names: Vec<&str> = data.aux.iter().map(|c| c.name.as_str()).collect();
+                outln!("  auxiliary channels kept: {}", names.join(", "))?;
+            }
+            if !data.skipped.is_empty() {
+                outln!("  {} rows left out:", data.skipped.len())?;
+                for s in &data.skipped {
+                    outln!("    line {}: {}", s.line, s.reason)?;
+                }
+            }
+            if let Some(out) = &self.output {
+                outln!("wrote {}", out.display())?;
+            }
+        }
+        Ok(())
+    }
+}

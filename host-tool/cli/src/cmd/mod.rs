@@ -1,0 +1,102 @@
+//! One module per subcommand; each exposes `Args` (clap) with `run`.
+
+pub mod compare;
+pub mod demo;
+pub mod diagnose;
+pub mod export;
+pub mod fit;
+pub mod flash;
+pub mod history;
+pub mod import;
+pub mod improve;
+pub mod input;
+pub mod iso230;
+pub mod monitor;
+pub mod out;
+pub mod progress;
+pub mod rollback;
+pub mod simulate;
+pub mod status;
+pub mod upload;
+
+/// `--port`: the board a link command (`upload`, `rollback`, `status`,
+/// `monitor`) talks to.
+#[derive(clap::Args, Debug)]
+pub struct BoardPort {
+    /// Serial port of the board (`/dev/ttyACM0`, `COM3`) or `tcp://HOST:PORT`.
+    #[arg(long)]
+    pub port: String,
+}
+
+impl BoardPort {
+    /// Opens the link with the default timing (500 ms, 4 tries). A port
+    /// that starts with `tcp:` but not `tcp://` is refused with a hint (it
+    /// would be opened as a serial device path); a path that is not a
+    /// serial device is named as such.
+    pub fn open(&self) -> anyhow::Result<crate::link::Client> {
+        let port = &self.port;
+        if port.starts_with("tcp:") && !port.starts_with("tcp://") {
+            anyhow::bail!(
+                "cannot open {port}: a TCP port is written tcp://HOST:PORT (two slashes), e.g. tcp://127.0.0.1:4000"
+            );
+        }
+        crate::link::Client::open(port, crate::link::Timing::default()).map_err(|e| {
+            let not_serial = !port.starts_with("tcp://")
+                && (std::fs::metadata(port).is_ok_and(|m| m.is_file() || m.is_dir())
+                    || std::error::Error::source(&e)
+                        .is_some_and(|s| s.to_string().contains("Not a typewriter")));
+            let e = anyhow::Error::new(e);
+            if not_serial {
+                e.context(format!(
+                    "{port} is not a serial device (a board is /dev/ttyACM0, /dev/ttyUSB0, COM3 or tcp://HOST:PORT)"
+                ))
+            } else {
+                e
+            }
+        })
+    }
+}
+
+/// Names of the model output flags set in `bits` (model-core's `Flags`);
+/// a bit without a name is `bit_N`, never dropped.
+pub fn model_flag_names(bits: u16) -> Vec<String> {
+    (0..16)
+        .filter(|i| bits & (1 << i) != 0)
+        .map(|i| {
+            model_core::eval::Flags::NAMES
+                .get(i)
+                .map_or_else(|| format!("bit_{i}"), |n| n.to_string())
+        })
+        .collect()
+}
+
+/// Telemetry JSON ([`crate::link::telemetry_json`]) with the model flags
+/// also by name (`model_flags_names`).
+pub fn telemetry_json(t: &model_core::link::Telemetry) -> serde_json::Value {
+    let mut v = crate::link::telemetry_json(t);
+    v["model_flags_names"] = serde_json::json!(model_flag_names(t.model_flags));
+    v
+}
+
+/// Temperatures as text: `20.000 °C` per channel.
+pub fn temps_text(temp_mc: &[i32]) -> String {
+    temp_mc
+        .iter()
+        .map(|t| format!("{:.3}", *t as f64 / 1000.0))
+        .collect::<Vec<_>>()
+        .join(", ")
+        + " °C"
+}
+
+/// A list of names, or `none`.
+pub fn names_or_none<S: AsRef<str>>(names: &[S]) -> String {
+    if names.is_empty() {
+        "none".into()
+    } else {
+        names
+            .iter()
+            .map(AsRef::as_ref)
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}

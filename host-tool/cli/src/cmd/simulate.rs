@@ -1,0 +1,155 @@
+//! `trueaxis simulate` — measurements of a synthetic machine: a preset's 21
+//! geometric errors, optional physical effects, measurement plans, Gaussian
+//! noise and a seed. The same arguments and seed give a byte-identical CSV.
+//! Spec syntax: docs/cli.md ("simulate"); parsing lives in `simulate::spec`.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use serde_json::json;
+
+use crate::cmd::out::outln;
+use trueaxis_engine::import;
+use trueaxis_engine::simulate::{self, Effect, Plan, RefReturn, SimConfig};
+
+/// Arguments of `trueaxis simulate`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Machine preset: mill800 (the seed's 800 × 500 × 500 mm vertical
+    /// mill), mill800-wavy (plus shapes a cubic cannot follow), perfect800.
+    #[arg(long, default_value = "mill800")]
+    pub preset: String,
+    /// Measurement plan(s), run in order: grid:<step_mm>,
+    /// plane:<ab>:<step_mm>, line:<a>:<step_mm>, iso230:<a>, point:x=,y=,z=,
+    /// pause:<s>[,new_session]
+    /// (options after commas, see docs/cli.md).
+    #[arg(long, required = true, num_args = 1..)]
+    pub plan: Vec<String>,
+    /// Physical effect (repeatable): periodic:…, thermal:…, reversal:…,
+    /// abbe:…, drift:… (see docs/cli.md).
+    #[arg(long)]
+    pub effect: Vec<String>,
+    /// Standard deviation of the Gaussian measurement noise, µm.
+    #[arg(long, default_value_t = 0.2, allow_negative_numbers = true)]
+    pub noise_um: f64,
+    /// Seed of the random stream (noise, ISO 230-2 targets).
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
+    pub seed: u64,
+    /// Reference point `X,Y,Z` (mm) the machine returns to between passes.
+    #[arg(long = "ref", value_name = "X,Y,Z", allow_hyphen_values = true)]
+    pub reference: Option<String>,
+    /// Return to the reference point after every N passes.
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
+    pub ref_every: usize,
+    /// Tool length (Abbe arm along the spindle) when no abbe effect varies it, mm.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub tool_mm: f64,
+    /// Traverse feed between points, mm/s (sets t_s).
+    #[arg(long, default_value_t = 25.0, allow_negative_numbers = true)]
+    pub feed_mm_s: f64,
+    /// Time spent at each point (settle + read), s.
+    #[arg(long, default_value_t = 3.0, allow_negative_numbers = true)]
+    pub dwell_s: f64,
+    /// Output CSV.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Write one JSON document to stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl Args {
+    /// The simulation config these arguments describe.
+    pub fn config(&self) -> Result<SimConfig> {
+        let mut cfg = SimConfig::preset(&self.preset)?;
+        cfg.plans = self
+            .plan
+            .iter()
+            .map(|s| s.parse::<Plan>())
+            .collect::<Result<_>>()?;
+        cfg.effects = self
+            .effect
+            .iter()
+            .map(|s| s.parse::<Effect>())
+            .collect::<Result<_>>()?;
+        // Every number is range-checked by `cfg.check()` below, with the
+        // flag's name in the message.
+        cfg.noise_um = self.noise_um;
+        cfg.seed = self.seed;
+        cfg.tool_mm = self.tool_mm;
+        cfg.timing.feed_mm_s = self.feed_mm_s;
+        cfg.timing.dwell_s = self.dwell_s;
+        if let Some(r) = &self.reference {
+            let v: Vec<f64> = r
+                .split(',')
+                .map(|p| p.trim().parse::<f64>())
+                .collect::<std::result::Result<_, _>>()
+                .ok()
+                .filter(|v: &Vec<f64>| v.len() == 3 && v.iter().all(|x| x.is_finite()))
+                .with_context(|| format!("--ref `{r}`: expected X,Y,Z in mm, e.g. 0,0,0"))?;
+            cfg.reference = Some(RefReturn {
+                pos_mm: [v[0], v[1], v[2]],
+                every_passes: self.ref_every,
+            });
+        }
+        cfg.check()?;
+        Ok(cfg)
+    }
+
+    pub fn run(self) -> Result<()> {
+        let cfg = self.config()?;
+        let data = simulate::simulate(&cfg);
+        let f = std::fs::File::create(&self.output)
+            .with_context(|| format!("cannot create {}", self.output.display()))?;
+        let mut w = std::io::BufWriter::new(f);
+        import::write_csv(&data, &mut w)?;
+        w.flush()
+            .with_context(|| format!("cannot write {}", self.output.display()))?;
+        let passes = data
+            .pass_id
+            .as_ref()
+            .map_or(0, |p| p.iter().max().map_or(0, |m| m + 1));
+        let duration_s = data
+            .t_s
+            .as_ref()
+            .and_then(|t| t.last().copied())
+            .unwrap_or(0.0);
+        let warnings: Vec<&String> = data
+            .metadata
+            .iter()
+            .filter(|(k, _)| k == "warning")
+            .map(|(_, v)| v)
+            .collect();
+        if self.json {
+            let doc = json!({
+                "output": self.output.display().to_string(),
+                "preset": cfg.machine.name,
+                "rows": data.len(),
+                "passes": passes,
+                "duration_s": duration_s,
+                "columns": import::column_names(&data),
+                "seed": cfg.seed,
+                "noise_um": cfg.noise_um,
+                "plans": cfg.plans.iter().map(ToString::to_string).collect::<Vec<_>>(),
+                "effects": cfg.effects.iter().map(ToString::to_string).collect::<Vec<_>>(),
+                "warnings": warnings,
+                "sha256": data.content_hash(),
+            });
+            outln!("{doc}")?;
+        } else {
+            outln!(
+                "simulated {} rows ({} passes, {:.0} s) of {} → {}",
+                data.len(),
+                passes,
+                duration_s,
+                cfg.machine.name,
+                self.output.display()
+            )?;
+            for w in warnings {
+                outln!("warning: {w}")?;
+            }
+        }
+        Ok(())
+    }
+}

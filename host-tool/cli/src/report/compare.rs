@@ -1,0 +1,529 @@
+//! The `compare --report DIR` page: the statistics of
+//! [`trueaxis_engine::compare`] drawn as an HTML page with SVG plots — the
+//! summary table, residual maps per plane (before and after), the residual
+//! along each dense line, against every position axis and channel, and the
+//! worst regions.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+
+use trueaxis_engine::compare::{
+    channels, dense_lines, planes, plot_num, residuals, Comparison, Plane, REGION_BINS,
+    REGION_RATIO, SNAP_MM,
+};
+use trueaxis_engine::data::{Dataset, AXES, TARGETS};
+
+use crate::report::plot::{before_after, heat_map_pair, HeatMap, Series, Style, XyPlot};
+use crate::report::Page;
+
+/// Deterministic thinning for scatter plots: every k-th point so that at
+/// most `max` remain (a 2000-point grid stays readable and the SVG small).
+fn thin<T: Copy>(v: &[T], max: usize) -> Vec<T> {
+    if v.len() <= max || max == 0 {
+        return v.to_vec();
+    }
+    let k = v.len().div_ceil(max);
+    v.iter().step_by(k).copied().collect()
+}
+
+/// Points per scatter series in the report.
+const MAX_SCATTER: usize = 800;
+/// Minimum distinct positions for a line to count as dense.
+pub const DENSE_LINE_POINTS: usize = 25;
+/// Plots of dense lines at most.
+const MAX_LINE_PLOTS: usize = 6;
+/// Residual maps per plane orientation at most: a 50 mm grid of the seed's
+/// mill has 17 planes normal to x; five evenly spaced ones (both ends and
+/// the middle among them) show how the residual changes through the
+/// volume without burying the page in near-identical maps.
+pub const MAX_PLANES_PER_NORMAL: usize = 5;
+
+/// Indices of at most `max` of `n` items, evenly spaced, the first and the
+/// last included (all of them when `n <= max`).
+pub fn pick_evenly(n: usize, max: usize) -> Vec<usize> {
+    if n <= max {
+        return (0..n).collect();
+    }
+    if max <= 1 {
+        return vec![0; max.min(n)];
+    }
+    let mut v: Vec<usize> = (0..max)
+        .map(|i| ((i * (n - 1)) as f64 / (max - 1) as f64).round() as usize)
+        .collect();
+    v.dedup();
+    v
+}
+
+/// Heat map of `vals` (µm per row, `None` where there is none) on the rows
+/// of `plane`, against its two in-plane axes.
+fn plane_map(
+    data: &Dataset,
+    plane: &Plane,
+    title: String,
+    vals: impl Fn(usize) -> Option<f64>,
+) -> HeatMap {
+    let others: Vec<usize> = (0..3).filter(|&a| a != plane.normal).collect();
+    let pts: Vec<(f64, f64, f64)> = plane
+        .rows
+        .iter()
+        .filter_map(|&r| vals(r).map(|v| (data.pos(others[0], r), data.pos(others[1], r), v)))
+        .collect();
+    HeatMap::from_points(
+        title,
+        format!("{} (mm)", AXES[others[0]]),
+        format!("{} (mm)", AXES[others[1]]),
+        "µm",
+        &pts,
+        SNAP_MM,
+    )
+}
+
+/// Writes the HTML report of a comparison to `dir` (index.html + SVGs) and
+/// returns the path of index.html.
+pub fn write_report(
+    dir: &Path,
+    data: &Dataset,
+    predicted: &[Option<Vec<f64>>; 3],
+    c: &Comparison,
+) -> Result<PathBuf> {
+    let mut page = Page::new(format!("trueaxis compare — {} vs {}", c.data, c.model));
+    build_report(&mut page, data, predicted, c)?;
+    page.write(dir)
+}
+
+/// Adds the comparison's sections to `page` (so `demo` and `diagnose` can
+/// put them on a page of their own).
+pub fn build_report(
+    page: &mut Page,
+    data: &Dataset,
+    predicted: &[Option<Vec<f64>>; 3],
+    c: &Comparison,
+) -> Result<()> {
+    if !data.metadata.is_empty() {
+        page.paragraph(
+            data.metadata
+                .iter()
+                .map(|(k, v)| format!("{k}: {v}"))
+                .collect::<Vec<_>>()
+                .join(" · "),
+        );
+    }
+    for w in &c.warnings {
+        page.paragraph(format!("Warning ({}): {}", w.code, w.detail));
+    }
+    page.heading("Summary");
+    let f = |v: f64| format!("{v:.3}");
+    let rows = c
+        .targets
+        .iter()
+        .map(|(name, r)| {
+            vec![
+                name.clone(),
+                r.after.points.to_string(),
+                f(r.before.rms_um),
+                f(r.after.rms_um),
+                r.held_out_rms_um.map_or("—".into(), f),
+                f(r.after.max_abs_um),
+                f(r.after.pv_um),
+                f(r.after.p50_abs_um),
+                f(r.after.p95_abs_um),
+                f(r.after.p99_abs_um),
+                format!("{:.1}×", r.improvement),
+            ]
+        })
+        .collect();
+    page.table(
+        &[
+            "target",
+            "points",
+            "RMS before (µm)",
+            "RMS after (µm)",
+            "held-out RMS (µm)",
+            "max |e| (µm)",
+            "PV (µm)",
+            "p50 |e| (µm)",
+            "p95 |e| (µm)",
+            "p99 |e| (µm)",
+            "improvement",
+        ],
+        rows,
+    );
+    let names: Vec<String> = c.targets.keys().cloned().collect();
+    let before: Vec<f64> = c.targets.values().map(|r| r.before.rms_um).collect();
+    let after: Vec<f64> = c.targets.values().map(|r| r.after.rms_um).collect();
+    page.figure(
+        "before_after_rms",
+        "RMS error per target before compensation (the raw measured error) and after (the residual the model leaves).",
+        before_after("Before vs after: RMS", "RMS (µm)", &names, &before, &after).to_svg()?,
+    );
+    let before: Vec<f64> = c.targets.values().map(|r| r.before.max_abs_um).collect();
+    let after: Vec<f64> = c.targets.values().map(|r| r.after.max_abs_um).collect();
+    page.figure(
+        "before_after_max",
+        "Largest |error| per target before and after compensation.",
+        before_after(
+            "Before vs after: max |e|",
+            "max |e| (µm)",
+            &names,
+            &before,
+            &after,
+        )
+        .to_svg()?,
+    );
+
+    page.heading("Worst regions");
+    page.paragraph(format!(
+        "The travel is cut into {REGION_BINS} slices per axis; cells whose residual RMS is at least {REGION_RATIO}× the target's overall RMS are merged into regions. A ratio near 1 means the residual is spread evenly."
+    ));
+    let rows = c
+        .worst_regions
+        .iter()
+        .map(|r| {
+            vec![
+                r.target.clone(),
+                r.bbox_mm
+                    .iter()
+                    .map(|(a, b)| format!("{a} {}…{}", plot_num(b[0]), plot_num(b[1])))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                f(r.rms_um),
+                format!("{:.2}", r.ratio),
+                r.points.to_string(),
+                format!("{:.0} %", 100.0 * r.share),
+            ]
+        })
+        .collect();
+    page.table(
+        &[
+            "target",
+            "box (mm)",
+            "RMS (µm)",
+            "ratio",
+            "points",
+            "share of SS",
+        ],
+        rows,
+    );
+
+    // Heat maps: residual on every measured plane, in every orientation
+    // (at most MAX_PLANES_PER_NORMAL per orientation, evenly spaced, and the
+    // page says so when planes are left out); before vs after on the middle
+    // plane of the first orientation.
+    let planes = planes(data);
+    // `planes` lists the planes of each orientation together.
+    let groups: Vec<&[Plane]> = planes.chunk_by(|a, b| a.normal == b.normal).collect();
+    if let Some(first) = groups.first() {
+        page.heading("Residual maps on measured planes");
+        page.paragraph("Mean residual per grid position (both directions and repeats averaged); grey cells were not measured. Red: the machine is further along the error's axis than the model says.");
+        if data.axes().len() == 3 {
+            for same in &groups {
+                let normal = AXES[same[0].normal];
+                let shown = pick_evenly(same.len(), MAX_PLANES_PER_NORMAL);
+                page.paragraph(if shown.len() < same.len() {
+                    format!(
+                        "Planes {normal} = const: {} measured, {} shown (at most {MAX_PLANES_PER_NORMAL} per orientation, evenly spaced, first and last included): {} mm.",
+                        same.len(),
+                        shown.len(),
+                        shown
+                            .iter()
+                            .map(|&i| plot_num(same[i].at_mm))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )
+                } else {
+                    format!(
+                        "Planes {normal} = const: {} measured, all shown.",
+                        same.len()
+                    )
+                });
+            }
+        }
+        for t in data.targets() {
+            let res = residuals(data, predicted, t);
+            for same in &groups {
+                for i in pick_evenly(same.len(), MAX_PLANES_PER_NORMAL) {
+                    let plane = &same[i];
+                    let title = if data.axes().len() == 3 {
+                        format!(
+                            "{} residual at {} = {} mm",
+                            TARGETS[t],
+                            AXES[plane.normal],
+                            plot_num(plane.at_mm)
+                        )
+                    } else {
+                        format!("{} residual", TARGETS[t])
+                    };
+                    page.figure(
+                        format!("map_{}_{}{}", TARGETS[t], AXES[plane.normal], i),
+                        format!("Residual of {} on a measured plane.", TARGETS[t]),
+                        plane_map(data, plane, title, |r| res[r]).to_svg()?,
+                    );
+                }
+            }
+            // Before vs after on the middle plane, one colour scale.
+            let plane = &first[first.len() / 2];
+            let raw = data.err_um[t].as_ref();
+            let before = plane_map(
+                data,
+                plane,
+                format!("{} before (raw error)", TARGETS[t]),
+                |r| raw.and_then(|c| c[r]),
+            );
+            let after = plane_map(
+                data,
+                plane,
+                format!("{} after (residual)", TARGETS[t]),
+                |r| res[r],
+            );
+            page.figure(
+                format!("map_before_after_{}", TARGETS[t]),
+                format!(
+                    "{} before and after compensation on the plane {} = {} mm, on one colour scale.",
+                    TARGETS[t],
+                    AXES[plane.normal],
+                    plot_num(plane.at_mm)
+                ),
+                heat_map_pair(&before, &after)?,
+            );
+        }
+    }
+
+    // Dense lines: residual along the line, measured vs model.
+    let lines = dense_lines(data, DENSE_LINE_POINTS);
+    if !lines.is_empty() {
+        page.heading("Dense lines");
+        page.paragraph(format!(
+            "Lines with at least {DENSE_LINE_POINTS} positions along one axis: the measured error with the model's prediction, and the residual. Short-period errors (a lead screw's pitch) show here and not on a coarse grid."
+        ));
+    }
+    for (k, line) in lines.iter().take(MAX_LINE_PLOTS).enumerate() {
+        let ax = AXES[line.axis];
+        let mut meas = XyPlot::new(
+            format!("measured vs model along {ax} ({})", line.label),
+            format!("{ax} (mm)"),
+            "error (µm)",
+        );
+        let mut resid = XyPlot::new(
+            format!("residual along {ax} ({})", line.label),
+            format!("{ax} (mm)"),
+            "residual (µm)",
+        )
+        .with_hline(0.0, "");
+        for t in data.targets() {
+            let res = residuals(data, predicted, t);
+            let m: Vec<(f64, f64)> = line
+                .rows
+                .iter()
+                .filter_map(|&r| {
+                    data.err_um[t]
+                        .as_ref()
+                        .and_then(|c| c[r])
+                        .map(|v| (data.pos(line.axis, r), v))
+                })
+                .collect();
+            let p: Vec<(f64, f64)> = line
+                .rows
+                .iter()
+                .filter_map(|&r| {
+                    predicted[t]
+                        .as_ref()
+                        .and_then(|c| c.get(r).copied())
+                        .map(|v| (data.pos(line.axis, r), v))
+                })
+                .collect();
+            let rr: Vec<(f64, f64)> = line
+                .rows
+                .iter()
+                .filter_map(|&r| res[r].map(|v| (data.pos(line.axis, r), v)))
+                .collect();
+            if m.is_empty() {
+                continue;
+            }
+            meas = meas
+                .with(Series::points(
+                    format!("{} measured", TARGETS[t]),
+                    thin(&m, MAX_SCATTER),
+                ))
+                .with(Series::line(format!("{} model", TARGETS[t]), p));
+            // A polyline of every point: compact, and the zoom below needs
+            // the full resolution.
+            resid = resid.with(Series::line(TARGETS[t], rr));
+        }
+        page.figure(
+            format!("line{k}_measured"),
+            format!("Measured error and model along {ax} at {}.", line.label),
+            meas.to_svg()?,
+        );
+        // Zoom on the first 60 mm of a long line: short periods (a lead
+        // screw's pitch) are unreadable over the whole travel.
+        let lo = data.pos(line.axis, line.rows[0]);
+        let hi = data.pos(line.axis, line.rows[line.rows.len() - 1]);
+        let zoom = (hi - lo > 200.0).then(|| {
+            let mut z = resid.clone();
+            z.title = format!("residual along {ax}, first 60 mm ({})", line.label);
+            for s in &mut z.series {
+                s.points.retain(|p| p.0 <= lo + 60.0);
+            }
+            z
+        });
+        page.figure(
+            format!("line{k}_residual"),
+            format!("Residual along {ax} at {}.", line.label),
+            resid.to_svg()?,
+        );
+        if let Some(z) = zoom {
+            page.figure(
+                format!("line{k}_residual_zoom"),
+                format!("Residual along {ax} at {}, the first 60 mm.", line.label),
+                z.to_svg()?,
+            );
+        }
+    }
+
+    // Measured vs model over all points.
+    page.heading("Measured vs model");
+    let mut mv = XyPlot::new(
+        "measured vs model, all points",
+        "model (µm)",
+        "measured (µm)",
+    );
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    for t in data.targets() {
+        let Some(pred) = &predicted[t] else { continue };
+        let pts: Vec<(f64, f64)> = data
+            .measured(t)
+            .filter_map(|(r, v)| pred.get(r).map(|p| (*p, v)))
+            .collect();
+        for p in &pts {
+            lo = lo.min(p.0.min(p.1));
+            hi = hi.max(p.0.max(p.1));
+        }
+        mv = mv.with(Series::points(TARGETS[t], thin(&pts, MAX_SCATTER)));
+    }
+    if lo.is_finite() {
+        mv = mv.with(Series::line("y = x", vec![(lo, lo), (hi, hi)]));
+    }
+    page.figure(
+        "measured_vs_model",
+        "Each point is one measurement; on the line y = x the model is exact.",
+        mv.to_svg()?,
+    );
+
+    // Residual against every axis and channel.
+    page.heading("Residual against positions and channels");
+    page.paragraph("A trend here is an effect the model lacks: a slope against a temperature is thermal growth, a step between dir = −1 and +1 is reversal (backlash), a drift with t_s is drift.");
+    for (k, (channel, values)) in channels(data).iter().enumerate() {
+        let mut plot = XyPlot::new(
+            format!("residual vs {channel}"),
+            channel.clone(),
+            "residual (µm)",
+        )
+        .with_hline(0.0, "");
+        for t in data.targets() {
+            let res = residuals(data, predicted, t);
+            let pts: Vec<(f64, f64)> = res
+                .iter()
+                .zip(values)
+                .filter_map(|(r, x)| r.map(|r| (*x, r)))
+                .collect();
+            plot = plot.with(Series::points(TARGETS[t], thin(&pts, MAX_SCATTER)));
+            if let Some(p) = c
+                .channels
+                .iter()
+                .find(|p| &p.channel == channel && p.target == TARGETS[t])
+            {
+                let means: Vec<(f64, f64)> = p
+                    .bins
+                    .iter()
+                    .map(|b| (0.5 * (b.lo + b.hi), b.mean_um))
+                    .collect();
+                plot = plot.with(Series::styled(
+                    format!("{} binned mean", TARGETS[t]),
+                    means,
+                    Style::LinePoints,
+                ));
+            }
+        }
+        page.figure(
+            format!("channel{k}"),
+            format!("Residual against {channel}, with the mean per bin."),
+            plot.to_svg()?,
+        );
+    }
+    let rows = c
+        .channels
+        .iter()
+        .map(|p| {
+            vec![
+                p.channel.clone(),
+                p.target.clone(),
+                p.corr.map_or("—".into(), |v| format!("{v:+.3}")),
+                p.slope_um_per_unit
+                    .map_or("—".into(), |v| format!("{v:+.4}")),
+            ]
+        })
+        .collect();
+    page.table(
+        &["channel", "target", "correlation", "slope (µm/unit)"],
+        rows,
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use trueaxis_engine::compare::compare;
+
+    #[test]
+    fn pick_evenly_keeps_both_ends() {
+        assert_eq!(pick_evenly(3, 5), vec![0, 1, 2]);
+        assert_eq!(pick_evenly(9, 5), vec![0, 2, 4, 6, 8]);
+        assert_eq!(pick_evenly(17, 5), vec![0, 4, 8, 12, 16]);
+        assert_eq!(pick_evenly(6, 5), vec![0, 1, 3, 4, 5]);
+        assert_eq!(pick_evenly(0, 5), Vec::<usize>::new());
+    }
+    #[test]
+    fn planes_and_lines_of_a_plan() {
+        // Grid 5 × 4 × 3 plus a dense line along x at y = 0, z = 0.
+        let mut d = Dataset {
+            source: "t".into(),
+            ..Dataset::default()
+        };
+        let (mut x, mut y, mut z, mut e) = (vec![], vec![], vec![], vec![]);
+        for iz in 0..3 {
+            for iy in 0..4 {
+                for ix in 0..5 {
+                    x.push(f64::from(ix) * 50.0);
+                    y.push(f64::from(iy) * 50.0);
+                    z.push(f64::from(iz) * 50.0);
+                    e.push(Some(0.0));
+                }
+            }
+        }
+        for i in 0..40 {
+            x.push(f64::from(i) * 5.0);
+            y.push(0.0);
+            z.push(0.0);
+            e.push(Some(1.0));
+        }
+        d.pos_mm = [Some(x), Some(y), Some(z)];
+        d.err_um = [Some(e), None, None];
+        let p = planes(&d);
+        assert_eq!(p.iter().filter(|p| p.normal == 2).count(), 3);
+        let lines = dense_lines(&d, 25);
+        assert_eq!(lines.len(), 1);
+        assert_eq!(lines[0].axis, 0);
+        assert_eq!(lines[0].label, "y=0, z=0");
+        let pred = [Some(vec![0.0; d.len()]), None, None];
+        let c = compare(&d, "m", &pred, [None; 3]);
+        let mut page = Page::new("t");
+        build_report(&mut page, &d, &pred, &c).unwrap();
+        let html = page.to_html();
+        assert!(html.contains("ex residual at z = 0 mm"));
+        assert!(html.contains("residual along x"));
+        assert!(page.figure_count() > 8);
+    }
+}

@@ -1,0 +1,246 @@
+//! Renishaw `.rtl` import: a hand-made file (CRLF, targets wrapped over two
+//! lines, backward runs in descending order) with known values, and broken
+//! files that must fail with the line number.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use trueaxis_engine::import;
+
+fn data(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+#[test]
+fn hand_made_file_has_known_values() {
+    let path = data("iso_worked.rtl");
+    // The file really is CRLF (the .gitattributes keeps it so).
+    assert!(std::fs::read_to_string(&path).unwrap().contains("\r\n"));
+    let d = import::load(&path).unwrap();
+    assert_eq!(d.len(), 12);
+    assert_eq!(d.axes(), vec![0]);
+    assert_eq!(d.targets(), vec![0]);
+    let x = d.pos_mm[0].as_ref().unwrap();
+    let ex: Vec<f64> = d.err_um[0]
+        .as_ref()
+        .unwrap()
+        .iter()
+        .map(|v| v.unwrap())
+        .collect();
+    let dir = d.dir[0].as_ref().unwrap();
+    let pass = d.pass_id.as_ref().unwrap();
+    // Run 1 forward, run 2 backward (targets 3, 2, 1 → 200, 100, 0 mm).
+    assert_eq!(&x[..6], &[0.0, 100.0, 200.0, 200.0, 100.0, 0.0]);
+    assert_eq!(&ex[..6], &[1.0, 3.0, -1.0, -3.0, 2.0, -1.0]);
+    assert_eq!(&dir[..6], &[1, 1, 1, -1, -1, -1]);
+    assert_eq!(pass, &vec![1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4]);
+    // Source lines of the deviation rows (first at line 21).
+    assert_eq!(d.line[0], 21);
+    let meta = |k: &str| {
+        d.metadata
+            .iter()
+            .find(|(key, _)| key == k)
+            .map(|(_, v)| v.as_str())
+    };
+    assert_eq!(meta("Machine"), Some("VMC-1"));
+    assert_eq!(meta("Serial No"), Some("SN-42"));
+    assert_eq!(meta("Location"), Some("Bay 3"));
+    assert_eq!(meta("environment Air temp"), Some("20.1 C"));
+    assert_eq!(meta("equipment Laser"), Some("XL-80"));
+    assert_eq!(meta("axis"), Some("x"));
+}
+
+fn fails(file: &str, want: &str) {
+    let path = data(file);
+    let e = format!("{:#}", import::load(&path).unwrap_err());
+    let want = format!("{}:{want}", path.display());
+    assert!(e.contains(&want), "expected `{want}` in `{e}`");
+}
+
+#[test]
+fn broken_files_name_the_line() {
+    fails(
+        "bad_count.rtl",
+        "6: Target-count is 4 but `Targets :` lists 3 positions",
+    );
+    fails(
+        "bad_deviation.rtl",
+        "28:3: expected a finite deviation in µm, found `5,0x`",
+    );
+    fails(
+        "bad_order.rtl",
+        "25:2: run 2 is a backward run: expected targets in descending order, found 3 after 2",
+    );
+    fails("truncated.rtl", "30: expected `EOF::` (file truncated?)");
+    fails(
+        "bad_target.rtl",
+        "23:2: expected a target number 1..=3, found `7`",
+    );
+}
+
+#[test]
+fn cli_converts_rtl_to_contract_csv() {
+    let out_csv = std::env::temp_dir().join(format!("trueaxis-rtl-{}.csv", std::process::id()));
+    let out = Command::new(env!("CARGO_BIN_EXE_trueaxis"))
+        .args([
+            "import",
+            data("iso_worked.rtl").to_str().unwrap(),
+            "-o",
+            out_csv.to_str().unwrap(),
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["rows"], 12);
+    assert_eq!(
+        v["columns"],
+        serde_json::json!(["x_mm", "ex_um", "dir_x", "pass_id"])
+    );
+    assert_eq!(v["skipped_count"], 0);
+    let text = std::fs::read_to_string(&out_csv).unwrap();
+    assert!(
+        text.contains("x_mm,ex_um,dir_x,pass_id\n0,1,1,1\n100,3,1,1\n"),
+        "{text}"
+    );
+    // The contract CSV of the same values gives the same data.
+    let a = import::load(&out_csv).unwrap();
+    let b = import::load(&data("iso_worked.csv")).unwrap();
+    assert_eq!(a.pos_mm, b.pos_mm);
+    assert_eq!(a.err_um, b.err_um);
+    assert_eq!(a.dir, b.dir);
+    let _ = std::fs::remove_file(out_csv);
+}
+
+#[test]
+fn mutated_files_never_panic_and_errors_are_located() {
+    use rand_chacha::rand_core::{RngCore, SeedableRng};
+    let base = std::fs::read_to_string(data("iso_worked.rtl")).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let specials = [":", "::", " ", "\r\n", "-", "9", "x", "", "1 1 1.0\r\n"];
+    let mut errors = 0;
+    for _ in 0..3000 {
+        let mut v = base.clone();
+        for _ in 0..1 + rng.next_u32() % 3 {
+            let mut i = rng.next_u32() as usize % (v.len() + 1);
+            while !v.is_char_boundary(i) {
+                i -= 1;
+            }
+            let s = specials[rng.next_u32() as usize % specials.len()];
+            match rng.next_u32() % 3 {
+                0 => v.insert_str(i, s),
+                1 => v.truncate(i),
+                _ => {
+                    let j = (i + 1 + rng.next_u32() as usize % 8).min(v.len());
+                    let mut j2 = j;
+                    while !v.is_char_boundary(j2) {
+                        j2 += 1;
+                    }
+                    v.replace_range(i..j2, s);
+                }
+            }
+        }
+        match import::read_rtl(&v, "m.rtl", None) {
+            Ok(d) => d.validate().unwrap(),
+            Err(e) => {
+                errors += 1;
+                assert!(e.to_string().starts_with("m.rtl:"), "unlocated: {e}");
+            }
+        }
+    }
+    assert!(errors > 300, "only {errors} of 3000 mutations failed");
+}
+
+#[test]
+fn label_in_front_of_every_row_is_read_the_same() {
+    let a = import::load(&data("iso_worked.rtl")).unwrap();
+    let b = import::load(&data("label_per_row.rtl")).unwrap();
+    assert_eq!(a.pos_mm, b.pos_mm);
+    assert_eq!(a.err_um, b.err_um);
+    assert_eq!(a.dir, b.dir);
+    assert_eq!(a.pass_id, b.pass_id);
+}
+
+/// The worked example with one edit, read from memory.
+fn edited(from: &str, to: &str) -> String {
+    let text = std::fs::read_to_string(data("iso_worked.rtl")).unwrap();
+    assert!(text.contains(from), "{from:?}");
+    text.replacen(from, to, 1)
+}
+
+/// A UTF-8 byte order mark (as Windows editors write it) is skipped, like
+/// the CSV reader does — from memory and from a file.
+#[test]
+fn byte_order_mark_is_skipped() {
+    let text = std::fs::read_to_string(data("iso_worked.rtl")).unwrap();
+    let plain = import::read_rtl(&text, "a.rtl", None).unwrap();
+    let bom = import::read_rtl(&format!("\u{feff}{text}"), "b.rtl", None).unwrap();
+    assert_eq!(bom.pos_mm, plain.pos_mm);
+    assert_eq!(bom.err_um, plain.err_um);
+    assert_eq!(bom.dir, plain.dir);
+    let path = std::env::temp_dir().join(format!("trueaxis-bom-{}.rtl", std::process::id()));
+    let mut bytes = vec![0xef, 0xbb, 0xbf];
+    bytes.extend_from_slice(text.as_bytes());
+    std::fs::write(&path, bytes).unwrap();
+    assert_eq!(import::load(&path).unwrap().err_um, plain.err_um);
+    let _ = std::fs::remove_file(path);
+}
+
+/// `Targets` must ascend: forward runs get dir +1 because they move up the
+/// list, so a descending list would give every row the wrong direction.
+#[test]
+fn targets_out_of_order_name_the_line_and_field() {
+    let text = edited(
+        "Targets :    0.000   100.000\r\n   200.000",
+        "Targets :    200.000   100.000\r\n   0.000",
+    );
+    let e = import::read_rtl(&text, "d.rtl", None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("d.rtl:6:2: Targets: expected positions in ascending order"),
+        "{e}"
+    );
+    assert!(e.contains("found `100.000` after 200"), "{e}");
+    // Also across a wrapped line, and a repeated position.
+    let text = edited("   200.000", "   100.000");
+    let e = import::read_rtl(&text, "d.rtl", None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("d.rtl:7:1: Targets: expected positions in ascending order"),
+        "{e}"
+    );
+}
+
+/// A run that stops before visiting every target is refused with the line
+/// of its last deviation, not read as a shorter run.
+#[test]
+fn incomplete_run_names_its_last_line() {
+    // Run 3 (lines 27–29) loses its third target.
+    let text = edited("3 3 1.0\r\n", "");
+    let e = import::read_rtl(&text, "d.rtl", None)
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        e,
+        "d.rtl:28: run 3 has 2 of the 3 targets (missing target 3); expected every run to visit every target"
+    );
+    // A backward run cut after its first reading.
+    let text = edited("2 2 2.0\r\n2 1 -1.0\r\n", "");
+    let e = import::read_rtl(&text, "d.rtl", None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("d.rtl:24: run 2 has 1 of the 3 targets (missing target 1, 2)"),
+        "{e}"
+    );
+}

@@ -1,0 +1,883 @@
+//! Where does a model fail? Statistics of the residual (measured error −
+//! model) per target, the regions where it concentrates, and how it depends
+//! on every position axis and channel. The HTML page that shows them is the
+//! CLI's (`trueaxis::report::compare`).
+//!
+//! Everything here works on a [`Dataset`] and the model's predictions as
+//! plain vectors (`[Option<Vec<f64>>; 3]`, µm per row), not on a model type:
+//! `compare` feeds it `FittedModel::predict`, `diagnose` and `improve` can
+//! feed it any intermediate fit, and the tests feed it hand-made numbers.
+//!
+//! Percentiles are of |residual| with linear interpolation between order
+//! statistics (Hyndman–Fan type 7, what numpy and R use by default), so a
+//! reader can reproduce them. "Before" is the raw measured error (no
+//! compensation), "after" the residual (what is left once the model's
+//! correction is applied).
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use crate::data::{Dataset, AXES, TARGETS};
+
+/// Summary statistics of a set of errors or residuals, µm.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ErrorStats {
+    /// Number of values.
+    pub points: usize,
+    /// Root mean square.
+    pub rms_um: f64,
+    /// Mean (signed).
+    pub mean_um: f64,
+    /// Largest |value|.
+    pub max_abs_um: f64,
+    /// Peak to valley: max − min.
+    pub pv_um: f64,
+    /// Median of |value|.
+    pub p50_abs_um: f64,
+    /// 95th percentile of |value|.
+    pub p95_abs_um: f64,
+    /// 99th percentile of |value|.
+    pub p99_abs_um: f64,
+}
+
+impl ErrorStats {
+    /// Statistics of `values`; `None` when there are none. Non-finite
+    /// values are not expected (the data set is validated) and are skipped.
+    pub fn of(values: &[f64]) -> Option<ErrorStats> {
+        let v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+        if v.is_empty() {
+            return None;
+        }
+        let n = v.len() as f64;
+        let mean = v.iter().sum::<f64>() / n;
+        let rms = (v.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
+        let min = v.iter().copied().fold(f64::INFINITY, f64::min);
+        let max = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let mut abs: Vec<f64> = v.iter().map(|x| x.abs()).collect();
+        abs.sort_by(f64::total_cmp);
+        Some(ErrorStats {
+            points: v.len(),
+            rms_um: rms,
+            mean_um: mean,
+            max_abs_um: abs[abs.len() - 1],
+            pv_um: max - min,
+            p50_abs_um: percentile(&abs, 50.0),
+            p95_abs_um: percentile(&abs, 95.0),
+            p99_abs_um: percentile(&abs, 99.0),
+        })
+    }
+}
+
+/// The `p`-th percentile (0..=100) of ascending `sorted` values, linear
+/// between order statistics (type 7). NaN for an empty slice.
+pub fn percentile(sorted: &[f64], p: f64) -> f64 {
+    match sorted.len() {
+        0 => f64::NAN,
+        1 => sorted[0],
+        n => {
+            let h = (n - 1) as f64 * (p / 100.0).clamp(0.0, 1.0);
+            let lo = h.floor() as usize;
+            let hi = (lo + 1).min(n - 1);
+            sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
+        }
+    }
+}
+
+/// Per-target result of a comparison.
+#[derive(Clone, Debug, Serialize)]
+pub struct TargetResult {
+    /// The residual (measured − model).
+    #[serde(flatten)]
+    pub after: ErrorStats,
+    /// Held-out RMS from the model's own fit statistics (block hold-out), µm.
+    pub held_out_rms_um: Option<f64>,
+    /// The raw measured error, before compensation.
+    pub before: ErrorStats,
+    /// RMS before / RMS after (how many times smaller the error became).
+    pub improvement: f64,
+}
+
+/// A region's box as text, `x 600…800, y 150…350` (mm, whole numbers).
+pub fn bbox_text(bbox_mm: &BTreeMap<String, [f64; 2]>) -> String {
+    bbox_mm
+        .iter()
+        .map(|(a, [lo, hi])| format!("{a} {lo:.0}…{hi:.0}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// A box where the residual of one target concentrates.
+#[derive(Clone, Debug, Serialize)]
+pub struct Region {
+    /// `ex`, `ey` or `ez`.
+    pub target: String,
+    /// Per axis present: `[min, max]` of the points in the region, mm.
+    pub bbox_mm: BTreeMap<String, [f64; 2]>,
+    /// RMS of the residual inside the region, µm.
+    pub rms_um: f64,
+    /// That RMS over the target's overall residual RMS.
+    pub ratio: f64,
+    /// Points inside.
+    pub points: usize,
+    /// Share of the target's residual sum of squares that lies inside (0..1).
+    pub share: f64,
+}
+
+/// One bin of a residual profile along a channel.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct Bin {
+    /// Lower edge of the bin, in the channel's unit.
+    pub lo: f64,
+    /// Upper edge.
+    pub hi: f64,
+    /// Points in the bin.
+    pub points: usize,
+    /// Mean residual, µm.
+    pub mean_um: f64,
+    /// RMS residual, µm.
+    pub rms_um: f64,
+}
+
+/// How the residual of one target depends on one channel (a position axis,
+/// a temperature, the tool length, time, a direction).
+#[derive(Clone, Debug, Serialize)]
+pub struct ChannelProfile {
+    /// The column name (`x_mm`, `T_bed_C`, `tool_mm`, `t_s`, `dir_x`).
+    pub channel: String,
+    /// `ex`, `ey` or `ez`.
+    pub target: String,
+    /// Pearson correlation of the residual with the channel (NaN → null
+    /// when the channel is constant).
+    pub corr: Option<f64>,
+    /// Least-squares slope of the residual against the channel, µm per
+    /// channel unit.
+    pub slope_um_per_unit: Option<f64>,
+    /// The residual in up to 10 equal-width bins (2 for a direction).
+    pub bins: Vec<Bin>,
+}
+
+/// A warning about the comparison itself.
+#[derive(Clone, Debug, Serialize)]
+pub struct Warning {
+    /// Stable machine-readable code (`data_hash_mismatch`, …).
+    pub code: String,
+    /// Human-readable detail.
+    pub detail: String,
+}
+
+/// Everything `compare` finds, serialised as its `--json` document.
+#[derive(Clone, Debug, Serialize)]
+pub struct Comparison {
+    /// The data set's source.
+    pub data: String,
+    /// The model's spec (`cubic19`, `cubic19+periodic:…`).
+    pub model: String,
+    /// Rows in the data set.
+    pub rows: usize,
+    /// Rows of the file left out on load (empty, no error value; docs/cli.md
+    /// § Measurement CSV: counted and said, never silently skipped).
+    pub skipped_count: usize,
+    /// Residual RMS per target, µm (same key as `fit --json`).
+    pub rms_um: BTreeMap<String, f64>,
+    /// Largest |residual| per target, µm.
+    pub max_abs_um: BTreeMap<String, f64>,
+    /// Residual peak to valley per target, µm.
+    pub pv_um: BTreeMap<String, f64>,
+    /// Held-out RMS per target from the model file, µm.
+    pub held_out_rms_um: BTreeMap<String, f64>,
+    /// Full statistics per target.
+    pub targets: BTreeMap<String, TargetResult>,
+    /// Where the residual concentrates, worst first within each target.
+    pub worst_regions: Vec<Region>,
+    /// Residual against every position axis and channel.
+    pub channels: Vec<ChannelProfile>,
+    /// Problems with the comparison (the data differ from the fitted data, …).
+    pub warnings: Vec<Warning>,
+    /// Path of the HTML report when one was written.
+    pub report: Option<String>,
+}
+
+/// Residual (measured − predicted) per row for target `t`; `None` where the
+/// target was not measured on the row or the model has no prediction.
+pub fn residuals(data: &Dataset, predicted: &[Option<Vec<f64>>; 3], t: usize) -> Vec<Option<f64>> {
+    let mut out = vec![None; data.len()];
+    if let Some(pred) = &predicted[t] {
+        for (row, v) in data.measured(t) {
+            if let Some(p) = pred.get(row) {
+                if p.is_finite() {
+                    out[row] = Some(v - p);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Compares the data with the predictions. `held_out_rms_um` comes from the
+/// model's fit statistics (the held-out RMS cannot be recomputed from
+/// predictions alone).
+pub fn compare(
+    data: &Dataset,
+    model: &str,
+    predicted: &[Option<Vec<f64>>; 3],
+    held_out_rms_um: [Option<f64>; 3],
+) -> Comparison {
+    let mut c = Comparison {
+        data: data.source.clone(),
+        model: model.to_string(),
+        rows: data.len(),
+        skipped_count: data.skipped.len(),
+        rms_um: BTreeMap::new(),
+        max_abs_um: BTreeMap::new(),
+        pv_um: BTreeMap::new(),
+        held_out_rms_um: BTreeMap::new(),
+        targets: BTreeMap::new(),
+        worst_regions: Vec::new(),
+        channels: Vec::new(),
+        warnings: Vec::new(),
+        report: None,
+    };
+    for t in data.targets() {
+        let name = TARGETS[t].to_string();
+        let res = residuals(data, predicted, t);
+        let after_v: Vec<f64> = res.iter().flatten().copied().collect();
+        let before_v: Vec<f64> = data.measured(t).map(|(_, v)| v).collect();
+        let (Some(after), Some(before)) = (ErrorStats::of(&after_v), ErrorStats::of(&before_v))
+        else {
+            c.warnings.push(Warning {
+                code: "no_prediction".into(),
+                detail: format!("the model predicts nothing for {name}, which the data measure"),
+            });
+            continue;
+        };
+        c.rms_um.insert(name.clone(), after.rms_um);
+        c.max_abs_um.insert(name.clone(), after.max_abs_um);
+        c.pv_um.insert(name.clone(), after.pv_um);
+        if let Some(h) = held_out_rms_um[t] {
+            c.held_out_rms_um.insert(name.clone(), h);
+        }
+        c.targets.insert(
+            name.clone(),
+            TargetResult {
+                after,
+                held_out_rms_um: held_out_rms_um[t],
+                before,
+                improvement: if after.rms_um > 0.0 {
+                    before.rms_um / after.rms_um
+                } else {
+                    f64::INFINITY
+                },
+            },
+        );
+        c.worst_regions
+            .extend(worst_regions(data, t, &res, REGION_BINS, MAX_REGIONS));
+        for (channel, values) in channels(data) {
+            let binary = channel.starts_with("dir_");
+            c.channels
+                .push(channel_profile(&channel, &name, &values, &res, binary));
+        }
+    }
+    c
+}
+
+/// Coarse grid used for worst regions: bins per axis.
+pub const REGION_BINS: usize = 4;
+/// At most this many regions per target.
+pub const MAX_REGIONS: usize = 3;
+/// A cell counts as "worse" when its RMS is at least this many times the
+/// target's overall residual RMS.
+pub const REGION_RATIO: f64 = 1.25;
+
+/// Where target `t`'s residual concentrates: the travel is cut into `bins`
+/// equal slices per axis present, the residual RMS of each cell is
+/// computed, cells at least `REGION_RATIO`× the overall RMS are merged with
+/// their face neighbours, and each merged group is reported as the bounding
+/// box of its points, worst first. When no cell stands out, the single worst
+/// cell is returned with its (small) ratio, so the answer says "uniform"
+/// rather than nothing.
+pub fn worst_regions(
+    data: &Dataset,
+    t: usize,
+    residual: &[Option<f64>],
+    bins: usize,
+    max_regions: usize,
+) -> Vec<Region> {
+    let bins = bins.max(1);
+    let axes = data.axes();
+    let rows: Vec<(usize, f64)> = residual
+        .iter()
+        .enumerate()
+        .filter_map(|(r, v)| v.map(|v| (r, v)))
+        .collect();
+    if rows.is_empty() {
+        return Vec::new();
+    }
+    let total_ss: f64 = rows.iter().map(|(_, v)| v * v).sum();
+    let overall_rms = (total_ss / rows.len() as f64).sqrt();
+    let mut lo = [0.0; 3];
+    let mut span = [0.0; 3];
+    for &a in &axes {
+        let (l, h) = rows
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), (r, _)| {
+                let p = data.pos(a, *r);
+                (l.min(p), h.max(p))
+            });
+        lo[a] = l;
+        span[a] = h - l;
+    }
+    let cell_of = |r: usize| -> [usize; 3] {
+        let mut c = [0; 3];
+        for &a in &axes {
+            if span[a] > 0.0 {
+                let f = (data.pos(a, r) - lo[a]) / span[a];
+                c[a] = ((f * bins as f64) as usize).min(bins - 1);
+            }
+        }
+        c
+    };
+    let mut cells: BTreeMap<[usize; 3], (usize, f64)> = BTreeMap::new();
+    for &(r, v) in &rows {
+        let e = cells.entry(cell_of(r)).or_insert((0, 0.0));
+        e.0 += 1;
+        e.1 += v * v;
+    }
+    let cell_rms = |k: &[usize; 3]| -> f64 {
+        let (n, ss) = cells[k];
+        (ss / n as f64).sqrt()
+    };
+    let hot: Vec<[usize; 3]> = cells
+        .keys()
+        .filter(|k| overall_rms > 0.0 && cell_rms(k) >= REGION_RATIO * overall_rms)
+        .copied()
+        .collect();
+    // Connected components of hot cells (face neighbours).
+    let mut groups: Vec<Vec<[usize; 3]>> = Vec::new();
+    let mut seen: Vec<[usize; 3]> = Vec::new();
+    for &start in &hot {
+        if seen.contains(&start) {
+            continue;
+        }
+        let mut group = vec![start];
+        seen.push(start);
+        let mut i = 0;
+        while i < group.len() {
+            let c = group[i];
+            for &n in &hot {
+                let dist: usize = (0..3).map(|a| c[a].abs_diff(n[a])).sum();
+                if dist == 1 && !seen.contains(&n) {
+                    seen.push(n);
+                    group.push(n);
+                }
+            }
+            i += 1;
+        }
+        groups.push(group);
+    }
+    if groups.is_empty() {
+        if let Some(worst) = cells
+            .keys()
+            .copied()
+            .max_by(|a, b| cell_rms(a).total_cmp(&cell_rms(b)))
+        {
+            groups.push(vec![worst]);
+        }
+    }
+    let mut regions: Vec<Region> = groups
+        .iter()
+        .map(|g| {
+            let members: Vec<(usize, f64)> = rows
+                .iter()
+                .copied()
+                .filter(|(r, _)| g.contains(&cell_of(*r)))
+                .collect();
+            let ss: f64 = members.iter().map(|(_, v)| v * v).sum();
+            let rms = (ss / members.len() as f64).sqrt();
+            let mut bbox_mm = BTreeMap::new();
+            for &a in &axes {
+                let (l, h) =
+                    members
+                        .iter()
+                        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), (r, _)| {
+                            let p = data.pos(a, *r);
+                            (l.min(p), h.max(p))
+                        });
+                bbox_mm.insert(AXES[a].to_string(), [l, h]);
+            }
+            Region {
+                target: TARGETS[t].to_string(),
+                bbox_mm,
+                rms_um: rms,
+                ratio: if overall_rms > 0.0 {
+                    rms / overall_rms
+                } else {
+                    0.0
+                },
+                points: members.len(),
+                share: if total_ss > 0.0 { ss / total_ss } else { 0.0 },
+            }
+        })
+        .collect();
+    regions.sort_by(|a, b| b.rms_um.total_cmp(&a.rms_um));
+    regions.truncate(max_regions);
+    regions
+}
+
+/// Every column the residual can be plotted against, with its values:
+/// position axes, temperatures, tool length, time, directions, and every
+/// numeric auxiliary column (`humidity_pct`, a second laser's reading…:
+/// docs/cli.md § Measurement CSV keeps a column it does not know as an auxiliary channel and
+/// reports it — a residual that follows humidity is exactly what compare
+/// should show). An auxiliary column counts as numeric when every
+/// non-empty cell is a finite number and at least one is; empty cells are
+/// left out of its profile.
+pub fn channels(data: &Dataset) -> Vec<(String, Vec<f64>)> {
+    let mut out = Vec::new();
+    for a in data.axes() {
+        if let Some(p) = &data.pos_mm[a] {
+            out.push((format!("{}_mm", AXES[a]), p.clone()));
+        }
+    }
+    for ch in &data.temps {
+        out.push((format!("T_{}_C", ch.name), ch.temp_c.clone()));
+    }
+    if let Some(v) = &data.tool_mm {
+        out.push(("tool_mm".into(), v.clone()));
+    }
+    if let Some(v) = &data.t_s {
+        out.push(("t_s".into(), v.clone()));
+    }
+    for (name, dir) in AXES.iter().zip(&data.dir) {
+        if let Some(d) = dir {
+            out.push((
+                format!("dir_{name}"),
+                d.iter().map(|&v| f64::from(v)).collect(),
+            ));
+        }
+    }
+    for ch in &data.aux {
+        if let Some(values) = numeric_cells(&ch.cells) {
+            out.push((ch.name.clone(), values));
+        }
+    }
+    out
+}
+
+/// The cells as numbers (NaN for an empty cell), or `None` when a
+/// non-empty cell is not a finite number or no cell has a value.
+fn numeric_cells(cells: &[String]) -> Option<Vec<f64>> {
+    let mut any = false;
+    let values = cells
+        .iter()
+        .map(|c| {
+            let c = c.trim();
+            if c.is_empty() {
+                return Some(f64::NAN);
+            }
+            any = true;
+            c.parse::<f64>().ok().filter(|v| v.is_finite())
+        })
+        .collect::<Option<Vec<f64>>>()?;
+    any.then_some(values)
+}
+
+/// The residual of one target against one channel: correlation, slope and
+/// binned mean/RMS (10 equal-width bins; for a direction, the −1 and +1
+/// groups).
+pub fn channel_profile(
+    channel: &str,
+    target: &str,
+    values: &[f64],
+    residual: &[Option<f64>],
+    binary: bool,
+) -> ChannelProfile {
+    let pairs: Vec<(f64, f64)> = residual
+        .iter()
+        .zip(values)
+        .filter_map(|(r, x)| r.map(|r| (*x, r)))
+        .filter(|(x, r)| x.is_finite() && r.is_finite())
+        .collect();
+    let n = pairs.len() as f64;
+    let (mut corr, mut slope) = (None, None);
+    if pairs.len() >= 2 {
+        let mx = pairs.iter().map(|p| p.0).sum::<f64>() / n;
+        let my = pairs.iter().map(|p| p.1).sum::<f64>() / n;
+        let sxx: f64 = pairs.iter().map(|p| (p.0 - mx).powi(2)).sum();
+        let syy: f64 = pairs.iter().map(|p| (p.1 - my).powi(2)).sum();
+        let sxy: f64 = pairs.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+        if sxx > 0.0 {
+            slope = Some(sxy / sxx);
+            if syy > 0.0 {
+                corr = Some(sxy / (sxx * syy).sqrt());
+            }
+        }
+    }
+    let lo = pairs.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
+    let hi = pairs.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
+    let mut bins = Vec::new();
+    if lo.is_finite() && hi.is_finite() {
+        let edges: Vec<(f64, f64)> = if binary {
+            vec![(-1.0, -1.0), (1.0, 1.0)]
+        } else if hi > lo {
+            let k = 10;
+            (0..k)
+                .map(|i| {
+                    (
+                        lo + (hi - lo) * i as f64 / k as f64,
+                        lo + (hi - lo) * (i + 1) as f64 / k as f64,
+                    )
+                })
+                .collect()
+        } else {
+            vec![(lo, hi)]
+        };
+        let last = edges.len() - 1;
+        for (i, &(a, b)) in edges.iter().enumerate() {
+            let inside: Vec<f64> = pairs
+                .iter()
+                .filter(|(x, _)| {
+                    if binary {
+                        *x == a
+                    } else {
+                        *x >= a && (*x < b || (i == last && *x <= b))
+                    }
+                })
+                .map(|p| p.1)
+                .collect();
+            if inside.is_empty() {
+                continue;
+            }
+            let m = inside.len() as f64;
+            bins.push(Bin {
+                lo: a,
+                hi: b,
+                points: inside.len(),
+                mean_um: inside.iter().sum::<f64>() / m,
+                rms_um: (inside.iter().map(|v| v * v).sum::<f64>() / m).sqrt(),
+            });
+        }
+    }
+    ChannelProfile {
+        channel: channel.to_string(),
+        target: target.to_string(),
+        corr,
+        slope_um_per_unit: slope,
+        bins,
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Geometry of a measurement plan: planes and dense lines, for the report.
+
+/// A measured plane: rows sharing one coordinate on `normal`.
+#[derive(Clone, Debug)]
+pub struct Plane {
+    /// The axis held constant (0 = x).
+    pub normal: usize,
+    /// Its value, mm.
+    pub at_mm: f64,
+    /// Rows on the plane.
+    pub rows: Vec<usize>,
+}
+
+/// Snap tolerance for "the same nominal position", mm (positions in a plan
+/// are written to 1 µm; 0.01 mm merges the two directions of one target).
+pub const SNAP_MM: f64 = 0.01;
+
+/// Planes of a 3-axis plan: for each axis used as a normal, groups of rows
+/// with the same coordinate that span at least 3 × 3 distinct positions on
+/// the other two axes. A 2-axis data set is one plane.
+pub fn planes(data: &Dataset) -> Vec<Plane> {
+    let axes = data.axes();
+    let mut out = Vec::new();
+    if axes.len() == 2 {
+        let normal = (0..3).find(|a| !axes.contains(a)).unwrap_or(2);
+        out.push(Plane {
+            normal,
+            at_mm: 0.0,
+            rows: (0..data.len()).collect(),
+        });
+        return out;
+    }
+    if axes.len() != 3 {
+        return out;
+    }
+    for normal in [2usize, 1, 0] {
+        let others: Vec<usize> = (0..3).filter(|&a| a != normal).collect();
+        let mut groups: Vec<(f64, Vec<usize>)> = Vec::new();
+        let mut order: Vec<usize> = (0..data.len()).collect();
+        order.sort_by(|&a, &b| data.pos(normal, a).total_cmp(&data.pos(normal, b)));
+        for r in order {
+            let p = data.pos(normal, r);
+            match groups.last_mut() {
+                Some((at, rows)) if (p - *at).abs() <= SNAP_MM => rows.push(r),
+                _ => groups.push((p, vec![r])),
+            }
+        }
+        for (at, rows) in groups {
+            // Keep the rows on the plane's grid: a position on one in-plane
+            // axis counts only when it was measured at ≥ 3 positions of the
+            // other, so a dense line through the plane does not turn the
+            // map into thousands of empty columns.
+            let snap = |v: f64| (v / SNAP_MM).round() as i64;
+            let mut seen: BTreeMap<(usize, i64), Vec<i64>> = BTreeMap::new();
+            for &r in &rows {
+                for (i, &a) in others.iter().enumerate() {
+                    let b = others[1 - i];
+                    let e = seen.entry((a, snap(data.pos(a, r)))).or_default();
+                    let v = snap(data.pos(b, r));
+                    if !e.contains(&v) {
+                        e.push(v);
+                    }
+                }
+            }
+            let rows: Vec<usize> = rows
+                .into_iter()
+                .filter(|&r| {
+                    others
+                        .iter()
+                        .all(|&a| seen[&(a, snap(data.pos(a, r)))].len() >= 3)
+                })
+                .collect();
+            let distinct = |a: usize| {
+                let mut v: Vec<f64> = rows.iter().map(|&r| data.pos(a, r)).collect();
+                v.sort_by(f64::total_cmp);
+                v.dedup_by(|x, y| (*x - *y).abs() <= SNAP_MM);
+                v.len()
+            };
+            if distinct(others[0]) >= 3 && distinct(others[1]) >= 3 {
+                out.push(Plane {
+                    normal,
+                    at_mm: at,
+                    rows,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// A dense line: rows of one traverse along one axis, the others fixed.
+#[derive(Clone, Debug)]
+pub struct Line {
+    /// The axis moved along.
+    pub axis: usize,
+    /// Rows on the line, in position order.
+    pub rows: Vec<usize>,
+    /// Where the other axes stand, mm (`y=100, z=250`).
+    pub label: String,
+}
+
+/// Lines with at least `min_points` distinct positions along one axis while
+/// every other axis stays put. Grouped by `pass_id` when the data has it,
+/// otherwise by the fixed coordinates.
+pub fn dense_lines(data: &Dataset, min_points: usize) -> Vec<Line> {
+    let axes = data.axes();
+    let mut groups: BTreeMap<String, Vec<usize>> = BTreeMap::new();
+    for axis in &axes {
+        for r in 0..data.len() {
+            let key = match &data.pass_id {
+                Some(p) => format!("{axis}:pass{}", p[r]),
+                None => {
+                    let fixed: Vec<String> = axes
+                        .iter()
+                        .filter(|a| *a != axis)
+                        .map(|&a| format!("{:.2}", data.pos(a, r)))
+                        .collect();
+                    format!("{axis}:{}", fixed.join(","))
+                }
+            };
+            groups.entry(key).or_default().push(r);
+        }
+    }
+    let mut out = Vec::new();
+    for (key, mut rows) in groups {
+        let axis: usize = key
+            .split(':')
+            .next()
+            .and_then(|a| a.parse().ok())
+            .unwrap_or(0);
+        let fixed_ok = axes.iter().filter(|&&a| a != axis).all(|&a| {
+            let (l, h) = rows
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &r| {
+                    (l.min(data.pos(a, r)), h.max(data.pos(a, r)))
+                });
+            h - l <= SNAP_MM
+        });
+        if !fixed_ok {
+            continue;
+        }
+        rows.sort_by(|&a, &b| data.pos(axis, a).total_cmp(&data.pos(axis, b)));
+        let mut distinct: Vec<f64> = rows.iter().map(|&r| data.pos(axis, r)).collect();
+        distinct.dedup_by(|x, y| (*x - *y).abs() <= SNAP_MM);
+        if distinct.len() < min_points {
+            continue;
+        }
+        let label = axes
+            .iter()
+            .filter(|&&a| a != axis)
+            .map(|&a| format!("{}={}", AXES[a], plot_num(data.pos(a, rows[0]))))
+            .collect::<Vec<_>>()
+            .join(", ");
+        out.push(Line { axis, rows, label });
+    }
+    out
+}
+
+/// A position for a label: three decimals at most, trailing zeros cut
+/// (`250`, `12.5`).
+pub fn plot_num(v: f64) -> String {
+    let s = format!("{v:.3}");
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numeric_aux_cells() {
+        let s = |v: &[&str]| v.iter().map(|c| c.to_string()).collect::<Vec<_>>();
+        let v = numeric_cells(&s(&["41.5", "", " 43 "])).unwrap();
+        assert_eq!(v[0], 41.5);
+        assert!(v[1].is_nan());
+        assert_eq!(v[2], 43.0);
+        assert_eq!(numeric_cells(&s(&["41.5", "Anna"])), None);
+        assert_eq!(numeric_cells(&s(&["1", "NaN"])), None);
+        assert_eq!(numeric_cells(&s(&["", ""])), None);
+    }
+
+    #[test]
+    fn stats_match_hand_computation() {
+        let s = ErrorStats::of(&[1.0, -2.0, 3.0, -4.0]).unwrap();
+        assert_eq!(s.points, 4);
+        assert!((s.rms_um - (30.0f64 / 4.0).sqrt()).abs() < 1e-12);
+        assert!((s.mean_um + 0.5).abs() < 1e-12);
+        assert_eq!(s.max_abs_um, 4.0);
+        assert_eq!(s.pv_um, 7.0);
+        // |e| sorted 1 2 3 4: p50 = 2.5, p95 = 3 + 0.85·1 = 3.85 (type 7).
+        assert!((s.p50_abs_um - 2.5).abs() < 1e-12);
+        assert!((s.p95_abs_um - 3.85).abs() < 1e-12);
+        assert!(ErrorStats::of(&[]).is_none());
+    }
+
+    #[test]
+    fn percentile_edges() {
+        assert!(percentile(&[], 50.0).is_nan());
+        assert_eq!(percentile(&[7.0], 99.0), 7.0);
+        assert_eq!(percentile(&[0.0, 10.0], 0.0), 0.0);
+        assert_eq!(percentile(&[0.0, 10.0], 100.0), 10.0);
+        assert_eq!(percentile(&[0.0, 10.0], 30.0), 3.0);
+    }
+
+    fn grid_data(f: impl Fn(f64, f64) -> f64) -> Dataset {
+        let mut x = Vec::new();
+        let mut y = Vec::new();
+        let mut e = Vec::new();
+        for iy in 0..11 {
+            for ix in 0..17 {
+                let (px, py) = (50.0 * f64::from(ix), 50.0 * f64::from(iy));
+                x.push(px);
+                y.push(py);
+                e.push(Some(f(px, py)));
+            }
+        }
+        Dataset {
+            source: "test".into(),
+            pos_mm: [Some(x), Some(y), None],
+            err_um: [Some(e), None, None],
+            ..Dataset::default()
+        }
+    }
+
+    #[test]
+    fn worst_region_finds_the_hot_corner() {
+        // Small noise-like pattern everywhere, a bump in x ≥ 600, y ≥ 375.
+        let d = grid_data(|x, y| {
+            let base = 0.1 * ((x * 0.37 + y * 0.11).sin());
+            if x >= 600.0 && y >= 375.0 {
+                base + 2.0
+            } else {
+                base
+            }
+        });
+        let pred = [Some(vec![0.0; d.len()]), None, None];
+        let res = residuals(&d, &pred, 0);
+        let r = worst_regions(&d, 0, &res, 4, 3);
+        assert!(!r.is_empty());
+        let top = &r[0];
+        assert_eq!(top.target, "ex");
+        assert!(top.bbox_mm["x"][0] >= 600.0, "{top:?}");
+        assert!(top.bbox_mm["y"][0] >= 375.0, "{top:?}");
+        assert!(top.ratio > 2.0);
+        assert!(top.share > 0.9);
+    }
+
+    #[test]
+    fn uniform_residual_gives_one_region_near_ratio_one() {
+        let d = grid_data(|x, y| {
+            if ((x + y) / 50.0) as i64 % 2 == 0 {
+                1.0
+            } else {
+                -1.0
+            }
+        });
+        let pred = [Some(vec![0.0; d.len()]), None, None];
+        let res = residuals(&d, &pred, 0);
+        let r = worst_regions(&d, 0, &res, 4, 3);
+        assert_eq!(r.len(), 1);
+        assert!((r[0].ratio - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn channel_profile_sees_a_slope_and_a_step() {
+        let x: Vec<f64> = (0..100).map(f64::from).collect();
+        let res: Vec<Option<f64>> = x.iter().map(|v| Some(0.5 * v)).collect();
+        let p = channel_profile("x_mm", "ex", &x, &res, false);
+        assert!((p.corr.unwrap() - 1.0).abs() < 1e-12);
+        assert!((p.slope_um_per_unit.unwrap() - 0.5).abs() < 1e-12);
+        assert_eq!(p.bins.len(), 10);
+        assert_eq!(p.bins.iter().map(|b| b.points).sum::<usize>(), 100);
+        let dir: Vec<f64> = (0..100)
+            .map(|i| if i % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let res: Vec<Option<f64>> = dir.iter().map(|d| Some(2.0 * d)).collect();
+        let p = channel_profile("dir_x", "ex", &dir, &res, true);
+        assert_eq!(p.bins.len(), 2);
+        assert_eq!(p.bins[0].mean_um, -2.0);
+        assert_eq!(p.bins[1].mean_um, 2.0);
+        // A constant channel has no correlation.
+        let c = vec![20.0; 100];
+        assert!(channel_profile("T_bed_C", "ex", &c, &res, false)
+            .corr
+            .is_none());
+    }
+
+    #[test]
+    fn compare_reports_before_and_after() {
+        let d = grid_data(|x, _| 0.01 * x);
+        let pred: Vec<f64> = d.pos_mm[0]
+            .as_ref()
+            .unwrap()
+            .iter()
+            .map(|x| 0.01 * x - 0.5)
+            .collect();
+        let c = compare(
+            &d,
+            "cubic19",
+            &[Some(pred), None, None],
+            [Some(0.6), None, None],
+        );
+        let ex = &c.targets["ex"];
+        assert!((ex.after.rms_um - 0.5).abs() < 1e-9);
+        assert!((ex.after.pv_um).abs() < 1e-9);
+        assert!(ex.before.rms_um > 4.0);
+        assert_eq!(c.held_out_rms_um["ex"], 0.6);
+        assert_eq!(c.rms_um.len(), 1);
+        let json = serde_json::to_value(&c).unwrap();
+        assert!(json["targets"]["ex"]["p95_abs_um"].is_number());
+        assert!(json["targets"]["ex"]["before"]["rms_um"].is_number());
+    }
+}

@@ -1,0 +1,254 @@
+//! The measurement data set: one in-memory form of docs/cli.md § Measurement CSV that every
+//! command works on, whatever file it came from (CSV, Renishaw .rtl,
+//! `simulate`). Columns are stored by meaning, not by position, so the
+//! fitting and diagnosis code never looks at column names again; anything the
+//! contract does not know is kept as an auxiliary channel, never dropped.
+//!
+//! Invariants (checked by the importers, relied on everywhere else):
+//! every per-row vector has `len()` rows; at least one axis and one target
+//! are present; all numbers are finite; `dir` values are -1 or +1.
+
+use serde::{Deserialize, Serialize};
+
+/// Axis names, in index order 0, 1, 2.
+pub const AXES: [&str; 3] = ["x", "y", "z"];
+/// Target (error) names, in index order 0, 1, 2: `ex`, `ey`, `ez`.
+pub const TARGETS: [&str; 3] = ["ex", "ey", "ez"];
+
+/// The temperatures a `T_<name>_C` reading may have, °C: a machine shop's
+/// sensors (air, bed, spindle housing, coolant) read well inside −50…150 °C.
+/// The importers refuse a value outside it as a unit mistake — most often
+/// kelvin (250…400 read as °C), which would otherwise be fitted silently
+/// and make the thermal terms meaningless.
+pub const TEMP_PLAUSIBLE_C: (f64, f64) = (-50.0, 150.0);
+
+/// A temperature sensor column `T_<name>_C`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TempChannel {
+    /// The sensor name between `T_` and `_C` (`bed` for `T_bed_C`).
+    pub name: String,
+    /// One value per row, °C.
+    pub temp_c: Vec<f64>,
+}
+
+/// A column the contract does not name: kept, reported, never dropped.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AuxChannel {
+    /// The header as written in the file.
+    pub name: String,
+    /// The raw cells, one per row.
+    pub cells: Vec<String>,
+}
+
+/// One measurement data set (docs/cli.md § Measurement CSV).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Dataset {
+    /// Where it came from (a path, or `simulate:<preset>`), for messages and reports.
+    pub source: String,
+    /// `# key: value` lines before the header, in file order.
+    pub metadata: Vec<(String, String)>,
+    /// Nominal positions x, y, z in mm; `None` for an axis not in the data.
+    pub pos_mm: [Option<Vec<f64>>; 3],
+    /// Measured errors ex, ey, ez in µm; `None` for a target not in the data,
+    /// `Some(None)` cells for "not measured on this row".
+    pub err_um: [Option<Vec<Option<f64>>>; 3],
+    /// Time since the start of the session, s.
+    pub t_s: Option<Vec<f64>>,
+    /// Direction of the last approach per axis, -1 or +1.
+    pub dir: [Option<Vec<i8>>; 3],
+    /// Temperature channels, in file order.
+    pub temps: Vec<TempChannel>,
+    /// Tool length / probe offset along the spindle (Abbe arm), mm.
+    pub tool_mm: Option<Vec<f64>>,
+    /// One continuous traverse per id (block hold-out, ISO 230-2 runs).
+    pub pass_id: Option<Vec<i64>>,
+    /// Measurement session per row.
+    pub session_id: Option<Vec<i64>>,
+    /// Standard uncertainty of the error values per row, µm (fit weights).
+    pub u_um: Option<Vec<f64>>,
+    /// Columns the contract does not name.
+    pub aux: Vec<AuxChannel>,
+    /// Source line number of each row (1-based), for messages; empty when
+    /// the data did not come from a file.
+    pub line: Vec<usize>,
+    /// Rows of the source that were left out, with the reason (docs/cli.md § Measurement CSV:
+    /// nothing is silently skipped). Empty for simulated data.
+    #[serde(default)]
+    pub skipped: Vec<SkippedRow>,
+}
+
+/// A source row that was left out of the data set, and why.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SkippedRow {
+    /// 1-based line number in the source file.
+    pub line: usize,
+    /// Why the row was left out (`no error value on this row`, …).
+    pub reason: String,
+}
+
+impl Dataset {
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.pos_mm
+            .iter()
+            .flatten()
+            .map(Vec::len)
+            .next()
+            .unwrap_or(0)
+    }
+
+    /// True when there are no rows.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Indices (0 = x, 1 = y, 2 = z) of the axes present.
+    pub fn axes(&self) -> Vec<usize> {
+        (0..3).filter(|&a| self.pos_mm[a].is_some()).collect()
+    }
+
+    /// Indices of the axes present that move: more than one position in the
+    /// data. An axis held at one position (a single-axis line with y = z =
+    /// 250 mm on every row) carries no information about how the error
+    /// changes along it, so the models treat it like an axis absent from the
+    /// data (no terms in it; grid nodes and network inputs only on moving
+    /// axes).
+    pub fn varying_axes(&self) -> Vec<usize> {
+        self.axes()
+            .into_iter()
+            .filter(|&a| self.constant_position(a).is_none())
+            .collect()
+    }
+
+    /// The position of `axis` when it is present and every row holds the
+    /// same value, mm; `None` when the axis is absent or moves.
+    pub fn constant_position(&self, axis: usize) -> Option<f64> {
+        let col = self.pos_mm[axis].as_ref()?;
+        let first = *col.first()?;
+        col.iter().all(|&p| p == first).then_some(first)
+    }
+
+    /// Indices (0 = ex, 1 = ey, 2 = ez) of the targets present.
+    pub fn targets(&self) -> Vec<usize> {
+        (0..3).filter(|&t| self.err_um[t].is_some()).collect()
+    }
+
+    /// Position of row `row` on `axis` in mm; 0 for an axis not in the data
+    /// (the machine sits at its reference there).
+    pub fn pos(&self, axis: usize, row: usize) -> f64 {
+        self.pos_mm[axis].as_ref().map_or(0.0, |v| v[row])
+    }
+
+    /// Rows where target `t` was measured, with the value in µm.
+    pub fn measured(&self, t: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
+        self.err_um[t]
+            .iter()
+            .flat_map(|col| col.iter().enumerate())
+            .filter_map(|(row, v)| v.map(|v| (row, v)))
+    }
+
+    /// The temperature channel named `name` (without `T_` / `_C`).
+    pub fn temp(&self, name: &str) -> Option<&TempChannel> {
+        self.temps.iter().find(|c| c.name == name)
+    }
+
+    /// SHA-256 (hex) of the data set's canonical CSV (`import::write_csv`):
+    /// the same measurements give the same hash whatever file they came
+    /// from, so a MODEL.json can name the data it was fitted to.
+    pub fn content_hash(&self) -> String {
+        use sha2::{Digest, Sha256};
+        let mut buf = Vec::new();
+        // Writing to a Vec cannot fail.
+        crate::import::write_csv(self, &mut buf).expect("writing CSV to memory");
+        Sha256::digest(&buf)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect()
+    }
+
+    /// Checks the invariants listed at the top of this module: equal column
+    /// lengths, an axis and a target present, finite numbers, `dir` ±1.
+    /// Importers and `simulate` call it before handing a data set out.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        use anyhow::bail;
+        let n = self.len();
+        if self.axes().is_empty() {
+            bail!(
+                "{}: no position column (expected x_mm, y_mm or z_mm)",
+                self.source
+            );
+        }
+        if self.targets().is_empty() {
+            bail!(
+                "{}: no error column (expected ex_um, ey_um or ez_um)",
+                self.source
+            );
+        }
+        let mut lens: Vec<(String, usize)> = Vec::new();
+        for a in 0..3 {
+            if let Some(v) = &self.pos_mm[a] {
+                lens.push((format!("{}_mm", AXES[a]), v.len()));
+                if v.iter().any(|x| !x.is_finite()) {
+                    bail!("{}: {}_mm holds a non-finite value", self.source, AXES[a]);
+                }
+            }
+            if let Some(v) = &self.err_um[a] {
+                lens.push((format!("{}_um", TARGETS[a]), v.len()));
+                if v.iter().flatten().any(|x| !x.is_finite()) {
+                    bail!(
+                        "{}: {}_um holds a non-finite value",
+                        self.source,
+                        TARGETS[a]
+                    );
+                }
+            }
+            if let Some(v) = &self.dir[a] {
+                lens.push((format!("dir_{}", AXES[a]), v.len()));
+                if v.iter().any(|d| *d != 1 && *d != -1) {
+                    bail!(
+                        "{}: dir_{} holds a value other than -1/+1",
+                        self.source,
+                        AXES[a]
+                    );
+                }
+            }
+        }
+        let opt_f = [
+            ("t_s", &self.t_s),
+            ("tool_mm", &self.tool_mm),
+            ("u_um", &self.u_um),
+        ];
+        for (name, col) in opt_f {
+            if let Some(v) = col {
+                lens.push((name.to_string(), v.len()));
+                if v.iter().any(|x| !x.is_finite()) {
+                    bail!("{}: {name} holds a non-finite value", self.source);
+                }
+            }
+        }
+        for (name, col) in [("pass_id", &self.pass_id), ("session_id", &self.session_id)] {
+            if let Some(v) = col {
+                lens.push((name.to_string(), v.len()));
+            }
+        }
+        for c in &self.temps {
+            lens.push((format!("T_{}_C", c.name), c.temp_c.len()));
+            if c.temp_c.iter().any(|x| !x.is_finite()) {
+                bail!("{}: T_{}_C holds a non-finite value", self.source, c.name);
+            }
+        }
+        for c in &self.aux {
+            lens.push((c.name.clone(), c.cells.len()));
+        }
+        if !self.line.is_empty() {
+            lens.push(("line numbers".into(), self.line.len()));
+        }
+        if let Some((name, len)) = lens.iter().find(|(_, len)| *len != n) {
+            bail!(
+                "{}: column {name} has {len} rows, expected {n}",
+                self.source
+            );
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,545 @@
+//! Linear models: per target present, weighted least squares of the seed's
+//! monomials plus the `--add` effects' columns on the rows where that target
+//! is measured. The checks a user needs happen here, in their words:
+//! too few distinct points for the terms (docs/cli.md § Measurement CSV), collinear columns
+//! named by feature, an ill-conditioned design reported with its number.
+
+// Numerical code indexes several parallel arrays by the same index;
+// index loops read closer to the formulas than zipped iterators.
+#![allow(clippy::needless_range_loop)]
+
+use anyhow::{bail, Result};
+use nalgebra::DMatrix;
+
+use crate::data::{Dataset, AXES, TARGETS};
+use crate::export::feature_uses_axis;
+use crate::features::{seed_monomials, Effect, Feature, Norm};
+use crate::holdout;
+use crate::lsq::{self, LsqError, ILL_CONDITIONED};
+use crate::model::{FitStats, FittedModel, LinearModel, LinearOutput};
+
+/// The features of `seed` (+ the effects for `target`) for target `target`
+/// on data with the given axes.
+pub fn features_for(
+    seed: &str,
+    adds: &[Effect],
+    target: usize,
+    axes: &[usize],
+) -> Result<Vec<Feature>> {
+    let mut f: Vec<Feature> = seed_monomials(seed, target, axes)?
+        .into_iter()
+        .map(|exp| Feature::Monomial { exp })
+        .collect();
+    for e in adds.iter().filter(|e| e.target == target) {
+        f.extend(e.features.iter().cloned());
+    }
+    Ok(f)
+}
+
+/// One target's fit with its statistics.
+#[derive(Clone, Debug)]
+pub struct TargetFit {
+    /// The fitted output.
+    pub output: LinearOutput,
+    /// Rows used.
+    pub rows: Vec<usize>,
+    /// Residual (measured − model) per used row, µm.
+    pub residual_um: Vec<f64>,
+    /// Condition number of the weighted, column-scaled design.
+    pub condition_number: f64,
+}
+
+/// Fits `features` to target `target` on the rows of `rows` where it is
+/// measured. `label` prefixes messages (`ex`, `ex, patch z 0…50 mm`).
+pub fn fit_target(
+    data: &Dataset,
+    norm: &Norm,
+    features: &[Feature],
+    target: usize,
+    rows: &[usize],
+    label: &str,
+) -> Result<TargetFit> {
+    let Some(err) = &data.err_um[target] else {
+        bail!("the data has no {}_um column", TARGETS[target]);
+    };
+    let rows: Vec<usize> = rows.iter().copied().filter(|&r| err[r].is_some()).collect();
+    Ok(fit_targets(data, norm, features, &[target], &rows, label)?.remove(0))
+}
+
+/// Fits `features` to each of `targets` on `rows`, where every one of them
+/// is measured: one design matrix, one QR and one SVD for all (the three
+/// targets of a seed model on a full grid). `label` prefixes messages.
+fn fit_targets(
+    data: &Dataset,
+    norm: &Norm,
+    features: &[Feature],
+    targets: &[usize],
+    rows: &[usize],
+    label: &str,
+) -> Result<Vec<TargetFit>> {
+    let a = lsq::design_matrix(data, norm, features, rows)?;
+    let distinct = lsq::distinct_rows(&a);
+    if distinct < features.len() {
+        bail!(
+            "{label}: {distinct} distinct points but the model has {} terms — measure more points or choose a smaller model",
+            features.len()
+        );
+    }
+    let mut b = DMatrix::zeros(rows.len(), targets.len());
+    for (c, &t) in targets.iter().enumerate() {
+        let err = data.err_um[t].as_ref();
+        for (i, &r) in rows.iter().enumerate() {
+            b[(i, c)] = err.and_then(|col| col[r]).unwrap_or(0.0);
+        }
+    }
+    let w = holdout::weights(data, rows)?;
+    let sols = match lsq::solve_multi(&a, &b, w.as_ref()) {
+        Ok(s) => s,
+        Err(e) => {
+            if let Some(LsqError::RankDeficient { groups, rank, cols }) =
+                e.downcast_ref::<LsqError>()
+            {
+                let named: Vec<String> = groups
+                    .iter()
+                    .map(|g| {
+                        let names: Vec<String> =
+                            g.iter().map(|&j| features[j].to_string()).collect();
+                        if g.len() == 1 {
+                            // A term in an axis held at one position is a
+                            // zero column (u = 0 there), not a zero position.
+                            let held = (0..3).find_map(|a| {
+                                feature_uses_axis(&features[g[0]], a)
+                                    .then(|| data.constant_position(a).map(|p| (a, p)))
+                                    .flatten()
+                            });
+                            match held {
+                                Some((a, p)) => format!(
+                                    "{} cannot be fitted: {} is {p} mm at every measured point",
+                                    names[0], AXES[a]
+                                ),
+                                None => format!("{} is zero at every measured point", names[0]),
+                            }
+                        } else {
+                            format!("{{{}}} are collinear", names.join(", "))
+                        }
+                    })
+                    .collect();
+                bail!(
+                    "{label}: the model's columns are linearly dependent on these data (rank {rank} of {cols}): {} — drop one of each group, or measure where they differ",
+                    named.join("; ")
+                );
+            }
+            return Err(e.context(format!("{label}: least squares failed")));
+        }
+    };
+    Ok(sols
+        .into_iter()
+        .zip(targets)
+        .enumerate()
+        .map(|(c, (sol, &target))| {
+            let pred = &a * &sol.coef;
+            TargetFit {
+                output: LinearOutput {
+                    target,
+                    features: features.to_vec(),
+                    coef_um: sol.coef.iter().copied().collect(),
+                    coef_sd_um: sol.coef_sd.iter().copied().collect(),
+                },
+                rows: rows.to_vec(),
+                residual_um: (0..rows.len()).map(|i| b[(i, c)] - pred[i]).collect(),
+                condition_number: sol.condition_number,
+            }
+        })
+        .collect())
+}
+
+/// Fits the linear model `seed` + `adds` to every target present.
+pub fn fit(
+    data: &Dataset,
+    seed: &str,
+    adds: &[Effect],
+    blocks: usize,
+) -> Result<(FittedModel, FitStats)> {
+    let norm = Norm::from_data(data);
+    // An axis held at one position is treated like an absent one (its
+    // monomials would be zero columns); `fit::fit` says so in a warning.
+    let axes = data.varying_axes();
+    if axes.is_empty() {
+        bail!(
+            "{}: every measured point lies at one position; a polynomial needs travel on some axis",
+            data.source
+        );
+    }
+    let mut stats = FitStats::default();
+    let mut outputs = Vec::new();
+    // Targets with the same features measured on the same rows (a seed
+    // model on a full grid) share one solve; the rest are fitted alone.
+    struct Job {
+        targets: Vec<usize>,
+        features: Vec<Feature>,
+        rows: Vec<usize>,
+    }
+    let mut jobs: Vec<Job> = Vec::new();
+    for t in data.targets() {
+        let rows: Vec<usize> = data.measured(t).map(|(r, _)| r).collect();
+        if rows.is_empty() {
+            stats.warnings.push(format!(
+                "{}: the column has no values; not modelled",
+                TARGETS[t]
+            ));
+            continue;
+        }
+        let features = features_for(seed, adds, t, &axes)?;
+        match jobs
+            .iter_mut()
+            .find(|j| j.features == features && j.rows == rows)
+        {
+            Some(job) => job.targets.push(t),
+            None => jobs.push(Job {
+                targets: vec![t],
+                features,
+                rows,
+            }),
+        }
+    }
+    let mut fits: Vec<TargetFit> = Vec::new();
+    for Job {
+        targets,
+        features,
+        rows,
+    } in jobs
+    {
+        let label: Vec<&str> = targets.iter().map(|&t| TARGETS[t]).collect();
+        match fit_targets(data, &norm, &features, &targets, &rows, &label.join(", ")) {
+            Ok(tfs) => fits.extend(tfs),
+            // Name the first target that fails on its own, as a lone fit would.
+            Err(_) if targets.len() > 1 => {
+                for &t in &targets {
+                    fits.push(fit_target(data, &norm, &features, t, &rows, TARGETS[t])?);
+                }
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    fits.sort_by_key(|tf| tf.output.target);
+    for tf in fits {
+        let (t, features) = (tf.output.target, &tf.output.features);
+        let name = TARGETS[t].to_string();
+        stats.terms = stats.terms.max(features.len());
+        stats.terms_per_target.insert(name.clone(), features.len());
+        stats.rows.insert(name.clone(), tf.rows.len());
+        stats
+            .rms_um
+            .insert(name.clone(), holdout::rms(tf.residual_um.iter().copied()));
+        stats.max_abs_um.insert(
+            name.clone(),
+            tf.residual_um.iter().fold(0.0, |m, e| f64::max(m, e.abs())),
+        );
+        if tf.condition_number.is_finite() {
+            stats
+                .condition_number
+                .insert(name.clone(), tf.condition_number);
+        }
+        if tf.condition_number > ILL_CONDITIONED {
+            stats.warnings.push(format!(
+                "{name}: ill-conditioned design (condition number {:.3e} > {ILL_CONDITIONED:.0e}): some terms nearly repeat each other on these points; coefficients are uncertain (see coef_sd_um) and extrapolation is unreliable",
+                tf.condition_number
+            ));
+        }
+        match holdout::held_out_rms_k(data, &tf.rows, features, t, &norm, blocks) {
+            Ok(h) => {
+                stats.held_out_rms_um.insert(name.clone(), h);
+            }
+            Err(e) => stats
+                .warnings
+                .push(format!("{name}: no held-out RMS: {e:#}")),
+        }
+        if stats.holdout.is_empty() {
+            stats.holdout = holdout::describe(data, &tf.rows, blocks);
+        }
+        outputs.push(tf.output);
+    }
+    if outputs.is_empty() {
+        bail!("{}: no error values to fit", data.source);
+    }
+    Ok((FittedModel::Linear(LinearModel { norm, outputs }), stats))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::features::CUBIC19;
+
+    /// The seed's 17 × 11 × 11 grid on 800 × 500 × 500 mm.
+    pub(crate) fn mill_grid() -> Dataset {
+        let (mut x, mut y, mut z) = (Vec::new(), Vec::new(), Vec::new());
+        for i in 0..17 {
+            for j in 0..11 {
+                for k in 0..11 {
+                    x.push(i as f64 * 50.0);
+                    y.push(j as f64 * 50.0);
+                    z.push(k as f64 * 50.0);
+                }
+            }
+        }
+        let n = x.len();
+        Dataset {
+            source: "mill".into(),
+            pos_mm: [Some(x), Some(y), Some(z)],
+            err_um: [
+                Some(vec![None; n]),
+                Some(vec![None; n]),
+                Some(vec![None; n]),
+            ],
+            ..Default::default()
+        }
+    }
+
+    fn set_target(d: &mut Dataset, t: usize, f: impl Fn(usize, [f64; 3]) -> f64) {
+        let norm = Norm::from_data(d);
+        let v = (0..d.len())
+            .map(|r| {
+                let u = [0, 1, 2].map(|a| norm.u(a, d.pos(a, r)));
+                Some(f(r, u))
+            })
+            .collect();
+        d.err_um[t] = Some(v);
+    }
+
+    #[test]
+    fn cubic19_recovers_known_coefficients_exactly() {
+        let mut d = mill_grid();
+        let coef: Vec<f64> = (0..19).map(|j| (j as f64 * 0.7).sin() * 5.0).collect();
+        for t in 0..3 {
+            let c = coef.clone();
+            set_target(&mut d, t, move |_, u| {
+                CUBIC19
+                    .iter()
+                    .zip(&c)
+                    .map(|(e, c)| {
+                        c * (t as f64 + 1.0)
+                            * (0..3).map(|a| u[a].powi(e[a] as i32)).product::<f64>()
+                    })
+                    .sum()
+            });
+        }
+        let (m, s) = fit(&d, "cubic19", &[], 5).unwrap();
+        let FittedModel::Linear(m) = m else { panic!() };
+        for o in &m.outputs {
+            for (j, c) in o.coef_um.iter().enumerate() {
+                assert!(
+                    (c - coef[j] * (o.target as f64 + 1.0)).abs() < 1e-9,
+                    "{} {j}",
+                    o.target
+                );
+            }
+        }
+        assert_eq!(s.terms, 19);
+        for t in ["ex", "ey", "ez"] {
+            assert!(s.rms_um[t] < 1e-9);
+            assert!(s.held_out_rms_um[t] < 1e-8, "{}", s.held_out_rms_um[t]);
+            assert!(s.condition_number[t] < 100.0);
+        }
+        assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    }
+
+    #[test]
+    fn effects_are_recovered_with_the_seed() {
+        let mut d = mill_grid();
+        // A 30 mm periodic term along y on ey (a 5 mm or 20 mm period would
+        // alias to zero at the 50 mm grid: sin(2π·50j/20) = sin(5πj) = 0;
+        // 30 mm repeats every 3 planes and is identifiable) plus reversal on x.
+        let n = d.len();
+        d.dir[0] = Some((0..n).map(|r| if r % 2 == 0 { 1 } else { -1 }).collect());
+        let y = d.pos_mm[1].clone().unwrap();
+        let dir = d.dir[0].clone().unwrap();
+        set_target(&mut d, 1, |r, u| {
+            1.0 + 2.0 * u[0] - 0.5 * u[1] * u[1]
+                + 0.8 * (std::f64::consts::TAU * y[r] / 30.0).sin()
+                + 0.3 * (std::f64::consts::TAU * y[r] / 30.0).cos()
+                + 1.5 * f64::from(dir[r])
+        });
+        let adds = [
+            Effect::parse("periodic:target=ey,axis=y,period_mm=30").unwrap(),
+            Effect::parse("reversal:target=ey,axis=x").unwrap(),
+        ];
+        let (m, s) = fit(&d, "cubic19", &adds, 5).unwrap();
+        let FittedModel::Linear(m) = m else { panic!() };
+        let o = &m.outputs[0];
+        assert_eq!(o.target, 1);
+        assert_eq!(o.features.len(), 22);
+        let c = &o.coef_um;
+        assert!(
+            (c[19] - 0.8).abs() < 1e-9 && (c[20] - 0.3).abs() < 1e-9 && (c[21] - 1.5).abs() < 1e-9,
+            "{c:?}"
+        );
+        assert!(
+            (c[0] - 1.0).abs() < 1e-9 && (c[1] - 2.0).abs() < 1e-9 && (c[5] + 0.5).abs() < 1e-9
+        );
+        assert_eq!(s.terms, 22);
+        assert!(s.rms_um["ey"] < 1e-9);
+        assert!(!s.rms_um.contains_key("ex"));
+    }
+
+    #[test]
+    fn u_um_weights_silence_a_row_with_huge_uncertainty() {
+        let mut d = mill_grid();
+        set_target(&mut d, 0, |_, u| 1.0 + u[0] - u[1] * u[2]);
+        d.err_um[1] = None;
+        d.err_um[2] = None;
+        let n = d.len();
+        if let Some(c) = d.err_um[0].as_mut() {
+            c[100] = c[100].map(|v| v + 500.0);
+        }
+        let mut u = vec![0.1; n];
+        u[100] = 1e8;
+        d.u_um = Some(u);
+        let (m, s) = fit(&d, "cubic19", &[], 5).unwrap();
+        let FittedModel::Linear(m) = m else { panic!() };
+        let c = &m.outputs[0].coef_um;
+        assert!(
+            (c[0] - 1.0).abs() < 1e-6 && (c[1] - 1.0).abs() < 1e-6,
+            "{c:?}"
+        );
+        // The outlier still shows in the (unweighted) residual statistics.
+        assert!(s.max_abs_um["ex"] > 499.0);
+        d.u_um = Some(vec![0.1; n]);
+        let (m, _) = fit(&d, "cubic19", &[], 5).unwrap();
+        let FittedModel::Linear(m) = m else { panic!() };
+        assert!((m.outputs[0].coef_um[0] - 1.0).abs() > 0.01);
+        // u ≤ 0 is bad input.
+        d.u_um = Some(vec![0.0; n]);
+        let e = fit(&d, "cubic19", &[], 5).unwrap_err().to_string();
+        assert!(e.contains("positive"), "{e}");
+    }
+
+    #[test]
+    fn nearly_collinear_terms_warn_with_the_condition_number() {
+        let mut d = mill_grid();
+        set_target(&mut d, 0, |_, u| u[0]);
+        d.err_um[1] = None;
+        d.err_um[2] = None;
+        // A tool length that barely changes along x: `abbe` is almost the
+        // constant column (ill-conditioned, yet above the rank threshold).
+        let x = d.pos_mm[0].clone().unwrap();
+        d.tool_mm = Some(x.iter().map(|p| 100.0 + 1e-5 * (p / 37.0).sin()).collect());
+        let adds = [Effect::parse("abbe:target=ex").unwrap()];
+        let (_, s) = fit(&d, "kinematic", &adds, 5).unwrap();
+        assert!(
+            s.condition_number["ex"] > ILL_CONDITIONED,
+            "{:?}",
+            s.condition_number
+        );
+        assert!(
+            s.warnings.iter().any(|w| w.contains("ill-conditioned")),
+            "{:?}",
+            s.warnings
+        );
+    }
+
+    #[test]
+    fn too_few_distinct_points_is_an_error() {
+        let d = mill_grid();
+        // Keep only 3 × 3 × 1 positions (9 distinct points, measured twice each).
+        let keep: Vec<usize> = (0..d.len())
+            .filter(|&r| d.pos(0, r) <= 100.0 && d.pos(1, r) <= 100.0 && d.pos(2, r) == 0.0)
+            .collect();
+        let mut keep2 = keep.clone();
+        keep2.extend(&keep);
+        let mut d = holdout::subset(&d, &keep2);
+        // z is held at 0 mm: treated like an absent axis, so cubic19 keeps
+        // its 10 terms in x and y — still more than the 9 points.
+        set_target(&mut d, 0, |_, u| u[0]);
+        d.err_um[1] = None;
+        d.err_um[2] = None;
+        let e = fit(&d, "cubic19", &[], 5).unwrap_err().to_string();
+        assert!(
+            e.contains("9 distinct points") && e.contains("10 terms"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_failed_shared_solve_names_the_target_as_a_lone_fit_would() {
+        // ex, ey and ez measured on the same 9 distinct points share one
+        // solve; when it fails, the message names the first target alone
+        // (the lone fit's "ex: …"), not the group ("ex, ey, ez: …").
+        let d = mill_grid();
+        let keep: Vec<usize> = (0..d.len())
+            .filter(|&r| d.pos(0, r) <= 100.0 && d.pos(1, r) <= 100.0 && d.pos(2, r) == 0.0)
+            .collect();
+        let mut d = holdout::subset(&d, &keep);
+        for t in 0..3 {
+            set_target(&mut d, t, |_, u| u[0] + u[1]);
+        }
+        let e = fit(&d, "cubic19", &[], 5).unwrap_err().to_string();
+        assert!(
+            e.starts_with("ex: 9 distinct points but the model has 10 terms"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn an_axis_held_at_one_position_is_left_out_like_an_absent_one() {
+        // The x line of the mill grid at y = z = 250 mm: cubic19 is the
+        // cubic in x (the y and z monomials would be zero columns), exactly
+        // the fit of the same data without the y and z columns.
+        let g = mill_grid();
+        let keep: Vec<usize> = (0..g.len())
+            .filter(|&r| g.pos(1, r) == 250.0 && g.pos(2, r) == 250.0)
+            .collect();
+        let mut d = holdout::subset(&g, &keep);
+        set_target(&mut d, 0, |_, u| 1.0 + 2.0 * u[0] - 0.5 * u[0].powi(3));
+        d.err_um[1] = None;
+        d.err_um[2] = None;
+        assert_eq!(d.varying_axes(), vec![0]);
+        let (m, s) = fit(&d, "cubic19", &[], 5).unwrap();
+        let FittedModel::Linear(m) = m else { panic!() };
+        let mut absent = d.clone();
+        absent.pos_mm[1] = None;
+        absent.pos_mm[2] = None;
+        let (ma, _) = fit(&absent, "cubic19", &[], 5).unwrap();
+        let FittedModel::Linear(ma) = ma else {
+            panic!()
+        };
+        assert_eq!(m.outputs[0].features, ma.outputs[0].features);
+        assert_eq!(m.outputs[0].features.len(), 4);
+        for (a, b) in m.outputs[0].coef_um.iter().zip(&ma.outputs[0].coef_um) {
+            assert!((a - b).abs() < 1e-9, "{a} {b}");
+        }
+        assert_eq!(s.terms, 4);
+        // The held axis' normalisation stays finite: u = 0 on the data.
+        assert_eq!(m.norm.centre_mm[1], 250.0);
+        assert!(m.norm.half_span_mm[1] > 0.0);
+        // A data set at one position has nothing to fit a polynomial to.
+        let one = holdout::subset(&d, &[3, 3, 3]);
+        let e = fit(&one, "cubic19", &[], 5).unwrap_err().to_string();
+        assert!(
+            e.contains("every measured point lies at one position"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn collinear_effect_is_named() {
+        let mut d = mill_grid();
+        set_target(&mut d, 0, |_, u| u[1]);
+        d.err_um[1] = None;
+        d.err_um[2] = None;
+        // cubic19 already has y; squareness adds y again for ex.
+        let adds = [Effect::parse("squareness:target=ex,axis=y").unwrap()];
+        let e = format!("{:#}", fit(&d, "cubic19", &adds, 5).unwrap_err());
+        assert!(e.contains("{y, y} are collinear"), "{e}");
+    }
+
+    #[test]
+    fn effect_on_missing_target_is_an_error() {
+        let mut d = mill_grid();
+        set_target(&mut d, 0, |_, u| u[1]);
+        d.err_um[1] = None;
+        d.err_um[2] = None;
+        let adds = [Effect::parse("reversal:target=ez,axis=x").unwrap()];
+        let e = crate::fit::fit(&d, "cubic19", &adds, &Default::default()).unwrap_err();
+        assert!(e.to_string().contains("no ez_um"), "{e}");
+    }
+}

@@ -1,0 +1,230 @@
+//! Fitting a compensation model to measurements: the one entry point
+//! [`fit`] that `trueaxis fit`, `diagnose`, `improve` and `demo` call, and
+//! the model kinds behind it —
+//!
+//! - `linear`: weighted least squares of a term set (`cubic19`, `kinematic`,
+//!   plus `--add` effects), one fit per target;
+//! - `local`: the seed's local polynomials on the cuboid between two
+//!   measured planes / the plane / the line (`--local`);
+//! - `grid`: a table with (bi/tri)linear interpolation (`grid:<step_mm>`);
+//! - `nn`: a tanh MLP trained by Levenberg–Marquardt (`nn:<hidden>`).
+
+pub mod bench_data;
+pub mod grid;
+pub mod linear;
+pub mod local;
+pub mod nn;
+
+use anyhow::{bail, Result};
+
+use crate::data::{Dataset, AXES, TARGETS};
+use crate::features::Effect;
+use crate::holdout;
+use crate::model::{DataRef, ModelFile, MODEL_FORMAT};
+
+/// Options of a fit beyond the model spec.
+#[derive(Clone, Debug)]
+pub struct FitOptions {
+    /// Hold-out blocks (≥ 2) for the held-out RMS.
+    pub blocks: usize,
+    /// Fit the seed's local polynomials instead of one global polynomial.
+    pub local: bool,
+    /// Neural-network training options.
+    pub nn: nn::NnOptions,
+    /// Where progress events of long computations (network training) go.
+    pub progress: ProgressSink,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            blocks: holdout::DEFAULT_BLOCKS,
+            local: false,
+            nn: nn::NnOptions::default(),
+            progress: ProgressSink::none(),
+        }
+    }
+}
+
+/// A step of a long computation, for a front end to show. The engine never
+/// draws: it emits these and the caller (the CLI's progress bar, a test, a
+/// GUI) renders them however it likes.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Progress {
+    /// Training `nn:<hidden>`: `done` of `total` epochs over all restarts.
+    Training {
+        /// Hidden neurons of the network.
+        hidden: usize,
+        /// The restart running (1-based).
+        restart: usize,
+        /// Restarts in all.
+        restarts: usize,
+        /// Epochs done over all restarts.
+        done: u64,
+        /// Epochs at most over all restarts.
+        total: u64,
+        /// Mean squared training error of the last epoch (scaled units).
+        train_mse: f64,
+    },
+    /// The computation is over.
+    Finished,
+}
+
+/// Where [`Progress`] events go: a front end's callback, or nowhere.
+#[derive(Clone, Default)]
+pub struct ProgressSink(Option<std::sync::Arc<ProgressFn>>);
+
+/// A receiver of [`Progress`] events.
+pub type ProgressFn = dyn Fn(&Progress) + Send + Sync;
+
+impl ProgressSink {
+    /// Events go to `f`.
+    pub fn new(f: impl Fn(&Progress) + Send + Sync + 'static) -> Self {
+        ProgressSink(Some(std::sync::Arc::new(f)))
+    }
+
+    /// Events go nowhere.
+    pub fn none() -> Self {
+        ProgressSink(None)
+    }
+
+    /// Sends `p` to the receiver, if there is one.
+    pub fn emit(&self, p: &Progress) {
+        if let Some(f) = &self.0 {
+            f(p);
+        }
+    }
+}
+
+impl std::fmt::Debug for ProgressSink {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(if self.0.is_some() {
+            "ProgressSink(callback)"
+        } else {
+            "ProgressSink(none)"
+        })
+    }
+}
+
+/// What a seed spec asks for.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Seed {
+    /// A polynomial seed (`cubic19`, `kinematic`).
+    Poly(String),
+    /// `nn:<hidden>`.
+    Nn(usize),
+    /// `grid:<step_mm>`.
+    Grid(f64),
+}
+
+impl Seed {
+    /// Parses a `--model` spec.
+    pub fn parse(spec: &str) -> Result<Seed> {
+        let expected = "expected cubic19, kinematic, nn:<hidden> or grid:<step_mm>";
+        if let Some(h) = spec.strip_prefix("nn:") {
+            let h: usize = h.parse().map_err(|_| {
+                anyhow::anyhow!(
+                    "model `{spec}`: hidden neurons must be a whole number ({expected})"
+                )
+            })?;
+            if !(1..=256).contains(&h) {
+                bail!("model `{spec}`: hidden neurons must be 1..=256");
+            }
+            return Ok(Seed::Nn(h));
+        }
+        if let Some(s) = spec.strip_prefix("grid:") {
+            let s: f64 = s.parse().map_err(|_| {
+                anyhow::anyhow!("model `{spec}`: grid step must be a number of mm ({expected})")
+            })?;
+            if !(s.is_finite() && s > 0.0) {
+                bail!("model `{spec}`: grid step must be a positive number of mm");
+            }
+            return Ok(Seed::Grid(s));
+        }
+        match spec {
+            "cubic19" | "kinematic" => Ok(Seed::Poly(spec.to_string())),
+            other => bail!("unknown model `{other}` ({expected})"),
+        }
+    }
+}
+
+/// Fits the model `seed` (+ `adds`) to `data` and returns the complete
+/// MODEL.json content, statistics included. Bad input (unknown seed, an
+/// effect on a target or channel the data lacks, fewer distinct points than
+/// terms, collinear columns, u_um ≤ 0) is an error with a message for the user.
+pub fn fit(data: &Dataset, seed: &str, adds: &[Effect], opts: &FitOptions) -> Result<ModelFile> {
+    let parsed = Seed::parse(seed)?;
+    if data.is_empty() {
+        bail!("{}: no data rows", data.source);
+    }
+    for e in adds {
+        if data.err_um[e.target].is_none() {
+            bail!(
+                "effect `{}` is for {} but the data has no {}_um column",
+                e.spec,
+                TARGETS[e.target],
+                TARGETS[e.target]
+            );
+        }
+    }
+    let blocks = opts.blocks.max(2);
+    let (model, mut stats, seed_name) = match parsed {
+        Seed::Poly(name) if opts.local => {
+            if !adds.is_empty() {
+                bail!("--add is not supported with --local (the local patches use the seed's own terms)");
+            }
+            let (m, s) = local::fit(data, blocks)?;
+            (m, s, format!("{name} --local"))
+        }
+        Seed::Poly(name) => {
+            let (m, s) = linear::fit(data, &name, adds, blocks)?;
+            (m, s, name)
+        }
+        Seed::Nn(h) => {
+            if opts.local || !adds.is_empty() {
+                bail!("--local and --add apply to the polynomial seeds (cubic19, kinematic), not to {seed}");
+            }
+            let (m, s) = nn::fit(data, h, &opts.nn, &opts.progress, blocks)?;
+            (m, s, seed.to_string())
+        }
+        Seed::Grid(step) => {
+            if opts.local || !adds.is_empty() {
+                bail!("--local and --add apply to the polynomial seeds (cubic19, kinematic), not to {seed}");
+            }
+            let (m, s) = grid::fit(data, step, blocks)?;
+            (m, s, seed.to_string())
+        }
+    };
+    // Every model kind leaves out an axis held at one position (no terms,
+    // grid nodes or network input along it): say so, with the position.
+    for a in data.axes() {
+        if let Some(p) = data.constant_position(a) {
+            stats.warnings.push(format!(
+                "{ax}: every measured point is at {ax} = {p} mm; {ax} is not modelled (the correction does not depend on {ax}, as for an axis absent from the data)",
+                ax = AXES[a]
+            ));
+        }
+    }
+    Ok(ModelFile {
+        format: MODEL_FORMAT.to_string(),
+        seed: seed_name,
+        adds: adds.iter().map(|e| e.spec.clone()).collect(),
+        data: DataRef {
+            source: data.source.clone(),
+            sha256: data.content_hash(),
+            rows: data.len(),
+            temp_range_c: Some(
+                data.temps
+                    .iter()
+                    .map(|c| {
+                        let lo = c.temp_c.iter().copied().fold(f64::INFINITY, f64::min);
+                        let hi = c.temp_c.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                        (c.name.clone(), [lo, hi])
+                    })
+                    .collect(),
+            ),
+        },
+        model,
+        stats,
+    })
+}

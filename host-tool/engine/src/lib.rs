@@ -1,0 +1,36 @@
+//! The trueaxis engine: everything that computes, as a library with no
+//! command line, no terminal output and no board link (those live in the
+//! `trueaxis` binary crate). Layered bottom-up — a module imports only from
+//! the layers below it:
+//!
+//! data → features / lsq / holdout → model → fit → diagnose / compare /
+//! export / history / iso230 → (the CLI's commands); import and simulate
+//! produce data sets.
+//!
+//! - `data`: the measurement data set (docs/cli.md § Measurement CSV) every command works on.
+//! - `import`: measurement files in (the trueaxis CSV, Renishaw .rtl) and the CSV out.
+//! - `simulate`: the synthetic machine (21 geometric errors, effects, plans, noise).
+//! - `features`: the model's terms — the cubic monomials and the physical effects.
+//! - `lsq`: least squares with rank and conditioning checks.
+//! - `holdout`: block-held-out validation (spatial blocks, not random rows).
+//! - `model`: the saved model file and its evaluation.
+//! - `fit`: training — linear/kinematic, local, grid and tanh-network models.
+//! - `compare`: where a model fails — residual statistics, regions, channels, planes, lines.
+//! - `diagnose`: which physical effect the model is missing, and how sure.
+//! - `history`: the steps of the error falling, fit by fit.
+//! - `iso230`: ISO 230-2 evaluation of bidirectional positioning runs.
+//! - `export`: the binary table for the board and controller compensation files.
+
+pub mod compare;
+pub mod data;
+pub mod diagnose;
+pub mod export;
+pub mod features;
+pub mod fit;
+pub mod history;
+pub mod holdout;
+pub mod import;
+pub mod iso230;
+pub mod lsq;
+pub mod model;
+pub mod simulate;

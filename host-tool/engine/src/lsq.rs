@@ -1,0 +1,544 @@
+//! Weighted linear least squares for compensation models: the design matrix
+//! of a term set over chosen rows, and a solver that tells the truth about
+//! the problem — condition number, rank, the columns that are collinear, and
+//! the standard deviation of every coefficient.
+//!
+//! Method: rows are multiplied by √w (w = 1/u², so a row with a huge
+//! uncertainty has no say), every column is scaled to unit 2-norm (the
+//! condition number then measures real collinearity, not units), a
+//! Householder QR reduces the tall m×n problem to n×n, and an SVD of R gives
+//! the solution, the singular values and — for a rank-deficient problem —
+//! the right singular vectors that name the collinear columns. QR first keeps
+//! the cost at O(m·n²) with a tiny SVD: cubic19 on the 2057-point grid is a
+//! few hundred microseconds (BENCHMARKS.md).
+
+// Numerical code indexes several parallel arrays by the same index;
+// index loops read closer to the formulas than zipped iterators.
+#![allow(clippy::needless_range_loop)]
+
+use std::collections::HashSet;
+
+use anyhow::{bail, Result};
+use nalgebra::{DMatrix, DVector};
+
+use crate::data::Dataset;
+use crate::features::{Feature, Norm};
+
+/// A column-scaled condition number above this is reported as ill-conditioned
+/// (coefficients then trade off against each other; predictions at the
+/// measured points stay good, extrapolation and coefficient values do not).
+pub const ILL_CONDITIONED: f64 = 1e6;
+
+/// Singular values below `RANK_TOL × σ_max` (of the column-scaled matrix)
+/// count as zero: such a combination of columns is zero to ten digits on the
+/// measured rows, and its coefficients would be noise amplified by 10¹⁰.
+pub const RANK_TOL: f64 = 1e-10;
+
+/// Why a least-squares problem cannot be solved.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LsqError {
+    /// Fewer rows than unknowns.
+    #[error("{rows} rows for {cols} unknowns")]
+    TooFewRows {
+        /// Rows (after weighting).
+        rows: usize,
+        /// Columns (unknowns).
+        cols: usize,
+    },
+    /// The columns are linearly dependent on these rows.
+    #[error("rank {rank} < {cols} columns; collinear column groups (indices): {groups:?}")]
+    RankDeficient {
+        /// Numerical rank.
+        rank: usize,
+        /// Number of columns.
+        cols: usize,
+        /// For each (numerically) zero singular value, the columns that take
+        /// part in the vanishing combination (|v_j| ≥ 0.1 % of the largest, in column-scaled units).
+        groups: Vec<Vec<usize>>,
+    },
+    /// A weight is zero, negative or not finite, or a value is not finite.
+    #[error("{0}")]
+    BadInput(String),
+}
+
+/// The solution of a weighted least-squares problem, in the units of `b`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LsqSolution {
+    /// Coefficients, one per column.
+    pub coef: DVector<f64>,
+    /// Standard deviation of each coefficient, √(σ̂²·[(AᵀWA)⁻¹]_jj) with
+    /// σ̂² = rss/dof; NaN when dof = 0 (an exact fit says nothing about noise).
+    pub coef_sd: DVector<f64>,
+    /// Weighted residual sum of squares Σ w·r².
+    pub rss: f64,
+    /// Residual degrees of freedom, rows − columns.
+    pub dof: usize,
+    /// Numerical rank (= columns for a returned solution unless it came from
+    /// [`solve_min_norm`]).
+    pub rank: usize,
+    /// σ_max/σ_min of the weighted, column-scaled matrix (∞ when rank-deficient).
+    pub condition_number: f64,
+}
+
+/// The design matrix: one row per entry of `rows`, one column per feature,
+/// in the units [`Feature::column`] gives (coefficients in µm).
+pub fn design_matrix(
+    data: &Dataset,
+    norm: &Norm,
+    features: &[Feature],
+    rows: &[usize],
+) -> Result<DMatrix<f64>> {
+    let mut a = DMatrix::zeros(rows.len(), features.len());
+    // Monomials (most columns of every seed) come from a table of the
+    // powers u_a^k of the selected rows, built once: ten times faster than
+    // evaluating each feature over the whole data set, and bit-identical to
+    // `Feature::column` (same powi, same product order x·y·z).
+    let max_exp = features
+        .iter()
+        .filter_map(|f| match f {
+            Feature::Monomial { exp } => exp.iter().copied().max(),
+            _ => None,
+        })
+        .max()
+        .unwrap_or(0) as usize;
+    let mut pow: [Vec<f64>; 3] = Default::default();
+    if features
+        .iter()
+        .any(|f| matches!(f, Feature::Monomial { .. }))
+    {
+        for axis in 0..3 {
+            let mut p = vec![1.0; rows.len() * (max_exp + 1)];
+            if let Some(col) = &data.pos_mm[axis] {
+                for (i, &r) in rows.iter().enumerate() {
+                    let u = norm.u(axis, col[r]);
+                    for k in 1..=max_exp {
+                        p[k * rows.len() + i] = u.powi(k as i32);
+                    }
+                }
+            } else {
+                // An absent axis sits at u = 0: u^0 = 1, higher powers 0.
+                for v in &mut p[rows.len()..] {
+                    *v = 0.0;
+                }
+            }
+            pow[axis] = p;
+        }
+    }
+    let m = rows.len();
+    for (j, f) in features.iter().enumerate() {
+        if let Feature::Monomial { exp } = f {
+            let [ex, ey, ez] = exp.map(usize::from);
+            let (px, py, pz) = (
+                &pow[0][ex * m..(ex + 1) * m],
+                &pow[1][ey * m..(ey + 1) * m],
+                &pow[2][ez * m..(ez + 1) * m],
+            );
+            let mut col = a.column_mut(j);
+            for i in 0..m {
+                col[i] = px[i] * py[i] * pz[i];
+            }
+            continue;
+        }
+        let col = f.column(data, norm)?;
+        for (i, &r) in rows.iter().enumerate() {
+            a[(i, j)] = col[r];
+        }
+    }
+    Ok(a)
+}
+
+/// Number of distinct rows of `a` (bit-exact): the number of distinct points
+/// in the model's own coordinates. Fewer than the column count means the
+/// model cannot be determined whatever the solver does (docs/cli.md § Measurement CSV).
+pub fn distinct_rows(a: &DMatrix<f64>) -> usize {
+    let mut seen: HashSet<Vec<u64>> = HashSet::with_capacity(a.nrows());
+    for i in 0..a.nrows() {
+        // +0.0 so that −0.0 and 0.0 count as the same point.
+        seen.insert(a.row(i).iter().map(|v| (v + 0.0).to_bits()).collect());
+    }
+    seen.len()
+}
+
+/// Weighted least squares min Σ wᵢ(bᵢ − aᵢ·x)²; `weights` = None means all 1.
+///
+/// Fails with [`LsqError`] (inside the `anyhow::Error`, so callers can
+/// `downcast_ref` and name the columns) when there are fewer rows than
+/// columns or the columns are collinear.
+pub fn solve(
+    a: &DMatrix<f64>,
+    b: &DVector<f64>,
+    weights: Option<&DVector<f64>>,
+) -> Result<LsqSolution> {
+    let b = DMatrix::from_column_slice(b.len(), 1, b.as_slice());
+    Ok(solve_inner(a, &b, weights, false)?.remove(0))
+}
+
+/// [`solve`] for several right-hand sides (the columns of `b`) on the same
+/// design and weights — the three error targets of a seed model measured on
+/// the same rows — with one QR and one SVD: one solution per column, each
+/// equal to what [`solve`] gives for that column alone.
+pub fn solve_multi(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    weights: Option<&DVector<f64>>,
+) -> Result<Vec<LsqSolution>> {
+    solve_inner(a, b, weights, false)
+}
+
+/// Like [`solve`], but a rank-deficient problem gets the minimum-norm
+/// solution (truncated SVD) instead of an error. Used by block hold-out,
+/// where leaving a block out can make a well-posed model briefly
+/// undetermined; the held-out error then shows the price honestly.
+pub fn solve_min_norm(
+    a: &DMatrix<f64>,
+    b: &DVector<f64>,
+    weights: Option<&DVector<f64>>,
+) -> Result<LsqSolution> {
+    let b = DMatrix::from_column_slice(b.len(), 1, b.as_slice());
+    Ok(solve_inner(a, &b, weights, true)?.remove(0))
+}
+
+fn solve_inner(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    weights: Option<&DVector<f64>>,
+    allow_deficient: bool,
+) -> Result<Vec<LsqSolution>> {
+    let (m, n) = a.shape();
+    let nrhs = b.ncols();
+    if b.nrows() != m || nrhs == 0 {
+        bail!(LsqError::BadInput(format!(
+            "{m} rows but {} right-hand sides",
+            b.nrows()
+        )));
+    }
+    if n == 0 {
+        bail!(LsqError::BadInput("no columns to fit".into()));
+    }
+    if m < n && !allow_deficient {
+        bail!(LsqError::TooFewRows { rows: m, cols: n });
+    }
+    if a.iter().chain(b.iter()).any(|v| !v.is_finite()) {
+        bail!(LsqError::BadInput(
+            "non-finite value in the least-squares problem".into()
+        ));
+    }
+    // Row weighting by √w.
+    let mut aw = a.clone();
+    let mut bw = b.clone();
+    if let Some(w) = weights {
+        if w.len() != m {
+            bail!(LsqError::BadInput(format!(
+                "{m} rows but {} weights",
+                w.len()
+            )));
+        }
+        if let Some(bad) = w.iter().find(|w| !(w.is_finite() && **w > 0.0)) {
+            bail!(LsqError::BadInput(format!(
+                "weight {bad} is not a positive finite number (u_um must be > 0)"
+            )));
+        }
+        for i in 0..m {
+            let s = w[i].sqrt();
+            aw.row_mut(i).scale_mut(s);
+            bw.row_mut(i).scale_mut(s);
+        }
+    }
+    // Column scaling to unit norm; an all-zero column is its own collinear
+    // group. "Zero" is relative to the largest column: sin(2π·p/period)
+    // sampled at multiples of half the period is 1e-15, not 0, and scaling
+    // it to unit norm would fit rounding noise.
+    let mut scale = DVector::zeros(n);
+    let mut zero_cols = Vec::new();
+    let norms: Vec<f64> = (0..n).map(|j| aw.column(j).norm()).collect();
+    let largest = norms.iter().copied().fold(0.0, f64::max);
+    for j in 0..n {
+        let c = norms[j];
+        if c > 1e-12 * largest {
+            scale[j] = c;
+            aw.column_mut(j).unscale_mut(c);
+        } else {
+            scale[j] = 1.0;
+            zero_cols.push(j);
+        }
+    }
+    // Reduce to a square problem: R x = Qᵀb (QR of the scaled m×n matrix).
+    let (r, qtb) = if m > n {
+        let qr = aw.qr();
+        let mut qtb_full = bw.clone();
+        qr.q_tr_mul(&mut qtb_full);
+        (qr.r(), qtb_full.rows(0, n).into_owned())
+    } else {
+        (aw, bw.clone())
+    };
+    let svd = nalgebra::linalg::SVD::new(r, true, true);
+    let (Some(u), Some(v_t)) = (svd.u.as_ref(), svd.v_t.as_ref()) else {
+        bail!(LsqError::BadInput("SVD did not converge".into()));
+    };
+    let s = &svd.singular_values;
+    let s_max = s.iter().copied().fold(0.0, f64::max);
+    let tol = RANK_TOL * s_max;
+    let rank = s.iter().filter(|&&v| v > tol).count();
+    let k_cols = s.len();
+    if (rank < n || !zero_cols.is_empty()) && !allow_deficient {
+        let mut groups: Vec<Vec<usize>> = zero_cols.iter().map(|&j| vec![j]).collect();
+        for k in 0..k_cols {
+            if s[k] > tol {
+                continue;
+            }
+            let v = v_t.row(k);
+            let vmax = v.iter().fold(0.0f64, |acc, x| acc.max(x.abs()));
+            let g: Vec<usize> = (0..n)
+                .filter(|&j| v[j].abs() >= 1e-3 * vmax && !zero_cols.contains(&j))
+                .collect();
+            if g.len() > 1 && !groups.contains(&g) {
+                groups.push(g);
+            }
+        }
+        bail!(LsqError::RankDeficient {
+            rank: rank.min(n - zero_cols.len()),
+            cols: n,
+            groups,
+        });
+    }
+    // x_scaled = V S⁺ Uᵀ (Qᵀb); the truncated pseudo-inverse keeps the
+    // minimum-norm solution when rank-deficient (only reached with allow_deficient).
+    let utb = u.tr_mul(&qtb);
+    let mut var_scaled: DVector<f64> = DVector::zeros(n);
+    let mut x: DMatrix<f64> = DMatrix::zeros(n, nrhs);
+    for k in 0..k_cols {
+        if s[k] <= tol {
+            continue;
+        }
+        for j in 0..n {
+            var_scaled[j] += (v_t[(k, j)] / s[k]).powi(2);
+        }
+        for c in 0..nrhs {
+            let coef_k = utb[(k, c)] / s[k];
+            for j in 0..n {
+                x[(j, c)] += v_t[(k, j)] * coef_k;
+            }
+        }
+    }
+    let s_min = s.iter().copied().fold(f64::INFINITY, f64::min);
+    let condition_number = if rank < n || s_min <= 0.0 {
+        f64::INFINITY
+    } else {
+        s_max / s_min
+    };
+    let dof = m.saturating_sub(rank);
+    Ok((0..nrhs)
+        .map(|c| {
+            let coef = x.column(c).component_div(&scale);
+            // Residuals from the weighted original problem (not Qᵀb
+            // bookkeeping), so rss is exact even when the fit is nearly perfect.
+            let resid = bw.column(c) - a_weighted_times(a, weights, &coef);
+            let rss = resid.norm_squared();
+            let sigma2 = if dof > 0 { rss / dof as f64 } else { f64::NAN };
+            let coef_sd = DVector::from_fn(n, |j, _| (sigma2 * var_scaled[j]).sqrt() / scale[j]);
+            LsqSolution {
+                coef,
+                coef_sd,
+                rss,
+                dof,
+                rank,
+                condition_number,
+            }
+        })
+        .collect())
+}
+
+/// √W·A·x without forming √W·A again.
+fn a_weighted_times(
+    a: &DMatrix<f64>,
+    weights: Option<&DVector<f64>>,
+    x: &DVector<f64>,
+) -> DVector<f64> {
+    let mut y = a * x;
+    if let Some(w) = weights {
+        for i in 0..y.len() {
+            y[i] *= w[i].sqrt();
+        }
+    }
+    y
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn poly_problem(n_rows: usize) -> (DMatrix<f64>, DVector<f64>, [f64; 4]) {
+        let coef = [1.5, -2.0, 0.25, 3.0];
+        let a = DMatrix::from_fn(n_rows, 4, |i, j| {
+            let u = -1.0 + 2.0 * i as f64 / (n_rows - 1) as f64;
+            u.powi(j as i32)
+        });
+        let b = DVector::from_fn(n_rows, |i, _| (0..4).map(|j| a[(i, j)] * coef[j]).sum());
+        (a, b, coef)
+    }
+
+    #[test]
+    fn several_right_hand_sides_equal_separate_solves() {
+        let (a, b, _) = poly_problem(40);
+        let b2 = b.map(|v| (v * 1.7).sin());
+        let b3 = DVector::from_fn(b.len(), |i, _| (i as f64 * 0.37).cos());
+        let w = DVector::from_fn(b.len(), |i, _| 1.0 + (i % 5) as f64);
+        let bm = DMatrix::from_columns(&[b.clone(), b2.clone(), b3.clone()]);
+        let multi = solve_multi(&a, &bm, Some(&w)).unwrap();
+        assert_eq!(multi.len(), 3);
+        for (sol, rhs) in multi.iter().zip([&b, &b2, &b3]) {
+            let one = solve(&a, rhs, Some(&w)).unwrap();
+            assert!((&sol.coef - &one.coef).amax() < 1e-12 * one.coef.amax().max(1.0));
+            assert!((&sol.coef_sd - &one.coef_sd).amax() < 1e-12 * one.coef_sd.amax().max(1.0));
+            assert!((sol.rss - one.rss).abs() <= 1e-12 * rhs.norm_squared());
+            assert_eq!((sol.dof, sol.rank), (one.dof, one.rank));
+            assert_eq!(sol.condition_number, one.condition_number);
+        }
+        assert!(multi[1].rss > 0.0 && multi[0].coef != multi[1].coef);
+    }
+
+    #[test]
+    fn exact_recovery_and_zero_residual() {
+        let (a, b, coef) = poly_problem(30);
+        let s = solve(&a, &b, None).unwrap();
+        for j in 0..4 {
+            assert!((s.coef[j] - coef[j]).abs() < 1e-12, "{j}: {}", s.coef[j]);
+        }
+        assert!(s.rss < 1e-20);
+        assert_eq!(s.dof, 26);
+        assert_eq!(s.rank, 4);
+        assert!(s.condition_number > 1.0 && s.condition_number < 100.0);
+    }
+
+    #[test]
+    fn square_problem_is_exact_and_has_no_sd() {
+        let (a, b, coef) = poly_problem(4);
+        let s = solve(&a, &b, None).unwrap();
+        for j in 0..4 {
+            assert!((s.coef[j] - coef[j]).abs() < 1e-12);
+        }
+        assert_eq!(s.dof, 0);
+        assert!(s.coef_sd[0].is_nan());
+    }
+
+    #[test]
+    fn coefficient_sd_matches_textbook_line_fit() {
+        // y = a + b·x with residuals ±1 alternating: σ̂² = rss/(n−2),
+        // sd(b) = σ̂ / √Σ(x − x̄)².
+        let n = 10;
+        let a = DMatrix::from_fn(n, 2, |i, j| if j == 0 { 1.0 } else { i as f64 });
+        let b = DVector::from_fn(n, |i, _| {
+            2.0 + 0.5 * i as f64 + if i % 2 == 0 { 1.0 } else { -1.0 }
+        });
+        let s = solve(&a, &b, None).unwrap();
+        let xbar = 4.5;
+        let sxx: f64 = (0..n).map(|i| (i as f64 - xbar).powi(2)).sum();
+        let sigma = (s.rss / (n - 2) as f64).sqrt();
+        assert!((s.coef_sd[1] - sigma / sxx.sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_row_with_huge_uncertainty_has_no_influence() {
+        let (a, mut b, coef) = poly_problem(20);
+        b[7] += 1000.0; // a gross outlier …
+        let mut w = DVector::from_element(20, 1.0);
+        w[7] = 1.0 / (1e9f64).powi(2); // … measured with u = 10⁹ µm
+        let s = solve(&a, &b, Some(&w)).unwrap();
+        for j in 0..4 {
+            assert!((s.coef[j] - coef[j]).abs() < 1e-9, "{j}: {}", s.coef[j]);
+        }
+        // Without the weights the outlier moves the fit.
+        let s = solve(&a, &b, None).unwrap();
+        assert!((s.coef[0] - coef[0]).abs() > 1.0);
+    }
+
+    #[test]
+    fn bad_weights_are_rejected() {
+        let (a, b, _) = poly_problem(10);
+        let mut w = DVector::from_element(10, 1.0);
+        w[3] = 0.0;
+        let e = solve(&a, &b, Some(&w)).unwrap_err();
+        assert!(matches!(
+            e.downcast_ref::<LsqError>(),
+            Some(LsqError::BadInput(_))
+        ));
+    }
+
+    #[test]
+    fn rank_deficiency_names_the_collinear_columns() {
+        // Column 3 = 2·column 1 − column 0; column 2 independent.
+        let n = 12;
+        let a = DMatrix::from_fn(n, 4, |i, j| {
+            let x = i as f64;
+            match j {
+                0 => 1.0,
+                1 => x,
+                2 => x * x,
+                _ => 2.0 * x - 1.0,
+            }
+        });
+        let b = DVector::from_fn(n, |i, _| i as f64);
+        let e = solve(&a, &b, None).unwrap_err();
+        match e.downcast_ref::<LsqError>() {
+            Some(LsqError::RankDeficient { rank, cols, groups }) => {
+                assert_eq!((*rank, *cols), (3, 4));
+                assert_eq!(groups, &vec![vec![0, 1, 3]]);
+            }
+            other => panic!("{other:?}"),
+        }
+        // The min-norm variant still answers, and fits the data.
+        let s = solve_min_norm(&a, &b, None).unwrap();
+        assert_eq!(s.rank, 3);
+        assert!(s.rss < 1e-18);
+    }
+
+    #[test]
+    fn zero_column_and_too_few_rows() {
+        let a = DMatrix::from_fn(5, 2, |i, j| if j == 0 { i as f64 } else { 0.0 });
+        let b = DVector::from_element(5, 1.0);
+        match solve(&a, &b, None).unwrap_err().downcast_ref::<LsqError>() {
+            Some(LsqError::RankDeficient { groups, .. }) => assert_eq!(groups, &vec![vec![1]]),
+            other => panic!("{other:?}"),
+        }
+        let a = DMatrix::from_element(2, 3, 1.0);
+        let b = DVector::from_element(2, 1.0);
+        assert!(matches!(
+            solve(&a, &b, None).unwrap_err().downcast_ref::<LsqError>(),
+            Some(LsqError::TooFewRows { rows: 2, cols: 3 })
+        ));
+    }
+
+    #[test]
+    fn design_matrix_fast_path_matches_feature_columns() {
+        let data = Dataset {
+            pos_mm: [
+                Some(vec![0.0, 3.0, 7.5, 10.0]),
+                None,
+                Some(vec![1.0, -2.0, 4.0, 0.5]),
+            ],
+            err_um: [Some(vec![Some(0.0); 4]), None, None],
+            dir: [Some(vec![1, -1, 1, -1]), None, None],
+            ..Default::default()
+        };
+        let norm = Norm::from_data(&data);
+        let features: Vec<Feature> = crate::features::CUBIC19
+            .iter()
+            .map(|&exp| Feature::Monomial { exp })
+            .chain([Feature::Reversal { axis: 0 }])
+            .collect();
+        let rows = [3, 1, 2];
+        let a = design_matrix(&data, &norm, &features, &rows).unwrap();
+        for (j, f) in features.iter().enumerate() {
+            let col = f.column(&data, &norm).unwrap();
+            for (i, &r) in rows.iter().enumerate() {
+                assert_eq!(a[(i, j)].to_bits(), col[r].to_bits(), "{f} row {r}");
+            }
+        }
+    }
+
+    #[test]
+    fn distinct_rows_counts_points() {
+        let a = DMatrix::from_row_slice(4, 2, &[1.0, 0.0, 1.0, -0.0, 1.0, 2.0, 1.0, 2.0]);
+        assert_eq!(distinct_rows(&a), 2);
+    }
+}
