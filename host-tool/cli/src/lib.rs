@@ -6,8 +6,10 @@
 //!
 //! - `cmd`: one module per subcommand (its clap arguments and its `run`).
 //! - `report`: the HTML pages and SVG plots of compare, diagnose, history, iso230.
+//! - `workflow`: the building blocks several commands share (so none calls another).
 //! - `link`: the board link client (serial port or TCP) behind upload/status/rollback/monitor.
 
 pub mod cmd;
 pub mod link;
 pub mod report;
+pub mod workflow;

@@ -99,7 +99,10 @@ fn written_file_reads_back_identically() {
     assert_eq!(back.tool_mm, d.tool_mm);
     assert_eq!(back.pass_id, d.pass_id);
     assert_eq!(back.metadata, d.metadata);
-    assert_eq!(back.content_hash(), d.content_hash());
+    assert_eq!(
+        trueaxis_engine::import::content_hash(&back),
+        trueaxis_engine::import::content_hash(&d)
+    );
 }
 
 #[test]
@@ -322,7 +325,10 @@ fn cli_json_shape_and_bad_specs() {
         ])
     );
     let d = import::load(&out_csv).unwrap();
-    assert_eq!(v["sha256"].as_str().unwrap(), d.content_hash());
+    assert_eq!(
+        v["sha256"].as_str().unwrap(),
+        trueaxis_engine::import::content_hash(&d)
+    );
     let _ = std::fs::remove_file(&out_csv);
 
     let bad = run(&[
@@ -514,7 +520,7 @@ fn golden_hash_pins_the_random_stream_and_the_format() {
     cfg.noise_um = 0.25;
     cfg.seed = 2024;
     let d = simulate::simulate(&cfg);
-    assert_eq!(d.content_hash(), GOLDEN);
+    assert_eq!(trueaxis_engine::import::content_hash(&d), GOLDEN);
 }
 
 /// sha256 of the canonical CSV. (libm's sin/exp may differ by an ulp

@@ -152,20 +152,6 @@ impl Dataset {
         self.temps.iter().find(|c| c.name == name)
     }
 
-    /// SHA-256 (hex) of the data set's canonical CSV (`import::write_csv`):
-    /// the same measurements give the same hash whatever file they came
-    /// from, so a MODEL.json can name the data it was fitted to.
-    pub fn content_hash(&self) -> String {
-        use sha2::{Digest, Sha256};
-        let mut buf = Vec::new();
-        // Writing to a Vec cannot fail.
-        crate::import::write_csv(self, &mut buf).expect("writing CSV to memory");
-        Sha256::digest(&buf)
-            .iter()
-            .map(|b| format!("{b:02x}"))
-            .collect()
-    }
-
     /// Checks the invariants listed at the top of this module: equal column
     /// lengths, an axis and a target present, finite numbers, `dir` ±1.
     /// Importers and `simulate` call it before handing a data set out.

@@ -311,6 +311,17 @@ pub fn seed_monomials(spec: &str, t: usize, axes: &[usize]) -> Result<Vec<[u8; 3
         .collect())
 }
 
+/// True when the feature's value changes with the position of `axis`.
+pub fn feature_uses_axis(f: &Feature, axis: usize) -> bool {
+    match f {
+        Feature::Monomial { exp } | Feature::Abbe { exp } | Feature::Thermal { exp, .. } => {
+            exp[axis] > 0
+        }
+        Feature::Periodic { axis: a, .. } | Feature::Reversal { axis: a } => *a == axis,
+        Feature::Drift { .. } => false,
+    }
+}
+
 /// A physical effect added to a model with `fit --add`, in the syntax
 /// `<family>:<key>=<value>,…` that `diagnose` prints in its `add` field.
 ///

@@ -4,7 +4,7 @@
 //! the layers below it:
 //!
 //! data → features / lsq / holdout → model → fit → diagnose / compare /
-//! export / history / iso230 → (the CLI's commands); import and simulate
+//! export / history / iso230 → improve → (the CLI's commands); import and simulate
 //! produce data sets.
 //!
 //! - `data`: the measurement data set (docs/cli.md § Measurement CSV) every command works on.
@@ -18,6 +18,7 @@
 //! - `compare`: where a model fails — residual statistics, regions, channels, planes, lines.
 //! - `diagnose`: which physical effect the model is missing, and how sure.
 //! - `history`: the steps of the error falling, fit by fit.
+//! - `improve`: the loop fit → diagnose → add the missing effects → refit, to the noise floor.
 //! - `iso230`: ISO 230-2 evaluation of bidirectional positioning runs.
 //! - `export`: the binary table for the board and controller compensation files.
 
@@ -30,6 +31,7 @@ pub mod fit;
 pub mod history;
 pub mod holdout;
 pub mod import;
+pub mod improve;
 pub mod iso230;
 pub mod lsq;
 pub mod model;

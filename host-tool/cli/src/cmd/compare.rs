@@ -6,12 +6,12 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 
 use crate::cmd::input;
 use crate::cmd::out;
-use trueaxis_engine::compare::{self, Comparison, Warning};
-use trueaxis_engine::data::Dataset;
+use crate::workflow::run_compare;
+use trueaxis_engine::compare::{self, Comparison};
 use trueaxis_engine::model::ModelFile;
 
 /// Arguments of `trueaxis compare`.
@@ -28,45 +28,6 @@ pub struct Args {
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
-}
-
-/// Runs the comparison of `data` with `model` (and writes the report when
-/// `report` is given). The building block `compare` and `demo` share.
-pub fn run_compare(
-    data: &Dataset,
-    model: &ModelFile,
-    report: Option<&std::path::Path>,
-) -> Result<Comparison> {
-    let predicted = model
-        .model
-        .predict(data)
-        .with_context(|| format!("{}: the model cannot be evaluated on it", data.source))?;
-    let held_out = [0, 1, 2].map(|t| {
-        model
-            .stats
-            .held_out_rms_um
-            .get(trueaxis_engine::data::TARGETS[t])
-            .copied()
-    });
-    let mut c = compare::compare(data, &model.spec(), &predicted, held_out);
-    let hash = data.content_hash();
-    if !model.data.sha256.is_empty() && hash != model.data.sha256 {
-        c.warnings.push(Warning {
-            code: "data_hash_mismatch".into(),
-            detail: format!(
-                "the data ({}, sha256 {}…) are not the data the model was fitted to ({}, sha256 {}…): the statistics describe a validation, not the fit",
-                data.source,
-                &hash[..12.min(hash.len())],
-                model.data.source,
-                &model.data.sha256[..12.min(model.data.sha256.len())]
-            ),
-        });
-    }
-    if let Some(dir) = report {
-        let index = crate::report::compare::write_report(dir, data, &predicted, &c)?;
-        c.report = Some(index.display().to_string());
-    }
-    Ok(c)
 }
 
 /// The comparison as readable text.

@@ -25,6 +25,7 @@
 //! holds the table's agreement with `model.json`. Each stage is a
 //! function; [`Demo::run`] is the story.
 
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -33,9 +34,12 @@ use anyhow::{Context, Result};
 
 use trueaxis_engine::compare::Comparison;
 use trueaxis_engine::data::{Dataset, AXES};
+use trueaxis_engine::diagnose::{self, Options, Verdict};
 use trueaxis_engine::export::table::{TableExport, TableOptions};
 use trueaxis_engine::features::Effect;
 use trueaxis_engine::fit::{self, FitOptions};
+use trueaxis_engine::history;
+use trueaxis_engine::improve::{improve, Improvement};
 use trueaxis_engine::model::ModelFile;
 use trueaxis_engine::simulate::{self, SimConfig};
 
@@ -190,7 +194,7 @@ impl Demo {
         report: &Path,
         json: &Path,
     ) -> Result<Comparison> {
-        let c = super::compare::run_compare(data, model, Some(report))?;
+        let c = crate::workflow::run_compare(data, model, Some(report))?;
         std::fs::write(json, serde_json::to_string_pretty(&c)? + "\n")
             .with_context(|| format!("cannot write {}", json.display()))?;
         Ok(c)
@@ -199,11 +203,8 @@ impl Demo {
     /// Stage 4: diagnose the fitted seed, add the effects it names, refit
     /// until the residual is at the noise floor; overwrites `model.json`
     /// with the improved model. Returns it and the story of the steps.
-    pub fn improve(
-        &self,
-        data: &Dataset,
-    ) -> Result<(ModelFile, String, super::improve::Improvement)> {
-        super::improve::demo_stage(
+    pub fn improve(&self, data: &Dataset) -> Result<(ModelFile, String, Improvement)> {
+        demo_stage(
             data,
             SEED_MODEL,
             &self.model_json(),
@@ -218,7 +219,7 @@ impl Demo {
             created_unix_s: 0, // reproducible bytes
             ..TableOptions::default()
         };
-        let e = super::export::export_table(model, &self.table_bin(), &opts, 1.0)?;
+        let e = crate::workflow::export_table(model, &self.table_bin(), &opts, 1.0)?;
         std::fs::write(self.table_json(), serde_json::to_string_pretty(&e)? + "\n")
             .with_context(|| format!("cannot write {}", self.table_json().display()))?;
         Ok(e)
@@ -450,4 +451,103 @@ impl Args {
             demo.run(Story::Stdout).map(|_| ())
         }
     }
+}
+
+/// The diagnosis stage of `trueaxis demo`: where the seed model fails, the
+/// missing effect named, added and refitted until the noise floor, the
+/// error falling step by step. Writes every fit to `model_path` (with its
+/// history) and, with `report_dir`, the diagnosis of the seed model and the
+/// history plot under `report_dir/diagnose` and `report_dir/history`.
+/// Returns the final model, the story told and the steps.
+fn demo_stage(
+    data: &Dataset,
+    seed: &str,
+    model_path: &std::path::Path,
+    report_dir: Option<&std::path::Path>,
+) -> Result<(trueaxis_engine::model::ModelFile, String, Improvement)> {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let first = diagnose::diagnose(data, &Options::seed(seed))?;
+    let _ = writeln!(s, "Diagnose {seed} — which physical effect is missing?");
+    let mut worst: Vec<&diagnose::Region> = first.worst_regions.iter().collect();
+    worst.sort_by(|a, b| b.rms_um.total_cmp(&a.rms_um));
+    if let Some(r) = worst.first() {
+        let _ = writeln!(
+            s,
+            "   the model fails most on {} in {} mm (residual RMS {:.2} µm)",
+            r.target,
+            trueaxis_engine::compare::bbox_text(&r.bbox_mm),
+            r.rms_um
+        );
+    }
+    if let Some(dir) = report_dir {
+        let p = crate::report::diagnose::write(&first, data, &dir.join("diagnose"))?;
+        let _ = writeln!(s, "   evidence: {}", p.display());
+    }
+    let fmt = |m: &BTreeMap<String, f64>| {
+        m.iter()
+            .map(|(k, v)| format!("{k} {v:.2}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let r = improve(data, seed, model_path, |st| {
+        match st.added_effects.as_slice() {
+            [] => {
+                let _ = writeln!(
+                    s,
+                    "   step {}: {seed} alone: RMS µm {}; held out {}",
+                    st.step,
+                    fmt(&st.rms_um),
+                    fmt(&st.held_out_rms_um)
+                );
+            }
+            added => {
+                for a in added {
+                    match &a.replaces {
+                        Some(old) => {
+                            let _ = writeln!(
+                                s,
+                                "   step {}: named `{}`, replacing `{old}`",
+                                st.step, a.add
+                            );
+                        }
+                        None => {
+                            let _ = writeln!(s, "   step {}: named and added `{}`", st.step, a.add);
+                        }
+                    }
+                    let _ = writeln!(s, "      because {}", a.evidence);
+                }
+                let _ = writeln!(
+                    s,
+                    "      refit: RMS µm {}; held out {}",
+                    fmt(&st.rms_um),
+                    fmt(&st.held_out_rms_um)
+                );
+            }
+        }
+        if st.verdict == Verdict::AtNoiseFloor {
+            let nf: Vec<String> = st
+                .noise_floor_um
+                .iter()
+                .filter_map(|(k, v)| v.map(|v| format!("{k} {v:.2}")))
+                .collect();
+            let _ = writeln!(
+                s,
+                "   {} — noise floor µm: {}; no candidate is significant any more",
+                st.outcome(),
+                nf.join(", ")
+            );
+        }
+    })?;
+    if let Some(dir) = report_dir {
+        let h = history::load(model_path)?;
+        let p = crate::report::history::write_report(
+            &h,
+            &model_path.display().to_string(),
+            &dir.join("history"),
+        )?;
+        let _ = writeln!(s, "   the error falling: {}", p.display());
+    }
+    let _ = write!(s, "   model: {} → {}", r.model, r.model_file);
+    Ok((trueaxis_engine::model::ModelFile::load(model_path)?, s, r))
 }

@@ -6,13 +6,13 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 
 use crate::cmd::input;
 use crate::cmd::out::{self, outln};
+use crate::workflow::model_spec;
 use trueaxis_engine::diagnose::{self, Diagnosis, Options, Verdict};
 use trueaxis_engine::features::Effect;
-use trueaxis_engine::model::ModelFile;
 
 /// Arguments of `trueaxis diagnose`.
 #[derive(clap::Args, Debug)]
@@ -32,26 +32,6 @@ pub struct Args {
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
-}
-
-/// Seed and effects of `--model`: a seed spec, or the `seed` and `adds` of
-/// a MODEL.json. Only linear seeds can be diagnosed: the candidates are
-/// scored by partialling the model's columns out of theirs.
-pub fn model_spec(model: &str) -> Result<(String, Vec<String>)> {
-    let (seed, adds) = if model.ends_with(".json") || Path::new(model).is_file() {
-        // Read and checked as every command reads a MODEL.json: a damaged
-        // file is refused here too, not half-used.
-        let m = ModelFile::load(model)?;
-        (m.seed, m.adds)
-    } else {
-        (model.to_string(), Vec::new())
-    };
-    if seed != "cubic19" && seed != "kinematic" {
-        bail!(
-            "diagnose works on linear seeds (cubic19, kinematic); the model is `{seed}` — fit a cubic19 or kinematic model to find missing effects"
-        );
-    }
-    Ok((seed, adds))
 }
 
 impl Args {

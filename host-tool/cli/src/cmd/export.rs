@@ -3,14 +3,15 @@
 //! (LinuxCNC `COMP_FILE_TYPE = 1`, Sinumerik LEC). The formats, units, sign
 //! conventions and envelope defaults are in docs/export-formats.md.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use serde_json::json;
 
 use crate::cmd::out::outln;
+use crate::workflow::{export_table, write_file};
 use trueaxis_engine::data::{AXES, TARGETS};
-use trueaxis_engine::export::table::{self, TableExport, TableOptions};
+use trueaxis_engine::export::table::TableOptions;
 use trueaxis_engine::export::{crc32_hex, linuxcnc, sample_axis, sinumerik, Warning};
 use trueaxis_engine::model::ModelFile;
 
@@ -146,40 +147,6 @@ fn fmt_no_neg_zero(v: f64, decimals: usize) -> String {
     } else {
         s
     }
-}
-
-fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    }
-    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
-}
-
-/// Exports `model` as a firmware table to `output` and fails when the
-/// accuracy check is above `allow_error_nm` (the file is not written then).
-/// The building block `export` and `demo` share.
-pub fn export_table(
-    model: &ModelFile,
-    output: &Path,
-    opts: &TableOptions,
-    allow_error_nm: f64,
-) -> Result<TableExport> {
-    if !(allow_error_nm.is_finite() && allow_error_nm >= 0.0) {
-        bail!("--allow-error-nm must be a finite number ≥ 0, got {allow_error_nm}");
-    }
-    let e = table::export(model, opts)?;
-    let worst = e.max_f32_error_nm.max(e.max_fixed_error_nm);
-    if worst.is_nan() || worst > allow_error_nm {
-        bail!(
-            "accuracy check failed: the firmware's evaluation differs from the model by up to {worst:.3} nm (f32 {:.3}, fixed {:.3}) over {} sweep points, above the {allow_error_nm} nm allowed (--allow-error-nm); {} was not written",
-            e.max_f32_error_nm,
-            e.max_fixed_error_nm,
-            e.sweep_points,
-            output.display()
-        );
-    }
-    write_file(output, &e.table)?;
-    Ok(e)
 }
 
 /// The table's creation time: `SOURCE_DATE_EPOCH` when set (the

@@ -10,9 +10,9 @@ use anyhow::{Context, Result};
 
 use crate::cmd::input;
 use crate::cmd::out::{self, outln};
+use crate::workflow::model_output;
 use trueaxis_engine::features::Effect;
 use trueaxis_engine::fit::{self, nn::NnOptions, FitOptions};
-use trueaxis_engine::history::history_path;
 
 /// Arguments of `trueaxis fit`.
 #[derive(clap::Args, Debug)]
@@ -48,32 +48,10 @@ pub struct Args {
     pub json: bool,
 }
 
-/// `<data>.model.json` beside the data file.
-pub fn default_model_path(data: &std::path::Path) -> PathBuf {
-    let mut name = data
-        .file_name()
-        .map(|n| n.to_os_string())
-        .unwrap_or_default();
-    name.push(".model.json");
-    data.with_file_name(name)
-}
-
-/// Where `fit` and `improve` write the model (`-o`, else
-/// [`default_model_path`]), refused when it or its history file is the
-/// data file.
-pub fn model_output(data: &std::path::Path, output: Option<PathBuf>) -> Result<PathBuf> {
-    let out = output.unwrap_or_else(|| default_model_path(data));
-    input::refuse_overwrite(
-        &[("the data file", data)],
-        &[("-o", &out), ("the history file", &history_path(&out))],
-    )?;
-    Ok(out)
-}
-
 impl Args {
     pub fn run(self) -> Result<()> {
         // Parse everything that can be wrong with the command before reading data.
-        fit::Seed::parse(&self.model)?;
+        trueaxis_engine::model::Seed::parse(&self.model)?;
         let adds = self
             .add
             .iter()

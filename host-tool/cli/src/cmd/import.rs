@@ -58,7 +58,7 @@ impl Args {
                 "metadata": data.metadata.iter().map(|(k, v)| json!({"key": k, "value": v})).collect::<Vec<_>>(),
                 "skipped_count": data.skipped.len(),
                 "skipped": data.skipped.iter().map(|s| json!({"line": s.line, "reason": s.reason})).collect::<Vec<_>>(),
-                "sha256": data.content_hash(),
+                "sha256": trueaxis_engine::import::content_hash(&data),
             });
             outln!("{doc}")?;
         } else {

@@ -134,7 +134,7 @@ impl Args {
                 "plans": cfg.plans.iter().map(ToString::to_string).collect::<Vec<_>>(),
                 "effects": cfg.effects.iter().map(ToString::to_string).collect::<Vec<_>>(),
                 "warnings": warnings,
-                "sha256": data.content_hash(),
+                "sha256": trueaxis_engine::import::content_hash(&data),
             });
             outln!("{doc}")?;
         } else {

@@ -22,6 +22,7 @@ use anyhow::{bail, Result};
 use serde::Serialize;
 
 use crate::data::{Dataset, TempChannel, AXES, TARGETS};
+pub use crate::features::feature_uses_axis;
 use crate::features::Feature;
 use crate::model::{FittedModel, ModelFile};
 
@@ -89,17 +90,6 @@ pub fn axis_travel_mm(model: &FittedModel, axis: usize) -> Option<(f64, f64)> {
                 )
             })
         }
-    }
-}
-
-/// True when the feature's value changes with the position of `axis`.
-pub fn feature_uses_axis(f: &Feature, axis: usize) -> bool {
-    match f {
-        Feature::Monomial { exp } | Feature::Abbe { exp } | Feature::Thermal { exp, .. } => {
-            exp[axis] > 0
-        }
-        Feature::Periodic { axis: a, .. } | Feature::Reversal { axis: a } => *a == axis,
-        Feature::Drift { .. } => false,
     }
 }
 

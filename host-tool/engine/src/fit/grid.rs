@@ -23,12 +23,10 @@
 
 use anyhow::{bail, Result};
 
-use crate::data::{Dataset, AXES, TARGETS};
+use crate::data::{Dataset, TARGETS};
 use crate::holdout;
+use crate::model::grid::{point, stencil, Stencil, MAX_NODES};
 use crate::model::{FitStats, FittedModel, GridModel, GridOutput};
-
-/// Largest table accepted (nodes); a finer grid is refused with a message.
-pub const MAX_NODES: usize = 2_000_000;
 
 /// Relative weight of the bending penalty (see module docs).
 const LAMBDA_REL: f64 = 1e-3;
@@ -68,68 +66,6 @@ pub fn geometry(data: &Dataset, step_mm: f64) -> Result<(Vec<usize>, Vec<f64>, V
         );
     }
     Ok((axes, origin, counts))
-}
-
-/// Interpolation stencil of one point: up to 8 (node, weight) pairs.
-#[derive(Clone, Copy, Debug)]
-struct Stencil {
-    idx: [usize; 8],
-    w: [f64; 8],
-    n: usize,
-}
-
-fn stencil(origin: &[f64], step: f64, counts: &[usize], p: &[f64]) -> Stencil {
-    let d = counts.len();
-    let mut base = [0usize; 3];
-    let mut frac = [0.0f64; 3];
-    for k in 0..d {
-        let t = ((p[k] - origin[k]) / step).clamp(0.0, (counts[k] - 1) as f64);
-        let i = (t.floor() as usize).min(counts[k] - 2);
-        base[k] = i;
-        frac[k] = t - i as f64;
-    }
-    let mut s = Stencil {
-        idx: [0; 8],
-        w: [0.0; 8],
-        n: 1 << d,
-    };
-    for corner in 0..s.n {
-        let mut idx = 0usize;
-        let mut stride = 1usize;
-        let mut w = 1.0;
-        for k in 0..d {
-            let hi = (corner >> k) & 1 == 1;
-            idx += (base[k] + usize::from(hi)) * stride;
-            stride *= counts[k];
-            w *= if hi { frac[k] } else { 1.0 - frac[k] };
-        }
-        s.idx[corner] = idx;
-        s.w[corner] = w;
-    }
-    s
-}
-
-fn point(data: &Dataset, axes: &[usize], r: usize) -> [f64; 3] {
-    let mut p = [0.0; 3];
-    for (k, &a) in axes.iter().enumerate() {
-        p[k] = data.pos(a, r);
-    }
-    p
-}
-
-/// Evaluates one target of a grid model at every row of `data`.
-pub fn predict(m: &GridModel, o: &GridOutput, data: &Dataset) -> Result<Vec<f64>> {
-    for &a in &m.axes {
-        if data.pos_mm[a].is_none() {
-            bail!("the grid model needs {}_mm", AXES[a]);
-        }
-    }
-    Ok((0..data.len())
-        .map(|r| {
-            let s = stencil(&m.origin_mm, m.step_mm, &m.counts, &point(data, &m.axes, r));
-            (0..s.n).map(|k| s.w[k] * o.values_um[s.idx[k]]).sum()
-        })
-        .collect())
 }
 
 /// Node values for one target from the rows `rows` (values `e`, weights `w`).

@@ -12,8 +12,7 @@ use anyhow::{bail, Result};
 use nalgebra::DMatrix;
 
 use crate::data::{Dataset, AXES, TARGETS};
-use crate::export::feature_uses_axis;
-use crate::features::{seed_monomials, Effect, Feature, Norm};
+use crate::features::{feature_uses_axis, seed_monomials, Effect, Feature, Norm};
 use crate::holdout;
 use crate::lsq::{self, LsqError, ILL_CONDITIONED};
 use crate::model::{FitStats, FittedModel, LinearModel, LinearOutput};

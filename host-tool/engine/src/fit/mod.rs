@@ -20,7 +20,7 @@ use anyhow::{bail, Result};
 use crate::data::{Dataset, AXES, TARGETS};
 use crate::features::Effect;
 use crate::holdout;
-use crate::model::{DataRef, ModelFile, MODEL_FORMAT};
+use crate::model::{DataRef, ModelFile, ModelSeed, Seed, MODEL_FORMAT};
 
 /// Options of a fit beyond the model spec.
 #[derive(Clone, Debug)]
@@ -106,48 +106,6 @@ impl std::fmt::Debug for ProgressSink {
     }
 }
 
-/// What a seed spec asks for.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Seed {
-    /// A polynomial seed (`cubic19`, `kinematic`).
-    Poly(String),
-    /// `nn:<hidden>`.
-    Nn(usize),
-    /// `grid:<step_mm>`.
-    Grid(f64),
-}
-
-impl Seed {
-    /// Parses a `--model` spec.
-    pub fn parse(spec: &str) -> Result<Seed> {
-        let expected = "expected cubic19, kinematic, nn:<hidden> or grid:<step_mm>";
-        if let Some(h) = spec.strip_prefix("nn:") {
-            let h: usize = h.parse().map_err(|_| {
-                anyhow::anyhow!(
-                    "model `{spec}`: hidden neurons must be a whole number ({expected})"
-                )
-            })?;
-            if !(1..=256).contains(&h) {
-                bail!("model `{spec}`: hidden neurons must be 1..=256");
-            }
-            return Ok(Seed::Nn(h));
-        }
-        if let Some(s) = spec.strip_prefix("grid:") {
-            let s: f64 = s.parse().map_err(|_| {
-                anyhow::anyhow!("model `{spec}`: grid step must be a number of mm ({expected})")
-            })?;
-            if !(s.is_finite() && s > 0.0) {
-                bail!("model `{spec}`: grid step must be a positive number of mm");
-            }
-            return Ok(Seed::Grid(s));
-        }
-        match spec {
-            "cubic19" | "kinematic" => Ok(Seed::Poly(spec.to_string())),
-            other => bail!("unknown model `{other}` ({expected})"),
-        }
-    }
-}
-
 /// Fits the model `seed` (+ `adds`) to `data` and returns the complete
 /// MODEL.json content, statistics included. Bad input (unknown seed, an
 /// effect on a target or channel the data lacks, fewer distinct points than
@@ -169,29 +127,33 @@ pub fn fit(data: &Dataset, seed: &str, adds: &[Effect], opts: &FitOptions) -> Re
     }
     let blocks = opts.blocks.max(2);
     let (model, mut stats, seed_name) = match parsed {
-        Seed::Poly(name) if opts.local => {
+        Seed::Cubic19 | Seed::Kinematic if opts.local => {
             if !adds.is_empty() {
                 bail!("--add is not supported with --local (the local patches use the seed's own terms)");
             }
             let (m, s) = local::fit(data, blocks)?;
-            (m, s, format!("{name} --local"))
+            let name = ModelSeed {
+                seed: parsed,
+                local: true,
+            };
+            (m, s, name.to_string())
         }
-        Seed::Poly(name) => {
-            let (m, s) = linear::fit(data, &name, adds, blocks)?;
-            (m, s, name)
+        Seed::Cubic19 | Seed::Kinematic => {
+            let (m, s) = linear::fit(data, &parsed.to_string(), adds, blocks)?;
+            (m, s, parsed.to_string())
         }
-        Seed::Nn(h) => {
+        Seed::Nn { hidden } => {
             if opts.local || !adds.is_empty() {
                 bail!("--local and --add apply to the polynomial seeds (cubic19, kinematic), not to {seed}");
             }
-            let (m, s) = nn::fit(data, h, &opts.nn, &opts.progress, blocks)?;
+            let (m, s) = nn::fit(data, hidden, &opts.nn, &opts.progress, blocks)?;
             (m, s, seed.to_string())
         }
-        Seed::Grid(step) => {
+        Seed::Grid { step_mm } => {
             if opts.local || !adds.is_empty() {
                 bail!("--local and --add apply to the polynomial seeds (cubic19, kinematic), not to {seed}");
             }
-            let (m, s) = grid::fit(data, step, blocks)?;
+            let (m, s) = grid::fit(data, step_mm, blocks)?;
             (m, s, seed.to_string())
         }
     };
@@ -211,7 +173,7 @@ pub fn fit(data: &Dataset, seed: &str, adds: &[Effect], opts: &FitOptions) -> Re
         adds: adds.iter().map(|e| e.spec.clone()).collect(),
         data: DataRef {
             source: data.source.clone(),
-            sha256: data.content_hash(),
+            sha256: crate::import::content_hash(data),
             rows: data.len(),
             temp_range_c: Some(
                 data.temps

@@ -19,6 +19,20 @@ use crate::data::Dataset;
 pub use csv_io::{column_names, probable_column, read_csv, write_csv};
 pub use rtl::read_rtl;
 
+/// SHA-256 (hex) of the data set's canonical CSV ([`write_csv`]): the same
+/// measurements give the same hash whatever file they came from, so a
+/// MODEL.json can name the data it was fitted to.
+pub fn content_hash(data: &Dataset) -> String {
+    use sha2::{Digest, Sha256};
+    let mut buf = Vec::new();
+    // Writing to a Vec cannot fail.
+    write_csv(data, &mut buf).expect("writing CSV to memory");
+    Sha256::digest(&buf)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
 /// A problem in an input file, located as precisely as the format allows.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub struct ImportError {

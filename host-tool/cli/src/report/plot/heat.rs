@@ -1,0 +1,275 @@
+//! Heat maps of a residual over a plane (points snapped to their grid, a
+//! diverging colour scale symmetric about zero) and the before/after pair.
+
+use super::*;
+
+/// A heat map: values on a rectangular grid of cell centres (the measured
+/// plane of a grid plan), coloured on a diverging scale symmetric about
+/// zero so that the sign of a residual reads at a glance.
+#[derive(Clone, Debug)]
+pub struct HeatMap {
+    /// Title above the map.
+    pub title: String,
+    /// Horizontal axis description (`x (mm)`).
+    pub x_label: String,
+    /// Vertical axis description (`y (mm)`).
+    pub y_label: String,
+    /// Unit of the values, shown on the colour bar (`µm`).
+    pub unit: String,
+    /// Cell centres along x, ascending.
+    pub x: Vec<f64>,
+    /// Cell centres along y, ascending.
+    pub y: Vec<f64>,
+    /// Values row by row: `values[iy * x.len() + ix]`; `None` = not measured.
+    pub values: Vec<Option<f64>>,
+    /// Colour range ±`limit`; `None` = the largest |value|. Set the same
+    /// limit on two maps to compare them (before vs after).
+    pub limit: Option<f64>,
+    /// Size in pixels.
+    pub size: (u32, u32),
+}
+
+impl HeatMap {
+    /// Bins scattered (x, y, value) samples onto the grid of their distinct
+    /// coordinates (coordinates closer than `snap` are the same grid line)
+    /// and averages the values that fall on the same cell — repeats and
+    /// both directions of a grid plan land on one cell.
+    pub fn from_points(
+        title: impl Into<String>,
+        x_label: impl Into<String>,
+        y_label: impl Into<String>,
+        unit: impl Into<String>,
+        points: &[(f64, f64, f64)],
+        snap: f64,
+    ) -> HeatMap {
+        let finite: Vec<(f64, f64, f64)> = points
+            .iter()
+            .copied()
+            .filter(|p| p.0.is_finite() && p.1.is_finite() && p.2.is_finite())
+            .collect();
+        let xs = distinct(finite.iter().map(|p| p.0), snap);
+        let ys = distinct(finite.iter().map(|p| p.1), snap);
+        let mut sum = vec![0.0; xs.len() * ys.len()];
+        let mut count = vec![0usize; xs.len() * ys.len()];
+        for &(x, y, v) in &finite {
+            let ix = nearest(&xs, x);
+            let iy = nearest(&ys, y);
+            sum[iy * xs.len() + ix] += v;
+            count[iy * xs.len() + ix] += 1;
+        }
+        let values = sum
+            .iter()
+            .zip(&count)
+            .map(|(s, &n)| (n > 0).then(|| s / n as f64))
+            .collect();
+        HeatMap {
+            title: title.into(),
+            x_label: x_label.into(),
+            y_label: y_label.into(),
+            unit: unit.into(),
+            x: xs,
+            y: ys,
+            values,
+            limit: None,
+            size: SIZE,
+        }
+    }
+
+    /// The largest |value| on the map (0 for an empty map).
+    pub fn max_abs(&self) -> f64 {
+        self.values
+            .iter()
+            .flatten()
+            .fold(0.0f64, |m, v| m.max(v.abs()))
+    }
+
+    fn draw<DB: DrawingBackend>(&self, area: &DrawingArea<DB, plotters::coord::Shift>) -> Result<()>
+    where
+        DB::ErrorType: 'static,
+    {
+        let limit = self.limit.unwrap_or_else(|| self.max_abs()).max(1e-12);
+        let (map_area, bar_area) =
+            area.split_horizontally(area.dim_in_pixel().0.saturating_sub(86));
+        let xe = edges(&self.x);
+        let ye = edges(&self.y);
+        let (x0, x1) = (xe[0], xe[xe.len() - 1]);
+        let (y0, y1) = (ye[0], ye[ye.len() - 1]);
+        let mut chart = ChartBuilder::on(&map_area)
+            .caption(&self.title, ("sans-serif", 17))
+            .margin(12)
+            .x_label_area_size(42)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(plot_err)?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_desc(&self.x_label)
+            .y_desc(&self.y_label)
+            .draw()
+            .map_err(plot_err)?;
+        let nx = self.x.len();
+        let cells = self.values.iter().enumerate().map(|(k, v)| {
+            let (ix, iy) = (k % nx.max(1), k / nx.max(1));
+            let style = match v {
+                Some(v) => diverging(*v / limit).filled(),
+                // Not measured: light grey, so a gap is never read as zero.
+                None => RGBColor(225, 225, 225).filled(),
+            };
+            Rectangle::new([(xe[ix], ye[iy]), (xe[ix + 1], ye[iy + 1])], style)
+        });
+        chart.draw_series(cells).map_err(plot_err)?;
+        // Colour bar: a vertical strip from −limit to +limit, labelled by
+        // hand on its right (x 0..1 is the strip, 1..3 the labels), which
+        // keeps the labels inside the chart whatever the font metrics.
+        let mut bar = ChartBuilder::on(&bar_area)
+            .margin_top(40)
+            .margin_bottom(54)
+            .margin_right(4)
+            .build_cartesian_2d(0.0..3.0, -limit * 1.04..limit * 1.04)
+            .map_err(plot_err)?;
+        let steps = 64;
+        bar.draw_series((0..steps).map(|i| {
+            let a = -limit + 2.0 * limit * i as f64 / steps as f64;
+            let b = -limit + 2.0 * limit * (i + 1) as f64 / steps as f64;
+            Rectangle::new(
+                [(0.0, a), (1.0, b)],
+                diverging(0.5 * (a + b) / limit).filled(),
+            )
+        }))
+        .map_err(plot_err)?;
+        bar.draw_series([-1.0, -0.5, 0.0, 0.5, 1.0].map(|f| {
+            Text::new(
+                format_value(f * limit),
+                (1.15, f * limit),
+                ("sans-serif", 11).into_font(),
+            )
+        }))
+        .map_err(plot_err)?;
+        bar.draw_series(std::iter::once(Text::new(
+            self.unit.clone(),
+            (0.0, limit * 1.04),
+            ("sans-serif", 12).into_font(),
+        )))
+        .map_err(plot_err)?;
+        Ok(())
+    }
+
+    /// Renders the map with its colour bar as an SVG document.
+    pub fn to_svg(&self) -> Result<String> {
+        if self.x.is_empty() || self.y.is_empty() {
+            return XyPlot::new(
+                format!("{} (no data)", self.title),
+                &self.x_label,
+                &self.y_label,
+            )
+            .to_svg();
+        }
+        let mut buf = String::new();
+        {
+            let root = SVGBackend::with_string(&mut buf, self.size).into_drawing_area();
+            root.fill(&WHITE).map_err(plot_err)?;
+            self.draw(&root)?;
+            root.present().map_err(plot_err)?;
+        }
+        Ok(buf)
+    }
+}
+
+/// Two heat maps side by side on one colour scale (the larger of the two
+/// ranges), so "after" is visibly smaller than "before" when it is.
+pub fn heat_map_pair(before: &HeatMap, after: &HeatMap) -> Result<String> {
+    let limit = before.max_abs().max(after.max_abs());
+    let (w, h) = before.size;
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, (2 * w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(plot_err)?;
+        let (left, right) = root.split_horizontally(w);
+        for (map, area) in [(before, &left), (after, &right)] {
+            let mut m = map.clone();
+            m.limit = Some(limit);
+            if m.x.is_empty() || m.y.is_empty() {
+                continue;
+            }
+            m.draw(area)?;
+        }
+        root.present().map_err(plot_err)?;
+    }
+    Ok(buf)
+}
+
+/// Diverging colour for t in [−1, 1]: blue (negative) – white – red
+/// (positive); values beyond ±1 saturate.
+pub fn diverging(t: f64) -> RGBColor {
+    let t = if t.is_finite() {
+        t.clamp(-1.0, 1.0)
+    } else {
+        0.0
+    };
+    let (r, g, b) = if t >= 0.0 {
+        // white → red (178, 24, 43)
+        (
+            255.0 + t * (178.0 - 255.0),
+            255.0 + t * (24.0 - 255.0),
+            255.0 + t * (43.0 - 255.0),
+        )
+    } else {
+        let s = -t;
+        // white → blue (33, 102, 172)
+        (
+            255.0 + s * (33.0 - 255.0),
+            255.0 + s * (102.0 - 255.0),
+            255.0 + s * (172.0 - 255.0),
+        )
+    };
+    RGBColor(r.round() as u8, g.round() as u8, b.round() as u8)
+}
+
+/// Distinct values, ascending, merging values closer than `snap`.
+pub(super) fn distinct(values: impl Iterator<Item = f64>, snap: f64) -> Vec<f64> {
+    let mut v: Vec<f64> = values.collect();
+    v.sort_by(f64::total_cmp);
+    let mut out: Vec<(f64, usize)> = Vec::new();
+    for x in v {
+        match out.last_mut() {
+            // Running mean of the cluster, so a jittered grid line stays centred.
+            Some((c, n)) if (x - *c).abs() <= snap => {
+                *c = (*c * *n as f64 + x) / (*n + 1) as f64;
+                *n += 1;
+            }
+            _ => out.push((x, 1)),
+        }
+    }
+    out.into_iter().map(|(c, _)| c).collect()
+}
+
+pub(super) fn nearest(sorted: &[f64], x: f64) -> usize {
+    let i = sorted.partition_point(|&c| c < x);
+    if i == 0 {
+        0
+    } else if i >= sorted.len() {
+        sorted.len() - 1
+    } else if (x - sorted[i - 1]).abs() <= (sorted[i] - x).abs() {
+        i - 1
+    } else {
+        i
+    }
+}
+
+/// Cell edges around centres: midpoints, ends extended by half a spacing.
+pub(super) fn edges(c: &[f64]) -> Vec<f64> {
+    match c.len() {
+        0 => vec![0.0, 1.0],
+        1 => vec![c[0] - 0.5, c[0] + 0.5],
+        n => {
+            let mut e = Vec::with_capacity(n + 1);
+            e.push(c[0] - 0.5 * (c[1] - c[0]));
+            for k in 0..n - 1 {
+                e.push(0.5 * (c[k] + c[k + 1]));
+            }
+            e.push(c[n - 1] + 0.5 * (c[n - 1] - c[n - 2]));
+            e
+        }
+    }
+}

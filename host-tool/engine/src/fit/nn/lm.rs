@@ -1,0 +1,443 @@
+//! Levenberg–Marquardt training of the network, as MATLAB's `trainlm`: the
+//! Nguyen–Widrow initialisation, the scaled samples, the Jacobian by
+//! backpropagation and JᵀJ from its block structure, and one early-stopped
+//! run (`run_lm`). The options, the split and the restarts are in the
+//! parent module.
+
+// Numerical code indexes several parallel arrays by the same index;
+// index loops read closer to the formulas than zipped iterators.
+#![allow(clippy::needless_range_loop)]
+
+use nalgebra::{Cholesky, DMatrix, DMatrixView, DVector};
+use rand_chacha::rand_core::{RngCore, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::{Epoch, NnOptions};
+use crate::model::nn::Net;
+
+impl Net {
+    /// Nguyen–Widrow initialisation for inputs in [−1, 1].
+    pub(super) fn init(nin: usize, nh: usize, nout: usize, seed: u64) -> Net {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        // Uniform in [lo, hi) from 53 random bits (no `rand` dependency needed).
+        let mut uniform = |lo: f64, hi: f64| {
+            lo + (hi - lo) * ((rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
+        };
+        let mut net = Net {
+            nin,
+            nh,
+            nout,
+            p: vec![0.0; Net::n_params(nin, nh, nout)],
+        };
+        let beta = 0.7 * (nh as f64).powf(1.0 / nin as f64);
+        for j in 0..nh {
+            let mut row: Vec<f64> = (0..nin).map(|_| uniform(-1.0, 1.0)).collect();
+            let norm = row.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-12);
+            for v in &mut row {
+                *v *= beta / norm;
+            }
+            net.p[j * nin..(j + 1) * nin].copy_from_slice(&row);
+            net.p[nh * nin + j] = uniform(-beta, beta);
+        }
+        let w2 = net.w2_off();
+        for k in w2..net.p.len() {
+            net.p[k] = uniform(-0.5, 0.5);
+        }
+        net
+    }
+}
+
+/// tanh through one `exp` for training: 1 − 2/(e^{2x} + 1), within a few
+/// 1e-16 of `f64::tanh` in absolute terms (which is all a weight update
+/// needs) and half its cost — glibc's tanh goes through expm1 and was a
+/// quarter of all training instructions. ±∞ and NaN come out as tanh's.
+/// `predict` (what is exported and compared) keeps `f64::tanh`.
+pub(super) fn tanh_fast(x: f64) -> f64 {
+    1.0 - 2.0 / ((2.0 * x).exp() + 1.0)
+}
+
+/// Scaled data of one set: inputs n × nin (row-major) and, per output, the
+/// residual entries (sample, scaled target, √weight) in sample order. Kept
+/// output by output so that the Jacobian's output-layer columns of one
+/// output form one contiguous block (see [`Lm::normal_equations`]).
+pub(super) struct Samples {
+    pub(super) n: usize,
+    pub(super) x: Vec<f64>,
+    pub(super) by_out: Vec<Vec<(usize, f64, f64)>>,
+}
+
+impl Samples {
+    pub(super) fn n_entries(&self) -> usize {
+        self.by_out.iter().map(Vec::len).sum()
+    }
+
+    /// Hidden activations (n × nh) and outputs (n × nout) of every sample.
+    /// The training loop's hot path (one call per μ trial): slices instead
+    /// of indexed parameters, and [`tanh_fast`].
+    pub(super) fn forward(&self, net: &Net, act: &mut [f64], out: &mut [f64]) {
+        let (nin, nh, nout) = (net.nin, net.nh, net.nout);
+        let (w1, rest) = net.p.split_at(nh * nin);
+        let (b1, rest) = rest.split_at(nh);
+        let (w2, b2) = rest.split_at(nout * nh);
+        for ((x, a), y) in self
+            .x
+            .chunks_exact(nin)
+            .zip(act.chunks_exact_mut(nh))
+            .zip(out.chunks_exact_mut(nout))
+        {
+            for ((aj, wj), bj) in a.iter_mut().zip(w1.chunks_exact(nin)).zip(b1) {
+                *aj = tanh_fast(wj.iter().zip(x).fold(*bj, |s, (w, xi)| s + w * xi));
+            }
+            for ((yo, w2o), bo) in y.iter_mut().zip(w2.chunks_exact(nh)).zip(b2) {
+                *yo = w2o.iter().zip(a.iter()).fold(*bo, |s, (w, aj)| s + w * aj);
+            }
+        }
+    }
+
+    /// Sum of squared weighted residuals from the outputs of `forward`.
+    pub(super) fn sse_of(&self, out: &[f64], nout: usize) -> f64 {
+        let mut sse = 0.0;
+        for (o, es) in self.by_out.iter().enumerate() {
+            for &(s, t, sw) in es {
+                let e = sw * (out[s * nout + o] - t);
+                sse += e * e;
+            }
+        }
+        sse
+    }
+
+    /// Jacobian (entries × params, entries output by output) and residuals,
+    /// dense. The training loop never forms it (see [`Lm`]); it is the
+    /// reference the tests check the LM normal equations against.
+    #[cfg(test)]
+    pub(super) fn jacobian(&self, net: &Net) -> (DMatrix<f64>, DVector<f64>) {
+        let np = net.p.len();
+        let m = self.n_entries();
+        let mut j = DMatrix::zeros(m, np);
+        let mut e = DVector::zeros(m);
+        let mut act = vec![0.0; self.n * net.nh];
+        let mut out = vec![0.0; self.n * net.nout];
+        self.forward(net, &mut act, &mut out);
+        let (w2o, b2o, b1o) = (net.w2_off(), net.b2_off(), net.nh * net.nin);
+        let mut row = 0;
+        for (o, es) in self.by_out.iter().enumerate() {
+            for &(s, t, sw) in es {
+                let x = &self.x[s * net.nin..(s + 1) * net.nin];
+                let a = &act[s * net.nh..(s + 1) * net.nh];
+                e[row] = sw * (out[s * net.nout + o] - t);
+                for h in 0..net.nh {
+                    let d = sw * net.w2(o, h) * (1.0 - a[h] * a[h]);
+                    for (i, xi) in x.iter().enumerate() {
+                        j[(row, h * net.nin + i)] = d * xi;
+                    }
+                    j[(row, b1o + h)] = d;
+                    j[(row, w2o + o * net.nh + h)] = sw * a[h];
+                }
+                j[(row, b2o + o)] = sw;
+                row += 1;
+            }
+        }
+        (j, e)
+    }
+}
+
+/// Workspace of Levenberg–Marquardt on one training set, allocated once per
+/// training and reused every epoch and restart.
+///
+/// JᵀJ is formed from the structure of J rather than as a dense product. The
+/// row of J for sample s and output o is √w_s · [w2[o,h]·g_h·x̃_i (hidden
+/// weights and biases, g = 1 − a², x̃ = (x, 1)) | ã = (a, 1) in the columns
+/// of output o only]. So with z_s = g ⊗ x̃ (the hidden part without the
+/// output weight) and the outputs measured on s written as its pattern p:
+///
+/// - HᵀH[k,k'] = Σₚ Wₚ[h(k),h(k')] · Σ_{s∈p} w_s z_s[k] z_s[k'], where
+///   Wₚ[h,h'] = Σ_{o∈p} w2[o,h]·w2[o,h'] — the sum over outputs moves out of
+///   the sum over samples;
+/// - the hidden × output-o block is w2[o,h(k)] · Σ_{s∋o} w_s z_s[k] ã_s[r];
+/// - the output-o block is Σ_{s∋o} w_s ã_s ã_sᵀ; outputs do not couple.
+///
+/// All three are blocks of one Gram matrix of the per-sample vectors
+/// m_s = √w_s (z_s, ã_s), one per measurement pattern (usually a single
+/// one: every target measured on every row), formed by one GEMM each. For
+/// 3-16-3 on 1581 samples that is 81² × 1581 = 10 M multiply-adds where the
+/// product over the 4 743 rows of J takes 63 M (26 M when only its
+/// hidden/own-output blocks are multiplied), with Jᵀe from the same vectors.
+/// The weight of a sample is the same for all its outputs (u_um is per
+/// row), which is what lets the outputs share one Gram matrix.
+pub(super) struct Lm {
+    /// Hidden neuron of each hidden parameter (weights h·nin + i, then
+    /// biases): nz = nh·(nin + 1) entries, the z part of m_s.
+    pub(super) hid: Vec<usize>,
+    /// Samples grouped by measurement pattern: (bitmask of outputs, first
+    /// column, end column) of `mt`.
+    pub(super) groups: Vec<(u32, usize, usize)>,
+    /// Sample index of each column of `mt`.
+    pub(super) order: Vec<usize>,
+    /// √w of each sample, targets per (sample, output) (NaN: not measured).
+    pub(super) sw: Vec<f64>,
+    pub(super) target: Vec<f64>,
+    /// m_s per column (nm × samples, column-major: each sample contiguous);
+    /// nm = nz + nh + 1 rows, z then ã.
+    pub(super) mt: DMatrix<f64>,
+    /// One Gram matrix (nm × nm) per group.
+    pub(super) gram: Vec<DMatrix<f64>>,
+    pub(super) jtj: DMatrix<f64>,
+    pub(super) g: DVector<f64>,
+    /// Activations and outputs of the current network on the training set.
+    pub(super) act: Vec<f64>,
+    pub(super) out: Vec<f64>,
+}
+
+impl Lm {
+    pub(super) fn new(train: &Samples, nin: usize, nh: usize, nout: usize) -> Lm {
+        let nz = nh * (nin + 1);
+        let nm = nz + nh + 1;
+        let n = train.n;
+        let mut mask = vec![0u32; n];
+        let mut sw = vec![0.0; n];
+        let mut target = vec![f64::NAN; n * nout];
+        for (o, es) in train.by_out.iter().enumerate() {
+            for &(s, t, w) in es {
+                mask[s] |= 1 << o;
+                sw[s] = w;
+                target[s * nout + o] = t;
+            }
+        }
+        let mut order: Vec<usize> = (0..n).filter(|&s| mask[s] != 0).collect();
+        order.sort_by_key(|&s| mask[s]);
+        let mut groups: Vec<(u32, usize, usize)> = Vec::new();
+        for (c, &s) in order.iter().enumerate() {
+            match groups.last_mut() {
+                Some(g) if g.0 == mask[s] => g.2 = c + 1,
+                _ => groups.push((mask[s], c, c + 1)),
+            }
+        }
+        let np = Net::n_params(nin, nh, nout);
+        Lm {
+            hid: (0..nz)
+                .map(|k| if k < nh * nin { k / nin } else { k - nh * nin })
+                .collect(),
+            gram: vec![DMatrix::zeros(nm, nm); groups.len()],
+            mt: DMatrix::zeros(nm, order.len()),
+            groups,
+            order,
+            sw,
+            target,
+            jtj: DMatrix::zeros(np, np),
+            g: DVector::zeros(np),
+            act: vec![0.0; n * nh],
+            out: vec![0.0; n * nout],
+        }
+    }
+
+    /// JᵀJ and g = Jᵀe at `net`, whose activations on `train` are in
+    /// `self.act` / `self.out`.
+    pub(super) fn normal_equations(&mut self, train: &Samples, net: &Net) {
+        let (nin, nh, nout) = (net.nin, net.nh, net.nout);
+        let (nz, nm) = (self.hid.len(), self.mt.nrows());
+        let (w2o, b2o) = (net.w2_off(), net.b2_off());
+        let w2 = &net.p[w2o..b2o];
+        let hid = &self.hid;
+        let pidx = |o: usize, r: usize| if r < nh { w2o + o * nh + r } else { b2o + o };
+        self.g.fill(0.0);
+        {
+            let mt = self.mt.as_mut_slice();
+            let mut q = vec![0.0; nh];
+            for (c, &s) in self.order.iter().enumerate() {
+                let x = &train.x[s * nin..(s + 1) * nin];
+                let a = &self.act[s * nh..(s + 1) * nh];
+                let sw = self.sw[s];
+                let col = &mut mt[c * nm..(c + 1) * nm];
+                for h in 0..nh {
+                    let d = sw * (1.0 - a[h] * a[h]);
+                    for (i, xi) in x.iter().enumerate() {
+                        col[h * nin + i] = d * xi;
+                    }
+                    col[nh * nin + h] = d;
+                    col[nz + h] = sw * a[h];
+                }
+                col[nz + nh] = sw;
+                // Jᵀe: e_{s,o} = √w (y − t) on the measured outputs.
+                q.fill(0.0);
+                for o in 0..nout {
+                    let t = self.target[s * nout + o];
+                    if t.is_nan() {
+                        continue;
+                    }
+                    let e = sw * (self.out[s * nout + o] - t);
+                    for h in 0..nh {
+                        q[h] += w2[o * nh + h] * e;
+                    }
+                    for r in 0..=nh {
+                        self.g[pidx(o, r)] += col[nz + r] * e;
+                    }
+                }
+                for k in 0..nz {
+                    self.g[k] += col[k] * q[hid[k]];
+                }
+            }
+        }
+        for (gi, &(_, c0, c1)) in self.groups.iter().enumerate() {
+            // mtᵀ read as its transpose (a strided view, no copy).
+            let cols = &self.mt.as_slice()[c0 * nm..c1 * nm];
+            let tview = DMatrixView::from_slice_with_strides(cols, c1 - c0, nm, nm, 1);
+            self.gram[gi].gemm(1.0, &self.mt.columns(c0, c1 - c0), &tview, 0.0);
+        }
+        self.jtj.fill(0.0);
+        let mut wp = vec![0.0; nh * nh];
+        for (gi, &(mask, _, _)) in self.groups.iter().enumerate() {
+            let gram = &self.gram[gi];
+            wp.fill(0.0);
+            for o in (0..nout).filter(|o| mask & (1 << o) != 0) {
+                let w2o = &w2[o * nh..(o + 1) * nh];
+                for h in 0..nh {
+                    for h2 in 0..nh {
+                        wp[h * nh + h2] += w2o[h] * w2o[h2];
+                    }
+                }
+                for r in 0..=nh {
+                    let pr = pidx(o, r);
+                    for k in 0..nz {
+                        let v = w2o[hid[k]] * gram[(k, nz + r)];
+                        self.jtj[(k, pr)] += v;
+                        self.jtj[(pr, k)] += v;
+                    }
+                    for r2 in 0..=nh {
+                        self.jtj[(pr, pidx(o, r2))] += gram[(nz + r, nz + r2)];
+                    }
+                }
+            }
+            for k2 in 0..nz {
+                for k in 0..nz {
+                    self.jtj[(k, k2)] += wp[hid[k] * nh + hid[k2]] * gram[(k, k2)];
+                }
+            }
+        }
+    }
+}
+
+/// The outcome of one LM run from one initialisation.
+pub(super) struct Run {
+    /// Weights of the kept (best validation) epoch.
+    pub(super) net: Net,
+    pub(super) epochs: usize,
+    pub(super) best_epoch: usize,
+    pub(super) stop: String,
+    /// Validation MSE (scaled units) of the kept weights; the training MSE
+    /// when there is no validation set.
+    pub(super) score: f64,
+}
+
+/// One trainlm run from `net` (see the module docs); `report` sees every
+/// epoch's network.
+pub(super) fn run_lm(
+    train: &Samples,
+    val: &Samples,
+    lm: &mut Lm,
+    mut net: Net,
+    opts: &NnOptions,
+    restart: usize,
+    report: &mut dyn FnMut(&Epoch, &Net),
+) -> Run {
+    let (np, nh, nout) = (net.p.len(), net.nh, net.nout);
+    let mut trial = net.clone();
+    let (mut t_act, mut t_out) = (vec![0.0; lm.act.len()], vec![0.0; lm.out.len()]);
+    let (mut v_act, mut v_out) = (vec![0.0; val.n * nh], vec![0.0; val.n * nout]);
+    let (n_train, n_val) = (train.n_entries(), val.n_entries());
+    let has_val = n_val > 0;
+    let mut val_sse = |net: &Net| {
+        val.forward(net, &mut v_act, &mut v_out);
+        val.sse_of(&v_out, nout)
+    };
+    train.forward(&net, &mut lm.act, &mut lm.out);
+    let mut sse = train.sse_of(&lm.out, nout);
+    let mut mu = opts.mu;
+    let mut best_val = if has_val {
+        val_sse(&net)
+    } else {
+        f64::INFINITY
+    };
+    let mut best = net.p.clone();
+    let mut best_epoch = 0;
+    let mut fails = 0;
+    let mut stop = "max_epochs".to_string();
+    let mut epochs = 0;
+    for epoch in 1..=opts.max_epochs {
+        epochs = epoch;
+        lm.normal_equations(train, &net);
+        if lm.g.norm() < opts.min_grad {
+            stop = "min_grad".into();
+            epochs = epoch - 1;
+            break;
+        }
+        let mut improved = false;
+        while mu <= opts.mu_max {
+            let mut a = lm.jtj.clone();
+            for k in 0..np {
+                a[(k, k)] += mu;
+            }
+            if let Some(ch) = Cholesky::new(a) {
+                let delta = ch.solve(&lm.g);
+                for k in 0..np {
+                    trial.p[k] = net.p[k] - delta[k];
+                }
+                train.forward(&trial, &mut t_act, &mut t_out);
+                let s_new = train.sse_of(&t_out, nout);
+                if s_new.is_finite() && s_new < sse {
+                    // Accept: the trial's activations are the next epoch's.
+                    std::mem::swap(&mut net, &mut trial);
+                    std::mem::swap(&mut lm.act, &mut t_act);
+                    std::mem::swap(&mut lm.out, &mut t_out);
+                    sse = s_new;
+                    mu *= opts.mu_dec;
+                    improved = true;
+                    break;
+                }
+            }
+            mu *= opts.mu_inc;
+        }
+        let v = if has_val { val_sse(&net) } else { f64::NAN };
+        if has_val {
+            if v < best_val {
+                best_val = v;
+                best.clone_from(&net.p);
+                best_epoch = epoch;
+                fails = 0;
+            } else {
+                fails += 1;
+            }
+        } else {
+            best.clone_from(&net.p);
+            best_epoch = epoch;
+        }
+        let info = Epoch {
+            restart,
+            epoch,
+            train_mse: sse / n_train.max(1) as f64,
+            val_mse: v / n_val.max(1) as f64,
+            mu,
+        };
+        report(&info, &net);
+        if !improved {
+            stop = "mu_max".into();
+            break;
+        }
+        if has_val && fails >= opts.max_fail {
+            stop = "validation".into();
+            break;
+        }
+    }
+    let score = if has_val {
+        best_val / n_val as f64
+    } else {
+        sse / n_train.max(1) as f64
+    };
+    net.p = best;
+    Run {
+        net,
+        epochs,
+        best_epoch,
+        stop,
+        score,
+    }
+}

@@ -1,0 +1,198 @@
+//! The improve loop — fit, diagnose, add the best significant effect of
+//! each target, refit — until the diagnosis finds nothing significant:
+//! what `trueaxis improve` and the demo's diagnosis stage both run. Every
+//! fit is written to the model file and appended to its history, so
+//! `trueaxis history` shows the same steps afterwards. The loop reports
+//! each step to a callback as it completes; it prints nothing itself.
+
+use std::collections::BTreeMap;
+
+use anyhow::Result;
+use serde::Serialize;
+
+use crate::data::Dataset;
+use crate::diagnose::{self, Options, Verdict};
+use crate::features::Effect;
+use crate::fit::{self, FitOptions};
+use crate::history;
+
+/// Most effects `improve` adds before it stops anyway.
+pub const MAX_STEPS: usize = 8;
+
+/// One effect added (or swapped in) at a step.
+#[derive(Clone, Debug, Serialize)]
+pub struct AddedEffect {
+    /// Target.
+    pub target: String,
+    /// The `fit --add` string.
+    pub add: String,
+    /// The effect it replaced (the same effect with another lag, period,
+    /// order or degree), if any.
+    pub replaces: Option<String>,
+    /// Its evidence, as diagnose gave it.
+    pub evidence: String,
+}
+
+/// One step of the loop.
+#[derive(Clone, Debug, Serialize)]
+pub struct ImproveStep {
+    /// 1-based.
+    pub step: usize,
+    /// Every effect added at this step: the best significant candidate of
+    /// each target (targets are fitted independently, so one step can
+    /// serve all of them), best first; none for the seed. The JSON also
+    /// has the first one's `add` and `evidence` as `added` and `evidence`
+    /// (null for the seed).
+    #[serde(flatten, serialize_with = "ser_added")]
+    pub added_effects: Vec<AddedEffect>,
+    /// In-sample RMS per target after the fit, µm.
+    pub rms_um: BTreeMap<String, f64>,
+    /// Block-held-out RMS per target after the fit, µm, with the
+    /// diagnosis' blocks (long passes cut into segments).
+    pub held_out_rms_um: BTreeMap<String, f64>,
+    /// The held-out RMS `fit` reports (its own blocks), µm.
+    pub fit_held_out_rms_um: BTreeMap<String, f64>,
+    /// Noise floor per target from the diagnosis of this fit, µm.
+    pub noise_floor_um: BTreeMap<String, Option<f64>>,
+    /// The diagnosis of this fit.
+    pub verdict: Verdict,
+    /// Targets whose RMS is still more than `ABOVE_NOISE_RATIO` × their noise
+    /// floor, with the ratio: `at_noise_floor` says no candidate is
+    /// significant, this says whether the data is really explained.
+    pub above_noise_floor: BTreeMap<String, f64>,
+}
+
+/// `"added"`, `"evidence"` (the best effect's, or null) and
+/// `"added_effects"` — kept in one field so that they cannot disagree.
+fn ser_added<S: serde::Serializer>(
+    added: &[AddedEffect],
+    ser: S,
+) -> std::result::Result<S::Ok, S::Error> {
+    #[derive(Serialize)]
+    struct Added<'a> {
+        added: Option<&'a str>,
+        evidence: Option<&'a str>,
+        added_effects: &'a [AddedEffect],
+    }
+    let best = added.first();
+    Added {
+        added: best.map(|a| a.add.as_str()),
+        evidence: best.map(|a| a.evidence.as_str()),
+        added_effects: added,
+    }
+    .serialize(ser)
+}
+
+impl ImproveStep {
+    /// What the step's verdict means, in words (for the closing line).
+    pub fn outcome(&self) -> String {
+        match self.verdict {
+            Verdict::MissingEffect => "stopped after the step limit".into(),
+            Verdict::AtNoiseFloor if self.above_noise_floor.is_empty() => {
+                "at the noise floor".into()
+            }
+            Verdict::AtNoiseFloor => format!(
+                "no significant candidate left, but above the noise floor ({})",
+                self.above_noise_floor
+                    .iter()
+                    .map(|(t, r)| format!("{t} {r:.1}×"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        }
+    }
+}
+
+/// The whole run.
+#[derive(Clone, Debug, Serialize)]
+pub struct Improvement {
+    /// Final model spec (`cubic19 --add …`).
+    pub model: String,
+    /// Where the final model was written.
+    pub model_file: String,
+    /// Steps, first fit first.
+    pub steps: Vec<ImproveStep>,
+    /// The last diagnosis' verdict.
+    pub verdict: Verdict,
+    /// What the user should know about the data (`aux_misspelled`,
+    /// `aux_columns`), as diagnose's `warnings`.
+    pub warnings: Vec<diagnose::Warning>,
+}
+
+/// Runs the loop on `data`, writing each fit to `out` (and its history);
+/// `on_step` sees each step as it completes (for printing).
+pub fn improve(
+    data: &Dataset,
+    seed: &str,
+    out: &std::path::Path,
+    mut on_step: impl FnMut(&ImproveStep),
+) -> Result<Improvement> {
+    let mut adds: Vec<String> = Vec::new();
+    let mut steps = Vec::new();
+    let mut added: Vec<AddedEffect> = Vec::new();
+    loop {
+        let effects = adds
+            .iter()
+            .map(|a| Effect::parse(a))
+            .collect::<Result<Vec<_>>>()?;
+        let model = fit::fit(data, seed, &effects, &FitOptions::default())?;
+        history::save_with_model(out, &model)?;
+        let d = diagnose::diagnose(
+            data,
+            &Options {
+                seed: seed.to_string(),
+                adds: adds.clone(),
+                follow_path: false,
+            },
+        )?;
+        let above_noise_floor = model
+            .stats
+            .rms_um
+            .iter()
+            .filter_map(|(t, rms)| {
+                let nf = d.noise_floor_um.get(t).copied().flatten()?;
+                Some((t.clone(), diagnose::above_noise(*rms, nf)?))
+            })
+            .collect();
+        let step = ImproveStep {
+            step: steps.len() + 1,
+            added_effects: std::mem::take(&mut added),
+            rms_um: model.stats.rms_um.clone(),
+            held_out_rms_um: d.held_out_rms_um.clone(),
+            fit_held_out_rms_um: model.stats.held_out_rms_um.clone(),
+            noise_floor_um: d.noise_floor_um.clone(),
+            verdict: d.verdict,
+            above_noise_floor,
+        };
+        on_step(&step);
+        steps.push(step);
+        // The best significant candidate of each target (candidates are
+        // sorted best first; without the path there is at most one per
+        // target), added — or swapped in for the same effect — together.
+        let mut seen = std::collections::BTreeSet::new();
+        if steps.len() <= MAX_STEPS {
+            for c in d.candidates.iter().filter(|c| c.significant) {
+                if !seen.insert(c.target.clone()) {
+                    continue;
+                }
+                if diagnose::swap_in(&mut adds, &c.add, c.replaces.as_deref()) {
+                    added.push(AddedEffect {
+                        target: c.target.clone(),
+                        add: c.add.clone(),
+                        replaces: c.replaces.clone(),
+                        evidence: c.evidence.clone(),
+                    });
+                }
+            }
+        }
+        if added.is_empty() {
+            return Ok(Improvement {
+                model: model.spec(),
+                model_file: out.display().to_string(),
+                steps,
+                verdict: d.verdict,
+                warnings: Vec::new(),
+            });
+        }
+    }
+}

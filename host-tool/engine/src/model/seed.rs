@@ -1,0 +1,160 @@
+//! The seed of a model — what `--model` names (`cubic19`, `kinematic`,
+//! `nn:<hidden>`, `grid:<step_mm>`) — as a type, and the `seed` field of
+//! MODEL.json, which adds ` --local` for piecewise local fits. The strings
+//! are parsed here once; inside the engine the seed travels as [`Seed`].
+
+use std::fmt;
+use std::str::FromStr;
+
+use anyhow::{bail, Result};
+
+/// What a seed spec asks for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Seed {
+    /// The 19-term cubic polynomial per target.
+    Cubic19,
+    /// The kinematic (rigid-body) polynomial.
+    Kinematic,
+    /// A tanh network with one hidden layer (`nn:<hidden>`).
+    Nn {
+        /// Hidden neurons, 1 to 256.
+        hidden: usize,
+    },
+    /// A grid table (`grid:<step_mm>`).
+    Grid {
+        /// Node spacing, mm (finite, > 0).
+        step_mm: f64,
+    },
+}
+
+impl Seed {
+    /// Parses a `--model` spec.
+    pub fn parse(spec: &str) -> Result<Seed> {
+        let expected = "expected cubic19, kinematic, nn:<hidden> or grid:<step_mm>";
+        if let Some(h) = spec.strip_prefix("nn:") {
+            let h: usize = h.parse().map_err(|_| {
+                anyhow::anyhow!(
+                    "model `{spec}`: hidden neurons must be a whole number ({expected})"
+                )
+            })?;
+            if !(1..=256).contains(&h) {
+                bail!("model `{spec}`: hidden neurons must be 1..=256");
+            }
+            return Ok(Seed::Nn { hidden: h });
+        }
+        if let Some(s) = spec.strip_prefix("grid:") {
+            let s: f64 = s.parse().map_err(|_| {
+                anyhow::anyhow!("model `{spec}`: grid step must be a number of mm ({expected})")
+            })?;
+            if !(s.is_finite() && s > 0.0) {
+                bail!("model `{spec}`: grid step must be a positive number of mm");
+            }
+            return Ok(Seed::Grid { step_mm: s });
+        }
+        match spec {
+            "cubic19" => Ok(Seed::Cubic19),
+            "kinematic" => Ok(Seed::Kinematic),
+            other => bail!("unknown model `{other}` ({expected})"),
+        }
+    }
+
+    /// True for the polynomial seeds (the ones `--add` and `--local` apply to).
+    pub fn is_polynomial(&self) -> bool {
+        matches!(self, Seed::Cubic19 | Seed::Kinematic)
+    }
+}
+
+impl FromStr for Seed {
+    type Err = anyhow::Error;
+
+    fn from_str(s: &str) -> Result<Seed> {
+        Seed::parse(s)
+    }
+}
+
+impl fmt::Display for Seed {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Seed::Cubic19 => f.write_str("cubic19"),
+            Seed::Kinematic => f.write_str("kinematic"),
+            Seed::Nn { hidden } => write!(f, "nn:{hidden}"),
+            Seed::Grid { step_mm } => write!(f, "grid:{step_mm}"),
+        }
+    }
+}
+
+/// The `seed` field of MODEL.json: the seed, and whether it was fitted as
+/// piecewise local polynomials (written `<seed> --local`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ModelSeed {
+    /// The seed.
+    pub seed: Seed,
+    /// Fitted with `--local`.
+    pub local: bool,
+}
+
+/// The suffix MODEL.json's `seed` carries for a `--local` fit.
+const LOCAL_SUFFIX: &str = " --local";
+
+impl ModelSeed {
+    /// Parses the `seed` field of a model file.
+    pub fn parse(s: &str) -> Result<ModelSeed> {
+        let (spec, local) = match s.strip_suffix(LOCAL_SUFFIX) {
+            Some(spec) => (spec, true),
+            None => (s, false),
+        };
+        Ok(ModelSeed {
+            seed: Seed::parse(spec)?,
+            local,
+        })
+    }
+}
+
+impl fmt::Display for ModelSeed {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.seed)?;
+        if self.local {
+            f.write_str(LOCAL_SUFFIX)?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn specs_parse_to_seeds_and_print_back() {
+        for (s, want) in [
+            ("cubic19", Seed::Cubic19),
+            ("kinematic", Seed::Kinematic),
+            ("nn:16", Seed::Nn { hidden: 16 }),
+            ("grid:50", Seed::Grid { step_mm: 50.0 }),
+            ("grid:12.5", Seed::Grid { step_mm: 12.5 }),
+        ] {
+            let seed: Seed = s.parse().unwrap();
+            assert_eq!(seed, want);
+            assert_eq!(seed.to_string(), s);
+        }
+        let m = ModelSeed::parse("kinematic --local").unwrap();
+        assert_eq!(m.seed, Seed::Kinematic);
+        assert!(m.local);
+        assert_eq!(m.to_string(), "kinematic --local");
+        assert!(!ModelSeed::parse("nn:4").unwrap().local);
+    }
+
+    #[test]
+    fn bad_specs_say_what_is_expected() {
+        for (s, needle) in [
+            ("cubic20", "unknown model `cubic20`"),
+            ("nn:0", "1..=256"),
+            ("nn:x", "whole number"),
+            ("grid:-1", "positive number of mm"),
+            ("grid:abc", "number of mm"),
+        ] {
+            let e = Seed::parse(s).unwrap_err().to_string();
+            assert!(e.contains(needle), "{s}: {e}");
+        }
+    }
+}
