@@ -132,7 +132,7 @@ fn next(model_path: &Path, mut step: Step) -> Result<History> {
             && last.adds.iter().all(|a| {
                 step.adds
                     .iter()
-                    .any(|b| a == b || crate::diagnose::same_effect(a, b))
+                    .any(|b| a == b || crate::effect::same_effect(a, b))
             })
     });
     if !continues {

@@ -12,7 +12,7 @@ use serde::Serialize;
 
 use crate::data::Dataset;
 use crate::diagnose::{self, Options, Verdict};
-use crate::features::Effect;
+use crate::effect::Effect;
 use crate::fit::{self, FitOptions};
 use crate::history;
 

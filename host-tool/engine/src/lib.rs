@@ -3,14 +3,15 @@
 //! `trueaxis` binary crate). Layered bottom-up — a module imports only from
 //! the layers below it:
 //!
-//! data → features / lsq / holdout → model → fit → diagnose / compare /
+//! data → features / effect / lsq / holdout → model → fit → diagnose / compare /
 //! export / history / iso230 → improve → (the CLI's commands); import and simulate
 //! produce data sets.
 //!
 //! - `data`: the measurement data set (docs/cli.md § Measurement CSV) every command works on.
 //! - `import`: measurement files in (the trueaxis CSV, Renishaw .rtl) and the CSV out.
 //! - `simulate`: the synthetic machine (21 geometric errors, effects, plans, noise).
-//! - `features`: the model's terms — the cubic monomials and the physical effects.
+//! - `features`: the model's terms — the cubic monomials and the effects' columns.
+//! - `effect`: the `--add` grammar as types — Family, Target, Axis, EffectSpec, Effect.
 //! - `lsq`: least squares with rank and conditioning checks.
 //! - `holdout`: block-held-out validation (spatial blocks, not random rows).
 //! - `model`: the saved model file and its evaluation.
@@ -25,6 +26,7 @@
 pub mod compare;
 pub mod data;
 pub mod diagnose;
+pub mod effect;
 pub mod export;
 pub mod features;
 pub mod fit;

@@ -12,7 +12,7 @@ use crate::cmd::input;
 use crate::cmd::out::{self, outln};
 use crate::workflow::model_spec;
 use trueaxis_engine::diagnose::{self, Diagnosis, Options, Verdict};
-use trueaxis_engine::features::Effect;
+use trueaxis_engine::effect::Effect;
 
 /// Arguments of `trueaxis diagnose`.
 #[derive(clap::Args, Debug)]

@@ -11,7 +11,7 @@ use anyhow::{Context, Result};
 use crate::cmd::input;
 use crate::cmd::out::{self, outln};
 use crate::workflow::model_output;
-use trueaxis_engine::features::Effect;
+use trueaxis_engine::effect::Effect;
 use trueaxis_engine::fit::{self, nn::NnOptions, FitOptions};
 
 /// Arguments of `trueaxis fit`.

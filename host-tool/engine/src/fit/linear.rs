@@ -12,7 +12,8 @@ use anyhow::{bail, Result};
 use nalgebra::DMatrix;
 
 use crate::data::{Dataset, AXES, TARGETS};
-use crate::features::{feature_uses_axis, seed_monomials, Effect, Feature, Norm};
+use crate::effect::Effect;
+use crate::features::{feature_uses_axis, seed_monomials, Feature, Norm};
 use crate::holdout;
 use crate::lsq::{self, LsqError, ILL_CONDITIONED};
 use crate::model::{FitStats, FittedModel, LinearModel, LinearOutput};

@@ -18,7 +18,7 @@ pub mod nn;
 use anyhow::{bail, Result};
 
 use crate::data::{Dataset, AXES, TARGETS};
-use crate::features::Effect;
+use crate::effect::Effect;
 use crate::holdout;
 use crate::model::{DataRef, ModelFile, ModelSeed, Seed, MODEL_FORMAT};
 

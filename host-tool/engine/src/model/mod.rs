@@ -249,7 +249,7 @@ impl ModelFile {
     pub fn validate(&self) -> std::result::Result<(), String> {
         let seed = ModelSeed::parse(&self.seed).map_err(|e| format!("seed: {e:#}"))?;
         for (i, a) in self.adds.iter().enumerate() {
-            crate::features::Effect::parse(a).map_err(|e| format!("adds[{i}]: {e:#}"))?;
+            crate::effect::Effect::parse(a).map_err(|e| format!("adds[{i}]: {e:#}"))?;
         }
         // Export's default temperature envelope: a range it cannot use
         // would fall back to 10…40 °C as if the file were from before it.
