@@ -3,9 +3,9 @@
 //! `trueaxis` binary crate). Layered bottom-up — a module imports only from
 //! the layers below it:
 //!
-//! data → features / lsq / holdout → model → fit → diagnose / compare /
-//! export / history / iso230 → (the CLI's commands); import and simulate
-//! produce data sets.
+//! data → features / lsq / holdout / lines / regions → model → fit →
+//! diagnose / compare / export / history / iso230 → (the CLI's commands);
+//! import and simulate produce data sets.
 //!
 //! - `data`: the measurement data set (docs/cli.md § Measurement CSV) every command works on.
 //! - `import`: measurement files in (the trueaxis CSV, Renishaw .rtl) and the CSV out.
@@ -13,9 +13,11 @@
 //! - `features`: the model's terms — the cubic monomials and the physical effects.
 //! - `lsq`: least squares with rank and conditioning checks.
 //! - `holdout`: block-held-out validation (spatial blocks, not random rows).
+//! - `lines`: lines and planes of a measurement plan (compare's plots, diagnose's periodic search).
+//! - `regions`: where a residual concentrates — one region type and binning for compare and diagnose.
 //! - `model`: the saved model file and its evaluation.
 //! - `fit`: training — linear/kinematic, local, grid and tanh-network models.
-//! - `compare`: where a model fails — residual statistics, regions, channels, planes, lines.
+//! - `compare`: where a model fails — residual statistics, regions, channels.
 //! - `diagnose`: which physical effect the model is missing, and how sure.
 //! - `history`: the steps of the error falling, fit by fit.
 //! - `iso230`: ISO 230-2 evaluation of bidirectional positioning runs.
@@ -31,6 +33,8 @@ pub mod history;
 pub mod holdout;
 pub mod import;
 pub mod iso230;
+pub mod lines;
 pub mod lsq;
 pub mod model;
+pub mod regions;
 pub mod simulate;

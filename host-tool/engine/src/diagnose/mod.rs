@@ -39,10 +39,13 @@ use serde::Serialize;
 
 use crate::data::{Dataset, AXES, TARGETS};
 use crate::features::{seed_monomials, Effect, Feature, Norm};
+use crate::lines::densest_lines as dense_lines;
+use crate::regions::bin_index;
+pub use crate::regions::Region;
 
 use linalg::{small_fit, Basis, HoldOut};
 use noise::{noise_floor, NoiseFloor, NoiseMethod};
-use periodogram::{dense_lines, periodogram, Periodogram};
+use periodogram::{periodogram, Periodogram};
 
 /// ΔBIC a candidate must beat to count (Kass & Raftery: "very strong").
 pub const DBIC_SIGNIFICANT: f64 = -10.0;
@@ -250,19 +253,6 @@ pub struct PathStep {
     pub replaces: Option<String>,
 }
 
-/// Where the residual concentrates.
-#[derive(Clone, Debug, Serialize)]
-pub struct Region {
-    /// Target.
-    pub target: String,
-    /// Bounding box per axis present, mm: `{"x": [lo, hi], …}`.
-    pub bbox_mm: BTreeMap<String, [f64; 2]>,
-    /// Residual RMS inside, µm.
-    pub rms_um: f64,
-    /// Rows inside.
-    pub points: usize,
-}
-
 /// A measurement-design or identifiability warning, with the measurement
 /// that would fix it.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -336,7 +326,9 @@ pub struct Diagnosis {
     pub candidates: Vec<Candidate>,
     /// The BIC-ordered path of effects that pass, per target in order.
     pub path: Vec<PathStep>,
-    /// Cells where the residual concentrates, per target.
+    /// Cells where the residual concentrates, per target (in the JSON
+    /// without `ratio` and `share`).
+    #[serde(serialize_with = "crate::regions::ser_without_spread")]
     pub worst_regions: Vec<Region>,
     /// Design and identifiability warnings.
     pub warnings: Vec<Warning>,
@@ -1613,65 +1605,20 @@ fn hold_out_blocks(data: &Dataset, rows: &[usize], norm: &Norm) -> (Vec<usize>, 
     }
     // Spatial cells, 6 per axis, assigned to folds by a pattern that keeps
     // neighbouring cells in different folds.
-    const CELLS: f64 = 6.0;
+    const CELLS: usize = 6;
     let fold = rows
         .iter()
         .map(|&r| {
             let mut id = 0usize;
             for (i, a) in data.axes().into_iter().enumerate() {
                 let u = norm.u(a, data.pos(a, r));
-                let c = (((u + 1.0) / 2.0 * CELLS).floor()).clamp(0.0, CELLS - 1.0) as usize;
+                let c = bin_index((u + 1.0) / 2.0, CELLS);
                 id += c * [1, 2, 3][i];
             }
             id % K
         })
         .collect();
     (fold, K, "spatial cells (6 per axis) in 5 folds".into())
-}
-
-fn worst_regions(td: &TargetData, resid: &[f64]) -> Vec<Region> {
-    const CELLS: f64 = 4.0;
-    let axes = td.data.axes();
-    let mut cells: BTreeMap<Vec<usize>, (f64, usize)> = BTreeMap::new();
-    for (i, &r) in td.rows.iter().enumerate() {
-        let key: Vec<usize> = axes
-            .iter()
-            .map(|&a| {
-                let u = td.norm.u(a, td.data.pos(a, r));
-                (((u + 1.0) / 2.0 * CELLS).floor()).clamp(0.0, CELLS - 1.0) as usize
-            })
-            .collect();
-        let e = cells.entry(key).or_insert((0.0, 0));
-        e.0 += resid[i] * resid[i];
-        e.1 += 1;
-    }
-    let mut v: Vec<(Vec<usize>, f64, usize)> = cells
-        .into_iter()
-        .filter(|(_, (_, n))| *n >= 5)
-        .map(|(k, (ss, n))| (k, (ss / n as f64).sqrt(), n))
-        .collect();
-    v.sort_by(|a, b| b.1.total_cmp(&a.1));
-    v.into_iter()
-        .take(2)
-        .map(|(k, rms, n)| {
-            let bbox = axes
-                .iter()
-                .zip(&k)
-                .map(|(&a, &c)| {
-                    let lo = td.norm.centre_mm[a]
-                        + td.norm.half_span_mm[a] * (2.0 * c as f64 / CELLS - 1.0);
-                    let hi = lo + 2.0 * td.norm.half_span_mm[a] / CELLS;
-                    (AXES[a].to_string(), [lo, hi])
-                })
-                .collect();
-            Region {
-                target: TARGETS[td.t].into(),
-                bbox_mm: bbox,
-                rms_um: rms,
-                points: n,
-            }
-        })
-        .collect()
 }
 
 fn design_warnings(data: &Dataset) -> Vec<Warning> {
@@ -1790,7 +1737,9 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
         let st0 = State::new(&td, &opts.seed, &opts.adds)?;
         rms_um.insert(tn.clone(), st0.rms());
         held_out_rms_um.insert(tn.clone(), st0.held_out_rms);
-        regions.extend(worst_regions(&td, &st0.resid));
+        regions.extend(crate::regions::worst_cells(
+            data, &td.norm, t, &td.rows, &st0.resid,
+        ));
         ev.resid_before
             .push((t, td.rows.clone(), st0.resid.clone()));
         let mut cur = rank_target(&td, &st0, &opts.seed, &mut warnings, &mut ev);
