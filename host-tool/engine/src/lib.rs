@@ -3,9 +3,9 @@
 //! `trueaxis` binary crate). Layered bottom-up — a module imports only from
 //! the layers below it:
 //!
-//! data → features / effect / lsq / holdout → model → fit → diagnose / compare /
-//! export / history / iso230 → improve → (the CLI's commands); import and simulate
-//! produce data sets.
+//! data → features / effect / lsq / holdout / lines / regions → model →
+//! fit → diagnose / compare / export / history / iso230 → improve → (the
+//! CLI's commands); import and simulate produce data sets.
 //!
 //! - `data`: the measurement data set (docs/cli.md § Measurement CSV) every command works on.
 //! - `import`: measurement files in (the trueaxis CSV, Renishaw .rtl) and the CSV out.
@@ -14,9 +14,11 @@
 //! - `effect`: the `--add` grammar as types — Family, Target, Axis, EffectSpec, Effect.
 //! - `lsq`: least squares with rank and conditioning checks.
 //! - `holdout`: block-held-out validation (spatial blocks, not random rows).
+//! - `lines`: lines and planes of a measurement plan (compare's plots, diagnose's periodic search).
+//! - `regions`: where a residual concentrates — one region type and binning for compare and diagnose.
 //! - `model`: the saved model file and its evaluation.
 //! - `fit`: training — linear/kinematic, local, grid and tanh-network models.
-//! - `compare`: where a model fails — residual statistics, regions, channels, planes, lines.
+//! - `compare`: where a model fails — residual statistics, regions, channels.
 //! - `diagnose`: which physical effect the model is missing, and how sure.
 //! - `history`: the steps of the error falling, fit by fit.
 //! - `improve`: the loop fit → diagnose → add the missing effects → refit, to the noise floor.
@@ -35,6 +37,8 @@ pub mod holdout;
 pub mod import;
 pub mod improve;
 pub mod iso230;
+pub mod lines;
 pub mod lsq;
 pub mod model;
+pub mod regions;
 pub mod simulate;

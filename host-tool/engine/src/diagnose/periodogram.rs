@@ -3,105 +3,19 @@
 //! told it about (5.08 mm as readily as 5 mm), and how it knows when the
 //! sampling cannot see short periods at all (aliasing).
 //!
-//! A "line" is the set of rows sharing the other axes' nominal positions
-//! (a laser traverse along one axis). The periodogram uses the densest lines
-//! along the axis: on a 50 mm grid a 5 mm period is invisible, and pooling
-//! grid rows into the periodogram only adds aliased power.
+//! The periodogram uses the densest lines along the axis
+//! ([`crate::lines::densest_lines`], here also as `dense_lines`): on a 50 mm
+//! grid a 5 mm period is invisible, and pooling grid rows into the
+//! periodogram only adds aliased power.
 //!
 //! The periodogram is the generalised (floating-mean) Lomb–Scargle form of
 //! Zechmeister & Kürster (2009): at each frequency, the share of the
 //! residual variance explained by a constant plus a sine and a cosine, on
 //! unevenly spaced samples.
 
-use std::collections::BTreeMap;
 use std::f64::consts::TAU;
 
-use crate::data::Dataset;
-
-/// Rows of the densest lines along one axis.
-#[derive(Clone, Debug, PartialEq)]
-pub struct DenseLines {
-    /// Data row indices on those lines.
-    pub rows: Vec<usize>,
-    /// Median spacing between distinct positions on the densest line, mm.
-    pub spacing_mm: f64,
-    /// Longest extent of one of those lines along the axis, mm.
-    pub span_mm: f64,
-    /// Number of lines pooled.
-    pub lines: usize,
-    /// True when real lines (≥ 8 distinct positions at fixed other axes)
-    /// were found; false when the rows are scattered and all were used.
-    pub from_lines: bool,
-}
-
-fn key_mm(v: f64) -> i64 {
-    // Nominal positions are commanded values: 1 µm resolution tells them apart.
-    (v * 1000.0).round() as i64
-}
-
-fn spacing_of(mut pos: Vec<i64>) -> Option<(f64, f64, usize)> {
-    pos.sort_unstable();
-    pos.dedup();
-    if pos.len() < 2 {
-        return None;
-    }
-    let mut d: Vec<i64> = pos.windows(2).map(|w| w[1] - w[0]).collect();
-    d.sort_unstable();
-    let med = d[d.len() / 2] as f64 / 1000.0;
-    let span = (pos[pos.len() - 1] - pos[0]) as f64 / 1000.0;
-    Some((med, span, pos.len()))
-}
-
-/// The densest lines along `axis` among `rows` (None when the axis is not in
-/// the data or has fewer than two distinct positions).
-pub fn dense_lines(data: &Dataset, axis: usize, rows: &[usize]) -> Option<DenseLines> {
-    let pos = data.pos_mm[axis].as_ref()?;
-    let others: Vec<usize> = data.axes().into_iter().filter(|&a| a != axis).collect();
-    let mut groups: BTreeMap<Vec<i64>, Vec<usize>> = BTreeMap::new();
-    for &r in rows {
-        let key: Vec<i64> = others.iter().map(|&a| key_mm(data.pos(a, r))).collect();
-        groups.entry(key).or_default().push(r);
-    }
-    let mut lines: Vec<(f64, f64, Vec<usize>)> = Vec::new();
-    for g in groups.into_values() {
-        let p: Vec<i64> = g.iter().map(|&r| key_mm(pos[r])).collect();
-        if let Some((sp, span, distinct)) = spacing_of(p) {
-            if distinct >= 8 && sp > 0.0 {
-                lines.push((sp, span, g));
-            }
-        }
-    }
-    if lines.is_empty() {
-        let p: Vec<i64> = rows.iter().map(|&r| key_mm(pos[r])).collect();
-        let (sp, span, _) = spacing_of(p)?;
-        return Some(DenseLines {
-            rows: rows.to_vec(),
-            spacing_mm: sp,
-            span_mm: span,
-            lines: 0,
-            from_lines: false,
-        });
-    }
-    let densest = lines.iter().map(|l| l.0).fold(f64::INFINITY, f64::min);
-    let mut out_rows = Vec::new();
-    let mut span_mm: f64 = 0.0;
-    let mut count = 0;
-    for (sp, span, g) in lines {
-        if sp <= 1.5 * densest {
-            out_rows.extend(g);
-            span_mm = span_mm.max(span);
-            count += 1;
-        }
-    }
-    out_rows.sort_unstable();
-    Some(DenseLines {
-        rows: out_rows,
-        spacing_mm: densest,
-        span_mm,
-        lines: count,
-        from_lines: true,
-    })
-}
+pub use crate::lines::{densest_lines as dense_lines, DenseLines};
 
 /// A periodogram: power (share of variance explained, 0..1) per frequency.
 #[derive(Clone, Debug)]
@@ -222,33 +136,5 @@ mod tests {
         let period = 1.0 / pg.freq_per_mm[k];
         assert!((period - 5.08).abs() < 0.01, "{period}");
         assert!(pg.power[k] > 50.0 * pg.median_power());
-    }
-
-    #[test]
-    fn lines_are_found_and_the_densest_kept() {
-        let mut x = Vec::new();
-        let mut y = Vec::new();
-        // A coarse grid line at y = 0 (50 mm) and a dense line at y = 100 (1 mm).
-        for i in 0..=16 {
-            x.push(i as f64 * 50.0);
-            y.push(0.0);
-        }
-        for i in 0..=800 {
-            x.push(i as f64);
-            y.push(100.0);
-        }
-        let d = Dataset {
-            pos_mm: [Some(x), Some(y), None],
-            ..Dataset::default()
-        };
-        let rows: Vec<usize> = (0..d.len()).collect();
-        let l = dense_lines(&d, 0, &rows).unwrap();
-        assert_eq!(l.lines, 1);
-        assert_eq!(l.rows.len(), 801);
-        assert!((l.spacing_mm - 1.0).abs() < 1e-9);
-        // Along y there are no lines: every row is used, spacing 100 mm.
-        let l = dense_lines(&d, 1, &rows).unwrap();
-        assert!(!l.from_lines);
-        assert!((l.spacing_mm - 100.0).abs() < 1e-9);
     }
 }

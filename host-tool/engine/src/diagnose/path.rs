@@ -1,0 +1,310 @@
+//! The ranking of one target's candidates at one model state (confounding,
+//! the significance of the best) and the BIC-ordered path that adds the
+//! significant best and looks again.
+
+use anyhow::Result;
+
+use crate::data::{AXES, TARGETS};
+use crate::features::Effect;
+
+use super::candidates::{propose, Proposal};
+use super::effect_key::swap_in;
+use super::effect_key::EffectKey;
+use super::linalg::small_fit;
+use super::linalg::Basis;
+use super::score::{score, Replacing, Scored};
+use super::target::{State, TargetData};
+use super::warnings::plausibility_warning;
+use super::{
+    Candidate, ComponentEvidence, Evidence, Options, PathStep, PeriodogramEvidence, Warning,
+    COMPETING_OVERLAP, CONFOUNDED_OVERLAP, DBIC_SIGNIFICANT, MAX_PATH_STEPS, MIN_GAP_DBIC,
+    MIN_HELD_OUT_GAIN,
+};
+
+/// Scores one target at one model state; marks confounding and the best
+/// candidate's significance. Returns the scored list sorted best first.
+pub(super) fn rank_target(
+    td: &TargetData,
+    st: &State,
+    seed_name: &str,
+    warnings: &mut Vec<Warning>,
+    ev: &mut Evidence,
+) -> Vec<Scored> {
+    // Effects already in the model for this target: a candidate that is
+    // one of them again (the same family, axis, channel, times) is not a
+    // second effect — it replaces the old one, with its nonlinear parameter
+    // searched again against the model without it. (Adding it twice fits
+    // two lags of one temperature: a two-time-constant model of what is
+    // one effect, and the path never ends.)
+    let own: Vec<(String, EffectKey)> = st
+        .adds
+        .iter()
+        .filter_map(|a| {
+            let k = EffectKey::of(a)?;
+            (k.target == TARGETS[td.t]).then(|| (a.clone(), k))
+        })
+        .collect();
+    let props: Vec<Proposal> = propose(td, st, ev, None)
+        .into_iter()
+        .filter(|p| EffectKey::of(&p.spec).is_none_or(|k| !own.iter().any(|(_, o)| o.matches(&k))))
+        .collect();
+    let mut sc = score(td, st, props, seed_name, warnings, None);
+    for (old, key) in &own {
+        let searchable = match key.family.as_str() {
+            "periodic" | "drift" | "higher_order" => true,
+            "thermal" => td.data.t_s.is_some(),
+            _ => false,
+        };
+        let Ok(old_effect) = Effect::parse(old) else {
+            continue;
+        };
+        if !searchable {
+            continue;
+        }
+        let rest: Vec<String> = st.adds.iter().filter(|a| *a != old).cloned().collect();
+        let Ok(reduced) = State::new(td, seed_name, &rest) else {
+            continue;
+        };
+        let props: Vec<Proposal> = propose(td, &reduced, &mut Evidence::default(), Some(key))
+            .into_iter()
+            .filter(|p| {
+                EffectKey::of(&p.spec).is_some_and(|k| k.matches(key))
+                    && Effect::parse(&p.spec).is_ok_and(|e| e.features != old_effect.features)
+            })
+            .collect();
+        let repl = Replacing {
+            current: st,
+            old: old.clone(),
+            old_rank: old_effect.features.len(),
+        };
+        sc.extend(score(
+            td,
+            &reduced,
+            props,
+            seed_name,
+            &mut Vec::new(),
+            Some(&repl),
+        ));
+    }
+    sc.sort_by(|a, b| {
+        let ka = a.cand.delta_bic.unwrap_or(f64::INFINITY);
+        let kb = b.cand.delta_bic.unwrap_or(f64::INFINITY);
+        ka.total_cmp(&kb)
+    });
+    let n = td.rows.len();
+    // Overlaps among the plausible contenders (ΔBIC < 0), best first.
+    let top: Vec<usize> = (0..sc.len())
+        .filter(|&i| sc[i].cand.identifiable && sc[i].cand.delta_bic.is_some_and(|d| d < 0.0))
+        .take(12)
+        .collect();
+    // How much two candidates' (partialled) column spaces share: the mean
+    // squared cosine of their principal angles over the smaller span
+    // (`Basis::overlap`). The largest share of any single column, used
+    // before, called `thermal…,times=z,offset=1` 100 % inside
+    // `drift:order=3` because its plain ΔT column is — though its ΔT·z
+    // column is not, and the data told the two apart. One basis per
+    // contender, not one per pair.
+    let spans: Vec<Basis> = top
+        .iter()
+        .map(|&i| Basis::new(&sc[i].partialled, n))
+        .collect();
+    let mut competing_best: Option<f64> = None;
+    for (ii, &i) in top.iter().enumerate() {
+        for (jj, &j) in top.iter().enumerate().skip(ii + 1) {
+            let ov = spans[ii].overlap(&spans[jj]);
+            if ii == 0 && ov >= COMPETING_OVERLAP && competing_best.is_none() {
+                competing_best = sc[j].cand.delta_bic;
+            }
+            let strong = |k: usize| sc[k].cand.delta_bic.is_some_and(|d| d < DBIC_SIGNIFICANT);
+            // Two candidates the data does separate (ΔBIC at least the gap
+            // rule's margin apart) are not confounded, however alike.
+            let (di, dj) = (
+                sc[i].cand.delta_bic.unwrap_or(f64::INFINITY),
+                sc[j].cand.delta_bic.unwrap_or(f64::INFINITY),
+            );
+            let separated = (di - dj).abs() >= MIN_GAP_DBIC;
+            if ov >= CONFOUNDED_OVERLAP
+                && !separated
+                && sc[i].cand.effect != sc[j].cand.effect
+                && (strong(i) || strong(j))
+            {
+                let (ai, aj) = (sc[i].cand.add.clone(), sc[j].cand.add.clone());
+                sc[i].cand.confounded_with.push(aj.clone());
+                sc[j].cand.confounded_with.push(ai.clone());
+                let fams = [sc[i].cand.effect.as_str(), sc[j].cand.effect.as_str()];
+                let fix = if fams.contains(&"drift") && fams.contains(&"thermal") {
+                    "; measure with temperature varying independently of time (a cool-down as well as a warm-up, or a second session)"
+                } else {
+                    "; vary the two channels independently in the next measurement"
+                };
+                warnings.push(Warning {
+                    code: "confounded".into(),
+                    detail: format!(
+                        "`{ai}` and `{aj}` cannot be told apart on these data (their new directions overlap {:.0} %: mean squared cosine of the principal angles; ΔBIC {:.0} vs {:.0}){fix}",
+                        100.0 * ov,
+                        di,
+                        dj
+                    ),
+                });
+            }
+        }
+    }
+    if let Some(&b) = top.first() {
+        let c = &sc[b].cand;
+        let dbic = c.delta_bic.unwrap_or(f64::INFINITY);
+        let gain = c.gain.unwrap_or(0.0);
+        let gap_ok = competing_best.is_none_or(|r| dbic <= r - MIN_GAP_DBIC);
+        // Plausibility is not part of the rule: an apparent CTE of 60
+        // µm/m/K (a sensor that sees a fifth of the structure's rise) is
+        // still the effect that explains the error, and declaring the data
+        // at its noise floor would hide it. The value is flagged instead
+        // (`implausible_parameter`, see `plausibility_warning`).
+        let ok = dbic < DBIC_SIGNIFICANT && gain >= MIN_HELD_OUT_GAIN && gap_ok;
+        let why = if ok {
+            if c.physical.as_ref().is_some_and(|p| !p.plausible) {
+                "significant, but its physical parameter is implausible (check the sensor or channel it follows)".to_string()
+            } else {
+                "significant".to_string()
+            }
+        } else {
+            let mut r = Vec::new();
+            if dbic >= DBIC_SIGNIFICANT {
+                r.push(format!("ΔBIC {dbic:.0} ≥ {DBIC_SIGNIFICANT}"));
+            }
+            if gain < MIN_HELD_OUT_GAIN {
+                r.push(format!(
+                    "held-out gain {:.0} % < {:.0} %",
+                    100.0 * gain,
+                    100.0 * MIN_HELD_OUT_GAIN
+                ));
+            }
+            if !gap_ok {
+                r.push(format!(
+                    "no clear gap to the competing candidate (ΔBIC {:.0})",
+                    competing_best.unwrap_or(0.0)
+                ));
+            }
+            format!("not significant: {}", r.join(", "))
+        };
+        sc[b].cand.significant = ok;
+        sc[b].cand.evidence.push_str(&format!(" — {why}"));
+    }
+    sc
+}
+
+/// The path of one target from its starting model `st0`: add the
+/// significant best and look again, until no candidate passes (or after
+/// one step without `opts.follow_path`). Appends the steps to `path`, the
+/// accepted effects' warnings to `warnings` and their periodograms and
+/// fitted components to `ev`. Returns the target's candidates (those on the
+/// path with the scores of the step that added them), the model it ends
+/// at, and whether the path stayed empty.
+pub(super) fn follow(
+    td: &TargetData,
+    st0: State,
+    opts: &Options,
+    warnings: &mut Vec<Warning>,
+    ev: &mut Evidence,
+    path: &mut Vec<PathStep>,
+) -> Result<(Vec<Candidate>, State, bool)> {
+    let t = td.t;
+    let tn = TARGETS[t].to_string();
+    let mut cur = rank_target(td, &st0, &opts.seed, warnings, ev);
+    // The path: add the significant best and look again. The candidate
+    // list is the starting model's ranking; each effect added at a later
+    // step takes the place of its stale first-step entry (the same
+    // effect) with the scores of the step that added it.
+    let mut st = st0;
+    let mut list: Option<Vec<Candidate>> = None;
+    let mut on_path: Vec<(usize, String)> = Vec::new();
+    for k in 1..=MAX_PATH_STEPS {
+        let Some(bi) = cur.iter().position(|s| s.cand.significant) else {
+            break;
+        };
+        let best = &cur[bi].cand;
+        let mut adds = st.adds.clone();
+        swap_in(&mut adds, &best.add, best.replaces.as_deref());
+        let next = State::new(td, &opts.seed, &adds)?;
+        if next.held_out_rms.is_nan() || next.held_out_rms >= st.held_out_rms {
+            // Cannot happen with the same blocks, but a candidate that
+            // does not lower the refit's held-out RMS is not added, and
+            // then it must not claim significance either.
+            cur[bi].cand.significant = false;
+            cur[bi]
+                .cand
+                .evidence
+                .push_str(" — but the refit's block-held-out RMS did not fall, so it is not added");
+            break;
+        }
+        let mut best = cur.remove(bi).cand;
+        best.step = Some(k);
+        path.push(PathStep {
+            target: tn.clone(),
+            add: best.add.clone(),
+            delta_bic: best.delta_bic.unwrap_or(0.0),
+            rms_um: next.rms(),
+            held_out_rms_um: next.held_out_rms,
+            replaces: best.replaces.clone(),
+        });
+        warnings.extend(plausibility_warning(&best));
+        on_path.push((k, best.add.clone()));
+        match list.as_mut() {
+            None => {
+                let mut l = vec![best];
+                l.extend(cur.drain(..).map(|s| s.cand));
+                list = Some(l);
+            }
+            Some(l) => {
+                let key = EffectKey::of(&best.add);
+                let stale = l.iter().position(|c| {
+                    !c.on_path()
+                        && key
+                            .as_ref()
+                            .zip(EffectKey::of(&c.add))
+                            .is_some_and(|(a, b)| a.matches(&b))
+                });
+                match stale {
+                    Some(i) => l[i] = best,
+                    None => l.push(best),
+                }
+            }
+        }
+        st = next;
+        if !opts.follow_path {
+            break;
+        }
+        let mut step_ev = Evidence::default();
+        cur = rank_target(td, &st, &opts.seed, &mut Vec::new(), &mut step_ev);
+        // The periodogram that finds a periodic effect at the next step.
+        if let Some(b) = cur.iter().find(|s| s.cand.significant) {
+            if b.cand.effect == "periodic" {
+                let axis = b
+                    .cand
+                    .axis
+                    .as_deref()
+                    .and_then(|a| AXES.iter().position(|x| *x == a));
+                ev.periodograms.extend(
+                    step_ev
+                        .periodograms
+                        .into_iter()
+                        .filter(|p| Some(p.axis) == axis)
+                        .map(|p| PeriodogramEvidence { step: k + 1, ..p }),
+                );
+            }
+        }
+    }
+    let first = list.is_none();
+    let candidates = list.unwrap_or_else(|| cur.into_iter().map(|s| s.cand).collect());
+    let fit = (!on_path.is_empty()).then(|| small_fit(&st.cols, &td.y));
+    for (k, add) in &on_path {
+        if let Some(values) = fit.as_ref().and_then(|f| st.component(f, add)) {
+            ev.components.push(ComponentEvidence {
+                target: t,
+                step: *k,
+                add: add.clone(),
+                values,
+            });
+        }
+    }
+    Ok((candidates, st, first))
+}

@@ -1,0 +1,194 @@
+//! Scoring of proposed candidates against one target's model: identifiability
+//! (the share outside the model's span), ΔBIC, the block-held-out gain, the
+//! physical parameter, and the evidence text of each, as [`Candidate`]s.
+
+use std::collections::BTreeMap;
+
+use crate::data::{AXES, TARGETS};
+use crate::features::{Effect, Feature};
+
+use super::candidates::Proposal;
+use super::physical::{lag_aware_xtx_inv, param_key, physical};
+use super::target::{fwl, State, TargetData};
+use super::{Candidate, Warning, IN_SPAN_SHARE};
+
+/// The scored candidates of one target, with the columns needed for overlaps.
+pub(super) struct Scored {
+    pub(super) cand: Candidate,
+    pub(super) partialled: Vec<Vec<f64>>,
+}
+
+/// A replacement's comparison: `st` passed to `score` is the model without
+/// the old effect; ΔBIC and gain are taken against the current model.
+pub(super) struct Replacing<'a> {
+    pub(super) current: &'a State,
+    pub(super) old: String,
+    /// Columns of the old effect (its rank in the current model).
+    pub(super) old_rank: usize,
+}
+
+pub(super) fn score(
+    td: &TargetData,
+    st: &State,
+    props: Vec<Proposal>,
+    seed_name: &str,
+    warnings: &mut Vec<Warning>,
+    repl: Option<&Replacing>,
+) -> Vec<Scored> {
+    let n = td.rows.len();
+    let tn = TARGETS[td.t];
+    let mut out = Vec::new();
+    for p in props {
+        let Ok(mut ff) = fwl(td, st, &p.spec, p.searched) else {
+            continue;
+        };
+        // Against the current model: the swap keeps the parameter count
+        // (one lag for another), so only the change in columns is charged.
+        let ref_held = match repl {
+            Some(r) => {
+                let nf = n as f64;
+                ff.dbic = nf * (ff.fit.rss.max(1e-300) / r.current.rss.max(1e-300)).ln()
+                    + (ff.fit.rank as f64 - r.old_rank as f64) * nf.ln();
+                r.current.held_out_rms
+            }
+            None => st.held_out_rms,
+        };
+        let mut params = BTreeMap::new();
+        if let Ok(e) = Effect::parse(&p.spec) {
+            match e.features.first() {
+                Some(Feature::Periodic { period_mm, .. }) => {
+                    params.insert("period_mm".into(), *period_mm);
+                    params.insert("harmonics".into(), (e.features.len() / 2) as f64);
+                }
+                Some(Feature::Thermal { lag_s, .. }) => {
+                    params.insert("lag_s".into(), *lag_s);
+                }
+                Some(Feature::Drift { .. }) => {
+                    params.insert("order".into(), e.features.len() as f64);
+                }
+                Some(Feature::Monomial { exp }) if p.family == "higher_order" => {
+                    params.insert(
+                        "degree".into(),
+                        f64::from(exp.iter().sum::<u8>() + e.features.len() as u8 - 1),
+                    );
+                }
+                _ => {}
+            }
+        }
+        let base = Candidate {
+            effect: p.family.to_string(),
+            target: tn.to_string(),
+            axis: p.axis.map(|a| AXES[a].to_string()),
+            channel: p.channel.clone(),
+            params,
+            add: p.spec.clone(),
+            held_out_rms_um_after: None,
+            gain: None,
+            identifiable: false,
+            evidence: String::new(),
+            delta_bic: None,
+            rms_um_after: None,
+            out_of_span_share: ff.share,
+            significant: false,
+            physical: None,
+            confounded_with: Vec::new(),
+            replaces: repl.map(|r| r.old.clone()),
+            step: None,
+        };
+        if ff.share < IN_SPAN_SHARE || ff.fit.rank == 0 {
+            if repl.is_some() {
+                continue;
+            }
+            let cols = Effect::parse(&p.spec)
+                .map(|e| {
+                    e.features
+                        .iter()
+                        .map(ToString::to_string)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                })
+                .unwrap_or_default();
+            let detail = format!(
+                "{seed_name} already contains the column(s) {cols} for {tn} (up to a combination of its terms), so `{}` cannot be told from it{}",
+                p.spec,
+                match p.family {
+                    "abbe" => "; measure with two or more tool lengths (tool_mm) to separate an Abbe error",
+                    "squareness" => "; use a seed without linear cross terms (kinematic) to estimate squareness",
+                    _ => "",
+                }
+            );
+            warnings.push(Warning {
+                code: "in_model_span".into(),
+                detail: detail.clone(),
+            });
+            out.push(Scored {
+                cand: Candidate {
+                    evidence: detail,
+                    ..base
+                },
+                partialled: ff.partialled,
+            });
+            continue;
+        }
+        let held = st.holdout.rms(&ff.cols);
+        let gain = held.map(|h| 1.0 - h / ref_held);
+        let dof = n.saturating_sub(st.basis.rank() + ff.fit.rank).max(1) as f64;
+        let sigma2 = ff.fit.rss / dof;
+        if let Some(inv) = lag_aware_xtx_inv(td, st, &p.spec, &ff) {
+            ff.fit.xtx_inv = inv;
+        }
+        let phys = physical(td, &p, &ff, sigma2);
+        let mut base = base;
+        if let Some(ph) = &phys {
+            base.params.insert(param_key(ph), ph.value);
+        }
+        let rms_after = (ff.fit.rss / n as f64).sqrt();
+        let mut evidence = format!(
+            "{}{}; ΔBIC {:.0}; block-held-out RMS {:.3} → {} µm (gain {})",
+            p.note,
+            repl.map_or(String::new(), |r| format!(
+                "; replaces `{}` (the same effect, its parameter searched again without it)",
+                r.old
+            )),
+            ff.dbic,
+            ref_held,
+            held.map_or("?".into(), |h| format!("{h:.3}")),
+            gain.map_or("?".into(), |g| format!("{:.0} %", 100.0 * g))
+        );
+        if let Some(ph) = &phys {
+            evidence.push_str(&format!(
+                "; {} {:.3} {} (95 % {:.3} … {:.3}){}",
+                ph.name,
+                ph.value,
+                ph.unit,
+                ph.ci95[0],
+                ph.ci95[1],
+                if ph.plausible {
+                    String::new()
+                } else {
+                    format!(" — NOT plausible (expected {})", ph.expected)
+                }
+            ));
+        }
+        if ff.share < 0.05 {
+            evidence.push_str(&format!(
+                "; only {:.1} % of it lies outside the model's span",
+                100.0 * ff.share
+            ));
+        }
+        out.push(Scored {
+            cand: Candidate {
+                held_out_rms_um_after: held,
+                gain,
+                identifiable: true,
+                evidence,
+                delta_bic: Some(ff.dbic),
+                rms_um_after: Some(rms_after),
+                physical: phys,
+                ..base
+            },
+            partialled: ff.partialled,
+        });
+    }
+    out
+}

@@ -1,0 +1,160 @@
+//! The diagnosis's warnings that are not a candidate's own: the measurement
+//! design (aliasing, one direction, no or constant temperature), an accepted
+//! effect with an implausible parameter, and a residual left above the
+//! noise floor.
+
+use crate::data::{Dataset, AXES};
+use crate::features::Norm;
+use crate::lines::densest_lines;
+
+use super::candidates::fmt_num;
+use super::noise::{NoiseFloor, NoiseMethod};
+use super::{Candidate, Warning, ABOVE_NOISE_RATIO, ALIASING_SPACING_MM, CONSTANT_TEMPERATURE_K};
+
+/// The `implausible_parameter` warning for an effect the diagnosis accepts
+/// although its physical parameter lies outside the plausible range: the
+/// effect is in the data, its size is suspicious — say which parameter,
+/// the range, and what to check.
+pub(super) fn plausibility_warning(c: &Candidate) -> Option<Warning> {
+    let ph = c.physical.as_ref().filter(|p| !p.plausible)?;
+    let check = match c.effect.as_str() {
+        "thermal" => "check the sensor: one that sees only part of the structure's temperature change (placed on a cover, in the air stream, far from the screw nut or scale) makes the apparent coefficient too large; put it on the part that grows or add a second sensor there",
+        "periodic" => "check the period against the screw lead and the scale pitch, and the amplitude against the screw's class",
+        "reversal" => "check the drive (a loose coupling or a worn nut) and the sign of the dir column",
+        "abbe" => "check tool_mm (unit mm, the arm from the measuring line) and whether the tool length changed between passes for another reason",
+        "drift" => "check that t_s is in seconds and whether a temperature channel explains the drift",
+        "squareness" => "check that the error and position columns belong to the axes they name",
+        _ => "check the data",
+    };
+    Some(Warning {
+        code: "implausible_parameter".into(),
+        detail: format!(
+            "`{}`: {} {:.3} {} (95 % {:.3} … {:.3}) is outside the plausible range ({}); the effect is in the data (ΔBIC {:.0}, held-out gain {:.0} %) and is kept, but its size is suspicious: {check}",
+            c.add,
+            ph.name,
+            ph.value,
+            ph.unit,
+            ph.ci95[0],
+            ph.ci95[1],
+            ph.expected,
+            c.delta_bic.unwrap_or(f64::NAN),
+            100.0 * c.gain.unwrap_or(f64::NAN),
+        ),
+    })
+}
+
+/// The `above_noise_floor` warning: the residual at the end is clearly
+/// above the noise floor, so whatever the verdict says about the named
+/// candidates, the data is not explained down to its noise.
+pub(super) fn above_noise_warning(
+    target: &str,
+    rms: f64,
+    nf: &NoiseFloor,
+    after_path: bool,
+) -> Option<Warning> {
+    let ratio = above_noise(rms, nf.sigma_um)?;
+    Some(Warning {
+        code: "above_noise_floor".into(),
+        detail: format!(
+            "{target}: the residual {} is {rms:.3} µm RMS, {ratio:.1}× the noise floor {:.3} µm (from {}): systematic error is left that no candidate explains significantly — smooth shape the seed cannot follow (a finer model: grid or nn) or an effect outside the library; see worst_regions for where it is",
+            if after_path { "after the path" } else { "of the model" },
+            nf.sigma_um,
+            match nf.method {
+                NoiseMethod::Repeats => "repeated points",
+                NoiseMethod::Differences => "neighbour differences along lines",
+            }
+        ),
+    })
+}
+
+/// The residual RMS as a multiple of the noise floor, when it is above
+/// `ABOVE_NOISE_RATIO` (the `above_noise_floor` rule, for the warning and
+/// for `improve`).
+pub fn above_noise(rms_um: f64, noise_um: f64) -> Option<f64> {
+    let ratio = rms_um / noise_um;
+    (ratio > ABOVE_NOISE_RATIO).then_some(ratio)
+}
+
+pub(super) fn design_warnings(data: &Dataset) -> Vec<Warning> {
+    let mut w = Vec::new();
+    let all: Vec<usize> = (0..data.len()).collect();
+    let norm = Norm::from_data(data);
+    let axes = data.axes();
+    for &a in &axes {
+        let Some(dl) = densest_lines(data, a, &all) else {
+            continue;
+        };
+        if dl.spacing_mm > ALIASING_SPACING_MM {
+            let lo = norm.centre_mm[a] - norm.half_span_mm[a];
+            let hi = norm.centre_mm[a] + norm.half_span_mm[a];
+            let at: Vec<String> = axes
+                .iter()
+                .filter(|&&o| o != a)
+                .map(|&o| format!("{}={}", AXES[o], fmt_num(norm.centre_mm[o], 1)))
+                .collect();
+            w.push(Warning {
+                code: "aliasing".into(),
+                detail: format!(
+                    "the densest sampling along {ax} is every {sp} mm, so periods below {p2} mm (ball-screw leads are 2–40 mm) are invisible or aliased; add a dense line along {ax}: {ax} from {lo} to {hi} mm every 0.5 mm{at}, forward and backward",
+                    ax = AXES[a],
+                    sp = fmt_num(dl.spacing_mm, 3),
+                    p2 = fmt_num(2.0 * dl.spacing_mm, 3),
+                    lo = fmt_num(lo, 1),
+                    hi = fmt_num(hi, 1),
+                    at = if at.is_empty() { String::new() } else { format!(" at {}", at.join(", ")) }
+                ),
+            });
+        }
+    }
+    for &a in &axes {
+        let fix = "measure bidirectionally (ISO 230-2: at least 5 runs each way) and record the approach direction";
+        match &data.dir[a] {
+            None => w.push(Warning {
+                code: "one_direction".into(),
+                detail: format!(
+                    "no dir_{0} column: reversal (backlash) on {0} cannot be identified; {fix} in dir_{0}",
+                    AXES[a]
+                ),
+            }),
+            Some(d) => {
+                let first = d.first().copied().unwrap_or(1);
+                if d.iter().all(|&v| v == first) {
+                    w.push(Warning {
+                        code: "one_direction".into(),
+                        detail: format!(
+                            "every point on {} is approached from {}: reversal (backlash) cannot be identified; {fix}",
+                            AXES[a],
+                            if first > 0 { "below (+)" } else { "above (−)" }
+                        ),
+                    });
+                }
+            }
+        }
+    }
+    if data.temps.is_empty() {
+        w.push(Warning {
+            code: "no_temperature".into(),
+            detail: "no T_<name>_C column: thermal effects cannot be tested (an error that follows temperature may be found as drift, or not at all); record at least one temperature — the bed, the screw nut or the scale — through a warm-up".into(),
+        });
+    }
+    for ch in &data.temps {
+        let lo = ch.temp_c.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = ch.temp_c.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if hi - lo < CONSTANT_TEMPERATURE_K {
+            w.push(Warning {
+                code: "constant_temperature".into(),
+                detail: format!(
+                    "T_{}_C spans only {:.3} K: thermal effects cannot be identified; measure through a warm-up or over a day so that it changes by 2 K or more",
+                    ch.name,
+                    hi - lo
+                ),
+            });
+        }
+    }
+    w
+}
+
+pub(super) fn dedup_warnings(w: &mut Vec<Warning>) {
+    let mut seen = std::collections::BTreeSet::new();
+    w.retain(|x| seen.insert((x.code.clone(), x.detail.clone())));
+}

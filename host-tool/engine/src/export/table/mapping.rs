@@ -1,0 +1,313 @@
+//! Model → table terms (the **Mapping** and **Units and sign** of the
+//! module docs): a linear model's features grouped into model-core
+//! `Poly`, `Periodic`, `Thermal`, `Reversal` and `Abbe` terms, a network
+//! into an `Mlp` term, a grid into `Grid` terms, all as corrections in nm;
+//! and what the rest of the export asks of the model (its kinds of terms,
+//! its shortest period, its steady state).
+
+use anyhow::{bail, Context, Result};
+
+use model_core::spec::{
+    GridAxisSpec, GridSpec, LayerSpec, MlpInputSpec, MlpSource, MlpSpec, PolyCoef, TermSpec,
+};
+use model_core::table::MAX_DEGREE;
+use model_core::MAX_TEMPS;
+
+use super::{mc, nm, Warning};
+use crate::data::{AXES, TARGETS};
+use crate::features::{Feature, Phase};
+use crate::model::FittedModel;
+
+/// The model as model-core terms, its channels, and warnings. Thermal lags
+/// are refused unless `drop_lag`.
+pub(super) fn terms_of(
+    model: &FittedModel,
+    drop_lag: bool,
+    transition_nm: i32,
+) -> Result<(Vec<TermSpec>, Vec<String>, Vec<Warning>)> {
+    let mut warnings = Vec::new();
+    let mut terms = Vec::new();
+    let mut channels: Vec<String> = Vec::new();
+    match model {
+        FittedModel::Linear(m) => {
+            for o in &m.outputs {
+                let out = o.target as u8;
+                let mut poly: Vec<PolyCoef> = Vec::new();
+                let mut abbe: Vec<PolyCoef> = Vec::new();
+                // (axis, period_mm) → (sin, cos) by harmonic.
+                let mut periodic: Vec<(usize, f64, Vec<f64>, Vec<f64>)> = Vec::new();
+                // (channel, t_ref_c) → coefficients nm/K.
+                let mut thermal: Vec<(String, f64, Vec<PolyCoef>)> = Vec::new();
+                let mut reversal: Vec<(usize, f64)> = Vec::new();
+                let add = |v: &mut Vec<PolyCoef>, exp: [u8; 3], c: f64| {
+                    match v.iter_mut().find(|(e, _)| *e == exp) {
+                        Some((_, acc)) => *acc += c,
+                        None => v.push((exp, c)),
+                    }
+                };
+                let degree_ok = |exp: [u8; 3]| exp.iter().map(|&e| u32::from(e)).sum::<u32>() <= u32::from(MAX_DEGREE);
+                for (f, &c_um) in o.features.iter().zip(&o.coef_um) {
+                    let c_nm = -1000.0 * c_um; // correction = −error
+                    match f {
+                        Feature::Monomial { exp } => {
+                            if !degree_ok(*exp) {
+                                bail!("{}: monomial {f} has degree above {MAX_DEGREE}, which the table cannot hold", TARGETS[o.target]);
+                            }
+                            add(&mut poly, *exp, c_nm);
+                        }
+                        Feature::Abbe { exp } => {
+                            if !degree_ok(*exp) {
+                                bail!("{}: Abbe term {f} has degree above {MAX_DEGREE}", TARGETS[o.target]);
+                            }
+                            // µm per mm of arm → nm per nm: ×1e-3 (and the sign).
+                            add(&mut abbe, *exp, -1e-3 * c_um);
+                        }
+                        Feature::Periodic {
+                            axis,
+                            period_mm,
+                            harmonic,
+                            phase,
+                        } => {
+                            let k = usize::from(*harmonic);
+                            if k == 0 || k > model_core::table::MAX_HARMONICS {
+                                bail!("{f}: harmonic {k} outside 1..={}", model_core::table::MAX_HARMONICS);
+                            }
+                            let idx = match periodic
+                                .iter()
+                                .position(|p| p.0 == *axis && p.1 == *period_mm)
+                            {
+                                Some(i) => i,
+                                None => {
+                                    periodic.push((*axis, *period_mm, Vec::new(), Vec::new()));
+                                    periodic.len() - 1
+                                }
+                            };
+                            let p = &mut periodic[idx];
+                            if p.2.len() < k {
+                                p.2.resize(k, 0.0);
+                                p.3.resize(k, 0.0);
+                            }
+                            match phase {
+                                Phase::Sin => p.2[k - 1] += c_nm,
+                                Phase::Cos => p.3[k - 1] += c_nm,
+                            }
+                        }
+                        Feature::Thermal {
+                            channel,
+                            t_ref_c,
+                            lag_s,
+                            exp,
+                        } => {
+                            if *lag_s > 0.0 {
+                                if !drop_lag {
+                                    bail!(
+                                        "{}: the thermal term {f} has a lag of {lag_s} s, which the firmware table cannot represent (it applies the coefficient to the sensor reading at once); refit without lag_s, or export with --drop-lag to use its steady state",
+                                        TARGETS[o.target]
+                                    );
+                                }
+                                warnings.push(Warning::new(
+                                    "lag_dropped",
+                                    format!("{}: {f} exported without its {lag_s} s lag: right in steady state, wrong while the temperature changes", TARGETS[o.target]),
+                                ));
+                            }
+                            if !degree_ok(*exp) {
+                                bail!("{}: thermal term {f} has degree above {MAX_DEGREE}", TARGETS[o.target]);
+                            }
+                            if !channels.contains(channel) {
+                                channels.push(channel.clone());
+                            }
+                            let idx = match thermal
+                                .iter()
+                                .position(|t| &t.0 == channel && t.1 == *t_ref_c)
+                            {
+                                Some(i) => i,
+                                None => {
+                                    thermal.push((channel.clone(), *t_ref_c, Vec::new()));
+                                    thermal.len() - 1
+                                }
+                            };
+                            add(&mut thermal[idx].2, *exp, c_nm);
+                        }
+                        Feature::Reversal { axis } => {
+                            match reversal.iter_mut().find(|r| r.0 == *axis) {
+                                Some(r) => r.1 += c_nm,
+                                None => reversal.push((*axis, c_nm)),
+                            }
+                        }
+                        Feature::Drift { .. } => {
+                            warnings.push(Warning::new(
+                                "drift_left_out",
+                                format!(
+                                    "{}: {f} ({c_um:+.4} µm per h^p) left out: drift describes the measurement session, not the machine",
+                                    TARGETS[o.target]
+                                ),
+                            ));
+                        }
+                    }
+                }
+                if !poly.is_empty() {
+                    terms.push(TermSpec::Poly { output: out, coefs: poly });
+                }
+                for (axis, period_mm, sin_nm, cos_nm) in periodic {
+                    let period_nm = nm(period_mm).context("periodic period")?;
+                    if period_nm <= 0 {
+                        bail!("periodic term on {}: period {period_mm} mm rounds to 0 nm", AXES[axis]);
+                    }
+                    if ((period_nm as f64) * 1e-6 - period_mm).abs() > 1e-9 {
+                        warnings.push(Warning::new(
+                            "period_rounded",
+                            format!("period {period_mm} mm stored as {period_nm} nm"),
+                        ));
+                    }
+                    terms.push(TermSpec::Periodic {
+                        output: out,
+                        axis: axis as u8,
+                        period_nm,
+                        sin_nm,
+                        cos_nm,
+                    });
+                }
+                for (channel, t_ref_c, coefs) in thermal {
+                    let ch = channels.iter().position(|c| *c == channel).unwrap_or(0);
+                    terms.push(TermSpec::Thermal {
+                        output: out,
+                        channel: ch as u8,
+                        t_ref_mc: mc(t_ref_c)?,
+                        coefs_nm_per_k: coefs,
+                    });
+                }
+                for (axis, amplitude_nm) in reversal {
+                    terms.push(TermSpec::Reversal {
+                        output: out,
+                        axis: axis as u8,
+                        transition_nm,
+                        amplitude_nm,
+                    });
+                }
+                if !abbe.is_empty() {
+                    terms.push(TermSpec::Abbe { output: out, coefs: abbe });
+                }
+            }
+        }
+        FittedModel::Nn(m) => {
+            let n_in = m.inputs.len();
+            let inputs = (0..n_in)
+                .map(|i| {
+                    Ok(MlpInputSpec {
+                        source: MlpSource::Pos(m.inputs[i] as u8),
+                        min: f64::from(nm(m.in_min_mm[i])?),
+                        max: f64::from(nm(m.in_max_mm[i])?),
+                    })
+                })
+                .collect::<Result<Vec<_>>>()?;
+            for i in &inputs {
+                if i.max <= i.min {
+                    bail!("network input scaling is empty ({}…{} nm)", i.min, i.max);
+                }
+            }
+            // Output scaling −1 ↦ min, +1 ↦ max in nm of *correction*:
+            // negating swaps the ends, so min_corr = −max_err.
+            terms.push(TermSpec::Mlp(MlpSpec {
+                outputs: m.outputs.iter().map(|&t| t as u8).collect(),
+                inputs,
+                hidden: vec![LayerSpec {
+                    weights: m.w1.clone(),
+                    bias: m.b1.clone(),
+                }],
+                output: LayerSpec {
+                    // y_corr = −y_err: flip the output layer so the scaled
+                    // output of the correction uses swapped ends.
+                    weights: m.w2.iter().map(|w| -w).collect(),
+                    bias: m.b2.iter().map(|b| -b).collect(),
+                },
+                out_min_nm: m.out_max_um.iter().map(|v| -1000.0 * v).collect(),
+                out_max_nm: m.out_min_um.iter().map(|v| -1000.0 * v).collect(),
+            }));
+        }
+        FittedModel::Grid(g) => {
+            let step_nm = nm(g.step_mm)?;
+            if step_nm <= 0 {
+                bail!("grid step {} mm is not positive", g.step_mm);
+            }
+            let mut axes = [GridAxisSpec {
+                nodes: 1,
+                origin_nm: 0,
+                step_nm: 1_000_000,
+            }; 3];
+            // The model stores its first listed axis fastest; the table
+            // stores x fastest. They agree when the axes are ascending.
+            if g.axes.windows(2).any(|w| w[0] >= w[1]) {
+                bail!("grid model axes {:?} are not in x, y, z order", g.axes);
+            }
+            for (i, &a) in g.axes.iter().enumerate() {
+                axes[a] = GridAxisSpec {
+                    nodes: u16::try_from(g.counts[i]).context("grid node count")?,
+                    origin_nm: nm(g.origin_mm[i])?,
+                    step_nm,
+                };
+            }
+            for o in &g.outputs {
+                terms.push(TermSpec::Grid(GridSpec {
+                    output: o.target as u8,
+                    axes,
+                    values_nm: o.values_um.iter().map(|v| -1000.0 * v).collect(),
+                }));
+            }
+        }
+        FittedModel::Local(_) => bail!(
+            "local (piecewise) models cannot be exported as a table: the firmware evaluates one global model; fit a global seed (cubic19 with --add …) or grid:<step_mm>"
+        ),
+    }
+    if channels.len() > MAX_TEMPS {
+        bail!(
+            "the model reads {} temperature channels ({}); a table holds at most {MAX_TEMPS}",
+            channels.len(),
+            channels.join(", ")
+        );
+    }
+    Ok((terms, channels, warnings))
+}
+
+/// True when the model has a term of this kind (for the sweep's states).
+pub(super) fn has(model: &FittedModel, pred: impl Fn(&Feature) -> bool) -> bool {
+    match model {
+        FittedModel::Linear(m) => m.outputs.iter().flat_map(|o| &o.features).any(pred),
+        _ => false,
+    }
+}
+
+/// Shortest period on `axis` among the model's periodic terms, mm.
+pub(in crate::export) fn shortest_period_mm(model: &FittedModel, axis: usize) -> Option<f64> {
+    let FittedModel::Linear(m) = model else {
+        return None;
+    };
+    m.outputs
+        .iter()
+        .flat_map(|o| &o.features)
+        .filter_map(|f| match f {
+            Feature::Periodic {
+                axis: a,
+                period_mm,
+                harmonic,
+                ..
+            } if *a == axis => Some(period_mm / f64::from(*harmonic)),
+            _ => None,
+        })
+        .reduce(f64::min)
+}
+
+/// The model with every thermal lag set to 0 (the steady state the table
+/// holds when `drop_lag` is used).
+pub(super) fn without_lag(model: &FittedModel) -> FittedModel {
+    let mut m = model.clone();
+    if let FittedModel::Linear(l) = &mut m {
+        for o in &mut l.outputs {
+            for f in &mut o.features {
+                if let Feature::Thermal { lag_s, .. } = f {
+                    *lag_s = 0.0;
+                }
+            }
+        }
+    }
+    m
+}
