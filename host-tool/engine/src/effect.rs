@@ -61,6 +61,11 @@ impl Family {
         }
     }
 
+    /// The name, as [`Family::name`] (for code that compares names).
+    pub fn as_str(self) -> &'static str {
+        self.name()
+    }
+
     /// The keys an `--add` string of this family may have.
     pub fn keys(self) -> &'static [&'static str] {
         match self {

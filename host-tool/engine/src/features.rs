@@ -16,7 +16,6 @@ use anyhow::{anyhow, bail, Result};
 use serde::{Deserialize, Serialize};
 
 use crate::data::{Dataset, AXES};
-pub use crate::effect::{split_spec, Effect, T_REF_C};
 
 /// Position normalisation: u = (p − centre) / half_span ∈ [−1, 1] over the
 /// data's travel. Polynomials in u keep the least-squares columns of equal

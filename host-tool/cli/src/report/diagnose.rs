@@ -12,6 +12,7 @@ use anyhow::Result;
 
 use trueaxis_engine::data::{Dataset, AXES, TARGETS};
 use trueaxis_engine::diagnose::{Candidate, Diagnosis};
+use trueaxis_engine::effect::Family;
 
 use crate::report::plot::{heat_map_pair, HeatMap, Series, XyPlot};
 use crate::report::Page;
@@ -22,8 +23,8 @@ fn channel(data: &Dataset, c: &Candidate) -> Option<(String, Vec<f64>)> {
         .axis
         .as_deref()
         .and_then(|a| AXES.iter().position(|x| *x == a));
-    match c.effect.as_str() {
-        "thermal" => {
+    match c.effect {
+        Family::Thermal => {
             let name = c
                 .channel
                 .as_deref()?
@@ -31,8 +32,8 @@ fn channel(data: &Dataset, c: &Candidate) -> Option<(String, Vec<f64>)> {
                 .strip_suffix("_C")?;
             Some((format!("T_{name}_C (°C)"), data.temp(name)?.temp_c.clone()))
         }
-        "drift" => Some(("t_s (s)".into(), data.t_s.clone()?)),
-        "abbe" => Some(("tool_mm (mm)".into(), data.tool_mm.clone()?)),
+        Family::Drift => Some(("t_s (s)".into(), data.t_s.clone()?)),
+        Family::Abbe => Some(("tool_mm (mm)".into(), data.tool_mm.clone()?)),
         _ => {
             let a = axis?;
             Some((format!("{} (mm)", AXES[a]), data.pos_mm[a].clone()?))
@@ -218,7 +219,7 @@ pub fn write_with_history(
         let Some(a) = c.axis.as_deref().and_then(|x| index(&AXES, x)) else {
             continue;
         };
-        if c.effect != "reversal" {
+        if c.effect != Family::Reversal {
             continue;
         }
         let Some((_, rows, after)) = d.evidence.resid_after.iter().find(|e| e.0 == comp.target)
@@ -240,7 +241,7 @@ pub fn write_with_history(
         if let Some(c) = d
             .candidates
             .iter()
-            .find(|c| c.effect == "reversal" && c.identifiable)
+            .find(|c| c.effect == Family::Reversal && c.identifiable)
         {
             let t = index(&TARGETS, &c.target);
             let a = c.axis.as_deref().and_then(|x| index(&AXES, x));

@@ -7,8 +7,8 @@
 use std::f64::consts::TAU;
 
 use crate::data::{AXES, TARGETS};
+use crate::effect::{Axis, EffectSpec, Family};
 
-use super::effect_key::EffectKey;
 use super::linalg::small_fit;
 use crate::lines::densest_lines;
 
@@ -21,7 +21,7 @@ use super::{
 /// A candidate before scoring: its spec and what the search learned.
 #[derive(Clone, Debug)]
 pub(super) struct Proposal {
-    pub(super) family: &'static str,
+    pub(super) family: Family,
     pub(super) spec: String,
     pub(super) axis: Option<usize>,
     pub(super) channel: Option<String>,
@@ -81,12 +81,12 @@ pub(super) fn propose(
     td: &TargetData,
     st: &State,
     ev: &mut Evidence,
-    only: Option<&EffectKey>,
+    only: Option<&EffectSpec>,
 ) -> Vec<Proposal> {
     let data = td.data;
     let tn = TARGETS[td.t];
     let axes = data.axes();
-    let want = |family: &str, axis: Option<&str>, channel: Option<&str>, times: Option<&str>| {
+    let want = |family: Family, axis: Option<Axis>, channel: Option<&str>, times: Option<Axis>| {
         only.is_none_or(|k| k.admits(family, axis, channel, times))
     };
     let mut out = Vec::new();
@@ -97,7 +97,7 @@ pub(super) fn propose(
     }
     // periodic: Lomb–Scargle along each axis on the densest lines.
     for &a in &axes {
-        if !want("periodic", Some(AXES[a]), None, None) {
+        if !want(Family::Periodic, Axis::from_index(a), None, None) {
             continue;
         }
         let Some(dl) = densest_lines(data, a, &td.rows) else {
@@ -190,7 +190,7 @@ pub(super) fn propose(
             pg,
         });
         out.push(Proposal {
-            family: "periodic",
+            family: Family::Periodic,
             spec: spec_at(f, h),
             axis: Some(a),
             channel: None,
@@ -209,7 +209,12 @@ pub(super) fn propose(
             .chain(axes.iter().map(|&a| Some(a)))
             .collect();
         for tm in times {
-            if !want("thermal", None, Some(ch.name.as_str()), tm.map(|a| AXES[a])) {
+            if !want(
+                Family::Thermal,
+                None,
+                Some(ch.name.as_str()),
+                tm.and_then(Axis::from_index),
+            ) {
                 continue;
             }
             let spec_at = |lag: f64| {
@@ -270,7 +275,7 @@ pub(super) fn propose(
                 )
             };
             out.push(Proposal {
-                family: "thermal",
+                family: Family::Thermal,
                 spec: spec_at(best.1),
                 axis: tm,
                 channel: Some(format!("T_{}_C", ch.name)),
@@ -281,7 +286,7 @@ pub(super) fn propose(
     }
     // reversal: each axis approached from both sides.
     for &a in &axes {
-        if !want("reversal", Some(AXES[a]), None, None) {
+        if !want(Family::Reversal, Axis::from_index(a), None, None) {
             continue;
         }
         let Some(d) = &data.dir[a] else { continue };
@@ -305,7 +310,7 @@ pub(super) fn propose(
             }
         }
         out.push(Proposal {
-            family: "reversal",
+            family: Family::Reversal,
             spec: format!("reversal:target={tn},axis={}", AXES[a]),
             axis: Some(a),
             channel: Some(format!("dir_{}", AXES[a])),
@@ -323,7 +328,7 @@ pub(super) fn propose(
         let lo = tool.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = tool.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         for tm in std::iter::once(None).chain(axes.iter().map(|&a| Some(a))) {
-            if !want("abbe", None, None, tm.map(|a| AXES[a])) {
+            if !want(Family::Abbe, None, None, tm.and_then(Axis::from_index)) {
                 continue;
             }
             let mut spec = format!("abbe:target={tn}");
@@ -331,7 +336,7 @@ pub(super) fn propose(
                 spec.push_str(&format!(",times={}", AXES[a]));
             }
             out.push(Proposal {
-                family: "abbe",
+                family: Family::Abbe,
                 spec,
                 axis: tm,
                 channel: Some("tool_mm".into()),
@@ -349,7 +354,7 @@ pub(super) fn propose(
         }
     }
     // drift: time, order by BIC.
-    if data.t_s.is_some() && want("drift", None, None, None) {
+    if data.t_s.is_some() && want(Family::Drift, None, None, None) {
         let spec_at = |o: u8| {
             if o == 1 {
                 format!("drift:target={tn}")
@@ -369,7 +374,7 @@ pub(super) fn propose(
             }
         }
         out.push(Proposal {
-            family: "drift",
+            family: Family::Drift,
             spec: spec_at(o),
             axis: None,
             channel: Some("t_s".into()),
@@ -379,11 +384,11 @@ pub(super) fn propose(
     }
     // squareness: linear cross terms.
     for &a in &axes {
-        if a == td.t || !want("squareness", Some(AXES[a]), None, None) {
+        if a == td.t || !want(Family::Squareness, Axis::from_index(a), None, None) {
             continue;
         }
         out.push(Proposal {
-            family: "squareness",
+            family: Family::Squareness,
             spec: format!("squareness:target={tn},axis={}", AXES[a]),
             axis: Some(a),
             channel: None,
@@ -393,7 +398,7 @@ pub(super) fn propose(
     }
     // higher_order: degree 4, or 5 when it buys ΔBIC < −10.
     for &a in &axes {
-        if !want("higher_order", Some(AXES[a]), None, None) {
+        if !want(Family::HigherOrder, Axis::from_index(a), None, None) {
             continue;
         }
         let spec_at = |d: u8| format!("higher_order:target={tn},axis={},degree={d}", AXES[a]);
@@ -401,7 +406,7 @@ pub(super) fn propose(
         let d5 = fwl(td, st, &spec_at(5), 0).map_or(f64::INFINITY, |x| x.dbic);
         let d = if d5 < d4 + DBIC_SIGNIFICANT { 5 } else { 4 };
         out.push(Proposal {
-            family: "higher_order",
+            family: Family::HigherOrder,
             spec: spec_at(d),
             axis: Some(a),
             channel: None,

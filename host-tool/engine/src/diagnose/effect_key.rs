@@ -1,7 +1,7 @@
-//! When two `fit --add` strings are the same effect up to its nonlinear
-//! parameter ([`same_effect`]), and how an effect goes into a model's list
-//! of effects ([`swap_in`]): the re-search of an effect already in the
-//! model replaces it instead of adding it a second time.
+//! How an effect goes into a model's list of effects ([`swap_in`]): the
+//! re-search of an effect already in the model (the same effect up to its
+//! nonlinear parameter, `effect::same_effect`) replaces it instead of
+//! adding it a second time.
 
 /// Puts effect `add` into the model's effect list: in the place of
 /// `replaces` (the same effect with its nonlinear parameter searched again)
@@ -22,85 +22,10 @@ pub fn swap_in(adds: &mut Vec<String>, add: &str, replaces: Option<&str>) -> boo
     }
 }
 
-/// What makes two effects "the same effect" for the path: family, target,
-/// axis, channel and `times` — the nonlinear parameter (lag, order, degree)
-/// is what a re-search may change. Periodic effects on one axis are the
-/// same when their periods are within 10 % (a lead re-found more exactly);
-/// farther apart they are two effects (a screw lead and a scale pitch).
-#[derive(Clone, Debug, PartialEq)]
-pub(super) struct EffectKey {
-    pub(super) family: String,
-    pub(super) target: String,
-    pub(super) axis: Option<String>,
-    pub(super) channel: Option<String>,
-    pub(super) times: Option<String>,
-    pub(super) period_mm: Option<f64>,
-}
-
-impl EffectKey {
-    /// The key of a `fit --add` string (None when it does not parse): the
-    /// pairs as `features::split_spec` reads them, the one grammar.
-    pub(super) fn of(spec: &str) -> Option<EffectKey> {
-        let (family, kv) = crate::features::split_spec(spec).ok()?;
-        let get = |key: &str| {
-            kv.iter()
-                .find(|(k, _)| *k == key)
-                .map(|(_, v)| v.to_string())
-        };
-        Some(EffectKey {
-            family: family.to_string(),
-            target: get("target")?,
-            axis: get("axis"),
-            channel: get("channel"),
-            times: get("times"),
-            period_mm: get("period_mm").and_then(|v| v.parse().ok()),
-        })
-    }
-
-    /// Same effect, up to its nonlinear parameter.
-    pub(super) fn matches(&self, o: &EffectKey) -> bool {
-        let period_ok = match (self.period_mm, o.period_mm) {
-            (Some(a), Some(b)) => (a / b - 1.0).abs() <= 0.1,
-            _ => true,
-        };
-        self.family == o.family
-            && self.target == o.target
-            && self.axis == o.axis
-            && self.channel == o.channel
-            && self.times == o.times
-            && period_ok
-    }
-
-    /// Whether a proposal of `family` along `axis` / following `channel` /
-    /// times `times` could match (checked before its parameter search).
-    pub(super) fn admits(
-        &self,
-        family: &str,
-        axis: Option<&str>,
-        channel: Option<&str>,
-        times: Option<&str>,
-    ) -> bool {
-        self.family == family
-            && self.axis.as_deref() == axis
-            && self.channel.as_deref() == channel
-            && self.times.as_deref() == times
-    }
-}
-
-/// Whether two `fit --add` strings are the same effect up to its nonlinear
-/// parameter (family, target, axis, channel, `times`; periods within 10 %):
-/// the second replaces the first rather than adding to it.
-pub fn same_effect(a: &str, b: &str) -> bool {
-    match (EffectKey::of(a), EffectKey::of(b)) {
-        (Some(x), Some(y)) => x.matches(&y),
-        _ => false,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::features::Effect;
+    use crate::effect::{same_effect, Effect};
 
     #[test]
     fn swap_in_replaces_in_place_and_never_adds_twice() {

@@ -52,10 +52,12 @@ use anyhow::Result;
 use serde::Serialize;
 
 use crate::data::{Dataset, AXES, TARGETS};
-use crate::features::{Effect, Norm};
+use crate::effect::{Effect, Family};
+use crate::features::Norm;
 
+pub use crate::effect::same_effect;
 pub use crate::regions::Region;
-pub use effect_key::{same_effect, swap_in};
+pub use effect_key::swap_in;
 pub use warnings::above_noise;
 
 use candidates::propose;
@@ -147,7 +149,7 @@ pub struct Physical {
 #[derive(Clone, Debug, Serialize)]
 pub struct Candidate {
     /// Family: periodic, thermal, reversal, abbe, drift, squareness, higher_order.
-    pub effect: String,
+    pub effect: Family,
     /// Target error column (`ex`, …).
     pub target: String,
     /// Axis the effect runs along, if any.
@@ -449,7 +451,7 @@ pub struct LibraryGroup {
     /// The `fit --add` string.
     pub add: String,
     /// Family.
-    pub effect: String,
+    pub effect: Family,
     /// Axis, if any.
     pub axis: Option<String>,
     /// Its columns (model partialled out), one value per measured row.
@@ -499,7 +501,7 @@ pub fn library(data: &Dataset, opts: &Options) -> Result<Vec<TargetLibrary>> {
             }
             groups.push(LibraryGroup {
                 add: p.spec,
-                effect: p.family.to_string(),
+                effect: p.family,
                 axis: p.axis.map(|a| AXES[a].to_string()),
                 columns: ff.partialled,
             });
@@ -520,7 +522,7 @@ mod tests {
     #[test]
     fn on_path_is_written_from_the_step() {
         let c = Candidate {
-            effect: "drift".into(),
+            effect: Family::Drift,
             target: "ez".into(),
             axis: None,
             channel: Some("t_s".into()),

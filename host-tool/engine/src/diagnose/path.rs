@@ -5,11 +5,10 @@
 use anyhow::Result;
 
 use crate::data::{AXES, TARGETS};
-use crate::features::Effect;
+use crate::effect::{Effect, EffectSpec, Family, Target};
 
 use super::candidates::{propose, Proposal};
 use super::effect_key::swap_in;
-use super::effect_key::EffectKey;
 use super::linalg::small_fit;
 use super::linalg::Basis;
 use super::score::{score, Replacing, Scored};
@@ -36,24 +35,28 @@ pub(super) fn rank_target(
     // searched again against the model without it. (Adding it twice fits
     // two lags of one temperature: a two-time-constant model of what is
     // one effect, and the path never ends.)
-    let own: Vec<(String, EffectKey)> = st
+    let own: Vec<(String, EffectSpec)> = st
         .adds
         .iter()
         .filter_map(|a| {
-            let k = EffectKey::of(a)?;
-            (k.target == TARGETS[td.t]).then(|| (a.clone(), k))
+            let k: EffectSpec = a.parse().ok()?;
+            (Some(k.target) == Target::from_index(td.t)).then(|| (a.clone(), k))
         })
         .collect();
     let props: Vec<Proposal> = propose(td, st, ev, None)
         .into_iter()
-        .filter(|p| EffectKey::of(&p.spec).is_none_or(|k| !own.iter().any(|(_, o)| o.matches(&k))))
+        .filter(|p| {
+            p.spec
+                .parse::<EffectSpec>()
+                .map_or(true, |k| !own.iter().any(|(_, o)| o.same_effect(&k)))
+        })
         .collect();
     let mut sc = score(td, st, props, seed_name, warnings, None);
     for (old, key) in &own {
-        let searchable = match key.family.as_str() {
-            "periodic" | "drift" | "higher_order" => true,
-            "thermal" => td.data.t_s.is_some(),
-            _ => false,
+        let searchable = match key.family {
+            Family::Periodic | Family::Drift | Family::HigherOrder => true,
+            Family::Thermal => td.data.t_s.is_some(),
+            Family::Reversal | Family::Abbe | Family::Squareness => false,
         };
         let Ok(old_effect) = Effect::parse(old) else {
             continue;
@@ -68,7 +71,9 @@ pub(super) fn rank_target(
         let props: Vec<Proposal> = propose(td, &reduced, &mut Evidence::default(), Some(key))
             .into_iter()
             .filter(|p| {
-                EffectKey::of(&p.spec).is_some_and(|k| k.matches(key))
+                p.spec
+                    .parse::<EffectSpec>()
+                    .is_ok_and(|k| k.same_effect(key))
                     && Effect::parse(&p.spec).is_ok_and(|e| e.features != old_effect.features)
             })
             .collect();
@@ -131,8 +136,8 @@ pub(super) fn rank_target(
                 let (ai, aj) = (sc[i].cand.add.clone(), sc[j].cand.add.clone());
                 sc[i].cand.confounded_with.push(aj.clone());
                 sc[j].cand.confounded_with.push(ai.clone());
-                let fams = [sc[i].cand.effect.as_str(), sc[j].cand.effect.as_str()];
-                let fix = if fams.contains(&"drift") && fams.contains(&"thermal") {
+                let fams = [sc[i].cand.effect, sc[j].cand.effect];
+                let fix = if fams.contains(&Family::Drift) && fams.contains(&Family::Thermal) {
                     "; measure with temperature varying independently of time (a cool-down as well as a warm-up, or a second session)"
                 } else {
                     "; vary the two channels independently in the next measurement"
@@ -255,13 +260,13 @@ pub(super) fn follow(
                 list = Some(l);
             }
             Some(l) => {
-                let key = EffectKey::of(&best.add);
+                let key = best.add.parse::<EffectSpec>().ok();
                 let stale = l.iter().position(|c| {
                     !c.on_path()
                         && key
                             .as_ref()
-                            .zip(EffectKey::of(&c.add))
-                            .is_some_and(|(a, b)| a.matches(&b))
+                            .zip(c.add.parse::<EffectSpec>().ok())
+                            .is_some_and(|(a, b)| a.same_effect(&b))
                 });
                 match stale {
                     Some(i) => l[i] = best,
@@ -277,7 +282,7 @@ pub(super) fn follow(
         cur = rank_target(td, &st, &opts.seed, &mut Vec::new(), &mut step_ev);
         // The periodogram that finds a periodic effect at the next step.
         if let Some(b) = cur.iter().find(|s| s.cand.significant) {
-            if b.cand.effect == "periodic" {
+            if b.cand.effect == Family::Periodic {
                 let axis = b
                     .cand
                     .axis

@@ -3,7 +3,8 @@
 //! covariance that takes a searched thermal lag's own uncertainty into
 //! account.
 
-use crate::features::{Effect, Feature};
+use crate::effect::{Effect, Family};
+use crate::features::Feature;
 
 use super::candidates::Proposal;
 use super::linalg::small_fit;
@@ -43,7 +44,7 @@ pub(super) fn physical(
     };
     let half = |a: usize| td.norm.half_span_mm[a];
     match p.family {
-        "periodic" => {
+        Family::Periodic => {
             let (a, b) = (beta[0], beta[1]);
             let amp = (a * a + b * b).sqrt();
             let se = if amp > 0.0 {
@@ -67,7 +68,7 @@ pub(super) fn physical(
                 expected: "periods 0.5–100 mm (leads 2–40 mm), amplitude up to ~8 µm".into(),
             })
         }
-        "thermal" => match p.axis {
+        Family::Thermal => match p.axis {
             Some(a) => lin(
                 1000.0 / half(a),
                 "cte",
@@ -77,12 +78,12 @@ pub(super) fn physical(
             ),
             None => lin(1.0, "offset_per_kelvin", "µm/K", 20.0, "≤ 20 µm/K"),
         },
-        "reversal" => lin(2.0, "backlash", "µm", 60.0, "backlash 1–50 µm"),
-        "abbe" => {
+        Family::Reversal => lin(2.0, "backlash", "µm", 60.0, "backlash 1–50 µm"),
+        Family::Abbe => {
             let scale = 1000.0;
             lin(scale, "angle", "µrad", 300.0, "angular errors 10–60 µrad")
         }
-        "drift" => {
+        Family::Drift => {
             // The mean rate over the session, (f(t_end) − f(t_start)) / span,
             // a linear combination of every power's coefficient (the linear
             // coefficient alone is not the rate once t² or t³ is in).
@@ -115,7 +116,7 @@ pub(super) fn physical(
                 expected: "≤ 30 µm/h (mean over the session)".into(),
             })
         }
-        "squareness" => {
+        Family::Squareness => {
             let a = p.axis?;
             lin(
                 1000.0 / half(a),
@@ -125,7 +126,7 @@ pub(super) fn physical(
                 "squareness 20–40 µrad",
             )
         }
-        "higher_order" => {
+        Family::HigherOrder => {
             let n = td.rows.len() as f64;
             let comp: f64 = (0..td.rows.len())
                 .map(|r| {
@@ -143,7 +144,6 @@ pub(super) fn physical(
                 expected: "any".into(),
             })
         }
-        _ => None,
     }
 }
 

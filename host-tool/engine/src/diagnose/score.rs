@@ -5,7 +5,8 @@
 use std::collections::BTreeMap;
 
 use crate::data::{AXES, TARGETS};
-use crate::features::{Effect, Feature};
+use crate::effect::{Effect, Family};
+use crate::features::Feature;
 
 use super::candidates::Proposal;
 use super::physical::{lag_aware_xtx_inv, param_key, physical};
@@ -66,7 +67,7 @@ pub(super) fn score(
                 Some(Feature::Drift { .. }) => {
                     params.insert("order".into(), e.features.len() as f64);
                 }
-                Some(Feature::Monomial { exp }) if p.family == "higher_order" => {
+                Some(Feature::Monomial { exp }) if p.family == Family::HigherOrder => {
                     params.insert(
                         "degree".into(),
                         f64::from(exp.iter().sum::<u8>() + e.features.len() as u8 - 1),
@@ -76,7 +77,7 @@ pub(super) fn score(
             }
         }
         let base = Candidate {
-            effect: p.family.to_string(),
+            effect: p.family,
             target: tn.to_string(),
             axis: p.axis.map(|a| AXES[a].to_string()),
             channel: p.channel.clone(),
@@ -112,8 +113,8 @@ pub(super) fn score(
                 "{seed_name} already contains the column(s) {cols} for {tn} (up to a combination of its terms), so `{}` cannot be told from it{}",
                 p.spec,
                 match p.family {
-                    "abbe" => "; measure with two or more tool lengths (tool_mm) to separate an Abbe error",
-                    "squareness" => "; use a seed without linear cross terms (kinematic) to estimate squareness",
+                    Family::Abbe => "; measure with two or more tool lengths (tool_mm) to separate an Abbe error",
+                    Family::Squareness => "; use a seed without linear cross terms (kinematic) to estimate squareness",
                     _ => "",
                 }
             );

@@ -7,7 +7,8 @@
 use anyhow::{bail, Result};
 
 use crate::data::{Dataset, TARGETS};
-use crate::features::{seed_monomials, Effect, Feature, Norm};
+use crate::effect::Effect;
+use crate::features::{seed_monomials, Feature, Norm};
 use crate::regions::bin_index;
 
 use super::linalg::{self, small_fit, Basis, HoldOut};
