@@ -9,7 +9,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{expect_exit, json, run, s, simulate_grid, tmp_dir};
+use common::{expect_exit, fit_cubic19, json, run, s, simulate_grid, tmp_dir};
 use serde_json::Value;
 
 const MEANT: &str = "columns are kept as auxiliary and not fitted, though the name looks like a contract column written another way: `ey [um]` (probably `ey_um`), `T_bed` (probably `T_bed_C`) — rename the header to the contract name to use it";
@@ -179,15 +179,7 @@ fn fit_diagnose_and_improve_report_aux_columns_and_what_they_probably_meant() {
 fn data_without_aux_columns_gets_no_aux_warning() {
     let dir = tmp_dir("aux", "none");
     let csv = simulate_grid(&dir, "grid.csv", 2);
-    let doc = json(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&dir.join("m.json")),
-        "--json",
-    ]));
+    let doc = fit_cubic19(&csv, &dir.join("m.json"));
     assert!(
         !doc["warnings"].to_string().contains("aux_"),
         "{}",

@@ -13,7 +13,8 @@ mod common;
 use std::path::Path;
 
 use common::{
-    expect_exit, fit_cubic19, json, run, s, simulate_grid, tmp_dir, with_blank_error_row,
+    compare, expect_exit, fit, fit_cubic19, golden_file, grid_cubic19, json, run, s, simulate_grid,
+    tmp_dir, warning_codes, with_blank_error_row, CUBIC19_REVERSAL_X,
 };
 use serde_json::Value;
 use trueaxis_engine::import;
@@ -96,10 +97,8 @@ fn num(v: &Value, what: &str) -> f64 {
 #[test]
 fn json_has_the_contract_keys_and_numbers_that_recompute() {
     let dir = tmp_dir("compare", "json");
-    let csv = simulate_grid(&dir, "grid.csv", 7);
-    let model = dir.join("grid.model.json");
-    let f = fit_cubic19(&csv, &model);
-    let v = json(&run(&["compare", s(&csv), "--model", s(&model), "--json"]));
+    let (csv, model, f) = grid_cubic19(&dir, "grid", 7);
+    let v = compare(&csv, &model);
 
     assert_eq!(v["model"], "cubic19");
     assert_eq!(v["rows"], 324);
@@ -221,9 +220,7 @@ fn json_has_the_contract_keys_and_numbers_that_recompute() {
 #[test]
 fn report_opens_offline_with_every_figure() {
     let dir = tmp_dir("compare", "report");
-    let csv = simulate_grid(&dir, "grid.csv", 7);
-    let model = dir.join("grid.model.json");
-    fit_cubic19(&csv, &model);
+    let (csv, model, _) = grid_cubic19(&dir, "grid", 7);
     let rep = dir.join("rep");
     let v = compare_report(&csv, &model, &rep);
     let index = rep.join("index.html");
@@ -295,9 +292,7 @@ fn report_maps_every_plane_in_every_orientation() {
 #[test]
 fn report_caps_planes_per_orientation_and_says_so() {
     let dir = tmp_dir("compare", "cap");
-    let csv = simulate_grid(&dir, "grid.csv", 7);
-    let model = dir.join("grid.model.json");
-    fit_cubic19(&csv, &model);
+    let (csv, model, _) = grid_cubic19(&dir, "grid", 7);
     let rep = dir.join("rep");
     compare_report(&csv, &model, &rep);
     let count = |prefix: &str| {
@@ -331,10 +326,8 @@ fn no_network(text: &str) -> bool {
 #[test]
 fn other_data_warns_data_hash_mismatch() {
     let dir = tmp_dir("compare", "hash");
-    let csv = simulate_grid(&dir, "a.csv", 7);
+    let (csv, model, _) = grid_cubic19(&dir, "a", 7);
     let other = simulate_grid(&dir, "b.csv", 8);
-    let model = dir.join("a.model.json");
-    fit_cubic19(&csv, &model);
     let out = run(&["compare", s(&other), "--model", s(&model), "--json"]);
     let v = json(&out);
     let w = v["warnings"].as_array().unwrap();
@@ -359,9 +352,7 @@ fn other_data_warns_data_hash_mismatch() {
 #[test]
 fn rows_left_out_are_counted_and_said() {
     let dir = tmp_dir("compare", "skipped");
-    let csv = simulate_grid(&dir, "grid.csv", 7);
-    let model = dir.join("grid.model.json");
-    fit_cubic19(&csv, &model);
+    let (csv, model, _) = grid_cubic19(&dir, "grid", 7);
     let clean = run(&["compare", s(&csv), "--model", s(&model), "--json"]);
     assert_eq!(json(&clean)["skipped_count"], 0);
     assert!(!String::from_utf8_lossy(&clean.stderr).contains("left out"));
@@ -427,13 +418,7 @@ fn numeric_auxiliary_columns_are_channels() {
     std::fs::write(&humid, out).unwrap();
     let model = dir.join("humid.model.json");
     fit_cubic19(&humid, &model);
-    let v = json(&run(&[
-        "compare",
-        s(&humid),
-        "--model",
-        s(&model),
-        "--json",
-    ]));
+    let v = compare(&humid, &model);
     let chans = v["channels"].as_array().unwrap();
     let h = chans
         .iter()
@@ -466,15 +451,10 @@ fn a_target_the_model_lacks_is_warned() {
     import::write_csv(&data, std::fs::File::create(&ex_only).unwrap()).unwrap();
     let model = dir.join("ex.model.json");
     fit_cubic19(&ex_only, &model);
-    let v = json(&run(&["compare", s(&csv), "--model", s(&model), "--json"]));
+    let v = compare(&csv, &model);
     let keys: Vec<&String> = v["rms_um"].as_object().unwrap().keys().collect();
     assert_eq!(keys, ["ex"]);
-    let codes: Vec<&str> = v["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(|w| w["code"].as_str())
-        .collect();
+    let codes = warning_codes(&v);
     assert_eq!(
         codes.iter().filter(|c| **c == "no_prediction").count(),
         2,
@@ -486,9 +466,7 @@ fn a_target_the_model_lacks_is_warned() {
 #[test]
 fn bad_input_exits_1_and_usage_exits_2() {
     let dir = tmp_dir("compare", "bad");
-    let csv = simulate_grid(&dir, "grid.csv", 7);
-    let model = dir.join("grid.model.json");
-    let fit_json = fit_cubic19(&csv, &model);
+    let (csv, model, fit_json) = grid_cubic19(&dir, "grid", 7);
 
     // The model file is missing.
     let missing = dir.join("missing.model.json");
@@ -598,10 +576,10 @@ fn bad_input_exits_1_and_usage_exits_2() {
 #[test]
 fn hand_made_line_shows_the_missing_reversal() {
     let dir = tmp_dir("compare", "line");
-    let csv = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/line_x.csv");
+    let csv = golden_file("line_x.csv");
     let plain = dir.join("plain.model.json");
     fit_cubic19(&csv, &plain);
-    let v = json(&run(&["compare", s(&csv), "--model", s(&plain), "--json"]));
+    let v = compare(&csv, &plain);
     assert_eq!(v["rows"], 42);
     let r = num(&v["rms_um"]["ex"], "rms");
     assert!(
@@ -635,18 +613,8 @@ fn hand_made_line_shows_the_missing_reversal() {
     assert!(text.contains("ex vs dir_x: r = +1.00"), "{text}");
 
     let full = dir.join("full.model.json");
-    json(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "--add",
-        "reversal:target=ex,axis=x",
-        "-o",
-        s(&full),
-        "--json",
-    ]));
-    let v = json(&run(&["compare", s(&csv), "--model", s(&full), "--json"]));
+    fit(&csv, CUBIC19_REVERSAL_X, &full);
+    let v = compare(&csv, &full);
     let after = num(&v["rms_um"]["ex"], "rms");
     assert!(after < 1e-4, "{after}");
     let before = num(&v["targets"]["ex"]["before"]["rms_um"], "before");
@@ -661,17 +629,16 @@ fn data_lacking_an_effect_input_is_named() {
     let dir = tmp_dir("compare", "lacking");
     let csv = simulate_grid(&dir, "grid.csv", 4);
     let model = dir.join("m.json");
-    json(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "--add",
-        "periodic:target=ey,axis=y,period_mm=7.3",
-        "-o",
-        s(&model),
-        "--json",
-    ]));
+    fit(
+        &csv,
+        &[
+            "--model",
+            "cubic19",
+            "--add",
+            "periodic:target=ey,axis=y,period_mm=7.3",
+        ],
+        &model,
+    );
     let xonly = dir.join("xonly.csv");
     std::fs::write(&xonly, "x_mm,ex_um\n0,1\n100,2\n200,1.5\n300,2.5\n").unwrap();
     expect_exit(

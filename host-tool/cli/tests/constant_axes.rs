@@ -10,7 +10,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{expect_exit, json, run, s, tmp_dir};
+use common::{compare, expect_exit, export, fit, json, run, s, tmp_dir, CUBIC19_REVERSAL_X};
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::import;
 use trueaxis_engine::model::{FittedModel, ModelFile};
@@ -67,29 +67,13 @@ fn simulated_line_and_iso230_data_fit_with_the_polynomial_seeds() {
     for csv in [&line, &iso] {
         // cubic19 in x alone: 1, x, x², x³ for every target.
         let model = dir.join("m.json");
-        let v = json(&run(&[
-            "fit",
-            s(csv),
-            "--model",
-            "cubic19",
-            "-o",
-            s(&model),
-            "--json",
-        ]));
+        let v = fit(csv, &["--model", "cubic19"], &model);
         for t in ["ex", "ey", "ez"] {
             assert_eq!(v["terms_per_target"][t], 4, "{v}");
         }
         assert_y_z_not_modelled(&v);
         // kinematic: ex's cubic in x (4 terms); ey, ez keep 1, x², x³.
-        let v = json(&run(&[
-            "fit",
-            s(csv),
-            "--model",
-            "kinematic",
-            "-o",
-            s(&model),
-            "--json",
-        ]));
+        let v = fit(csv, &["--model", "kinematic"], &model);
         assert_eq!(v["terms_per_target"]["ex"], 4, "{v}");
         assert_eq!(v["terms_per_target"]["ey"], 3, "{v}");
         assert_y_z_not_modelled(&v);
@@ -97,17 +81,7 @@ fn simulated_line_and_iso230_data_fit_with_the_polynomial_seeds() {
 
     // What `diagnose` suggests on the ISO run, as the user typed it.
     let model = dir.join("iso.model.json");
-    let v = json(&run(&[
-        "fit",
-        s(&iso),
-        "--model",
-        "cubic19",
-        "--add",
-        "reversal:target=ex,axis=x",
-        "-o",
-        s(&model),
-        "--json",
-    ]));
+    let v = fit(&iso, CUBIC19_REVERSAL_X, &model);
     assert_eq!(v["terms_per_target"]["ex"], 5, "{v}");
     // The 8 µm backlash is found: ±4 µm on dir_x, the residual at the noise.
     let m = ModelFile::load(&model).unwrap();
@@ -143,17 +117,7 @@ fn the_model_of_a_line_does_not_depend_on_the_held_axes() {
     let dir = tmp_dir("constant-axes", "predict");
     let line = simulate(&dir, "line.csv", "line:x:5,bidir");
     let model = dir.join("m.json");
-    json(&run(&[
-        "fit",
-        s(&line),
-        "--model",
-        "cubic19",
-        "--add",
-        "reversal:target=ex,axis=x",
-        "-o",
-        s(&model),
-        "--json",
-    ]));
+    fit(&line, CUBIC19_REVERSAL_X, &model);
     let m = ModelFile::load(&model).unwrap();
     let at = |y: f64, z: f64| -> [Option<Vec<f64>>; 3] {
         let x: Vec<f64> = (0..=16).map(|i| f64::from(i) * 50.0).collect();
@@ -177,7 +141,7 @@ fn the_model_of_a_line_does_not_depend_on_the_held_axes() {
     }
 
     // compare reads the data the model was fitted to.
-    let v = json(&run(&["compare", s(&line), "--model", s(&model), "--json"]));
+    let v = compare(&line, &model);
     assert!(v["targets"]["ex"]["rms_um"].as_f64().unwrap() < 0.3, "{v}");
 }
 
@@ -186,26 +150,10 @@ fn every_export_format_treats_the_held_axes_as_unused() {
     let dir = tmp_dir("constant-axes", "export");
     let iso = simulate(&dir, "iso.csv", "iso230:x");
     let model = dir.join("m.json");
-    json(&run(&[
-        "fit",
-        s(&iso),
-        "--model",
-        "cubic19",
-        "--add",
-        "reversal:target=ex,axis=x",
-        "-o",
-        s(&model),
-        "--json",
-    ]));
+    fit(&iso, CUBIC19_REVERSAL_X, &model);
     // Firmware table: y and z unbounded, the firmware's own evaluation
     // agrees with the model to well under 1 nm.
-    let v = json(&run(&[
-        "export",
-        s(&model),
-        "-o",
-        s(&dir.join("m.tbl")),
-        "--json",
-    ]));
+    let v = export(&model, &[], &dir.join("m.tbl"));
     let travel = &v["envelope"]["travel_mm"];
     assert!(travel[0].is_array(), "{v}");
     assert!(travel[1].is_null() && travel[2].is_null(), "{v}");
@@ -214,15 +162,7 @@ fn every_export_format_treats_the_held_axes_as_unused() {
     // Controller tables: x is the only axis the model uses (no --axis
     // needed), the other axes at 0 as for an absent axis.
     for fmt in ["linuxcnc", "sinumerik"] {
-        let v = json(&run(&[
-            "export",
-            s(&model),
-            "--format",
-            fmt,
-            "-o",
-            s(&dir.join(format!("m.{fmt}"))),
-            "--json",
-        ]));
+        let v = export(&model, &["--format", fmt], &dir.join(format!("m.{fmt}")));
         assert_eq!(v["axis"], "x", "{v}");
         assert_eq!(
             v["at_mm"],
@@ -237,25 +177,8 @@ fn every_export_format_treats_the_held_axes_as_unused() {
     // A --local line model also uses x alone: a controller table needs no
     // --axis (it named x, y, z before).
     let local = dir.join("local.json");
-    json(&run(&[
-        "fit",
-        s(&iso),
-        "--model",
-        "cubic19",
-        "--local",
-        "-o",
-        s(&local),
-        "--json",
-    ]));
-    let v = json(&run(&[
-        "export",
-        s(&local),
-        "--format",
-        "linuxcnc",
-        "-o",
-        s(&dir.join("local.lc")),
-        "--json",
-    ]));
+    fit(&iso, &["--model", "cubic19", "--local"], &local);
+    let v = export(&local, &["--format", "linuxcnc"], &dir.join("local.lc"));
     assert_eq!(v["axis"], "x", "{v}");
 }
 

@@ -9,7 +9,7 @@ mod common;
 use std::path::Path;
 use std::process::Output;
 
-use common::{json, run, s};
+use common::{fit, json, run, s};
 use serde_json::Value;
 use trueaxis_engine::diagnose::synth::{generate, Hidden, Plan, SynthConfig};
 use trueaxis_engine::diagnose::{diagnose, Options};
@@ -141,18 +141,8 @@ fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
     // The add string goes to fit verbatim, and the fit starts a history.
     let model = dir.join("m.json");
     let add = top["add"].as_str().unwrap();
-    let fit = json(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "--add",
-        add,
-        "-o",
-        s(&model),
-        "--json",
-    ]));
-    assert!(fit["rms_um"]["ey"].as_f64().unwrap() < 0.4, "{fit}");
+    let v = fit(&csv, &["--model", "cubic19", "--add", add], &model);
+    assert!(v["rms_um"]["ey"].as_f64().unwrap() < 0.4, "{v}");
     let h = json(&run(&["history", s(&model), "--json"]));
     assert_eq!(h["steps"].as_array().unwrap().len(), 1);
     // Diagnosing that model with --report shows its history as well.

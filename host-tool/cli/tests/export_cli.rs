@@ -21,7 +21,10 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{expect_exit, fit_cubic19, json, run, run_env, s, simulate_grid, tmp_dir};
+use common::{
+    expect_exit, export, export_args, find_warning, fit, fit_cubic19, golden, golden_file,
+    grid_cubic19, json, run, run_env, s, simulate_grid, tmp_dir, warning_codes, CUBIC19_REVERSAL_X,
+};
 use model_core::{Inputs, Model, MAX_TEMPS};
 use serde_json::Value;
 use trueaxis_engine::data::{Dataset, TempChannel};
@@ -55,15 +58,13 @@ fn crc32_ieee(bytes: &[u8]) -> u32 {
 /// The preset mill on a 100 mm grid (324 points, ex ey ez), seed 7, fitted
 /// with cubic19. Returns (data, model).
 fn grid_model(dir: &Path) -> (PathBuf, PathBuf) {
-    let csv = simulate_grid(dir, "grid.csv", 7);
-    let model = dir.join("grid.model.json");
-    fit_cubic19(&csv, &model);
+    let (csv, model, _) = grid_cubic19(dir, "grid", 7);
     (csv, model)
 }
 
 /// The checked-in hand-made x line (tests/golden/line_x.csv).
 fn line_csv() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/line_x.csv")
+    golden_file("line_x.csv")
 }
 
 /// The error the hand-made line was generated from, µm (see its header).
@@ -74,17 +75,7 @@ fn line_truth_um(x_mm: f64, dir: f64) -> f64 {
 /// cubic19 + reversal fitted to the hand-made line (ex over x only).
 fn line_model(dir: &Path) -> PathBuf {
     let model = dir.join("line.model.json");
-    let v = json(&run(&[
-        "fit",
-        s(&line_csv()),
-        "--model",
-        "cubic19",
-        "--add",
-        "reversal:target=ex,axis=x",
-        "-o",
-        s(&model),
-        "--json",
-    ]));
+    let v = fit(&line_csv(), CUBIC19_REVERSAL_X, &model);
     assert_eq!(v["terms"], 5, "1, x, x², x³ and dir_x: {v}");
     model
 }
@@ -162,7 +153,7 @@ fn table_json_matches_the_file_and_the_firmware_corrects_minus_the_error() {
     let dir = tmp_dir("export", "table");
     let (csv, model) = grid_model(&dir);
     let bin = dir.join("grid.bin");
-    let v = json(&run(&["export", s(&model), "-o", s(&bin), "--json"]));
+    let v = export(&model, &[], &bin);
     // docs/cli.md.
     let bytes = std::fs::read(&bin).unwrap();
     assert_eq!(v["bytes"].as_u64(), Some(bytes.len() as u64));
@@ -242,9 +233,7 @@ fn table_envelope_follows_the_options() {
     let (_, model) = grid_model(&dir);
     let bin = dir.join("t.bin");
     let envelope = |extra: &[&str]| {
-        let mut a = vec!["export", s(&model), "-o", s(&bin), "--json"];
-        a.extend_from_slice(extra);
-        let v = json(&run(&a));
+        let v = export(&model, extra, &bin);
         let bytes = std::fs::read(&bin).unwrap();
         let env = model_core::parse(&bytes).unwrap().envelope();
         (v, env)
@@ -306,15 +295,7 @@ fn failed_accuracy_check_exits_1_and_writes_nothing() {
     let (_, model) = grid_model(&dir);
     let bin = dir.join("never.bin");
     expect_exit(
-        &[
-            "export",
-            s(&model),
-            "-o",
-            s(&bin),
-            "--allow-error-nm",
-            "0.000001",
-            "--json",
-        ],
+        &export_args(&model, &["--allow-error-nm", "0.000001", "--json"], &bin),
         1,
         &[
             "accuracy check failed",
@@ -330,21 +311,20 @@ fn thermal_lag_is_refused_without_drop_lag_and_drift_is_left_out() {
     let dir = tmp_dir("export", "thermal");
     let csv = thermal_csv(&dir);
     let model = dir.join("thermal.model.json");
-    json(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "--add",
-        "reversal:target=ex,axis=x",
-        "--add",
-        "thermal:target=ex,channel=bed,times=x,lag_s=300",
-        "--add",
-        "drift:target=ex",
-        "-o",
-        s(&model),
-        "--json",
-    ]));
+    fit(
+        &csv,
+        &[
+            "--model",
+            "cubic19",
+            "--add",
+            "reversal:target=ex,axis=x",
+            "--add",
+            "thermal:target=ex,channel=bed,times=x,lag_s=300",
+            "--add",
+            "drift:target=ex",
+        ],
+        &model,
+    );
     let bin = dir.join("thermal.bin");
     expect_exit(
         &["export", s(&model), "-o", s(&bin), "--json"],
@@ -355,12 +335,7 @@ fn thermal_lag_is_refused_without_drop_lag_and_drift_is_left_out() {
 
     let out = run(&["export", s(&model), "-o", s(&bin), "--drop-lag", "--json"]);
     let v = json(&out);
-    let codes: Vec<&str> = v["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(|w| w["code"].as_str())
-        .collect();
+    let codes = warning_codes(&v);
     assert!(codes.contains(&"lag_dropped"), "{codes:?}");
     assert!(codes.contains(&"drift_left_out"), "{codes:?}");
     let err = String::from_utf8_lossy(&out.stderr);
@@ -422,21 +397,8 @@ fn thermal_lag_is_refused_without_drop_lag_and_drift_is_left_out() {
     // The one-axis controller files: drift left out too, thermal at the
     // reference temperature, both warned.
     let lc = dir.join("thermal.linuxcnc");
-    let v = json(&run(&[
-        "export",
-        s(&model),
-        "--format",
-        "linuxcnc",
-        "-o",
-        s(&lc),
-        "--json",
-    ]));
-    let codes: Vec<&str> = v["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(|w| w["code"].as_str())
-        .collect();
+    let v = export(&model, &["--format", "linuxcnc"], &lc);
+    let codes = warning_codes(&v);
     assert!(codes.contains(&"drift_left_out"), "{codes:?}");
     assert!(codes.contains(&"thermal_at_reference"), "{codes:?}");
 }
@@ -479,15 +441,7 @@ fn linuxcnc_trims_are_minus_the_error_in_mm() {
     let dir = tmp_dir("export", "linuxcnc");
     let model = line_model(&dir);
     let out = dir.join("x.comp");
-    let v = json(&run(&[
-        "export",
-        s(&model),
-        "--format",
-        "linuxcnc",
-        "-o",
-        s(&out),
-        "--json",
-    ]));
+    let v = export(&model, &["--format", "linuxcnc"], &out);
     let text = std::fs::read_to_string(&out).unwrap();
     let rows = read_linuxcnc(&text);
     // Defaults: 201 points over the data's span, axis x (the only one).
@@ -529,17 +483,7 @@ fn linuxcnc_trims_are_minus_the_error_in_mm() {
     assert!((num(&v["backlash_um"]) - 4.8).abs() < 1e-3, "{v}");
 
     // LinuxCNC's limit: 256 entries exactly, no more.
-    let v = json(&run(&[
-        "export",
-        s(&model),
-        "--format",
-        "linuxcnc",
-        "--points",
-        "256",
-        "-o",
-        s(&out),
-        "--json",
-    ]));
+    let v = export(&model, &["--format", "linuxcnc", "--points", "256"], &out);
     assert_eq!(v["points"], 256);
     assert_eq!(
         read_linuxcnc(&std::fs::read_to_string(&out).unwrap()).len(),
@@ -547,31 +491,13 @@ fn linuxcnc_trims_are_minus_the_error_in_mm() {
     );
     let big = dir.join("big.comp");
     expect_exit(
-        &[
-            "export",
-            s(&model),
-            "--format",
-            "linuxcnc",
-            "--points",
-            "300",
-            "-o",
-            s(&big),
-        ],
+        &export_args(&model, &["--format", "linuxcnc", "--points", "300"], &big),
         1,
         &["--points 300", "at most 256"],
     );
     assert!(!big.exists());
     expect_exit(
-        &[
-            "export",
-            s(&model),
-            "--format",
-            "linuxcnc",
-            "--points",
-            "1",
-            "-o",
-            s(&big),
-        ],
+        &export_args(&model, &["--format", "linuxcnc", "--points", "1"], &big),
         1,
         &["at least 2 points"],
     );
@@ -585,17 +511,11 @@ fn sinumerik_table_holds_plus_the_mean_error_in_mm() {
     let dir = tmp_dir("export", "sinumerik");
     let model = line_model(&dir);
     let out = dir.join("x.ini");
-    let v = json(&run(&[
-        "export",
-        s(&model),
-        "--format",
-        "sinumerik",
-        "--sinumerik-axis",
-        "X1",
-        "-o",
-        s(&out),
-        "--json",
-    ]));
+    let v = export(
+        &model,
+        &["--format", "sinumerik", "--sinumerik-axis", "X1"],
+        &out,
+    );
     assert_eq!(v["format"], "sinumerik");
     assert_eq!(v["points"], 200, "default: a Sinumerik 808D's 200 points");
     let text = std::fs::read_to_string(&out).unwrap();
@@ -657,16 +577,11 @@ fn sinumerik_table_holds_plus_the_mean_error_in_mm() {
         "{text}"
     );
     expect_exit(
-        &[
-            "export",
-            s(&model),
-            "--format",
-            "sinumerik",
-            "--sinumerik-axis",
-            "AX 1",
-            "-o",
-            s(&out),
-        ],
+        &export_args(
+            &model,
+            &["--format", "sinumerik", "--sinumerik-axis", "AX 1"],
+            &out,
+        ),
         1,
         &["Sinumerik axis name `AX 1`"],
     );
@@ -674,39 +589,6 @@ fn sinumerik_table_holds_plus_the_mean_error_in_mm() {
 
 // ---------------------------------------------------------------------------
 // Golden files.
-
-/// Compares `actual` with the checked-in golden file, or rewrites it when
-/// TRUEAXIS_BLESS=1.
-fn golden(name: &str, actual: &[u8]) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/golden")
-        .join(name);
-    if std::env::var("TRUEAXIS_BLESS").is_ok_and(|v| v == "1") {
-        std::fs::write(&path, actual).unwrap();
-        return;
-    }
-    let expected = std::fs::read(&path).unwrap_or_else(|e| {
-        panic!(
-            "{}: {e} (run with TRUEAXIS_BLESS=1 to create it)",
-            path.display()
-        )
-    });
-    if expected != actual {
-        let (e, a) = (
-            String::from_utf8_lossy(&expected),
-            String::from_utf8_lossy(actual),
-        );
-        let first = e
-            .lines()
-            .zip(a.lines())
-            .position(|(x, y)| x != y)
-            .map_or("the length".to_string(), |i| format!("line {}", i + 1));
-        panic!(
-            "{} differs from the output at {first} (TRUEAXIS_BLESS=1 rewrites it after an intended change)\nexpected:\n{e}\nactual:\n{a}",
-            path.display()
-        );
-    }
-}
 
 #[test]
 fn golden_linuxcnc_and_sinumerik_files() {
@@ -731,17 +613,7 @@ fn golden_linuxcnc_and_sinumerik_files() {
         ("sinumerik", "line_x.sinumerik.ini"),
     ] {
         let out = dir.join(name);
-        json(&run(&[
-            "export",
-            s(&model),
-            "--format",
-            format,
-            "--points",
-            "21",
-            "-o",
-            s(&out),
-            "--json",
-        ]));
+        export(&model, &["--format", format, "--points", "21"], &out);
         golden(name, &std::fs::read(&out).unwrap());
     }
 }
@@ -785,16 +657,7 @@ fn bad_input_exits_1_with_a_clear_message() {
     // An axis the model does not use.
     for format in ["linuxcnc", "sinumerik"] {
         expect_exit(
-            &[
-                "export",
-                s(&model),
-                "--format",
-                format,
-                "--axis",
-                "y",
-                "-o",
-                o,
-            ],
+            &export_args(&model, &["--format", format, "--axis", "y"], &out),
             1,
             &["does not depend on y", "fitted axes: x"],
         );
@@ -807,17 +670,7 @@ fn bad_input_exits_1_with_a_clear_message() {
         &["the model uses the axes x, y, z", "--axis"],
     );
     let lc = dir.join("grid_y.comp");
-    let v = json(&run(&[
-        "export",
-        s(&grid),
-        "--format",
-        "linuxcnc",
-        "--axis",
-        "y",
-        "-o",
-        s(&lc),
-        "--json",
-    ]));
+    let v = export(&grid, &["--format", "linuxcnc", "--axis", "y"], &lc);
     assert_eq!(v["axis"], "y");
     assert_eq!(
         v["at_mm"],
@@ -868,11 +721,9 @@ fn grid_and_network_models_export_and_local_is_refused() {
         (vec!["--model", "nn:4", "--max-epochs", "30"], 1),
     ] {
         let model = dir.join("kind.model.json");
-        let mut a = vec!["fit", s(&csv), "-o", s(&model), "--json"];
-        a.extend(args.iter().copied());
-        json(&run(&a));
+        fit(&csv, &args, &model);
         let bin = dir.join("kind.bin");
-        let v = json(&run(&["export", s(&model), "-o", s(&bin), "--json"]));
+        let v = export(&model, &[], &bin);
         assert!(num(&v["max_f32_error_nm"]) <= 1.0, "{args:?}: {v}");
         assert!(num(&v["max_fixed_error_nm"]) <= 1.0, "{args:?}: {v}");
         assert_eq!(v["terms"], terms, "{args:?}");
@@ -880,33 +731,14 @@ fn grid_and_network_models_export_and_local_is_refused() {
         let t = model_core::parse(&bytes).unwrap();
         assert_eq!(t.envelope().travel_nm(0), (0, 800_000_000), "{args:?}");
         let lc = dir.join("kind.comp");
-        let v = json(&run(&[
-            "export",
-            s(&model),
-            "--format",
-            "linuxcnc",
-            "--axis",
-            "z",
-            "-o",
-            s(&lc),
-            "--json",
-        ]));
+        let v = export(&model, &["--format", "linuxcnc", "--axis", "z"], &lc);
         assert_eq!(v["axis"], "z");
         let rows = read_linuxcnc(&std::fs::read_to_string(&lc).unwrap());
         assert_eq!(rows.len(), 201);
         assert_eq!((rows[0][0], rows[200][0]), (0.0, 500.0), "{args:?}");
     }
     let local = dir.join("local.model.json");
-    json(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "--local",
-        "-o",
-        s(&local),
-        "--json",
-    ]));
+    fit(&csv, &["--model", "cubic19", "--local"], &local);
     let bin = dir.join("local.bin");
     expect_exit(
         &["export", s(&local), "-o", s(&bin)],
@@ -957,19 +789,13 @@ fn source_date_epoch_makes_the_table_reproducible() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("SOURCE_DATE_EPOCH"));
     assert!(!dir.join("bad.bin").exists());
 
+    let a_bin = dir.join("a.bin");
     expect_exit(
-        &[
-            "export",
-            s(&model),
-            "--axis",
-            "x",
-            "-o",
-            s(&dir.join("a.bin")),
-        ],
+        &export_args(&model, &["--axis", "x"], &a_bin),
         2,
         &["--axis applies to --format linuxcnc and sinumerik only, not to --format table"],
     );
-    assert!(!dir.join("a.bin").exists());
+    assert!(!a_bin.exists());
 }
 
 // ---------------------------------------------------------------------------
@@ -979,19 +805,18 @@ fn source_date_epoch_makes_the_table_reproducible() {
 fn thermal_model(dir: &Path) -> (PathBuf, PathBuf) {
     let csv = thermal_csv(dir);
     let model = dir.join("thermal_nolag.model.json");
-    json(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "--add",
-        "reversal:target=ex,axis=x",
-        "--add",
-        "thermal:target=ex,channel=bed,times=x",
-        "-o",
-        s(&model),
-        "--json",
-    ]));
+    fit(
+        &csv,
+        &[
+            "--model",
+            "cubic19",
+            "--add",
+            "reversal:target=ex,axis=x",
+            "--add",
+            "thermal:target=ex,channel=bed,times=x",
+        ],
+        &model,
+    );
     (csv, model)
 }
 
@@ -1013,7 +838,7 @@ fn temperature_envelope_defaults_to_the_measured_range() {
         "fit records the measured range"
     );
     let bin = dir.join("t.bin");
-    let v = json(&run(&["export", s(&model), "-o", s(&bin), "--json"]));
+    let v = export(&model, &[], &bin);
     assert_eq!(
         v["envelope"]["temp_range_c"],
         serde_json::json!([20.0, 21.71])
@@ -1055,15 +880,7 @@ fn temperature_envelope_defaults_to_the_measured_range() {
     assert!(!edge.flags.contains(model_core::Flags::TEMP_OUT_OF_RANGE));
 
     // --temp-range-c overrides, for every channel.
-    let v = json(&run(&[
-        "export",
-        s(&model),
-        "-o",
-        s(&bin),
-        "--temp-range-c",
-        "-5..45",
-        "--json",
-    ]));
+    let v = export(&model, &["--temp-range-c", "-5..45"], &bin);
     assert_eq!(
         v["envelope"]["temp_range_c"],
         serde_json::json!([-5.0, 45.0])
@@ -1085,12 +902,7 @@ fn temperature_envelope_defaults_to_the_measured_range() {
         v["envelope"]["temp_range_c"],
         serde_json::json!([10.0, 40.0])
     );
-    let w = v["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|w| w["code"] == "temp_range_unknown")
-        .unwrap_or_else(|| panic!("{v}"));
+    let w = find_warning(&v, "temp_range_unknown").unwrap_or_else(|| panic!("{v}"));
     assert!(
         w["detail"].as_str().unwrap().contains("T_bed_C")
             && w["detail"].as_str().unwrap().contains("--temp-range-c"),
@@ -1137,7 +949,7 @@ fn max_correction_limit_applies_to_every_format() {
             ("460".to_string(), "306".to_string())
         };
         let err = expect_exit(
-            &["export", s(&model), "--format", format, "-o", s(&out)],
+            &export_args(&model, &["--format", format], &out),
             1,
             &[
                 &format!("ex: the default max |correction| {default}"),
@@ -1150,29 +962,12 @@ fn max_correction_limit_applies_to_every_format() {
     }
     // An explicit limit: the table clamps (warned); a controller file
     // would hold more than it, so it is refused and not written.
-    let v = json(&run(&[
-        "export",
-        s(&model),
-        "-o",
-        s(&out),
-        "--max-corr-um",
-        "4000",
-        "--json",
-    ]));
+    let v = export(&model, &["--max-corr-um", "4000"], &out);
     assert_eq!(v["envelope"]["max_corr_um"][0], 4000.0);
     std::fs::remove_file(&out).unwrap();
     for format in ["linuxcnc", "sinumerik"] {
         expect_exit(
-            &[
-                "export",
-                s(&model),
-                "--format",
-                format,
-                "--max-corr-um",
-                "100",
-                "-o",
-                s(&out),
-            ],
+            &export_args(&model, &["--format", format, "--max-corr-um", "100"], &out),
             1,
             &["above --max-corr-um 100", "cannot clamp", "was not written"],
         );
@@ -1183,15 +978,7 @@ fn max_correction_limit_applies_to_every_format() {
     // the flag; below its largest trim it is refused.
     let line = line_model(&dir);
     let comp = dir.join("x.comp");
-    let v = json(&run(&[
-        "export",
-        s(&line),
-        "--format",
-        "linuxcnc",
-        "-o",
-        s(&comp),
-        "--json",
-    ]));
+    let v = export(&line, &["--format", "linuxcnc"], &comp);
     let rows = read_linuxcnc(&std::fs::read_to_string(&comp).unwrap());
     let largest_mm = rows
         .iter()
@@ -1201,30 +988,19 @@ fn max_correction_limit_applies_to_every_format() {
         (got - 1.5 * 1000.0 * largest_mm).abs() < 0.01,
         "{got} vs {largest_mm} mm"
     );
-    let v = json(&run(&[
-        "export",
-        s(&line),
-        "--format",
-        "linuxcnc",
-        "--max-corr-um",
-        "50",
-        "-o",
-        s(&comp),
-        "--json",
-    ]));
+    let v = export(
+        &line,
+        &["--format", "linuxcnc", "--max-corr-um", "50"],
+        &comp,
+    );
     assert_eq!(v["max_corr_um"], 50.0);
     std::fs::remove_file(&comp).unwrap();
     expect_exit(
-        &[
-            "export",
-            s(&line),
-            "--format",
-            "linuxcnc",
-            "--max-corr-um",
-            "1",
-            "-o",
-            s(&comp),
-        ],
+        &export_args(
+            &line,
+            &["--format", "linuxcnc", "--max-corr-um", "1"],
+            &comp,
+        ),
         1,
         &[
             "ex: the linuxcnc file would hold corrections up to",
@@ -1340,9 +1116,7 @@ fn flags_of_another_format_and_bad_limits_are_usage_errors() {
             "50",
         ][..],
     ] {
-        let mut a = vec!["export", m, "-o", o, "--json"];
-        a.extend_from_slice(extra);
-        json(&run(&a));
+        export(&model, extra, &out);
         std::fs::remove_file(&out).unwrap();
     }
 }
@@ -1371,42 +1145,28 @@ fn interpolation_error_counts_the_terms_left_out() {
     let csv = dir.join("y.csv");
     import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
     let model = dir.join("y.model.json");
-    json(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "--add",
-        "periodic:target=ey,axis=y,period_mm=5.08",
-        "-o",
-        s(&model),
-        "--json",
-    ]));
-    let ini = dir.join("y.ini");
-    let out = run(&[
-        "export",
-        s(&model),
-        "--format",
-        "sinumerik",
-        "-o",
-        s(&ini),
-        "--json",
-    ]);
-    let v = json(&out);
-    assert!(
-        v["warnings"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .any(|w| w["code"] == "periodic_left_out"),
-        "{v}"
+    fit(
+        &csv,
+        &[
+            "--model",
+            "cubic19",
+            "--add",
+            "periodic:target=ey,axis=y,period_mm=5.08",
+        ],
+        &model,
     );
+    let ini = dir.join("y.ini");
+    let mut args = export_args(&model, &["--format", "sinumerik"], &ini);
+    args.push("--json");
+    let out = run(&args);
+    let v = json(&out);
+    assert!(warning_codes(&v).contains(&"periodic_left_out"), "{v}");
     let e = num(&v["max_interp_error_um"]);
     assert!((2.95..3.05).contains(&e), "the 3 µm wave left out: {e}");
     let raw = String::from_utf8_lossy(&out.stdout);
     assert!(raw.contains(r#""md32450_backlash_mm":0.0"#), "{raw}");
     assert!(raw.contains(r#""backlash_um":0.0"#), "{raw}");
-    let out = run(&["export", s(&model), "--format", "sinumerik", "-o", s(&ini)]);
+    let out = run(&export_args(&model, &["--format", "sinumerik"], &ini));
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         text.contains("differs from the full model by at most 3.0")
@@ -1429,22 +1189,14 @@ fn interpolation_error_counts_the_terms_left_out() {
 fn grid_over_capacity_is_refused_with_a_coarser_step() {
     let dir = tmp_dir("export", "gridcap");
     let csv = simulate_grid(&dir, "g.csv", 7);
-    let fit = |step: &str| {
+    let fit_grid = |step: &str| {
         let model = dir.join(format!("g{step}.model.json"));
-        json(&run(&[
-            "fit",
-            s(&csv),
-            "--model",
-            &format!("grid:{step}"),
-            "-o",
-            s(&model),
-            "--json",
-        ]));
+        fit(&csv, &["--model", &format!("grid:{step}")], &model);
         model
     };
     let bin = dir.join("g.bin");
     expect_exit(
-        &["export", s(&fit("60")), "-o", s(&bin)],
+        &["export", s(&fit_grid("60")), "-o", s(&bin)],
         1,
         &[
             "model needs 4500 grid values, capacity is 2048; nothing was written",
@@ -1452,15 +1204,10 @@ fn grid_over_capacity_is_refused_with_a_coarser_step() {
         ],
     );
     assert!(!bin.exists());
-    let out = run(&["export", s(&fit("90")), "-o", s(&bin), "--json"]);
+    let out = run(&["export", s(&fit_grid("90")), "-o", s(&bin), "--json"]);
     let v = json(&out);
     assert_eq!(v["board"]["fits"], false);
-    let w = v["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|w| w["code"] == "board_refuses")
-        .unwrap_or_else(|| panic!("{v}"));
+    let w = find_warning(&v, "board_refuses").unwrap_or_else(|| panic!("{v}"));
     assert!(
         w["detail"]
             .as_str()
@@ -1468,7 +1215,7 @@ fn grid_over_capacity_is_refused_with_a_coarser_step() {
             .contains("grid:108 or coarser"),
         "{w}"
     );
-    let v = json(&run(&["export", s(&fit("108")), "-o", s(&bin), "--json"]));
+    let v = export(&fit_grid("108"), &[], &bin);
     assert_eq!(v["board"]["fits"], true, "{v}");
 }
 
@@ -1481,32 +1228,10 @@ fn controller_file_warns_about_a_reference_outside_the_data() {
     let comp = dir.join("x.comp");
     for (t_ref, warned) in [("20", false), ("25", true)] {
         let model = dir.join(format!("tref{t_ref}.model.json"));
-        json(&run(&[
-            "fit",
-            s(&csv),
-            "--model",
-            "cubic19",
-            "--add",
-            &format!("thermal:target=ex,channel=bed,times=x,t_ref_c={t_ref}"),
-            "-o",
-            s(&model),
-            "--json",
-        ]));
-        let out = run(&[
-            "export",
-            s(&model),
-            "--format",
-            "linuxcnc",
-            "-o",
-            s(&comp),
-            "--json",
-        ]);
-        let v = json(&out);
-        let w = v["warnings"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|w| w["code"] == "thermal_reference_outside_data");
+        let thermal = format!("thermal:target=ex,channel=bed,times=x,t_ref_c={t_ref}");
+        fit(&csv, &["--model", "cubic19", "--add", &thermal], &model);
+        let v = export(&model, &["--format", "linuxcnc"], &comp);
+        let w = find_warning(&v, "thermal_reference_outside_data");
         assert_eq!(w.is_some(), warned, "t_ref {t_ref}: {v}");
         if let Some(w) = w {
             assert!(

@@ -3,23 +3,10 @@
 //! expected; a good file keeps metadata, aux channels and says which rows
 //! were left out; writing and reading back gives the same data set.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
+mod common;
 
+use common::{data_file as data, json, run as trueaxis};
 use trueaxis_engine::import;
-
-fn data(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
-
-fn trueaxis(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_trueaxis"))
-        .args(args)
-        .output()
-        .expect("run trueaxis")
-}
 
 /// Runs `import FILE --json`, expects exit 1 and a stderr message that
 /// starts with `<path>:<line>:<column>:` (or `<path>:<line>:` when `col` is
@@ -127,13 +114,7 @@ fn good_file_reports_rows_metadata_aux_and_skipped() {
         out_csv.to_str().unwrap(),
         "--json",
     ]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON document");
+    let v = json(&out);
     assert_eq!(v["rows"], 3);
     assert_eq!(
         v["columns"],

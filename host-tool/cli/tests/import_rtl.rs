@@ -2,16 +2,10 @@
 //! lines, backward runs in descending order) with known values, and broken
 //! files that must fail with the line number.
 
-use std::path::PathBuf;
-use std::process::Command;
+mod common;
 
+use common::{data_file as data, json, run};
 use trueaxis_engine::import;
-
-fn data(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
 
 #[test]
 fn hand_made_file_has_known_values() {
@@ -83,23 +77,14 @@ fn broken_files_name_the_line() {
 #[test]
 fn cli_converts_rtl_to_contract_csv() {
     let out_csv = std::env::temp_dir().join(format!("trueaxis-rtl-{}.csv", std::process::id()));
-    let out = Command::new(env!("CARGO_BIN_EXE_trueaxis"))
-        .args([
-            "import",
-            data("iso_worked.rtl").to_str().unwrap(),
-            "-o",
-            out_csv.to_str().unwrap(),
-            "--json",
-        ])
-        .output()
-        .unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let out = run(&[
+        "import",
+        data("iso_worked.rtl").to_str().unwrap(),
+        "-o",
+        out_csv.to_str().unwrap(),
+        "--json",
+    ]);
+    let v = json(&out);
     assert_eq!(v["rows"], 12);
     assert_eq!(
         v["columns"],

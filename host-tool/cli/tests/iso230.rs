@@ -37,9 +37,7 @@
 
 mod common;
 
-use std::process::Command;
-
-use common::data_file;
+use common::{assert_success, data_file, json, run, s};
 use trueaxis_engine::{import, iso230};
 
 const TOL: f64 = 1e-6;
@@ -94,25 +92,16 @@ fn worked_example_from_csv_and_rtl() {
 #[test]
 fn cli_json_keys_and_plot() {
     let dir = std::env::temp_dir().join(format!("trueaxis-iso-{}", std::process::id()));
-    let out = Command::new(env!("CARGO_BIN_EXE_trueaxis"))
-        .args([
-            "iso230",
-            data_file("iso_worked.csv").to_str().unwrap(),
-            "--axis",
-            "x",
-            "--json",
-            "--report",
-        ])
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON document");
+    let out = run(&[
+        "iso230",
+        data_file("iso_worked.csv").to_str().unwrap(),
+        "--axis",
+        "x",
+        "--json",
+        "--report",
+        s(&dir),
+    ]);
+    let v = json(&out);
     for k in [
         "axis",
         "targets",
@@ -160,11 +149,8 @@ fn cli_json_keys_and_plot() {
 
 #[test]
 fn human_table_without_json() {
-    let out = Command::new(env!("CARGO_BIN_EXE_trueaxis"))
-        .args(["iso230", data_file("iso_worked.rtl").to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(0));
+    let out = run(&["iso230", data_file("iso_worked.rtl").to_str().unwrap()]);
+    assert_success(&out);
     let s = String::from_utf8(out.stdout).unwrap();
     assert!(s.contains("axis x: 3 targets, 2 bidirectional runs"), "{s}");
     assert!(s.contains("A  =   10.743 µm"), "{s}");

@@ -10,7 +10,7 @@
 
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -57,6 +57,7 @@ impl Drop for Board {
     }
 }
 
+/// Runs the built `trueaxis` with `args`.
 fn trueaxis(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_trueaxis"))
         .args(args)
@@ -64,6 +65,7 @@ fn trueaxis(args: &[&str]) -> Output {
         .unwrap()
 }
 
+/// Stdout of `trueaxis ARGS…` as JSON; the run must succeed.
 fn json_ok(args: &[&str]) -> Value {
     let out = trueaxis(args);
     assert!(
@@ -72,6 +74,16 @@ fn json_ok(args: &[&str]) -> Value {
         String::from_utf8_lossy(&out.stderr)
     );
     serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// `trueaxis upload FILE --port PORT --json`: its JSON (the run must succeed).
+fn upload_json(file: &Path, port: &str) -> Value {
+    json_ok(&["upload", file.to_str().unwrap(), "--port", port, "--json"])
+}
+
+/// `trueaxis status --port PORT --json`: its JSON (the run must succeed).
+fn status_json(port: &str) -> Value {
+    json_ok(&["status", "--port", port, "--json"])
 }
 
 fn table_file(name: &str, bytes: &[u8]) -> PathBuf {
@@ -87,7 +99,7 @@ fn crc_hex(bytes: &[u8]) -> String {
 #[test]
 fn upload_status_monitor_and_read_back_equal_model_core() {
     let board = Board::start();
-    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    let s = status_json(&board.port);
     assert!(s["active"].is_null());
     assert!(s["telemetry"]["faults"]
         .as_array()
@@ -96,18 +108,12 @@ fn upload_status_monitor_and_read_back_equal_model_core() {
 
     let table = sample_table(0);
     let path = table_file("t0", &table);
-    let u = json_ok(&[
-        "upload",
-        path.to_str().unwrap(),
-        "--port",
-        &board.port,
-        "--json",
-    ]);
+    let u = upload_json(&path, &board.port);
     assert_eq!(u["crc32"], crc_hex(&table));
     assert_eq!(u["verified"], true);
     assert_eq!(u["active"]["slot"], "A");
 
-    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    let s = status_json(&board.port);
     assert_eq!(s["active"]["crc32"], crc_hex(&table));
     assert_eq!(s["table_format"], model_core::FORMAT_VERSION);
 
@@ -186,11 +192,11 @@ fn upload_and_status_over_a_serial_port() {
 
     let table = sample_table(1);
     let file = table_file("serial", &table);
-    let u = json_ok(&["upload", file.to_str().unwrap(), "--port", &path, "--json"]);
+    let u = upload_json(&file, &path);
     assert_eq!(u["port"], path.as_str());
     assert_eq!(u["crc32"], crc_hex(&table));
     assert_eq!(u["verified"], true);
-    let st = json_ok(&["status", "--port", &path, "--json"]);
+    let st = status_json(&path);
     assert_eq!(st["active"]["crc32"], crc_hex(&table));
     assert_eq!(st["telemetry"]["rx_bad_frames"], 0);
 
@@ -204,13 +210,7 @@ fn a_cut_upload_keeps_the_old_table_and_the_next_upload_resumes() {
     let board = Board::start();
     let t1 = sample_table(0);
     let p1 = table_file("cut_t1", &t1);
-    json_ok(&[
-        "upload",
-        p1.to_str().unwrap(),
-        "--port",
-        &board.port,
-        "--json",
-    ]);
+    upload_json(&p1, &board.port);
 
     // Half of t2, then the host goes away.
     let t2 = sample_table(2);
@@ -227,22 +227,16 @@ fn a_cut_upload_keeps_the_old_table_and_the_next_upload_resumes() {
         })
         .unwrap();
     }
-    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    let s = status_json(&board.port);
     assert_eq!(s["active"]["crc32"], crc_hex(&t1));
 
     // Uploading t2 again picks up at byte 256.
     let p2 = table_file("cut_t2", &t2);
-    let u = json_ok(&[
-        "upload",
-        p2.to_str().unwrap(),
-        "--port",
-        &board.port,
-        "--json",
-    ]);
+    let u = upload_json(&p2, &board.port);
     assert_eq!(u["resumed_at"], 256);
     assert_eq!(u["active"]["crc32"], crc_hex(&t2));
     assert_eq!(u["active"]["slot"], "B");
-    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    let s = status_json(&board.port);
     assert_eq!(s["standby"]["crc32"], crc_hex(&t1));
 }
 
@@ -334,7 +328,7 @@ fn an_upload_whose_commit_answer_is_lost_still_succeeds() {
     assert_eq!(r.committed.crc32, table_id(&table));
     assert_eq!(r.activated, r.committed);
     drop(c);
-    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    let s = status_json(&board.port);
     assert_eq!(s["active"]["crc32"], crc_hex(&table));
     assert_eq!(s["active"]["seq"], 1, "written once");
 }
@@ -347,27 +341,15 @@ fn uploading_the_running_table_keeps_the_standby() {
     let (t0, t1) = (sample_table(0), sample_table(1));
     let (p0, p1) = (table_file("aa0", &t0), table_file("aa1", &t1));
     for p in [&p0, &p1] {
-        let u = json_ok(&[
-            "upload",
-            p.to_str().unwrap(),
-            "--port",
-            &board.port,
-            "--json",
-        ]);
+        let u = upload_json(p, &board.port);
         assert_eq!(u["already_active"], false);
     }
-    let u = json_ok(&[
-        "upload",
-        p1.to_str().unwrap(),
-        "--port",
-        &board.port,
-        "--json",
-    ]);
+    let u = upload_json(&p1, &board.port);
     assert_eq!(u["already_active"], true);
     assert_eq!(u["chunks"], 0);
     assert_eq!(u["active"]["crc32"], crc_hex(&t1));
     assert_eq!(u["active"]["seq"], 2, "nothing written");
-    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    let s = status_json(&board.port);
     assert_eq!(s["active"]["seq"], 2);
     assert_eq!(s["standby"]["crc32"], crc_hex(&t0));
     let out = trueaxis(&["upload", p1.to_str().unwrap(), "--port", &board.port]);
@@ -388,15 +370,7 @@ fn rollback_returns_to_the_previous_table_even_when_its_answer_is_lost() {
     let board = Board::start();
     let (t0, t1) = (sample_table(0), sample_table(1));
     let (p0, p1) = (table_file("rb0", &t0), table_file("rb1", &t1));
-    let upload = |p: &PathBuf| {
-        json_ok(&[
-            "upload",
-            p.to_str().unwrap(),
-            "--port",
-            &board.port,
-            "--json",
-        ])
-    };
+    let upload = |p: &PathBuf| upload_json(p, &board.port);
     let refused = || {
         let out = trueaxis(&["rollback", "--port", &board.port, "--json"]);
         let err = String::from_utf8_lossy(&out.stderr);
@@ -418,7 +392,7 @@ fn rollback_returns_to_the_previous_table_even_when_its_answer_is_lost() {
     assert_eq!(r["active"]["crc32"], crc_hex(&t0));
     assert_eq!(r["active"]["seq"], 1);
     assert_eq!(r["verified"], true);
-    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    let s = status_json(&board.port);
     assert_eq!(s["active"], r["active"]);
     assert!(s["standby"].is_null(), "{s}");
     // The revoked table is gone: a second rollback has nothing to go to.
@@ -438,7 +412,7 @@ fn rollback_returns_to_the_previous_table_even_when_its_answer_is_lost() {
     assert_eq!(r.revoked.crc32, table_id(&t1));
     assert_eq!((r.active.crc32, r.active.seq), (table_id(&t0), 1));
     drop(c);
-    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    let s = status_json(&board.port);
     assert_eq!(s["active"]["crc32"], crc_hex(&t0));
     assert!(s["standby"].is_null(), "{s}");
 }
@@ -478,7 +452,7 @@ fn garbage_on_the_line_does_not_stick_the_board() {
     }
     drop(s);
     // And the next client is served normally.
-    let st = json_ok(&["status", "--port", &board.port, "--json"]);
+    let st = status_json(&board.port);
     assert!(st["telemetry"]["rx_bad_frames"].as_u64().unwrap() >= 1);
 }
 
@@ -640,15 +614,9 @@ fn status_and_monitor_name_the_model_flags_and_show_temperatures() {
     spec.envelope.temp_min_mc = [30_000, 30_000, 0, 0];
     let table = spec.encode().unwrap();
     let path = table_file("warm", &table);
-    json_ok(&[
-        "upload",
-        path.to_str().unwrap(),
-        "--port",
-        &board.port,
-        "--json",
-    ]);
+    upload_json(&path, &board.port);
     std::thread::sleep(Duration::from_millis(50));
-    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    let s = status_json(&board.port);
     let t = &s["telemetry"];
     assert_eq!(t["model_flags"], 16, "{s}");
     assert_eq!(
@@ -684,14 +652,8 @@ fn status_and_monitor_name_the_model_flags_and_show_temperatures() {
 fn status_clear_faults_clears_the_latched_faults() {
     let board = Board::start();
     let path = table_file("clear", &sample_table(0));
-    json_ok(&[
-        "upload",
-        path.to_str().unwrap(),
-        "--port",
-        &board.port,
-        "--json",
-    ]);
-    let s = json_ok(&["status", "--port", &board.port, "--json"]);
+    upload_json(&path, &board.port);
+    let s = status_json(&board.port);
     assert!(s["cleared_faults"].is_null(), "{s}");
     assert_eq!(s["telemetry"]["faults"], serde_json::json!([]), "{s}");
     assert_eq!(

@@ -6,8 +6,11 @@
 // Rows are checked across several parallel columns; index loops read clearer.
 #![allow(clippy::needless_range_loop)]
 
+mod common;
+
 use std::path::PathBuf;
-use std::process::Command;
+
+use common::{assert_success, json, run};
 
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::import;
@@ -16,13 +19,6 @@ use trueaxis_engine::simulate::{self, Effect, Machine, Plan, RefReturn, SimConfi
 
 fn tmp(name: &str) -> PathBuf {
     std::env::temp_dir().join(format!("trueaxis-sim-{}-{name}", std::process::id()))
-}
-
-fn run(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_trueaxis"))
-        .args(args)
-        .output()
-        .unwrap()
 }
 
 /// A perfect 800 × 500 × 500 machine, no noise, with `plans` and `effects`.
@@ -65,12 +61,7 @@ fn same_seed_same_bytes_other_seed_other_bytes() {
             "-o",
             out.to_str().unwrap(),
         ]);
-        assert_eq!(
-            o.status.code(),
-            Some(0),
-            "{}",
-            String::from_utf8_lossy(&o.stderr)
-        );
+        assert_success(&o);
         std::fs::read(out).unwrap()
     };
     let (a, b, c) = (tmp("a.csv"), tmp("b.csv"), tmp("c.csv"));
@@ -305,13 +296,7 @@ fn cli_json_shape_and_bad_specs() {
         out_csv.to_str().unwrap(),
         "--json",
     ]);
-    assert_eq!(
-        o.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let v = json(&o);
     assert_eq!(v["rows"], 2057);
     assert_eq!(v["passes"], 121);
     assert_eq!(v["preset"], "mill800");
@@ -643,12 +628,7 @@ fn every_numeric_option_is_validated() {
         "-o",
         o,
     ]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_success(&out);
     let _ = std::fs::remove_file(&out_csv);
 }
 

@@ -37,14 +37,19 @@ pub fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-/// Stdout of a successful run as one JSON document.
-pub fn json(out: &Output) -> Value {
+/// Asserts that a run exited 0, showing its exit and stderr if not.
+pub fn assert_success(out: &Output) {
     assert!(
         out.status.success(),
         "exit {:?}\nstderr: {}",
         out.status.code(),
         String::from_utf8_lossy(&out.stderr)
     );
+}
+
+/// Stdout of a successful run as one JSON document.
+pub fn json(out: &Output) -> Value {
+    assert_success(out);
     serde_json::from_slice(&out.stdout).expect("exactly one JSON document on stdout")
 }
 
@@ -122,4 +127,103 @@ pub fn with_blank_error_row(src: &Path, dst: &Path) -> usize {
         .collect();
     std::fs::write(dst, format!("{}\n{}\n", text.trim_end(), row.join(","))).unwrap();
     lines.len() + 1
+}
+
+/// `--model cubic19 --add reversal:target=ex,axis=x`: the cubic plus the
+/// x reversal on ex, the model an x line measured both ways is fitted with.
+pub const CUBIC19_REVERSAL_X: &[&str] =
+    &["--model", "cubic19", "--add", "reversal:target=ex,axis=x"];
+
+/// `trueaxis fit CSV ARGS… -o MODEL --json`; returns its JSON.
+pub fn fit(csv: &Path, args: &[&str], model: &Path) -> Value {
+    let mut a = vec!["fit", s(csv)];
+    a.extend_from_slice(args);
+    a.extend_from_slice(&["-o", s(model), "--json"]);
+    json(&run(&a))
+}
+
+/// `simulate_grid(DIR, STEM.csv, SEED)` fitted with `fit_cubic19` to
+/// `DIR/STEM.model.json`. Returns (data, model, the fit's JSON).
+pub fn grid_cubic19(dir: &Path, stem: &str, seed: u64) -> (PathBuf, PathBuf, Value) {
+    let csv = simulate_grid(dir, &format!("{stem}.csv"), seed);
+    let model = dir.join(format!("{stem}.model.json"));
+    let v = fit_cubic19(&csv, &model);
+    (csv, model, v)
+}
+
+/// The `trueaxis export MODEL ARGS… -o OUT` command line.
+pub fn export_args<'a>(model: &'a Path, args: &[&'a str], out: &'a Path) -> Vec<&'a str> {
+    let mut a = vec!["export", s(model)];
+    a.extend_from_slice(args);
+    a.extend_from_slice(&["-o", s(out)]);
+    a
+}
+
+/// `trueaxis export MODEL ARGS… -o OUT --json`; returns its JSON.
+pub fn export(model: &Path, args: &[&str], out: &Path) -> Value {
+    let mut a = export_args(model, args, out);
+    a.push("--json");
+    json(&run(&a))
+}
+
+/// `trueaxis compare CSV --model MODEL --json`; returns its JSON.
+pub fn compare(csv: &Path, model: &Path) -> Value {
+    json(&run(&["compare", s(csv), "--model", s(model), "--json"]))
+}
+
+/// The `code`s of a JSON document's `warnings`, in order.
+pub fn warning_codes(v: &Value) -> Vec<&str> {
+    v["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|w| w["code"].as_str())
+        .collect()
+}
+
+/// The first of a JSON document's `warnings` with `code`, if any.
+pub fn find_warning<'a>(v: &'a Value, code: &str) -> Option<&'a Value> {
+    v["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|w| w["code"] == code)
+}
+
+/// A checked-in golden file, `tests/golden/NAME`.
+pub fn golden_file(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/golden")
+        .join(name)
+}
+
+/// Compares `actual` with the checked-in golden file `tests/golden/NAME`,
+/// or rewrites it when TRUEAXIS_BLESS=1.
+pub fn golden(name: &str, actual: &[u8]) {
+    let path = golden_file(name);
+    if std::env::var("TRUEAXIS_BLESS").is_ok_and(|v| v == "1") {
+        std::fs::write(&path, actual).unwrap();
+        return;
+    }
+    let expected = std::fs::read(&path).unwrap_or_else(|e| {
+        panic!(
+            "{}: {e} (run with TRUEAXIS_BLESS=1 to create it)",
+            path.display()
+        )
+    });
+    if expected != actual {
+        let (e, a) = (
+            String::from_utf8_lossy(&expected),
+            String::from_utf8_lossy(actual),
+        );
+        let first = e
+            .lines()
+            .zip(a.lines())
+            .position(|(x, y)| x != y)
+            .map_or("the length".to_string(), |i| format!("line {}", i + 1));
+        panic!(
+            "{} differs from the output at {first} (TRUEAXIS_BLESS=1 rewrites it after an intended change)\nexpected:\n{e}\nactual:\n{a}",
+            path.display()
+        );
+    }
 }
