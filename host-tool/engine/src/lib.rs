@@ -3,9 +3,11 @@
 //! `trueaxis` binary crate). Layered bottom-up — a module imports only from
 //! the layers below it:
 //!
-//! data → features / effect / lsq / holdout / lines / regions → model →
+//! data → features → effect / lsq / lines / regions → holdout → model →
 //! fit → diagnose / compare / export / history / iso230 → improve → (the
-//! CLI's commands); import and simulate produce data sets.
+//! CLI's commands). `import` (files ↔ data sets) sits beside `data`;
+//! `simulate` makes data sets from `features`' thermal lag and is imported
+//! by no engine module.
 //!
 //! - `data`: the measurement data set (docs/cli.md § Measurement CSV) every command works on.
 //! - `import`: measurement files in (the trueaxis CSV, Renishaw .rtl) and the CSV out.

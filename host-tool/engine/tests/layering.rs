@@ -1,0 +1,108 @@
+//! The engine's layering (lib.rs, docs/host.md) checked on its sources: a
+//! module may name `crate::<module>` only for modules in a lower layer, so
+//! no import goes upward and none runs in a circle. A new top-level module
+//! must be given its layer here.
+
+use std::path::{Path, PathBuf};
+
+/// Layer of each top-level engine module, lowest first.
+const LAYERS: &[(&str, u8)] = &[
+    ("data", 0),
+    ("import", 1),
+    ("features", 1),
+    ("effect", 2),
+    ("lsq", 2),
+    ("lines", 2),
+    ("regions", 2),
+    ("simulate", 3),
+    ("holdout", 3),
+    ("model", 4),
+    ("fit", 5),
+    ("diagnose", 6),
+    ("compare", 6),
+    ("export", 6),
+    ("history", 6),
+    ("iso230", 6),
+    ("improve", 7),
+];
+
+fn layer(module: &str) -> Option<u8> {
+    LAYERS.iter().find(|(m, _)| *m == module).map(|(_, l)| *l)
+}
+
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            rust_files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+}
+
+/// The `crate::<name>` paths a source names, outside comments.
+fn crate_paths(src: &str) -> Vec<String> {
+    let mut v = Vec::new();
+    for line in src.lines() {
+        let code = line.split("//").next().unwrap_or("");
+        let mut rest = code;
+        while let Some(i) = rest.find("crate::") {
+            rest = &rest[i + "crate::".len()..];
+            let name: String = rest
+                .chars()
+                .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                .collect();
+            v.push(name);
+        }
+    }
+    v
+}
+
+#[test]
+fn no_engine_module_imports_from_its_own_layer_or_above() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    assert!(files.len() > 20, "found only {} source files", files.len());
+    let mut bad = Vec::new();
+    for f in &files {
+        let rel = f.strip_prefix(&src).unwrap();
+        let top = rel
+            .components()
+            .next()
+            .unwrap()
+            .as_os_str()
+            .to_string_lossy()
+            .trim_end_matches(".rs")
+            .to_string();
+        if top == "lib" {
+            continue;
+        }
+        let own = layer(&top).unwrap_or_else(|| panic!("{top}: give the module its layer"));
+        let text = std::fs::read_to_string(f).unwrap();
+        for m in crate_paths(&text) {
+            if m == top {
+                continue;
+            }
+            match layer(&m) {
+                Some(l) if l < own => {}
+                _ => bad.push(format!("{}: crate::{m}", rel.display())),
+            }
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "imports against the layering:\n{}",
+        bad.join("\n")
+    );
+}
+
+#[test]
+fn the_checker_sees_an_upward_import() {
+    assert_eq!(
+        crate_paths("use crate::fit::Seed; // crate::history"),
+        ["fit"]
+    );
+    assert!(layer("model") < layer("fit"));
+}
