@@ -29,12 +29,10 @@ use core::num::NonZeroU32;
 use heapless::Vec;
 
 use crate::math::{sincos_f32, sincos_q30, tanh_f32, tanh_q30, ONE_Q30, TANH_IN_FRAC};
-use crate::table::{
-    Envelope, Table, TermView, MAX_HIDDEN_LAYERS, MAX_HIDDEN_UNITS, MAX_MLP_INPUTS, MAX_MONOMIALS,
-};
+use crate::table::{Envelope, Table, TermView};
 
-/// Temperature channels an input carries.
-pub const MAX_TEMPS: usize = 4;
+use crate::limits::{MAX_HIDDEN_LAYERS, MAX_HIDDEN_UNITS, MAX_MLP_INPUTS, MAX_MONOMIALS};
+pub use crate::limits::{MAX_MLP_INPUTS_TOTAL, MAX_TEMPS, MAX_TERMS};
 
 /// What the firmware feeds the model each cycle.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -251,10 +249,6 @@ impl core::fmt::Display for LoadError {
 #[cfg(feature = "std")]
 impl std::error::Error for LoadError {}
 
-/// Most terms in a model.
-pub const MAX_TERMS: usize = 24;
-/// Most MLP inputs over all MLP terms of a model.
-pub const MAX_MLP_INPUTS_TOTAL: usize = 16;
 /// Parameter pool capacity of [`Model`].
 pub const DEFAULT_PARAMS: usize = 1536;
 /// Grid value capacity of [`Model`] (e.g. one 17×11×11 grid, or three 2-D grids).

@@ -6,6 +6,8 @@
 //! - [`table`]: format v1, [`table::parse`] (zero-copy, fully validated).
 //! - [`eval`]: the prepared [`Model`] with `eval_f32` / `eval_fixed`,
 //!   [`Inputs`], [`Outputs`], [`Flags`], [`DirTracker`].
+//! - [`limits`]: the table format's and the firmware's capacity limits
+//!   (`MAX_TEMPS`, `MAX_TERMS`, the MLP shape, …).
 //! - [`monomials`]: the named polynomial sets (`cubic19`, `kinematic`).
 //! - [`board`]: the compensation board's limits (staging buffer, model
 //!   capacity) as constants the firmware uses and the host checks.
@@ -19,6 +21,7 @@
 pub mod board;
 pub mod cost;
 pub mod eval;
+pub mod limits;
 pub mod link;
 pub mod math;
 pub mod monomials;
