@@ -1,7 +1,8 @@
 //! The trueaxis core shared by the host tool and the firmware: everything the
 //! two sides must agree on bit for bit — model evaluation (f32 and fixed
-//! point, plus the f64 reference on the host), the binary table format and
-//! the link protocol. `no_std`, no allocation, no `unsafe`.
+//! point, plus the f64 reference on the host) and the binary table format.
+//! The link protocol is its own crate, `trueaxis-protocol` (`protocol/`).
+//! `no_std`, no allocation, no `unsafe`.
 //!
 //! - [`table`]: format v1, [`table::parse`] (zero-copy, fully validated).
 //! - [`eval`]: the prepared [`Model`] with `eval_f32` / `eval_fixed`,
@@ -22,7 +23,6 @@ pub mod board;
 pub mod cost;
 pub mod eval;
 pub mod limits;
-pub mod link;
 pub mod math;
 pub mod monomials;
 #[cfg(feature = "std")]

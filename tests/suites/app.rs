@@ -9,12 +9,12 @@
 
 use core::cell::Cell;
 
-use model_core::link::{table_id, Injection, Slot, SlotInfo, LINK_TEMPS};
 use trueaxis_app::engine::{round_div, AxisConfig, Engine, EngineConfig};
 use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::memflash::MemFlash;
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::store::{Layout, TableStore};
+use trueaxis_protocol::{table_id, Injection, Slot, SlotInfo, LINK_TEMPS};
 use trueaxis_qemu as _;
 
 static CUBIC19: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/cubic19.bin"));

@@ -293,10 +293,11 @@ fn test(args: &[String]) -> Result<()> {
         ],
     )?;
 
-    // Host tests (model-core, host-tool, xtask).
+    // Host tests (model-core, protocol, host-tool, xtask).
     run(&root, "cargo", &["test", "--workspace"])?;
 
-    // model-core must stay no_std: build and lint it for the MCU.
+    // model-core and the link protocol must stay no_std: build and lint
+    // them for the MCU.
     run(
         &root,
         "cargo",
@@ -304,6 +305,8 @@ fn test(args: &[String]) -> Result<()> {
             "clippy",
             "-p",
             "model-core",
+            "-p",
+            "trueaxis-protocol",
             "--target",
             THUMB,
             "--no-default-features",

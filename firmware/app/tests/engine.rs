@@ -5,12 +5,12 @@
 
 use std::cell::Cell;
 
-use model_core::link::{Faults, Slot, SlotInfo, LINK_TEMPS};
 use model_core::{DirTracker, Inputs, Model};
 use trueaxis_app::engine::{round_div, ConfigError, Engine, EngineConfig};
 use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::sim::{sample_table, sim_engine_config};
+use trueaxis_protocol::{Faults, Slot, SlotInfo, LINK_TEMPS};
 
 struct Fake {
     counts: [i32; 3],
@@ -73,7 +73,7 @@ fn info(table: &[u8]) -> SlotInfo {
         slot: Slot::A,
         seq: 1,
         len: table.len() as u32,
-        crc32: model_core::link::table_id(table),
+        crc32: trueaxis_protocol::table_id(table),
     }
 }
 

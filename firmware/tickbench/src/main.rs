@@ -30,12 +30,12 @@ use core::cell::Cell;
 use core::hint::black_box;
 
 use model_core::board;
-use model_core::link::{Slot, SlotInfo, LINK_TEMPS};
 use semihosting::println;
 use stm32_metapac::{timer::vals::Urs, TIM2};
 use trueaxis_app::engine::{AxisConfig, Engine, EngineConfig};
 use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::model::{load_into, ModelBuf};
+use trueaxis_protocol::{Slot, SlotInfo, LINK_TEMPS};
 
 /// The tables, by name.
 static TABLES: [(&str, &[u8]); 6] = [
@@ -205,7 +205,7 @@ fn main() -> ! {
             slot: Slot::A,
             seq: 1,
             len: table.len() as u32,
-            crc32: model_core::link::table_id(table),
+            crc32: trueaxis_protocol::table_id(table),
         };
         let mut engine = match Engine::new(CONFIG) {
             Ok(e) => e,

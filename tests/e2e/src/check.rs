@@ -8,11 +8,11 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use model_core::link::{
+use model_core::{Inputs, Model, MAX_TEMPS};
+use trueaxis_protocol::{
     table_id, Correction, Faults, Injection, LinkError, Request, Response, SlotInfo, LINK_TEMPS,
     MAX_CHUNK_BYTES,
 };
-use model_core::{Inputs, Model, MAX_TEMPS};
 
 use crate::link::LinkClient;
 use crate::Cli;
@@ -360,9 +360,9 @@ pub fn check(cli: &Cli) -> Result<(), String> {
     let mut rng = Rng(0x6A2B_A6E0_0000_0001);
     let garbage: Vec<u8> = (0..4096).map(|_| rng.next_u64() as u8).collect();
     link.send_raw(&garbage).map_err(|e| e.to_string())?;
-    let mut half = vec![0u8; model_core::link::MAX_FRAME_BYTES];
-    let n = model_core::link::encode_frame(
-        &model_core::link::Packet {
+    let mut half = vec![0u8; trueaxis_protocol::MAX_FRAME_BYTES];
+    let n = trueaxis_protocol::encode_frame(
+        &trueaxis_protocol::Packet {
             seq: 7,
             msg: Request::Status,
         },
