@@ -11,6 +11,8 @@ use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::sim::{sample_table, sim_engine_config};
 use trueaxis_protocol::{Faults, Slot, SlotInfo, LINK_TEMPS};
+// Deterministic xorshift, so the random walk is the same on every run.
+use trueaxis_test_support::XorShift64 as Rng;
 
 struct Fake {
     counts: [i32; 3],
@@ -51,20 +53,6 @@ struct FakeClock(Cell<u64>);
 impl Clock for FakeClock {
     fn now_us(&self) -> u64 {
         self.0.get()
-    }
-}
-
-/// Deterministic xorshift, so the random walk is the same on every run.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn range(&mut self, lo: i64, hi: i64) -> i64 {
-        lo + (self.next() % (hi - lo + 1) as u64) as i64
     }
 }
 

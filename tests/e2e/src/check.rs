@@ -9,10 +9,12 @@ use std::process::Command;
 use std::time::Duration;
 
 use model_core::{Inputs, Model, MAX_TEMPS};
+// splitmix64 with a fixed seed: the same trajectory and garbage every run.
 use trueaxis_protocol::{
     table_id, Correction, Faults, Injection, LinkError, Request, Response, SlotInfo, LINK_TEMPS,
     MAX_CHUNK_BYTES,
 };
+use trueaxis_test_support::SplitMix64 as Rng;
 
 use crate::link::LinkClient;
 use crate::Cli;
@@ -54,23 +56,6 @@ impl HostTable {
             tool_nm: inj.tool_nm,
         });
         (out.corr_nm, out.flags.bits())
-    }
-}
-
-/// splitmix64 with a fixed seed: the same trajectory and garbage every run.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 
