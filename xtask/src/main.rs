@@ -1,4 +1,5 @@
-//! `cargo xtask …` — the repository's tasks (CONTRACT.md §3).
+//! `cargo xtask …` — the repository's tasks (README.md, "Two commands";
+//! `bench-mcu`'s output in docs/qemu.md, "Instruction counts").
 //!
 //! `setup` installs what a fresh machine lacks, `test` runs every check CI
 //! runs, `demo` runs the main job end to end, `bench-mcu` counts instructions

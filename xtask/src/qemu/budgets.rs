@@ -10,7 +10,8 @@ use super::PACKAGE;
 use crate::Result;
 
 /// The instruction budgets per 3-axis model update (issue 6): the bench
-/// names CONTRACT.md §3 requires and the most instructions each may take.
+/// names docs/qemu.md ("Instruction counts") lists and the most
+/// instructions each may take.
 /// `cargo xtask bench-mcu` prints them beside the counts; `cargo xtask
 /// test` fails when a bench is missing or its worst call exceeds its budget.
 pub const BUDGETS: [(&str, u64); 4] = [
@@ -119,7 +120,8 @@ pub(super) fn check_bench() -> Result<()> {
     Ok(())
 }
 
-/// Instruction counts per model update (CONTRACT.md §3): one JSON line per
+/// Instruction counts per model update (docs/qemu.md, "Instruction
+/// counts"): one JSON line per
 /// model kind on stdout, `{"bench": "cubic19_f32", "instructions_per_update":
 /// N, "outputs": 3}`, a human summary with the budgets and the loop rate
 /// each allows at 168 MHz on stderr.
