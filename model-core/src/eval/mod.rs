@@ -19,9 +19,8 @@
 //! monomials Q30 (|u| ≤ 1 is guaranteed by the table validation); sin/cos,
 //! tanh and the reversal state Q30; corrections are accumulated in i64 Q16 nm
 //! and rounded to nm at the end.
-
 //!
-//! The module is split along its concerns: [`load`](self::load) turns a
+//! The module is split along its concerns: `load` turns a
 //! validated table into a prepared model (one function per table section),
 //! `f32` and `fixed` are the two evaluation paths, and `kernels` holds what
 //! both share (the graded monomial list, the fixed-point helpers, the
