@@ -70,7 +70,7 @@ fn main() {
 }
 
 /// The bench image's table list (`bench_tables.rs` in OUT_DIR): the three
-/// tables of build/tables.rs (CONTRACT §3 names), two checked-in golden
+/// tables of build/tables.rs (the bench names of docs/qemu.md, "Instruction counts"), two checked-in golden
 /// tables of model-core (`grid_17x11`; `all_kinds`, every term kind in one
 /// table: the worst realistic case), and build/cost_tables.rs (one table
 /// per evaluation path, for the check of model-core's cost estimate). With

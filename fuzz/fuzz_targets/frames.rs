@@ -1,4 +1,4 @@
-//! Fuzz the link's receive path in model-core — what the board does with
+//! Fuzz the link's receive path in trueaxis-protocol — what the board does with
 //! every byte that arrives on USB or the UART: the streaming frame decoder
 //! (COBS + CRC), and the postcard messages behind it, and the flash slot
 //! header decoder. Any bytes must give frames or typed errors, never a panic
@@ -8,7 +8,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use model_core::link::{
+use trueaxis_protocol::{
     decode_message, encode_frame, slot, FrameDecoder, Packet, Request, Response, Slot,
     MAX_FRAME_BYTES,
 };

@@ -11,8 +11,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use model_core::link::FRAME_CRC;
 use model_core::{parse, Inputs, LargeModel};
+use trueaxis_protocol::FRAME_CRC;
 
 fuzz_target!(|data: &[u8]| {
     check(data);

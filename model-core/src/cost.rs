@@ -22,7 +22,7 @@
 //! chip are more (see [`crate::board`] for the margin the loop budget
 //! keeps).
 
-use crate::eval::MAX_TERMS;
+use crate::limits::MAX_TERMS;
 use crate::table::{Table, TermView};
 
 /// Estimated instructions of one 3-axis evaluation of a table.

@@ -1,11 +1,14 @@
 //! The trueaxis core shared by the host tool and the firmware: everything the
 //! two sides must agree on bit for bit — model evaluation (f32 and fixed
-//! point, plus the f64 reference on the host), the binary table format and
-//! the link protocol. `no_std`, no allocation, no `unsafe`.
+//! point, plus the f64 reference on the host) and the binary table format.
+//! The link protocol is its own crate, `trueaxis-protocol` (`protocol/`).
+//! `no_std`, no allocation, no `unsafe`.
 //!
 //! - [`table`]: format v1, [`table::parse`] (zero-copy, fully validated).
 //! - [`eval`]: the prepared [`Model`] with `eval_f32` / `eval_fixed`,
 //!   [`Inputs`], [`Outputs`], [`Flags`], [`DirTracker`].
+//! - [`limits`]: the table format's and the firmware's capacity limits
+//!   (`MAX_TEMPS`, `MAX_TERMS`, the MLP shape, …).
 //! - [`monomials`]: the named polynomial sets (`cubic19`, `kinematic`).
 //! - [`board`]: the compensation board's limits (staging buffer, model
 //!   capacity) as constants the firmware uses and the host checks.
@@ -19,7 +22,7 @@
 pub mod board;
 pub mod cost;
 pub mod eval;
-pub mod link;
+pub mod limits;
 pub mod math;
 pub mod monomials;
 #[cfg(feature = "std")]

@@ -8,7 +8,8 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
-use crate::eval::{Inputs, MAX_TEMPS};
+use crate::eval::Inputs;
+use crate::limits::MAX_TEMPS;
 use crate::table::{
     self, Envelope, InputScaling, Monomial, TableError, CHANNEL_NAME_LEN, CRC32, CRC_LEN,
     FIXED_LEN, FORMAT_VERSION, MAGIC, UNITS_NM_MC,

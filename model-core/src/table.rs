@@ -9,7 +9,10 @@
 
 use core::fmt;
 
-use crate::eval::MAX_TEMPS;
+pub use crate::limits::{
+    MAX_DEGREE, MAX_HARMONICS, MAX_HIDDEN_LAYERS, MAX_HIDDEN_UNITS, MAX_MLP_INPUTS, MAX_MONOMIALS,
+    MAX_TEMPS,
+};
 
 /// The four magic bytes at offset 0.
 pub const MAGIC: [u8; 4] = *b"TXAX";
@@ -26,18 +29,6 @@ pub const MAX_TABLE_LEN: usize = 128 * 1024;
 pub const CHANNEL_NAME_LEN: usize = 16;
 /// Byte length of a term header (kind, outputs, aux, reserved, body length).
 pub const TERM_HEADER_LEN: usize = 8;
-/// Highest total degree of a polynomial monomial.
-pub const MAX_DEGREE: u8 = 5;
-/// Number of monomials x^a y^b z^c with a+b+c ≤ 5.
-pub const MAX_MONOMIALS: usize = 56;
-/// Most harmonics in a periodic term.
-pub const MAX_HARMONICS: usize = 4;
-/// Most inputs of an MLP (3 positions + 4 temperatures).
-pub const MAX_MLP_INPUTS: usize = 3 + MAX_TEMPS;
-/// Most units in an MLP hidden layer.
-pub const MAX_HIDDEN_UNITS: usize = 32;
-/// Most hidden layers of an MLP.
-pub const MAX_HIDDEN_LAYERS: usize = 2;
 /// Most nodes along one grid axis.
 pub const MAX_GRID_NODES_PER_AXIS: u16 = 1024;
 /// Largest |max correction| an envelope may declare: 4 mm, below 2^22 nm so

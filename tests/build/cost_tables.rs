@@ -45,7 +45,7 @@ fn poly(rng: &mut Rng, deg: u8, scale: f64) -> Vec<PolyCoef> {
         for b in 0..=deg - a {
             for c in 0..=deg - a - b {
                 let d = f64::from(a + b + c);
-                v.push(([a, b, c], rng.sym() * scale / (1.0 + d * d)));
+                v.push(([a, b, c], rng.signed_unit() * scale / (1.0 + d * d)));
             }
         }
     }
@@ -58,10 +58,10 @@ fn periodic(rng: &mut Rng, output: u8, axis: u8, harmonics: usize) -> TermSpec {
         axis,
         period_nm: 5_000_000 + 1_000_000 * i32::from(axis),
         sin_nm: (0..harmonics)
-            .map(|k| 1_500.0 * rng.sym() / (k + 1) as f64)
+            .map(|k| 1_500.0 * rng.signed_unit() / (k + 1) as f64)
             .collect(),
         cos_nm: (0..harmonics)
-            .map(|k| 1_500.0 * rng.sym() / (k + 1) as f64)
+            .map(|k| 1_500.0 * rng.signed_unit() / (k + 1) as f64)
             .collect(),
     }
 }
@@ -71,16 +71,16 @@ fn mlp(rng: &mut Rng, inputs: Vec<MlpInputSpec>, hidden: &[usize], outputs: Vec<
     let mut layers = Vec::new();
     for &h in hidden {
         layers.push(LayerSpec {
-            weights: (0..h * prev).map(|_| 1.2 * rng.sym()).collect(),
-            bias: (0..h).map(|_| 0.5 * rng.sym()).collect(),
+            weights: (0..h * prev).map(|_| 1.2 * rng.signed_unit()).collect(),
+            bias: (0..h).map(|_| 0.5 * rng.signed_unit()).collect(),
         });
         prev = h;
     }
     let n_out = outputs.len();
     TermSpec::Mlp(MlpSpec {
         output: LayerSpec {
-            weights: (0..n_out * prev).map(|_| 0.4 * rng.sym()).collect(),
-            bias: (0..n_out).map(|_| 0.1 * rng.sym()).collect(),
+            weights: (0..n_out * prev).map(|_| 0.4 * rng.signed_unit()).collect(),
+            bias: (0..n_out).map(|_| 0.1 * rng.signed_unit()).collect(),
         },
         outputs,
         inputs,
@@ -144,7 +144,7 @@ pub fn all() -> Result<Vec<(&'static str, Vec<u8>)>, EncodeError> {
                 output,
                 axis,
                 transition_nm: 20_000,
-                amplitude_nm: 2_000.0 * rng.sym(),
+                amplitude_nm: 2_000.0 * rng.signed_unit(),
             });
         }
     }
@@ -156,7 +156,10 @@ pub fn all() -> Result<Vec<(&'static str, Vec<u8>)>, EncodeError> {
     s.terms = (0..3)
         .map(|o| TermSpec::Poly {
             output: o,
-            coefs: CUBIC19.iter().map(|&m| (m, 3_000.0 * rng.sym())).collect(),
+            coefs: CUBIC19
+                .iter()
+                .map(|&m| (m, 3_000.0 * rng.signed_unit()))
+                .collect(),
         })
         .collect();
     for ch in 0..2u8 {
@@ -199,7 +202,7 @@ pub fn all() -> Result<Vec<(&'static str, Vec<u8>)>, EncodeError> {
     s.terms = vec![TermSpec::Grid(GridSpec {
         output: 2,
         axes: [ax(0, 9), ax(1, 9), ax(2, 9)],
-        values_nm: (0..729).map(|_| 5_000.0 * rng.sym()).collect(),
+        values_nm: (0..729).map(|_| 5_000.0 * rng.signed_unit()).collect(),
     })];
     add("grid_9x9x9", s)?;
 
@@ -224,7 +227,10 @@ pub fn all() -> Result<Vec<(&'static str, Vec<u8>)>, EncodeError> {
     s.terms = (0..3)
         .map(|o| TermSpec::Poly {
             output: o,
-            coefs: CUBIC19.iter().map(|&m| (m, 3_000.0 * rng.sym())).collect(),
+            coefs: CUBIC19
+                .iter()
+                .map(|&m| (m, 3_000.0 * rng.signed_unit()))
+                .collect(),
         })
         .collect();
     s.terms.push(periodic(&mut rng, 1, 1, 2));
@@ -239,13 +245,13 @@ pub fn all() -> Result<Vec<(&'static str, Vec<u8>)>, EncodeError> {
             output: axis,
             axis,
             transition_nm: 20_000,
-            amplitude_nm: 2_500.0 * rng.sym(),
+            amplitude_nm: 2_500.0 * rng.signed_unit(),
         });
     }
     s.terms.push(TermSpec::Grid(GridSpec {
         output: 0,
         axes: [ax(0, 5), ax(1, 5), ax(2, 3)],
-        values_nm: (0..75).map(|_| 2_000.0 * rng.sym()).collect(),
+        values_nm: (0..75).map(|_| 2_000.0 * rng.signed_unit()).collect(),
     }));
     s.terms
         .push(mlp(&mut rng, pos_inputs(), &[16], vec![0, 1, 2]));
@@ -265,7 +271,7 @@ fn int(rng: &mut Rng, lo: u32, hi: u32) -> u32 {
 
 /// True with probability `p`.
 fn chance(rng: &mut Rng, p: f64) -> bool {
-    (rng.sym() + 1.0) / 2.0 < p
+    (rng.signed_unit() + 1.0) / 2.0 < p
 }
 
 /// Up to `max` monomials of total degree ≤ `deg` (always the highest
@@ -317,7 +323,7 @@ fn calibration_spec(rng: &mut Rng, tag: u8) -> TableSpec {
                 axis: output(rng),
                 // One transition length per axis (the format requires it).
                 transition_nm: 20_000,
-                amplitude_nm: 3_000.0 * rng.sym(),
+                amplitude_nm: 3_000.0 * rng.signed_unit(),
             });
         }
     }
@@ -363,7 +369,7 @@ fn calibration_spec(rng: &mut Rng, tag: u8) -> TableSpec {
             s.terms.push(TermSpec::Grid(GridSpec {
                 output: output(rng),
                 axes,
-                values_nm: (0..n).map(|_| 4_000.0 * rng.sym()).collect(),
+                values_nm: (0..n).map(|_| 4_000.0 * rng.signed_unit()).collect(),
             }));
         }
     }

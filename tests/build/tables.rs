@@ -20,26 +20,9 @@ use model_core::{
 /// Travel, nm.
 pub const TRAVEL_MAX_NM: [i32; 3] = [800_000_000, 500_000_000, 500_000_000];
 
-/// splitmix64: a tiny, well-known generator; fixed seeds make the tables
-/// identical on every build.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Rng(seed)
-    }
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [-1, 1).
-    pub fn sym(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-    }
-}
+/// splitmix64 (`trueaxis-test-support`): a tiny, well-known generator;
+/// fixed seeds make the tables identical on every build.
+pub use trueaxis_test_support::SplitMix64 as Rng;
 
 fn envelope() -> Envelope {
     Envelope {
@@ -81,7 +64,7 @@ fn cubic19_terms(rng: &mut Rng) -> Vec<TermSpec> {
                 .iter()
                 .map(|&m| {
                     let degree = f64::from(m[0] + m[1] + m[2]);
-                    (m, rng.sym() * 8_000.0 / (1.0 + degree * degree))
+                    (m, rng.signed_unit() * 8_000.0 / (1.0 + degree * degree))
                 })
                 .collect(),
         })
@@ -103,8 +86,8 @@ pub fn full(seed: u64) -> Result<Vec<u8>, EncodeError> {
         output: 1,
         axis: 1,
         period_nm: 5_000_000,
-        sin_nm: vec![1_800.0 * rng.sym(), 600.0 * rng.sym()],
-        cos_nm: vec![1_800.0 * rng.sym(), 600.0 * rng.sym()],
+        sin_nm: vec![1_800.0 * rng.signed_unit(), 600.0 * rng.signed_unit()],
+        cos_nm: vec![1_800.0 * rng.signed_unit(), 600.0 * rng.signed_unit()],
     });
     spec.terms.push(TermSpec::Thermal {
         output: 0,
@@ -118,7 +101,7 @@ pub fn full(seed: u64) -> Result<Vec<u8>, EncodeError> {
             output: axis,
             axis,
             transition_nm: 20_000,
-            amplitude_nm: 3_000.0 + 2_000.0 * rng.sym(),
+            amplitude_nm: 3_000.0 + 2_000.0 * rng.signed_unit(),
         });
     }
     spec.encode()
@@ -136,12 +119,12 @@ pub fn nn_3x16x3(seed: u64) -> Result<Vec<u8>, EncodeError> {
         })
         .collect();
     let hidden = LayerSpec {
-        weights: (0..HIDDEN * 3).map(|_| 1.5 * rng.sym()).collect(),
-        bias: (0..HIDDEN).map(|_| 0.5 * rng.sym()).collect(),
+        weights: (0..HIDDEN * 3).map(|_| 1.5 * rng.signed_unit()).collect(),
+        bias: (0..HIDDEN).map(|_| 0.5 * rng.signed_unit()).collect(),
     };
     let output = LayerSpec {
-        weights: (0..3 * HIDDEN).map(|_| 0.4 * rng.sym()).collect(),
-        bias: (0..3).map(|_| 0.1 * rng.sym()).collect(),
+        weights: (0..3 * HIDDEN).map(|_| 0.4 * rng.signed_unit()).collect(),
+        bias: (0..3).map(|_| 0.1 * rng.signed_unit()).collect(),
     };
     spec.terms.push(TermSpec::Mlp(MlpSpec {
         outputs: vec![0, 1, 2],
@@ -167,17 +150,17 @@ pub fn vector_inputs(seed: u64, n: usize) -> Vec<model_core::Inputs> {
         .map(|_| {
             let pos_nm = core::array::from_fn(|a| {
                 let t = f64::from(TRAVEL_MAX_NM[a]);
-                (t * (0.5 + 0.52 * rng.sym())) as i32
+                (t * (0.5 + 0.52 * rng.signed_unit())) as i32
             });
             let rev_q30 = core::array::from_fn(|_| match rng.next_u64() % 4 {
                 0 => -(1 << 30),
                 1 => 1 << 30,
                 2 => 0,
-                _ => (rng.sym() * f64::from(1 << 30)) as i32,
+                _ => (rng.signed_unit() * f64::from(1 << 30)) as i32,
             });
             let mut temp_mc = [0; model_core::MAX_TEMPS];
-            temp_mc[0] = (25_000.0 + 17_000.0 * rng.sym()) as i32;
-            let tool_nm = (150_000_000.0 + 160_000_000.0 * rng.sym()) as i32;
+            temp_mc[0] = (25_000.0 + 17_000.0 * rng.signed_unit()) as i32;
+            let tool_nm = (150_000_000.0 + 160_000_000.0 * rng.signed_unit()) as i32;
             model_core::Inputs {
                 pos_nm,
                 rev_q30,

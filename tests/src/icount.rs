@@ -12,7 +12,7 @@
 //! 0.168 counts per instruction, 24 bits) would quantise to 6 instructions.
 //! Both are checked against a block of `nop`s in the `infra` suite.
 
-use stm32_metapac::{timer::vals::Urs, TIM2};
+use stm32_metapac::TIM2;
 
 /// A free-running TIM2 counting one per executed instruction (under
 /// `-icount shift=0`), and the fixed cost of reading it.
@@ -26,15 +26,7 @@ pub struct InstructionCounter {
 impl InstructionCounter {
     /// Starts TIM2 free-running from 0 and calibrates the read overhead.
     pub fn start() -> Self {
-        TIM2.cr1().write(|w| {
-            w.set_cen(false);
-            w.set_urs(Urs::COUNTER_ONLY);
-        });
-        TIM2.psc().write_value(0);
-        TIM2.arr().write_value(u32::MAX);
-        // UG loads the prescaler and zeroes the counter.
-        TIM2.egr().write(|w| w.set_ug(true));
-        TIM2.cr1().modify(|w| w.set_cen(true));
+        crate::tim2::start_free_running();
         let mut counter = Self { overhead: 0 };
         let (_, raw) = counter.measure(|| ());
         counter.overhead = raw;

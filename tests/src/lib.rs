@@ -11,6 +11,7 @@
 
 pub mod executor;
 pub mod icount;
+pub mod tim2;
 pub mod time_driver;
 pub mod usart;
 

@@ -9,13 +9,15 @@
 
 use core::cell::Cell;
 
-use model_core::link::{table_id, Injection, Slot, SlotInfo, LINK_TEMPS};
 use trueaxis_app::engine::{round_div, AxisConfig, Engine, EngineConfig};
 use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::memflash::MemFlash;
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::store::{Layout, TableStore};
+use trueaxis_protocol::{table_id, Injection, Slot, SlotInfo, LINK_TEMPS};
 use trueaxis_qemu as _;
+// xorshift64 with a fixed seed.
+use trueaxis_test_support::XorShift64 as Rng;
 
 static CUBIC19: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/cubic19.bin"));
 static FULL: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/full.bin"));
@@ -120,17 +122,6 @@ fn info(table: &[u8]) -> SlotInfo {
         seq: 1,
         len: table.len() as u32,
         crc32: table_id(table),
-    }
-}
-
-/// xorshift64 with a fixed seed.
-struct Rng(u64);
-impl Rng {
-    fn range(&mut self, lo: i64, hi: i64) -> i64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        lo + (self.0 % (hi - lo + 1) as u64) as i64
     }
 }
 

@@ -1,4 +1,5 @@
-//! `cargo xtask …` — the repository's tasks (CONTRACT.md §3).
+//! `cargo xtask …` — the repository's tasks (README.md, "Two commands";
+//! `bench-mcu`'s output in docs/qemu.md, "Instruction counts").
 //!
 //! `setup` installs what a fresh machine lacks, `test` runs every check CI
 //! runs, `demo` runs the main job end to end, `bench-mcu` counts instructions
@@ -293,10 +294,11 @@ fn test(args: &[String]) -> Result<()> {
         ],
     )?;
 
-    // Host tests (model-core, the host engine and CLI, xtask).
+    // Host tests (model-core, protocol, test-support, the host engine and CLI, xtask).
     run(&root, "cargo", &["test", "--workspace"])?;
 
-    // model-core must stay no_std: build and lint it for the MCU.
+    // model-core and the link protocol must stay no_std: build and lint
+    // them for the MCU.
     run(
         &root,
         "cargo",
@@ -304,6 +306,8 @@ fn test(args: &[String]) -> Result<()> {
             "clippy",
             "-p",
             "model-core",
+            "-p",
+            "trueaxis-protocol",
             "--target",
             THUMB,
             "--no-default-features",

@@ -23,7 +23,7 @@
 //! output, bad table) stay active until the host clears them — a glitch
 //! that was bad enough to happen once is worth a look by a person.
 
-use model_core::link::{Correction, Faults, Injection, SlotInfo, Telemetry, LINK_TEMPS};
+use trueaxis_protocol::{Correction, Faults, Injection, SlotInfo, Telemetry, LINK_TEMPS};
 
 use crate::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use crate::model::{self, ModelBuf, ModelInputs};
@@ -339,7 +339,7 @@ impl<'m> Engine<'m> {
         self.out_mnm.map(|m| round_div(m, 1000) as i32)
     }
 
-    /// What [`Request::ReadCorrection`](model_core::link::Request) answers.
+    /// What [`Request::ReadCorrection`](trueaxis_protocol::Request) answers.
     pub fn correction(&self) -> Correction {
         Correction {
             pos_nm: self.pos_nm,

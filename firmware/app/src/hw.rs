@@ -5,7 +5,7 @@
 //! type. Flash is `embedded_storage::nor_flash::NorFlash` (see `store`), the
 //! link is plain bytes in and out (see `server`).
 
-use model_core::link::LINK_TEMPS;
+use trueaxis_protocol::LINK_TEMPS;
 
 /// Quadrature encoders, one per axis (X, Y, Z).
 pub trait Encoders {

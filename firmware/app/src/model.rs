@@ -9,8 +9,8 @@
 //! swaps two references inside it — O(1) in the correction loop's critical
 //! section instead of a 26 KiB copy that would cost a period.
 
-use model_core::link::LINK_TEMPS;
 use model_core::{DirTracker, Flags, Inputs, MAX_TEMPS};
+use trueaxis_protocol::LINK_TEMPS;
 
 pub use model_core::FORMAT_VERSION;
 

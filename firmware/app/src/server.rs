@@ -1,6 +1,6 @@
 //! The link server: bytes in, bytes out, whatever the transport (USB
 //! CDC-ACM and USART on the board, a TCP socket in QEMU and in the host's
-//! end-to-end tests). Frames and messages are model-core's `link` module;
+//! end-to-end tests). Frames and messages are the `trueaxis-protocol` crate;
 //! this file is what the board *does* with each request.
 //!
 //! One [`Server`] owns the table store and the upload staging buffer; each
@@ -27,7 +27,7 @@
 
 use core::cell::RefCell;
 
-use model_core::link::{
+use trueaxis_protocol::{
     decode_message, encode_frame, FrameDecoder, Identity, LinkError, Packet, Request, Response,
     SlotInfo, MAX_CHUNK_BYTES, MAX_FRAME_BYTES, PROTOCOL_VERSION,
 };
@@ -316,7 +316,7 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                         size: u.size,
                     });
                 }
-                if model_core::link::table_id(&self.stage[..u.size as usize]) != u.crc32 {
+                if trueaxis_protocol::table_id(&self.stage[..u.size as usize]) != u.crc32 {
                     // The staged bytes are wrong: forget them, or the next
                     // UploadBegin of the same table would "resume" them.
                     self.upload = None;

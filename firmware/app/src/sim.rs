@@ -22,9 +22,9 @@ use std::vec::Vec;
 
 use core::cell::{Cell, RefCell};
 
-use model_core::link::LINK_TEMPS;
 use model_core::spec::{PolyCoef, TableSpec, TermSpec};
 use model_core::{Envelope, InputScaling};
+use trueaxis_protocol::LINK_TEMPS;
 
 use crate::engine::{AxisConfig, Engine, EngineConfig};
 use crate::hw::{Clock, Encoders, StepOutput, TemperatureSource};

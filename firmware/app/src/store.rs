@@ -2,7 +2,7 @@
 //! each holding one table with a commit sequence number. Boot uses the
 //! valid slot with the highest sequence number.
 //!
-//! **Slot layout**: `model_core::link::slot` (header with magic, sequence
+//! **Slot layout**: `trueaxis_protocol::slot` (header with magic, sequence
 //! number, length and CRCs; a revoke marker; the table) — shared with the
 //! host's `trueaxis flash`, which writes the same image through a probe.
 //!
@@ -40,11 +40,11 @@
 //! step of commits and rollbacks against [`MemFlash`](crate::memflash).
 
 use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
-use model_core::link::slot::{
+use trueaxis_protocol::slot::{
     decode_header, encode_header, is_live, BODY_AT, HEADER_AT, HEADER_BYTES, REVOKE_AT,
     REVOKE_BYTES,
 };
-use model_core::link::{table_id, Slot, SlotInfo};
+use trueaxis_protocol::{table_id, Slot, SlotInfo};
 
 /// Bytes written or compared per flash operation.
 const CHUNK: usize = 256;

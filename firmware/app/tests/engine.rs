@@ -5,12 +5,14 @@
 
 use std::cell::Cell;
 
-use model_core::link::{Faults, Slot, SlotInfo, LINK_TEMPS};
 use model_core::{DirTracker, Inputs, Model};
 use trueaxis_app::engine::{round_div, ConfigError, Engine, EngineConfig};
 use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::sim::{sample_table, sim_engine_config};
+use trueaxis_protocol::{Faults, Slot, SlotInfo, LINK_TEMPS};
+// Deterministic xorshift, so the random walk is the same on every run.
+use trueaxis_test_support::XorShift64 as Rng;
 
 struct Fake {
     counts: [i32; 3],
@@ -54,26 +56,12 @@ impl Clock for FakeClock {
     }
 }
 
-/// Deterministic xorshift, so the random walk is the same on every run.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn range(&mut self, lo: i64, hi: i64) -> i64 {
-        lo + (self.next() % (hi - lo + 1) as u64) as i64
-    }
-}
-
 fn info(table: &[u8]) -> SlotInfo {
     SlotInfo {
         slot: Slot::A,
         seq: 1,
         len: table.len() as u32,
-        crc32: model_core::link::table_id(table),
+        crc32: trueaxis_protocol::table_id(table),
     }
 }
 

@@ -7,14 +7,14 @@
 mod common;
 
 use common::{call, decode_all, install, stage};
-use model_core::link::{
-    encode_frame, table_id, Faults, Injection, LinkError, Packet, Request, Response, Slot,
-    LINK_TEMPS, MAX_FRAME_BYTES,
-};
 use model_core::{parse, Inputs, Model};
 use proptest::prelude::*;
 use trueaxis_app::server::Port;
 use trueaxis_app::sim::{sample_table, SimBoard};
+use trueaxis_protocol::{
+    encode_frame, table_id, Faults, Injection, LinkError, Packet, Request, Response, Slot,
+    LINK_TEMPS, MAX_FRAME_BYTES,
+};
 
 fn injection(pos_nm: [i32; 3]) -> Injection {
     let mut temp_mc = [20_000; LINK_TEMPS];
@@ -48,7 +48,7 @@ fn empty_board_identifies_and_reports_no_table() {
         panic!()
     };
     assert_eq!(id.active, None);
-    assert_eq!(id.protocol, model_core::link::PROTOCOL_VERSION);
+    assert_eq!(id.protocol, trueaxis_protocol::PROTOCOL_VERSION);
     assert_eq!(id.table_format, model_core::FORMAT_VERSION);
     b.tick(3);
     let Response::Status(t) = call(&mut b, &mut p, 10, Request::Status) else {

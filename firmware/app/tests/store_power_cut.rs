@@ -5,9 +5,9 @@
 //! new one — never garbage, never nothing. Also torn operations (the cut
 //! operation half done), bit rot in a slot, and the rollback.
 
-use model_core::link::{Slot, SlotInfo};
 use trueaxis_app::memflash::MemFlash;
 use trueaxis_app::store::{Layout, StoreError, TableStore};
+use trueaxis_protocol::{Slot, SlotInfo};
 
 /// Small erase units (4 KiB, like many NOR chips) give a commit many cut
 /// points; the F405's 128 KiB sectors are a special case of this.

@@ -12,9 +12,9 @@ use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
 use embassy_usb::{Builder, UsbDevice};
 use embedded_io_async::{Read, Write};
 use heapless::Vec;
-use model_core::link::MAX_FRAME_BYTES;
 use static_cell::StaticCell;
 use trueaxis_app::server::Port;
+use trueaxis_protocol::MAX_FRAME_BYTES;
 
 use crate::board::UsbDriver;
 use crate::shared::{BoardServer, SharedEngine};

@@ -29,11 +29,11 @@ use embassy_time::{Duration, Instant, Ticker, Timer};
 use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
 
-use model_core::link::LINK_TEMPS;
 use trueaxis_app::engine::Engine;
 use trueaxis_app::hw::{Clock, TemperatureSource};
 use trueaxis_app::server::{Server, ServerConfig};
 use trueaxis_app::store::TableStore;
+use trueaxis_protocol::LINK_TEMPS;
 
 use crate::shared::SharedEngine;
 

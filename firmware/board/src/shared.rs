@@ -22,11 +22,11 @@ use embassy_stm32::flash::{Blocking, Flash};
 use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, ThreadModeRawMutex};
 use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
 use embassy_sync::mutex::Mutex;
-use model_core::link::LINK_TEMPS;
 use static_cell::{ConstStaticCell, StaticCell};
 use trueaxis_app::engine::Engine;
 use trueaxis_app::model::ModelBuf;
 use trueaxis_app::server::{EngineAccess, Server};
+use trueaxis_protocol::LINK_TEMPS;
 
 /// The engine, shared between the correction loop and the link server.
 pub struct SharedEngine(pub BlockingMutex<CriticalSectionRawMutex, RefCell<Engine<'static>>>);

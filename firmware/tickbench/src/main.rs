@@ -30,12 +30,17 @@ use core::cell::Cell;
 use core::hint::black_box;
 
 use model_core::board;
-use model_core::link::{Slot, SlotInfo, LINK_TEMPS};
 use semihosting::println;
-use stm32_metapac::{timer::vals::Urs, TIM2};
+use stm32_metapac::TIM2;
 use trueaxis_app::engine::{AxisConfig, Engine, EngineConfig};
 use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::model::{load_into, ModelBuf};
+use trueaxis_protocol::{Slot, SlotInfo, LINK_TEMPS};
+
+// The QEMU crate's TIM2 set-up (one copy), included by path: linking that
+// crate would bring its defmt logger and handlers into this image.
+#[path = "../../../tests/src/tim2.rs"]
+mod tim2;
 
 /// The tables, by name.
 static TABLES: [(&str, &[u8]); 6] = [
@@ -171,14 +176,7 @@ fn run(name: &str, engine: &mut Engine<'_>, n: u32, est_fixed: u32) {
 
 #[cortex_m_rt::entry]
 fn main() -> ! {
-    TIM2.cr1().write(|w| {
-        w.set_cen(false);
-        w.set_urs(Urs::COUNTER_ONLY);
-    });
-    TIM2.psc().write_value(0);
-    TIM2.arr().write_value(u32::MAX);
-    TIM2.egr().write(|w| w.set_ug(true));
-    TIM2.cr1().modify(|w| w.set_cen(true));
+    tim2::start_free_running();
 
     println!(
         "BUDGET period={} tick={} engine={} model={}",
@@ -205,7 +203,7 @@ fn main() -> ! {
             slot: Slot::A,
             seq: 1,
             len: table.len() as u32,
-            crc32: model_core::link::table_id(table),
+            crc32: trueaxis_protocol::table_id(table),
         };
         let mut engine = match Engine::new(CONFIG) {
             Ok(e) => e,

@@ -9,7 +9,7 @@ use std::io::{self, Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
-use model_core::link::{
+use trueaxis_protocol::{
     decode_message, encode_frame, table_id, FrameDecoder, Identity, LinkError, Packet, Request,
     Response, SlotInfo, Telemetry, MAX_CHUNK_BYTES, MAX_FRAME_BYTES, PROTOCOL_VERSION,
 };
@@ -518,7 +518,7 @@ fn unexpected(what: &'static str, r: Response) -> ClientError {
 /// JSON for a slot.
 pub fn slot_json(s: &SlotInfo) -> serde_json::Value {
     serde_json::json!({
-        "slot": match s.slot { model_core::link::Slot::A => "A", model_core::link::Slot::B => "B" },
+        "slot": match s.slot { trueaxis_protocol::Slot::A => "A", trueaxis_protocol::Slot::B => "B" },
         "seq": s.seq,
         "bytes": s.len,
         "crc32": format!("{:#010x}", s.crc32),

@@ -17,14 +17,14 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use model_core::link::{
-    encode_frame, table_id, FrameDecoder, Injection, Packet, Request, Response, LINK_TEMPS,
-    MAX_FRAME_BYTES,
-};
 use model_core::{parse, Inputs, Model};
 use serde_json::Value;
 use trueaxis::link::{Client, Timing};
 use trueaxis_app::sim::{sample_spec, sample_table, SimBoard};
+use trueaxis_protocol::{
+    encode_frame, table_id, FrameDecoder, Injection, Packet, Request, Response, LINK_TEMPS,
+    MAX_FRAME_BYTES,
+};
 
 /// A simulated board on a loopback port; stopped on drop.
 struct Board {
@@ -264,7 +264,7 @@ fn lossy_proxy(board: &str, lost: fn(&Request) -> bool) -> String {
                 // Noted before it is passed on, so the answer cannot overtake it.
                 let mut input = &buf[..n];
                 while let Some(f) = dec.feed(&mut input) {
-                    let Ok(p) = f.and_then(model_core::link::decode_message::<Packet<Request>>)
+                    let Ok(p) = f.and_then(trueaxis_protocol::decode_message::<Packet<Request>>)
                     else {
                         continue;
                     };
@@ -292,7 +292,8 @@ fn lossy_proxy(board: &str, lost: fn(&Request) -> bool) -> String {
             }
             let mut input = &buf[..n];
             while let Some(f) = dec.feed(&mut input) {
-                let Ok(p) = f.and_then(model_core::link::decode_message::<Packet<Response>>) else {
+                let Ok(p) = f.and_then(trueaxis_protocol::decode_message::<Packet<Response>>)
+                else {
                     continue;
                 };
                 if !dropped && Some(p.seq) == *lost_seq.lock().unwrap() {
@@ -446,7 +447,7 @@ fn garbage_on_the_line_does_not_stick_the_board() {
         assert!(k > 0, "board closed the link");
         let mut input = &buf[..k];
         while let Some(f) = dec.feed(&mut input) {
-            let p: Packet<Response> = model_core::link::decode_message(f.unwrap()).unwrap();
+            let p: Packet<Response> = trueaxis_protocol::decode_message(f.unwrap()).unwrap();
             answered |= p.seq == 5 && matches!(p.msg, Response::Identity(_));
         }
     }

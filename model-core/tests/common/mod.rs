@@ -1,4 +1,5 @@
-//! Shared test fixtures: a tiny deterministic RNG (SplitMix64, so generated
+//! Shared test fixtures: a tiny deterministic RNG (SplitMix64 from
+//! `trueaxis-test-support`, so generated
 //! models are identical on every run and every machine) and generators of
 //! realistic random table specs and inputs — corrections up to ±200 µm,
 //! travel up to ±1 m, temperatures 10–40 °C — used by the accuracy
@@ -16,32 +17,8 @@ use model_core::{
     MlpInputSpec, MlpSource, MlpSpec, Model, TableSpec, TermSpec, MAX_TEMPS,
 };
 
-/// SplitMix64.
-#[derive(Clone, Debug)]
-pub struct Rng(pub u64);
-
-impl Rng {
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    pub fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.unit()
-    }
-    pub fn int(&mut self, lo: i64, hi_incl: i64) -> i64 {
-        lo + (self.next_u64() % (hi_incl - lo + 1) as u64) as i64
-    }
-    pub fn sym(&mut self, a: f64) -> f64 {
-        self.range(-a, a)
-    }
-}
+/// SplitMix64, the one copy in `test-support`.
+pub use trueaxis_test_support::SplitMix64 as Rng;
 
 /// Which term kinds a generated spec contains.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -8,11 +8,13 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use model_core::link::{
+use model_core::{Inputs, Model, MAX_TEMPS};
+// splitmix64 with a fixed seed: the same trajectory and garbage every run.
+use trueaxis_protocol::{
     table_id, Correction, Faults, Injection, LinkError, Request, Response, SlotInfo, LINK_TEMPS,
     MAX_CHUNK_BYTES,
 };
-use model_core::{Inputs, Model, MAX_TEMPS};
+use trueaxis_test_support::SplitMix64 as Rng;
 
 use crate::link::LinkClient;
 use crate::Cli;
@@ -54,23 +56,6 @@ impl HostTable {
             tool_nm: inj.tool_nm,
         });
         (out.corr_nm, out.flags.bits())
-    }
-}
-
-/// splitmix64 with a fixed seed: the same trajectory and garbage every run.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 
@@ -360,9 +345,9 @@ pub fn check(cli: &Cli) -> Result<(), String> {
     let mut rng = Rng(0x6A2B_A6E0_0000_0001);
     let garbage: Vec<u8> = (0..4096).map(|_| rng.next_u64() as u8).collect();
     link.send_raw(&garbage).map_err(|e| e.to_string())?;
-    let mut half = vec![0u8; model_core::link::MAX_FRAME_BYTES];
-    let n = model_core::link::encode_frame(
-        &model_core::link::Packet {
+    let mut half = vec![0u8; trueaxis_protocol::MAX_FRAME_BYTES];
+    let n = trueaxis_protocol::encode_frame(
+        &trueaxis_protocol::Packet {
             seq: 7,
             msg: Request::Status,
         },

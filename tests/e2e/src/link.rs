@@ -1,4 +1,4 @@
-//! A minimal blocking client of model-core's link protocol over TCP (QEMU's
+//! A minimal blocking client of the link protocol (trueaxis-protocol) over TCP (QEMU's
 //! serial socket): one request, one response with the same sequence number,
 //! retried on timeout as the protocol prescribes. Used to inject positions,
 //! read corrections, and to cut uploads short on purpose — things
@@ -8,7 +8,7 @@ use std::io::{ErrorKind, Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
-use model_core::link::{
+use trueaxis_protocol::{
     decode_message, encode_frame, FrameDecoder, Packet, Request, Response, MAX_FRAME_BYTES,
 };
 
@@ -23,7 +23,7 @@ pub enum LinkClientError {
         what: String,
     },
     /// The request does not fit a frame (a bug of the caller).
-    Encode(model_core::link::FrameError),
+    Encode(trueaxis_protocol::FrameError),
 }
 
 impl std::fmt::Display for LinkClientError {

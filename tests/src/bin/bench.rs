@@ -2,7 +2,8 @@
 //! table (build/tables.rs, encoded by the build script) on a trajectory of
 //! inputs and counts the instructions of every evaluation with the TIM2
 //! counter (exact under `-icount shift=0`, see `icount`). One `BENCH` log
-//! line per model kind; xtask turns them into CONTRACT.md §3 JSON lines.
+//! line per model kind; xtask turns them into the JSON lines of
+//! `cargo xtask bench-mcu` (docs/qemu.md, "Instruction counts").
 //!
 //! Tables: the list build.rs generates (`BENCH_TABLES`), each as
 //! `<name>_f32` and `<name>_fixed`. What is counted: one call of

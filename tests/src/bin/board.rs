@@ -16,13 +16,13 @@ use core::cell::RefCell;
 
 use critical_section::Mutex;
 use embassy_time::{Duration, Instant, Ticker};
-use model_core::link::LINK_TEMPS;
 use trueaxis_app::engine::{AxisConfig, Engine, EngineConfig};
 use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::memflash::MemFlash;
 use trueaxis_app::model::ModelBuf;
 use trueaxis_app::server::{EngineAccess, Port, Server, ServerConfig};
 use trueaxis_app::store::{Layout, TableStore};
+use trueaxis_protocol::LINK_TEMPS;
 use trueaxis_qemu::{executor::WfiExecutor, time_driver, usart::Usart1};
 
 /// One table slot (header + table), bytes: three erase units. Small

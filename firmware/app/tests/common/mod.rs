@@ -1,12 +1,12 @@
 //! Test helpers: a tiny in-process link client for the simulated board.
 #![allow(dead_code)]
 
-use model_core::link::{
+use trueaxis_app::server::Port;
+use trueaxis_app::sim::SimBoard;
+use trueaxis_protocol::{
     decode_message, encode_frame, FrameDecoder, Packet, Request, Response, MAX_CHUNK_BYTES,
     MAX_FRAME_BYTES,
 };
-use trueaxis_app::server::Port;
-use trueaxis_app::sim::SimBoard;
 
 /// Frames `req`, feeds it to the board and decodes the one answer.
 pub fn call(board: &mut SimBoard, port: &mut Port, seq: u16, req: Request<'_>) -> Response {
@@ -62,7 +62,7 @@ pub fn stage(board: &mut SimBoard, port: &mut Port, seq: u16, table: &[u8], crc3
 
 /// Uploads, commits and activates `table`.
 pub fn install(board: &mut SimBoard, port: &mut Port, table: &[u8]) -> Response {
-    stage(board, port, 1, table, model_core::link::table_id(table));
+    stage(board, port, 1, table, trueaxis_protocol::table_id(table));
     let r = call(board, port, 3, Request::Commit);
     assert!(matches!(r, Response::Committed(_)), "{r:?}");
     call(board, port, 4, Request::Activate)

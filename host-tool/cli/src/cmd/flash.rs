@@ -18,10 +18,10 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use model_core::link::{slot, table_id, Slot};
 use probe_rs::flashing::DownloadOptions;
 use probe_rs::probe::list::Lister;
 use probe_rs::{MemoryInterface, Permissions};
+use trueaxis_protocol::{slot, table_id, Slot};
 
 use crate::cmd::input;
 use crate::cmd::out::outln;

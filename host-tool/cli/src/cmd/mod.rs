@@ -72,7 +72,7 @@ pub fn model_flag_names(bits: u16) -> Vec<String> {
 
 /// Telemetry JSON ([`crate::link::telemetry_json`]) with the model flags
 /// also by name (`model_flags_names`).
-pub fn telemetry_json(t: &model_core::link::Telemetry) -> serde_json::Value {
+pub fn telemetry_json(t: &trueaxis_protocol::Telemetry) -> serde_json::Value {
     let mut v = crate::link::telemetry_json(t);
     v["model_flags_names"] = serde_json::json!(model_flag_names(t.model_flags));
     v

@@ -8,9 +8,12 @@
 //! tests and the Monte Carlo benchmark need exact control of what is hidden
 //! and where — the answer key — and of the misfit, which must lie outside
 //! the seed's span by construction. Everything is deterministic for a seed
-//! (a SplitMix64 stream: no dependency, bit-identical on every platform).
+//! (the SplitMix64 stream of `trueaxis-test-support`, bit-identical on
+//! every platform).
 
 use std::f64::consts::TAU;
+
+use trueaxis_test_support::SplitMix64;
 
 use crate::data::{Dataset, TempChannel};
 use crate::features::{kinematic, lagged, Norm, CUBIC19};
@@ -126,31 +129,11 @@ impl Default for SynthConfig {
     }
 }
 
-/// SplitMix64 with Box–Muller normals.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self) -> f64 {
-        ((self.next_u64() >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn normal(&mut self) -> f64 {
-        let (u1, u2) = (self.uniform(), self.uniform());
-        (-2.0 * u1.ln()).sqrt() * (TAU * u2).cos()
-    }
-}
-
 const TRAVEL_MM: [f64; 3] = [800.0, 500.0, 500.0];
 
 /// Generates the data set.
 pub fn generate(cfg: &SynthConfig) -> Dataset {
-    let mut rng = Rng(cfg.seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ 0x5EED);
+    let mut rng = SplitMix64(cfg.seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ 0x5EED);
     // Passes: (fixed positions, moving axis, start, stop, step).
     let mut pts: Vec<([f64; 3], [i8; 3], i64)> = Vec::new();
     let mut pass = 0i64;
@@ -273,8 +256,8 @@ pub fn generate(cfg: &SynthConfig) -> Dataset {
         for e in err.iter_mut() {
             // A smooth bump at a random place, with the seed's part removed
             // so that exactly `misfit_um` RMS is left for no model to fit.
-            let c = [0; 3].map(|_| 1.2 * rng.uniform() - 0.6);
-            let w = 0.25 + 0.2 * rng.uniform();
+            let c = [0; 3].map(|_| 1.2 * rng.unit_open() - 0.6);
+            let w = 0.25 + 0.2 * rng.unit_open();
             let bump: Vec<f64> = (0..n)
                 .map(|r| {
                     let uu = u(r);

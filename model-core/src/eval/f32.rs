@@ -1,0 +1,430 @@
+//! The f32 evaluation path, the fast path on the Cortex-M4F's FPU:
+//! [`ModelCap::eval_f32`] with its flat layout for the common tables (every
+//! term a reversal, a periodic term or a thermal/Abbe term of degree ≤ 1),
+//! the general term loop, and the per-kind term kernels (factored, periodic,
+//! MLP, grid). Results are rounded to whole nm once, at the end.
+
+use super::kernels::{grid_cell, mlp_source, mono20_f32, mono56_f32, phase_turns};
+use super::{Factor, Flags, GridAxis, Inputs, ModelCap, Outputs, Term, MAX_TEMPS};
+use crate::limits::{MAX_HIDDEN_UNITS, MAX_MLP_INPUTS, MAX_MONOMIALS};
+use crate::math::{sincos_f32, tanh_f32, ONE_Q30};
+
+impl<const P: usize, const G: usize> ModelCap<P, G> {
+    /// Evaluate in f32 (the fast path on the Cortex-M4F).
+    pub fn eval_f32(&self, inp: &Inputs) -> Outputs {
+        let mut flags = Flags::empty();
+        let pos = self.hold_pos(inp.pos_nm, &mut flags);
+        // |p − c| ≤ half-span < 2^31 (validated), so the wrapping i32
+        // difference is exact.
+        // Computed only when the table has polynomials.
+        let u = || {
+            [
+                pos[0].wrapping_sub(self.centre_nm[0]) as f32 * self.inv_half_f32[0],
+                pos[1].wrapping_sub(self.centre_nm[1]) as f32 * self.inv_half_f32[1],
+                pos[2].wrapping_sub(self.centre_nm[2]) as f32 * self.inv_half_f32[2],
+            ]
+        };
+        // Monomials up to degree 3 (the common case) are one straight-line
+        // expression and the block loop has a constant trip count. All other
+        // terms are evaluated out of line (recomputing the monomials they
+        // need), so they cost the polynomial path nothing — no spilled
+        // monomials, no hoisted constants — when a table has none.
+        let out = if self.terms.is_empty() {
+            match self.n_monos {
+                0 => [0.0; 3],
+                1..=20 => self.block_f32(&mono20_f32(u())),
+                _ => self.block_f32(&mono56_f32(u())),
+            }
+        } else if self.flat {
+            // The flat terms read u itself, so the monomials stay in registers.
+            let uv = u();
+            let mut out = match self.n_monos {
+                0 => [0.0; 3],
+                1..=20 => self.block_f32(&mono20_f32(uv)),
+                _ => self.block_f32(&mono56_f32(uv)),
+            };
+            self.flat_f32(uv, &pos, inp, &mut flags, &mut out);
+            out
+        } else {
+            // The monomials are handed to the thermal/Abbe terms.
+            match self.n_monos {
+                0 => {
+                    let mut out = [0.0; 3];
+                    self.terms_f32(&[], &pos, inp, &mut flags, &mut out);
+                    out
+                }
+                1..=20 => {
+                    let mv = mono20_f32(u());
+                    let mut out = self.block_f32(&mv);
+                    self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
+                    out
+                }
+                _ => {
+                    let mv = mono56_f32(u());
+                    let mut out = self.block_f32(&mv);
+                    self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
+                    out
+                }
+            }
+        };
+        let mut corr = [0i32; 3];
+        for o in 0..3 {
+            // Absent outputs have no coefficients and no terms: they are 0.
+            let v = out[o];
+            let max = self.max_corr_f32[o];
+            let c = if v.abs() <= max {
+                v // the common case; NaN fails the comparison
+            } else if v > max {
+                flags.insert(Flags::CLAMPED);
+                max
+            } else if v < -max {
+                flags.insert(Flags::CLAMPED);
+                -max
+            } else {
+                flags.insert(Flags::NOT_FINITE);
+                0.0
+            };
+            // Round to nearest (ties to even) with the 1.5·2^23 trick: exact
+            // for |c| < 2^22, which MAX_CORR_LIMIT_NM guarantees.
+            corr[o] = ((c + ROUND_MAGIC) - ROUND_MAGIC) as i32;
+        }
+        Outputs {
+            corr_nm: corr,
+            flags,
+        }
+    }
+
+    #[inline(always)]
+    fn block_f32<const N: usize>(&self, mv: &[f32; N]) -> [f32; 3] {
+        if !self.has_block {
+            return [0.0; 3];
+        }
+        let (mut a0, mut a1, mut a2) = (0.0f32, 0.0f32, 0.0f32);
+        for i in 0..N.min(MAX_MONOMIALS) {
+            let (m, c) = (mv[i], self.block_f32[i]);
+            a0 += c[0] * m;
+            a1 += c[1] * m;
+            a2 += c[2] * m;
+        }
+        [a0, a1, a2]
+    }
+
+    /// Thermal/Abbe, periodic and reversal terms from their per-kind arrays.
+    #[inline(never)]
+    fn flat_f32(
+        &self,
+        u: [f32; 3],
+        pos: &[i32; 3],
+        inp: &Inputs,
+        flags: &mut Flags,
+        out: &mut [f32; 3],
+    ) {
+        let (temp, tool) = self.hold_aux(inp, flags);
+        let mut acc = [out[0], out[1], out[2], 0.0f32];
+        for f in self.fac_f32.iter() {
+            let s = f.c[0] + f.c[1] * u[0] + f.c[2] * u[1] + f.c[3] * u[2];
+            let v = if f.src < 4 {
+                temp[f.src as usize & 3]
+            } else {
+                tool
+            };
+            acc[f.output as usize & 3] += s * v.wrapping_sub(f.offset) as f32;
+        }
+        for p in self.per_f32.iter() {
+            let d = pos
+                .get(p.axis as usize)
+                .copied()
+                .unwrap_or(0)
+                .wrapping_sub(p.base_nm) as u32;
+            let r = d % p.period;
+            let theta = r
+                .wrapping_mul(p.turns.int)
+                .wrapping_add(((r as u64 * p.turns.frac as u64) >> 32) as u32);
+            let (s1, c1) = sincos_f32(theta);
+            let (mut s, mut co) = (s1, c1);
+            let mut v = 0.0f32;
+            for ab in p.ab.iter().take(p.harmonics as usize) {
+                v += ab[0] * s + ab[1] * co;
+                let sn = s * c1 + co * s1;
+                co = co * c1 - s * s1;
+                s = sn;
+            }
+            acc[p.output as usize & 3] += v;
+        }
+        if self.has_rev {
+            // Held to ±1 (the upper bound 1 − 2^-30 makes it one SSAT).
+            let r = inp.rev_q30.map(|r| r.clamp(-ONE_Q30, ONE_Q30 - 1) as f32);
+            for (ra, rv) in self.rev_f32.iter().zip(r) {
+                acc[0] += ra[0] * rv;
+                acc[1] += ra[1] * rv;
+                acc[2] += ra[2] * rv;
+            }
+        }
+        *out = [acc[0], acc[1], acc[2]];
+    }
+
+    #[inline(never)]
+    fn terms_f32(
+        &self,
+        mv: &[f32],
+        pos: &[i32; 3],
+        inp: &Inputs,
+        flags: &mut Flags,
+        out: &mut [f32; 3],
+    ) {
+        // Each kind is its own out-of-line function taking the term by
+        // reference: this loop then hoists nothing and costs a few
+        // instructions per term.
+        let (temp, tool) = self.hold_aux(inp, flags);
+        for t in self.terms.iter() {
+            let (o, v) = match t {
+                Term::Factored { output, .. } => (*output, self.factored_f32(t, mv, &temp, tool)),
+                Term::Periodic { output, .. } => (*output, self.periodic_f32(t, pos)),
+                Term::Reversal {
+                    output,
+                    axis,
+                    amp_f32,
+                    ..
+                } => {
+                    let r = inp.rev_q30[*axis as usize % 3].clamp(-ONE_Q30, ONE_Q30);
+                    (*output, amp_f32 * r as f32)
+                }
+                Term::Grid {
+                    output,
+                    axes,
+                    start,
+                } => (*output, self.grid_f32(axes, *start as usize, pos)),
+                Term::Mlp { .. } => {
+                    self.mlp_f32(t, pos, &temp, out);
+                    continue;
+                }
+            };
+            out[o as usize % 3] += v;
+        }
+    }
+
+    #[inline(never)]
+    fn factored_f32(&self, t: &Term, mv: &[f32], temp: &[i32; MAX_TEMPS], tool: i32) -> f32 {
+        let Term::Factored {
+            factor, start, len, ..
+        } = *t
+        else {
+            return 0.0;
+        };
+        let (s, e) = (start as usize, start as usize + len as usize);
+        let mut v = 0.0f32;
+        if let (Some(c), Some(idx)) = (self.pf.get(s..e), self.pidx.get(s..e)) {
+            for (c, &i) in c.iter().zip(idx) {
+                v += c * mv.get(i as usize).copied().unwrap_or(0.0);
+            }
+        }
+        let f = match factor {
+            Factor::Temp { ch, t_ref_mc } => temp[ch as usize & 3].wrapping_sub(t_ref_mc) as f32,
+            Factor::Tool => tool as f32,
+        };
+        v * f
+    }
+
+    /// Σ a_k sin kθ + b_k cos kθ: the first harmonic from the table, the
+    /// others by the angle-addition recurrence (4 multiplies each).
+    #[inline(never)]
+    fn periodic_f32(&self, t: &Term, pos: &[i32; 3]) -> f32 {
+        let Term::Periodic {
+            axis,
+            harmonics,
+            period_nm,
+            turns,
+            start,
+            ..
+        } = *t
+        else {
+            return 0.0;
+        };
+        let theta = phase_turns(pos[axis as usize % 3], period_nm, turns);
+        let (s1, c1) = sincos_f32(theta);
+        let c = self
+            .pf
+            .get(start as usize..start as usize + 2 * harmonics as usize)
+            .unwrap_or(&[]);
+        let (mut s, mut co) = (s1, c1);
+        let mut v = 0.0f32;
+        for ab in c.chunks_exact(2) {
+            v += ab[0] * s + ab[1] * co;
+            let sn = s * c1 + co * s1;
+            co = co * c1 - s * s1;
+            s = sn;
+        }
+        v
+    }
+
+    /// The MLP in f32. The last hidden layer is fused with the linear output
+    /// layer (each unit's activation is consumed as soon as it is computed),
+    /// so a one-hidden-layer net needs no activation buffer at all.
+    #[inline(never)]
+    fn mlp_f32(&self, t: &Term, pos: &[i32; 3], temp: &[i32; MAX_TEMPS], out: &mut [f32; 3]) {
+        let Term::Mlp {
+            outputs,
+            n_in,
+            n_layers,
+            widths,
+            n_out,
+            in_start,
+            start,
+            ..
+        } = *t
+        else {
+            return;
+        };
+        let n_in = (n_in as usize).min(MAX_MLP_INPUTS);
+        let n_out = (n_out as usize).min(3);
+        let mut x = [0.0f32; MAX_MLP_INPUTS];
+        for (xi, mi) in x
+            .iter_mut()
+            .zip(&self.mlp_in[in_start as usize..in_start as usize + n_in])
+        {
+            // |v − mid| < 2^31 over the envelope (checked at load).
+            *xi = mlp_source(mi.src, pos, temp).wrapping_sub(mi.mid) as f32 * mi.k_f32;
+        }
+        let x = &x[..n_in];
+        let mut k = start as usize;
+        let h1: [f32; MAX_HIDDEN_UNITS];
+        let (src, prev): (&[f32], usize) = if n_layers >= 2 {
+            let width = (widths[0] as usize).min(MAX_HIDDEN_UNITS);
+            let (w, rest) = self.pf[k..].split_at(width * n_in);
+            let b = &rest[..width];
+            h1 = core::array::from_fn(|j| match (w.get(j * n_in..(j + 1) * n_in), b.get(j)) {
+                (Some(row), Some(&bj)) => tanh_f32(bj + dot_f32(row, x)),
+                _ => 0.0,
+            });
+            k += width * n_in + width;
+            (&h1[..width], width)
+        } else {
+            (x, n_in)
+        };
+        let width = (widths[(n_layers as usize).clamp(1, 2) - 1] as usize).min(MAX_HIDDEN_UNITS);
+        let blk = self.pf.get(k..).unwrap_or(&[]);
+        // Monomorphised (fully unrolled) for the common shapes.
+        let acc = match (prev, n_out) {
+            (3, 3) => fused_f32::<3, 3>(blk, src, width),
+            (4, 3) => fused_f32::<4, 3>(blk, src, width),
+            (3, 1) => fused_f32::<3, 1>(blk, src, width),
+            (16, 3) => fused_f32::<16, 3>(blk, src, width),
+            _ => fused_f32_dyn(blk, src, width, n_out),
+        };
+        let mut j = 0;
+        for o in 0..3 {
+            if outputs & (1 << o) != 0 {
+                out[o] += acc[j % 3];
+                j += 1;
+            }
+        }
+    }
+
+    #[inline(never)]
+    fn grid_f32(&self, axes: &[GridAxis; 3], start: usize, pos: &[i32; 3]) -> f32 {
+        let mut idx = [0usize; 3];
+        let mut nxt = [0usize; 3];
+        let mut t = [0.0f32; 3];
+        for a in 0..3 {
+            let (i, frac) = grid_cell(&axes[a], pos[a]);
+            idx[a] = i;
+            nxt[a] = if (i + 1) < axes[a].nodes as usize {
+                i + 1
+            } else {
+                i
+            };
+            t[a] = frac as f32 * axes[a].inv_step_f32;
+        }
+        let nx = axes[0].nodes as usize;
+        let nxy = nx * axes[1].nodes as usize;
+        let g = |x: usize, y: usize, z: usize| {
+            self.grid
+                .get(start + x + nx * y + nxy * z)
+                .copied()
+                .unwrap_or(0) as f32
+        };
+        let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+        let c00 = lerp(g(idx[0], idx[1], idx[2]), g(nxt[0], idx[1], idx[2]), t[0]);
+        let c10 = lerp(g(idx[0], nxt[1], idx[2]), g(nxt[0], nxt[1], idx[2]), t[0]);
+        let c01 = lerp(g(idx[0], idx[1], nxt[2]), g(nxt[0], idx[1], nxt[2]), t[0]);
+        let c11 = lerp(g(idx[0], nxt[1], nxt[2]), g(nxt[0], nxt[1], nxt[2]), t[0]);
+        let c0 = lerp(c00, c10, t[1]);
+        let c1 = lerp(c01, c11, t[1]);
+        lerp(c0, c1, t[2]) * (1.0 / 256.0)
+    }
+}
+
+/// The last hidden layer fused with the output layer, f32: per unit the
+/// record [bias, NI weights, NO output weights]; then NO output biases.
+#[inline(always)]
+fn fused_f32<const NI: usize, const NO: usize>(blk: &[f32], x: &[f32], width: usize) -> [f32; 3] {
+    let mut acc = [0.0f32; 3];
+    let Ok(x) = <&[f32; NI]>::try_from(x) else {
+        return acc;
+    };
+    let stride = 1 + NI + NO;
+    let (Some(units), Some(bo)) = (
+        blk.get(..width * stride),
+        blk.get(width * stride..width * stride + NO),
+    ) else {
+        return acc;
+    };
+    let mut a = [0.0f32; NO];
+    for (ai, &b) in a.iter_mut().zip(bo) {
+        *ai = b;
+    }
+    for u in units.chunks_exact(stride) {
+        let (b, w, wo) = (u[0], &u[1..1 + NI], &u[1 + NI..]);
+        let (Ok(w), Ok(wo)) = (<&[f32; NI]>::try_from(w), <&[f32; NO]>::try_from(wo)) else {
+            continue;
+        };
+        let mut z = b;
+        for i in 0..NI {
+            z += w[i] * x[i];
+        }
+        let h = tanh_f32(z);
+        for o in 0..NO {
+            a[o] += wo[o] * h;
+        }
+    }
+    for (ac, ai) in acc.iter_mut().zip(a) {
+        *ac = ai;
+    }
+    acc
+}
+
+/// [`fused_f32`] for any shape.
+fn fused_f32_dyn(blk: &[f32], x: &[f32], width: usize, n_out: usize) -> [f32; 3] {
+    let mut acc = [0.0f32; 3];
+    let stride = 1 + x.len() + n_out;
+    let (Some(units), Some(bo)) = (
+        blk.get(..width * stride),
+        blk.get(width * stride..width * stride + n_out),
+    ) else {
+        return acc;
+    };
+    for (a, &b) in acc.iter_mut().zip(bo) {
+        *a = b;
+    }
+    for u in units.chunks_exact(stride) {
+        let (w, wo) = u[1..].split_at(x.len());
+        let h = tanh_f32(u[0] + dot_f32(w, x));
+        for (a, &wj) in acc.iter_mut().zip(wo) {
+            *a += wj * h;
+        }
+    }
+    acc
+}
+
+/// Dot product with the common tiny input counts unrolled.
+#[inline(always)]
+fn dot_f32(row: &[f32], x: &[f32]) -> f32 {
+    match (row, x) {
+        ([a, b, c], [p, q, r, ..]) => a * p + b * q + c * r,
+        ([a, b, c, d], [p, q, r, s, ..]) => a * p + b * q + c * r + d * s,
+        _ => row.iter().zip(x).fold(0.0, |z, (w, v)| z + w * v),
+    }
+}
+
+/// 1.5 · 2^23: adding and subtracting it rounds an f32 of magnitude < 2^22 to an integer.
+const ROUND_MAGIC: f32 = 12_582_912.0;

@@ -1,0 +1,387 @@
+//! The integer-only fixed-point evaluation path: [`ModelCap::eval_fixed`],
+//! bit-exact between the host and thumbv7em because it is the same integer
+//! code. Positions nm (i32), normalised positions and monomials Q30, sin/cos
+//! and tanh Q30, corrections accumulated in i64 Q16 nm and rounded to nm at
+//! the end; every coefficient set carries the binary scale the loader chose
+//! so the accumulations cannot overflow inside the envelope.
+
+use super::kernels::{grid_cell, mlp_source, mono20_q30, mono56_q30, phase_turns, rshr};
+use super::{Factor, Flags, GridAxis, Inputs, ModelCap, Outputs, Term, MAX_TEMPS};
+use crate::limits::{MAX_HIDDEN_UNITS, MAX_MLP_INPUTS, MAX_MONOMIALS};
+use crate::math::{sincos_q30, tanh_q30, ONE_Q30, TANH_IN_FRAC};
+
+impl<const P: usize, const G: usize> ModelCap<P, G> {
+    #[inline(never)]
+    fn grid_fixed(&self, axes: &[GridAxis; 3], start: usize, pos: &[i32; 3]) -> i64 {
+        let mut idx = [0usize; 3];
+        let mut nxt = [0usize; 3];
+        let mut t = [0i64; 3];
+        for a in 0..3 {
+            let (i, frac) = grid_cell(&axes[a], pos[a]);
+            idx[a] = i;
+            nxt[a] = if (i + 1) < axes[a].nodes as usize {
+                i + 1
+            } else {
+                i
+            };
+            t[a] = axes[a].t_scale.apply(frac) as i64;
+        }
+        let nx = axes[0].nodes as usize;
+        let nxy = nx * axes[1].nodes as usize;
+        // Values in Q8 nm with |v| ≤ 2^30 (checked at load), so (b − a)·t < 2^61.
+        let g = |x: usize, y: usize, z: usize| {
+            self.grid
+                .get(start + x + nx * y + nxy * z)
+                .copied()
+                .unwrap_or(0) as i64
+        };
+        let lerp = |a: i64, b: i64, t: i64| a + rshr((b - a) * t, 30);
+        let c00 = lerp(g(idx[0], idx[1], idx[2]), g(nxt[0], idx[1], idx[2]), t[0]);
+        let c10 = lerp(g(idx[0], nxt[1], idx[2]), g(nxt[0], nxt[1], idx[2]), t[0]);
+        let c01 = lerp(g(idx[0], idx[1], nxt[2]), g(nxt[0], idx[1], nxt[2]), t[0]);
+        let c11 = lerp(g(idx[0], nxt[1], nxt[2]), g(nxt[0], nxt[1], nxt[2]), t[0]);
+        let c0 = lerp(c00, c10, t[1]);
+        let c1 = lerp(c01, c11, t[1]);
+        lerp(c0, c1, t[2]) << 8 // Q8 → Q16
+    }
+
+    /// Evaluate in integer-only fixed point (bit-exact on every target).
+    pub fn eval_fixed(&self, inp: &Inputs) -> Outputs {
+        let mut flags = Flags::empty();
+        let pos = self.hold_pos(inp.pos_nm, &mut flags);
+        // |p − c| ≤ half-span, so |u| ≤ 2^30 (+1 from rounding) fits i32.
+        // Computed only when the table has polynomials.
+        let u = || {
+            [
+                self.u_scale[0].apply(pos[0].wrapping_sub(self.centre_nm[0])),
+                self.u_scale[1].apply(pos[1].wrapping_sub(self.centre_nm[1])),
+                self.u_scale[2].apply(pos[2].wrapping_sub(self.centre_nm[2])),
+            ]
+        };
+        let out = if self.terms.is_empty() {
+            match self.n_monos {
+                0 => [0; 3],
+                1..=20 => self.block_fixed(&mono20_q30(u())),
+                _ => self.block_fixed(&mono56_q30(u())),
+            }
+        } else {
+            // The monomials are handed to the thermal/Abbe terms.
+            match self.n_monos {
+                0 => {
+                    let mut out = [0; 3];
+                    self.terms_fixed(&[], &pos, inp, &mut flags, &mut out);
+                    out
+                }
+                1..=20 => {
+                    let mv = mono20_q30(u());
+                    let mut out = self.block_fixed(&mv);
+                    self.terms_fixed(&mv, &pos, inp, &mut flags, &mut out);
+                    out
+                }
+                _ => {
+                    let mv = mono56_q30(u());
+                    let mut out = self.block_fixed(&mv);
+                    self.terms_fixed(&mv, &pos, inp, &mut flags, &mut out);
+                    out
+                }
+            }
+        };
+        let mut corr = [0i32; 3];
+        for o in 0..3 {
+            let max = self.env.max_corr_nm[o] as i64;
+            let v = rshr(out[o], 16);
+            corr[o] = if v > max {
+                flags.insert(Flags::CLAMPED);
+                max
+            } else if v < -max {
+                flags.insert(Flags::CLAMPED);
+                -max
+            } else {
+                v
+            } as i32;
+        }
+        Outputs {
+            corr_nm: corr,
+            flags,
+        }
+    }
+
+    /// The shared polynomial block, Q16 nm.
+    #[inline(always)]
+    fn block_fixed<const N: usize>(&self, mv: &[i32; N]) -> [i64; 3] {
+        if !self.has_block {
+            return [0; 3];
+        }
+        // Σ|c_q| ≤ 2^31 and |m| ≤ 2^30: each sum stays below 2^61.
+        let (mut a0, mut a1, mut a2) = (0i64, 0i64, 0i64);
+        for i in 0..N.min(MAX_MONOMIALS) {
+            let (m, c) = (mv[i] as i64, self.block_q[i]);
+            a0 += c[0] as i64 * m;
+            a1 += c[1] as i64 * m;
+            a2 += c[2] as i64 * m;
+        }
+        [
+            rshr(a0, self.block_shift[0]),
+            rshr(a1, self.block_shift[1]),
+            rshr(a2, self.block_shift[2]),
+        ]
+    }
+
+    #[inline(never)]
+    fn terms_fixed(
+        &self,
+        mv: &[i32],
+        pos: &[i32; 3],
+        inp: &Inputs,
+        flags: &mut Flags,
+        out: &mut [i64; 3],
+    ) {
+        let (temp, tool) = self.hold_aux(inp, flags);
+        for t in self.terms.iter() {
+            let (o, v) = match t {
+                Term::Factored { output, .. } => (*output, self.factored_fixed(t, mv, &temp, tool)),
+                Term::Periodic { output, shift, .. } => {
+                    (*output, rshr(self.periodic_fixed(t, pos), *shift))
+                }
+                Term::Reversal {
+                    output,
+                    axis,
+                    amp_q,
+                    shift,
+                    ..
+                } => {
+                    let r = inp.rev_q30[*axis as usize % 3].clamp(-ONE_Q30, ONE_Q30);
+                    (*output, rshr(*amp_q as i64 * r as i64, *shift))
+                }
+                Term::Grid {
+                    output,
+                    axes,
+                    start,
+                } => (*output, self.grid_fixed(axes, *start as usize, pos)),
+                Term::Mlp { .. } => {
+                    self.mlp_fixed(t, pos, &temp, out);
+                    continue;
+                }
+            };
+            let o = o as usize % 3;
+            out[o] = out[o].saturating_add(v);
+        }
+    }
+
+    /// factor × polynomial, Q16 nm.
+    #[inline(never)]
+    fn factored_fixed(&self, t: &Term, mv: &[i32], temp: &[i32; MAX_TEMPS], tool: i32) -> i64 {
+        let Term::Factored {
+            factor,
+            start,
+            len,
+            shift,
+            ..
+        } = *t
+        else {
+            return 0;
+        };
+        let (s, e) = (start as usize, start as usize + len as usize);
+        let mut v = 0i64;
+        if let (Some(c), Some(idx)) = (self.pq.get(s..e), self.pidx.get(s..e)) {
+            for (&c, &i) in c.iter().zip(idx) {
+                v += c as i64 * mv.get(i as usize).copied().unwrap_or(0) as i64;
+            }
+        }
+        let f = match factor {
+            Factor::Temp { ch, t_ref_mc } => temp[ch as usize & 3] as i64 - t_ref_mc as i64,
+            Factor::Tool => tool as i64,
+        };
+        rshr(rshr(v, 30) * f, shift)
+    }
+
+    /// Σ a_k sin kθ + b_k cos kθ in Q(q+30): the first harmonic from the
+    /// table, the others by the angle-addition recurrence in Q30.
+    #[inline(never)]
+    fn periodic_fixed(&self, t: &Term, pos: &[i32; 3]) -> i64 {
+        let Term::Periodic {
+            axis,
+            harmonics,
+            period_nm,
+            turns,
+            start,
+            ..
+        } = *t
+        else {
+            return 0;
+        };
+        let theta = phase_turns(pos[axis as usize % 3], period_nm, turns);
+        let (s1, c1) = sincos_q30(theta);
+        let c = &self.pq[start as usize..start as usize + 2 * harmonics as usize];
+        let (mut s, mut co) = (s1, c1);
+        let mut v = 0i64;
+        for ab in c.chunks_exact(2) {
+            v += ab[0] as i64 * s as i64 + ab[1] as i64 * co as i64;
+            let sn = ((s as i64 * c1 as i64 + co as i64 * s1 as i64 + (1 << 29)) >> 30) as i32;
+            co = ((co as i64 * c1 as i64 - s as i64 * s1 as i64 + (1 << 29)) >> 30) as i32;
+            s = sn;
+        }
+        v
+    }
+
+    /// The MLP in fixed point (same structure as [`Self::mlp_f32`]); the
+    /// integer sums are exact, so fusing the output layer changes nothing.
+    #[inline(never)]
+    fn mlp_fixed(&self, t: &Term, pos: &[i32; 3], temp: &[i32; MAX_TEMPS], out: &mut [i64; 3]) {
+        let Term::Mlp {
+            outputs,
+            n_in,
+            n_layers,
+            widths,
+            n_out,
+            in_start,
+            start,
+            q,
+        } = *t
+        else {
+            return;
+        };
+        let n_in = (n_in as usize).min(MAX_MLP_INPUTS);
+        let n_out = (n_out as usize).min(3);
+        // Layer-1 inputs in Q28 (|x| ≤ 7 checked at load), later ones Q30.
+        let mut x = [0i32; MAX_MLP_INPUTS];
+        for (xi, mi) in x
+            .iter_mut()
+            .zip(&self.mlp_in[in_start as usize..in_start as usize + n_in])
+        {
+            *xi = mi
+                .k_q28
+                .apply(mlp_source(mi.src, pos, temp).wrapping_sub(mi.mid));
+        }
+        let x = &x[..n_in];
+        let mut k = start as usize;
+        let h1: [i32; MAX_HIDDEN_UNITS];
+        let (src, prev, in_frac): (&[i32], usize, u32) = if n_layers >= 2 {
+            let width = (widths[0] as usize).min(MAX_HIDDEN_UNITS);
+            let (w, rest) = self.pq[k..].split_at(width * n_in);
+            let b = &rest[..width];
+            let ql = q[0] as u32;
+            h1 = core::array::from_fn(|j| match (w.get(j * n_in..(j + 1) * n_in), b.get(j)) {
+                (Some(row), Some(&bj)) => tanh_q26_of(((bj as i64) << 28) + dot_q(row, x), ql + 28),
+                _ => 0,
+            });
+            k += width * n_in + width;
+            (&h1[..width], width, 30)
+        } else {
+            (x, n_in, 28)
+        };
+        let last = (n_layers as usize).clamp(1, 2) - 1;
+        let width = (widths[last] as usize).min(MAX_HIDDEN_UNITS);
+        let (ql, qo) = (q[last] as u32 + in_frac, q[2] as u32);
+        let blk = self.pq.get(k..).unwrap_or(&[]);
+        let acc = match (prev, n_out) {
+            (3, 3) => fused_q::<3, 3>(blk, src, width, in_frac, ql),
+            (4, 3) => fused_q::<4, 3>(blk, src, width, in_frac, ql),
+            (3, 1) => fused_q::<3, 1>(blk, src, width, in_frac, ql),
+            (16, 3) => fused_q::<16, 3>(blk, src, width, in_frac, ql),
+            _ => fused_q_dyn(blk, src, width, n_out, in_frac, ql),
+        };
+        let mut j = 0;
+        for (o, a) in out.iter_mut().enumerate() {
+            if outputs & (1 << o) != 0 {
+                // acc is Q(q_out + 30).
+                *a = a.saturating_add(rshr(acc[j % 3], qo + 14));
+                j += 1;
+            }
+        }
+    }
+}
+
+/// The fused last hidden + output layer in fixed point: `x` has `in_frac`
+/// fractional bits, hidden pre-activations `ql` (= q + in_frac); the result
+/// is Q(q_out + 30).
+#[inline(always)]
+fn fused_q<const NI: usize, const NO: usize>(
+    blk: &[i32],
+    x: &[i32],
+    width: usize,
+    in_frac: u32,
+    ql: u32,
+) -> [i64; 3] {
+    let mut acc = [0i64; 3];
+    let Ok(x) = <&[i32; NI]>::try_from(x) else {
+        return acc;
+    };
+    let stride = 1 + NI + NO;
+    let (Some(units), Some(bo)) = (
+        blk.get(..width * stride),
+        blk.get(width * stride..width * stride + NO),
+    ) else {
+        return acc;
+    };
+    let mut a = [0i64; NO];
+    for (ai, &b) in a.iter_mut().zip(bo) {
+        *ai = (b as i64) << 30;
+    }
+    for u in units.chunks_exact(stride) {
+        let (b, w, wo) = (u[0], &u[1..1 + NI], &u[1 + NI..]);
+        let (Ok(w), Ok(wo)) = (<&[i32; NI]>::try_from(w), <&[i32; NO]>::try_from(wo)) else {
+            continue;
+        };
+        let mut z = (b as i64) << in_frac;
+        for i in 0..NI {
+            z += w[i] as i64 * x[i] as i64;
+        }
+        let h = tanh_q26_of(z, ql) as i64;
+        for o in 0..NO {
+            a[o] += wo[o] as i64 * h;
+        }
+    }
+    for (ac, ai) in acc.iter_mut().zip(a) {
+        *ac = ai;
+    }
+    acc
+}
+
+/// [`fused_q`] for any shape.
+fn fused_q_dyn(
+    blk: &[i32],
+    x: &[i32],
+    width: usize,
+    n_out: usize,
+    in_frac: u32,
+    ql: u32,
+) -> [i64; 3] {
+    let mut acc = [0i64; 3];
+    let stride = 1 + x.len() + n_out;
+    let (Some(units), Some(bo)) = (
+        blk.get(..width * stride),
+        blk.get(width * stride..width * stride + n_out),
+    ) else {
+        return acc;
+    };
+    for (a, &b) in acc.iter_mut().zip(bo) {
+        *a = (b as i64) << 30;
+    }
+    for u in units.chunks_exact(stride) {
+        let (w, wo) = u[1..].split_at(x.len());
+        let h = tanh_q26_of(((u[0] as i64) << in_frac) + dot_q(w, x), ql) as i64;
+        for (a, &wj) in acc.iter_mut().zip(wo) {
+            *a += wj as i64 * h;
+        }
+    }
+    acc
+}
+
+/// Integer dot product (exact), the common tiny input counts unrolled.
+#[inline(always)]
+fn dot_q(row: &[i32], x: &[i32]) -> i64 {
+    let m = |a: i32, b: i32| a as i64 * b as i64;
+    match (row, x) {
+        ([a, b, c], [p, q, r, ..]) => m(*a, *p) + m(*b, *q) + m(*c, *r),
+        ([a, b, c, d], [p, q, r, s, ..]) => m(*a, *p) + m(*b, *q) + m(*c, *r) + m(*d, *s),
+        _ => row.iter().zip(x).fold(0, |z, (w, v)| z + m(*w, *v)),
+    }
+}
+
+/// tanh of a pre-activation `z` with `frac` fractional bits, Q30 out.
+#[inline(always)]
+fn tanh_q26_of(z: i64, frac: u32) -> i32 {
+    let z26 = rshr(z, frac - TANH_IN_FRAC);
+    tanh_q30(z26.clamp(-(16 << TANH_IN_FRAC), 16 << TANH_IN_FRAC) as i32)
+}

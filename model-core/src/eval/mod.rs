@@ -1,0 +1,548 @@
+//! Evaluation of a prepared model: the RAM-resident [`Model`] the firmware
+//! runs every cycle, in f32 ([`ModelCap::eval_f32`]) and in integer-only fixed
+//! point ([`ModelCap::eval_fixed`], bit-exact between the host and
+//! thumbv7em because it is the same integer code), plus the per-axis
+//! reversal tracker [`DirTracker`].
+//!
+//! Why a prepared model: decoding little-endian f64 fields with bounds checks
+//! per coefficient would blow the MCU budget (~300 instructions for a 3-output
+//! cubic19 update), so [`ModelCap::load`] converts a validated table once into
+//! fixed-size arrays: a dense coefficient block over the graded monomial list
+//! (so the monomials are computed once per update and shared by the three
+//! outputs and by every thermal/Abbe polynomial), per-term parameters in
+//! parameter pools, and grid values in Q8 nm. Loading also does the
+//! fixed-point range analysis: every coefficient set gets its own binary
+//! scale q chosen so that Σ|c|·2^q < 2^31, which guarantees that the i64
+//! accumulations below cannot overflow for any input inside the envelope.
+//!
+//! Fixed-point formats: positions nm (i32); normalised positions and
+//! monomials Q30 (|u| ≤ 1 is guaranteed by the table validation); sin/cos,
+//! tanh and the reversal state Q30; corrections are accumulated in i64 Q16 nm
+//! and rounded to nm at the end.
+//!
+//! The module is split along its concerns: `load` turns a
+//! validated table into a prepared model (one function per table section),
+//! `f32` and `fixed` are the two evaluation paths, and `kernels` holds what
+//! both share (the graded monomial list, the fixed-point helpers, the
+//! monomial vectors, grid cells and MLP input sources).
+
+// Index loops over parallel fixed arrays mirror the equations (and keep the
+// hot loops' shape obvious in the disassembly); iterator chains would not help.
+#![allow(clippy::needless_range_loop)]
+
+use core::num::NonZeroU32;
+
+use heapless::Vec;
+
+use crate::limits::{MAX_HIDDEN_LAYERS, MAX_MONOMIALS};
+use crate::math::ONE_Q30;
+use crate::table::Envelope;
+
+pub use crate::limits::{MAX_MLP_INPUTS_TOTAL, MAX_TEMPS, MAX_TERMS};
+use kernels::{hold, Mul32, Turns};
+pub use kernels::{mono_index, MONO_EXPS};
+
+mod f32;
+mod fixed;
+mod kernels;
+mod load;
+
+/// What the firmware feeds the model each cycle.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Inputs {
+    /// x, y, z machine position, nm (encoder counts × scale).
+    pub pos_nm: [i32; 3],
+    /// Reversal state per axis, Q1.30: −2^30 = fully after a negative move,
+    /// +2^30 fully after a positive one, 0 unknown / mid-transition.
+    pub rev_q30: [i32; 3],
+    /// Temperature channels, m°C, indexed as the table's channel list.
+    pub temp_mc: [i32; MAX_TEMPS],
+    /// Abbe arm (tool length / probe offset), nm.
+    pub tool_nm: i32,
+}
+
+/// Flags raised by one evaluation (a small hand-rolled bitset).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Flags(u16);
+
+impl Flags {
+    /// x was outside the travel and was held at the edge.
+    pub const OUT_OF_TRAVEL_X: Flags = Flags(1 << 0);
+    /// y was outside the travel and was held at the edge.
+    pub const OUT_OF_TRAVEL_Y: Flags = Flags(1 << 1);
+    /// z was outside the travel and was held at the edge.
+    pub const OUT_OF_TRAVEL_Z: Flags = Flags(1 << 2);
+    /// A correction was limited to the envelope's max |correction|.
+    pub const CLAMPED: Flags = Flags(1 << 3);
+    /// A temperature was outside its channel's range and was held at the edge.
+    pub const TEMP_OUT_OF_RANGE: Flags = Flags(1 << 4);
+    /// The f32 evaluation produced NaN/inf; that output was forced to 0.
+    pub const NOT_FINITE: Flags = Flags(1 << 5);
+    /// The tool arm was outside its range and was held at the edge.
+    pub const TOOL_OUT_OF_RANGE: Flags = Flags(1 << 6);
+
+    /// No flag.
+    pub const fn empty() -> Flags {
+        Flags(0)
+    }
+    /// The raw bits.
+    pub const fn bits(self) -> u16 {
+        self.0
+    }
+    /// From raw bits (unknown bits kept).
+    pub const fn from_bits(bits: u16) -> Flags {
+        Flags(bits)
+    }
+    /// Whether every bit of `other` is set.
+    pub const fn contains(self, other: Flags) -> bool {
+        self.0 & other.0 == other.0
+    }
+    /// Whether no bit is set.
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+    /// Set the bits of `other`.
+    pub fn insert(&mut self, other: Flags) {
+        self.0 |= other.0;
+    }
+    /// The out-of-travel flag of `axis`.
+    pub const fn out_of_travel(axis: usize) -> Flags {
+        Flags(1 << (axis & 3))
+    }
+    /// Name of each bit, bit 0 first (`docs/cli.md`, `trueaxis status`).
+    pub const NAMES: [&'static str; 7] = [
+        "out_of_travel_x",
+        "out_of_travel_y",
+        "out_of_travel_z",
+        "clamped",
+        "temp_out_of_range",
+        "not_finite",
+        "tool_out_of_range",
+    ];
+    /// The names of the set bits, bit 0 first (bits without a name are
+    /// left out; compare with [`Flags::bits`] to see them).
+    pub fn names(self) -> impl Iterator<Item = &'static str> {
+        Flags::NAMES
+            .into_iter()
+            .enumerate()
+            .filter(move |(i, _)| self.0 & (1 << i) != 0)
+            .map(|(_, n)| n)
+    }
+}
+
+impl core::ops::BitOr for Flags {
+    type Output = Flags;
+    fn bitor(self, rhs: Flags) -> Flags {
+        Flags(self.0 | rhs.0)
+    }
+}
+
+/// The result of one evaluation.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Outputs {
+    /// Corrections for ex, ey, ez, nm (0 where the table has no such output).
+    pub corr_nm: [i32; 3],
+    /// What happened on the way.
+    pub flags: Flags,
+}
+
+/// Reversal state of one axis, integer-only.
+///
+/// The state moves linearly from −1 to +1 (Q30) over `transition_nm` of
+/// travel in the positive direction (and back over the same distance in the
+/// negative one), so a reversal term's correction ramps instead of stepping.
+/// The first update only records the position (state 0 = unknown).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DirTracker {
+    last_pos_nm: i32,
+    rev_q30: i32,
+    started: bool,
+}
+
+impl DirTracker {
+    /// A tracker in the unknown state.
+    pub const fn new() -> Self {
+        DirTracker {
+            last_pos_nm: 0,
+            rev_q30: 0,
+            started: false,
+        }
+    }
+    /// The current state, Q30.
+    pub fn rev_q30(&self) -> i32 {
+        self.rev_q30
+    }
+    /// Feed the new position; returns the reversal state in Q30.
+    /// `transition_nm` ≤ 0 means an immediate switch.
+    pub fn update(&mut self, pos_nm: i32, transition_nm: i32) -> i32 {
+        if !self.started {
+            self.started = true;
+            self.last_pos_nm = pos_nm;
+            return self.rev_q30;
+        }
+        let delta = pos_nm as i64 - self.last_pos_nm as i64;
+        self.last_pos_nm = pos_nm;
+        if delta == 0 {
+            return self.rev_q30;
+        }
+        let one = ONE_Q30 as i64;
+        let next = if transition_nm <= 0 {
+            if delta > 0 {
+                one
+            } else {
+                -one
+            }
+        } else {
+            let t = transition_nm as i64;
+            // A full swing (2.0 = 2^31 in Q30) per transition_nm; clamping the
+            // move first keeps the product inside i64.
+            let d = delta.clamp(-t, t);
+            self.rev_q30 as i64 + d * (1i64 << 31) / t
+        };
+        self.rev_q30 = next.clamp(-one, one) as i32;
+        self.rev_q30
+    }
+}
+
+/// Why a valid table cannot become a [`Model`] of this capacity.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LoadError {
+    /// More terms than [`MAX_TERMS`].
+    TooManyTerms { count: u32 },
+    /// The parameter pool (coefficients, weights) is too small.
+    ParamCapacity { needed: u32, capacity: u32 },
+    /// The grid value store is too small (use a larger-capacity alias such as [`LargeModel`]).
+    GridCapacity { needed: u32, capacity: u32 },
+    /// More MLP inputs in total than [`MAX_MLP_INPUTS_TOTAL`].
+    MlpInputCapacity,
+    /// A term's coefficients are too large for the fixed-point representation (Σ|c| ≥ 2^31 in its units).
+    CoefficientRange { term: u32 },
+    /// A grid value exceeds ±4.1 mm (the Q8 nm range with interpolation headroom).
+    GridValueRange { term: u32 },
+    /// An MLP's input scaling maps the envelope beyond ±7 (the fixed-point input range),
+    /// or its min-max range is narrower than 1 nm / 1 m°C.
+    MlpInputRange { term: u32 },
+}
+
+impl core::fmt::Display for LoadError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            Self::TooManyTerms { count } => {
+                write!(f, "{count} terms exceed the model capacity of {MAX_TERMS}")
+            }
+            Self::ParamCapacity { needed, capacity } => {
+                write!(f, "model needs {needed} parameters, capacity is {capacity}")
+            }
+            Self::GridCapacity { needed, capacity } => {
+                write!(
+                    f,
+                    "model needs {needed} grid values, capacity is {capacity}"
+                )
+            }
+            Self::MlpInputCapacity => write!(f, "too many MLP inputs in total"),
+            Self::CoefficientRange { term } => {
+                write!(f, "coefficients of term {term} too large for fixed point")
+            }
+            Self::GridValueRange { term } => write!(f, "grid value of term {term} exceeds ±4.1 mm"),
+            Self::MlpInputRange { term } => {
+                write!(
+                    f,
+                    "MLP term {term}: the envelope maps outside ±7 of the input scaling"
+                )
+            }
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for LoadError {}
+
+/// Parameter pool capacity of [`Model`].
+pub const DEFAULT_PARAMS: usize = 1536;
+/// Grid value capacity of [`Model`] (e.g. one 17×11×11 grid, or three 2-D grids).
+pub const DEFAULT_GRID: usize = 2048;
+/// Grid value capacity of [`LargeModel`] (three 17×11×11 grids = 6171 values).
+pub const LARGE_GRID: usize = 6400;
+
+/// The default model (about 26 KiB of RAM).
+pub type Model = ModelCap<DEFAULT_PARAMS, DEFAULT_GRID>;
+/// A model for full 3-axis grids on all outputs (about 43 KiB of RAM).
+pub type LargeModel = ModelCap<DEFAULT_PARAMS, LARGE_GRID>;
+
+// ---------------------------------------------------------------------------
+// The prepared model.
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Factor {
+    Temp { ch: u8, t_ref_mc: i32 },
+    Tool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct GridAxis {
+    nodes: u16,
+    origin_nm: i32,
+    step_nm: i32,
+    inv_step_f32: f32,
+    t_scale: Mul32,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct MlpInput {
+    src: u8,
+    mid: i32,
+    k_f32: f32,
+    k_q28: Mul32,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Term {
+    /// factor × Σ c·monomial; pool [start, start+len) holds c (nm per factor unit) and the monomial indices.
+    Factored {
+        output: u8,
+        factor: Factor,
+        start: u16,
+        len: u16,
+        shift: u32,
+    },
+    /// Σ a_k sin + b_k cos; pool holds (a, b) pairs, nm.
+    Periodic {
+        output: u8,
+        axis: u8,
+        harmonics: u8,
+        period_nm: i32,
+        turns: Turns,
+        start: u16,
+        shift: u32,
+    },
+    /// amplitude × rev.
+    Reversal {
+        output: u8,
+        axis: u8,
+        transition_nm: i32,
+        amp_f32: f32,
+        amp_q: i32,
+        shift: u32,
+    },
+    /// MLP: inputs in `mlp_in[in_start..]`, weights in the pool from `start`.
+    Mlp {
+        outputs: u8,
+        n_in: u8,
+        n_layers: u8,
+        widths: [u8; MAX_HIDDEN_LAYERS],
+        n_out: u8,
+        in_start: u8,
+        start: u16,
+        q: [u8; 3],
+    },
+    /// Grid on up to three axes, values (Q8 nm) in `grid[start..]`.
+    Grid {
+        output: u8,
+        axes: [GridAxis; 3],
+        start: u32,
+    },
+}
+
+/// A periodic term laid out for the f32 fast path (coefficients inline).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct PeriodicF32 {
+    output: u8,
+    axis: u8,
+    harmonics: u8,
+    /// The period, nm (> 0).
+    period: NonZeroU32,
+    /// A multiple of the period at or below the travel minimum (truncated to
+    /// i32: the held position minus it, wrapping, is the exact u32 offset).
+    base_nm: i32,
+    turns: Turns,
+    /// (a_k, b_k) for k = 1 … harmonics, zero beyond.
+    ab: [[f32; 2]; 4],
+}
+
+/// A thermal/Abbe term of degree ≤ 1 laid out for the f32 fast path:
+/// factor × (c₀ + c₁x + c₂y + c₃z), read straight from the normalised
+/// position (no monomial vector in memory).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct FactoredF32 {
+    output: u8,
+    /// 0…3 temperature channel, 4 the tool arm.
+    src: u8,
+    /// Subtracted from the factor (t_ref for thermal, 0 for Abbe).
+    offset: i32,
+    /// Coefficients of 1, x, y, z (the first four graded monomials).
+    c: [f32; 4],
+}
+
+/// A prepared, RAM-resident model with capacity `P` parameters and `G` grid
+/// values. Use the aliases [`Model`] and [`LargeModel`].
+#[derive(Clone, Debug)]
+pub struct ModelCap<const P: usize, const G: usize> {
+    env: Envelope,
+    outputs: u8,
+    n_channels: u8,
+    centre_nm: [i32; 3],
+    inv_half_f32: [f32; 3],
+    u_scale: [Mul32; 3],
+    /// Number of graded monomials needed (0 = no polynomial at all).
+    n_monos: u8,
+    block_f32: [[f32; 3]; MAX_MONOMIALS],
+    block_q: [[i32; 3]; MAX_MONOMIALS],
+    block_shift: [u32; 3],
+    has_block: bool,
+    /// Some term reads temperatures / the tool arm (so they are held and flagged).
+    reads_temp: bool,
+    reads_tool: bool,
+    /// Some term is a thermal/Abbe polynomial (needs the monomials).
+    has_factored: bool,
+    /// max |correction| per output as f32 (exact: ≤ MAX_CORR_LIMIT_NM < 2^22).
+    max_corr_f32: [f32; 3],
+    terms: Vec<Term, MAX_TERMS>,
+    pf: Vec<f32, P>,
+    pq: Vec<i32, P>,
+    pidx: Vec<u8, P>,
+    mlp_in: Vec<MlpInput, MAX_MLP_INPUTS_TOTAL>,
+    grid: Vec<i32, G>,
+    /// f32 fast path: every term is a reversal, a periodic term or a
+    /// thermal/Abbe term of degree ≤ 1, laid out per kind below (no per-term
+    /// dispatch, no pool slicing, no monomial vector in memory).
+    flat: bool,
+    /// Σ reversal amplitudes (× 2^-30) per [axis][output].
+    rev_f32: [[f32; 3]; 3],
+    has_rev: bool,
+    per_f32: Vec<PeriodicF32, MAX_TERMS>,
+    fac_f32: Vec<FactoredF32, MAX_TERMS>,
+}
+
+impl<const P: usize, const G: usize> ModelCap<P, G> {
+    /// An empty model (no outputs: every evaluation returns zeros). `const`,
+    /// so it can initialise a `static` that [`ModelCap::load_into`] fills.
+    pub const fn empty() -> Self {
+        ModelCap {
+            env: Envelope {
+                travel_min_nm: [0; 3],
+                travel_max_nm: [0; 3],
+                max_corr_nm: [0; 3],
+                max_slew_nm_per_ms: 0,
+                temp_min_mc: [0; MAX_TEMPS],
+                temp_max_mc: [0; MAX_TEMPS],
+                tool_min_nm: 0,
+                tool_max_nm: 0,
+            },
+            outputs: 0,
+            n_channels: 0,
+            centre_nm: [0; 3],
+            inv_half_f32: [0.0; 3],
+            u_scale: [Mul32 { k: 0 }; 3],
+            n_monos: 0,
+            block_f32: [[0.0; 3]; MAX_MONOMIALS],
+            block_q: [[0; 3]; MAX_MONOMIALS],
+            block_shift: [0; 3],
+            has_block: false,
+            reads_temp: false,
+            reads_tool: false,
+            has_factored: false,
+            max_corr_f32: [0.0; 3],
+            terms: Vec::new(),
+            pf: Vec::new(),
+            pq: Vec::new(),
+            pidx: Vec::new(),
+            mlp_in: Vec::new(),
+            grid: Vec::new(),
+            flat: false,
+            rev_f32: [[0.0; 3]; 3],
+            has_rev: false,
+            per_f32: Vec::new(),
+            fac_f32: Vec::new(),
+        }
+    }
+
+    /// The table's envelope (travel, max |correction|, slew limit for the engine).
+    pub fn envelope(&self) -> &Envelope {
+        &self.env
+    }
+
+    /// Outputs present: bit 0 ex, 1 ey, 2 ez.
+    pub fn outputs_mask(&self) -> u8 {
+        self.outputs
+    }
+
+    /// The transition length of the reversal terms on `axis`, for the
+    /// firmware's [`DirTracker`] (None if no reversal term uses that axis).
+    /// All of them have this length: `parse` refuses a table where two
+    /// differ (`TableError::ReversalTransitionMismatch`).
+    pub fn reversal_transition_nm(&self, axis: usize) -> Option<i32> {
+        self.terms.iter().find_map(|t| match *t {
+            Term::Reversal {
+                axis: a,
+                transition_nm,
+                ..
+            } if a as usize == axis => Some(transition_nm),
+            _ => None,
+        })
+    }
+
+    /// Hold the positions inside the travel, raising the per-axis flags.
+    #[inline(always)]
+    fn hold_pos(&self, p: [i32; 3], flags: &mut Flags) -> [i32; 3] {
+        let mut pos = p;
+        for a in 0..3 {
+            pos[a] = hold(
+                p[a],
+                self.env.travel_min_nm[a],
+                self.env.travel_max_nm[a],
+                flags,
+                Flags::out_of_travel(a),
+            );
+        }
+        pos
+    }
+
+    /// Hold the temperatures and the tool arm the terms read (the reversal
+    /// state is clamped where it is used). Their flags are raised only when
+    /// the table reads them.
+    #[inline(always)]
+    fn hold_aux(&self, inp: &Inputs, flags: &mut Flags) -> ([i32; MAX_TEMPS], i32) {
+        let mut temp = inp.temp_mc;
+        if self.reads_temp {
+            for ch in 0..(self.n_channels as usize).min(MAX_TEMPS) {
+                temp[ch] = hold(
+                    temp[ch],
+                    self.env.temp_min_mc[ch],
+                    self.env.temp_max_mc[ch],
+                    flags,
+                    Flags::TEMP_OUT_OF_RANGE,
+                );
+            }
+        }
+        let tool = if self.reads_tool {
+            hold(
+                inp.tool_nm,
+                self.env.tool_min_nm,
+                self.env.tool_max_nm,
+                flags,
+                Flags::TOOL_OUT_OF_RANGE,
+            )
+        } else {
+            inp.tool_nm
+        };
+        (temp, tool)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flag_names_follow_the_bits() {
+        assert!(Flags::from_bits(0x7f).names().eq(Flags::NAMES));
+        let f = Flags::TEMP_OUT_OF_RANGE | Flags::OUT_OF_TRAVEL_Y;
+        assert!(f.names().eq(["out_of_travel_y", "temp_out_of_range"]));
+        assert_eq!(Flags::from_bits(1 << 9).names().count(), 0);
+    }
+}

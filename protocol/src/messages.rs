@@ -1,0 +1,360 @@
+//! The messages of the link: the [`Packet`] envelope pairing a response with
+//! its request, every [`Request`] the host sends and every [`Response`] the
+//! board answers, and the values they carry (injected sensor inputs,
+//! telemetry, corrections, the slots' state, the board's faults and
+//! identity, and the typed [`LinkError`] a refused request answers with).
+//! postcard is not self-describing: changing any of these types changes the
+//! wire and needs a new [`crate::PROTOCOL_VERSION`]; variants are only ever
+//! appended.
+
+use serde::{Deserialize, Serialize};
+
+use crate::LINK_TEMPS;
+
+/// One message on the wire: the sequence number that pairs a response with
+/// its request, and the message.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq, Eq)]
+pub struct Packet<T> {
+    /// Chosen by the host, echoed by the board.
+    pub seq: u16,
+    /// The request or response.
+    pub msg: T,
+}
+
+/// A request from the host to the board.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq, Eq)]
+pub enum Request<'a> {
+    /// Who are you? → [`Response::Identity`].
+    Identify,
+    /// Current telemetry → [`Response::Status`].
+    Status,
+    /// Start (or resume, when size and CRC equal the upload in progress)
+    /// an upload of a table of `size` bytes whose CRC-32 is `crc32`.
+    UploadBegin {
+        /// Table length in bytes.
+        size: u32,
+        /// CRC-32 (ISO-HDLC) of the whole table.
+        crc32: u32,
+    },
+    /// Bytes `offset..offset + data.len()` of the table being uploaded.
+    UploadChunk {
+        /// Byte offset in the table.
+        offset: u32,
+        /// At most [`MAX_CHUNK_BYTES`](crate::MAX_CHUNK_BYTES).
+        #[serde(borrow)]
+        data: &'a [u8],
+    },
+    /// Validate the uploaded table, write it to the free slot and run it.
+    Commit,
+    /// Switch the running correction to the newest committed table.
+    Activate,
+    /// Revoke the newest table and fall back to the other slot (a repeat
+    /// after a lost answer gets the same answer).
+    Rollback,
+    /// Clear latched faults whose cause is gone.
+    ClearFaults,
+    /// Bring-up and tests: replace the sensor readings by these values until
+    /// [`Request::EndInject`]; the answer is [`Response::Correction`] with
+    /// the model's correction for exactly these inputs.
+    Inject(Injection),
+    /// Go back to the real sensors.
+    EndInject,
+    /// The correction currently output → [`Response::Correction`].
+    ReadCorrection,
+}
+
+/// Sensor values forced by [`Request::Inject`].
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Injection {
+    /// Machine position per axis (X, Y, Z), nm.
+    pub pos_nm: [i32; 3],
+    /// Reversal state per axis (model-core's `DirTracker` output, Q30:
+    /// −2^30 = last moved negative … +2^30 = positive), given explicitly so
+    /// the answer is a pure function of the injection.
+    pub rev_q30: [i32; 3],
+    /// Temperatures, milli-degrees Celsius; channels the table does not use
+    /// are ignored.
+    pub temp_mc: [i32; LINK_TEMPS],
+    /// Tool length (Abbe arm), nm.
+    pub tool_nm: i32,
+}
+
+/// Which flash slot of `memory.x` (TABLE_A / TABLE_B).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Slot {
+    /// TABLE_A.
+    A,
+    /// TABLE_B.
+    B,
+}
+
+/// A table stored in a slot.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SlotInfo {
+    /// Where it is.
+    pub slot: Slot,
+    /// Commit sequence number; the valid slot with the highest one boots.
+    pub seq: u32,
+    /// Table length in bytes.
+    pub len: u32,
+    /// CRC-32 of the table bytes.
+    pub crc32: u32,
+}
+
+/// Fault bits (a set; [`Faults::NONE`] when healthy). Any active fault ramps
+/// the correction to zero.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Faults(pub u16);
+
+impl Faults {
+    /// No fault.
+    pub const NONE: Faults = Faults(0);
+    /// No valid table in either slot (or none loaded yet).
+    pub const NO_TABLE: Faults = Faults(1 << 0);
+    /// The stored table failed validation or could not be loaded.
+    pub const BAD_TABLE: Faults = Faults(1 << 1);
+    /// A temperature reading outside the plausible range (sensor open or
+    /// shorted).
+    pub const SENSOR_RANGE: Faults = Faults(1 << 2);
+    /// The correction loop missed its period.
+    pub const LOOP_OVERRUN: Faults = Faults(1 << 3);
+    /// The model produced a non-finite or overflowing value.
+    pub const NOT_FINITE: Faults = Faults(1 << 4);
+    /// An encoder jumped further in one tick than the axis can move
+    /// (counter glitch or lost cable).
+    pub const ENCODER_JUMP: Faults = Faults(1 << 5);
+
+    /// True when no bit is set.
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+    /// True when every bit of `other` is set in `self`.
+    pub const fn contains(self, other: Faults) -> bool {
+        self.0 & other.0 == other.0
+    }
+    /// Union.
+    pub const fn union(self, other: Faults) -> Faults {
+        Faults(self.0 | other.0)
+    }
+    /// Names of the set bits, for humans.
+    pub fn names(self) -> impl Iterator<Item = &'static str> {
+        const NAMES: [&str; 6] = [
+            "no_table",
+            "bad_table",
+            "sensor_range",
+            "loop_overrun",
+            "not_finite",
+            "encoder_jump",
+        ];
+        NAMES
+            .into_iter()
+            .enumerate()
+            .filter(move |(i, _)| self.0 & (1 << i) != 0)
+            .map(|(_, n)| n)
+    }
+}
+
+/// Live state of the board, answered to [`Request::Status`].
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Telemetry {
+    /// Time since boot, µs.
+    pub uptime_us: u64,
+    /// Correction ticks run since boot.
+    pub ticks: u64,
+    /// Nominal tick period, µs.
+    pub period_us: u32,
+    /// Longest time between two consecutive ticks seen, µs.
+    pub worst_loop_us: u32,
+    /// Longest time spent inside one tick, µs.
+    pub worst_tick_us: u32,
+    /// Ticks that started later than one period after the previous one.
+    pub overruns: u32,
+    /// Positions, nm (from the encoders, or injected).
+    pub pos_nm: [i32; 3],
+    /// Temperatures, m°C.
+    pub temp_mc: [i32; LINK_TEMPS],
+    /// What the model asks for at this position, nm.
+    pub model_corr_nm: [i32; 3],
+    /// What is output (after slew limit and fault ramp), nm.
+    pub corr_nm: [i32; 3],
+    /// Net step pulses emitted per axis since boot.
+    pub steps: [i64; 3],
+    /// Model output flags (see model-core's `Flags`), raw bits.
+    pub model_flags: u16,
+    /// Faults active now.
+    pub faults: Faults,
+    /// Faults seen since the last [`Request::ClearFaults`].
+    pub faults_latched: Faults,
+    /// True while [`Request::Inject`] overrides the sensors.
+    pub injecting: bool,
+    /// The table the correction runs on.
+    pub active: Option<SlotInfo>,
+    /// Frames dropped for a bad CRC, bad COBS or overflow.
+    pub rx_bad_frames: u32,
+}
+
+/// The correction for given inputs, answered to [`Request::Inject`] and
+/// [`Request::ReadCorrection`].
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Correction {
+    /// The inputs, nm.
+    pub pos_nm: [i32; 3],
+    /// The model's correction for them (envelope applied by the model), nm.
+    pub model_corr_nm: [i32; 3],
+    /// The correction output now (after slew limit and fault ramp), nm.
+    pub corr_nm: [i32; 3],
+    /// Model output flags, raw bits.
+    pub model_flags: u16,
+    /// Faults active now.
+    pub faults: Faults,
+}
+
+/// A response from the board.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq, Eq)]
+pub enum Response {
+    /// Answer to [`Request::Identify`].
+    Identity(Identity),
+    /// Answer to [`Request::Status`].
+    Status(Telemetry),
+    /// Upload progress: the next byte offset the board wants.
+    UploadAck {
+        /// Bytes received so far (contiguous from 0).
+        next_offset: u32,
+    },
+    /// The uploaded table is in flash, verified.
+    Committed(SlotInfo),
+    /// The correction now runs on this table.
+    Activated(SlotInfo),
+    /// The newest table was revoked; the correction runs on this one.
+    RolledBack(SlotInfo),
+    /// Answer to [`Request::Inject`] and [`Request::ReadCorrection`].
+    Correction(Correction),
+    /// Done (answer to [`Request::ClearFaults`] and [`Request::EndInject`]).
+    Ok,
+    /// The request was refused.
+    Error(LinkError),
+}
+
+/// Answer to [`Request::Identify`].
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Identity {
+    /// Firmware version (major, minor, patch).
+    pub firmware: [u16; 3],
+    /// [`PROTOCOL_VERSION`](crate::PROTOCOL_VERSION) of the board.
+    pub protocol: u16,
+    /// Table format version the board reads.
+    pub table_format: u16,
+    /// Largest table the board accepts, bytes.
+    pub max_table_bytes: u32,
+    /// The table the correction runs on.
+    pub active: Option<SlotInfo>,
+    /// The other slot's table, if valid (the rollback target).
+    pub standby: Option<SlotInfo>,
+}
+
+/// Why a request was refused. Small and `Copy` (it crosses the link).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LinkError {
+    /// A chunk, commit or resume without an `UploadBegin`.
+    NoUpload,
+    /// The announced table does not fit the board's buffer or slot.
+    TooLarge {
+        /// Largest accepted size, bytes.
+        max_bytes: u32,
+    },
+    /// A chunk not at the offset the board expects (the host resumes from
+    /// `expected`).
+    BadOffset {
+        /// The next offset the board wants.
+        expected: u32,
+    },
+    /// A chunk longer than [`MAX_CHUNK_BYTES`](crate::MAX_CHUNK_BYTES) or past the announced size.
+    BadChunk,
+    /// Commit before every byte arrived.
+    Incomplete {
+        /// Bytes received.
+        received: u32,
+        /// Bytes announced.
+        size: u32,
+    },
+    /// The received bytes do not have the CRC announced in `UploadBegin`.
+    CrcMismatch,
+    /// The table failed model-core's validation (format, version, CRC,
+    /// envelope) or cannot be loaded as a model.
+    InvalidTable,
+    /// Single-bank flash: an erase stalls the CPU, so a commit or rollback
+    /// is refused while an axis moved within the last `quiet_ms`.
+    AxesMoving {
+        /// How long the axes must stand still, ms.
+        quiet_ms: u32,
+    },
+    /// Erase or write failed.
+    FlashWrite,
+    /// Read-back after writing differs from what was written.
+    FlashVerify,
+    /// Activate without a committed table.
+    NothingToActivate,
+    /// Rollback without a valid table in the other slot.
+    NothingToRollBackTo,
+    /// An injection carries a value no sensor can produce (a reversal
+    /// state beyond ±2^30). Positions, temperatures and tool lengths outside
+    /// the table's envelope are accepted: the model holds them at the edge
+    /// and flags it, exactly as for real sensors.
+    BadInjection,
+    /// The table is valid but too slow for the correction loop: its
+    /// fixed-point evaluation is estimated (`model_core::cost::estimate`) above
+    /// what a tick leaves for the model (`model_core::board`). Refused at
+    /// commit; the active table stays. (Appended last, so the messages of
+    /// every other variant encode as before.)
+    TooSlow {
+        /// The table's estimate, instructions per evaluation.
+        estimate_instr: u32,
+        /// The most the board accepts, instructions.
+        budget_instr: u32,
+    },
+}
+
+impl core::fmt::Display for LinkError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            LinkError::NoUpload => write!(f, "no upload in progress"),
+            LinkError::TooLarge { max_bytes } => {
+                write!(
+                    f,
+                    "table too large (the board takes at most {max_bytes} bytes)"
+                )
+            }
+            LinkError::BadOffset { expected } => {
+                write!(f, "chunk at the wrong offset (board expects {expected})")
+            }
+            LinkError::BadChunk => write!(f, "chunk too long or past the announced size"),
+            LinkError::Incomplete { received, size } => {
+                write!(f, "upload incomplete: {received} of {size} bytes received")
+            }
+            LinkError::CrcMismatch => write!(f, "uploaded bytes do not match the announced CRC"),
+            LinkError::InvalidTable => write!(f, "the board rejected the table as invalid"),
+            LinkError::AxesMoving { quiet_ms } => write!(
+                f,
+                "axes are moving: a flash erase stalls the correction, so the board \
+                 commits only after all axes stood still for {quiet_ms} ms"
+            ),
+            LinkError::FlashWrite => write!(f, "flash erase/write failed"),
+            LinkError::FlashVerify => write!(f, "flash read-back differs from the table"),
+            LinkError::NothingToActivate => write!(f, "no committed table to activate"),
+            LinkError::NothingToRollBackTo => write!(f, "no valid table in the other slot"),
+            LinkError::BadInjection => write!(f, "injected value out of range"),
+            LinkError::TooSlow {
+                estimate_instr,
+                budget_instr,
+            } => write!(
+                f,
+                "the table is too slow for the correction loop: its evaluation is estimated \
+                 at {estimate_instr} instructions, the board allows {budget_instr}"
+            ),
+        }
+    }
+}
