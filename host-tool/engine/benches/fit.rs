@@ -25,16 +25,7 @@ use trueaxis_engine::lsq;
 /// The seed's 17 × 11 × 11 grid (50 mm, 800 × 500 × 500 mm) with smooth
 /// errors and a deterministic pseudo-noise.
 fn mill_grid() -> Dataset {
-    let (mut x, mut y, mut z) = (Vec::new(), Vec::new(), Vec::new());
-    for i in 0..17 {
-        for j in 0..11 {
-            for k in 0..11 {
-                x.push(i as f64 * 50.0);
-                y.push(j as f64 * 50.0);
-                z.push(k as f64 * 50.0);
-            }
-        }
-    }
+    let [x, y, z] = trueaxis_engine::data::grid_positions([17, 11, 11], [50.0; 3]);
     let n = x.len();
     let err = |t: usize| -> Vec<Option<f64>> {
         (0..n)

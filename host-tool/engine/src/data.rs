@@ -86,6 +86,23 @@ pub struct SkippedRow {
     pub reason: String,
 }
 
+/// The positions of a regular grid of `counts` nodes per axis, `step_mm`
+/// apart from 0, x outermost and z innermost: `[x, y, z]` columns for a
+/// data set (tests, benches and examples build their grids with it).
+pub fn grid_positions(counts: [usize; 3], step_mm: [f64; 3]) -> [Vec<f64>; 3] {
+    let mut p: [Vec<f64>; 3] = Default::default();
+    for i in 0..counts[0] {
+        for j in 0..counts[1] {
+            for k in 0..counts[2] {
+                for (a, n) in [i, j, k].into_iter().enumerate() {
+                    p[a].push(n as f64 * step_mm[a]);
+                }
+            }
+        }
+    }
+    p
+}
+
 impl Dataset {
     /// Number of rows.
     pub fn len(&self) -> usize {

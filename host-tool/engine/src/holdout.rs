@@ -362,18 +362,7 @@ mod tests {
     #[test]
     fn spatial_blocks_keep_planes_whole_and_spread() {
         // A 3-D grid 9 × 3 × 2: x is the longest axis; blocks are x-planes.
-        let mut x = Vec::new();
-        let mut y = Vec::new();
-        let mut z = Vec::new();
-        for i in 0..9 {
-            for j in 0..3 {
-                for k in 0..2 {
-                    x.push(i as f64 * 100.0);
-                    y.push(j as f64 * 50.0);
-                    z.push(k as f64 * 50.0);
-                }
-            }
-        }
+        let [x, y, z] = crate::data::grid_positions([9, 3, 2], [100.0, 50.0, 50.0]);
         let n = x.len();
         let d = Dataset {
             source: "grid".into(),

@@ -272,16 +272,7 @@ mod tests {
 
     /// The seed's 17 × 11 × 11 grid on 800 × 500 × 500 mm.
     pub(crate) fn mill_grid() -> Dataset {
-        let (mut x, mut y, mut z) = (Vec::new(), Vec::new(), Vec::new());
-        for i in 0..17 {
-            for j in 0..11 {
-                for k in 0..11 {
-                    x.push(i as f64 * 50.0);
-                    y.push(j as f64 * 50.0);
-                    z.push(k as f64 * 50.0);
-                }
-            }
-        }
+        let [x, y, z] = crate::data::grid_positions([17, 11, 11], [50.0; 3]);
         let n = x.len();
         Dataset {
             source: "mill".into(),
