@@ -103,101 +103,85 @@ impl PartialEq<&str> for Family {
     }
 }
 
-/// A machine axis.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Axis {
-    /// x.
-    X,
-    /// y.
-    Y,
-    /// z.
-    Z,
+/// A closed set of names indexing the data set's x/y/z columns (axes and
+/// targets): `ALL`, the column index both ways, the name, `FromStr` and
+/// `Display`.
+macro_rules! column_enum {
+    ($(#[$doc:meta])* $name:ident, $names:expr, $expected:literal, [$($(#[$vdoc:meta])* $v:ident),+]) => {
+        $(#[$doc])*
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+        pub enum $name {
+            $($(#[$vdoc])* $v),+
+        }
+
+        impl $name {
+            /// Every value, in column order.
+            pub const ALL: [$name; 3] = [$($name::$v),+];
+
+            /// The index into the data set's columns (0, 1, 2).
+            pub fn index(self) -> usize {
+                self as usize
+            }
+
+            /// The value of column index `i` (0..3).
+            pub fn from_index(i: usize) -> Option<$name> {
+                $name::ALL.get(i).copied()
+            }
+
+            /// The name in CSV columns, `--add` strings and JSON.
+            pub fn name(self) -> &'static str {
+                $names[self.index()]
+            }
+        }
+
+        impl FromStr for $name {
+            type Err = anyhow::Error;
+
+            fn from_str(s: &str) -> Result<$name> {
+                $name::ALL
+                    .into_iter()
+                    .find(|a| a.name() == s)
+                    .ok_or_else(|| anyhow!(concat!("`{}`: expected ", $expected), s))
+            }
+        }
+
+        impl fmt::Display for $name {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str(self.name())
+            }
+        }
+    };
 }
 
-impl Axis {
-    /// x, y, z.
-    pub const ALL: [Axis; 3] = [Axis::X, Axis::Y, Axis::Z];
+column_enum!(
+    /// A machine axis.
+    Axis,
+    AXES,
+    "x, y or z",
+    [
+        /// x.
+        X,
+        /// y.
+        Y,
+        /// z.
+        Z
+    ]
+);
 
-    /// 0 for x, 1 for y, 2 for z: the index into the data set's columns.
-    pub fn index(self) -> usize {
-        self as usize
-    }
-
-    /// The axis of column index `i` (0..3).
-    pub fn from_index(i: usize) -> Option<Axis> {
-        Axis::ALL.get(i).copied()
-    }
-
-    /// `x`, `y` or `z`.
-    pub fn name(self) -> &'static str {
-        AXES[self.index()]
-    }
-}
-
-impl FromStr for Axis {
-    type Err = anyhow::Error;
-
-    fn from_str(s: &str) -> Result<Axis> {
-        Axis::ALL
-            .into_iter()
-            .find(|a| a.name() == s)
-            .ok_or_else(|| anyhow!("`{s}`: expected x, y or z"))
-    }
-}
-
-impl fmt::Display for Axis {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// An error component the model corrects: the error along x, y or z.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Target {
-    /// Error along x.
-    Ex,
-    /// Error along y.
-    Ey,
-    /// Error along z.
-    Ez,
-}
-
-impl Target {
-    /// ex, ey, ez.
-    pub const ALL: [Target; 3] = [Target::Ex, Target::Ey, Target::Ez];
-
-    /// 0 for ex, 1 for ey, 2 for ez: the index into the data set's columns.
-    pub fn index(self) -> usize {
-        self as usize
-    }
-
-    /// The target of column index `i` (0..3).
-    pub fn from_index(i: usize) -> Option<Target> {
-        Target::ALL.get(i).copied()
-    }
-
-    /// `ex`, `ey` or `ez`.
-    pub fn name(self) -> &'static str {
-        TARGETS[self.index()]
-    }
-}
-
-impl FromStr for Target {
-    type Err = anyhow::Error;
-
-    fn from_str(s: &str) -> Result<Target> {
-        Target::ALL
-            .into_iter()
-            .find(|t| t.name() == s)
-            .ok_or_else(|| anyhow!("`{s}`: expected ex, ey or ez"))
-    }
-}
-
-impl fmt::Display for Target {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
+column_enum!(
+    /// An error component the model corrects: the error along x, y or z.
+    Target,
+    TARGETS,
+    "ex, ey or ez",
+    [
+        /// Error along x.
+        Ex,
+        /// Error along y.
+        Ey,
+        /// Error along z.
+        Ez
+    ]
+);
 
 /// A valid `fit --add` string, typed: what an effect is (its family, the
 /// target it corrects, the axis, channel and `times` it follows) and its
@@ -590,6 +574,12 @@ mod tests {
             Family::HigherOrder
         );
         assert_eq!(Family::HigherOrder.to_string(), "higher_order");
+        assert_eq!("y".parse::<Axis>().unwrap().index(), 1);
+        assert_eq!(Target::from_index(2), Some(Target::Ez));
+        assert_eq!(Target::from_index(3), None);
+        let e = "q".parse::<Axis>().unwrap_err().to_string();
+        assert_eq!(e, "`q`: expected x, y or z");
+        assert_eq!("ez".parse::<Target>().unwrap().to_string(), "ez");
     }
 
     #[test]
