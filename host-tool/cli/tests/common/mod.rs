@@ -6,6 +6,8 @@
 //! Each test binary uses only part of it.
 #![allow(dead_code)]
 
+pub mod export;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
