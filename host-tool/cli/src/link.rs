@@ -1,9 +1,9 @@
 //! The host end of the board link: opens a serial port (`/dev/ttyACM0`,
 //! `COM3`) or a TCP socket (`tcp://HOST:PORT`, emulators and the simulated
-//! board), and runs request/response exchanges of the link
-//! protocol (the `trueaxis-protocol` crate) with timeouts and retries. The upload procedure (chunks,
-//! acknowledgements, resume, commit, activate, verify) lives here too, so
-//! the `upload` command is only arguments and output.
+//! board), and runs request/response exchanges of the link protocol (the
+//! `trueaxis-protocol` crate) with timeouts and retries. The upload
+//! procedure (chunks, acknowledgements, resume, commit, activate, verify)
+//! lives here too, so the `upload` command is only arguments and output.
 
 use std::io::{self, Read, Write};
 use std::net::TcpStream;
