@@ -124,8 +124,10 @@ impl EngineConfig {
         for axis in 0..3 {
             while s > 0 && self.max_step_nm_per_tick(s) > self.step_budget_nm(axis) {
                 // Scale down rather than step by one: converges in a few
-                // iterations for any budget.
-                s = s * 7 / 8;
+                // iterations for any budget. In i64: `s * 7` overflows i32
+                // for any table slew above 306 783 378 nm/ms, which a valid
+                // table may carry (issue 14).
+                s = (i64::from(s) * 7 / 8) as i32;
             }
         }
         s

@@ -9,7 +9,7 @@ use model_core::{DirTracker, Inputs, Model};
 use trueaxis_app::engine::{round_div, ConfigError, Engine, EngineConfig};
 use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::model::{load_into, ModelBuf};
-use trueaxis_app::sim::{sample_table, sim_engine_config};
+use trueaxis_app::sim::{sample_spec, sample_table, sim_engine_config};
 use trueaxis_protocol::{Faults, Slot, SlotInfo, LINK_TEMPS};
 // Deterministic xorshift, so the random walk is the same on every run.
 use trueaxis_test_support::XorShift64 as Rng;
@@ -191,6 +191,48 @@ fn slew_limit_holds_on_a_table_switch() {
     assert!(moved);
     assert_eq!(e.corr_nm(), e.telemetry().model_corr_nm);
     assert!(io.max_pulses_per_call <= e.config().max_steps_per_tick);
+}
+
+/// A table's slew is only checked > 0 by `parse`: every value up to
+/// `i32::MAX` must be reduced to what the pulses can follow, never
+/// overflow (a slew above 306 783 378 nm/ms overflowed `s * 7` and crashed
+/// the board on every tick of that table: issue 14).
+#[test]
+fn a_table_slew_up_to_i32_max_is_reduced_never_overflows() {
+    for slew in [
+        1,
+        500,
+        306_783_378,
+        306_783_379,
+        400_000_000,
+        i32::MAX - 1,
+        i32::MAX,
+    ] {
+        let mut spec = sample_spec(0);
+        spec.envelope.max_slew_nm_per_ms = slew;
+        let table = spec.encode().unwrap();
+        let mut e = Engine::new(sim_engine_config()).unwrap();
+        e.set_model(loaded(&table), info(&table));
+        let applied = e.slew_nm_per_ms();
+        assert!(applied > 0 && applied <= slew, "slew {slew} → {applied}");
+        let clock = FakeClock(Cell::new(0));
+        let mut io = Fake::new();
+        io.counts = [3_000_000, -2_500_000, 1_000_000];
+        let mut prev = e.corr_nm();
+        for _ in 0..200 {
+            run(&mut e, &clock, &mut io, 1);
+            let now = e.corr_nm();
+            for a in 0..3 {
+                assert!(
+                    (now[a] - prev[a]).abs() <= applied + 1,
+                    "slew {slew}: {prev:?} -> {now:?}"
+                );
+            }
+            prev = now;
+        }
+        assert!(e.faults().is_empty(), "slew {slew}: {:?}", e.faults());
+        assert!(io.max_pulses_per_call <= e.config().max_steps_per_tick);
+    }
 }
 
 /// Runs to a steady non-zero correction, injects a fault, checks the ramp
