@@ -316,6 +316,36 @@ fn crlf_bom_and_other_separators() {
 }
 
 #[test]
+fn implausible_positions_and_errors() {
+    // A placeholder 1e308 in a position column, an error of 25 mm: unit
+    // mistakes or broken readings, refused where they are (issue 14).
+    fails_at(
+        "bad_position.csv",
+        4,
+        Some(1),
+        "column `x_mm`: expected a position in mm between -10000 and 10000, found `1e308`",
+    );
+    fails_at(
+        "bad_error.csv",
+        3,
+        Some(2),
+        "column `ey_um`: expected an error in µm between -10000 and 10000, found `25000`",
+    );
+    // At the limit itself the value is accepted.
+    let dir = std::env::temp_dir().join(format!("trueaxis-plausible-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let edge = dir.join("edge.csv");
+    std::fs::write(&edge, "x_mm,ex_um\n-10000,-10000\n10000,10000\n").unwrap();
+    let out = trueaxis(&["import", edge.to_str().unwrap(), "--json"]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
 fn implausible_temperatures() {
     // °C outside −50…150 is a unit mistake; 250…400 is named as kelvin.
     fails_at(

@@ -206,6 +206,32 @@ fn targets_out_of_order_name_the_line_and_field() {
     );
 }
 
+/// A target beyond ±10 m or a deviation beyond ±10 mm is a unit mistake or
+/// a broken beam, refused with its line and field (issue 14).
+#[test]
+fn implausible_targets_and_deviations_are_refused() {
+    let text = edited("   200.000", "   2e7");
+    let e = import::read_rtl(&text, "d.rtl", None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with(
+            "d.rtl:7:1: Targets: expected a position in mm between -10000 and 10000, found `2e7`"
+        ),
+        "{e}"
+    );
+    let text = edited("1 2 3.0", "1 2 30000.0");
+    let e = import::read_rtl(&text, "d.rtl", None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with(
+            "d.rtl:22:3: expected a deviation in µm between -10000 and 10000, found `30000.0`"
+        ),
+        "{e}"
+    );
+}
+
 /// A run that stops before visiting every target is refused with the line
 /// of its last deviation, not read as a shorter run.
 #[test]

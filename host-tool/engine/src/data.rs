@@ -22,6 +22,18 @@ pub const TARGETS: [&str; 3] = ["ex", "ey", "ez"];
 /// and make the thermal terms meaningless.
 pub const TEMP_PLAUSIBLE_C: (f64, f64) = (-50.0, 150.0);
 
+/// The largest |position| a `<axis>_mm` cell may have, mm: 10 m, beyond
+/// the travel of any machine the tool is for. A larger value is a unit or
+/// export mistake (µm or nm in a mm column, a placeholder such as 1e308),
+/// which would otherwise stretch or collapse the model's span silently.
+pub const POS_PLAUSIBLE_MM: f64 = 10_000.0;
+
+/// The largest |error| an `e<axis>_um` cell may have, µm: 10 mm, far beyond
+/// any machine's positioning error. A larger value is a unit mistake (nm in
+/// a µm column) or a broken beam's reading, which would otherwise set a
+/// table's max correction.
+pub const ERR_PLAUSIBLE_UM: f64 = 10_000.0;
+
 /// A temperature sensor column `T_<name>_C`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TempChannel {

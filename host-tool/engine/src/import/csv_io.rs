@@ -11,7 +11,10 @@ use std::io::{Read, Write};
 use anyhow::Context;
 
 use super::ImportError;
-use crate::data::{AuxChannel, Dataset, SkippedRow, TempChannel, AXES, TARGETS, TEMP_PLAUSIBLE_C};
+use crate::data::{
+    AuxChannel, Dataset, SkippedRow, TempChannel, AXES, ERR_PLAUSIBLE_UM, POS_PLAUSIBLE_MM,
+    TARGETS, TEMP_PLAUSIBLE_C,
+};
 
 /// What a column means.
 #[derive(Clone, Debug, PartialEq)]
@@ -180,6 +183,18 @@ fn parse_num(cell: &str, col_name: &str) -> Result<f64, String> {
     if !v.is_finite() {
         return Err(format!(
             "column `{col_name}`: expected a finite number, found `{cell}`"
+        ));
+    }
+    Ok(v)
+}
+
+/// Parses a number and checks |value| ≤ `limit` (a position or an error
+/// beyond it is a unit mistake or a broken reading, not a measurement).
+fn parse_bounded(cell: &str, col_name: &str, limit: f64, what: &str) -> Result<f64, String> {
+    let v = parse_num(cell, col_name)?;
+    if v.abs() > limit {
+        return Err(format!(
+            "column `{col_name}`: expected {what} between -{limit} and {limit}, found `{cell}` — check the column's unit (and the instrument's reading at this line)"
         ));
     }
     Ok(v)
@@ -439,7 +454,9 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
             }
             row_cells.push(match c {
                 Col::Err(_) if empty => Cell::OptF(None),
-                Col::Err(_) => Cell::OptF(Some(parse_num(cell, h).map_err(at)?)),
+                Col::Err(_) => Cell::OptF(Some(
+                    parse_bounded(cell, h, ERR_PLAUSIBLE_UM, "an error in µm").map_err(at)?,
+                )),
                 Col::Dir(_) => {
                     let v = cell.trim();
                     match v {
@@ -466,7 +483,10 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
                 }
                 Col::Aux => Cell::S(cell.to_string()),
                 Col::Temp(_) => Cell::F(parse_temp(cell, h).map_err(at)?),
-                Col::Pos(_) | Col::Time | Col::Tool => Cell::F(parse_num(cell, h).map_err(at)?),
+                Col::Pos(_) => Cell::F(
+                    parse_bounded(cell, h, POS_PLAUSIBLE_MM, "a position in mm").map_err(at)?,
+                ),
+                Col::Time | Col::Tool => Cell::F(parse_num(cell, h).map_err(at)?),
             });
         }
         if skip_reason.is_none()

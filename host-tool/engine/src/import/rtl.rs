@@ -23,7 +23,7 @@
 //! of each row depends on it. A leading UTF-8 byte order mark is skipped.
 
 use super::ImportError;
-use crate::data::{Dataset, AXES};
+use crate::data::{Dataset, AXES, ERR_PLAUSIBLE_UM, POS_PLAUSIBLE_MM};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Section {
@@ -184,6 +184,9 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                             let v: f64 = tok.parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| {
                                 err(ln, Some(field + 1), format!("Targets: expected a finite position in mm, found `{tok}`"))
                             })?;
+                            if v.abs() > POS_PLAUSIBLE_MM {
+                                return Err(err(ln, Some(field + 1), format!("Targets: expected a position in mm between -{POS_PLAUSIBLE_MM} and {POS_PLAUSIBLE_MM}, found `{tok}` — check the file's unit")));
+                            }
                             // Forward (odd) runs get dir +1 because they
                             // move up the list: a list that is not
                             // ascending would give every row the wrong
@@ -295,6 +298,16 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                             format!("expected a finite deviation in µm, found `{}`", toks[2]),
                         )
                     })?;
+                if dev.abs() > ERR_PLAUSIBLE_UM {
+                    return Err(err(
+                        ln,
+                        Some(3),
+                        format!(
+                            "expected a deviation in µm between -{ERR_PLAUSIBLE_UM} and {ERR_PLAUSIBLE_UM}, found `{}` — a broken beam or another unit",
+                            toks[2]
+                        ),
+                    ));
+                }
                 if rows.iter().any(|r| r.1 == run && r.2 == target - 1) {
                     return Err(err(
                         ln,
