@@ -23,7 +23,7 @@
 
 use anyhow::{bail, Result};
 
-use crate::data::{Dataset, TARGETS};
+use crate::data::{Dataset, AXES, TARGETS};
 use crate::holdout;
 use crate::model::grid::{point, stencil, Stencil, MAX_NODES};
 use crate::model::{FitStats, FittedModel, GridModel, GridOutput};
@@ -43,10 +43,19 @@ pub fn geometry(data: &Dataset, step_mm: f64) -> Result<(Vec<usize>, Vec<f64>, V
         let lo = col.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = col.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         // Nodes from lo in steps, the last at or beyond hi (1 nm tolerance).
-        let n = ((hi - lo) / step_mm - 1e-9).ceil() as usize + 1;
+        // Counted in f64 first: a tiny step over a long travel would
+        // saturate the usize conversion and overflow the `+ 1`, giving a
+        // two-node grid that covers a sliver of the travel (issue 14).
+        let nodes = ((hi - lo) / step_mm - 1e-9).ceil() + 1.0;
+        if nodes.is_nan() || nodes > MAX_NODES as f64 {
+            bail!(
+                "grid:{step_mm}: {nodes:.3e} nodes along {} alone is more than {MAX_NODES}; choose a coarser step",
+                AXES[a]
+            );
+        }
         axes.push(a);
         origin.push(lo);
-        counts.push(n.max(2));
+        counts.push((nodes as usize).max(2));
     }
     if axes.is_empty() {
         bail!("grid:{step_mm}: every measured point lies at one position; a table needs travel on some axis");
@@ -359,5 +368,11 @@ mod tests {
         let d = plane(3, 3, 100.0, 100.0, |x, _| x);
         let e = fit(&d, 0.01, 5).unwrap_err().to_string();
         assert!(e.contains("coarser"), "{e}");
+        // A step so small that the node count leaves usize (it used to
+        // overflow, or wrap to a two-node grid over a sliver of the travel).
+        for step in [1e-300, f64::MIN_POSITIVE] {
+            let e = fit(&d, step, 5).unwrap_err().to_string();
+            assert!(e.contains("coarser") && e.contains("along x"), "{e}");
+        }
     }
 }
