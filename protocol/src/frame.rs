@@ -74,9 +74,14 @@ pub fn encode_frame<T: Serialize>(packet: &T, out: &mut [u8]) -> Result<usize, F
 }
 
 /// Decodes one message from the payload returned by
-/// [`FrameDecoder::feed`] (CRC already checked and stripped).
+/// [`FrameDecoder::feed`] (CRC already checked and stripped). The message
+/// must fill the payload: bytes after it are refused as [`FrameError::Decode`]
+/// (a frame is one message, nothing is silently ignored).
 pub fn decode_message<'a, T: Deserialize<'a>>(payload: &'a [u8]) -> Result<T, FrameError> {
-    postcard::from_bytes(payload).map_err(|_| FrameError::Decode)
+    match postcard::take_from_bytes(payload) {
+        Ok((msg, [])) => Ok(msg),
+        _ => Err(FrameError::Decode),
+    }
 }
 
 /// Streaming frame receiver: bytes in, checked payloads out. It holds at
@@ -196,6 +201,26 @@ mod tests {
                 offset: u32::MAX,
                 data: &DATA,
             },
+        }
+    }
+
+    #[test]
+    fn a_message_with_bytes_after_it_is_refused() {
+        let p = Packet {
+            seq: 7,
+            msg: Request::Status,
+        };
+        let mut buf = [0u8; 64];
+        let n = postcard::to_slice(&p, &mut buf).unwrap().len();
+        assert_eq!(decode_message::<Packet<Request>>(&buf[..n]), Ok(p));
+        for junk in [&[0u8][..], &[0xFF], &[1, 2, 3]] {
+            let mut v = buf[..n].to_vec();
+            v.extend_from_slice(junk);
+            assert_eq!(
+                decode_message::<Packet<Request>>(&v),
+                Err(FrameError::Decode),
+                "{junk:?}"
+            );
         }
     }
 
