@@ -1,0 +1,178 @@
+//! The engine's output limits as properties (issue 14), over random tables
+//! (slew from 1 nm/ms to `i32::MAX`, max |correction| 0.1–100 µm), random
+//! motion, late ticks, table switches, temperature faults and their
+//! clearing:
+//! - the output changes per tick by at most the rate in force (the table's
+//!   slew as the engine applies it, or the fault ramp while a fault is
+//!   active) plus 1 nm of rounding;
+//! - during a fault the output never grows;
+//! - above the active table's max |correction| the output never grows;
+//! - the pulses equal the rounded output every tick;
+//! - no tick panics.
+
+use std::cell::Cell;
+
+use proptest::prelude::*;
+use trueaxis_app::engine::{round_div, Engine};
+use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
+use trueaxis_app::model::{load_into, ModelBuf};
+use trueaxis_app::sim::{sample_spec, sim_engine_config};
+use trueaxis_protocol::{Slot, SlotInfo, LINK_TEMPS};
+
+#[derive(Clone, Copy)]
+struct Io {
+    counts: [i32; 3],
+    temps: [i32; LINK_TEMPS],
+    pulses: [i64; 3],
+}
+
+impl Encoders for Io {
+    fn read_counts(&mut self) -> [i32; 3] {
+        self.counts
+    }
+}
+impl TemperatureSource for Io {
+    fn read_temps_mc(&mut self) -> [i32; LINK_TEMPS] {
+        self.temps
+    }
+}
+impl StepOutput for Io {
+    fn pulses(&mut self, axis: usize, steps: i32) {
+        self.pulses[axis] += steps as i64;
+    }
+}
+
+struct FakeClock(Cell<u64>);
+impl Clock for FakeClock {
+    fn now_us(&self) -> u64 {
+        self.0.get()
+    }
+}
+
+/// A table: the sample polynomial (variant `v`) with the given envelope.
+#[derive(Clone, Debug)]
+struct TableCase {
+    variant: u32,
+    slew: i32,
+    max_corr_nm: i32,
+}
+
+fn table_case() -> impl Strategy<Value = TableCase> {
+    (
+        0u32..6,
+        prop_oneof![1i32..3000, 3000i32..=i32::MAX],
+        100i32..100_000,
+    )
+        .prop_map(|(variant, slew, max_corr_nm)| TableCase {
+            variant,
+            slew,
+            max_corr_nm,
+        })
+}
+
+fn build(t: &TableCase) -> (&'static mut ModelBuf, SlotInfo) {
+    let mut spec = sample_spec(t.variant);
+    spec.envelope.max_slew_nm_per_ms = t.slew;
+    spec.envelope.max_corr_nm = [t.max_corr_nm; 3];
+    let bytes = spec.encode().expect("encodes");
+    let m: &'static mut ModelBuf = Box::leak(Box::default());
+    load_into(&bytes, m).expect("loads");
+    let info = SlotInfo {
+        slot: Slot::A,
+        seq: 1,
+        len: bytes.len() as u32,
+        crc32: trueaxis_protocol::table_id(&bytes),
+    };
+    (m, info)
+}
+
+#[derive(Clone, Debug)]
+enum Op {
+    /// Move the axes by these counts (0.1 µm) over one tick.
+    Move([i32; 3]),
+    /// The next tick comes this many µs late.
+    Late(u32),
+    /// Activate table `i` of the case's list.
+    Switch(usize),
+    /// Bed temperature out of the table's range (a fault) or back.
+    Temp(bool),
+    /// Clear latched faults.
+    Clear,
+}
+
+fn op() -> impl Strategy<Value = Op> {
+    prop_oneof![
+        6 => prop::array::uniform3(-20_000i32..20_000).prop_map(Op::Move),
+        1 => (0u32..20_000).prop_map(Op::Late),
+        1 => (0usize..3).prop_map(Op::Switch),
+        1 => any::<bool>().prop_map(Op::Temp),
+        1 => Just(Op::Clear),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 128, ..ProptestConfig::default() })]
+
+    #[test]
+    fn the_output_never_exceeds_the_rate_in_force_nor_grows_when_it_must_not(
+        tables in prop::collection::vec(table_case(), 3),
+        ops in prop::collection::vec(op(), 1..250),
+    ) {
+        let cfg = sim_engine_config();
+        let pulse_nm = cfg.axes.map(|a| a.pulse_nm as i64);
+        let period = cfg.period_us as i64;
+        let fault_ramp = cfg.fault_ramp_nm_per_ms as i64;
+        let mut e = Engine::new(cfg).unwrap();
+        let (m, info) = build(&tables[0]);
+        e.set_model(m, info);
+        let mut active = 0usize;
+        let clock = FakeClock(Cell::new(0));
+        let mut io = Io { counts: [0; 3], temps: [20_000; LINK_TEMPS], pulses: [0; 3] };
+        let mut prev = e.corr_nm();
+        for op in ops {
+            let mut dt = period as u64;
+            match op {
+                Op::Move(d) => {
+                    for (c, d) in io.counts.iter_mut().zip(d) {
+                        *c = (*c as i64 + d as i64).clamp(-3_000_000, 3_000_000) as i32;
+                    }
+                }
+                Op::Late(us) => dt += us as u64,
+                Op::Switch(i) => {
+                    let (m, info) = build(&tables[i]);
+                    e.set_model(m, info);
+                    active = i;
+                }
+                Op::Temp(hot) => io.temps[0] = if hot { 95_000 } else { 20_000 },
+                Op::Clear => e.clear_faults(),
+            }
+            clock.0.set(clock.0.get() + dt);
+            let (mut enc, mut t) = (io, io);
+            let report = e.tick(&clock, &mut enc, &mut t, &mut io);
+            let now = e.corr_nm();
+            let faulted = !report.faults.is_empty();
+            let rate = if faulted { fault_ramp } else { e.slew_nm_per_ms() as i64 };
+            let max_corr = tables[active].max_corr_nm as i64;
+            for a in 0..3 {
+                let (p, n) = (prev[a] as i64, now[a] as i64);
+                let step = (n - p).abs();
+                prop_assert!(
+                    step <= rate * period / 1000 + 1,
+                    "axis {a}: {p} -> {n} at {rate} nm/ms (faults {:?})", report.faults
+                );
+                if faulted {
+                    prop_assert!(n.abs() <= p.abs(), "axis {a}: grew during a fault: {p} -> {n}");
+                }
+                if n.abs() > max_corr {
+                    prop_assert!(
+                        n.abs() <= p.abs(),
+                        "axis {a}: grew above the table's max |correction| {max_corr}: {p} -> {n}"
+                    );
+                }
+                prop_assert_eq!(io.pulses[a], round_div(n, pulse_nm[a]), "axis {}", a);
+            }
+            prop_assert_eq!(io.pulses, e.steps());
+            prev = now;
+        }
+    }
+}
