@@ -252,14 +252,30 @@ fn random_datasets_round_trip_bit_for_bit() {
             ],
             ..Dataset::default()
         };
-        d.pos_mm[0] = Some((0..n).map(|_| f(1.0)).collect());
-        d.pos_mm[2] = Some((0..n).map(|_| f(1.0)).collect());
+        // Any double a position or an error may have (±10 000 mm / µm; the
+        // importer refuses the rest), with full mantissas, −0, a subnormal
+        // and the limits themselves.
+        let mut plausible = |i: usize, limit: f64| match i {
+            0 => -0.0,
+            1 => f64::from_bits(3),
+            2 => -limit,
+            3 => limit,
+            _ => limit * (2.0 * (f(1.0).to_bits() >> 11) as f64 / (1u64 << 53) as f64 - 1.0),
+        };
+        d.pos_mm[0] = Some((0..n).map(|i| plausible(i, 10_000.0)).collect());
+        d.pos_mm[2] = Some((0..n).map(|i| plausible(n - 1 - i, 10_000.0)).collect());
         d.err_um[1] = Some(
             (0..n)
-                .map(|i| if i % 3 == 0 { None } else { Some(f(1e-3)) })
+                .map(|i| {
+                    if i % 3 == 0 {
+                        None
+                    } else {
+                        Some(plausible(i, 10_000.0))
+                    }
+                })
                 .collect(),
         );
-        d.err_um[2] = Some((0..n).map(|_| Some(f(1e-3))).collect());
+        d.err_um[2] = Some((0..n).map(|i| Some(plausible(i, 10_000.0))).collect());
         d.dir[0] = Some((0..n).map(|i| if i % 2 == 0 { 1 } else { -1 }).collect());
         d.t_s = Some((0..n).map(|_| f(1.0)).collect());
         d.temps = vec![TempChannel {
