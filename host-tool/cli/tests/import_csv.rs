@@ -324,10 +324,66 @@ fn crlf_bom_and_other_separators() {
         let e = import::read_csv(text.as_bytes(), "b.csv").unwrap_err();
         assert!(e.to_string().starts_with("b.csv:5:2: "), "{nl:?}: {e}");
     }
-    let e = import::read_csv("x_mm;ex_um\n0;1\n".as_bytes(), "semi.csv").unwrap_err();
+    // `;` (with decimal commas) and tabs are read as Excel writes them.
+    let d = import::read_csv("x_mm;ex_um\n0;1,5\n".as_bytes(), "semi.csv").unwrap();
+    assert_eq!(d.err_um[0].as_ref().unwrap(), &vec![Some(1.5)]);
+    let d = import::read_csv("x_mm\tex_um\n0\t1.5\n".as_bytes(), "tab.csv").unwrap();
+    assert_eq!(d.err_um[0].as_ref().unwrap(), &vec![Some(1.5)]);
+}
+
+/// Excel's "CSV (semicolon)" of a decimal-comma locale (UTF-8 BOM, CRLF,
+/// `;`, `1,25`, empty columns after the data) and its "Unicode text"
+/// (UTF-16LE with BOM, tabs) are read as written, through the binary.
+#[test]
+fn excel_files_are_read_as_written() {
+    let v = json(&trueaxis(&[
+        "import",
+        data("excel_semicolon.csv").to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(v["rows"], 3, "{v}");
+    let d = import::read_csv(
+        std::fs::File::open(data("excel_semicolon.csv")).unwrap(),
+        "excel_semicolon.csv",
+    )
+    .unwrap();
+    assert_eq!(d.pos_mm[0].as_ref().unwrap(), &vec![0.0, 100.0, 200.0]);
     assert_eq!(
-        e.to_string(),
-        "semi.csv:1:1: expected comma-separated columns; this header is separated by `;`"
+        d.err_um[0].as_ref().unwrap(),
+        &vec![Some(1.25), Some(-0.75), Some(2.0)]
+    );
+    assert_eq!(d.temp("bed").unwrap().temp_c, vec![20.5, 20.75, 21.0]);
+    assert_eq!(d.dir[0].as_ref().unwrap(), &vec![1, -1, 1]);
+    assert_eq!(
+        d.metadata,
+        vec![("machine".to_string(), "VMC-1".to_string())]
+    );
+    assert_eq!(d.line, vec![3, 4, 5]);
+    let d = import::read_csv(
+        std::fs::File::open(data("excel_unicode.txt")).unwrap(),
+        "excel_unicode.txt",
+    )
+    .unwrap();
+    assert_eq!(d.pos_mm[0].as_ref().unwrap(), &vec![0.0, 50.0]);
+    assert_eq!(d.err_um[0].as_ref().unwrap(), &vec![Some(1.5), Some(-0.25)]);
+    // UTF-16BE without a BOM is recognised by its zero bytes.
+    let be: Vec<u8> = "x_mm,ex_um\n1,2\n"
+        .encode_utf16()
+        .flat_map(|u| u.to_be_bytes())
+        .collect();
+    let d = import::read_csv(be.as_slice(), "be.csv").unwrap();
+    assert_eq!(d.err_um[0].as_ref().unwrap(), &vec![Some(2.0)]);
+    // A cut UTF-16 file, and a value in a trailing empty column, are errors.
+    let e = import::read_csv(&[0xFF, 0xFE, b'x', 0, b'_'][..], "cut.csv").unwrap_err();
+    assert!(
+        e.to_string().contains("cut.csv:1: expected UTF-16 text"),
+        "{e}"
+    );
+    let e = import::read_csv("x_mm;ex_um;;\n0;1;;\n1;2;3;\n".as_bytes(), "t.csv").unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("t.csv:3:3: expected 2 cells as in the header, found 4"),
+        "{e}"
     );
 }
 

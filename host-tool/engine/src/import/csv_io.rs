@@ -174,10 +174,19 @@ pub fn probable_column(name: &str) -> Option<String> {
     sensor.filter(|s| !s.is_empty()).map(|s| format!("T_{s}_C"))
 }
 
-/// Parses a finite number or says what was expected.
-fn parse_num(cell: &str, col_name: &str) -> Result<f64, String> {
-    let v: f64 = cell
-        .trim()
+/// Parses a finite number or says what was expected. With `decimal_comma`
+/// (a `;`-separated file, as Excel writes it where the comma is the
+/// decimal mark) `1,5` reads as 1.5.
+fn parse_num(cell: &str, col_name: &str, decimal_comma: bool) -> Result<f64, String> {
+    let t = cell.trim();
+    let dotted;
+    let t = if decimal_comma && t.matches(',').count() == 1 && !t.contains('.') {
+        dotted = t.replacen(',', ".", 1);
+        dotted.as_str()
+    } else {
+        t
+    };
+    let v: f64 = t
         .parse()
         .map_err(|_| format!("column `{col_name}`: expected a number, found `{cell}`"))?;
     if !v.is_finite() {
@@ -190,8 +199,14 @@ fn parse_num(cell: &str, col_name: &str) -> Result<f64, String> {
 
 /// Parses a number and checks |value| ≤ `limit` (a position or an error
 /// beyond it is a unit mistake or a broken reading, not a measurement).
-fn parse_bounded(cell: &str, col_name: &str, limit: f64, what: &str) -> Result<f64, String> {
-    let v = parse_num(cell, col_name)?;
+fn parse_bounded(
+    cell: &str,
+    col_name: &str,
+    decimal_comma: bool,
+    limit: f64,
+    what: &str,
+) -> Result<f64, String> {
+    let v = parse_num(cell, col_name, decimal_comma)?;
     if v.abs() > limit {
         return Err(format!(
             "column `{col_name}`: expected {what} between -{limit} and {limit}, found `{cell}` — check the column's unit (and the instrument's reading at this line)"
@@ -202,8 +217,8 @@ fn parse_bounded(cell: &str, col_name: &str, limit: f64, what: &str) -> Result<f
 
 /// Parses a temperature in °C and checks that it is plausible
 /// ([`TEMP_PLAUSIBLE_C`]); a value in 250…400 is named as likely kelvin.
-fn parse_temp(cell: &str, col_name: &str) -> Result<f64, String> {
-    let v = parse_num(cell, col_name)?;
+fn parse_temp(cell: &str, col_name: &str, decimal_comma: bool) -> Result<f64, String> {
+    let v = parse_num(cell, col_name, decimal_comma)?;
     let (lo, hi) = TEMP_PLAUSIBLE_C;
     if !(lo..=hi).contains(&v) {
         let hint = if (250.0..=400.0).contains(&v) {
@@ -230,15 +245,78 @@ pub fn read_csv<R: Read>(mut reader: R, name: &str) -> anyhow::Result<Dataset> {
     reader
         .read_to_end(&mut bytes)
         .with_context(|| format!("cannot read {name}"))?;
-    let text = String::from_utf8(bytes).map_err(|e| {
-        let upto = &e.as_bytes()[..e.utf8_error().valid_up_to()];
-        let line = upto.iter().filter(|&&b| b == b'\n').count() + 1;
-        ImportError::at(name, line, None, "expected UTF-8 text")
-    })?;
+    let text = match utf16_text(&bytes, name)? {
+        Some(t) => t,
+        None => String::from_utf8(bytes).map_err(|e| {
+            let upto = &e.as_bytes()[..e.utf8_error().valid_up_to()];
+            let line = upto.iter().filter(|&&b| b == b'\n').count() + 1;
+            ImportError::at(name, line, None, "expected UTF-8 or UTF-16 text")
+        })?,
+    };
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     let ds = parse(text, name)?;
     ds.validate()?;
     Ok(ds)
+}
+
+/// The text of a UTF-16 file (as Excel's "Unicode text" and some Windows
+/// tools write it): a byte order mark FF FE / FE FF, or — without one — a
+/// zero byte in every other place of the first line. `None` for anything
+/// else (read as UTF-8).
+fn utf16_text(bytes: &[u8], name: &str) -> Result<Option<String>, ImportError> {
+    let le = match bytes {
+        [0xFF, 0xFE, ..] => Some((true, 2)),
+        [0xFE, 0xFF, ..] => Some((false, 2)),
+        [a, 0, b, 0, ..] if *a != 0 && *b != 0 => Some((true, 0)),
+        [0, a, 0, b, ..] if *a != 0 && *b != 0 => Some((false, 0)),
+        _ => None,
+    };
+    let Some((le, skip)) = le else {
+        return Ok(None);
+    };
+    let body = &bytes[skip..];
+    if body.len() % 2 != 0 {
+        let line = body.iter().filter(|&&b| b == b'\n').count() + 1;
+        return Err(ImportError::at(
+            name,
+            line,
+            None,
+            "expected UTF-16 text (an even number of bytes); the file is cut",
+        ));
+    }
+    let units = body.chunks_exact(2).map(|c| {
+        if le {
+            u16::from_le_bytes([c[0], c[1]])
+        } else {
+            u16::from_be_bytes([c[0], c[1]])
+        }
+    });
+    let mut out = String::with_capacity(body.len() / 2);
+    for ch in char::decode_utf16(units) {
+        match ch {
+            Ok(c) => out.push(c),
+            Err(_) => {
+                let line = out.matches('\n').count() + 1;
+                return Err(ImportError::at(name, line, None, "expected UTF-16 text"));
+            }
+        }
+    }
+    Ok(Some(out))
+}
+
+/// The dialect of a CSV file, from its header line: comma-separated, or —
+/// as Excel writes it where the comma is the decimal mark — `;`-separated
+/// with decimal commas, or tab-separated.
+fn dialect(header: &str) -> (u8, bool) {
+    if header.contains(',') && !header.contains(';') {
+        (b',', false)
+    } else if header.contains(';') {
+        (b';', true)
+    } else if header.contains('\t') {
+        (b'\t', false)
+    } else {
+        (b',', false)
+    }
 }
 
 fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
@@ -275,9 +353,11 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
             "expected a header row (x_mm, ex_um, …), found end of file",
         ));
     }
+    let (delimiter, dc) = dialect(body.lines().next().unwrap_or(""));
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
+        .delimiter(delimiter)
         .from_reader(body.as_bytes());
     let mut records = rdr.records();
     // The file line of a record from its byte offset. csv's own line count
@@ -315,24 +395,15 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
             ))
         }
     };
-    let names: Vec<String> = header.iter().map(|h| h.trim().to_string()).collect();
-    if names.len() == 1 {
-        // A header with one cell that holds `;` or tabs is a file in another
-        // dialect; say so instead of complaining about a strange name.
-        if let Some(sep) = [';', '\t'].into_iter().find(|c| names[0].contains(*c)) {
-            let shown = if sep == '\t' {
-                "tab".to_string()
-            } else {
-                format!("`{sep}`")
-            };
-            return Err(ImportError::at(
-                name,
-                header_line,
-                Some(1),
-                format!("expected comma-separated columns; this header is separated by {shown}"),
-            ));
-        }
-    }
+    let mut names: Vec<String> = header.iter().map(|h| h.trim().to_string()).collect();
+    // Empty columns at the end (a spreadsheet's `;;` after the data) are
+    // not columns: dropped here, their cells must be empty in every row.
+    let used = names
+        .iter()
+        .rposition(|n| !n.is_empty())
+        .map_or(0, |i| i + 1);
+    let trailing = names.len() - used;
+    names.truncate(used);
     let mut cols = Vec::with_capacity(names.len());
     for (i, h) in names.iter().enumerate() {
         if let Some(first) = names[..i].iter().position(|p| p == h) {
@@ -428,7 +499,10 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
             });
             continue;
         }
-        if rec.len() != cols.len() {
+        let extra_empty = rec.len() > cols.len()
+            && rec.len() <= cols.len() + trailing
+            && rec.iter().skip(cols.len()).all(|c| c.trim().is_empty());
+        if rec.len() != cols.len() && !extra_empty {
             return Err(ImportError::at(
                 name,
                 line,
@@ -455,7 +529,7 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
             row_cells.push(match c {
                 Col::Err(_) if empty => Cell::OptF(None),
                 Col::Err(_) => Cell::OptF(Some(
-                    parse_bounded(cell, h, ERR_PLAUSIBLE_UM, "an error in µm").map_err(at)?,
+                    parse_bounded(cell, h, dc, ERR_PLAUSIBLE_UM, "an error in µm").map_err(at)?,
                 )),
                 Col::Dir(_) => {
                     let v = cell.trim();
@@ -473,7 +547,7 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
                     at(format!("column `{h}`: expected an integer, found `{cell}`"))
                 })?),
                 Col::U => {
-                    let v = parse_num(cell, h).map_err(at)?;
+                    let v = parse_num(cell, h, dc).map_err(at)?;
                     if v <= 0.0 {
                         return Err(at(format!(
                             "column `{h}`: expected a positive uncertainty, found `{cell}`"
@@ -482,11 +556,11 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
                     Cell::F(v)
                 }
                 Col::Aux => Cell::S(cell.to_string()),
-                Col::Temp(_) => Cell::F(parse_temp(cell, h).map_err(at)?),
+                Col::Temp(_) => Cell::F(parse_temp(cell, h, dc).map_err(at)?),
                 Col::Pos(_) => Cell::F(
-                    parse_bounded(cell, h, POS_PLAUSIBLE_MM, "a position in mm").map_err(at)?,
+                    parse_bounded(cell, h, dc, POS_PLAUSIBLE_MM, "a position in mm").map_err(at)?,
                 ),
-                Col::Time | Col::Tool => Cell::F(parse_num(cell, h).map_err(at)?),
+                Col::Time | Col::Tool => Cell::F(parse_num(cell, h, dc).map_err(at)?),
             });
         }
         if skip_reason.is_none()
