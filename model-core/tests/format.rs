@@ -229,6 +229,28 @@ fn structurally_invalid_tables_with_correct_crc() {
             offset: layout::MAX_SLEW as u32
         }
     );
+    // The slew's upper bound (issue 14: a slew of 400 000 000 nm/ms once
+    // crashed the board): one past it is refused, the bound itself loads.
+    for slew in [
+        model_core::table::MAX_SLEW_LIMIT_NM_PER_MS + 1,
+        400_000_000,
+        i32::MAX,
+    ] {
+        assert_eq!(
+            invalid("cubic19", |b| set_i32(b, layout::MAX_SLEW, slew)),
+            E::BadEnvelope {
+                offset: layout::MAX_SLEW as u32
+            }
+        );
+    }
+    let mut at_bound = golden("cubic19");
+    set_i32(
+        &mut at_bound,
+        layout::MAX_SLEW,
+        model_core::table::MAX_SLEW_LIMIT_NM_PER_MS,
+    );
+    reseal(&mut at_bound);
+    assert!(parse(&at_bound).is_ok());
     assert_eq!(
         invalid("cubic19", |b| set_i32(b, layout::TEMP_MIN, 50_000)),
         E::BadEnvelope {

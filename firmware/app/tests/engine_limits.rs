@@ -1,5 +1,5 @@
 //! The engine's output limits as properties (issue 14), over random tables
-//! (slew from 1 nm/ms to `i32::MAX`, max |correction| 0.1–100 µm), random
+//! (slew from 1 nm/ms to the format's limit of 10 000 000 nm/ms, max |correction| 0.1–100 µm), random
 //! motion, late ticks, table switches, temperature faults and their
 //! clearing:
 //! - the output changes per tick by at most the rate in force (the table's
@@ -60,7 +60,10 @@ struct TableCase {
 fn table_case() -> impl Strategy<Value = TableCase> {
     (
         0u32..6,
-        prop_oneof![1i32..3000, 3000i32..=i32::MAX],
+        prop_oneof![
+            1i32..3000,
+            3000i32..=model_core::table::MAX_SLEW_LIMIT_NM_PER_MS
+        ],
         100i32..100_000,
     )
         .prop_map(|(variant, slew, max_corr_nm)| TableCase {

@@ -157,6 +157,19 @@ fn table_envelope_follows_the_options() {
     assert!(clamped > 0, "the limit bites somewhere on the model");
     let (_, env) = envelope(&["--max-slew-nm-per-ms", "123"]);
     assert_eq!(env.max_slew_nm_per_ms, 123);
+    // A slew the format (and the board) refuses is refused here with the
+    // limit named (issue 14: 400 000 000 nm/ms crashed the board); a feed
+    // so high that the default slew would pass it gives the limit.
+    expect_exit(
+        &export_args(&model, &["--max-slew-nm-per-ms", "400000000"], &bin),
+        1,
+        &["--max-slew-nm-per-ms 400000000: a table holds at most 10000000 nm/ms"],
+    );
+    let (_, env) = envelope(&["--max-feed-mm-per-min", "1e11"]);
+    assert_eq!(
+        env.max_slew_nm_per_ms,
+        model_core::table::MAX_SLEW_LIMIT_NM_PER_MS
+    );
     // Default slew = 1.5 × gradient × feed: twice the feed, twice the slew.
     let (_, fast) = envelope(&["--max-feed-mm-per-min", "20000"]);
     let ratio = f64::from(fast.max_slew_nm_per_ms) / f64::from(base.max_slew_nm_per_ms);

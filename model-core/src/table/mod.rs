@@ -43,6 +43,12 @@ pub const MAX_GRID_NODES_PER_AXIS: u16 = 1024;
 /// Largest |max correction| an envelope may declare: 4 mm, below 2^22 nm so
 /// the f32 evaluator rounds its outputs exactly with one add and subtract.
 pub const MAX_CORR_LIMIT_NM: i32 = 4_000_000;
+/// Largest `max_slew_nm_per_ms` a table may carry: 10 m/s, beyond any
+/// correction's rate of change (a correction gradient of 1 µm/mm at a
+/// feed of 100 m/min changes by 1.7 µm/ms). The engine reduces any slew to
+/// what its pulses can follow; this bound refuses a slew that can only be
+/// a unit or typing mistake, at export and on the board alike.
+pub const MAX_SLEW_LIMIT_NM_PER_MS: i32 = 10_000_000;
 /// Largest |T_ref| of a thermal term (200 °C).
 pub const MAX_TREF_MC: i32 = 200_000;
 /// The CRC used for the trailer: CRC-32/ISO-HDLC (the zlib/PNG CRC-32,

@@ -65,7 +65,7 @@ pub(super) fn validate_structure(b: &[u8]) -> Result<(), TableError> {
             });
         }
     }
-    if env.max_slew_nm_per_ms <= 0 {
+    if !(1..=MAX_SLEW_LIMIT_NM_PER_MS).contains(&env.max_slew_nm_per_ms) {
         return Err(TableError::BadEnvelope {
             offset: l::MAX_SLEW as u32,
         });

@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
-use model_core::table::{Envelope, InputScaling};
+use model_core::table::{Envelope, InputScaling, MAX_SLEW_LIMIT_NM_PER_MS};
 use model_core::MAX_TEMPS;
 
 use super::{mc, nm, TableOptions, Warning, UNBOUNDED_NM};
@@ -212,10 +212,16 @@ pub(super) fn max_slew_nm_per_ms(
         }
     }
     let feed_mm_per_ms = opts.max_feed_mm_per_min / 60_000.0;
+    let limit = f64::from(MAX_SLEW_LIMIT_NM_PER_MS);
     let slew = match opts.max_slew_nm_per_ms {
         Some(s) => {
             if !(s.is_finite() && s >= 1.0) {
                 bail!("--max-slew-nm-per-ms must be ≥ 1");
+            }
+            if s > limit {
+                bail!(
+                    "--max-slew-nm-per-ms {s}: a table holds at most {MAX_SLEW_LIMIT_NM_PER_MS} nm/ms (10 m/s; the format's and the board's limit) — check the unit (nm per ms)"
+                );
             }
             s
         }
@@ -223,10 +229,12 @@ pub(super) fn max_slew_nm_per_ms(
             if !(opts.max_feed_mm_per_min.is_finite() && opts.max_feed_mm_per_min > 0.0) {
                 bail!("--max-feed-mm-per-min must be positive");
             }
-            (1.5 * grad_nm_per_mm * feed_mm_per_ms).max(1.0)
+            // Capped at the format's limit: the board reduces any slew to
+            // what its pulses can follow anyway.
+            (1.5 * grad_nm_per_mm * feed_mm_per_ms).clamp(1.0, limit)
         }
     };
-    Ok(slew.ceil().min(f64::from(i32::MAX)) as i32)
+    Ok(slew.ceil() as i32)
 }
 
 /// The envelope written into the table.
