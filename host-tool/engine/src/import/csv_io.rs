@@ -275,7 +275,7 @@ fn utf16_text(bytes: &[u8], name: &str) -> Result<Option<String>, ImportError> {
         return Ok(None);
     };
     let body = &bytes[skip..];
-    if body.len() % 2 != 0 {
+    if !body.len().is_multiple_of(2) {
         let line = body.iter().filter(|&&b| b == b'\n').count() + 1;
         return Err(ImportError::at(
             name,
