@@ -12,7 +12,7 @@ use trueaxis_engine::export::table::{self, TableExport, TableOptions};
 use trueaxis_engine::history::history_path;
 use trueaxis_engine::model::ModelFile;
 
-use crate::cmd::input;
+use crate::input;
 
 /// `<data>.model.json` beside the data file.
 pub fn default_model_path(data: &std::path::Path) -> PathBuf {

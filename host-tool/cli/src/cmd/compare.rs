@@ -8,8 +8,8 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
-use crate::cmd::input;
 use crate::cmd::out;
+use crate::input;
 use crate::workflow::run_compare;
 use trueaxis_engine::compare::{self, Comparison};
 use trueaxis_engine::model::ModelFile;

@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 
-use crate::cmd::input;
 use crate::cmd::out::{self, outln};
+use crate::input;
 use crate::workflow::model_spec;
 use trueaxis_engine::diagnose::{self, Diagnosis, Options, Verdict};
 use trueaxis_engine::effect::Effect;

@@ -256,7 +256,7 @@ impl Args {
 
     pub fn run(self) -> Result<()> {
         self.check_flags();
-        crate::cmd::input::refuse_overwrite(
+        crate::input::refuse_overwrite(
             &[("the model file", &self.model)],
             &[("-o", &self.output)],
         )?;

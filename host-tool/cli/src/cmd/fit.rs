@@ -8,8 +8,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 
-use crate::cmd::input;
 use crate::cmd::out::{self, outln};
+use crate::input;
 use crate::workflow::model_output;
 use trueaxis_engine::effect::Effect;
 use trueaxis_engine::fit::{self, nn::NnOptions, FitOptions};

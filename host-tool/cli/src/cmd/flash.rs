@@ -23,8 +23,8 @@ use probe_rs::probe::list::Lister;
 use probe_rs::{MemoryInterface, Permissions};
 use trueaxis_protocol::{slot, table_id, Slot};
 
-use crate::cmd::input;
 use crate::cmd::out::outln;
+use crate::input;
 
 /// The firmware's memory map (repository root).
 pub const MEMORY_X: &str = include_str!("../../../../memory.x");

@@ -36,7 +36,7 @@ impl Args {
             .as_deref()
             .and_then(|a| AXES.iter().position(|x| *x == a));
         if let Some(out) = &self.output {
-            crate::cmd::input::refuse_overwrite(&[("the input file", &self.file)], &[("-o", out)])?;
+            crate::input::refuse_overwrite(&[("the input file", &self.file)], &[("-o", out)])?;
         }
         let data = import::load_with_axis(&self.file, axis)?;
         if let Some(out) = &self.output {

@@ -10,8 +10,8 @@ use anyhow::{Context, Result};
 use trueaxis_engine::diagnose;
 use trueaxis_engine::improve::{improve, ImproveStep, Improvement};
 
-use crate::cmd::input;
 use crate::cmd::out::{self, outln};
+use crate::input;
 use crate::workflow::{model_output, model_spec};
 
 /// Arguments of `trueaxis improve`.

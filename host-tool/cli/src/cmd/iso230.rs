@@ -6,8 +6,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 
-use crate::cmd::input;
 use crate::cmd::out::outln;
+use crate::input;
 use trueaxis_engine::data::AXES;
 use trueaxis_engine::iso230;
 

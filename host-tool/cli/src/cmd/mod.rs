@@ -9,7 +9,6 @@ pub mod flash;
 pub mod history;
 pub mod import;
 pub mod improve;
-pub mod input;
 pub mod iso230;
 pub mod monitor;
 pub mod out;

@@ -11,9 +11,9 @@ use std::path::PathBuf;
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::cmd::input;
 use crate::cmd::out::outln;
 use crate::cmd::BoardPort;
+use crate::input;
 use crate::link::{slot_json, slot_text, ClientError};
 
 /// Arguments of `trueaxis upload`.
