@@ -3,58 +3,20 @@
 //! the output follows model-core's fixed-point evaluation, the slew limit
 //! holds, every fault ramps the output to zero and is reported.
 
+mod common;
+
 use std::cell::Cell;
 
 use model_core::{DirTracker, Inputs, Model};
 use trueaxis_app::engine::{round_div, ConfigError, Engine, EngineConfig};
-use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
+use trueaxis_app::hw::Clock;
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::sim::{sample_spec, sample_table, sim_engine_config};
-use trueaxis_protocol::{Faults, Slot, SlotInfo, LINK_TEMPS};
+use trueaxis_protocol::{Faults, Slot, SlotInfo};
 // Deterministic xorshift, so the random walk is the same on every run.
 use trueaxis_test_support::XorShift64 as Rng;
 
-struct Fake {
-    counts: [i32; 3],
-    temps: [i32; LINK_TEMPS],
-    pulses: [i64; 3],
-    max_pulses_per_call: i32,
-}
-
-impl Fake {
-    fn new() -> Self {
-        Self {
-            counts: [0; 3],
-            temps: [20_000; LINK_TEMPS],
-            pulses: [0; 3],
-            max_pulses_per_call: 0,
-        }
-    }
-}
-
-impl Encoders for Fake {
-    fn read_counts(&mut self) -> [i32; 3] {
-        self.counts
-    }
-}
-impl TemperatureSource for Fake {
-    fn read_temps_mc(&mut self) -> [i32; LINK_TEMPS] {
-        self.temps
-    }
-}
-impl StepOutput for Fake {
-    fn pulses(&mut self, axis: usize, steps: i32) {
-        self.pulses[axis] += steps as i64;
-        self.max_pulses_per_call = self.max_pulses_per_call.max(steps.abs());
-    }
-}
-
-struct FakeClock(Cell<u64>);
-impl Clock for FakeClock {
-    fn now_us(&self) -> u64 {
-        self.0.get()
-    }
-}
+use common::fake::{Fake, FakeClock};
 
 fn info(table: &[u8]) -> SlotInfo {
     SlotInfo {

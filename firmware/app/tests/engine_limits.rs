@@ -10,44 +10,17 @@
 //! - the pulses equal the rounded output every tick;
 //! - no tick panics.
 
+mod common;
+
 use std::cell::Cell;
 
 use proptest::prelude::*;
 use trueaxis_app::engine::{round_div, Engine};
-use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::sim::{sample_spec, sim_engine_config};
-use trueaxis_protocol::{Slot, SlotInfo, LINK_TEMPS};
+use trueaxis_protocol::{Slot, SlotInfo};
 
-#[derive(Clone, Copy)]
-struct Io {
-    counts: [i32; 3],
-    temps: [i32; LINK_TEMPS],
-    pulses: [i64; 3],
-}
-
-impl Encoders for Io {
-    fn read_counts(&mut self) -> [i32; 3] {
-        self.counts
-    }
-}
-impl TemperatureSource for Io {
-    fn read_temps_mc(&mut self) -> [i32; LINK_TEMPS] {
-        self.temps
-    }
-}
-impl StepOutput for Io {
-    fn pulses(&mut self, axis: usize, steps: i32) {
-        self.pulses[axis] += steps as i64;
-    }
-}
-
-struct FakeClock(Cell<u64>);
-impl Clock for FakeClock {
-    fn now_us(&self) -> u64 {
-        self.0.get()
-    }
-}
+use common::fake::{Fake, FakeClock};
 
 /// A table: the sample polynomial (variant `v`) with the given envelope.
 #[derive(Clone, Debug)]
@@ -130,7 +103,7 @@ proptest! {
         e.set_model(m, info);
         let mut active = 0usize;
         let clock = FakeClock(Cell::new(0));
-        let mut io = Io { counts: [0; 3], temps: [20_000; LINK_TEMPS], pulses: [0; 3] };
+        let mut io = Fake::new();
         let mut prev = e.corr_nm();
         for op in ops {
             let mut dt = period as u64;

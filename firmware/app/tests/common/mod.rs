@@ -1,6 +1,8 @@
 //! Test helpers: a tiny in-process link client for the simulated board.
 #![allow(dead_code)]
 
+pub mod fake;
+
 use trueaxis_app::server::Port;
 use trueaxis_app::sim::SimBoard;
 use trueaxis_protocol::{

@@ -10,6 +10,7 @@ use std::io::{Read, Write};
 
 use anyhow::Context;
 
+use super::dialect::{dialect, utf16_text};
 use super::ImportError;
 use crate::data::{
     AuxChannel, Dataset, SkippedRow, TempChannel, AXES, ERR_PLAUSIBLE_UM, POS_PLAUSIBLE_MM,
@@ -257,66 +258,6 @@ pub fn read_csv<R: Read>(mut reader: R, name: &str) -> anyhow::Result<Dataset> {
     let ds = parse(text, name)?;
     ds.validate()?;
     Ok(ds)
-}
-
-/// The text of a UTF-16 file (as Excel's "Unicode text" and some Windows
-/// tools write it): a byte order mark FF FE / FE FF, or — without one — a
-/// zero byte in every other place of the first line. `None` for anything
-/// else (read as UTF-8).
-fn utf16_text(bytes: &[u8], name: &str) -> Result<Option<String>, ImportError> {
-    let le = match bytes {
-        [0xFF, 0xFE, ..] => Some((true, 2)),
-        [0xFE, 0xFF, ..] => Some((false, 2)),
-        [a, 0, b, 0, ..] if *a != 0 && *b != 0 => Some((true, 0)),
-        [0, a, 0, b, ..] if *a != 0 && *b != 0 => Some((false, 0)),
-        _ => None,
-    };
-    let Some((le, skip)) = le else {
-        return Ok(None);
-    };
-    let body = &bytes[skip..];
-    if !body.len().is_multiple_of(2) {
-        let line = body.iter().filter(|&&b| b == b'\n').count() + 1;
-        return Err(ImportError::at(
-            name,
-            line,
-            None,
-            "expected UTF-16 text (an even number of bytes); the file is cut",
-        ));
-    }
-    let units = body.chunks_exact(2).map(|c| {
-        if le {
-            u16::from_le_bytes([c[0], c[1]])
-        } else {
-            u16::from_be_bytes([c[0], c[1]])
-        }
-    });
-    let mut out = String::with_capacity(body.len() / 2);
-    for ch in char::decode_utf16(units) {
-        match ch {
-            Ok(c) => out.push(c),
-            Err(_) => {
-                let line = out.matches('\n').count() + 1;
-                return Err(ImportError::at(name, line, None, "expected UTF-16 text"));
-            }
-        }
-    }
-    Ok(Some(out))
-}
-
-/// The dialect of a CSV file, from its header line: comma-separated, or —
-/// as Excel writes it where the comma is the decimal mark — `;`-separated
-/// with decimal commas, or tab-separated.
-fn dialect(header: &str) -> (u8, bool) {
-    if header.contains(',') && !header.contains(';') {
-        (b',', false)
-    } else if header.contains(';') {
-        (b';', true)
-    } else if header.contains('\t') {
-        (b'\t', false)
-    } else {
-        (b',', false)
-    }
 }
 
 fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {

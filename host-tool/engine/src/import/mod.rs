@@ -7,6 +7,7 @@
 //! nothing is silently dropped (docs/cli.md § Measurement CSV).
 
 mod csv_io;
+mod dialect;
 mod rtl;
 
 use std::fmt;
