@@ -283,40 +283,38 @@ impl SimBoard {
         self.server.into_store().into_flash()
     }
 
-    /// Serves TCP connections on `listener` (one at a time) until `stop`
-    /// is set, ticking in step with wall-clock time. Returns the board.
+    /// Serves TCP connections on `listener` until `stop` is set, ticking in
+    /// step with wall-clock time: every client that connects is served,
+    /// each with its own frame receiver (a second `trueaxis status` while a
+    /// `monitor` runs gets its answer, not silence). Returns the board.
     pub fn serve(mut self, listener: TcpListener, stop: Arc<AtomicBool>) -> Self {
         let _ = listener.set_nonblocking(true);
         let mut clock = WallClock::new(&self);
-        let mut conn: Option<(TcpStream, Port)> = None;
+        let mut conns: Vec<(TcpStream, Port)> = Vec::new();
         let mut buf = [0u8; 1024];
         while !stop.load(Ordering::Relaxed) {
-            if conn.is_none() {
-                if let Ok((s, _)) = listener.accept() {
+            while let Ok((s, _)) = listener.accept() {
+                let _ = s.set_nonblocking(true);
+                let _ = s.set_nodelay(true);
+                conns.push((s, Port::new()));
+            }
+            let mut idle = true;
+            conns.retain_mut(|(s, port)| match s.read(&mut buf) {
+                Ok(0) => false,
+                Ok(n) => {
+                    idle = false;
+                    let out = self.receive(port, &buf[..n]);
+                    // Answers are small: written blocking, then back to
+                    // non-blocking reads.
                     let _ = s.set_nonblocking(false);
-                    let _ = s.set_read_timeout(Some(Duration::from_millis(1)));
-                    let _ = s.set_nodelay(true);
-                    conn = Some((s, Port::new()));
+                    let ok = s.write_all(&out).is_ok();
+                    let _ = s.set_nonblocking(true);
+                    ok
                 }
-            }
-            let mut drop_conn = false;
-            if let Some((s, port)) = conn.as_mut() {
-                match s.read(&mut buf) {
-                    Ok(0) => drop_conn = true,
-                    Ok(n) => {
-                        let out = self.receive(port, &buf[..n]);
-                        if s.write_all(&out).is_err() {
-                            drop_conn = true;
-                        }
-                    }
-                    Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
-                    Err(_) => drop_conn = true,
-                }
-            } else {
+                Err(e) => matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut),
+            });
+            if idle {
                 std::thread::sleep(Duration::from_millis(1));
-            }
-            if drop_conn {
-                conn = None;
             }
             clock.catch_up(&mut self);
         }

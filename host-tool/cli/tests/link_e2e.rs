@@ -57,6 +57,24 @@ impl Drop for Board {
     }
 }
 
+/// Two clients at once (a `monitor` running while someone asks `status`):
+/// the simulated board answers both, each on its own connection (issue 14:
+/// the second used to get no answer until the first went away).
+#[test]
+fn the_simulated_board_answers_two_clients_at_once() {
+    let board = Board::start();
+    let mut first = Client::open(&board.port, Timing::default()).unwrap();
+    let mut second = Client::open(&board.port, Timing::default()).unwrap();
+    for _ in 0..3 {
+        let a = first.status().unwrap();
+        let b = second.status().unwrap();
+        assert!(b.ticks >= a.ticks, "{} then {}", a.ticks, b.ticks);
+    }
+    drop(first);
+    // The one left keeps being served after the other hangs up.
+    assert!(second.status().is_ok());
+}
+
 /// Runs the built `trueaxis` with `args`.
 fn trueaxis(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_trueaxis"))
