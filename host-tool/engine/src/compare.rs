@@ -481,8 +481,8 @@ mod tests {
         assert_eq!(top.target, "ex");
         assert!(top.bbox_mm["x"][0] >= 600.0, "{top:?}");
         assert!(top.bbox_mm["y"][0] >= 375.0, "{top:?}");
-        assert!(top.ratio > 2.0);
-        assert!(top.share > 0.9);
+        assert!(top.ratio.unwrap() > 2.0);
+        assert!(top.share.unwrap() > 0.9);
     }
 
     #[test]
@@ -498,7 +498,7 @@ mod tests {
         let res = residuals(&d, &pred, 0);
         let r = worst_regions(&d, 0, &res, 4, 3);
         assert_eq!(r.len(), 1);
-        assert!((r[0].ratio - 1.0).abs() < 1e-9);
+        assert!((r[0].ratio.unwrap() - 1.0).abs() < 1e-9);
     }
 
     #[test]

@@ -6,8 +6,8 @@
 //! neighbours, boxes around their points) and [`worst_cells`] (`diagnose`:
 //! the two worst cells of [`CELL_BINS`] per axis in the normalised
 //! coordinates, with at least [`MIN_CELL_POINTS`] rows each, boxes of the
-//! cells). `diagnose --json` writes its regions without `ratio` and
-//! `share` ([`ser_without_spread`]).
+//! cells). `ratio` and `share` are compare's alone
+//! (`None`, and absent from the JSON, for diagnose's cells).
 
 use std::collections::BTreeMap;
 
@@ -26,12 +26,16 @@ pub struct Region {
     pub bbox_mm: BTreeMap<String, [f64; 2]>,
     /// RMS of the residual inside the region, µm.
     pub rms_um: f64,
-    /// That RMS over the target's overall residual RMS.
-    pub ratio: f64,
+    /// That RMS over the target's overall residual RMS (`compare`'s
+    /// regions; absent from `diagnose`'s cells).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ratio: Option<f64>,
     /// Points inside.
     pub points: usize,
-    /// Share of the target's residual sum of squares that lies inside (0..1).
-    pub share: f64,
+    /// Share of the target's residual sum of squares that lies inside
+    /// (0..1; `compare`'s regions only, like `ratio`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub share: Option<f64>,
 }
 
 /// A region's box as text, `x 600…800, y 150…350` (mm, whole numbers).
@@ -198,9 +202,9 @@ pub fn worst_regions(
                 target: TARGETS[t].to_string(),
                 bbox_mm,
                 rms_um: rms,
-                ratio: ratio(rms, overall_rms),
+                ratio: Some(ratio(rms, overall_rms)),
                 points: members.len(),
-                share: ratio(ss, total_ss),
+                share: Some(ratio(ss, total_ss)),
             }
         })
         .collect();
@@ -239,8 +243,6 @@ pub fn worst_cells(
 ) -> Vec<Region> {
     let cells_f = CELL_BINS as f64;
     let axes = data.axes();
-    let total_ss: f64 = resid.iter().map(|v| v * v).sum();
-    let overall_rms = (total_ss / resid.len() as f64).sqrt();
     let cells = cell_sums(rows.iter().zip(resid).map(|(&r, &v)| {
         let key: Vec<usize> = axes
             .iter()
@@ -271,31 +273,10 @@ pub fn worst_cells(
                 target: TARGETS[t].into(),
                 bbox_mm: bbox,
                 rms_um: rms,
-                ratio: ratio(rms, overall_rms),
+                ratio: None,
                 points: c.points,
-                share: ratio(c.ss, total_ss),
+                share: None,
             }
         })
         .collect()
-}
-
-/// Regions as `diagnose --json` writes them (docs/cli.md): target, box,
-/// RMS and points, without `ratio` and `share`.
-pub fn ser_without_spread<S: serde::Serializer>(
-    regions: &[Region],
-    ser: S,
-) -> Result<S::Ok, S::Error> {
-    #[derive(Serialize)]
-    struct Cell<'a> {
-        target: &'a str,
-        bbox_mm: &'a BTreeMap<String, [f64; 2]>,
-        rms_um: f64,
-        points: usize,
-    }
-    ser.collect_seq(regions.iter().map(|r| Cell {
-        target: &r.target,
-        bbox_mm: &r.bbox_mm,
-        rms_um: r.rms_um,
-        points: r.points,
-    }))
 }

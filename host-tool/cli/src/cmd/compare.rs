@@ -73,8 +73,8 @@ pub fn text(c: &Comparison) -> String {
                 "  {} {bbox}: RMS {:.3} µm ({:.2}× the overall), {:.0} % of the squared residual",
                 r.target,
                 r.rms_um,
-                r.ratio,
-                100.0 * r.share
+                r.ratio.unwrap_or(f64::NAN),
+                100.0 * r.share.unwrap_or(f64::NAN)
             );
         }
     }

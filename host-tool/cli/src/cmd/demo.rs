@@ -319,7 +319,8 @@ impl Demo {
                 let _ = writeln!(
                     s,
                     "   worst: {name} in {bbox} mm, RMS {:.2} µm ({:.1}× its average)",
-                    region.rms_um, region.ratio
+                    region.rms_um,
+                    region.ratio.unwrap_or(f64::NAN)
                 );
             }
             let mut related: Vec<_> = c

@@ -188,9 +188,9 @@ pub fn build_report(
                     .collect::<Vec<_>>()
                     .join(", "),
                 f(r.rms_um),
-                format!("{:.2}", r.ratio),
+                format!("{:.2}", r.ratio.unwrap_or(f64::NAN)),
                 r.points.to_string(),
-                format!("{:.0} %", 100.0 * r.share),
+                format!("{:.0} %", 100.0 * r.share.unwrap_or(f64::NAN)),
             ]
         })
         .collect();

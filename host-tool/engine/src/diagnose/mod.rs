@@ -336,7 +336,6 @@ pub struct Diagnosis {
     pub path: Vec<PathStep>,
     /// Cells where the residual concentrates, per target (in the JSON
     /// without `ratio` and `share`).
-    #[serde(serialize_with = "crate::regions::ser_without_spread")]
     pub worst_regions: Vec<Region>,
     /// Design and identifiability warnings.
     pub warnings: Vec<Warning>,
