@@ -49,7 +49,7 @@ impl Family {
     ];
 
     /// The name in `--add` strings and JSON.
-    pub fn name(self) -> &'static str {
+    pub fn as_str(self) -> &'static str {
         match self {
             Family::Periodic => "periodic",
             Family::Thermal => "thermal",
@@ -59,11 +59,6 @@ impl Family {
             Family::Squareness => "squareness",
             Family::HigherOrder => "higher_order",
         }
-    }
-
-    /// The name, as [`Family::name`] (for code that compares names).
-    pub fn as_str(self) -> &'static str {
-        self.name()
     }
 
     /// The keys an `--add` string of this family may have.
@@ -83,7 +78,7 @@ impl FromStr for Family {
     type Err = anyhow::Error;
 
     fn from_str(s: &str) -> Result<Family> {
-        Family::ALL.into_iter().find(|f| f.name() == s).ok_or_else(|| {
+        Family::ALL.into_iter().find(|f| f.as_str() == s).ok_or_else(|| {
             anyhow!(
                 "unknown effect family `{s}` (expected periodic, thermal, reversal, abbe, drift, squareness or higher_order)"
             )
@@ -93,13 +88,13 @@ impl FromStr for Family {
 
 impl fmt::Display for Family {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
+        f.write_str(self.as_str())
     }
 }
 
 impl PartialEq<&str> for Family {
     fn eq(&self, other: &&str) -> bool {
-        self.name() == *other
+        self.as_str() == *other
     }
 }
 
@@ -254,24 +249,10 @@ impl EffectSpec {
 impl FromStr for EffectSpec {
     type Err = anyhow::Error;
 
-    /// Parses and checks an `--add` string, with `Effect::parse`'s errors.
+    /// Parses and checks an `--add` string, with `Effect::parse`'s errors
+    /// (the one parse: [`Effect::parse`] gives the columns as well).
     fn from_str(s: &str) -> Result<EffectSpec> {
-        let e = Effect::parse(s)?;
-        let (_, kv) = split_spec(&e.spec)?;
-        let get = |key: &str| kv.iter().find(|(k, _)| *k == key).map(|(_, v)| *v);
-        // Effect::parse checked every value: these parse.
-        let axis_of = |key: &str| get(key).map(Axis::from_str).transpose();
-        Ok(EffectSpec {
-            family: e.family,
-            target: Target::from_index(e.target).context("target index")?,
-            axis: axis_of("axis")?,
-            channel: get("channel").map(str::to_string),
-            times: axis_of("times")?,
-            params: kv
-                .iter()
-                .map(|(k, v)| (k.to_string(), v.to_string()))
-                .collect(),
-        })
+        Effect::parse_both(s).map(|(_, spec)| spec)
     }
 }
 
@@ -377,10 +358,15 @@ impl Effect {
     /// Parses `--add` syntax. Errors say which key is missing or malformed
     /// and what was expected.
     pub fn parse(s: &str) -> Result<Effect> {
+        Self::parse_both(s).map(|(e, _)| e)
+    }
+
+    /// The effect and its typed spec from one parse.
+    fn parse_both(s: &str) -> Result<(Effect, EffectSpec)> {
         Self::parse_inner(s).with_context(|| format!("bad effect `{s}`"))
     }
 
-    fn parse_inner(s: &str) -> Result<Effect> {
+    fn parse_inner(s: &str) -> Result<(Effect, EffectSpec)> {
         let (family, kv) = split_spec(s)?;
         let get = |key: &str| kv.iter().find(|(k, _)| *k == key).map(|(_, v)| *v);
         let need = |key: &str| get(key).ok_or_else(|| anyhow!("missing `{key}=`"));
@@ -485,19 +471,26 @@ impl Effect {
                     .collect()
             }
         };
-        let spec = format!(
-            "{family}:{}",
-            kv.iter()
-                .map(|(k, v)| format!("{k}={v}"))
-                .collect::<Vec<_>>()
-                .join(",")
-        );
-        Ok(Effect {
+        // Every value is checked above: the typed fields parse.
+        let axis_of = |key: &str| get(key).map(Axis::from_str).transpose();
+        let typed = EffectSpec {
+            family,
+            target: Target::from_index(target).context("target index")?,
+            axis: axis_of("axis")?,
+            channel: get("channel").map(str::to_string),
+            times: axis_of("times")?,
+            params: kv
+                .iter()
+                .map(|(k, v)| (k.to_string(), v.to_string()))
+                .collect(),
+        };
+        let effect = Effect {
             family,
             target,
             features,
-            spec,
-        })
+            spec: typed.to_string(),
+        };
+        Ok((effect, typed))
     }
 }
 
@@ -583,15 +576,30 @@ mod tests {
     }
 
     #[test]
-    fn same_effect_reads_specs_with_the_one_grammar() {
+    fn same_effect_reads_specs_with_effect_parse_grammar() {
+        // Spaces around keys and values, key order: the same effect.
+        assert!(same_effect(
+            "thermal:target=ex,channel=bed,lag_s=3600",
+            "thermal: lag_s = 600 , channel=bed,target=ex"
+        ));
+        // Another channel, target or `times`: another effect.
+        assert!(!same_effect(
+            "thermal:target=ex,channel=bed,lag_s=0",
+            "thermal:target=ex,channel=spindle,lag_s=0"
+        ));
         assert!(same_effect(
             "thermal:target=ex,channel=bed,times=x,lag_s=600",
             "thermal:target=ex,times=x,channel=bed"
         ));
         assert!(!same_effect("abbe:target=ex,times=y", "abbe:target=ex"));
-        let p = |v: &str| format!("periodic:target=ey,axis=y,period_mm={v}");
+        // Periods within 10 % are one lead re-found; farther, two effects.
+        let p = |mm: &str| format!("periodic:target=ey,axis=y,period_mm={mm}");
         assert!(same_effect(&p("5"), &p("5.4")));
         assert!(!same_effect(&p("5"), &p("10")));
+        // What Effect::parse refuses is nobody's duplicate.
+        let twice = "reversal:target=ex,axis=x,axis=y";
+        assert!(Effect::parse(twice).is_err());
+        assert!(!same_effect(twice, "reversal:target=ex,axis=x"));
         assert!(!same_effect("reversal", "reversal"));
     }
 }

@@ -31,17 +31,18 @@
 //! and a candidate's FWL fit), `candidates` (the library proposed at a
 //! model), `score` and `physical` (ΔBIC, held-out gain, the physical
 //! parameter), `path` (the ranking and the BIC-ordered path), `warnings`
-//! (design, plausibility, noise floor) and `effect_key` (when two effects
-//! are the same). Worst regions are [`crate::regions::worst_cells`].
+//! (design, plausibility, noise floor) and `swap` (an effect put into a
+//! model's list in place of the same effect; sameness is
+//! `effect::same_effect`). Worst regions are [`crate::regions::worst_cells`].
 
 mod candidates;
-mod effect_key;
 pub mod linalg;
 pub mod noise;
 mod path;
 pub mod periodogram;
 mod physical;
 mod score;
+mod swap;
 pub mod synth;
 mod target;
 mod warnings;
@@ -57,7 +58,7 @@ use crate::features::Norm;
 
 pub use crate::effect::same_effect;
 pub use crate::regions::Region;
-pub use effect_key::swap_in;
+pub use swap::swap_in;
 pub use warnings::above_noise;
 
 use candidates::propose;

@@ -8,10 +8,10 @@ use crate::data::{AXES, TARGETS};
 use crate::effect::{Effect, EffectSpec, Family, Target};
 
 use super::candidates::{propose, Proposal};
-use super::effect_key::swap_in;
 use super::linalg::small_fit;
 use super::linalg::Basis;
 use super::score::{score, Replacing, Scored};
+use super::swap::swap_in;
 use super::target::{State, TargetData};
 use super::warnings::plausibility_warning;
 use super::{

@@ -25,7 +25,6 @@ pub fn swap_in(adds: &mut Vec<String>, add: &str, replaces: Option<&str>) -> boo
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::effect::{same_effect, Effect};
 
     #[test]
     fn swap_in_replaces_in_place_and_never_adds_twice() {
@@ -40,29 +39,5 @@ mod tests {
         // A new effect goes to the end.
         assert!(swap_in(&mut adds, "drift:target=ez", None));
         assert_eq!(adds.last().map(String::as_str), Some("drift:target=ez"));
-    }
-
-    #[test]
-    fn same_effect_reads_specs_with_effect_parse_grammar() {
-        // Spaces around keys and values, key order: the same effect.
-        assert!(same_effect(
-            "thermal:target=ex,channel=bed,lag_s=3600",
-            "thermal: lag_s = 600 , channel=bed,target=ex"
-        ));
-        // Another channel, target or `times`: another effect.
-        assert!(!same_effect(
-            "thermal:target=ex,channel=bed,lag_s=0",
-            "thermal:target=ex,channel=spindle,lag_s=0"
-        ));
-        assert!(!same_effect("abbe:target=ex,times=y", "abbe:target=ex"));
-        // Periods within 10 % are one lead re-found; farther, two effects.
-        let p = |mm: &str| format!("periodic:target=ey,axis=y,period_mm={mm}");
-        assert!(same_effect(&p("5"), &p("5.4")));
-        assert!(!same_effect(&p("5"), &p("10")));
-        // What Effect::parse refuses is nobody's duplicate.
-        let twice = "reversal:target=ex,axis=x,axis=y";
-        assert!(Effect::parse(twice).is_err());
-        assert!(!same_effect(twice, "reversal:target=ex,axis=x"));
-        assert!(!same_effect("reversal", "reversal"));
     }
 }

@@ -57,11 +57,6 @@ impl Seed {
             other => bail!("unknown model `{other}` ({expected})"),
         }
     }
-
-    /// True for the polynomial seeds (the ones `--add` and `--local` apply to).
-    pub fn is_polynomial(&self) -> bool {
-        matches!(self, Seed::Cubic19 | Seed::Kinematic)
-    }
 }
 
 impl FromStr for Seed {
