@@ -373,6 +373,17 @@ fn excel_files_are_read_as_written() {
         .collect();
     let d = import::read_csv(be.as_slice(), "be.csv").unwrap();
     assert_eq!(d.err_um[0].as_ref().unwrap(), &vec![Some(2.0)]);
+    // A `;` file whose numbers use the decimal point: there a comma in a
+    // number may be a thousands separator, so `1,234` is refused, not read
+    // as 1.234.
+    let d = import::read_csv("x_mm;ex_um\n0;1.5\n".as_bytes(), "dot.csv").unwrap();
+    assert_eq!(d.err_um[0].as_ref().unwrap(), &vec![Some(1.5)]);
+    let e = import::read_csv("x_mm;ex_um\n0;1.5\n10;1,234\n".as_bytes(), "mixed.csv").unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("mixed.csv:3:2: column `ex_um`: expected a number, found `1,234`"),
+        "{e}"
+    );
     // A cut UTF-16 file, and a value in a trailing empty column, are errors.
     let e = import::read_csv(&[0xFF, 0xFE, b'x', 0, b'_'][..], "cut.csv").unwrap_err();
     assert!(

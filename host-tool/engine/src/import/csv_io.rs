@@ -294,7 +294,7 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
             "expected a header row (x_mm, ex_um, …), found end of file",
         ));
     }
-    let (delimiter, dc) = dialect(body.lines().next().unwrap_or(""));
+    let (delimiter, dc) = dialect(body);
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)

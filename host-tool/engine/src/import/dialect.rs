@@ -49,14 +49,23 @@ pub(super) fn utf16_text(bytes: &[u8], name: &str) -> Result<Option<String>, Imp
     Ok(Some(out))
 }
 
-/// The dialect of a CSV file, from its header line: comma-separated, or —
-/// as Excel writes it where the comma is the decimal mark — `;`-separated
-/// with decimal commas, or tab-separated.
-pub(super) fn dialect(header: &str) -> (u8, bool) {
+/// The dialect of a CSV file (`body`: the header line and the rows): the
+/// separator from the header line — `,`, `;` or tab — and whether `,` is
+/// the decimal mark. It is for a `;`-separated file (as Excel writes it
+/// where the comma is the decimal mark) unless some number in it is written
+/// with a decimal point: then a comma in a number could be a thousands
+/// separator (`1,234`), and such a cell is refused as not a number rather
+/// than read as 1.234.
+pub(super) fn dialect(body: &str) -> (u8, bool) {
+    let header = body.lines().next().unwrap_or("");
     if header.contains(',') && !header.contains(';') {
         (b',', false)
     } else if header.contains(';') {
-        (b';', true)
+        let b = body.as_bytes();
+        let dot_decimal = b
+            .windows(3)
+            .any(|w| w[0].is_ascii_digit() && w[1] == b'.' && w[2].is_ascii_digit());
+        (b';', !dot_decimal)
     } else if header.contains('\t') {
         (b'\t', false)
     } else {
