@@ -1,5 +1,6 @@
-//! `trueaxis import` — validate a measurement file (Renishaw .rtl or the
-//! contract CSV) and write it as the trueaxis CSV (docs/cli.md § Measurement CSV). Bad input
+//! `trueaxis import` — validate a measurement file (the contract CSV,
+//! Renishaw .rtl, ecmc ISO 230-2 .dat, a RepRapFirmware or Klipper bed
+//! map) and write it as the trueaxis CSV (docs/cli.md § Measurement CSV). Bad input
 //! exits 1 with `file:line:column: what was expected`; rows left out are
 //! listed, never dropped silently.
 
@@ -16,14 +17,20 @@ use trueaxis_engine::import;
 /// Arguments of `trueaxis import`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The measurement file: `.rtl` (Renishaw linear laser) or `.csv`.
+    /// The measurement file: `.csv` (or a RepRapFirmware heightmap.csv),
+    /// `.rtl` (Renishaw linear laser), `.dat` (ecmc ISO 230-2 run) or `.cfg`
+    /// (a Klipper config with a saved bed mesh).
     pub file: PathBuf,
     /// Where to write the contract CSV (omit to only validate).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
-    /// Axis of an .rtl file whose USER-TEXT:: has no `Axis:` line (x, y, z).
+    /// The machine axis of a one-axis run: an .rtl file whose USER-TEXT::
+    /// has no `Axis:` line, an ecmc .dat file (required there).
     #[arg(long, value_parser = ["x", "y", "z"])]
     pub axis: Option<String>,
+    /// The Klipper bed mesh profile to read when the .cfg saves several.
+    #[arg(long)]
+    pub profile: Option<String>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -38,7 +45,13 @@ impl Args {
         if let Some(out) = &self.output {
             crate::input::refuse_overwrite(&[("the input file", &self.file)], &[("-o", out)])?;
         }
-        let data = import::load_with_axis(&self.file, axis)?;
+        let data = import::load_with(
+            &self.file,
+            &import::LoadOptions {
+                axis,
+                profile: self.profile.clone(),
+            },
+        )?;
         if let Some(out) = &self.output {
             let f = std::fs::File::create(out)
                 .with_context(|| format!("cannot create {}", out.display()))?;

@@ -1,13 +1,17 @@
-//! Measurement import: the CSV of docs/cli.md § Measurement CSV (read and write) and
-//! Renishaw `.rtl` linear-laser files, both into [`Dataset`].
+//! Measurement import: the CSV of docs/cli.md § Measurement CSV (read and write),
+//! Renishaw `.rtl` linear-laser files, ecmc ISO 230-2 `.dat` runs and the bed
+//! maps of RepRapFirmware (`heightmap.csv`) and Klipper (`[bed_mesh]` in
+//! `printer.cfg`), all into [`Dataset`].
 //!
 //! Every error names the file, the line and (where there is one) the column,
 //! and says what was expected; the commands turn it into exit code 1. Rows
 //! that are left out are recorded in [`Dataset::skipped`] with the reason —
 //! nothing is silently dropped (docs/cli.md § Measurement CSV).
 
+mod bedmesh;
 mod csv_io;
 mod dialect;
+mod ecmc;
 mod rtl;
 
 use std::fmt;
@@ -17,7 +21,9 @@ use anyhow::Context;
 
 use crate::data::Dataset;
 
+pub use bedmesh::{klipper_profiles, read_klipper_mesh, read_rrf_heightmap};
 pub use csv_io::{column_names, probable_column, read_csv, write_csv};
+pub use ecmc::read_ecmc;
 pub use rtl::read_rtl;
 
 /// SHA-256 (hex) of the data set's canonical CSV ([`write_csv`]): the same
@@ -73,28 +79,61 @@ impl ImportError {
     }
 }
 
-/// Loads a measurement file, choosing the reader by extension (`.csv`,
-/// `.rtl`, case-insensitive). The result has passed [`Dataset::validate`].
+/// Loads a measurement file, choosing the reader by extension and content
+/// (docs/cli.md § import). The result has passed [`Dataset::validate`].
 pub fn load(path: &Path) -> anyhow::Result<Dataset> {
-    load_with_axis(path, None)
+    load_with(path, &LoadOptions::default())
 }
 
 /// As [`load`], but for `.rtl` files `axis` (0 = x) overrides the axis named
 /// in the file's `USER-TEXT::` section (needed when that line is missing).
 pub fn load_with_axis(path: &Path, axis: Option<usize>) -> anyhow::Result<Dataset> {
+    load_with(
+        path,
+        &LoadOptions {
+            axis,
+            profile: None,
+        },
+    )
+}
+
+/// What a file may need beyond its bytes.
+#[derive(Clone, Debug, Default)]
+pub struct LoadOptions {
+    /// The machine axis (0 = x) of a one-axis file: an `.rtl` without an
+    /// `Axis:` line (overrides it), an ecmc `*_ISO230.dat` (required).
+    pub axis: Option<usize>,
+    /// The Klipper bed mesh profile to read when a config holds several.
+    pub profile: Option<String>,
+}
+
+/// Loads a measurement file: `.csv` (the contract CSV, or a
+/// RepRapFirmware `heightmap.csv` recognised by its first line), `.rtl`
+/// (Renishaw), `.dat` (ecmc ISO 230-2), `.cfg` (a Klipper config with a
+/// saved bed mesh). The result has passed [`Dataset::validate`].
+pub fn load_with(path: &Path, opts: &LoadOptions) -> anyhow::Result<Dataset> {
     let name = path.display().to_string();
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {name}"))?;
+    let text = || String::from_utf8_lossy(&bytes);
+    if opts.profile.is_some() && ext != "cfg" {
+        anyhow::bail!("{name}: --profile names a Klipper bed mesh; expected a .cfg file");
+    }
     let ds = match ext.as_str() {
+        "csv" if bedmesh::is_rrf_heightmap(&text()) => read_rrf_heightmap(&text(), &name)?,
         "csv" => read_csv(bytes.as_slice(), &name)?,
-        "rtl" => {
-            let text = String::from_utf8_lossy(&bytes);
-            read_rtl(&text, &name, axis)?
-        }
-        other => anyhow::bail!("{name}: unknown file type `.{other}` (expected .csv or .rtl)"),
+        "rtl" => read_rtl(&text(), &name, opts.axis)?,
+        "dat" if ecmc::is_ecmc_iso230(&text()) => read_ecmc(&text(), &name, opts.axis)?,
+        "dat" => anyhow::bail!(
+            "{name}: a .dat file without TGT_DATA[i]= lines; expected an ecmc ISO230 file (TGT_DATA, REF_DATA_FWD, REF_DATA_BWD)"
+        ),
+        "cfg" => read_klipper_mesh(&text(), &name, opts.profile.as_deref())?,
+        other => anyhow::bail!(
+            "{name}: unknown file type `.{other}` (expected .csv, .rtl, .dat (ecmc ISO 230-2) or .cfg (Klipper bed mesh))"
+        ),
     };
     ds.validate()?;
     Ok(ds)

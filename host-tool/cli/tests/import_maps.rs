@@ -1,0 +1,141 @@
+//! The files users of other stacks already have: a RepRapFirmware
+//! `heightmap.csv`, a Klipper `printer.cfg` with two saved bed meshes, an
+//! ecmc `*_ISO230.dat` run — small files written by the project in each
+//! format (tests/data; generators' formulas in the assertions below).
+
+mod common;
+
+use common::{data_file as data, json, run, s, tmp_dir};
+
+fn stderr(out: &std::process::Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// The `ez_um` of the node at (x, y) in an imported map's CSV.
+fn node(csv: &str, x: f64, y: f64) -> f64 {
+    let mut r = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_reader(csv.as_bytes());
+    for rec in r.records() {
+        let rec = rec.unwrap();
+        let (rx, ry): (f64, f64) = (rec[0].parse().unwrap(), rec[1].parse().unwrap());
+        if (rx - x).abs() < 1e-6 && (ry - y).abs() < 1e-6 {
+            return rec[2].parse().unwrap();
+        }
+    }
+    panic!("no node at {x}, {y}");
+}
+
+#[test]
+fn a_reprapfirmware_map_becomes_a_z_error_map_with_the_compensation_sign() {
+    let dir = tmp_dir("maps", "rrf");
+    let out_csv = dir.join("bed.csv");
+    let map = data("bed_heightmap.csv");
+    let doc = json(&run(&["import", s(&map), "-o", s(&out_csv), "--json"]));
+    assert_eq!(doc["rows"], 80, "{doc}");
+    assert_eq!(doc["columns"], serde_json::json!(["x_mm", "y_mm", "ez_um"]));
+    // The bare `0` of the last node is "not probed", listed with its line.
+    assert_eq!(doc["skipped_count"], 1);
+    assert_eq!(doc["skipped"][0]["line"], 12);
+    let csv = std::fs::read_to_string(&out_csv).unwrap();
+    // Line 5 (second row, y = 10 + 185/8 = 33.125 mm), first node x = 25:
+    // height −0.061 mm → the tool stands 61 µm high → ez = +61 µm.
+    assert!((node(&csv, 25.0, 33.125) - 61.0).abs() < 1e-9);
+    // Line 4, node 8 (x = 200): height 0.051 mm → ez = −51 µm.
+    assert!((node(&csv, 200.0, 10.0) + 51.0).abs() < 1e-9);
+    // The probed `0.000` (line 4, node 5) is a zero, not a gap; the last row reaches
+    // ymax = 195 mm although the file writes the spacing as 23.12 (line 12,
+    // node 8: −0.037 mm).
+    assert_eq!(node(&csv, 125.0, 10.0), 0.0);
+    assert!((node(&csv, 25.0, 10.0) - 70.0).abs() < 1e-9);
+    assert!((node(&csv, 200.0, 195.0) - 37.0).abs() < 1e-9);
+    // fit reads it directly and says which row it left out.
+    let model = dir.join("m.json");
+    let fit = run(&[
+        "fit",
+        s(&map),
+        "--model",
+        "cubic19",
+        "-o",
+        s(&model),
+        "--json",
+    ]);
+    assert!(stderr(&fit).contains("line 12"), "{}", stderr(&fit));
+    let f = json(&fit);
+    // The map is mostly a tilted dish: a cubic follows it to a few µm of a
+    // −170…+67 µm surface (the rest is a cos(πx)·y warp a cubic cannot
+    // follow). Swapped axes or rows read in the wrong order would not.
+    assert_eq!(f["rows"]["ez"], 80, "{f}");
+    let rms = f["rms_um"]["ez"].as_f64().unwrap_or_else(|| panic!("{f}"));
+    assert!(rms < 5.0, "{f}");
+}
+
+#[test]
+fn a_klipper_config_with_two_meshes_needs_a_profile() {
+    let cfg = data("klipper_printer.cfg");
+    let out = run(&["import", s(&cfg)]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("2 bed mesh profiles (default, hot)"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(stderr(&out).contains("--profile"));
+    let dir = tmp_dir("maps", "klipper");
+    let out_csv = dir.join("hot.csv");
+    let doc = json(&run(&[
+        "import",
+        s(&cfg),
+        "--profile",
+        "hot",
+        "-o",
+        s(&out_csv),
+        "--json",
+    ]));
+    assert_eq!(doc["rows"], 25);
+    let csv = std::fs::read_to_string(&out_csv).unwrap();
+    // Profile `hot` at the centre node (x = y = 117.5): 0.030 mm → −30 µm;
+    // at (34, 34): 0.03 − 0.05 + 0.02 − 0.08 = −0.08 mm → +80 µm.
+    assert!((node(&csv, 117.5, 117.5) + 30.0).abs() < 1e-9);
+    assert!((node(&csv, 34.0, 34.0) - 80.0).abs() < 1e-9);
+    let out = run(&["import", s(&cfg), "--profile", "cold"]);
+    assert!(
+        stderr(&out).contains("no bed mesh profile `cold`"),
+        "{}",
+        stderr(&out)
+    );
+    let out = run(&["import", s(&data("good.csv")), "--profile", "hot"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("expected a .cfg file"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn an_ecmc_iso230_run_gives_the_iso230_figures_it_was_made_with() {
+    let dat = data("axis1_ISO230.dat");
+    let out = run(&["iso230", s(&dat)]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("pass --axis x|y|z"),
+        "{}",
+        stderr(&out)
+    );
+    // Made with a 3 µm backlash (backward reads 3 µm short) and noise that
+    // averages to zero over the 5 cycles at every target: B = 3 µm, and the
+    // forward mean at 15 mm is 12e-6·15 mm + 1 µm·sin(2π·15/50) = 1.131 µm.
+    let doc = json(&run(&["iso230", s(&dat), "--axis", "x", "--json"]));
+    assert!((doc["B_um"].as_f64().unwrap() - 3.0).abs() < 0.01, "{doc}");
+    let first = &doc["per_target"][0];
+    assert_eq!(first["pos_mm"], 15.0);
+    assert_eq!(
+        (first["n_up"].as_u64(), first["n_down"].as_u64()),
+        (Some(5), Some(5))
+    );
+    assert!(
+        (first["mean_up_um"].as_f64().unwrap() - 1.131).abs() < 0.011,
+        "{first}"
+    );
+}
