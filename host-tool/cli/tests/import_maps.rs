@@ -139,3 +139,110 @@ fn an_ecmc_iso230_run_gives_the_iso230_figures_it_was_made_with() {
         "{first}"
     );
 }
+
+#[test]
+fn a_mesh_exported_from_a_fit_of_a_mesh_gives_the_mesh_back() {
+    // Profile `hot` is a quadratic surface, which cubic19 follows exactly:
+    // import → fit → export as a Klipper profile and as a RepRapFirmware
+    // map → import again must give the measured heights back (to the
+    // 1e-6 mm and 1e-3 mm the two formats write), at the same nodes.
+    let dir = tmp_dir("maps", "roundtrip");
+    let cfg = data("klipper_printer.cfg");
+    let hot = dir.join("hot.csv");
+    json(&run(&[
+        "import",
+        s(&cfg),
+        "--profile",
+        "hot",
+        "-o",
+        s(&hot),
+        "--json",
+    ]));
+    let model = dir.join("m.json");
+    json(&run(&[
+        "fit",
+        s(&hot),
+        "--model",
+        "cubic19",
+        "-o",
+        s(&model),
+        "--json",
+    ]));
+    let measured = std::fs::read_to_string(&hot).unwrap();
+    for (format, file, tol_um) in [
+        ("klipper-mesh", "back.cfg", 1e-3),
+        ("rrf-heightmap", "back_heightmap.csv", 0.5 + 1e-9),
+    ] {
+        let out = dir.join(file);
+        let doc = json(&run(&[
+            "export",
+            s(&model),
+            "--format",
+            format,
+            "--mesh-points",
+            "5",
+            "-o",
+            s(&out),
+            "--json",
+        ]));
+        assert_eq!(doc["nodes"], serde_json::json!([5, 5]), "{doc}");
+        assert!(doc["max_interp_error_um"].as_f64().unwrap() < 40.0, "{doc}");
+        let back_csv = dir.join(format!("{file}.csv"));
+        json(&run(&["import", s(&out), "-o", s(&back_csv), "--json"]));
+        let back = std::fs::read_to_string(&back_csv).unwrap();
+        for (x, y) in [
+            (34.0, 34.0),
+            (75.75, 117.5),
+            (201.0, 201.0),
+            (117.5, 159.25),
+        ] {
+            let (a, b) = (node(&measured, x, y), node(&back, x, y));
+            assert!(
+                (a - b).abs() <= tol_um,
+                "{format} at ({x}, {y}): {a} vs {b}"
+            );
+        }
+    }
+    // A flag of another format is a usage error, not ignored.
+    let out = run(&[
+        "export",
+        s(&model),
+        "--format",
+        "klipper-mesh",
+        "--points",
+        "5",
+        "-o",
+        s(&dir.join("x.cfg")),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    // A one-axis model is not a bed mesh.
+    let line = dir.join("line.csv");
+    json(&run(&[
+        "simulate",
+        "--plan",
+        "line:x:10",
+        "-o",
+        s(&line),
+        "--json",
+    ]));
+    let lm = dir.join("line.json");
+    json(&run(&[
+        "fit",
+        s(&line),
+        "--model",
+        "cubic19",
+        "-o",
+        s(&lm),
+        "--json",
+    ]));
+    let out = run(&[
+        "export",
+        s(&lm),
+        "--format",
+        "rrf-heightmap",
+        "-o",
+        s(&dir.join("l.csv")),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("a bed mesh"), "{}", stderr(&out));
+}

@@ -12,7 +12,7 @@ use crate::cmd::out::outln;
 use crate::workflow::{export_table, write_file};
 use trueaxis_engine::data::{AXES, TARGETS};
 use trueaxis_engine::export::table::TableOptions;
-use trueaxis_engine::export::{crc32_hex, linuxcnc, sample_axis, sinumerik, Warning};
+use trueaxis_engine::export::{bedmesh, crc32_hex, linuxcnc, sample_axis, sinumerik, Warning};
 use trueaxis_engine::model::ModelFile;
 
 /// Output format of `trueaxis export`.
@@ -24,6 +24,12 @@ pub enum Format {
     Linuxcnc,
     /// Sinumerik leadscrew error compensation ($AA_ENC_COMP), one axis.
     Sinumerik,
+    /// RepRapFirmware bed height map (heightmap.csv, `G29 S1` loads it):
+    /// the model's ez over x and y.
+    RrfHeightmap,
+    /// Klipper bed mesh profile (`#*# [bed_mesh NAME]`, for printer.cfg):
+    /// the model's ez over x and y.
+    KlipperMesh,
 }
 
 /// Arguments of `trueaxis export`. Each flag applies to the formats named
@@ -51,6 +57,13 @@ pub struct Args {
     /// [sinumerik] Sinumerik axis name in the table's variables [default: AX1].
     #[arg(long)]
     pub sinumerik_axis: Option<String>,
+    /// [rrf-heightmap, klipper-mesh] Nodes of the mesh along x and y, `N`
+    /// or `NX,NY` [default: 11,11].
+    #[arg(long)]
+    pub mesh_points: Option<String>,
+    /// [klipper-mesh] Name of the bed mesh profile [default: trueaxis].
+    #[arg(long)]
+    pub profile: Option<String>,
     /// [every format] Largest |correction| the export may hold, µm (default:
     /// 1.5 × the largest the model asks for, at least 1; at most 4000). The
     /// firmware table clamps there (warned when below the model's largest);
@@ -111,12 +124,32 @@ fn parse_allow_error_nm(s: &str) -> std::result::Result<f64, String> {
 const TABLE_ONLY: &[Format] = &[Format::Table];
 const CONTROLLERS: &[Format] = &[Format::Linuxcnc, Format::Sinumerik];
 const SINUMERIK_ONLY: &[Format] = &[Format::Sinumerik];
+const MESHES: &[Format] = &[Format::RrfHeightmap, Format::KlipperMesh];
+const KLIPPER_ONLY: &[Format] = &[Format::KlipperMesh];
 
 fn format_name(f: Format) -> &'static str {
     match f {
         Format::Table => "table",
         Format::Linuxcnc => "linuxcnc",
         Format::Sinumerik => "sinumerik",
+        Format::RrfHeightmap => "rrf-heightmap",
+        Format::KlipperMesh => "klipper-mesh",
+    }
+}
+
+/// `--mesh-points`: `N` or `NX,NY`, each 2…100.
+fn parse_mesh_points(s: &str) -> Result<[usize; 2]> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let n = |p: &str| -> Result<usize> {
+        match p.parse::<usize>() {
+            Ok(v) if (2..=100).contains(&v) => Ok(v),
+            _ => bail!("--mesh-points `{s}`: expected N or NX,NY with whole numbers from 2 to 100"),
+        }
+    };
+    match parts.as_slice() {
+        [a] => Ok([n(a)?; 2]),
+        [a, b] => Ok([n(a)?, n(b)?]),
+        _ => bail!("--mesh-points `{s}`: expected N or NX,NY"),
     }
 }
 
@@ -183,13 +216,25 @@ impl Args {
             self.points.is_some(),
             "--points",
             CONTROLLERS,
-            "a firmware table evaluates the model itself, not points of it",
+            "only a one-axis controller file is a list of points; a bed mesh takes --mesh-points",
         );
         flag(
             self.sinumerik_axis.is_some(),
             "--sinumerik-axis",
             SINUMERIK_ONLY,
             "only the Sinumerik program names its axis",
+        );
+        flag(
+            self.mesh_points.is_some(),
+            "--mesh-points",
+            MESHES,
+            "only a bed mesh is a grid over x and y",
+        );
+        flag(
+            self.profile.is_some(),
+            "--profile",
+            KLIPPER_ONLY,
+            "only a Klipper mesh is a named profile",
         );
         flag(
             self.max_slew_nm_per_ms.is_some(),
@@ -303,6 +348,7 @@ impl Args {
                 (doc, e.warnings.clone(), text)
             }
             Format::Linuxcnc | Format::Sinumerik => self.controller(&model)?,
+            Format::RrfHeightmap | Format::KlipperMesh => self.mesh(&model)?,
         };
         for w in &warnings {
             eprintln!("warning ({}): {}", w.code, w.detail);
@@ -313,6 +359,69 @@ impl Args {
             crate::cmd::out::print(&text)?;
         }
         Ok(())
+    }
+
+    /// A bed mesh (docs/export-formats.md § Bed meshes): the model's ez on an
+    /// x–y grid, with the max-correction rule of the controller files.
+    fn mesh(&self, model: &ModelFile) -> Result<(serde_json::Value, Vec<Warning>, String)> {
+        let counts = match self.mesh_points.as_deref() {
+            Some(s) => parse_mesh_points(s)?,
+            None => [11, 11],
+        };
+        let m = bedmesh::sample_mesh(model, counts)?;
+        let name = format_name(self.format);
+        let largest_nm = m
+            .height_mm
+            .iter()
+            .flatten()
+            .fold(0.0f64, |a, h| a.max(1e6 * h.abs()));
+        let max_corr_nm =
+            trueaxis_engine::export::max_corr_limit_nm(2, largest_nm, self.max_corr_um)
+                .map_err(|e| anyhow::anyhow!("{e:#}; {} was not written", self.output.display()))?;
+        if largest_nm > max_corr_nm {
+            bail!(
+                "ez: the {name} file would hold corrections up to {:.3} µm, above --max-corr-um {}: a firmware's bed mesh cannot clamp, so {} was not written — check the model, or raise --max-corr-um",
+                largest_nm / 1000.0,
+                max_corr_nm / 1000.0,
+                self.output.display()
+            );
+        }
+        let body = if self.format == Format::RrfHeightmap {
+            bedmesh::write_rrf(
+                &m,
+                &format!("generated by trueaxis from {}", self.model.display()),
+            )
+        } else {
+            bedmesh::write_klipper(&m, self.profile.as_deref().unwrap_or("trueaxis"))?
+        };
+        write_file(&self.output, body.as_bytes())?;
+        let (nx, ny) = (m.x_mm.len(), m.y_mm.len());
+        let doc = json!({
+            "format": name,
+            "output": self.output.display().to_string(),
+            "nodes": [nx, ny],
+            "x_mm": [m.x_mm[0], m.x_mm[nx - 1]],
+            "y_mm": [m.y_mm[0], m.y_mm[ny - 1]],
+            "spacing_mm": [m.x_mm[1] - m.x_mm[0], m.y_mm[1] - m.y_mm[0]],
+            "z_mm": m.z_mm,
+            "bytes": body.len(),
+            "crc32": crc32_hex(body.as_bytes()),
+            "max_interp_error_um": m.max_interp_error_um,
+            "max_corr_um": max_corr_nm.ceil() / 1000.0,
+            "largest_height_um": largest_nm / 1000.0,
+            "warnings": m.warnings,
+        });
+        let text = format!(
+            "{}: {name}, {nx} × {ny} nodes over x {:.2}…{:.2} mm, y {:.2}…{:.2} mm; heights up to {:.3} µm; bilinear interpolation of the nodes differs from the model by at most {:.3} µm (height = −ez: the firmware lifts the tool where ez is negative)\n",
+            self.output.display(),
+            m.x_mm[0],
+            m.x_mm[nx - 1],
+            m.y_mm[0],
+            m.y_mm[ny - 1],
+            largest_nm / 1000.0,
+            m.max_interp_error_um
+        );
+        Ok((doc, m.warnings.clone(), text))
     }
 
     fn controller(&self, model: &ModelFile) -> Result<(serde_json::Value, Vec<Warning>, String)> {

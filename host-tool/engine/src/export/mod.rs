@@ -14,6 +14,7 @@
 //! code (`FittedModel::predict`) at a fixed state (other axes at the centre
 //! of the travel, temperatures at the reference, tool length 0, time 0).
 
+pub mod bedmesh;
 pub mod linuxcnc;
 pub mod sinumerik;
 pub mod table;
