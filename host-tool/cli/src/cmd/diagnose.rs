@@ -73,19 +73,75 @@ impl Args {
                 outln!("report: {}", index.display())?;
             }
         }
+        let model_out = next_model_path(&self.model, &self.data);
         if self.json {
             let mut doc = serde_json::to_value(&d)?;
+            doc["next_command"] = next_command(&d, &self.data, &model_out).into();
             input::add_skipped_count(&mut doc, &data);
             out::json_pretty(&doc)?;
         } else {
-            crate::cmd::out::print(&text(&d, &self.data))?;
+            crate::cmd::out::print(&text(&d, &self.data, &model_out))?;
         }
         Ok(())
     }
 }
 
-/// The human summary.
-pub fn text(d: &Diagnosis, data_path: &Path) -> String {
+/// A path as one shell word: as it is when it has only characters no
+/// shell treats specially, else in single quotes.
+fn shell_word(p: &Path) -> String {
+    let s = p.display().to_string();
+    if !s.is_empty()
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || "/._-+,:=@%".contains(c))
+    {
+        s
+    } else {
+        format!("'{}'", s.replace('\'', r"'\''"))
+    }
+}
+
+/// Where the `next:` command writes its model: over the model file that
+/// was diagnosed (so its history continues, docs/diagnose.md § History),
+/// or `model.json` beside the data when a seed name was given.
+fn next_model_path(model: &str, data_path: &Path) -> PathBuf {
+    let m = Path::new(model);
+    if m.is_file() {
+        m.to_path_buf()
+    } else {
+        data_path
+            .parent()
+            .unwrap_or(Path::new(""))
+            .join("model.json")
+    }
+}
+
+/// The `fit` command that adds every effect the path found — the one
+/// command to run next — or `None` when the path found nothing.
+pub fn next_command(d: &Diagnosis, data_path: &Path, model_out: &Path) -> Option<String> {
+    if d.path.is_empty() {
+        return None;
+    }
+    let mut cmd = format!(
+        "trueaxis fit {} --model {}",
+        shell_word(data_path),
+        d.model.split(" + ").next().unwrap_or("cubic19")
+    );
+    // Every effect the path found, in order; one that replaces an effect
+    // of the model (the same effect with another lag, period, order or
+    // degree) takes its place.
+    let mut adds: Vec<String> = d.model.split(" + ").skip(1).map(String::from).collect();
+    for p in &d.path {
+        diagnose::swap_in(&mut adds, &p.add, p.replaces.as_deref());
+    }
+    for a in adds {
+        cmd.push_str(&format!(" --add '{a}'"));
+    }
+    cmd.push_str(&format!(" -o {}", shell_word(model_out)));
+    Some(cmd)
+}
+
+/// The human summary; `model_out` is where the `next:` command writes.
+pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path) -> String {
     let mut s = String::new();
     s.push_str(&format!(
         "{}: model {} (hold-out: {})\n",
@@ -173,22 +229,7 @@ pub fn text(d: &Diagnosis, data_path: &Path) -> String {
             s.push_str(&format!("  [{}] {}\n", w.code, w.detail));
         }
     }
-    if !d.path.is_empty() {
-        let mut cmd = format!(
-            "trueaxis fit {} --model {}",
-            data_path.display(),
-            d.model.split(" + ").next().unwrap_or("cubic19")
-        );
-        // Every effect the path found, in order; one that replaces an effect
-        // of the model (the same effect with another lag, period, order or
-        // degree) takes its place.
-        let mut adds: Vec<String> = d.model.split(" + ").skip(1).map(String::from).collect();
-        for p in &d.path {
-            diagnose::swap_in(&mut adds, &p.add, p.replaces.as_deref());
-        }
-        for a in adds {
-            cmd.push_str(&format!(" --add '{a}'"));
-        }
+    if let Some(cmd) = next_command(d, data_path, model_out) {
         s.push_str(&format!("next: {cmd}\n"));
     }
     s
