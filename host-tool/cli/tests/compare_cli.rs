@@ -436,7 +436,14 @@ fn numeric_auxiliary_columns_are_channels() {
     // The text output names it among the channels the residual follows.
     let out = run(&["compare", s(&humid), "--model", s(&model)]);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("ex vs humidity_pct: r = +0.99"), "{text}");
+    let line = text
+        .lines()
+        .find(|l| l.contains("ex vs humidity_pct:"))
+        .unwrap_or_else(|| panic!("{text}"));
+    assert!(
+        line.contains("(r = +0.99)") && line.contains("µm per unit"),
+        "{line}"
+    );
 }
 
 #[test]
@@ -610,7 +617,12 @@ fn hand_made_line_shows_the_missing_reversal() {
     // The text output names the correlated channel.
     let out = run(&["compare", s(&csv), "--model", s(&plain)]);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("ex vs dir_x: r = +1.00"), "{text}");
+    // Ranked by what it explains beyond position, the step from −1 to +1
+    // in words (2 × 2.4 µm).
+    assert!(
+        text.contains("ex vs dir_x: 100 % (r = +1.00), slope +4.8000 µm per direction change"),
+        "{text}"
+    );
 
     let full = dir.join("full.model.json");
     fit(&csv, CUBIC19_REVERSAL_X, &full);

@@ -132,6 +132,24 @@ pub struct ChannelProfile {
     /// Least-squares slope of the residual against the channel, µm per
     /// channel unit.
     pub slope_um_per_unit: Option<f64>,
+    /// The unit of the slopes in words: `µm/mm` (a position, the tool
+    /// length), `µm/K` (a temperature), `µm/s` (time), `µm per direction
+    /// change` (a direction: the step from −1 to +1), `µm per unit` (an
+    /// auxiliary column).
+    pub slope_unit: String,
+    /// Once position is accounted for (the residual and the channel both
+    /// regressed on a cubic in the moving axes, cross terms included), the
+    /// correlation of what is left of each. `None` for a position axis
+    /// itself, and for a channel that position explains entirely (a
+    /// temperature that only follows x cannot be told from x).
+    pub partial_corr: Option<f64>,
+    /// The slope of the residual against the channel once position is
+    /// accounted for, in `slope_unit` (for a direction: the step from −1 to
+    /// +1, twice the slope per unit).
+    pub partial_slope: Option<f64>,
+    /// The share of the residual's variance that the channel explains
+    /// beyond position (0…1): what `compare` ranks channels by.
+    pub explains_share: Option<f64>,
     /// The residual in up to 10 equal-width bins (2 for a direction).
     pub bins: Vec<Bin>,
 }
@@ -251,13 +269,176 @@ pub fn compare(
         );
         c.worst_regions
             .extend(worst_regions(data, t, &res, REGION_BINS, MAX_REGIONS));
+        let basis = PositionBasis::new(data, &res);
         for (channel, values) in channels(data) {
             let binary = channel.starts_with("dir_");
-            c.channels
-                .push(channel_profile(&channel, &name, &values, &res, binary));
+            let mut p = channel_profile(&channel, &name, &values, &res, binary);
+            if !is_position(&channel) {
+                basis.partial(&mut p, &values, &res);
+            }
+            c.channels.push(p);
         }
     }
     c
+}
+
+/// The smallest share of the residual a channel must explain beyond
+/// position to be listed by `compare` (5 %).
+pub const RANK_MIN_SHARE: f64 = 0.05;
+
+/// The channels of target `target` that explain a share of its residual
+/// beyond position, most first (`explains_share` ≥ `min_share`): the
+/// ranking `compare` prints.
+pub fn ranked_channels<'a>(
+    c: &'a Comparison,
+    target: &str,
+    min_share: f64,
+) -> Vec<&'a ChannelProfile> {
+    let mut v: Vec<&ChannelProfile> = c
+        .channels
+        .iter()
+        .filter(|p| p.target == target && p.explains_share.is_some_and(|s| s >= min_share))
+        .collect();
+    v.sort_by(|a, b| {
+        b.explains_share
+            .unwrap_or(0.0)
+            .total_cmp(&a.explains_share.unwrap_or(0.0))
+    });
+    v
+}
+
+/// `x_mm`, `y_mm`, `z_mm`: a position axis.
+pub fn is_position(channel: &str) -> bool {
+    matches!(channel, "x_mm" | "y_mm" | "z_mm")
+}
+
+/// The unit of a slope against `channel`.
+fn slope_unit(channel: &str) -> &'static str {
+    if channel.starts_with("T_") && channel.ends_with("_C") {
+        "µm/K"
+    } else if channel.ends_with("_mm") {
+        "µm/mm"
+    } else if channel == "t_s" {
+        "µm/s"
+    } else if channel.starts_with("dir_") {
+        "µm per direction change"
+    } else {
+        "µm per unit"
+    }
+}
+
+/// An orthonormal basis (over the rows where the residual is known) of a
+/// cubic in the moving axes with cross terms: what "position" can explain.
+struct PositionBasis {
+    /// Row indices the basis is over.
+    rows: Vec<usize>,
+    /// Orthonormal columns over `rows`.
+    q: Vec<Vec<f64>>,
+}
+
+impl PositionBasis {
+    fn new(data: &Dataset, residual: &[Option<f64>]) -> PositionBasis {
+        let rows: Vec<usize> = (0..residual.len())
+            .filter(|&i| residual[i].is_some_and(f64::is_finite))
+            .collect();
+        // Each moving axis scaled to −1…1 (conditioning), then its powers
+        // and the pairwise products of the first powers.
+        let mut cols: Vec<Vec<f64>> = vec![vec![1.0; rows.len()]];
+        let mut firsts = Vec::new();
+        for a in data.varying_axes() {
+            let p = data.pos_mm[a].as_ref().expect("a varying axis is present");
+            let (lo, hi) = rows
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &i| {
+                    (l.min(p[i]), h.max(p[i]))
+                });
+            if hi <= lo || hi.is_nan() {
+                continue;
+            }
+            let u: Vec<f64> = rows
+                .iter()
+                .map(|&i| (2.0 * p[i] - lo - hi) / (hi - lo))
+                .collect();
+            for k in 1..=3 {
+                cols.push(u.iter().map(|v| v.powi(k)).collect());
+            }
+            firsts.push(u);
+        }
+        for i in 0..firsts.len() {
+            for j in i + 1..firsts.len() {
+                cols.push(
+                    firsts[i]
+                        .iter()
+                        .zip(&firsts[j])
+                        .map(|(a, b)| a * b)
+                        .collect(),
+                );
+            }
+        }
+        // Modified Gram–Schmidt; a column that is (nearly) a combination of
+        // the others (a grid with two levels on an axis) is dropped.
+        let mut q: Vec<Vec<f64>> = Vec::new();
+        for mut c in cols {
+            let norm0 = dot(&c, &c).sqrt();
+            for e in &q {
+                let d = dot(&c, e);
+                c.iter_mut().zip(e).for_each(|(v, w)| *v -= d * w);
+            }
+            let norm = dot(&c, &c).sqrt();
+            if norm0 > 0.0 && norm > 1e-8 * norm0 {
+                c.iter_mut().for_each(|v| *v /= norm);
+                q.push(c);
+            }
+        }
+        PositionBasis { rows, q }
+    }
+
+    /// `v` on the basis rows with its projection on the basis removed.
+    fn residual_of(&self, v: &[f64]) -> Vec<f64> {
+        let mut r: Vec<f64> = self.rows.iter().map(|&i| v[i]).collect();
+        for e in &self.q {
+            let d = dot(&r, e);
+            r.iter_mut().zip(e).for_each(|(x, w)| *x -= d * w);
+        }
+        r
+    }
+
+    /// Fills `partial_corr`, `partial_slope` and `explains_share` of `p`.
+    fn partial(&self, p: &mut ChannelProfile, channel: &[f64], residual: &[Option<f64>]) {
+        // A row without a channel value (an empty auxiliary cell) leaves
+        // the basis's rows: such a channel keeps only its raw statistics.
+        if self.rows.iter().any(|&i| !channel[i].is_finite()) || self.rows.len() <= self.q.len() + 2
+        {
+            return;
+        }
+        let res: Vec<f64> = residual.iter().map(|v| v.unwrap_or(f64::NAN)).collect();
+        let r = self.residual_of(&res);
+        let c = self.residual_of(channel);
+        let c_all: Vec<f64> = self.rows.iter().map(|&i| channel[i]).collect();
+        let mean = c_all.iter().sum::<f64>() / c_all.len() as f64;
+        let var_c: f64 = c_all.iter().map(|v| (v - mean).powi(2)).sum();
+        let (scc, srr, src) = (dot(&c, &c), dot(&r, &r), dot(&r, &c));
+        let res_all: Vec<f64> = self.rows.iter().map(|&i| res[i]).collect();
+        let rmean = res_all.iter().sum::<f64>() / res_all.len() as f64;
+        let var_r: f64 = res_all.iter().map(|v| (v - rmean).powi(2)).sum();
+        // Position explains the channel (all but 1e-6 of its variance):
+        // nothing is left to tell it from position.
+        if var_c <= 0.0 || scc <= 1e-6 * var_c || srr <= 0.0 || var_r <= 0.0 {
+            return;
+        }
+        let slope = src / scc;
+        p.partial_corr = Some(src / (scc * srr).sqrt());
+        p.partial_slope = Some(if p.channel.starts_with("dir_") {
+            2.0 * slope
+        } else {
+            slope
+        });
+        p.explains_share = Some(src * src / scc / var_r);
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 /// Every column the residual can be plotted against, with its values:
@@ -399,6 +580,10 @@ pub fn channel_profile(
         target: target.to_string(),
         corr,
         slope_um_per_unit: slope,
+        slope_unit: slope_unit(channel).to_string(),
+        partial_corr: None,
+        partial_slope: None,
+        explains_share: None,
         bins,
     }
 }
@@ -406,6 +591,77 @@ pub fn channel_profile(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::data::{AuxChannel, TempChannel};
+
+    /// A bidirectional line along x measured 6 times while the machine
+    /// warms: the residual is a cubic shape along x plus 1.5 µm/K of the
+    /// bed temperature. A humidity column that follows x correlates with
+    /// the residual far more than the temperature does — raw correlation
+    /// ranks it first, although it explains nothing position does not.
+    #[test]
+    fn channels_are_ranked_by_what_they_explain_beyond_position() {
+        let (mut x, mut t, mut temp, mut dir, mut hum, mut e) =
+            (vec![], vec![], vec![], vec![], vec![], vec![]);
+        let mut time = 0.0f64;
+        for pass in 0..6 {
+            for k in 0..=100 {
+                let xi = if pass % 2 == 0 {
+                    5.0 * k as f64
+                } else {
+                    500.0 - 5.0 * k as f64
+                };
+                time += 3.0;
+                // Warm-up: 20 → 23 °C, with a small wobble.
+                let tc = 20.0 + 3.0 * (1.0 - (-time / 900.0).exp()) + 0.05 * (time / 37.0).sin();
+                let u = (xi - 250.0) / 250.0;
+                x.push(xi);
+                t.push(time);
+                temp.push(tc);
+                dir.push(if pass % 2 == 0 { 1 } else { -1 });
+                hum.push(format!(
+                    "{}",
+                    40.0 + xi / 50.0 + 0.01 * (k as f64 * 1.7).sin()
+                ));
+                e.push(Some(15.0 * u * u * u - 3.0 * u + 1.5 * (tc - 21.5)));
+            }
+        }
+        let data = Dataset {
+            source: "test".into(),
+            pos_mm: [Some(x), None, None],
+            err_um: [Some(e), None, None],
+            t_s: Some(t),
+            dir: [Some(dir), None, None],
+            temps: vec![TempChannel {
+                name: "bed".into(),
+                temp_c: temp,
+            }],
+            aux: vec![AuxChannel {
+                name: "humidity_pct".into(),
+                cells: hum,
+            }],
+            ..Dataset::default()
+        };
+        let n = data.len();
+        let c = compare(&data, "none", &[Some(vec![0.0; n]), None, None], [None; 3]);
+        let get = |ch: &str| c.channels.iter().find(|p| p.channel == ch).unwrap();
+        let (hum, bed) = (get("humidity_pct"), get("T_bed_C"));
+        assert!(
+            hum.corr.unwrap().abs() > 2.0 * bed.corr.unwrap().abs(),
+            "{hum:?} {bed:?}"
+        );
+        let ranked = ranked_channels(&c, "ex", RANK_MIN_SHARE);
+        assert_eq!(ranked[0].channel, "T_bed_C", "{ranked:?}");
+        assert_eq!(bed.slope_unit, "µm/K");
+        let slope = bed.partial_slope.unwrap();
+        assert!((slope - 1.5).abs() < 0.05, "{slope}");
+        assert!(hum.explains_share.unwrap() < 0.01, "{hum:?}");
+        assert!(!ranked
+            .iter()
+            .any(|p| p.channel == "humidity_pct" || p.channel == "dir_x"));
+        // Position itself is not ranked against itself.
+        assert!(get("x_mm").partial_corr.is_none());
+        assert_eq!(get("dir_x").slope_unit, "µm per direction change");
+    }
 
     #[test]
     fn numeric_aux_cells() {

@@ -78,21 +78,46 @@ pub fn text(c: &Comparison) -> String {
             );
         }
     }
-    let strong: Vec<_> = c
-        .channels
-        .iter()
-        .filter(|p| p.corr.is_some_and(|r| r.abs() >= 0.3))
-        .collect();
-    if !strong.is_empty() {
-        let _ = writeln!(s, "residual correlated with a channel (|r| ≥ 0.3):");
-        for p in strong {
+    // What the residual follows beyond position, ranked by the share of
+    // the residual each channel explains (docs/cli.md § compare).
+    let mut head = false;
+    for t in c.rms_um.keys() {
+        for p in compare::ranked_channels(c, t, compare::RANK_MIN_SHARE) {
+            if !head {
+                let _ = writeln!(
+                    s,
+                    "what the residual follows once position is accounted for (share of the residual explained):"
+                );
+                head = true;
+            }
             let _ = writeln!(
                 s,
-                "  {} vs {}: r = {:+.2}, slope {:+.4} µm per unit",
+                "  {} vs {}: {:.0} % (r = {:+.2}), slope {:+.4} {}",
+                p.target,
+                p.channel,
+                100.0 * p.explains_share.unwrap_or(0.0),
+                p.partial_corr.unwrap_or(0.0),
+                p.partial_slope.unwrap_or(0.0),
+                p.slope_unit
+            );
+        }
+    }
+    let along: Vec<_> = c
+        .channels
+        .iter()
+        .filter(|p| compare::is_position(&p.channel) && p.corr.is_some_and(|r| r.abs() >= 0.3))
+        .collect();
+    if !along.is_empty() {
+        let _ = writeln!(s, "residual trend along an axis (|r| ≥ 0.3):");
+        for p in along {
+            let _ = writeln!(
+                s,
+                "  {} vs {}: r = {:+.2}, slope {:+.4} {}",
                 p.target,
                 p.channel,
                 p.corr.unwrap_or(0.0),
-                p.slope_um_per_unit.unwrap_or(0.0)
+                p.slope_um_per_unit.unwrap_or(0.0),
+                p.slope_unit
             );
         }
     }
