@@ -72,6 +72,15 @@ pub fn load_board_table(path: &Path) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
+/// Every warning about the data themselves that fit, diagnose and improve
+/// give: auxiliary columns ([`aux_warnings`]) and units the data probably
+/// do not have (`units_suspect`, trueaxis_engine::units).
+pub fn data_warnings(data: &Dataset) -> Vec<(&'static str, String)> {
+    let mut w = aux_warnings(data);
+    w.extend(trueaxis_engine::units::suspect(data));
+    w
+}
+
 /// What `fit`, `improve` and `diagnose` say about the data's auxiliary
 /// columns (docs/cli.md § Measurement CSV: kept and reported), as (code, detail):
 /// `aux_misspelled` for those whose name looks like a contract column

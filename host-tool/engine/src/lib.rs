@@ -5,12 +5,14 @@
 //!
 //! data → features → effect / lsq / lines / regions → holdout → model →
 //! fit → diagnose / compare / export / history / iso230 → improve → (the
-//! CLI's commands). `import` (files ↔ data sets) sits beside `data`;
+//! CLI's commands). `import` (files ↔ data sets) and `units` (units the
+//! data probably do not have) sit beside `data`;
 //! `simulate` makes data sets from `features`' thermal lag and is imported
 //! by no engine module.
 //!
 //! - `data`: the measurement data set (docs/cli.md § Measurement CSV) every command works on.
-//! - `import`: measurement files in (the trueaxis CSV, Renishaw .rtl) and the CSV out.
+//! - `import`: measurement files in (the trueaxis CSV, Renishaw .rtl, ecmc ISO 230-2 .dat, RepRapFirmware and Klipper bed maps) and the CSV out.
+//! - `units`: `units_suspect` — errors in mm in µm columns, nm as µm, positions in metres.
 //! - `simulate`: the synthetic machine (21 geometric errors, effects, plans, noise).
 //! - `features`: the model's terms — the cubic monomials and the effects' columns.
 //! - `effect`: the `--add` grammar as types — Family, Target, Axis, EffectSpec, Effect.
@@ -25,7 +27,7 @@
 //! - `history`: the steps of the error falling, fit by fit.
 //! - `improve`: the loop fit → diagnose → add the missing effects → refit, to the noise floor.
 //! - `iso230`: ISO 230-2 evaluation of bidirectional positioning runs.
-//! - `export`: the binary table for the board and controller compensation files.
+//! - `export`: the binary table for the board, controller compensation files and bed meshes.
 
 pub mod compare;
 pub mod data;
@@ -44,3 +46,4 @@ pub mod lsq;
 pub mod model;
 pub mod regions;
 pub mod simulate;
+pub mod units;

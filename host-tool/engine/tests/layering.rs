@@ -10,6 +10,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("data", 0),
     ("import", 1),
     ("features", 1),
+    ("units", 1),
     ("effect", 2),
     ("lsq", 2),
     ("lines", 2),

@@ -53,7 +53,7 @@ impl Args {
             },
         )
         .with_context(|| format!("{}: cannot diagnose", self.data.display()))?;
-        for (code, detail) in input::aux_warnings(&data) {
+        for (code, detail) in input::data_warnings(&data) {
             d.warnings.push(diagnose::Warning {
                 code: code.into(),
                 detail,

@@ -70,6 +70,11 @@ pub struct Args {
     /// a controller file, which cannot clamp, is refused then.
     #[arg(long, allow_negative_numbers = true)]
     pub max_corr_um: Option<f64>,
+    /// [every format] Export even when every correction is below 0.05 µm
+    /// (refused otherwise: nothing worth compensating, or errors in mm
+    /// written into µm columns).
+    #[arg(long)]
+    pub accept_tiny_corrections: bool,
     /// [table] Largest change of the correction, nm/ms (default: 1.5 × the
     /// model's largest gradient × --max-feed-mm-per-min).
     #[arg(long, allow_negative_numbers = true)]
@@ -325,6 +330,7 @@ impl Args {
                         .transpose()?,
                     drop_lag: self.drop_lag,
                     created_unix_s: created_unix_s()?,
+                    accept_tiny: self.accept_tiny_corrections,
                 };
                 let e = export_table(
                     &model,
@@ -370,6 +376,12 @@ impl Args {
         };
         let m = bedmesh::sample_mesh(model, counts)?;
         let name = format_name(self.format);
+        let ez_nm: Vec<f64> = m.height_mm.iter().flatten().map(|h| -1e6 * h).collect();
+        trueaxis_engine::export::refuse_tiny(
+            &[None, None, Some(ez_nm)],
+            self.accept_tiny_corrections,
+        )
+        .map_err(|e| anyhow::anyhow!("{e:#}; {} was not written", self.output.display()))?;
         let largest_nm = m
             .height_mm
             .iter()
@@ -450,6 +462,16 @@ impl Args {
         }
         let s = sample_axis(model, axis, points)?;
         let name = format_name(self.format);
+        let corr_nm: Vec<f64> = s
+            .err_fwd_um
+            .iter()
+            .chain(&s.err_rev_um)
+            .map(|v| 1000.0 * v)
+            .collect();
+        let mut host: [Option<Vec<f64>>; 3] = [None, None, None];
+        host[axis] = Some(corr_nm);
+        trueaxis_engine::export::refuse_tiny(&host, self.accept_tiny_corrections)
+            .map_err(|e| anyhow::anyhow!("{e:#}; {} was not written", self.output.display()))?;
         // The same max-correction rule as the firmware table, on the values
         // the file holds (the controller interpolates between them, so they
         // bound what it applies). A controller file cannot clamp: above an

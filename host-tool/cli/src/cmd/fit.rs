@@ -75,7 +75,7 @@ impl Args {
             .with_context(|| format!("{}: cannot fit {}", self.data.display(), self.model))?;
         // Fit's warnings are strings (MODEL.json `stats.warnings`); the
         // code leads, as `warning (code): …` elsewhere.
-        for (code, detail) in input::aux_warnings(&data) {
+        for (code, detail) in input::data_warnings(&data) {
             model.stats.warnings.push(format!("{code}: {detail}"));
         }
         trueaxis_engine::history::save_with_model(&out, &model)?;

@@ -40,7 +40,7 @@ impl Args {
         }
         let out = model_output(&self.data, self.output.clone())?;
         let data = input::load_data(&self.data, None)?;
-        let warnings: Vec<diagnose::Warning> = input::aux_warnings(&data)
+        let warnings: Vec<diagnose::Warning> = input::data_warnings(&data)
             .into_iter()
             .map(|(code, detail)| diagnose::Warning {
                 code: code.into(),

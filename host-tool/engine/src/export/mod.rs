@@ -377,6 +377,35 @@ pub fn sample_axis(file: &ModelFile, axis: usize, points: usize) -> Result<AxisS
     })
 }
 
+/// Refuses an export whose largest |correction| on every output is below
+/// [`crate::units::TINY_CORRECTION_UM`] unless `accept` (the flag
+/// `--accept-tiny-corrections`): such a file compensates nothing a machine
+/// notices, and the usual cause is errors in mm written into µm columns (a
+/// table 1000× too small). `host` holds each output's corrections, nm.
+pub fn refuse_tiny(host: &[Option<Vec<f64>>; 3], accept: bool) -> Result<()> {
+    let largest: Vec<(usize, f64)> = host
+        .iter()
+        .enumerate()
+        .filter_map(|(t, h)| {
+            h.as_ref()
+                .map(|h| (t, h.iter().fold(0.0f64, |m, v| m.max(v.abs()))))
+        })
+        .collect();
+    let tiny_nm = crate::units::TINY_CORRECTION_UM * 1000.0;
+    if accept || largest.is_empty() || largest.iter().any(|&(_, m)| m >= tiny_nm) {
+        return Ok(());
+    }
+    let list: Vec<String> = largest
+        .iter()
+        .map(|(t, m)| format!("{} {:.1} nm", TARGETS[*t], m))
+        .collect();
+    bail!(
+        "the largest correction is tiny ({}, below {} µm on every output): nothing a machine would notice, or errors in mm written into µm columns (a table 1000× too small) — check the data's units; --accept-tiny-corrections exports it anyway",
+        list.join(", "),
+        crate::units::TINY_CORRECTION_UM
+    )
+}
+
 /// The largest |correction| any export may hold, µm: the firmware table's
 /// limit (`model_core::table::MAX_CORR_LIMIT_NM`), applied to the
 /// controller files as well.

@@ -95,6 +95,10 @@ pub struct TableOptions {
     pub drop_lag: bool,
     /// Creation time written into the table, s since the Unix epoch.
     pub created_unix_s: i64,
+    /// Export a table whose largest |correction| is below
+    /// `units::TINY_CORRECTION_UM` (refused otherwise: nothing worth
+    /// compensating, or errors in mm written as µm).
+    pub accept_tiny: bool,
 }
 
 impl Default for TableOptions {
@@ -108,6 +112,7 @@ impl Default for TableOptions {
             tool_range_mm: None,
             drop_lag: false,
             created_unix_s: 0,
+            accept_tiny: false,
         }
     }
 }
@@ -265,6 +270,7 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
     };
     let points = sweep::points(&model, &ranges, has_abbe, has_rev);
     let host = verify::host_corrections(&model, &channels, &points)?;
+    super::refuse_tiny(&host, opts.accept_tiny)?;
     let max_corr_nm = envelope::max_corr_nm(&host, opts.max_corr_um, &mut warnings)?;
     let max_slew_nm_per_ms =
         envelope::max_slew_nm_per_ms(&model, &points, &host, has_rev, transition_nm, opts)?;
