@@ -39,6 +39,8 @@ enum Command {
     History(cmd::history::Args),
     /// ISO 230-2 evaluation of bidirectional positioning runs.
     Iso230(cmd::iso230::Args),
+    /// On-machine probing: calibrate a probe on a master ball, correct a scan.
+    Probe(cmd::probe::Args),
     /// Export a model as a firmware table or a controller's compensation file.
     Export(cmd::export::Args),
     /// Upload a table to the board over the serial link.
@@ -66,6 +68,7 @@ fn main() -> ExitCode {
         Command::Improve(a) => a.run(),
         Command::History(a) => a.run(),
         Command::Iso230(a) => a.run(),
+        Command::Probe(a) => a.run(),
         Command::Export(a) => a.run(),
         Command::Upload(a) => a.run(),
         Command::Status(a) => a.run(),

@@ -27,6 +27,7 @@
 //! - `history`: the steps of the error falling, fit by fit.
 //! - `improve`: the loop fit → diagnose → add the missing effects → refit, to the noise floor.
 //! - `iso230`: ISO 230-2 evaluation of bidirectional positioning runs.
+//! - `probe`: on-machine probing — probe radius and form on a master ball, a scan corrected.
 //! - `export`: the binary table for the board, controller compensation files and bed meshes.
 
 pub mod compare;
@@ -44,6 +45,7 @@ pub mod iso230;
 pub mod lines;
 pub mod lsq;
 pub mod model;
+pub mod probe;
 pub mod regions;
 pub mod simulate;
 pub mod units;

@@ -17,6 +17,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("regions", 2),
     ("simulate", 3),
     ("holdout", 3),
+    ("probe", 3),
     ("model", 4),
     ("fit", 5),
     ("diagnose", 6),

@@ -12,6 +12,7 @@ pub mod improve;
 pub mod iso230;
 pub mod monitor;
 pub mod out;
+pub mod probe;
 pub mod progress;
 pub mod rollback;
 pub mod simulate;

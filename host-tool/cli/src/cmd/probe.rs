@@ -1,0 +1,266 @@
+//! `trueaxis probe calibrate` and `trueaxis probe correct` — the probe's
+//! effective radius and form error from a master-ball scan, and a workpiece
+//! scan corrected with them (docs/probe.md).
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use serde_json::json;
+
+use crate::cmd::out::{self, outln};
+use trueaxis_engine::probe::{self, ProbeFile};
+
+/// Arguments of `trueaxis probe`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    #[command(subcommand)]
+    pub cmd: Sub,
+}
+
+/// The probe subcommands.
+#[derive(clap::Subcommand, Debug)]
+pub enum Sub {
+    /// Calibrate a probe on a master ball (2-D scan in one plane).
+    Calibrate(Calibrate),
+    /// Correct a workpiece scan with a calibrated probe.
+    Correct(Correct),
+}
+
+/// The plane a 2-D scan lies in.
+fn plane(s: &str) -> Result<[&'static str; 2]> {
+    Ok(match s {
+        "xz" => ["x", "z"],
+        "yz" => ["y", "z"],
+        "xy" => ["x", "y"],
+        _ => bail!("--plane `{s}`: expected xz, yz or xy"),
+    })
+}
+
+fn read(path: &PathBuf, pl: [&str; 2]) -> Result<Vec<[f64; 2]>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    probe::read_scan(&text, &path.display().to_string(), pl)
+}
+
+/// `trueaxis probe calibrate SCAN.csv --ball-diameter-mm D -o PROBE.json`.
+#[derive(clap::Args, Debug)]
+pub struct Calibrate {
+    /// The master-ball scan: probe-centre positions, one contact per row.
+    pub scan: PathBuf,
+    /// The master ball's calibrated diameter, mm (its certificate).
+    #[arg(long)]
+    pub ball_diameter_mm: f64,
+    /// The plane of the scan [default: xz].
+    #[arg(long, default_value = "xz")]
+    pub plane: String,
+    /// Where to write the probe file.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Write one JSON document to stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl Calibrate {
+    fn run(self) -> Result<()> {
+        crate::input::refuse_overwrite(&[("the scan", &self.scan)], &[("-o", &self.output)])?;
+        let pl = plane(&self.plane)?;
+        let p = read(&self.scan, pl)?;
+        let cal = probe::calibrate(&p, self.ball_diameter_mm / 2.0)
+            .with_context(|| format!("{}: cannot calibrate", self.scan.display()))?;
+        let pr = &cal.probe;
+        crate::workflow::write_file(
+            &self.output,
+            (serde_json::to_string_pretty(pr)? + "\n").as_bytes(),
+        )?;
+        for w in &cal.warnings {
+            eprintln!("warning: {w}");
+        }
+        if self.json {
+            let doc = json!({
+                "scan": self.scan.display().to_string(),
+                "output": self.output.display().to_string(),
+                "probe": pr,
+                "pv_without_form_nm": cal.pv_without_form_nm,
+                "pv_with_form_nm": cal.pv_with_form_nm,
+                "warnings": cal.warnings,
+            });
+            out::json_pretty(&doc)?;
+        } else {
+            let mut s = String::new();
+            let _ = writeln!(
+                s,
+                "{}: {} contacts over {:.1}°…{:.1}° on a {} mm master ball",
+                self.scan.display(),
+                pr.points,
+                pr.theta_range_deg[0],
+                pr.theta_range_deg[1],
+                self.ball_diameter_mm
+            );
+            let _ = writeln!(
+                s,
+                "  probe radius   {:.6} mm ± {:.6} mm (95 %)",
+                pr.probe_radius_mm, pr.probe_radius_ci95_mm
+            );
+            let _ = writeln!(
+                s,
+                "  ball centre    {}={:.6} mm, {}={:.6} mm",
+                pl[0], pr.centre_mm[0], pl[1], pr.centre_mm[1]
+            );
+            if pr.order >= 2 {
+                let _ = writeln!(s, "  form error     {:.1} nm PV over the arc, harmonics 2…{} (order chosen by held-out RMS)", pr.form_pv_nm, pr.order);
+            } else {
+                let _ = writeln!(s, "  form error     none supported by held-out data");
+            }
+            let _ = writeln!(s, "  on the ball    {:.1} nm PV with the radius only → {:.1} nm PV with the form (residual RMS {:.1} nm)", cal.pv_without_form_nm, cal.pv_with_form_nm, pr.residual_rms_nm);
+            let _ = writeln!(s, "  probe file written to {}", self.output.display());
+            out::print(&s)?;
+        }
+        Ok(())
+    }
+}
+
+/// `trueaxis probe correct SCAN.csv --probe PROBE.json -o SURFACE.csv`.
+#[derive(clap::Args, Debug)]
+pub struct Correct {
+    /// The workpiece scan: probe-centre positions in scan order.
+    pub scan: PathBuf,
+    /// The probe file `probe calibrate` wrote.
+    #[arg(long)]
+    pub probe: PathBuf,
+    /// The plane of the scan [default: xz].
+    #[arg(long, default_value = "xz")]
+    pub plane: String,
+    /// Which side of the part the probe touches: the outward direction of
+    /// the surface, `+z`, `-z`, `+x`, `-x`, `+y`, `-y` [default: +z].
+    #[arg(long, default_value = "+z", allow_hyphen_values = true)]
+    pub side: String,
+    /// The nominal shape the form error is taken against: `circle` or
+    /// `line` (least squares) [default: circle].
+    #[arg(long, default_value = "circle")]
+    pub nominal: String,
+    /// Where to write the corrected contact points (CSV).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Write one JSON document to stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl Correct {
+    fn run(self) -> Result<()> {
+        crate::input::refuse_overwrite(
+            &[("the scan", &self.scan), ("the probe file", &self.probe)],
+            &[("-o", &self.output)],
+        )?;
+        let pl = plane(&self.plane)?;
+        let text = std::fs::read_to_string(&self.probe)
+            .with_context(|| format!("cannot read {}", self.probe.display()))?;
+        let pr: ProbeFile = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a trueaxis probe file", self.probe.display()))?;
+        pr.check()
+            .with_context(|| format!("{}: not a valid probe file", self.probe.display()))?;
+        let side = match self.side.as_str() {
+            s if s.len() == 2 && (s.starts_with('+') || s.starts_with('-')) => {
+                let sign = if s.starts_with('-') { -1.0 } else { 1.0 };
+                let axis = &s[1..];
+                match pl.iter().position(|a| *a == axis) {
+                    Some(0) => [sign, 0.0],
+                    Some(_) => [0.0, sign],
+                    None => bail!(
+                        "--side `{s}`: expected ± one of the plane's axes {} and {}",
+                        pl[0],
+                        pl[1]
+                    ),
+                }
+            }
+            s => bail!(
+                "--side `{s}`: expected +{0}, -{0}, +{1} or -{1}",
+                pl[0],
+                pl[1]
+            ),
+        };
+        let circle = match self.nominal.as_str() {
+            "circle" => true,
+            "line" => false,
+            s => bail!("--nominal `{s}`: expected circle or line"),
+        };
+        let p = read(&self.scan, pl)?;
+        let contacts = probe::correct(&pr, &p, side)?;
+        let outside = contacts.iter().filter(|c| !c.calibrated).count();
+        let surf: Vec<[f64; 2]> = contacts.iter().map(|c| c.surface_mm).collect();
+        // The same scan with the radius only (no form): what the form
+        // correction changes.
+        let radius_only: Vec<[f64; 2]> = contacts
+            .iter()
+            .map(|c| {
+                let t = c.theta_deg.to_radians();
+                let d = c.form_nm * 1e-6;
+                [c.surface_mm[0] + d * t.cos(), c.surface_mm[1] + d * t.sin()]
+            })
+            .collect();
+        let dev = probe::form_deviation_nm(&surf, circle)?;
+        let dev0 = probe::form_deviation_nm(&radius_only, circle)?;
+        let mut csv = format!(
+            "# probe: {}\n# nominal: {}\n{}_mm,{}_mm,theta_deg,probe_form_nm,calibrated,deviation_nm\n",
+            self.probe.display(),
+            self.nominal,
+            pl[0],
+            pl[1]
+        );
+        for (c, d) in contacts.iter().zip(&dev) {
+            let _ = writeln!(
+                csv,
+                "{},{},{:.4},{:.3},{},{:.3}",
+                c.surface_mm[0], c.surface_mm[1], c.theta_deg, c.form_nm, c.calibrated, d
+            );
+        }
+        crate::workflow::write_file(&self.output, csv.as_bytes())?;
+        let mut warnings = Vec::new();
+        if outside > 0 {
+            warnings.push(format!(
+                "{outside} of {} contacts have angles outside the calibrated {:.1}°…{:.1}°: corrected with the radius only (the form error there is unknown — calibrate over the angles the part presents)",
+                contacts.len(),
+                pr.theta_range_deg[0],
+                pr.theta_range_deg[1]
+            ));
+        }
+        for w in &warnings {
+            eprintln!("warning: {w}");
+        }
+        if self.json {
+            let doc = json!({
+                "scan": self.scan.display().to_string(),
+                "output": self.output.display().to_string(),
+                "points": contacts.len(),
+                "nominal": self.nominal,
+                "form_pv_nm": probe::pv(&dev),
+                "form_pv_radius_only_nm": probe::pv(&dev0),
+                "outside_calibration": outside,
+                "warnings": warnings,
+            });
+            out::json_pretty(&doc)?;
+        } else {
+            outln!(
+                "{}: {} contacts; part form vs a least-squares {}: {:.1} nm PV ({:.1} nm PV with the probe radius only); written to {}",
+                self.scan.display(),
+                contacts.len(),
+                self.nominal,
+                probe::pv(&dev),
+                probe::pv(&dev0),
+                self.output.display()
+            )?;
+        }
+        Ok(())
+    }
+}
+
+impl Args {
+    pub fn run(self) -> Result<()> {
+        match self.cmd {
+            Sub::Calibrate(c) => c.run(),
+            Sub::Correct(c) => c.run(),
+        }
+    }
+}

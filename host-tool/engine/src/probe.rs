@@ -1,0 +1,745 @@
+//! On-machine probing (docs/probe.md): the probe's effective radius and its
+//! form error as a function of contact angle, calibrated on a master ball,
+//! and the correction of a workpiece scan with them.
+//!
+//! **Geometry (2-D, the XZ plane).** Each scan row is the probe ball's
+//! centre at one contact, `(x, z)` in mm. Touching a ball of radius `R`
+//! centred at `c`, the centre lies at
+//! `|p − c| = R + r + f(θ)`, with `θ = atan2(z − c_z, x − c_x)` the contact
+//! angle (the direction from the ball's centre to the probe's, which is the
+//! outward surface normal at the contact), `r` the probe's effective radius
+//! and `f` its form error. `f` is a Fourier series in θ from the second
+//! harmonic up (`f = Σ_{k=2..K} a_k cos kθ + b_k sin kθ`): its mean is the
+//! radius and its first harmonic a shift of the centre, so neither can be
+//! told from them. On a partial arc the higher harmonics are not
+//! orthogonal to radius and centre either; the fitted form is therefore
+//! made orthogonal to `1, cos θ, sin θ` over the calibrated angles (that
+//! part goes to radius and centre), so `r` is the radius that fits best
+//! with a form error of zero mean and no tilt. The order `K` is chosen by
+//! held-out RMS over 5 folds of contiguous angular blocks — the smallest
+//! `K` within 2 % of the best — not fixed. Solved by Gauss–Newton from an
+//! algebraic circle fit; 95 % intervals from the final linearised least
+//! squares (1.96 σ).
+//!
+//! **Correcting a scan.** On a workpiece the centre path is the surface
+//! offset by the probe, so the surface normal at each contact is the
+//! normal of the centre path (the tangency relation: probe and part touch
+//! where their tangents agree), taken from neighbouring rows. The contact
+//! point is `s = p − (r + f(θ)) n`. A contact angle outside the calibrated
+//! arc has an unknown form error: such rows are flagged and corrected with
+//! the radius only, never with an extrapolated series.
+
+use std::f64::consts::PI;
+
+use anyhow::{bail, Result};
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+use crate::lsq;
+
+/// Format tag of a probe file.
+pub const PROBE_FORMAT: &str = "trueaxis-probe/1";
+
+/// Highest form order tried.
+pub const MAX_ORDER: usize = 12;
+
+/// A calibrated probe: what `probe calibrate` writes and `probe correct`
+/// reads (docs/probe.md).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ProbeFile {
+    /// [`PROBE_FORMAT`].
+    pub format: String,
+    /// The master ball's radius the calibration assumed, mm.
+    pub ball_radius_mm: f64,
+    /// The probe's effective radius, mm.
+    pub probe_radius_mm: f64,
+    /// Half-width of its 95 % interval, mm.
+    pub probe_radius_ci95_mm: f64,
+    /// The fitted ball centre `[x, z]`, mm.
+    pub centre_mm: [f64; 2],
+    /// Form order K (0: no form error term).
+    pub order: usize,
+    /// Form coefficients, nm: `[a_2, b_2, a_3, b_3, …]` (cos, sin).
+    pub form_nm: Vec<f64>,
+    /// Half-widths of their 95 % intervals, nm.
+    pub form_ci95_nm: Vec<f64>,
+    /// The mean and the first harmonic removed from the series over the
+    /// calibrated angles (`f − c0 − c1 cos θ − s1 sin θ`), nm: applied when
+    /// the series is evaluated, so `f` has zero mean and no tilt there.
+    pub form_rigid_nm: [f64; 3],
+    /// The calibrated contact angles, degrees `[lo, hi]`.
+    pub theta_range_deg: [f64; 2],
+    /// Peak to valley of the form error over the calibrated arc, nm.
+    pub form_pv_nm: f64,
+    /// RMS of what is left after radius, centre and form, nm (noise).
+    pub residual_rms_nm: f64,
+    /// Held-out RMS per order tried `[order, nm]`.
+    pub held_out_rms_nm: Vec<[f64; 2]>,
+    /// Points in the calibration.
+    pub points: usize,
+}
+
+impl ProbeFile {
+    /// The form error at contact angle `theta` (rad), nm.
+    pub fn form_nm_at(&self, theta: f64) -> f64 {
+        let raw: f64 = (2..=self.order)
+            .map(|k| {
+                let i = 2 * (k - 2);
+                self.form_nm[i] * (k as f64 * theta).cos()
+                    + self.form_nm[i + 1] * (k as f64 * theta).sin()
+            })
+            .sum();
+        let [c0, c1, s1] = self.form_rigid_nm;
+        raw - c0 - c1 * theta.cos() - s1 * theta.sin()
+    }
+
+    /// Whether `theta` (rad) lies in the calibrated arc (1° margin).
+    pub fn covers(&self, theta: f64) -> bool {
+        let d = wrap_deg(theta.to_degrees());
+        let [lo, hi] = self.theta_range_deg;
+        d >= lo - 1.0 && d <= hi + 1.0
+    }
+
+    /// Checks a probe file read from disk.
+    pub fn check(&self) -> Result<()> {
+        if self.format != PROBE_FORMAT {
+            bail!(
+                "not a trueaxis probe file (format `{}`, expected `{PROBE_FORMAT}`)",
+                self.format
+            );
+        }
+        let n = if self.order >= 2 {
+            2 * (self.order - 1)
+        } else {
+            0
+        };
+        if self.order == 1 || self.form_nm.len() != n || self.form_ci95_nm.len() != n {
+            bail!(
+                "order {} needs {n} form coefficients, found {}",
+                self.order,
+                self.form_nm.len()
+            );
+        }
+        let finite = [self.ball_radius_mm, self.probe_radius_mm, self.form_pv_nm]
+            .iter()
+            .chain(&self.form_nm)
+            .chain(&self.form_rigid_nm)
+            .chain(&self.theta_range_deg)
+            .all(|v| v.is_finite());
+        if !finite
+            || self.probe_radius_mm <= 0.0
+            || self.theta_range_deg[0] > self.theta_range_deg[1]
+        {
+            bail!("a value is not finite, the probe radius not positive or the angle range empty");
+        }
+        Ok(())
+    }
+}
+
+/// Angle in degrees wrapped to (−180, 180].
+fn wrap_deg(d: f64) -> f64 {
+    let mut d = d % 360.0;
+    if d <= -180.0 {
+        d += 360.0;
+    } else if d > 180.0 {
+        d -= 360.0;
+    }
+    d
+}
+
+/// Columns of the design for rows at angles `theta`: `[cos θ, sin θ, 1,
+/// form…]` scaled for the Gauss–Newton step (centre x, centre z, radius,
+/// form in mm).
+fn form_cols(theta: f64, order: usize) -> Vec<f64> {
+    let mut v = Vec::with_capacity(2 * order);
+    for k in 2..=order {
+        v.push((k as f64 * theta).cos());
+        v.push((k as f64 * theta).sin());
+    }
+    v
+}
+
+/// The result of one fit at a given order.
+struct Fit {
+    centre: [f64; 2],
+    total_radius: f64,
+    form: Vec<f64>, // mm
+    form_sd: Vec<f64>,
+    resid: Vec<f64>, // mm, per point
+}
+
+/// Algebraic (Kåsa) circle fit: centre and radius.
+fn kasa(p: &[[f64; 2]]) -> Result<([f64; 2], f64)> {
+    let n = p.len();
+    let a = DMatrix::from_fn(n, 3, |i, j| match j {
+        0 => p[i][0],
+        1 => p[i][1],
+        _ => 1.0,
+    });
+    let b = DVector::from_fn(n, |i, _| p[i][0] * p[i][0] + p[i][1] * p[i][1]);
+    let s = lsq::solve(&a, &b, None)?;
+    let (cx, cz) = (s.coef[0] / 2.0, s.coef[1] / 2.0);
+    let r2 = s.coef[2] + cx * cx + cz * cz;
+    if r2.is_nan() || r2 <= 0.0 {
+        bail!("the points do not lie on a circle");
+    }
+    Ok(([cx, cz], r2.sqrt()))
+}
+
+/// Gauss–Newton fit of centre, total radius and a form series of `order`
+/// to the rows `use_rows` of `p`.
+fn fit_order(
+    p: &[[f64; 2]],
+    use_rows: &[usize],
+    order: usize,
+    start: ([f64; 2], f64),
+) -> Result<Fit> {
+    let nf = if order >= 2 { 2 * (order - 1) } else { 0 };
+    let (mut c, mut rt) = start;
+    let mut form = vec![0.0; nf];
+    let mut last = None;
+    for _ in 0..30 {
+        let n = use_rows.len();
+        let mut a = DMatrix::zeros(n, 3 + nf);
+        let mut b = DVector::zeros(n);
+        for (row, &i) in use_rows.iter().enumerate() {
+            let (dx, dz) = (p[i][0] - c[0], p[i][1] - c[1]);
+            let d = (dx * dx + dz * dz).sqrt();
+            let th = dz.atan2(dx);
+            let fc = form_cols(th, order);
+            let f: f64 = fc.iter().zip(&form).map(|(u, v)| u * v).sum();
+            // ρ = d − (rt + f); ∂ρ/∂c = −(dx, dz)/d; ∂ρ/∂rt = −1; ∂ρ/∂a = −col.
+            b[row] = d - rt - f;
+            a[(row, 0)] = dx / d;
+            a[(row, 1)] = dz / d;
+            a[(row, 2)] = 1.0;
+            for (j, v) in fc.iter().enumerate() {
+                a[(row, 3 + j)] = *v;
+            }
+        }
+        let s = lsq::solve(&a, &b, None)?;
+        c[0] += s.coef[0];
+        c[1] += s.coef[1];
+        rt += s.coef[2];
+        for (j, f) in form.iter_mut().enumerate() {
+            *f += s.coef[3 + j];
+        }
+        let step = s.coef.amax();
+        last = Some(s);
+        if step < 1e-12 {
+            break;
+        }
+    }
+    let s = last.expect("at least one iteration");
+    let resid: Vec<f64> = (0..p.len())
+        .map(|i| {
+            let (dx, dz) = (p[i][0] - c[0], p[i][1] - c[1]);
+            let th = dz.atan2(dx);
+            let f: f64 = form_cols(th, order)
+                .iter()
+                .zip(&form)
+                .map(|(u, v)| u * v)
+                .sum();
+            (dx * dx + dz * dz).sqrt() - rt - f
+        })
+        .collect();
+    Ok(Fit {
+        centre: c,
+        total_radius: rt,
+        form_sd: (0..nf).map(|j| s.coef_sd[3 + j]).collect(),
+        form,
+        resid,
+    })
+}
+
+/// What a calibration says beyond the probe file: per order the held-out
+/// RMS, and warnings.
+#[derive(Clone, Debug, Serialize)]
+pub struct Calibration {
+    /// The probe file to write.
+    pub probe: ProbeFile,
+    /// Residual per point after the chosen model, nm (for plots).
+    pub residual_nm: Vec<f64>,
+    /// Contact angle per point, degrees.
+    pub theta_deg: Vec<f64>,
+    /// Peak to valley of the distance to the fitted circle without the
+    /// form term (radius and centre only), nm — what the form correction
+    /// starts from.
+    pub pv_without_form_nm: f64,
+    /// Peak to valley of the residual with it, nm.
+    pub pv_with_form_nm: f64,
+    /// Problems with the calibration data.
+    pub warnings: Vec<String>,
+}
+
+/// Calibrates a probe on a master ball of radius `ball_radius_mm` from the
+/// probe-centre positions `p` (mm) of a 2-D scan in one plane.
+pub fn calibrate(p: &[[f64; 2]], ball_radius_mm: f64) -> Result<Calibration> {
+    if !(ball_radius_mm.is_finite() && ball_radius_mm > 0.0) {
+        bail!("the master ball radius must be a positive number of mm, got {ball_radius_mm}");
+    }
+    if p.len() < 12 {
+        bail!("{} points on the ball; a calibration needs at least 12 (a few hundred along the arc for a form error)", p.len());
+    }
+    let start = kasa(p)?;
+    let all: Vec<usize> = (0..p.len()).collect();
+    let rigid = fit_order(p, &all, 0, start)?;
+    let theta: Vec<f64> = p
+        .iter()
+        .map(|q| (q[1] - rigid.centre[1]).atan2(q[0] - rigid.centre[0]))
+        .collect();
+    // The arc, as the smallest interval of angles covering the points
+    // (wrapped so that an arc through ±180° stays one interval).
+    let mut deg: Vec<f64> = theta.iter().map(|t| t.to_degrees()).collect();
+    deg.sort_by(f64::total_cmp);
+    let mut gap = (deg[0] + 360.0 - deg[deg.len() - 1], deg.len() - 1);
+    for i in 0..deg.len() - 1 {
+        if deg[i + 1] - deg[i] > gap.0 {
+            gap = (deg[i + 1] - deg[i], i);
+        }
+    }
+    let (lo, hi) = if gap.1 == deg.len() - 1 {
+        (deg[0], deg[deg.len() - 1])
+    } else {
+        (deg[gap.1 + 1], deg[gap.1] + 360.0)
+    };
+    let arc = hi - lo;
+    let mut warnings = Vec::new();
+    if arc < 90.0 {
+        warnings.push(format!(
+            "the scan covers {arc:.0}° of the ball: on so short an arc a form error of low order cannot be told from the probe radius and the ball centre — scan at least 120° (the contact angles the workpiece will see)"
+        ));
+    }
+    // Folds: 20 contiguous angular blocks dealt round-robin to 5 folds.
+    let fold_of = |i: usize| -> usize {
+        let d = wrap_deg(theta[i].to_degrees() - lo);
+        let d = if d < 0.0 { d + 360.0 } else { d };
+        let block = ((d / arc.max(1e-9)) * 20.0).floor().clamp(0.0, 19.0) as usize;
+        block % 5
+    };
+    let max_order = MAX_ORDER.min((p.len() / 10).saturating_sub(3) / 2 + 1);
+    let mut held: Vec<(usize, f64)> = Vec::new();
+    for order in std::iter::once(0).chain(2..=max_order) {
+        let mut ss = 0.0;
+        let mut n = 0usize;
+        let mut ok = true;
+        for fold in 0..5 {
+            let train: Vec<usize> = all
+                .iter()
+                .copied()
+                .filter(|&i| fold_of(i) != fold)
+                .collect();
+            let test: Vec<usize> = all
+                .iter()
+                .copied()
+                .filter(|&i| fold_of(i) == fold)
+                .collect();
+            match fit_order(p, &train, order, start) {
+                Ok(f) => {
+                    for &i in &test {
+                        ss += f.resid[i] * f.resid[i];
+                        n += 1;
+                    }
+                }
+                Err(_) => {
+                    ok = false;
+                    break;
+                }
+            }
+        }
+        if ok && n > 0 {
+            held.push((order, (ss / n as f64).sqrt() * 1e6));
+        }
+    }
+    let best = held.iter().map(|h| h.1).fold(f64::INFINITY, f64::min);
+    let order = held.iter().find(|h| h.1 <= 1.02 * best).map_or(0, |h| h.0);
+    let fit = fit_order(p, &all, order, start)?;
+    // Make the form orthogonal to 1, cos θ, sin θ over the calibration
+    // angles: that part belongs to radius and centre.
+    let thetas: Vec<f64> = p
+        .iter()
+        .map(|q| (q[1] - fit.centre[1]).atan2(q[0] - fit.centre[0]))
+        .collect();
+    let raw: Vec<f64> = thetas
+        .iter()
+        .map(|&t| {
+            form_cols(t, order)
+                .iter()
+                .zip(&fit.form)
+                .map(|(u, v)| u * v)
+                .sum::<f64>()
+                * 1e6
+        })
+        .collect();
+    let rig = DMatrix::from_fn(p.len(), 3, |i, j| match j {
+        0 => 1.0,
+        1 => thetas[i].cos(),
+        _ => thetas[i].sin(),
+    });
+    let proj = lsq::solve(&rig, &DVector::from_vec(raw.clone()), None)?;
+    let form_rigid_nm = [proj.coef[0], proj.coef[1], proj.coef[2]];
+    // Radius and centre take the removed part (nm → mm).
+    let total_radius = fit.total_radius + form_rigid_nm[0] * 1e-6;
+    let centre = [
+        fit.centre[0] - form_rigid_nm[1] * 1e-6,
+        fit.centre[1] - form_rigid_nm[2] * 1e-6,
+    ];
+    // The radius's interval in this parameterisation (form orthogonal to
+    // radius and centre): the rigid columns alone at the final centre,
+    // with the full model's residual as the noise.
+    let rig_lin = DMatrix::from_fn(p.len(), 3, |i, j| match j {
+        0 => thetas[i].cos(),
+        1 => thetas[i].sin(),
+        _ => 1.0,
+    });
+    let radius_sd = lsq::solve(&rig_lin, &DVector::from_vec(fit.resid.clone()), None)?.coef_sd[2];
+    let mut probe = ProbeFile {
+        format: PROBE_FORMAT.into(),
+        ball_radius_mm,
+        probe_radius_mm: total_radius - ball_radius_mm,
+        probe_radius_ci95_mm: 1.96 * radius_sd,
+        centre_mm: centre,
+        order,
+        form_nm: fit.form.iter().map(|v| v * 1e6).collect(),
+        form_ci95_nm: fit.form_sd.iter().map(|v| 1.96 * v * 1e6).collect(),
+        form_rigid_nm,
+        theta_range_deg: [wrap_deg(lo), wrap_deg(lo) + arc],
+        form_pv_nm: 0.0,
+        residual_rms_nm: 0.0,
+        held_out_rms_nm: held.iter().map(|&(o, v)| [o as f64, v]).collect(),
+        points: p.len(),
+    };
+    if probe.probe_radius_mm <= 0.0 {
+        bail!(
+            "the fitted radius {:.6} mm is not above the master ball's {ball_radius_mm} mm: the scan is not of the probe's centre on this ball (check the ball diameter and that the rows are centre positions)",
+            total_radius
+        );
+    }
+    let form_at: Vec<f64> = thetas.iter().map(|&t| probe.form_nm_at(t)).collect();
+    let (fmin, fmax) = form_at
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    probe.form_pv_nm = if order >= 2 { fmax - fmin } else { 0.0 };
+    let resid_nm: Vec<f64> = fit.resid.iter().map(|v| v * 1e6).collect();
+    probe.residual_rms_nm =
+        (resid_nm.iter().map(|v| v * v).sum::<f64>() / resid_nm.len() as f64).sqrt();
+    let pv = |v: &[f64]| {
+        v.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+            - v.iter().copied().fold(f64::INFINITY, f64::min)
+    };
+    let without: Vec<f64> = rigid.resid.iter().map(|v| v * 1e6).collect();
+    if order == 0 {
+        warnings.push(
+            "no form error term is supported by held-out data: the probe is calibrated as a sphere of the fitted radius".into(),
+        );
+    }
+    Ok(Calibration {
+        pv_without_form_nm: pv(&without),
+        pv_with_form_nm: pv(&resid_nm),
+        residual_nm: resid_nm,
+        theta_deg: thetas.iter().map(|t| t.to_degrees()).collect(),
+        probe,
+        warnings,
+    })
+}
+
+/// One corrected contact of a workpiece scan.
+#[derive(Clone, Debug, Serialize)]
+pub struct Contact {
+    /// The contact point on the part, `[x, z]` mm.
+    pub surface_mm: [f64; 2],
+    /// Contact angle, degrees.
+    pub theta_deg: f64,
+    /// The probe form error applied, nm (0 outside the calibrated arc).
+    pub form_nm: f64,
+    /// Whether the angle lies in the calibrated arc.
+    pub calibrated: bool,
+}
+
+/// Corrects a workpiece scan (probe-centre positions `p`, mm, in scan
+/// order) with `probe`. `side` is the outward direction of the part's
+/// surface where the probe touches it, roughly (`[0, 1]`: the probe is
+/// above, +z): it orients the normals.
+pub fn correct(probe: &ProbeFile, p: &[[f64; 2]], side: [f64; 2]) -> Result<Vec<Contact>> {
+    if p.len() < 3 {
+        bail!(
+            "{} points; a scan needs at least 3 to take normals from",
+            p.len()
+        );
+    }
+    let r = probe.probe_radius_mm;
+    let mut out = Vec::with_capacity(p.len());
+    for i in 0..p.len() {
+        let (a, b) = (p[i.saturating_sub(1)], p[(i + 1).min(p.len() - 1)]);
+        let (tx, tz) = (b[0] - a[0], b[1] - a[1]);
+        let len = (tx * tx + tz * tz).sqrt();
+        if len.is_nan() || len <= 0.0 {
+            bail!(
+                "points {} and {} of the scan coincide: no tangent between them",
+                i.saturating_sub(1) + 1,
+                (i + 1).min(p.len() - 1) + 1
+            );
+        }
+        let mut n = [-tz / len, tx / len];
+        if n[0] * side[0] + n[1] * side[1] < 0.0 {
+            n = [-n[0], -n[1]];
+        }
+        let theta = n[1].atan2(n[0]);
+        let calibrated = probe.covers(theta);
+        let form_nm = if calibrated {
+            probe.form_nm_at(theta)
+        } else {
+            0.0
+        };
+        let d = r + form_nm * 1e-6;
+        out.push(Contact {
+            surface_mm: [p[i][0] - d * n[0], p[i][1] - d * n[1]],
+            theta_deg: theta.to_degrees(),
+            form_nm,
+            calibrated,
+        });
+    }
+    Ok(out)
+}
+
+/// Deviation of points from their least-squares circle (`circle`) or line,
+/// nm, signed outward / along +normal.
+pub fn form_deviation_nm(s: &[[f64; 2]], circle: bool) -> Result<Vec<f64>> {
+    if circle {
+        let (c, r) = kasa(s)?;
+        let all: Vec<usize> = (0..s.len()).collect();
+        let f = fit_order(s, &all, 0, (c, r))?;
+        Ok(f.resid.iter().map(|v| v * 1e6).collect())
+    } else {
+        let n = s.len();
+        let a = DMatrix::from_fn(n, 2, |i, j| if j == 0 { s[i][0] } else { 1.0 });
+        let b = DVector::from_fn(n, |i, _| s[i][1]);
+        let l = lsq::solve(&a, &b, None)?;
+        let k = (1.0 + l.coef[0] * l.coef[0]).sqrt();
+        Ok((0..n)
+            .map(|i| (s[i][1] - l.coef[0] * s[i][0] - l.coef[1]) / k * 1e6)
+            .collect())
+    }
+}
+
+/// Peak to valley of `v`.
+pub fn pv(v: &[f64]) -> f64 {
+    v.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+        - v.iter().copied().fold(f64::INFINITY, f64::min)
+}
+
+/// `theta` in the convention of the module, from degrees.
+pub fn rad(deg: f64) -> f64 {
+    deg * PI / 180.0
+}
+
+/// Reads a probe scan: a CSV with a header naming the two columns of the
+/// plane (`x_mm,z_mm` for `plane = ["x", "z"]`), `#` comment lines, one
+/// probe-centre position per row (docs/probe.md). Other columns are
+/// ignored. Errors name the file, line and column.
+pub fn read_scan(text: &str, name: &str, plane: [&str; 2]) -> Result<Vec<[f64; 2]>> {
+    let mut rows = Vec::new();
+    let mut cols: Option<[usize; 2]> = None;
+    for (i, raw) in text.trim_start_matches('\u{feff}').lines().enumerate() {
+        let ln = i + 1;
+        let line = raw.trim_end_matches('\r');
+        if line.trim().is_empty() || line.trim_start().starts_with('#') {
+            continue;
+        }
+        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+        let Some(c) = cols else {
+            let find = |axis: &str| cells.iter().position(|h| *h == format!("{axis}_mm"));
+            match (find(plane[0]), find(plane[1])) {
+                (Some(a), Some(b)) => cols = Some([a, b]),
+                _ => bail!(
+                    "{name}:{ln}: the header needs `{0}_mm` and `{1}_mm` (the probe centre in the {0}{1} plane), found `{line}`",
+                    plane[0],
+                    plane[1]
+                ),
+            }
+            continue;
+        };
+        let mut v = [0.0; 2];
+        for (k, &j) in c.iter().enumerate() {
+            let cell = cells.get(j).copied().unwrap_or("");
+            v[k] = match cell.parse::<f64>() {
+                Ok(x) if x.is_finite() && x.abs() <= 10_000.0 => x,
+                _ => bail!(
+                    "{name}:{ln}:{}: `{}_mm`: expected a finite position within ±10000 mm, found `{cell}`",
+                    j + 1,
+                    plane[k]
+                ),
+            };
+        }
+        rows.push(v);
+    }
+    if cols.is_none() {
+        bail!(
+            "{name}: no header line; expected `{}_mm,{}_mm`",
+            plane[0],
+            plane[1]
+        );
+    }
+    Ok(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use trueaxis_test_support::SplitMix64;
+
+    /// The seed's case: a 0.49715 mm probe with ~175 nm PV of form error
+    /// on a 2 mm master ball, 401 contacts over 10°…170°, 5 nm noise.
+    fn ball_scan(seed: u64) -> (Vec<[f64; 2]>, impl Fn(f64) -> f64) {
+        let form =
+            |t: f64| 60.0 * (3.0 * t).cos() + 35.0 * (5.0 * t).sin() - 20.0 * (2.0 * t).cos();
+        let mut rng = SplitMix64(seed);
+        let (r_ball, r_probe, c) = (2.0, 0.49715, [12.5, -3.0]);
+        let p = (0..=400)
+            .map(|i| {
+                let t = rad(10.0 + 160.0 * i as f64 / 400.0);
+                let d = r_ball + r_probe + (form(t) + 5.0 * rng.normal()) * 1e-6;
+                [c[0] + d * t.cos(), c[1] + d * t.sin()]
+            })
+            .collect();
+        (p, form)
+    }
+
+    #[test]
+    fn a_master_ball_scan_gives_the_probe_radius_and_its_form() {
+        let (p, form) = ball_scan(1);
+        let cal = calibrate(&p, 2.0).unwrap();
+        let pr = &cal.probe;
+        assert!(
+            (pr.probe_radius_mm - 0.49715).abs() < 3e-6,
+            "{}",
+            pr.probe_radius_mm
+        );
+        assert!(
+            pr.probe_radius_ci95_mm < 3e-6,
+            "{}",
+            pr.probe_radius_ci95_mm
+        );
+        assert!(
+            pr.order >= 4 && pr.order < MAX_ORDER,
+            "order {} {:?}",
+            pr.order,
+            pr.held_out_rms_nm
+        );
+        assert!(
+            (pr.residual_rms_nm - 5.0).abs() < 1.0,
+            "{}",
+            pr.residual_rms_nm
+        );
+        // The recovered form matches the true one once both are made
+        // orthogonal to radius and centre over the arc.
+        let t: Vec<f64> = (0..=160).map(|d| rad(10.0 + d as f64)).collect();
+        let truth: Vec<f64> = t.iter().map(|&x| form(x)).collect();
+        let rig = DMatrix::from_fn(t.len(), 3, |i, j| [1.0, t[i].cos(), t[i].sin()][j]);
+        let proj = lsq::solve(&rig, &DVector::from_vec(truth.clone()), None).unwrap();
+        // The radius in the same convention: the true one plus the mean
+        // part of the form.
+        let r_true = 0.49715 + proj.coef[0] * 1e-6;
+        assert!(
+            (pr.probe_radius_mm - r_true).abs() < 2e-6,
+            "{} vs {r_true}",
+            pr.probe_radius_mm
+        );
+        let worst = t
+            .iter()
+            .zip(&truth)
+            .map(|(&x, &f)| {
+                let true_perp = f - proj.coef[0] - proj.coef[1] * x.cos() - proj.coef[2] * x.sin();
+                (pr.form_nm_at(x) - true_perp).abs()
+            })
+            .fold(0.0f64, f64::max);
+        assert!(worst < 6.0, "form recovered to {worst} nm");
+        // 175 → ~noise PV on the ball, as in the seed (175 → 27 nm).
+        assert!(cal.pv_without_form_nm > 150.0, "{}", cal.pv_without_form_nm);
+        assert!(cal.pv_with_form_nm < 40.0, "{}", cal.pv_with_form_nm);
+    }
+
+    #[test]
+    fn a_ball_without_form_error_gets_no_form_term() {
+        let mut rng = SplitMix64(7);
+        let p: Vec<[f64; 2]> = (0..=300)
+            .map(|i| {
+                let t = rad(20.0 + 140.0 * i as f64 / 300.0);
+                let d = 2.5 + 0.5 + 5.0 * rng.normal() * 1e-6;
+                [d * t.cos(), d * t.sin()]
+            })
+            .collect();
+        let cal = calibrate(&p, 2.5).unwrap();
+        assert!(
+            cal.probe.order <= 3,
+            "order {} chosen for pure noise",
+            cal.probe.order
+        );
+        assert!(cal.probe.form_pv_nm < 15.0, "{}", cal.probe.form_pv_nm);
+    }
+
+    #[test]
+    fn a_short_arc_is_warned_and_a_wrong_ball_refused() {
+        let (p, _) = ball_scan(2);
+        let short: Vec<[f64; 2]> = p[..150].to_vec(); // 10°…70°
+        let cal = calibrate(&short, 2.0).unwrap();
+        assert!(
+            cal.warnings
+                .iter()
+                .any(|w| w.contains("scan at least 120°")),
+            "{:?}",
+            cal.warnings
+        );
+        let e = calibrate(&p, 3.0).unwrap_err();
+        assert!(format!("{e}").contains("not above the master ball"), "{e}");
+    }
+
+    #[test]
+    fn a_workpiece_scan_is_corrected_to_its_true_form() {
+        let (p, form) = ball_scan(3);
+        let probe = calibrate(&p, 2.0).unwrap().probe;
+        // A part: a 20 mm radius arc with a 4-lobe form of 150 nm, scanned
+        // over its top 30°…150° by the same probe (no noise).
+        let lobes = |t: f64| 150.0 * (4.0 * t).cos();
+        let mut centres = Vec::new();
+        let mut truth = Vec::new();
+        for i in 0..=600 {
+            let t = rad(30.0 + 120.0 * i as f64 / 600.0);
+            let surf = 20.0 + lobes(t) * 1e-6;
+            truth.push([surf * t.cos(), surf * t.sin()]);
+            // The lobes tilt the normal by < 1e-7 rad: the contact angle is
+            // t to far below a nm of form.
+            let d = surf + 0.49715 + form(t) * 1e-6;
+            centres.push([d * t.cos(), d * t.sin()]);
+        }
+        let c = correct(&probe, &centres, [0.0, 1.0]).unwrap();
+        let s: Vec<[f64; 2]> = c.iter().map(|k| k.surface_mm).collect();
+        let pv_true = pv(&form_deviation_nm(&truth, true).unwrap());
+        let pv_corr = pv(&form_deviation_nm(&s, true).unwrap());
+        // Radius only (no form correction): the probe's lobing shows up.
+        let radius_only: Vec<[f64; 2]> = centres
+            .iter()
+            .zip(&c)
+            .map(|(q, k)| {
+                let t = rad(k.theta_deg);
+                [q[0] - 0.49715 * t.cos(), q[1] - 0.49715 * t.sin()]
+            })
+            .collect();
+        let pv_raw = pv(&form_deviation_nm(&radius_only, true).unwrap());
+        assert!(
+            (pv_corr - pv_true).abs() < 15.0,
+            "true {pv_true}, corrected {pv_corr}"
+        );
+        assert!(
+            (pv_raw - pv_true).abs() > 40.0,
+            "true {pv_true}, uncorrected {pv_raw}"
+        );
+        assert!(c.iter().all(|k| k.calibrated));
+        // Beyond the calibrated arc the form is not extrapolated.
+        let below: Vec<[f64; 2]> = (0..10).map(|i| [i as f64, 0.0]).collect();
+        let c = correct(&probe, &below, [0.0, -1.0]).unwrap();
+        assert!(c.iter().all(|k| !k.calibrated && k.form_nm == 0.0));
+    }
+}
