@@ -41,6 +41,8 @@ enum Command {
     Iso230(cmd::iso230::Args),
     /// On-machine probing: calibrate a probe on a master ball, correct a scan.
     Probe(cmd::probe::Args),
+    /// Error separation: part form vs slide straightness (reversal).
+    Separate(cmd::separate::Args),
     /// Export a model as a firmware table or a controller's compensation file.
     Export(cmd::export::Args),
     /// Upload a table to the board over the serial link.
@@ -69,6 +71,7 @@ fn main() -> ExitCode {
         Command::History(a) => a.run(),
         Command::Iso230(a) => a.run(),
         Command::Probe(a) => a.run(),
+        Command::Separate(a) => a.run(),
         Command::Export(a) => a.run(),
         Command::Upload(a) => a.run(),
         Command::Status(a) => a.run(),

@@ -245,3 +245,68 @@ fn bad_probe_input_is_refused_with_its_place() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("not a trueaxis probe file"));
 }
+
+#[test]
+fn a_reversal_gives_part_form_and_slide_straightness() {
+    let dir = tmp_dir("probe", "reversal");
+    // Part: a 2 µm bow; slide: a 1.5 µm wave; run 180° with its own
+    // offset and tilt; 10 nm of noise (uniform ±17 nm).
+    let part = |x: f64| 2.0 * ((x - 100.0) / 100.0).powi(2);
+    let slide = |x: f64| 1.5 * (x / 40.0).sin();
+    let mut r0 = String::from("# part at 0°\nx_mm,d_um\n");
+    let mut r1 = String::from("x_mm,d_um,operator\n");
+    for i in 0..=200u64 {
+        let x = i as f64;
+        r0.push_str(&format!(
+            "{x},{:.4}\n",
+            part(x) + slide(x) + 0.035 * noise(i)
+        ));
+        r1.push_str(&format!(
+            "{x},{:.4},Anna\n",
+            part(x) - slide(x) + 1.2 + 0.003 * x + 0.035 * noise(i + 1000)
+        ));
+    }
+    let (a, b) = (dir.join("r0.csv"), dir.join("r180.csv"));
+    std::fs::write(&a, r0).unwrap();
+    std::fs::write(&b, r1).unwrap();
+    let out = dir.join("sep.csv");
+    let doc = json(&run(&[
+        "separate",
+        "reversal",
+        s(&a),
+        s(&b),
+        "-o",
+        s(&out),
+        "--json",
+    ]));
+    // True PVs once the least-squares lines are removed.
+    let xs: Vec<f64> = (0..=200).map(f64::from).collect();
+    let pv_line_removed = |f: &dyn Fn(f64) -> f64| {
+        let n = xs.len() as f64;
+        let (mx, my) = (
+            xs.iter().sum::<f64>() / n,
+            xs.iter().map(|&x| f(x)).sum::<f64>() / n,
+        );
+        let k = xs.iter().map(|&x| (x - mx) * (f(x) - my)).sum::<f64>()
+            / xs.iter().map(|&x| (x - mx).powi(2)).sum::<f64>();
+        let r: Vec<f64> = xs.iter().map(|&x| f(x) - my - k * (x - mx)).collect();
+        r.iter().copied().fold(f64::MIN, f64::max) - r.iter().copied().fold(f64::MAX, f64::min)
+    };
+    let part_pv = doc["part_pv_um"].as_f64().unwrap();
+    let slide_pv = doc["slide_pv_um"].as_f64().unwrap();
+    assert!((part_pv - pv_line_removed(&part)).abs() < 0.05, "{doc}");
+    assert!((slide_pv - pv_line_removed(&slide)).abs() < 0.05, "{doc}");
+    let ci = doc["point_ci95_um"].as_f64().unwrap();
+    assert!(ci > 0.005 && ci < 0.05, "{doc}");
+    let text = std::fs::read_to_string(&out).unwrap();
+    assert!(text.starts_with("x_mm,part_um,slide_um\n"));
+    // A run with a broken cell names its place.
+    std::fs::write(&b, "x_mm,d_um\n0,1\n1,x\n").unwrap();
+    let bad = run(&["separate", "reversal", s(&a), s(&b), "-o", s(&out)]);
+    assert_eq!(bad.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&bad.stderr).contains("r180.csv:3:2: `d_um`"),
+        "{}",
+        String::from_utf8_lossy(&bad.stderr)
+    );
+}

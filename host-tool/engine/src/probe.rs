@@ -540,49 +540,13 @@ pub fn rad(deg: f64) -> f64 {
 /// probe-centre position per row (docs/probe.md). Other columns are
 /// ignored. Errors name the file, line and column.
 pub fn read_scan(text: &str, name: &str, plane: [&str; 2]) -> Result<Vec<[f64; 2]>> {
-    let mut rows = Vec::new();
-    let mut cols: Option<[usize; 2]> = None;
-    for (i, raw) in text.trim_start_matches('\u{feff}').lines().enumerate() {
-        let ln = i + 1;
-        let line = raw.trim_end_matches('\r');
-        if line.trim().is_empty() || line.trim_start().starts_with('#') {
-            continue;
-        }
-        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
-        let Some(c) = cols else {
-            let find = |axis: &str| cells.iter().position(|h| *h == format!("{axis}_mm"));
-            match (find(plane[0]), find(plane[1])) {
-                (Some(a), Some(b)) => cols = Some([a, b]),
-                _ => bail!(
-                    "{name}:{ln}: the header needs `{0}_mm` and `{1}_mm` (the probe centre in the {0}{1} plane), found `{line}`",
-                    plane[0],
-                    plane[1]
-                ),
-            }
-            continue;
-        };
-        let mut v = [0.0; 2];
-        for (k, &j) in c.iter().enumerate() {
-            let cell = cells.get(j).copied().unwrap_or("");
-            v[k] = match cell.parse::<f64>() {
-                Ok(x) if x.is_finite() && x.abs() <= 10_000.0 => x,
-                _ => bail!(
-                    "{name}:{ln}:{}: `{}_mm`: expected a finite position within ±10000 mm, found `{cell}`",
-                    j + 1,
-                    plane[k]
-                ),
-            };
-        }
-        rows.push(v);
-    }
-    if cols.is_none() {
-        bail!(
-            "{name}: no header line; expected `{}_mm,{}_mm`",
-            plane[0],
-            plane[1]
-        );
-    }
-    Ok(rows)
+    let cols = [format!("{}_mm", plane[0]), format!("{}_mm", plane[1])];
+    crate::import::read_columns(
+        text,
+        name,
+        [cols[0].as_str(), cols[1].as_str()],
+        &format!("the probe centre in the {}{} plane", plane[0], plane[1]),
+    )
 }
 
 #[cfg(test)]

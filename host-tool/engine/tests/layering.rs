@@ -18,6 +18,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("simulate", 3),
     ("holdout", 3),
     ("probe", 3),
+    ("separate", 2),
     ("model", 4),
     ("fit", 5),
     ("diagnose", 6),

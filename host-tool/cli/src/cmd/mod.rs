@@ -15,6 +15,7 @@ pub mod out;
 pub mod probe;
 pub mod progress;
 pub mod rollback;
+pub mod separate;
 pub mod simulate;
 pub mod status;
 pub mod upload;

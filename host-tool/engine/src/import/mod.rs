@@ -138,3 +138,65 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> anyhow::Result<Dataset> {
     ds.validate()?;
     Ok(ds)
 }
+
+/// Reads two named numeric columns of a small CSV (a header line, `#`
+/// comment lines, other columns ignored): probe scans and reversal runs
+/// (docs/probe.md). A `*_mm` value must lie within ±10 000 mm and a `*_um`
+/// value within ±10 000 µm (the measurement CSV's plausibility limits);
+/// `what` says what the columns are in the message for a header without
+/// them. Errors name the file, line and column.
+pub fn read_columns(
+    text: &str,
+    name: &str,
+    columns: [&str; 2],
+    what: &str,
+) -> anyhow::Result<Vec<[f64; 2]>> {
+    let mut rows = Vec::new();
+    let mut cols: Option<[usize; 2]> = None;
+    for (i, raw) in text.trim_start_matches('\u{feff}').lines().enumerate() {
+        let ln = i + 1;
+        let line = raw.trim_end_matches('\r');
+        if line.trim().is_empty() || line.trim_start().starts_with('#') {
+            continue;
+        }
+        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+        let Some(c) = cols else {
+            let find = |h: &str| cells.iter().position(|c| *c == h);
+            match (find(columns[0]), find(columns[1])) {
+                (Some(a), Some(b)) => cols = Some([a, b]),
+                _ => anyhow::bail!(
+                    "{name}:{ln}: the header needs `{}` and `{}` ({what}), found `{line}`",
+                    columns[0],
+                    columns[1]
+                ),
+            }
+            continue;
+        };
+        let mut v = [0.0; 2];
+        for (k, &j) in c.iter().enumerate() {
+            let cell = cells.get(j).copied().unwrap_or("");
+            let (limit, unit) = if columns[k].ends_with("_um") {
+                (crate::data::ERR_PLAUSIBLE_UM, "µm")
+            } else {
+                (crate::data::POS_PLAUSIBLE_MM, "mm")
+            };
+            v[k] = match cell.parse::<f64>() {
+                Ok(x) if x.is_finite() && x.abs() <= limit => x,
+                _ => anyhow::bail!(
+                    "{name}:{ln}:{}: `{}`: expected a finite number within ±{limit} {unit}, found `{cell}`",
+                    j + 1,
+                    columns[k]
+                ),
+            };
+        }
+        rows.push(v);
+    }
+    if cols.is_none() {
+        anyhow::bail!(
+            "{name}: no header line; expected `{},{}`",
+            columns[0],
+            columns[1]
+        );
+    }
+    Ok(rows)
+}
