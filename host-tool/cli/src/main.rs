@@ -43,6 +43,8 @@ enum Command {
     Probe(cmd::probe::Args),
     /// Error separation: part form vs slide straightness (reversal).
     Separate(cmd::separate::Args),
+    /// A part's form from on-machine probing and the correction pass.
+    Workpiece(cmd::workpiece::Args),
     /// Export a model as a firmware table or a controller's compensation file.
     Export(cmd::export::Args),
     /// Upload a table to the board over the serial link.
@@ -72,6 +74,7 @@ fn main() -> ExitCode {
         Command::Iso230(a) => a.run(),
         Command::Probe(a) => a.run(),
         Command::Separate(a) => a.run(),
+        Command::Workpiece(a) => a.run(),
         Command::Export(a) => a.run(),
         Command::Upload(a) => a.run(),
         Command::Status(a) => a.run(),

@@ -310,3 +310,115 @@ fn a_reversal_gives_part_form_and_slide_straightness() {
         String::from_utf8_lossy(&bad.stderr)
     );
 }
+
+#[test]
+fn a_workpiece_correction_pass_makes_the_form_fall_pass_by_pass() {
+    let dir = tmp_dir("probe", "workpiece");
+    // A ground shaft, 100 mm long, probed on 12 generatrices every 5 mm:
+    // 3 µm taper, 2 µm barrel, a 1.5 µm 3-lobe form, 4 µm eccentricity,
+    // 0.1 µm of reading noise.
+    let truth = |c: f64, z: f64| {
+        let t = (z - 50.0) / 50.0;
+        let cr = c.to_radians();
+        1.5 * t + 2.0 * (t * t - 1.0 / 3.0) + 1.5 * (3.0 * cr).cos() + 4.0 * cr.sin()
+    };
+    let mut scan = String::from("# pass 1\nc_deg,z_mm,dev_um\n");
+    let mut i = 0u64;
+    for g in 0..12 {
+        for k in 0..=20 {
+            let (c, z) = (30.0 * g as f64, 5.0 * k as f64);
+            scan.push_str(&format!("{c},{z},{:.4}\n", truth(c, z) + 0.35 * noise(i)));
+            i += 1;
+        }
+    }
+    let (p1, hist, nc, pass) = (
+        dir.join("pass1.csv"),
+        dir.join("part.history.json"),
+        dir.join("pass.nc"),
+        dir.join("pass.csv"),
+    );
+    std::fs::write(&p1, scan).unwrap();
+    let doc = json(&run(&[
+        "workpiece",
+        s(&p1),
+        "--gcode",
+        "fanuc",
+        "--gcode-out",
+        s(&nc),
+        "--nominal-diameter-mm",
+        "40",
+        "--pass-csv",
+        s(&pass),
+        "--c-step-deg",
+        "30",
+        "--z-steps",
+        "20",
+        "--history",
+        s(&hist),
+        "--json",
+    ]));
+    let f = &doc["form"];
+    assert_eq!(
+        (f["degree_z"].as_u64(), f["harmonics"].as_u64()),
+        (Some(2), Some(3)),
+        "{doc}"
+    );
+    assert!(
+        (f["eccentricity_um"].as_f64().unwrap() - 4.0).abs() < 0.1,
+        "{doc}"
+    );
+    let pv1 = f["form_pv_um"].as_f64().unwrap();
+    assert!(pv1 > 10.0, "{doc}");
+    let g = std::fs::read_to_string(&nc).unwrap();
+    assert!(g.starts_with("%\nO1000") && g.contains("G01 X"), "{g}");
+    // The machine repeats its error: pass 2 is the error plus the
+    // commanded offset, with new reading noise.
+    let offsets: std::collections::HashMap<(i64, i64), f64> = std::fs::read_to_string(&pass)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|c| c.parse().unwrap()).collect();
+            (
+                ((v[0] * 10.0).round() as i64, (v[1] * 10.0).round() as i64),
+                v[3],
+            )
+        })
+        .collect();
+    let mut scan2 = String::from("c_deg,z_mm,dev_um\n");
+    for g in 0..12 {
+        for k in 0..=20 {
+            let (c, z) = (30.0 * g as f64, 5.0 * k as f64);
+            let off = offsets[&((c * 10.0).round() as i64, (z * 10.0).round() as i64)];
+            scan2.push_str(&format!(
+                "{c},{z},{:.4}\n",
+                truth(c, z) + off + 0.35 * noise(i)
+            ));
+            i += 1;
+        }
+    }
+    let p2 = dir.join("pass2.csv");
+    std::fs::write(&p2, scan2).unwrap();
+    let doc = json(&run(&[
+        "workpiece",
+        s(&p2),
+        "--history",
+        s(&hist),
+        "--json",
+    ]));
+    let h = doc["history"].as_array().unwrap();
+    assert_eq!(h.len(), 2, "{doc}");
+    let pv2 = h[1]["form_pv_um"].as_f64().unwrap();
+    assert!(pv2 < 1.0 && pv2 < pv1 / 10.0, "{pv1} → {pv2}");
+    // G-code without the diameter it is programmed in is refused.
+    let out = run(&[
+        "workpiece",
+        s(&p2),
+        "--gcode",
+        "siemens",
+        "--gcode-out",
+        s(&dir.join("x.mpf")),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--nominal-diameter-mm"));
+}

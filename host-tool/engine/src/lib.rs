@@ -27,6 +27,7 @@
 //! - `history`: the steps of the error falling, fit by fit.
 //! - `improve`: the loop fit → diagnose → add the missing effects → refit, to the noise floor.
 //! - `iso230`: ISO 230-2 evaluation of bidirectional positioning runs.
+//! - `workpiece`: a part's form from probed generatrices and the correction pass (G-code).
 //! - `separate`: error separation — the reversal method (part form vs slide straightness).
 //! - `probe`: on-machine probing — probe radius and form on a master ball, a scan corrected.
 //! - `export`: the binary table for the board, controller compensation files and bed meshes.
@@ -51,3 +52,4 @@ pub mod regions;
 pub mod separate;
 pub mod simulate;
 pub mod units;
+pub mod workpiece;

@@ -19,6 +19,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("holdout", 3),
     ("probe", 3),
     ("separate", 2),
+    ("workpiece", 3),
     ("model", 4),
     ("fit", 5),
     ("diagnose", 6),

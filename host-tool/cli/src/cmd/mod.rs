@@ -19,6 +19,7 @@ pub mod separate;
 pub mod simulate;
 pub mod status;
 pub mod upload;
+pub mod workpiece;
 
 /// `--port`: the board a link command (`upload`, `rollback`, `status`,
 /// `monitor`) talks to.

@@ -139,20 +139,36 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> anyhow::Result<Dataset> {
     Ok(ds)
 }
 
-/// Reads two named numeric columns of a small CSV (a header line, `#`
-/// comment lines, other columns ignored): probe scans and reversal runs
-/// (docs/probe.md). A `*_mm` value must lie within ±10 000 mm and a `*_um`
-/// value within ±10 000 µm (the measurement CSV's plausibility limits);
-/// `what` says what the columns are in the message for a header without
-/// them. Errors name the file, line and column.
+/// Reads two named numeric columns of a small CSV: [`read_table`] for two
+/// columns.
 pub fn read_columns(
     text: &str,
     name: &str,
     columns: [&str; 2],
     what: &str,
 ) -> anyhow::Result<Vec<[f64; 2]>> {
+    Ok(read_table(text, name, &columns, what)?
+        .into_iter()
+        .map(|r| [r[0], r[1]])
+        .collect())
+}
+
+/// Reads named numeric columns of a small CSV (a header line, `#` comment
+/// lines, other columns ignored): probe scans, reversal runs, workpiece
+/// scans (docs/probe.md). A `*_mm` value must lie within ±10 000 mm, a
+/// `*_um` value within ±10 000 µm (the measurement CSV's plausibility
+/// limits), a `*_deg` value within ±3600°; `what` says what the columns
+/// are in the message for a header without them. Returns one row per line
+/// with the values in the order of `columns` and, last, the line number.
+/// Errors name the file, line and column.
+pub fn read_table(
+    text: &str,
+    name: &str,
+    columns: &[&str],
+    what: &str,
+) -> anyhow::Result<Vec<Vec<f64>>> {
     let mut rows = Vec::new();
-    let mut cols: Option<[usize; 2]> = None;
+    let mut cols: Option<Vec<usize>> = None;
     for (i, raw) in text.trim_start_matches('\u{feff}').lines().enumerate() {
         let ln = i + 1;
         let line = raw.trim_end_matches('\r');
@@ -160,43 +176,48 @@ pub fn read_columns(
             continue;
         }
         let cells: Vec<&str> = line.split(',').map(str::trim).collect();
-        let Some(c) = cols else {
-            let find = |h: &str| cells.iter().position(|c| *c == h);
-            match (find(columns[0]), find(columns[1])) {
-                (Some(a), Some(b)) => cols = Some([a, b]),
-                _ => anyhow::bail!(
-                    "{name}:{ln}: the header needs `{}` and `{}` ({what}), found `{line}`",
-                    columns[0],
-                    columns[1]
+        let Some(c) = &cols else {
+            let found: Option<Vec<usize>> = columns
+                .iter()
+                .map(|h| cells.iter().position(|c| c == h))
+                .collect();
+            match found {
+                Some(f) => cols = Some(f),
+                None => anyhow::bail!(
+                    "{name}:{ln}: the header needs {} ({what}), found `{line}`",
+                    columns
+                        .iter()
+                        .map(|c| format!("`{c}`"))
+                        .collect::<Vec<_>>()
+                        .join(" and ")
                 ),
             }
             continue;
         };
-        let mut v = [0.0; 2];
+        let mut v = Vec::with_capacity(columns.len() + 1);
         for (k, &j) in c.iter().enumerate() {
             let cell = cells.get(j).copied().unwrap_or("");
             let (limit, unit) = if columns[k].ends_with("_um") {
                 (crate::data::ERR_PLAUSIBLE_UM, "µm")
+            } else if columns[k].ends_with("_deg") {
+                (3600.0, "°")
             } else {
                 (crate::data::POS_PLAUSIBLE_MM, "mm")
             };
-            v[k] = match cell.parse::<f64>() {
+            v.push(match cell.parse::<f64>() {
                 Ok(x) if x.is_finite() && x.abs() <= limit => x,
                 _ => anyhow::bail!(
                     "{name}:{ln}:{}: `{}`: expected a finite number within ±{limit} {unit}, found `{cell}`",
                     j + 1,
                     columns[k]
                 ),
-            };
+            });
         }
+        v.push(ln as f64);
         rows.push(v);
     }
     if cols.is_none() {
-        anyhow::bail!(
-            "{name}: no header line; expected `{},{}`",
-            columns[0],
-            columns[1]
-        );
+        anyhow::bail!("{name}: no header line; expected {}", columns.join(","));
     }
     Ok(rows)
 }
