@@ -422,3 +422,80 @@ fn a_workpiece_correction_pass_makes_the_form_fall_pass_by_pass() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--nominal-diameter-mm"));
 }
+
+#[test]
+fn three_probes_give_roundness_and_name_the_lobes_they_cannot_see() {
+    let dir = tmp_dir("probe", "three");
+    let part = |t: f64| 2.0 * (3.0 * t).cos() + 1.0 * (7.0 * t + 0.4).sin();
+    let sx = |t: f64| 1.2 * (t + 0.3).cos() + 0.4 * (4.0 * t).sin();
+    let sy = |t: f64| 0.8 * t.sin();
+    let write = |angles: [f64; 3], path: &std::path::Path| {
+        // Two turns of 360 samples (averaged by the command).
+        let mut s = String::from("c_deg,p1_um,p2_um,p3_um\n");
+        for turn in 0..2 {
+            for i in 0..360 {
+                let t = (i as f64).to_radians();
+                let probe = |a: f64| {
+                    let a = a.to_radians();
+                    part(t - a) + sx(t) * a.cos() + sy(t) * a.sin()
+                };
+                s.push_str(&format!(
+                    "{},{:.5},{:.5},{:.5}\n",
+                    i + 360 * turn,
+                    probe(angles[0]),
+                    probe(angles[1]),
+                    probe(angles[2])
+                ));
+            }
+        }
+        std::fs::write(path, s).unwrap();
+    };
+    let good = dir.join("good.csv");
+    write([0.0, 99.84, 202.5], &good);
+    let doc = json(&run(&[
+        "separate",
+        "three-probe",
+        s(&good),
+        "--angles-deg",
+        "0,99.84,202.5",
+        "-o",
+        s(&dir.join("g.out")),
+        "--json",
+    ]));
+    let true_pv = {
+        let v: Vec<f64> = (0..3600)
+            .map(|i| part((i as f64 / 10.0).to_radians()))
+            .collect();
+        v.iter().copied().fold(f64::MIN, f64::max) - v.iter().copied().fold(f64::MAX, f64::min)
+    };
+    assert!(
+        (doc["part_pv_um"].as_f64().unwrap() - true_pv).abs() < 0.05,
+        "{doc} vs {true_pv}"
+    );
+    assert_eq!(doc["samples"], 360);
+    let bad = dir.join("bad.csv");
+    write([0.0, 90.0, 180.0], &bad);
+    let out = run(&[
+        "separate",
+        "three-probe",
+        s(&bad),
+        "--angles-deg",
+        "0,90,180",
+        "-o",
+        s(&dir.join("b.out")),
+        "--json",
+    ]);
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("cannot see"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let doc = json(&out);
+    let unseen: Vec<u64> = doc["unseen_harmonics"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect();
+    assert!(unseen.contains(&3) && unseen.contains(&7), "{unseen:?}");
+}

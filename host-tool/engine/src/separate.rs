@@ -210,3 +210,207 @@ mod tests {
             .contains("same travel"));
     }
 }
+
+/// The result of a three-probe roundness separation.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ThreeProbe {
+    /// Samples per turn.
+    pub samples: usize,
+    /// The part's roundness profile at `k·360/samples` degrees, µm
+    /// (harmonics 2…samples/2 that the probes see).
+    pub part_um: Vec<f64>,
+    /// The spindle's radial error motion along probe 1, µm.
+    pub spindle_x_um: Vec<f64>,
+    /// …and perpendicular to it (toward +90°), µm.
+    pub spindle_y_um: Vec<f64>,
+    /// Peak to valley of the part's roundness, µm.
+    pub part_pv_um: f64,
+    /// Peak to valley of the spindle motion along probe 1, µm.
+    pub spindle_x_pv_um: f64,
+    /// Harmonics the probe angles cannot see (|W(k)| below 10 % of its
+    /// largest): left out of the part and named.
+    pub unseen_harmonics: Vec<usize>,
+    /// Per harmonic 2…samples/2 the factor by which reading noise is
+    /// amplified in the part's profile (1/|W(k)|), for the uncertainty.
+    pub noise_gain: Vec<[f64; 2]>,
+}
+
+/// Separates a part's roundness from the spindle's radial error motion
+/// with three probes at `angles_deg` (the first is the reference
+/// direction) read at `samples` equally spaced rotation angles
+/// (`readings[i] = [p1, p2, p3]` µm at `i·360/samples` degrees; one turn,
+/// or several averaged by the caller). The combination `m1 + a m2 + b m3`
+/// with `1 + a cos α + b cos β = 0` and `a sin α + b sin β = 0` cancels the
+/// error motion; in Fourier terms the part's harmonic k is then the
+/// combination's divided by `W(k) = 1 + a e^{−ikα} + b e^{−ikβ}`. Where
+/// `|W(k)|` is small the probes cannot see harmonic k (the spacing's
+/// blind spots, like the aliasing of a coarse grid): it is left out and
+/// named. Harmonics 0 and 1 (size and centring) are not roundness.
+pub fn three_probe(readings: &[[f64; 3]], angles_deg: [f64; 3]) -> Result<ThreeProbe> {
+    let n = readings.len();
+    if n < 16 {
+        bail!("{n} samples per turn; three-probe separation needs at least 16");
+    }
+    let (al, be) = (
+        (angles_deg[1] - angles_deg[0]).to_radians(),
+        (angles_deg[2] - angles_deg[0]).to_radians(),
+    );
+    let det = al.cos() * be.sin() - be.cos() * al.sin();
+    if det.abs() < 1e-6 {
+        bail!("the probe angles {angles_deg:?} are collinear (0° and 180° apart): they cannot separate the spindle's motion");
+    }
+    // Solve 1 + a cos α + b cos β = 0, a sin α + b sin β = 0.
+    let a = -be.sin() / det;
+    let b = al.sin() / det;
+    let m: Vec<f64> = readings
+        .iter()
+        .map(|r| r[0] + a * r[1] + b * r[2])
+        .collect();
+    let w = |k: usize| -> (f64, f64) {
+        let kf = k as f64;
+        (
+            1.0 + a * (kf * al).cos() + b * (kf * be).cos(),
+            -(a * (kf * al).sin() + b * (kf * be).sin()),
+        )
+    };
+    let half = n / 2;
+    let wmax = (2..=half)
+        .map(|k| w(k).0.hypot(w(k).1))
+        .fold(0.0f64, f64::max);
+    let mut unseen = Vec::new();
+    let mut noise_gain = Vec::new();
+    let mut part = vec![0.0; n];
+    for k in 2..half {
+        // DFT of the combination at harmonic k.
+        let (mut re, mut im) = (0.0, 0.0);
+        for (i, v) in m.iter().enumerate() {
+            let t = 2.0 * std::f64::consts::PI * (k * i) as f64 / n as f64;
+            re += v * t.cos();
+            im -= v * t.sin();
+        }
+        let (wr, wi) = w(k);
+        let mag = wr.hypot(wi);
+        noise_gain.push([k as f64, if mag > 0.0 { 1.0 / mag } else { f64::INFINITY }]);
+        if mag < 0.1 * wmax {
+            unseen.push(k);
+            continue;
+        }
+        // R(k) = M(k) / W(k).
+        let d = wr * wr + wi * wi;
+        let (rr, ri) = ((re * wr + im * wi) / d, (im * wr - re * wi) / d);
+        for (i, p) in part.iter_mut().enumerate() {
+            let t = 2.0 * std::f64::consts::PI * (k * i) as f64 / n as f64;
+            *p += 2.0 / n as f64 * (rr * t.cos() - ri * t.sin());
+        }
+    }
+    // Error motion: probe 1 sees r(θ) + x(θ); probe 2 at α sees
+    // r(θ − α) + x cos α + y sin α (the part's profile passes probe 2 α
+    // later).
+    let shift = |theta_rad: f64, i: usize| -> f64 {
+        let s =
+            (i as f64 - theta_rad / (2.0 * std::f64::consts::PI) * n as f64).rem_euclid(n as f64);
+        let (i0, f) = (s.floor() as usize % n, s - s.floor());
+        part[i0] * (1.0 - f) + part[(i0 + 1) % n] * f
+    };
+    let x: Vec<f64> = (0..n).map(|i| readings[i][0] - part[i]).collect();
+    let y: Vec<f64> = (0..n)
+        .map(|i| {
+            if al.sin().abs() > 1e-6 {
+                (readings[i][1] - shift(al, i) - x[i] * al.cos()) / al.sin()
+            } else {
+                (readings[i][2] - shift(be, i) - x[i] * be.cos()) / be.sin()
+            }
+        })
+        .collect();
+    // Remove each motion's mean (the probes' zero).
+    let centred = |v: Vec<f64>| {
+        let m = v.iter().sum::<f64>() / v.len() as f64;
+        v.into_iter().map(|x| x - m).collect::<Vec<_>>()
+    };
+    let (x, y) = (centred(x), centred(y));
+    Ok(ThreeProbe {
+        samples: n,
+        part_pv_um: pv(&part),
+        spindle_x_pv_um: pv(&x),
+        part_um: part,
+        spindle_x_um: x,
+        spindle_y_um: y,
+        unseen_harmonics: unseen,
+        noise_gain,
+    })
+}
+
+#[cfg(test)]
+mod three_probe_tests {
+    use super::*;
+
+    fn readings(n: usize, angles: [f64; 3]) -> (Vec<[f64; 3]>, Vec<f64>) {
+        let part =
+            |t: f64| 2.0 * (3.0 * t).cos() + 1.0 * (7.0 * t + 0.4).sin() + 0.5 * (15.0 * t).cos();
+        let sx = |t: f64| 1.2 * (t + 0.3).cos() + 0.4 * (4.0 * t).sin() + 0.2 * (9.0 * t).cos();
+        let sy = |t: f64| 0.8 * (t).sin() + 0.3 * (5.0 * t + 1.0).cos();
+        let r: Vec<[f64; 3]> = (0..n)
+            .map(|i| {
+                let t = 2.0 * std::f64::consts::PI * i as f64 / n as f64;
+                let probe = |a: f64| {
+                    let a = a.to_radians();
+                    part(t - a) + sx(t) * a.cos() + sy(t) * a.sin()
+                };
+                [probe(angles[0]), probe(angles[1]), probe(angles[2])]
+            })
+            .collect();
+        let truth = (0..n)
+            .map(|i| part(2.0 * std::f64::consts::PI * i as f64 / n as f64))
+            .collect();
+        (r, truth)
+    }
+
+    #[test]
+    fn three_probes_separate_roundness_from_spindle_motion() {
+        let angles = [0.0, 99.84, 202.5];
+        let (r, truth) = readings(512, angles);
+        let s = three_probe(&r, angles).unwrap();
+        let worst = s
+            .part_um
+            .iter()
+            .zip(&truth)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f64, f64::max);
+        assert!(worst < 0.02, "{worst}, unseen {:?}", s.unseen_harmonics);
+        assert!(!s
+            .unseen_harmonics
+            .iter()
+            .any(|&k| k == 3 || k == 7 || k == 15));
+        // The spindle's motion along probe 1, its mean removed.
+        let sx: Vec<f64> = (0..512)
+            .map(|i| {
+                let t = 2.0 * std::f64::consts::PI * i as f64 / 512.0;
+                1.2 * (t + 0.3).cos() + 0.4 * (4.0 * t).sin() + 0.2 * (9.0 * t).cos()
+            })
+            .collect();
+        let m = sx.iter().sum::<f64>() / 512.0;
+        let worst_x = s
+            .spindle_x_um
+            .iter()
+            .zip(&sx)
+            .map(|(a, b)| (a - (b - m)).abs())
+            .fold(0.0f64, f64::max);
+        assert!(worst_x < 0.05, "{worst_x}");
+    }
+
+    #[test]
+    fn probes_at_0_90_180_cannot_see_odd_lobes_and_say_so() {
+        let angles = [0.0, 90.0, 180.0];
+        let (r, _) = readings(256, angles);
+        let s = three_probe(&r, angles).unwrap();
+        for k in [3, 5, 7, 15] {
+            assert!(
+                s.unseen_harmonics.contains(&k),
+                "{k} not named: {:?}",
+                s.unseen_harmonics
+            );
+        }
+        assert!(!s.unseen_harmonics.contains(&4));
+        assert!(three_probe(&r, [0.0, 180.0, 360.0]).is_err());
+    }
+}

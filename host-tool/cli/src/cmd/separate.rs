@@ -4,7 +4,7 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use serde_json::json;
 
 use crate::cmd::out;
@@ -22,6 +22,135 @@ pub struct Args {
 pub enum Sub {
     /// Reversal: part form and slide straightness from runs at 0° and 180°.
     Reversal(Reversal),
+    /// Three probes: part roundness and spindle error motion.
+    ThreeProbe(ThreeProbe),
+}
+
+/// `trueaxis separate three-probe SCAN.csv --angles-deg 0,A,B -o OUT.csv`.
+#[derive(clap::Args, Debug)]
+pub struct ThreeProbe {
+    /// `c_deg,p1_um,p2_um,p3_um`: the three probes' readings at equally
+    /// spaced rotation angles over one or more whole turns.
+    pub scan: PathBuf,
+    /// The probes' angular positions around the part, degrees: `0,A,B`.
+    #[arg(long, allow_hyphen_values = true)]
+    pub angles_deg: String,
+    /// Where to write `c_deg,part_um,spindle_x_um,spindle_y_um`.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Write one JSON document to stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl ThreeProbe {
+    fn run(self) -> Result<()> {
+        crate::input::refuse_overwrite(&[("the scan", &self.scan)], &[("-o", &self.output)])?;
+        let angles: Vec<f64> = self
+            .angles_deg
+            .split(',')
+            .map(|a| a.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+            .collect::<Option<Vec<f64>>>()
+            .filter(|v| v.len() == 3)
+            .with_context(|| {
+                format!(
+                    "--angles-deg `{}`: expected three angles in degrees, e.g. 0,99.84,202.5",
+                    self.angles_deg
+                )
+            })?;
+        let text = std::fs::read_to_string(&self.scan)
+            .with_context(|| format!("cannot read {}", self.scan.display()))?;
+        let name = self.scan.display().to_string();
+        let rows = import::read_table(
+            &text,
+            &name,
+            &["c_deg", "p1_um", "p2_um", "p3_um"],
+            "the rotation angle and the three probes' readings",
+        )?;
+        // Samples per turn from the distinct angles; several turns are
+        // averaged per angle; the spacing must be even.
+        let key = |c: f64| (c.rem_euclid(360.0) * 1000.0).round() as i64 % 360_000;
+        let mut bins: std::collections::BTreeMap<i64, ([f64; 3], usize)> = Default::default();
+        for r in &rows {
+            let e = bins.entry(key(r[0])).or_insert(([0.0; 3], 0));
+            for k in 0..3 {
+                e.0[k] += r[k + 1];
+            }
+            e.1 += 1;
+        }
+        let n = bins.len();
+        let step = 360_000 / n.max(1) as i64;
+        let first = *bins.keys().next().context("no readings")?;
+        if let Some((i, (&k, _))) = bins
+            .iter()
+            .enumerate()
+            .find(|(i, (&k, _))| (k - first - *i as i64 * step).abs() > 1)
+        {
+            bail!(
+                "{name}: the angles are not evenly spaced over the turn: the {}th distinct angle is {:.3}°, expected {:.3}° ({n} per turn); three-probe separation needs equal steps",
+                i + 1,
+                k as f64 / 1000.0,
+                (first + i as i64 * step) as f64 / 1000.0
+            );
+        }
+        let readings: Vec<[f64; 3]> = bins
+            .values()
+            .map(|(s, c)| [s[0] / *c as f64, s[1] / *c as f64, s[2] / *c as f64])
+            .collect();
+        let r = separate::three_probe(&readings, [angles[0], angles[1], angles[2]])
+            .with_context(|| format!("{name}: cannot separate"))?;
+        let mut csv = String::from("c_deg,part_um,spindle_x_um,spindle_y_um\n");
+        for (i, k) in bins.keys().enumerate() {
+            let _ = writeln!(
+                csv,
+                "{:.3},{:.5},{:.5},{:.5}",
+                *k as f64 / 1000.0,
+                r.part_um[i],
+                r.spindle_x_um[i],
+                r.spindle_y_um[i]
+            );
+        }
+        crate::workflow::write_file(&self.output, csv.as_bytes())?;
+        let mut warnings = Vec::new();
+        if !r.unseen_harmonics.is_empty() {
+            let list: Vec<String> = r
+                .unseen_harmonics
+                .iter()
+                .take(12)
+                .map(|k| k.to_string())
+                .collect();
+            warnings.push(format!(
+                "probes at {}° cannot see {} harmonic(s) of the part ({}{}): lobes of those orders are left out of the roundness — change the angles (e.g. 0, 99.84, 202.5) or add a probe",
+                self.angles_deg,
+                r.unseen_harmonics.len(),
+                list.join(", "),
+                if r.unseen_harmonics.len() > 12 { ", …" } else { "" }
+            ));
+        }
+        for w in &warnings {
+            eprintln!("warning: {w}");
+        }
+        if self.json {
+            out::json_pretty(&json!({
+                "output": self.output.display().to_string(),
+                "samples": r.samples,
+                "part_pv_um": r.part_pv_um,
+                "spindle_x_pv_um": r.spindle_x_pv_um,
+                "unseen_harmonics": r.unseen_harmonics,
+                "noise_gain": r.noise_gain,
+                "warnings": warnings,
+            }))?;
+        } else {
+            out::print(&format!(
+                "{n} samples per turn: part roundness {:.3} µm PV, spindle error motion {:.3} µm PV along probe 1; {} harmonic(s) unseen; written to {}\n",
+                r.part_pv_um,
+                r.spindle_x_pv_um,
+                r.unseen_harmonics.len(),
+                self.output.display()
+            ))?;
+        }
+        Ok(())
+    }
 }
 
 /// `trueaxis separate reversal RUN0.csv RUN180.csv -o OUT.csv`.
@@ -118,6 +247,7 @@ impl Args {
     pub fn run(self) -> Result<()> {
         match self.cmd {
             Sub::Reversal(r) => r.run(),
+            Sub::ThreeProbe(t) => t.run(),
         }
     }
 }
