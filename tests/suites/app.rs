@@ -210,6 +210,14 @@ mod tests {
             Err(err) => defmt::panic!("config: {}", err),
         };
         let _ = e.set_model(model, info(FULL));
+        // The engine corrects only from referenced axes: the counts of the
+        // first tick (0.1 µm each) are these positions.
+        for (axis, pos_nm) in [400_000_000, 250_000_000, 250_000_000]
+            .into_iter()
+            .enumerate()
+        {
+            defmt::assert!(e.reference(axis, pos_nm));
+        }
         let clock = FakeClock(Cell::new(0));
         let mut io = Io {
             counts: [4_000_000, 2_500_000, 2_500_000],

@@ -1,13 +1,16 @@
 //! The engine's output limits as properties (issue 14), over random tables
 //! (slew from 1 nm/ms to the format's limit of 10 000 000 nm/ms, max |correction| 0.1–100 µm), random
 //! motion, late ticks, table switches, temperature faults and their
-//! clearing:
+//! clearing, referencing and references lost (encoder jumps):
 //! - the output changes per tick by at most the rate in force (the table's
 //!   slew as the engine applies it, or the fault ramp while a fault is
 //!   active) plus 1 nm of rounding;
 //! - during a fault the output never grows;
 //! - above the active table's max |correction| the output never grows;
 //! - the pulses equal the rounded output every tick;
+//! - the output is zero until every axis has been referenced, and never
+//!   grows while an axis is not referenced (never referenced, or its
+//!   reference lost);
 //! - no tick panics.
 
 mod common;
@@ -18,7 +21,7 @@ use proptest::prelude::*;
 use trueaxis_app::engine::{round_div, Engine};
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::sim::{sample_spec, sim_engine_config};
-use trueaxis_protocol::{Slot, SlotInfo};
+use trueaxis_protocol::{Faults, Slot, SlotInfo};
 
 use common::fake::{Fake, FakeClock};
 
@@ -74,6 +77,10 @@ enum Op {
     Temp(bool),
     /// Clear latched faults.
     Clear,
+    /// Reference an axis at a position, nm.
+    Reference(usize, i32),
+    /// An axis's counter jumps (a glitch): its reference is lost.
+    Jump(usize),
 }
 
 fn op() -> impl Strategy<Value = Op> {
@@ -83,6 +90,8 @@ fn op() -> impl Strategy<Value = Op> {
         1 => (0usize..3).prop_map(Op::Switch),
         1 => any::<bool>().prop_map(Op::Temp),
         1 => Just(Op::Clear),
+        2 => (0usize..3, -400_000_000i32..400_000_000).prop_map(|(a, p)| Op::Reference(a, p)),
+        1 => (0usize..3).prop_map(Op::Jump),
     ]
 }
 
@@ -94,7 +103,11 @@ proptest! {
         tables in prop::collection::vec(table_case(), 3),
         ops in prop::collection::vec(op(), 1..250),
     ) {
-        let cfg = sim_engine_config();
+        let mut cfg = sim_engine_config();
+        // 1.5 m/s: a Move (≤ 2 mm per tick) is motion, a Jump (5 mm) a glitch.
+        for a in cfg.axes.iter_mut() {
+            a.max_speed_nm_per_ms = 1_500_000;
+        }
         let pulse_nm = cfg.axes.map(|a| a.pulse_nm as i64);
         let period = cfg.period_us as i64;
         let fault_ramp = cfg.fault_ramp_nm_per_ms as i64;
@@ -105,6 +118,10 @@ proptest! {
         let clock = FakeClock(Cell::new(0));
         let mut io = Fake::new();
         let mut prev = e.corr_nm();
+        // The test's own account of the references, and whether all three
+        // were ever referenced together.
+        let mut referenced = [false; 3];
+        let mut ever_all = false;
         for op in ops {
             let mut dt = period as u64;
             match op {
@@ -121,6 +138,15 @@ proptest! {
                 }
                 Op::Temp(hot) => io.temps[0] = if hot { 95_000 } else { 20_000 },
                 Op::Clear => e.clear_faults(),
+                Op::Reference(axis, pos) => {
+                    prop_assert!(e.reference(axis, pos));
+                    referenced[axis] = true;
+                }
+                Op::Jump(axis) => {
+                    // Towards 0, so the counts stay within the ±3 M a Move keeps.
+                    io.counts[axis] += if io.counts[axis] > 0 { -50_000 } else { 50_000 };
+                    referenced[axis] = false;
+                }
             }
             clock.0.set(clock.0.get() + dt);
             let (mut enc, mut t) = (io, io);
@@ -129,6 +155,16 @@ proptest! {
             let faulted = !report.faults.is_empty();
             let rate = if faulted { fault_ramp } else { e.slew_nm_per_ms() as i64 };
             let max_corr = tables[active].max_corr_nm as i64;
+            prop_assert_eq!(e.telemetry().referenced, referenced);
+            let all = referenced.iter().all(|&r| r);
+            ever_all |= all;
+            if !ever_all {
+                prop_assert_eq!(now, [0; 3], "output before every axis was referenced");
+                prop_assert_eq!(io.pulses, [0; 3]);
+            }
+            if !all {
+                prop_assert!(report.faults.contains(Faults::NOT_REFERENCED));
+            }
             for a in 0..3 {
                 let (p, n) = (prev[a] as i64, now[a] as i64);
                 let step = (n - p).abs();
@@ -138,6 +174,9 @@ proptest! {
                 );
                 if faulted {
                     prop_assert!(n.abs() <= p.abs(), "axis {a}: grew during a fault: {p} -> {n}");
+                }
+                if !all {
+                    prop_assert!(n.abs() <= p.abs(), "axis {a}: grew while not referenced: {p} -> {n}");
                 }
                 if n.abs() > max_corr {
                     prop_assert!(

@@ -57,3 +57,12 @@ impl Clock for FakeClock {
         self.0.get()
     }
 }
+
+/// References every axis of `e` at position 0 for the counts its next tick
+/// reads (the engine corrects only from referenced axes): with counts 0 and
+/// a configured origin 0 the positions are what they were unreferenced.
+pub fn reference_at_zero(e: &mut trueaxis_app::engine::Engine<'_>) {
+    for axis in 0..3 {
+        assert!(e.reference(axis, 0));
+    }
+}

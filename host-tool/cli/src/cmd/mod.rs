@@ -13,13 +13,14 @@ pub mod iso230;
 pub mod monitor;
 pub mod out;
 pub mod progress;
+pub mod reference;
 pub mod rollback;
 pub mod simulate;
 pub mod status;
 pub mod upload;
 
 /// `--port`: the board a link command (`upload`, `rollback`, `status`,
-/// `monitor`) talks to.
+/// `monitor`, `reference`) talks to.
 #[derive(clap::Args, Debug)]
 pub struct BoardPort {
     /// Serial port of the board (`/dev/ttyACM0`, `COM3`) or `tcp://HOST:PORT`.
