@@ -137,8 +137,6 @@ impl EngineConfig {
         (self.max_steps_per_tick as i64 - 1) * self.axes[axis].pulse_nm as i64
     }
 
-    /// Slew limit actually applied for a table's `slew_nm_per_ms`: the
-    /// table's, reduced if the pulse budget of an axis cannot follow it.
     /// True when `axis` needs a reference before the board corrects: it
     /// has an encoder (`pm_per_count != 0`). Every such axis needs one,
     /// whether or not the active table reads its position: the board does
@@ -149,6 +147,8 @@ impl EngineConfig {
         self.axes[axis].pm_per_count != 0
     }
 
+    /// Slew limit actually applied for a table's `slew_nm_per_ms`: the
+    /// table's, reduced if the pulse budget of an axis cannot follow it.
     fn effective_slew(&self, table_slew_nm_per_ms: i32) -> i32 {
         let mut s = table_slew_nm_per_ms.max(0);
         for axis in 0..3 {
@@ -200,11 +200,16 @@ pub struct Engine<'m> {
     /// Per axis: added to the unreferenced position (counts · scale +
     /// configured origin) once referenced, nm.
     ref_offset_nm: [i64; 3],
-    /// Per axis: referenced since reset, and not lost since.
-    referenced: [bool; 3],
+    /// Bit per axis: referenced since reset, and not lost since. (Bit
+    /// masks, so that a tick with nothing to do checks one byte.)
+    referenced: u8,
+    /// Bit per axis: the axis needs a reference (it has an encoder).
+    needs_ref: u8,
     /// Per axis: a reference asked for, applied at the next tick with the
     /// counts that tick reads.
     pending_ref: [Option<i32>; 3],
+    /// Some `pending_ref` is set.
+    ref_pending: bool,
 
     last_counts: Option<[i32; 3]>,
     pos_nm: [i32; 3],
@@ -257,8 +262,12 @@ impl<'m> Engine<'m> {
             inject: None,
             inject_ticks_left: 0,
             ref_offset_nm: [0; 3],
-            referenced: [false; 3],
+            referenced: 0,
+            needs_ref: (0..3)
+                .filter(|&a| cfg.reference_needed(a))
+                .fold(0, |m, a| m | 1 << a),
             pending_ref: [None; 3],
+            ref_pending: false,
             last_counts: None,
             pos_nm: [0; 3],
             rev_q30: [0; 3],
@@ -352,6 +361,7 @@ impl<'m> Engine<'m> {
         match self.pending_ref.get_mut(axis) {
             Some(p) => {
                 *p = Some(pos_nm);
+                self.ref_pending = true;
                 true
             }
             None => false,
@@ -360,7 +370,7 @@ impl<'m> Engine<'m> {
 
     /// Per axis: referenced (since reset, and not lost since).
     pub fn referenced(&self) -> [bool; 3] {
-        self.referenced
+        core::array::from_fn(|a| self.referenced & 1 << a != 0)
     }
 
     /// True when every encoder has been unchanged for [`STILL_US`] at
@@ -455,8 +465,8 @@ impl<'m> Engine<'m> {
             faults: self.faults(),
             faults_latched: self.latched,
             injecting: self.inject.is_some(),
-            referenced: self.referenced,
-            reference_needed: core::array::from_fn(|a| self.cfg.reference_needed(a)),
+            referenced: self.referenced(),
+            reference_needed: core::array::from_fn(|a| self.needs_ref & 1 << a != 0),
             active: self.active,
             rx_bad_frames: 0,
         }
@@ -518,10 +528,13 @@ impl<'m> Engine<'m> {
         });
         // A reference asked for since the last tick: the counts read now
         // are the position it names.
-        for (i, p) in self.pending_ref.iter_mut().enumerate() {
-            if let Some(pos) = p.take() {
-                self.ref_offset_nm[i] = pos as i64 - raw_nm[i];
-                self.referenced[i] = true;
+        if self.ref_pending {
+            self.ref_pending = false;
+            for (i, p) in self.pending_ref.iter_mut().enumerate() {
+                if let Some(pos) = p.take() {
+                    self.ref_offset_nm[i] = pos as i64 - raw_nm[i];
+                    self.referenced |= 1 << i;
+                }
             }
         }
         if let Some(prev) = self.last_counts {
@@ -533,7 +546,7 @@ impl<'m> Engine<'m> {
                 if d_counts.saturating_mul(a.pm_per_count.abs()) >= self.jump_threshold_pm[i] {
                     events = events.union(Faults::ENCODER_JUMP);
                     // Counts were lost or invented: the reference is gone.
-                    self.referenced[i] = false;
+                    self.referenced &= !(1 << i);
                 }
             }
         }
@@ -545,10 +558,8 @@ impl<'m> Engine<'m> {
         // unreferenced position: a reference shifts the position but is no
         // motion, and keeps the reversal state.
         let rev_q30 = self.dirs.update(raw_nm.map(clamp_i32));
-        for (i, r) in self.referenced.iter().enumerate() {
-            if !r && self.cfg.reference_needed(i) {
-                live = live.union(Faults::NOT_REFERENCED);
-            }
+        if self.needs_ref & !self.referenced != 0 {
+            live = live.union(Faults::NOT_REFERENCED);
         }
         // The real temperatures are checked whether or not an injection
         // replaces them: a sensor fault is a fault in test mode too.
