@@ -395,3 +395,38 @@ impl core::fmt::Display for LinkError {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bytes<T: Serialize>(v: &T) -> std::vec::Vec<u8> {
+        let mut buf = [0u8; 64];
+        postcard::to_slice(v, &mut buf).unwrap().to_vec()
+    }
+
+    /// Version 2 only appended: every request of version 1 keeps its
+    /// variant index (so a version-1 host's `Identify` reaches a version-2
+    /// board and learns the version), `Reference` is the next one, and the
+    /// new errors and fault bit come after the old ones.
+    #[test]
+    fn version_2_appends_reference_and_keeps_the_old_encodings() {
+        assert_eq!(bytes(&Request::Identify), [0]);
+        assert_eq!(bytes(&Request::Status), [1]);
+        assert_eq!(bytes(&Request::ReadCorrection), [10]);
+        // Variant 11, axis 2, pos -1 (zigzag varint 1).
+        assert_eq!(
+            bytes(&Request::Reference {
+                axis: 2,
+                pos_nm: -1
+            }),
+            [11, 2, 1]
+        );
+        assert_eq!(bytes(&LinkError::BadInjection), [12]);
+        assert_eq!(bytes(&LinkError::NotStill { still_ms: 20 }), [14, 20]);
+        assert_eq!(bytes(&LinkError::BadAxis), [15]);
+        assert_eq!(Faults::NOT_REFERENCED.0, 1 << 6);
+        assert!(Faults::NOT_REFERENCED.names().eq(["not_referenced"]));
+        assert_eq!(crate::PROTOCOL_VERSION, 2);
+    }
+}
