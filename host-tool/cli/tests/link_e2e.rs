@@ -871,6 +871,22 @@ fn the_board_corrects_only_after_trueaxis_reference_and_status_shows_it() {
     assert_eq!(t["injecting"], false, "{t}");
     assert_eq!(t["pos_nm"], serde_json::json!([0, 0, 0]), "{t}");
 
+    // A negative position is a value, not a flag (docs/cli.md); status then
+    // reports the position it names.
+    let r = json_ok(&[
+        "reference",
+        "--port",
+        &board.port,
+        "--axis",
+        "y",
+        "--at-mm",
+        "-12.5",
+        "--json",
+    ]);
+    assert_eq!(r["pos_nm"], -12_500_000, "{r}");
+    let t = &status_json(&board.port)["telemetry"];
+    assert_eq!(t["pos_nm"], serde_json::json!([0, -12_500_000, 0]), "{t}");
+
     // A position the link cannot carry is refused before anything is sent.
     let out = trueaxis(&[
         "reference",
