@@ -95,6 +95,7 @@ fn config() -> EngineConfig {
         origin_nm: 0,
         pulse_nm: 100,
         max_speed_nm_per_ms: 0,
+        home_nm: None,
     };
     EngineConfig {
         axes: [axis; 3],

@@ -27,7 +27,8 @@
 //! the board was switched on, so until an axis is referenced its position
 //! is not the machine's, and a correction keyed to position would move the
 //! machine the wrong way. Every axis with an encoder needs a reference
-//! ([`Engine::reference`]: "the count read now is machine position P");
+//! ([`Engine::reference`]: "the count read now is machine position P", or
+//! its home switch turning on: the axis is at `AxisConfig::home_nm`);
 //! until each has one, `NOT_REFERENCED` is active and the output is held
 //! at (ramped to) zero like for any fault. The reference is lost on an
 //! encoder jump (the count can no longer be trusted) and on reset (the
@@ -62,6 +63,11 @@ pub struct AxisConfig {
     /// Fastest the axis can travel, nm/ms (= mm/s · 1000); a larger jump
     /// between two ticks is an encoder fault. 0 disables the check.
     pub max_speed_nm_per_ms: i32,
+    /// Machine position at which the axis's home switch trips, nm: the
+    /// engine references the axis there when the switch input
+    /// ([`Encoders::home_switches`]) turns on. `None`: no switch; the axis
+    /// is referenced over the link only.
+    pub home_nm: Option<i32>,
 }
 
 /// Engine configuration (from the board; fixed at build time).
@@ -210,6 +216,10 @@ pub struct Engine<'m> {
     pending_ref: [Option<i32>; 3],
     /// Some `pending_ref` is set.
     ref_pending: bool,
+    /// The home switches at the previous tick (`None` before the first:
+    /// an axis already on its switch at power-up is not referenced by it —
+    /// only the switch turning on marks the position).
+    last_home: Option<u8>,
 
     last_counts: Option<[i32; 3]>,
     pos_nm: [i32; 3],
@@ -268,6 +278,7 @@ impl<'m> Engine<'m> {
                 .fold(0, |m, a| m | 1 << a),
             pending_ref: [None; 3],
             ref_pending: false,
+            last_home: None,
             last_counts: None,
             pos_nm: [0; 3],
             rev_q30: [0; 3],
@@ -528,6 +539,18 @@ impl<'m> Engine<'m> {
         });
         // A reference asked for since the last tick: the counts read now
         // are the position it names.
+        // A home switch turning on: its axis is at its configured home.
+        let home = enc.home_switches();
+        let rising = self.last_home.map_or(0, |h| home & !h);
+        self.last_home = Some(home);
+        if rising != 0 {
+            for (i, a) in self.cfg.axes.iter().enumerate() {
+                if let (true, Some(pos)) = (rising & 1 << i != 0, a.home_nm) {
+                    self.pending_ref[i] = Some(pos);
+                    self.ref_pending = true;
+                }
+            }
+        }
         if self.ref_pending {
             self.ref_pending = false;
             for (i, p) in self.pending_ref.iter_mut().enumerate() {

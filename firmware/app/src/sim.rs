@@ -54,6 +54,7 @@ pub fn sim_engine_config() -> EngineConfig {
         origin_nm: 0,
         pulse_nm: 100,
         max_speed_nm_per_ms: 0,
+        home_nm: None,
     };
     EngineConfig {
         axes: [axis; 3],

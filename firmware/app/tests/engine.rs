@@ -706,3 +706,51 @@ fn sensor_checks_stay_on_while_injecting() {
     run(&mut e, &clock, &mut io, 1);
     assert!(e.faults().is_empty(), "{:?}", e.faults());
 }
+
+#[test]
+fn a_home_switch_references_its_axis_when_it_turns_on() {
+    // X has a home switch at -5 mm; Y and Z have none.
+    let mut cfg = sim_engine_config();
+    cfg.axes[0].home_nm = Some(-5_000_000);
+    let table = sample_table(0);
+    let mut e = Engine::new(cfg).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    // Switched on with every axis on its switch: that is no edge, no
+    // reference (the switch turning on marks the position, not being on).
+    io.counts = [1234, 0, 0];
+    io.home = 0b111;
+    run(&mut e, &clock, &mut io, 10);
+    assert_eq!(e.telemetry().referenced, [false; 3]);
+    // Off the switch, back on it at count 4321 (moving: a switch works
+    // while the axis moves, unlike a reference over the link). Y's input
+    // does nothing: Y has no home position configured.
+    io.home = 0;
+    run(&mut e, &clock, &mut io, 1);
+    io.counts[0] = 4321;
+    run(&mut e, &clock, &mut io, 1);
+    io.home = 0b011;
+    run(&mut e, &clock, &mut io, 1);
+    let t = e.telemetry();
+    assert_eq!(t.referenced, [true, false, false]);
+    assert_eq!(t.pos_nm[0], -5_000_000);
+    // Staying on the switch and moving on does not re-reference.
+    io.counts[0] += 10;
+    run(&mut e, &clock, &mut io, 1);
+    assert_eq!(e.telemetry().pos_nm[0], -5_000_000 + 1000);
+    // With Y and Z referenced over the link, the correction ramps in.
+    e.reference(1, 0);
+    e.reference(2, 0);
+    run(&mut e, &clock, &mut io, 1000);
+    assert!(e.faults().is_empty(), "{:?}", e.faults());
+    // X last moved forward: the reversal state is +1.
+    let m = Model::load(&model_core::parse(&table).unwrap()).unwrap();
+    let want = m.eval_fixed(&Inputs {
+        pos_nm: [-5_000_000 + 1000, 0, 0],
+        rev_q30: [1 << 30, 0, 0],
+        temp_mc: [20_000; model_core::MAX_TEMPS],
+        tool_nm: 0,
+    });
+    assert_eq!(e.corr_nm(), want.corr_nm);
+}

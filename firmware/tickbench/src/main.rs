@@ -77,6 +77,7 @@ const CONFIG: EngineConfig = EngineConfig {
         origin_nm: 0,
         pulse_nm: 100,
         max_speed_nm_per_ms: 500_000,
+        home_nm: None,
     }; 3],
     period_us: 50,
     max_steps_per_tick: 2,
