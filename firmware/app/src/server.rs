@@ -214,15 +214,18 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                 self.rx_bad_frames = self.rx_bad_frames.saturating_add(1);
                 continue;
             };
-            if matches!(packet.msg, Request::Inject(_))
+            let inject = matches!(packet.msg, Request::Inject(_));
+            let msg = self.handle(packet.msg, now_us, engine);
+            if inject
+                && matches!(msg, Response::Correction(_))
                 && (port.inject_gen == 0 || port.inject_gen != self.inject_gen)
             {
-                // A new owner of the injection (the generation is only
-                // compared, never a count that matters: wrapping is fine).
+                // An accepted injection from a new owner (a refused one
+                // takes nothing over). The generation is only compared,
+                // never a count that matters: wrapping is fine.
                 self.inject_gen = self.inject_gen.wrapping_add(1).max(1);
                 port.inject_gen = self.inject_gen;
             }
-            let msg = self.handle(packet.msg, now_us, engine);
             let mut out = [0u8; MAX_FRAME_BYTES];
             // Every response fits a frame (tested in model-core); if one
             // ever did not, dropping it makes the host retry rather than

@@ -143,6 +143,18 @@ fn an_injection_needs_the_axes_at_rest_and_ends_with_its_lease_or_its_client() {
     b.close(&mut other);
     b.tick(1);
     assert!(status(&mut b, &mut p).injecting);
+    // A refused injection (a reversal state no tracker has) takes nothing
+    // over: its client leaving leaves the injection running.
+    let mut refused = Port::new();
+    let mut bad = inj;
+    bad.rev_q30[0] = (1 << 30) + 1;
+    assert_eq!(
+        call(&mut b, &mut refused, 6, Request::Inject(bad)),
+        Response::Error(LinkError::BadInjection)
+    );
+    b.close(&mut refused);
+    b.tick(1);
+    assert!(status(&mut b, &mut p).injecting);
     // A second client takes the injection over; the first one leaving no
     // longer ends it.
     call(&mut b, &mut other, 5, Request::Inject(inj));
