@@ -1,7 +1,8 @@
 //! The engine's output limits as properties (issue 14), over random tables
 //! (slew from 1 nm/ms to the format's limit of 10 000 000 nm/ms, max |correction| 0.1–100 µm), random
 //! motion, late ticks, table switches, temperature faults and their
-//! clearing, referencing and references lost (encoder jumps):
+//! clearing, referencing (over the link and by X's home switch) and
+//! references lost (encoder jumps):
 //! - the output changes per tick by at most the rate in force (the table's
 //!   slew as the engine applies it, or the fault ramp while a fault is
 //!   active) plus 1 nm of rounding;
@@ -81,6 +82,8 @@ enum Op {
     Reference(usize, i32),
     /// An axis's counter jumps (a glitch): its reference is lost.
     Jump(usize),
+    /// An axis's home switch turns on or off (X has one at 12 mm).
+    Home(usize, bool),
 }
 
 fn op() -> impl Strategy<Value = Op> {
@@ -92,6 +95,7 @@ fn op() -> impl Strategy<Value = Op> {
         1 => Just(Op::Clear),
         2 => (0usize..3, -400_000_000i32..400_000_000).prop_map(|(a, p)| Op::Reference(a, p)),
         1 => (0usize..3).prop_map(Op::Jump),
+        1 => (0usize..3, any::<bool>()).prop_map(|(a, on)| Op::Home(a, on)),
     ]
 }
 
@@ -108,6 +112,7 @@ proptest! {
         for a in cfg.axes.iter_mut() {
             a.max_speed_nm_per_ms = 1_500_000;
         }
+        cfg.axes[0].home_nm = Some(12_000_000);
         let pulse_nm = cfg.axes.map(|a| a.pulse_nm as i64);
         let period = cfg.period_us as i64;
         let fault_ramp = cfg.fault_ramp_nm_per_ms as i64;
@@ -122,6 +127,7 @@ proptest! {
         // were ever referenced together.
         let mut referenced = [false; 3];
         let mut ever_all = false;
+        let mut last_home: Option<u8> = None;
         for op in ops {
             let mut dt = period as u64;
             match op {
@@ -142,12 +148,25 @@ proptest! {
                     prop_assert!(e.reference(axis, pos));
                     referenced[axis] = true;
                 }
+                Op::Home(axis, on) => {
+                    if on {
+                        io.home |= 1 << axis;
+                    } else {
+                        io.home &= !(1 << axis);
+                    }
+                }
                 Op::Jump(axis) => {
                     // Towards 0, so the counts stay within the ±3 M a Move keeps.
                     io.counts[axis] += if io.counts[axis] > 0 { -50_000 } else { 50_000 };
                     referenced[axis] = false;
                 }
             }
+            // The switch turning on references X (the only axis with a
+            // home position); on at the first tick is no edge.
+            if last_home.is_some_and(|h| io.home & !h & 1 != 0) {
+                referenced[0] = true;
+            }
+            last_home = Some(io.home);
             clock.0.set(clock.0.get() + dt);
             let (mut enc, mut t) = (io, io);
             let report = e.tick(&clock, &mut enc, &mut t, &mut io);
