@@ -783,3 +783,30 @@ proptest! {
         prop_assert!(answers.iter().any(|a| a.seq == 77));
     }
 }
+
+/// A reset (power loss) loses the references: the rebooted board runs the
+/// stored table but holds the output at zero until referenced again.
+#[test]
+fn a_reboot_loses_the_references_the_table_stays() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    let table = sample_table(0);
+    install(&mut b, &mut p, &table);
+    reference_all(&mut b, &mut p);
+    b.io.lock().unwrap().counts = [1_000_000, 0, 0];
+    b.tick(300);
+    let t = status(&mut b, &mut p);
+    assert!(t.faults.is_empty(), "{:?}", t.faults);
+    assert_ne!(t.corr_nm, [0; 3]);
+
+    let mut b = SimBoard::with_flash(b.into_flash());
+    let mut p = Port::new();
+    b.tick(300);
+    let t = status(&mut b, &mut p);
+    assert_eq!(t.active.map(|a| a.crc32), Some(table_id(&table)));
+    assert_eq!(t.referenced, [false; 3]);
+    assert_eq!(t.faults, Faults::NOT_REFERENCED);
+    assert_eq!(t.corr_nm, [0; 3]);
+    assert_eq!(t.steps, [0; 3]);
+    assert!(t.faults_latched.contains(Faults::NOT_REFERENCED));
+}
