@@ -340,7 +340,8 @@ pub enum LinkError {
         budget_instr: u32,
     },
     /// Referencing over the link and injection need the axes at rest: an
-    /// encoder count changed within the last `still_ms`.
+    /// axis moved (more than the board's 1 µm still band) within the last
+    /// `still_ms`.
     NotStill {
         /// How long the encoders must not have changed, ms.
         still_ms: u32,
@@ -388,8 +389,8 @@ impl core::fmt::Display for LinkError {
             ),
             LinkError::NotStill { still_ms } => write!(
                 f,
-                "the axes are moving: referencing and injection need every encoder \
-                 unchanged for {still_ms} ms"
+                "the axes are moving: referencing and injection need every axis at rest \
+                 (within 1 µm) for {still_ms} ms"
             ),
             LinkError::BadAxis => write!(f, "no such axis (X, Y or Z)"),
         }

@@ -170,9 +170,16 @@ impl EngineConfig {
     }
 }
 
-/// How long every encoder must be unchanged for the axes to count as at
-/// rest, µs: referencing over the link and injection need it.
+/// How long no axis may have moved for the axes to count as at rest, µs:
+/// referencing over the link and injection need it.
 pub const STILL_US: u64 = 20_000;
+
+/// Motion is a displacement of more than this from where an axis last
+/// stood, nm: a servo holding position dithers by a count or two, which is
+/// no motion (else an axis at rest under servo control could never be
+/// referenced, injected or committed on). Smaller than anything a machine
+/// is compensated for.
+pub const STILL_BAND_NM: i64 = 1000;
 
 /// What a tick did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -240,6 +247,11 @@ pub struct Engine<'m> {
     /// an overrun: the gap it leaves is not counted a second time.
     late_end: bool,
     last_motion_us: Option<u64>,
+    /// Per axis: the counts where the axes last stood (motion is leaving
+    /// the band around them); `None` before the first tick.
+    still_anchor: Option<[i32; 3]>,
+    /// Per axis: the still band in counts (`u32::MAX`: no encoder).
+    still_band_counts: [u32; 3],
     now_us: u64,
     ticks: u64,
     worst_loop_us: u32,
@@ -293,6 +305,14 @@ impl<'m> Engine<'m> {
             last_tick_us: None,
             late_end: false,
             last_motion_us: None,
+            still_anchor: None,
+            still_band_counts: cfg.axes.map(|a| {
+                if a.pm_per_count == 0 {
+                    u32::MAX
+                } else {
+                    (STILL_BAND_NM * 1000 / a.pm_per_count.abs()).min(u32::MAX as i64) as u32
+                }
+            }),
             now_us: 0,
             ticks: 0,
             worst_loop_us: 0,
@@ -384,7 +404,8 @@ impl<'m> Engine<'m> {
         core::array::from_fn(|a| self.referenced & 1 << a != 0)
     }
 
-    /// True when every encoder has been unchanged for [`STILL_US`] at
+    /// True when no axis has moved (left its [`STILL_BAND_NM`] band) for
+    /// [`STILL_US`] at
     /// `now_us` (or never moved).
     pub fn is_still(&self, now_us: u64) -> bool {
         self.quiet_for_us(now_us) >= STILL_US
@@ -402,7 +423,8 @@ impl<'m> Engine<'m> {
         self.live.union(self.sticky)
     }
 
-    /// How long the axes have stood still (encoder counts unchanged) at
+    /// How long the axes have stood still (no axis left its
+    /// [`STILL_BAND_NM`] band) at
     /// `now_us`, µs; `u64::MAX` if they never moved since boot.
     pub fn quiet_for_us(&self, now_us: u64) -> u64 {
         match self.last_motion_us {
@@ -522,8 +544,12 @@ impl<'m> Engine<'m> {
         let counts = enc.read_counts();
         let temps_mc = temps.read_temps_mc();
         let mut live = Faults::NONE;
-        let moved = self.last_counts.is_some_and(|c| c != counts);
+        // Motion: an axis left the still band around where it last stood.
+        let anchor = *self.still_anchor.get_or_insert(counts);
+        let moved = (0..3)
+            .any(|i| counts[i].wrapping_sub(anchor[i]).unsigned_abs() > self.still_band_counts[i]);
         if moved {
+            self.still_anchor = Some(counts);
             self.last_motion_us = Some(start_us);
         }
         // Unreferenced positions: counts · scale + the configured origin.

@@ -15,8 +15,9 @@
 //! flash stalls, the correction loop included. The active model lives in
 //! RAM, but the code does not, so the loop *does* stop for the erase. A
 //! commit (and a rollback, whose one-word program stalls too) is therefore
-//! refused with [`LinkError::AxesMoving`] unless the encoders have not
-//! changed for `quiet_ms`; a machine at rest needs no new correction while
+//! refused with [`LinkError::AxesMoving`] unless no axis moved (beyond
+//! the engine's 1 µm still band, `engine::STILL_BAND_NM`) for `quiet_ms`;
+//! a machine at rest needs no new correction while
 //! the CPU waits. After the flash operation the engine's clock is resynced
 //! so the stall is not reported as a loop overrun.
 //!

@@ -664,14 +664,20 @@ fn an_injection_ends_when_its_lease_runs_out_or_an_axis_moves() {
     run(&mut e, &clock, &mut io, 1);
     assert!(!e.injecting(), "the lease of 50 ticks ran out");
     assert_eq!(e.telemetry().pos_nm, [0; 3]);
-    // Renewed, then an axis moves: the injection ends at once.
+    // Renewed; a servo's dither at rest (±1 µm here: 10 counts) is no
+    // motion; leaving that band is, and the injection ends at once.
     e.set_injection(Some(inj), 50);
     run(&mut e, &clock, &mut io, 10);
     assert!(e.injecting());
-    io.counts[1] += 1;
+    for d in [1, -1, 10, -10, 0] {
+        io.counts[1] = d;
+        run(&mut e, &clock, &mut io, 1);
+    }
+    assert!(e.injecting(), "dither ended the injection");
+    io.counts[1] = 11;
     run(&mut e, &clock, &mut io, 1);
     assert!(!e.injecting(), "an axis moved");
-    assert_eq!(e.telemetry().pos_nm, [0, 100, 0]);
+    assert_eq!(e.telemetry().pos_nm, [0, 1100, 0]);
 }
 
 #[test]

@@ -111,7 +111,8 @@ fn an_injection_needs_the_axes_at_rest_and_ends_with_its_lease_or_its_client() {
     let mut p = Port::new();
     install(&mut b, &mut p, &sample_table(0));
     reference_all(&mut b, &mut p);
-    b.io.lock().unwrap().counts[2] += 10;
+    // Z moves 10 µm (beyond the 1 µm a servo at rest dithers).
+    b.io.lock().unwrap().counts[2] += 100;
     b.tick(1);
     let inj = injection([100_000_000, 0, 0]);
     assert_eq!(
@@ -134,7 +135,7 @@ fn an_injection_needs_the_axes_at_rest_and_ends_with_its_lease_or_its_client() {
     b.tick(1);
     let t = status(&mut b, &mut p);
     assert!(!t.injecting, "the lease ran out");
-    assert_eq!(t.pos_nm, [0, 0, 10 * 100]);
+    assert_eq!(t.pos_nm, [0, 0, 100 * 100]);
     // Its client goes: the injection ends; another client going does not
     // end it.
     call(&mut b, &mut p, 4, Request::Inject(inj));
@@ -809,4 +810,36 @@ fn a_reboot_loses_the_references_the_table_stays() {
     assert_eq!(t.corr_nm, [0; 3]);
     assert_eq!(t.steps, [0; 3]);
     assert!(t.faults_latched.contains(Faults::NOT_REFERENCED));
+}
+
+/// A servo holding an axis dithers by a count or two: the axis is at rest
+/// (it can be referenced and injected on), while leaving the ±1 µm band
+/// is motion.
+#[test]
+fn a_dithering_axis_is_at_rest() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    install(&mut b, &mut p, &sample_table(0));
+    // A count or a few (0.1 µm each) either way, every tick for 100 ms:
+    // never more than 1 µm from where the axis first stood (count 1).
+    for k in 0..100 {
+        b.io.lock().unwrap().counts[0] = [1, -1, 5, -5, 11, -9][k % 6];
+        b.tick(1);
+    }
+    assert_eq!(
+        call(&mut b, &mut p, 1, Request::Reference { axis: 0, pos_nm: 0 }),
+        Response::Ok
+    );
+    assert!(matches!(
+        call(&mut b, &mut p, 2, Request::Inject(injection([0; 3]))),
+        Response::Correction(_)
+    ));
+    // 1.1 µm away from it: motion.
+    b.io.lock().unwrap().counts[0] = 12;
+    b.tick(1);
+    assert_eq!(
+        call(&mut b, &mut p, 3, Request::Reference { axis: 1, pos_nm: 0 }),
+        Response::Error(LinkError::NotStill { still_ms: 20 })
+    );
+    assert!(!status(&mut b, &mut p).injecting);
 }
