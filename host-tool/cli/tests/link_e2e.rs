@@ -31,6 +31,8 @@ struct Board {
     port: String,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<SimBoard>>,
+    /// The board's sensors (tests move its encoders).
+    io: Arc<std::sync::Mutex<trueaxis_app::sim::SimIo>>,
 }
 
 impl Board {
@@ -39,11 +41,14 @@ impl Board {
         let port = format!("tcp://{}", listener.local_addr().unwrap());
         let stop = Arc::new(AtomicBool::new(false));
         let s = stop.clone();
-        let thread = std::thread::spawn(move || SimBoard::new().serve(listener, s));
+        let board = SimBoard::new();
+        let io = board.io.clone();
+        let thread = std::thread::spawn(move || board.serve(listener, s));
         Self {
             port,
             stop,
             thread: Some(thread),
+            io,
         }
     }
 }
@@ -903,4 +908,42 @@ fn the_board_corrects_only_after_trueaxis_reference_and_status_shows_it() {
         err.contains("--at-mm 5000: expected a position within ±2147 mm"),
         "{err}"
     );
+}
+
+/// `trueaxis reference` while an axis moves: refused by the board, exit 1,
+/// the reason named; nothing referenced.
+#[test]
+fn reference_is_refused_while_an_axis_moves() {
+    let board = Board::start();
+    let moving = Arc::new(AtomicBool::new(true));
+    let (m, io) = (moving.clone(), board.io.clone());
+    // X creeps 1 µm (10 counts) every millisecond: 1 mm/s.
+    let mover = std::thread::spawn(move || {
+        while m.load(Ordering::Relaxed) {
+            io.lock().unwrap().counts[0] += 10;
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    });
+    std::thread::sleep(Duration::from_millis(50));
+    let out = trueaxis(&[
+        "reference",
+        "--port",
+        &board.port,
+        "--axis",
+        "y",
+        "--at-mm",
+        "0",
+    ]);
+    moving.store(false, Ordering::Relaxed);
+    mover.join().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("referencing y on tcp://")
+            && err.contains("the board refused reference: the axes are moving")
+            && err.contains("at rest (within 1 µm) for 20 ms"),
+        "{err}"
+    );
+    let t = &status_json(&board.port)["telemetry"];
+    assert_eq!(t["axes"]["y"]["referenced"], false, "{t}");
 }
