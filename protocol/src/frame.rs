@@ -249,6 +249,8 @@ mod tests {
             faults: Faults(u16::MAX),
             faults_latched: Faults(u16::MAX),
             injecting: true,
+            referenced: [true; 3],
+            reference_needed: [true; 3],
             active: Some(SlotInfo {
                 slot: Slot::B,
                 seq: u32::MAX,

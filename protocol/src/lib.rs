@@ -61,7 +61,7 @@ pub use messages::{
 
 /// Version of this protocol; bumped on any incompatible change of the types
 /// below (postcard is not self-describing, so both sides must agree).
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 
 /// Largest payload of one [`Request::UploadChunk`]. Small enough that a
 /// frame fits comfortably in a USB full-speed burst and a UART FIFO-less

@@ -61,6 +61,17 @@ pub enum Request<'a> {
     EndInject,
     /// The correction currently output → [`Response::Correction`].
     ReadCorrection,
+    /// Reference (home) `axis` (0 = X): the encoder count it reads now is
+    /// machine position `pos_nm`. The board corrects only from referenced
+    /// axes; refused while the axes move ([`LinkError::NotStill`]). Takes
+    /// effect at the next tick (see [`Telemetry::referenced`]) → [`Response::Ok`].
+    /// (Appended: the other requests encode as before.)
+    Reference {
+        /// Axis index: 0 = X, 1 = Y, 2 = Z.
+        axis: u8,
+        /// The machine position the axis is at now, nm.
+        pos_nm: i32,
+    },
 }
 
 /// Sensor values forced by [`Request::Inject`].
@@ -126,6 +137,10 @@ impl Faults {
     /// An encoder jumped further in one tick than the axis can move
     /// (counter glitch or lost cable).
     pub const ENCODER_JUMP: Faults = Faults(1 << 5);
+    /// An axis that needs a reference has none: never referenced since
+    /// power-up or reset, or its reference was lost (an encoder jump). Live:
+    /// it clears when the axis is referenced again.
+    pub const NOT_REFERENCED: Faults = Faults(1 << 6);
 
     /// True when no bit is set.
     pub const fn is_empty(self) -> bool {
@@ -141,13 +156,14 @@ impl Faults {
     }
     /// Names of the set bits, for humans.
     pub fn names(self) -> impl Iterator<Item = &'static str> {
-        const NAMES: [&str; 6] = [
+        const NAMES: [&str; 7] = [
             "no_table",
             "bad_table",
             "sensor_range",
             "loop_overrun",
             "not_finite",
             "encoder_jump",
+            "not_referenced",
         ];
         NAMES
             .into_iter()
@@ -190,6 +206,12 @@ pub struct Telemetry {
     pub faults_latched: Faults,
     /// True while [`Request::Inject`] overrides the sensors.
     pub injecting: bool,
+    /// Per axis (X, Y, Z): the axis is referenced (its encoder count has a
+    /// known machine position since [`Request::Reference`]).
+    pub referenced: [bool; 3],
+    /// Per axis: the board corrects only once this axis is referenced (an
+    /// axis with an encoder; one without needs no reference).
+    pub reference_needed: [bool; 3],
     /// The table the correction runs on.
     pub active: Option<SlotInfo>,
     /// Frames dropped for a bad CRC, bad COBS or overflow.
@@ -232,7 +254,8 @@ pub enum Response {
     RolledBack(SlotInfo),
     /// Answer to [`Request::Inject`] and [`Request::ReadCorrection`].
     Correction(Correction),
-    /// Done (answer to [`Request::ClearFaults`] and [`Request::EndInject`]).
+    /// Done (answer to [`Request::ClearFaults`], [`Request::EndInject`] and
+    /// [`Request::Reference`]).
     Ok,
     /// The request was refused.
     Error(LinkError),
@@ -316,6 +339,15 @@ pub enum LinkError {
         /// The most the board accepts, instructions.
         budget_instr: u32,
     },
+    /// Referencing over the link and injection need the axes at rest: an
+    /// axis moved (more than the board's 1 µm still band) within the last
+    /// `still_ms`.
+    NotStill {
+        /// How long the encoders must not have changed, ms.
+        still_ms: u32,
+    },
+    /// An axis index other than 0, 1, 2 (X, Y, Z).
+    BadAxis,
 }
 
 impl core::fmt::Display for LinkError {
@@ -355,6 +387,47 @@ impl core::fmt::Display for LinkError {
                 "the table is too slow for the correction loop: its evaluation is estimated \
                  at {estimate_instr} instructions, the board allows {budget_instr}"
             ),
+            LinkError::NotStill { still_ms } => write!(
+                f,
+                "the axes are moving: referencing and injection need every axis at rest \
+                 (within 1 µm) for {still_ms} ms"
+            ),
+            LinkError::BadAxis => write!(f, "no such axis (X, Y or Z)"),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bytes<T: Serialize>(v: &T) -> std::vec::Vec<u8> {
+        let mut buf = [0u8; 64];
+        postcard::to_slice(v, &mut buf).unwrap().to_vec()
+    }
+
+    /// Version 2 only appended: every request of version 1 keeps its
+    /// variant index (so a version-1 host's `Identify` reaches a version-2
+    /// board and learns the version), `Reference` is the next one, and the
+    /// new errors and fault bit come after the old ones.
+    #[test]
+    fn version_2_appends_reference_and_keeps_the_old_encodings() {
+        assert_eq!(bytes(&Request::Identify), [0]);
+        assert_eq!(bytes(&Request::Status), [1]);
+        assert_eq!(bytes(&Request::ReadCorrection), [10]);
+        // Variant 11, axis 2, pos -1 (zigzag varint 1).
+        assert_eq!(
+            bytes(&Request::Reference {
+                axis: 2,
+                pos_nm: -1
+            }),
+            [11, 2, 1]
+        );
+        assert_eq!(bytes(&LinkError::BadInjection), [12]);
+        assert_eq!(bytes(&LinkError::NotStill { still_ms: 20 }), [14, 20]);
+        assert_eq!(bytes(&LinkError::BadAxis), [15]);
+        assert_eq!(Faults::NOT_REFERENCED.0, 1 << 6);
+        assert!(Faults::NOT_REFERENCED.names().eq(["not_referenced"]));
+        assert_eq!(crate::PROTOCOL_VERSION, 2);
     }
 }

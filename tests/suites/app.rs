@@ -95,6 +95,7 @@ fn config() -> EngineConfig {
         origin_nm: 0,
         pulse_nm: 100,
         max_speed_nm_per_ms: 0,
+        home_nm: None,
     };
     EngineConfig {
         axes: [axis; 3],
@@ -210,6 +211,14 @@ mod tests {
             Err(err) => defmt::panic!("config: {}", err),
         };
         let _ = e.set_model(model, info(FULL));
+        // The engine corrects only from referenced axes: the counts of the
+        // first tick (0.1 µm each) are these positions.
+        for (axis, pos_nm) in [400_000_000, 250_000_000, 250_000_000]
+            .into_iter()
+            .enumerate()
+        {
+            defmt::assert!(e.reference(axis, pos_nm));
+        }
         let clock = FakeClock(Cell::new(0));
         let mut io = Io {
             counts: [4_000_000, 2_500_000, 2_500_000],

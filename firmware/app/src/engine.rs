@@ -22,6 +22,24 @@
 //! sensor range) are live; events (overrun, encoder jump, non-finite
 //! output, bad table) stay active until the host clears them — a glitch
 //! that was bad enough to happen once is worth a look by a person.
+//!
+//! **No correction before referencing.** An encoder counts from wherever
+//! the board was switched on, so until an axis is referenced its position
+//! is not the machine's, and a correction keyed to position would move the
+//! machine the wrong way. Every axis with an encoder needs a reference
+//! ([`Engine::reference`]: "the count read now is machine position P", or
+//! its home switch turning on: the axis is at `AxisConfig::home_nm`);
+//! until each has one, `NOT_REFERENCED` is active and the output is held
+//! at (ramped to) zero like for any fault. The reference is lost on an
+//! encoder jump (the count can no longer be trusted) and on reset (the
+//! engine starts unreferenced). Once every axis is referenced the output
+//! ramps in from zero at the table's slew.
+//!
+//! **Injection is a test mode with a lease.** Injected inputs replace the
+//! sensors for a number of ticks (the lease, renewed by every injection);
+//! the injection ends when the lease runs out, when the link server ends it
+//! (its client went), or as soon as an encoder moves. The sensor checks
+//! stay on while injecting (real temperatures and the injected ones).
 
 use trueaxis_protocol::{Correction, Faults, Injection, SlotInfo, Telemetry, LINK_TEMPS};
 
@@ -35,13 +53,21 @@ pub struct AxisConfig {
     /// Encoder scale, picometres per count (a 0.1 µm scale read in
     /// quadrature: 25 000 pm). Negative flips the direction.
     pub pm_per_count: i64,
-    /// Machine position at count 0, nm.
+    /// Position at count 0 before the axis is referenced, nm (the
+    /// correction waits for the reference, see the module doc). An axis
+    /// with `pm_per_count == 0` has no encoder: its position is always
+    /// `origin_nm` and it needs no reference.
     pub origin_nm: i32,
     /// Displacement of one correction step pulse at the drive, nm (> 0).
     pub pulse_nm: i32,
     /// Fastest the axis can travel, nm/ms (= mm/s · 1000); a larger jump
     /// between two ticks is an encoder fault. 0 disables the check.
     pub max_speed_nm_per_ms: i32,
+    /// Machine position at which the axis's home switch trips, nm: the
+    /// engine references the axis there when the switch input
+    /// ([`Encoders::home_switches`]) turns on. `None`: no switch; the axis
+    /// is referenced over the link only.
+    pub home_nm: Option<i32>,
 }
 
 /// Engine configuration (from the board; fixed at build time).
@@ -117,6 +143,16 @@ impl EngineConfig {
         (self.max_steps_per_tick as i64 - 1) * self.axes[axis].pulse_nm as i64
     }
 
+    /// True when `axis` needs a reference before the board corrects: it
+    /// has an encoder (`pm_per_count != 0`). Every such axis needs one,
+    /// whether or not the active table reads its position: the board does
+    /// not analyse which positions a table's terms read, and the state must
+    /// not depend on the table (a table switch must never start correcting
+    /// from an unreferenced axis).
+    pub fn reference_needed(&self, axis: usize) -> bool {
+        self.axes[axis].pm_per_count != 0
+    }
+
     /// Slew limit actually applied for a table's `slew_nm_per_ms`: the
     /// table's, reduced if the pulse budget of an axis cannot follow it.
     fn effective_slew(&self, table_slew_nm_per_ms: i32) -> i32 {
@@ -133,6 +169,17 @@ impl EngineConfig {
         s
     }
 }
+
+/// How long no axis may have moved for the axes to count as at rest, µs:
+/// referencing over the link and injection need it.
+pub const STILL_US: u64 = 20_000;
+
+/// Motion is a displacement of more than this from where an axis last
+/// stood, nm: a servo holding position dithers by a count or two, which is
+/// no motion (else an axis at rest under servo control could never be
+/// referenced, injected or committed on). Smaller than anything a machine
+/// is compensated for.
+pub const STILL_BAND_NM: i64 = 1000;
 
 /// What a tick did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -161,6 +208,25 @@ pub struct Engine<'m> {
     active: Option<SlotInfo>,
     dirs: model::DirTrackers,
     inject: Option<Injection>,
+    /// Ticks the injection still runs without a renewal.
+    inject_ticks_left: u32,
+    /// Per axis: added to the unreferenced position (counts · scale +
+    /// configured origin) once referenced, nm.
+    ref_offset_nm: [i64; 3],
+    /// Bit per axis: referenced since reset, and not lost since. (Bit
+    /// masks, so that a tick with nothing to do checks one byte.)
+    referenced: u8,
+    /// Bit per axis: the axis needs a reference (it has an encoder).
+    needs_ref: u8,
+    /// Per axis: a reference asked for, applied at the next tick with the
+    /// counts that tick reads.
+    pending_ref: [Option<i32>; 3],
+    /// Some `pending_ref` is set.
+    ref_pending: bool,
+    /// The home switches at the previous tick (`None` before the first:
+    /// an axis already on its switch at power-up is not referenced by it —
+    /// only the switch turning on marks the position).
+    last_home: Option<u8>,
 
     last_counts: Option<[i32; 3]>,
     pos_nm: [i32; 3],
@@ -181,6 +247,11 @@ pub struct Engine<'m> {
     /// an overrun: the gap it leaves is not counted a second time.
     late_end: bool,
     last_motion_us: Option<u64>,
+    /// Per axis: the counts where the axes last stood (motion is leaving
+    /// the band around them); `None` before the first tick.
+    still_anchor: Option<[i32; 3]>,
+    /// Per axis: the still band in counts (`u32::MAX`: no encoder).
+    still_band_counts: [u32; 3],
     now_us: u64,
     ticks: u64,
     worst_loop_us: u32,
@@ -211,6 +282,15 @@ impl<'m> Engine<'m> {
             active: None,
             dirs: model::DirTrackers::default(),
             inject: None,
+            inject_ticks_left: 0,
+            ref_offset_nm: [0; 3],
+            referenced: 0,
+            needs_ref: (0..3)
+                .filter(|&a| cfg.reference_needed(a))
+                .fold(0, |m, a| m | 1 << a),
+            pending_ref: [None; 3],
+            ref_pending: false,
+            last_home: None,
             last_counts: None,
             pos_nm: [0; 3],
             rev_q30: [0; 3],
@@ -225,6 +305,14 @@ impl<'m> Engine<'m> {
             last_tick_us: None,
             late_end: false,
             last_motion_us: None,
+            still_anchor: None,
+            still_band_counts: cfg.axes.map(|a| {
+                if a.pm_per_count == 0 {
+                    u32::MAX
+                } else {
+                    (STILL_BAND_NM * 1000 / a.pm_per_count.abs()).min(u32::MAX as i64) as u32
+                }
+            }),
             now_us: 0,
             ticks: 0,
             worst_loop_us: 0,
@@ -283,10 +371,44 @@ impl<'m> Engine<'m> {
         self.slew_nm_per_ms
     }
 
-    /// Replaces the sensor readings by `inj` from the next tick on (or goes
-    /// back to the sensors with `None`).
-    pub fn set_injection(&mut self, inj: Option<Injection>) {
+    /// Replaces the sensor readings by `inj` for the next `lease_ticks`
+    /// ticks (or goes back to the sensors with `None`). The injection ends
+    /// earlier if an encoder moves. The caller checks that the axes are at
+    /// rest ([`is_still`](Self::is_still)).
+    pub fn set_injection(&mut self, inj: Option<Injection>, lease_ticks: u32) {
         self.inject = inj;
+        self.inject_ticks_left = if inj.is_some() { lease_ticks } else { 0 };
+    }
+
+    /// True while injected inputs replace the sensors.
+    pub fn injecting(&self) -> bool {
+        self.inject.is_some()
+    }
+
+    /// References `axis`: the encoder count read at the next tick is
+    /// machine position `pos_nm` (the caller checks that the axes are at
+    /// rest). False for an axis index above 2.
+    pub fn reference(&mut self, axis: usize, pos_nm: i32) -> bool {
+        match self.pending_ref.get_mut(axis) {
+            Some(p) => {
+                *p = Some(pos_nm);
+                self.ref_pending = true;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Per axis: referenced (since reset, and not lost since).
+    pub fn referenced(&self) -> [bool; 3] {
+        core::array::from_fn(|a| self.referenced & 1 << a != 0)
+    }
+
+    /// True when no axis has moved (left its [`STILL_BAND_NM`] band) for
+    /// [`STILL_US`] at
+    /// `now_us` (or never moved).
+    pub fn is_still(&self, now_us: u64) -> bool {
+        self.quiet_for_us(now_us) >= STILL_US
     }
 
     /// Clears the sticky and latched faults; live conditions come back at
@@ -301,7 +423,8 @@ impl<'m> Engine<'m> {
         self.live.union(self.sticky)
     }
 
-    /// How long the axes have stood still (encoder counts unchanged) at
+    /// How long the axes have stood still (no axis left its
+    /// [`STILL_BAND_NM`] band) at
     /// `now_us`, µs; `u64::MAX` if they never moved since boot.
     pub fn quiet_for_us(&self, now_us: u64) -> u64 {
         match self.last_motion_us {
@@ -375,6 +498,8 @@ impl<'m> Engine<'m> {
             faults: self.faults(),
             faults_latched: self.latched,
             injecting: self.inject.is_some(),
+            referenced: self.referenced(),
+            reference_needed: core::array::from_fn(|a| self.needs_ref & 1 << a != 0),
             active: self.active,
             rx_bad_frames: 0,
         }
@@ -419,11 +544,16 @@ impl<'m> Engine<'m> {
         let counts = enc.read_counts();
         let temps_mc = temps.read_temps_mc();
         let mut live = Faults::NONE;
-        let moved = self.last_counts.is_some_and(|c| c != counts);
+        // Motion: an axis left the still band around where it last stood.
+        let anchor = *self.still_anchor.get_or_insert(counts);
+        let moved = (0..3)
+            .any(|i| counts[i].wrapping_sub(anchor[i]).unsigned_abs() > self.still_band_counts[i]);
         if moved {
+            self.still_anchor = Some(counts);
             self.last_motion_us = Some(start_us);
         }
-        let enc_pos_nm = core::array::from_fn(|i| {
+        // Unreferenced positions: counts · scale + the configured origin.
+        let raw_nm: [i64; 3] = core::array::from_fn(|i| {
             let a = &self.cfg.axes[i];
             // Whole nm per count (the usual scales): a multiply; else the
             // exact 64-bit division (a library call on the M4).
@@ -431,9 +561,31 @@ impl<'m> Engine<'m> {
                 Some(k) => counts[i] as i64 * k,
                 None => counts[i] as i64 * a.pm_per_count / 1000,
             };
-            let nm = scaled + a.origin_nm as i64;
-            nm.clamp(i32::MIN as i64, i32::MAX as i64) as i32
+            scaled + a.origin_nm as i64
         });
+        // A reference asked for since the last tick: the counts read now
+        // are the position it names.
+        // A home switch turning on: its axis is at its configured home.
+        let home = enc.home_switches();
+        let rising = self.last_home.map_or(0, |h| home & !h);
+        self.last_home = Some(home);
+        if rising != 0 {
+            for (i, a) in self.cfg.axes.iter().enumerate() {
+                if let (true, Some(pos)) = (rising & 1 << i != 0, a.home_nm) {
+                    self.pending_ref[i] = Some(pos);
+                    self.ref_pending = true;
+                }
+            }
+        }
+        if self.ref_pending {
+            self.ref_pending = false;
+            for (i, p) in self.pending_ref.iter_mut().enumerate() {
+                if let Some(pos) = p.take() {
+                    self.ref_offset_nm[i] = pos as i64 - raw_nm[i];
+                    self.referenced |= 1 << i;
+                }
+            }
+        }
         if let Some(prev) = self.last_counts {
             for (i, a) in self.cfg.axes.iter().enumerate() {
                 // |Δcounts| · |pm/count| ≥ threshold ⇔ the jump exceeds
@@ -442,13 +594,46 @@ impl<'m> Engine<'m> {
                 let d_counts = counts[i].wrapping_sub(prev[i]).unsigned_abs() as i64;
                 if d_counts.saturating_mul(a.pm_per_count.abs()) >= self.jump_threshold_pm[i] {
                     events = events.union(Faults::ENCODER_JUMP);
+                    // Counts were lost or invented: the reference is gone.
+                    self.referenced &= !(1 << i);
                 }
             }
         }
         self.last_counts = Some(counts);
+        let clamp_i32 = |nm: i64| nm.clamp(i32::MIN as i64, i32::MAX as i64) as i32;
+        let enc_pos_nm: [i32; 3] =
+            core::array::from_fn(|i| clamp_i32(raw_nm[i] + self.ref_offset_nm[i]));
+        // The direction trackers see only differences, so they follow the
+        // unreferenced position: a reference shifts the position but is no
+        // motion, and keeps the reversal state.
+        let rev_q30 = self.dirs.update(raw_nm.map(clamp_i32));
+        if self.needs_ref & !self.referenced != 0 {
+            live = live.union(Faults::NOT_REFERENCED);
+        }
+        // The real temperatures are checked whether or not an injection
+        // replaces them: a sensor fault is a fault in test mode too.
+        let out_of_range = |t: &[i32]| {
+            t.iter()
+                .any(|&t| t < self.cfg.temp_min_mc || t > self.cfg.temp_max_mc)
+        };
+        if out_of_range(&temps_mc[..self.cfg.temps_used]) {
+            live = live.union(Faults::SENSOR_RANGE);
+        }
+        // The injection's lease: it ends when it runs out or when an axis
+        // moves (the injected position is no longer where the machine is).
+        if self.inject.is_some() {
+            if moved || self.inject_ticks_left == 0 {
+                self.inject = None;
+            } else {
+                self.inject_ticks_left -= 1;
+            }
+        }
 
         let inputs = match &self.inject {
             Some(inj) => {
+                if out_of_range(&inj.temp_mc[..self.cfg.temps_used]) {
+                    live = live.union(Faults::SENSOR_RANGE);
+                }
                 self.pos_nm = inj.pos_nm;
                 self.rev_q30 = inj.rev_q30;
                 self.temp_mc = inj.temp_mc;
@@ -457,13 +642,7 @@ impl<'m> Engine<'m> {
             None => {
                 self.pos_nm = enc_pos_nm;
                 self.temp_mc = temps_mc;
-                self.rev_q30 = self.dirs.update(enc_pos_nm);
-                let t = &self.temp_mc[..self.cfg.temps_used];
-                if t.iter()
-                    .any(|&t| t < self.cfg.temp_min_mc || t > self.cfg.temp_max_mc)
-                {
-                    live = live.union(Faults::SENSOR_RANGE);
-                }
+                self.rev_q30 = rev_q30;
                 ModelInputs {
                     pos_nm: self.pos_nm,
                     rev_q30: self.rev_q30,

@@ -13,6 +13,15 @@ pub trait Encoders {
     /// board widens its 16-bit timers; the engine takes differences with
     /// wrapping arithmetic, so a wrap of the 32-bit count is harmless).
     fn read_counts(&mut self) -> [i32; 3];
+
+    /// Home (reference) switches, one bit per axis (bit 0 = X): set while
+    /// the axis is on its switch. The engine references an axis with a
+    /// configured `home_nm` when its bit goes from clear to set. Read once
+    /// per tick, after `read_counts`. Encoders without switches keep the
+    /// default: none.
+    fn home_switches(&mut self) -> u8 {
+        0
+    }
 }
 
 /// Temperature sensors.

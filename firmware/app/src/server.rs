@@ -15,10 +15,19 @@
 //! flash stalls, the correction loop included. The active model lives in
 //! RAM, but the code does not, so the loop *does* stop for the erase. A
 //! commit (and a rollback, whose one-word program stalls too) is therefore
-//! refused with [`LinkError::AxesMoving`] unless the encoders have not
-//! changed for `quiet_ms`; a machine at rest needs no new correction while
+//! refused with [`LinkError::AxesMoving`] unless no axis moved (beyond
+//! the engine's 1 µm still band, `engine::STILL_BAND_NM`) for `quiet_ms`;
+//! a machine at rest needs no new correction while
 //! the CPU waits. After the flash operation the engine's clock is resynced
 //! so the stall is not reported as a loop overrun.
+//!
+//! **Referencing and injection need the axes at rest.** A `Reference`
+//! names the position of the count the encoder reads at the next tick, so
+//! it is refused while an encoder moves ([`LinkError::NotStill`]); so is an
+//! `Inject`. An injection is a lease of [`INJECT_LEASE_MS`] (counted in
+//! the engine's ticks, so it means the same under an emulator whose
+//! virtual time is not the wall clock), renewed by each `Inject`; it also
+//! ends when the port that started it closes ([`Server::port_closed`]).
 //!
 //! **Loop budget.** A commit is also refused (`LinkError::TooSlow`) when
 //! the table's fixed-point evaluation is estimated (`model_core::cost`)
@@ -35,9 +44,13 @@ use trueaxis_protocol::{
 use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
 use model_core::board::{check_cost, LimitError};
 
-use crate::engine::Engine;
+use crate::engine::{Engine, STILL_US};
 use crate::model::{self, ModelBuf};
 use crate::store::{StoreError, TableStore};
+
+/// How long an injection lasts without a renewing `Inject`, ms (turned
+/// into engine ticks at the configured period).
+pub const INJECT_LEASE_MS: u32 = 2000;
 
 /// Access to the engine shared with the correction loop.
 pub trait EngineAccess<'m> {
@@ -71,6 +84,9 @@ pub struct ServerConfig {
 #[derive(Debug, Default)]
 pub struct Port {
     decoder: FrameDecoder<MAX_FRAME_BYTES>,
+    /// The server's injection generation when this port last injected
+    /// (0: never): the injection is this port's while the two agree.
+    inject_gen: u32,
 }
 
 impl Port {
@@ -78,6 +94,7 @@ impl Port {
     pub const fn new() -> Self {
         Self {
             decoder: FrameDecoder::new(),
+            inject_gen: 0,
         }
     }
 
@@ -118,6 +135,8 @@ pub struct Server<'b, 'm, F> {
     last_done: Option<Done>,
     cfg: ServerConfig,
     rx_bad_frames: u32,
+    /// Bumped each time a port other than the last injecting one injects.
+    inject_gen: u32,
 }
 
 impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
@@ -139,6 +158,7 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
             last_done: None,
             cfg,
             rx_bad_frames: 0,
+            inject_gen: 0,
         }
     }
 
@@ -195,7 +215,18 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                 self.rx_bad_frames = self.rx_bad_frames.saturating_add(1);
                 continue;
             };
+            let inject = matches!(packet.msg, Request::Inject(_));
             let msg = self.handle(packet.msg, now_us, engine);
+            if inject
+                && matches!(msg, Response::Correction(_))
+                && (port.inject_gen == 0 || port.inject_gen != self.inject_gen)
+            {
+                // An accepted injection from a new owner (a refused one
+                // takes nothing over). The generation is only compared,
+                // never a count that matters: wrapping is fine.
+                self.inject_gen = self.inject_gen.wrapping_add(1).max(1);
+                port.inject_gen = self.inject_gen;
+            }
             let mut out = [0u8; MAX_FRAME_BYTES];
             // Every response fits a frame (tested in model-core); if one
             // ever did not, dropping it makes the host retry rather than
@@ -210,6 +241,16 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                 send(&out[..n]);
             }
         }
+    }
+
+    /// The transport behind `port` went away (a TCP client closed): an
+    /// injection it started ends now instead of outliving its client.
+    pub fn port_closed(&mut self, port: &mut Port, engine: &impl EngineAccess<'m>) {
+        if port.inject_gen != 0 && port.inject_gen == self.inject_gen {
+            engine.with_engine(|e| e.set_injection(None, 0));
+        }
+        port.inject_gen = 0;
+        port.reset();
     }
 
     /// Answers one request.
@@ -389,13 +430,33 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                 if inj.rev_q30.iter().any(|r| r.unsigned_abs() > 1 << 30) {
                     return Err(LinkError::BadInjection);
                 }
-                Response::Correction(engine.with_engine(|e| {
-                    e.set_injection(Some(inj));
-                    e.evaluate_injection(&inj)
-                }))
+                let r = engine.with_engine(|e| {
+                    if !e.is_still(now_us) {
+                        return Err(not_still());
+                    }
+                    let period = u64::from(e.config().period_us.max(1));
+                    let lease =
+                        (u64::from(INJECT_LEASE_MS) * 1000 / period).clamp(1, u32::MAX.into());
+                    e.set_injection(Some(inj), lease as u32);
+                    Ok(e.evaluate_injection(&inj))
+                })?;
+                Response::Correction(r)
             }
             Request::EndInject => {
-                engine.with_engine(|e| e.set_injection(None));
+                engine.with_engine(|e| e.set_injection(None, 0));
+                Response::Ok
+            }
+            Request::Reference { axis, pos_nm } => {
+                if axis > 2 {
+                    return Err(LinkError::BadAxis);
+                }
+                engine.with_engine(|e| {
+                    if !e.is_still(now_us) {
+                        return Err(not_still());
+                    }
+                    e.reference(usize::from(axis), pos_nm);
+                    Ok(())
+                })?;
                 Response::Ok
             }
             Request::ReadCorrection => Response::Correction(engine.with_engine(|e| e.correction())),
@@ -466,6 +527,12 @@ fn spare<'a>(spares: &'a mut [Option<&mut ModelBuf>; 2]) -> &'a mut ModelBuf {
     match spares {
         [Some(m), _] | [None, Some(m)] => m,
         [None, None] => unreachable!("both model buffers in use"),
+    }
+}
+
+fn not_still() -> LinkError {
+    LinkError::NotStill {
+        still_ms: (STILL_US / 1000) as u32,
     }
 }
 

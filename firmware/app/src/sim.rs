@@ -54,6 +54,7 @@ pub fn sim_engine_config() -> EngineConfig {
         origin_nm: 0,
         pulse_nm: 100,
         max_speed_nm_per_ms: 0,
+        home_nm: None,
     };
     EngineConfig {
         axes: [axis; 3],
@@ -267,6 +268,11 @@ impl SimBoard {
         out
     }
 
+    /// The client behind `port` went away (see [`Server::port_closed`]).
+    pub fn close(&mut self, port: &mut Port) {
+        self.server.port_closed(port, &*self.engine);
+    }
+
     /// The engine (for assertions).
     pub fn engine(&self) -> std::cell::Ref<'_, Engine<'static>> {
         self.engine.borrow()
@@ -299,19 +305,26 @@ impl SimBoard {
                 conns.push((s, Port::new()));
             }
             let mut idle = true;
-            conns.retain_mut(|(s, port)| match s.read(&mut buf) {
-                Ok(0) => false,
-                Ok(n) => {
-                    idle = false;
-                    let out = self.receive(port, &buf[..n]);
-                    // Answers are small: written blocking, then back to
-                    // non-blocking reads.
-                    let _ = s.set_nonblocking(false);
-                    let ok = s.write_all(&out).is_ok();
-                    let _ = s.set_nonblocking(true);
-                    ok
+            conns.retain_mut(|(s, port)| {
+                let open = match s.read(&mut buf) {
+                    Ok(0) => false,
+                    Ok(n) => {
+                        idle = false;
+                        let out = self.receive(port, &buf[..n]);
+                        // Answers are small: written blocking, then back to
+                        // non-blocking reads.
+                        let _ = s.set_nonblocking(false);
+                        let ok = s.write_all(&out).is_ok();
+                        let _ = s.set_nonblocking(true);
+                        ok
+                    }
+                    Err(e) => matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut),
+                };
+                if !open {
+                    // An injection ends with the client that started it.
+                    self.server.port_closed(port, &*self.engine);
                 }
-                Err(e) => matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut),
+                open
             });
             if idle {
                 std::thread::sleep(Duration::from_millis(1));

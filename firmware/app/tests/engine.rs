@@ -12,11 +12,11 @@ use trueaxis_app::engine::{round_div, ConfigError, Engine, EngineConfig};
 use trueaxis_app::hw::Clock;
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::sim::{sample_spec, sample_table, sim_engine_config};
-use trueaxis_protocol::{Faults, Slot, SlotInfo};
+use trueaxis_protocol::{Faults, Injection, Slot, SlotInfo, LINK_TEMPS};
 // Deterministic xorshift, so the random walk is the same on every run.
 use trueaxis_test_support::XorShift64 as Rng;
 
-use common::fake::{Fake, FakeClock};
+use common::fake::{reference_at_zero, Fake, FakeClock};
 
 fn info(table: &[u8]) -> SlotInfo {
     SlotInfo {
@@ -48,6 +48,7 @@ fn run(e: &mut Engine<'_>, clock: &FakeClock, io: &mut Fake, n: u64) {
 fn an_hour_of_random_motion_pulses_equal_the_rounded_correction_every_tick() {
     let table = sample_table(0);
     let mut e = Engine::new(sim_engine_config()).unwrap();
+    reference_at_zero(&mut e);
     e.set_model(loaded(&table), info(&table));
     let clock = FakeClock(Cell::new(0));
     let mut io = Fake::new();
@@ -90,6 +91,7 @@ fn output_equals_model_core_fixed_point_and_tracks_reversal() {
     let table = sample_table(1);
     let m = Model::load(&model_core::parse(&table).unwrap()).unwrap();
     let mut e = Engine::new(sim_engine_config()).unwrap();
+    reference_at_zero(&mut e);
     e.set_model(loaded(&table), info(&table));
     let clock = FakeClock(Cell::new(0));
     let mut io = Fake::new();
@@ -127,6 +129,7 @@ fn output_equals_model_core_fixed_point_and_tracks_reversal() {
 fn slew_limit_holds_on_a_table_switch() {
     let (t1, t2) = (sample_table(0), sample_table(3));
     let mut e = Engine::new(sim_engine_config()).unwrap();
+    reference_at_zero(&mut e);
     e.set_model(loaded(&t1), info(&t1));
     let clock = FakeClock(Cell::new(0));
     let mut io = Fake::new();
@@ -173,6 +176,7 @@ fn every_table_slew_is_reduced_to_what_the_pulses_follow() {
         spec.envelope.max_slew_nm_per_ms = slew;
         let table = spec.encode().unwrap();
         let mut e = Engine::new(sim_engine_config()).unwrap();
+        reference_at_zero(&mut e);
         e.set_model(loaded(&table), info(&table));
         let applied = e.slew_nm_per_ms();
         assert!(applied > 0 && applied <= slew, "slew {slew} → {applied}");
@@ -208,6 +212,10 @@ fn fault_ramps_to_zero(
     let clock = FakeClock(Cell::new(0));
     let mut io = Fake::new();
     io.counts = [3_900_000, 3_900_000, 3_900_000];
+    // 3.9 M counts of 0.1 µm: the axes are at 390 mm.
+    for axis in 0..3 {
+        e.reference(axis, 390_000_000);
+    }
     run(&mut e, &clock, &mut io, 1000);
     let start = e.corr_nm();
     assert!(start.iter().any(|&c| c.abs() > 5000), "{start:?}");
@@ -305,6 +313,7 @@ impl Clock for TickTimes {
 fn a_tick_that_ends_past_the_next_deadline_is_an_overrun() {
     let table = sample_table(0);
     let mut e = Engine::new(sim_engine_config()).unwrap();
+    reference_at_zero(&mut e);
     e.set_model(loaded(&table), info(&table));
     let period = e.config().period_us as u64;
     let clock = TickTimes::new(period);
@@ -348,6 +357,7 @@ fn a_tick_that_ends_past_the_next_deadline_is_an_overrun() {
 fn a_stall_announced_by_resync_is_not_an_overrun() {
     let table = sample_table(0);
     let mut e = Engine::new(sim_engine_config()).unwrap();
+    reference_at_zero(&mut e);
     e.set_model(loaded(&table), info(&table));
     let clock = FakeClock(Cell::new(0));
     let mut io = Fake::new();
@@ -367,6 +377,7 @@ fn encoder_jump_is_a_fault() {
     }
     let table = sample_table(0);
     let mut e = Engine::new(cfg).unwrap();
+    reference_at_zero(&mut e);
     e.set_model(loaded(&table), info(&table));
     let clock = FakeClock(Cell::new(0));
     let mut io = Fake::new();
@@ -384,6 +395,7 @@ fn encoder_jump_is_a_fault() {
 #[test]
 fn without_a_table_the_output_is_zero_and_says_why() {
     let mut e = Engine::new(sim_engine_config()).unwrap();
+    reference_at_zero(&mut e);
     let clock = FakeClock(Cell::new(0));
     let mut io = Fake::new();
     io.counts = [1_000_000; 3];
@@ -409,6 +421,7 @@ fn configurations_the_pulse_budget_cannot_follow_are_refused() {
     cfg.fault_ramp_nm_per_ms = 150;
     let table = sample_table(0);
     let mut e = Engine::new(cfg).unwrap();
+    reference_at_zero(&mut e);
     e.set_model(loaded(&table), info(&table));
     assert!(
         e.slew_nm_per_ms() < 500 && e.slew_nm_per_ms() > 100,
@@ -451,4 +464,299 @@ fn positions_scale_exactly_for_whole_and_fractional_nm_per_count() {
             );
         }
     }
+}
+
+/// The model-core evaluation at `pos_nm`, axes at rest (reversal unknown),
+/// 20 °C.
+fn model_at(table: &[u8], pos_nm: [i32; 3]) -> [i32; 3] {
+    let m = Model::load(&model_core::parse(table).unwrap()).unwrap();
+    m.eval_fixed(&Inputs {
+        pos_nm,
+        rev_q30: [0; 3],
+        temp_mc: [20_000; model_core::MAX_TEMPS],
+        tool_nm: 0,
+    })
+    .corr_nm
+}
+
+#[test]
+fn no_correction_until_every_axis_is_referenced_then_it_ramps_in_at_the_table_slew() {
+    let table = sample_table(0);
+    let mut e = Engine::new(sim_engine_config()).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    // Switched on somewhere: 100 mm, -50 mm, 20 mm of counts.
+    io.counts = [1_000_000, -500_000, 200_000];
+    run(&mut e, &clock, &mut io, 500);
+    assert_eq!(e.corr_nm(), [0; 3]);
+    assert_eq!(e.steps(), [0; 3]);
+    assert_eq!(e.faults(), Faults::NOT_REFERENCED);
+    let t = e.telemetry();
+    assert_eq!((t.referenced, t.reference_needed), ([false; 3], [true; 3]));
+    // Two of three axes are not enough.
+    assert!(e.reference(0, 10_000_000));
+    assert!(e.reference(1, -20_000_000));
+    run(&mut e, &clock, &mut io, 100);
+    assert_eq!(e.corr_nm(), [0; 3]);
+    assert_eq!(e.telemetry().referenced, [true, true, false]);
+    assert_eq!(e.faults(), Faults::NOT_REFERENCED);
+    assert!(!e.reference(3, 0), "there is no fourth axis");
+    // The third: the output ramps in at the table's slew, to the model at
+    // the referenced positions (not at the positions counted from power-up).
+    assert!(e.reference(2, 250_000_000));
+    let pos = [10_000_000, -20_000_000, 250_000_000];
+    let want = model_at(&table, pos);
+    assert_ne!(
+        want,
+        model_at(&table, [100_000_000, -50_000_000, 20_000_000])
+    );
+    let step = e.slew_nm_per_ms() as i64 * e.config().period_us as i64 / 1000 + 1;
+    let mut prev = e.corr_nm();
+    let mut ticks = 0;
+    while e.corr_nm() != want {
+        run(&mut e, &clock, &mut io, 1);
+        let now = e.corr_nm();
+        for a in 0..3 {
+            assert!(
+                (now[a] - prev[a]).abs() as i64 <= step,
+                "{prev:?} -> {now:?}"
+            );
+        }
+        prev = now;
+        ticks += 1;
+        assert!(ticks < 1000, "never got there: {now:?}, want {want:?}");
+    }
+    assert!(ticks > 1, "ramped, not jumped: {ticks} ticks");
+    assert_eq!(e.telemetry().pos_nm, pos);
+    assert!(e.faults().is_empty(), "{:?}", e.faults());
+}
+
+#[test]
+fn an_encoder_jump_loses_the_reference_the_output_ramps_to_zero_until_referenced_again() {
+    let mut cfg = sim_engine_config();
+    for a in cfg.axes.iter_mut() {
+        a.max_speed_nm_per_ms = 100_000;
+    }
+    let table = sample_table(0);
+    let mut e = Engine::new(cfg).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    io.counts = [2_000_000; 3];
+    for axis in 0..3 {
+        e.reference(axis, 200_000_000);
+    }
+    run(&mut e, &clock, &mut io, 1000);
+    let steady = e.corr_nm();
+    assert_eq!(steady, model_at(&table, [200_000_000; 3]));
+    // Y's counter glitches by 10 mm.
+    io.counts[1] += 100_000;
+    run(&mut e, &clock, &mut io, 1);
+    assert_eq!(e.telemetry().referenced, [true, false, true]);
+    assert!(e
+        .faults()
+        .contains(Faults::ENCODER_JUMP.union(Faults::NOT_REFERENCED)));
+    let ramp = e.config().fault_ramp_nm_per_ms as i64;
+    let mut prev = e.corr_nm();
+    for _ in 0..200 {
+        run(&mut e, &clock, &mut io, 1);
+        let now = e.corr_nm();
+        for a in 0..3 {
+            assert!((now[a] - prev[a]).abs() as i64 <= ramp + 1);
+            assert!(now[a].abs() <= prev[a].abs(), "grew: {prev:?} -> {now:?}");
+        }
+        prev = now;
+    }
+    assert_eq!(e.corr_nm(), [0; 3]);
+    // Clearing the jump is not enough: Y has no reference.
+    e.clear_faults();
+    run(&mut e, &clock, &mut io, 200);
+    assert_eq!(e.corr_nm(), [0; 3]);
+    assert_eq!(e.faults(), Faults::NOT_REFERENCED);
+    assert!(e
+        .telemetry()
+        .faults_latched
+        .contains(Faults::NOT_REFERENCED));
+    // Referenced again (Y is at 200 mm): the correction comes back.
+    e.reference(1, 200_000_000);
+    run(&mut e, &clock, &mut io, 1000);
+    assert!(e.faults().is_empty(), "{:?}", e.faults());
+    assert_eq!(e.corr_nm(), steady);
+}
+
+#[test]
+fn an_axis_without_an_encoder_needs_no_reference() {
+    // A two-axis machine: no Z encoder (pm_per_count 0), Z at its
+    // configured origin.
+    let mut cfg = sim_engine_config();
+    cfg.axes[2].pm_per_count = 0;
+    cfg.axes[2].origin_nm = 5_000_000;
+    let table = sample_table(0);
+    let mut e = Engine::new(cfg).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    e.reference(0, 0);
+    e.reference(1, 0);
+    run(&mut e, &clock, &mut io, 1000);
+    let t = e.telemetry();
+    assert_eq!(t.reference_needed, [true, true, false]);
+    assert_eq!(t.referenced, [true, true, false]);
+    assert!(e.faults().is_empty(), "{:?}", e.faults());
+    assert_eq!(e.corr_nm(), model_at(&table, [0, 0, 5_000_000]));
+}
+
+#[test]
+fn a_reference_keeps_the_reversal_state() {
+    let table = sample_table(1);
+    let mut e = Engine::new(sim_engine_config()).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    reference_at_zero(&mut e);
+    run(&mut e, &clock, &mut io, 1);
+    // X moves forward by 1 mm (past the reversal transition).
+    for _ in 0..100 {
+        io.counts[0] += 100;
+        run(&mut e, &clock, &mut io, 1);
+    }
+    let before = e.telemetry();
+    // Re-referenced 5 mm back: a shift of the position, not a motion
+    // backwards (the reversal state stays "moved forward").
+    e.reference(0, before.pos_nm[0] - 5_000_000);
+    run(&mut e, &clock, &mut io, 1);
+    let after = e.telemetry();
+    assert_eq!(after.pos_nm[0], before.pos_nm[0] - 5_000_000);
+    let m = Model::load(&model_core::parse(&table).unwrap()).unwrap();
+    let forward = m.eval_fixed(&Inputs {
+        pos_nm: after.pos_nm,
+        rev_q30: [1 << 30, 0, 0],
+        temp_mc: [20_000; model_core::MAX_TEMPS],
+        tool_nm: 0,
+    });
+    assert_eq!(after.model_corr_nm, forward.corr_nm);
+}
+
+fn still_injection(pos_nm: [i32; 3], temp_c: i32) -> Injection {
+    Injection {
+        pos_nm,
+        rev_q30: [0; 3],
+        temp_mc: [temp_c * 1000; LINK_TEMPS],
+        tool_nm: 0,
+    }
+}
+
+#[test]
+fn an_injection_ends_when_its_lease_runs_out_or_an_axis_moves() {
+    let table = sample_table(0);
+    let mut e = Engine::new(sim_engine_config()).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    reference_at_zero(&mut e);
+    run(&mut e, &clock, &mut io, 10);
+    let inj = still_injection([100_000_000, 0, 0], 20);
+    e.set_injection(Some(inj), 50);
+    run(&mut e, &clock, &mut io, 50);
+    assert!(e.injecting());
+    assert_eq!(e.telemetry().pos_nm, inj.pos_nm);
+    run(&mut e, &clock, &mut io, 1);
+    assert!(!e.injecting(), "the lease of 50 ticks ran out");
+    assert_eq!(e.telemetry().pos_nm, [0; 3]);
+    // Renewed; a servo's dither at rest (±1 µm here: 10 counts) is no
+    // motion; leaving that band is, and the injection ends at once.
+    e.set_injection(Some(inj), 50);
+    run(&mut e, &clock, &mut io, 10);
+    assert!(e.injecting());
+    for d in [1, -1, 10, -10, 0] {
+        io.counts[1] = d;
+        run(&mut e, &clock, &mut io, 1);
+    }
+    assert!(e.injecting(), "dither ended the injection");
+    io.counts[1] = 11;
+    run(&mut e, &clock, &mut io, 1);
+    assert!(!e.injecting(), "an axis moved");
+    assert_eq!(e.telemetry().pos_nm, [0, 1100, 0]);
+}
+
+#[test]
+fn sensor_checks_stay_on_while_injecting() {
+    let table = sample_table(0);
+    let mut e = Engine::new(sim_engine_config()).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    reference_at_zero(&mut e);
+    run(&mut e, &clock, &mut io, 10);
+    // A real thermistor open while plausible temperatures are injected.
+    e.set_injection(Some(still_injection([0; 3], 20)), 1000);
+    io.temps[1] = -100_000;
+    run(&mut e, &clock, &mut io, 1);
+    assert!(e.injecting());
+    assert!(
+        e.faults().contains(Faults::SENSOR_RANGE),
+        "{:?}",
+        e.faults()
+    );
+    // Real sensors fine, an injected temperature no sensor can read.
+    io.temps[1] = 20_000;
+    e.set_injection(Some(still_injection([0; 3], 150)), 1000);
+    run(&mut e, &clock, &mut io, 1);
+    assert!(
+        e.faults().contains(Faults::SENSOR_RANGE),
+        "{:?}",
+        e.faults()
+    );
+    e.set_injection(Some(still_injection([0; 3], 20)), 1000);
+    run(&mut e, &clock, &mut io, 1);
+    assert!(e.faults().is_empty(), "{:?}", e.faults());
+}
+
+#[test]
+fn a_home_switch_references_its_axis_when_it_turns_on() {
+    // X has a home switch at -5 mm; Y and Z have none.
+    let mut cfg = sim_engine_config();
+    cfg.axes[0].home_nm = Some(-5_000_000);
+    let table = sample_table(0);
+    let mut e = Engine::new(cfg).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    // Switched on with every axis on its switch: that is no edge, no
+    // reference (the switch turning on marks the position, not being on).
+    io.counts = [1234, 0, 0];
+    io.home = 0b111;
+    run(&mut e, &clock, &mut io, 10);
+    assert_eq!(e.telemetry().referenced, [false; 3]);
+    // Off the switch, back on it at count 4321 (moving: a switch works
+    // while the axis moves, unlike a reference over the link). Y's input
+    // does nothing: Y has no home position configured.
+    io.home = 0;
+    run(&mut e, &clock, &mut io, 1);
+    io.counts[0] = 4321;
+    run(&mut e, &clock, &mut io, 1);
+    io.home = 0b011;
+    run(&mut e, &clock, &mut io, 1);
+    let t = e.telemetry();
+    assert_eq!(t.referenced, [true, false, false]);
+    assert_eq!(t.pos_nm[0], -5_000_000);
+    // Staying on the switch and moving on does not re-reference.
+    io.counts[0] += 10;
+    run(&mut e, &clock, &mut io, 1);
+    assert_eq!(e.telemetry().pos_nm[0], -5_000_000 + 1000);
+    // With Y and Z referenced over the link, the correction ramps in.
+    e.reference(1, 0);
+    e.reference(2, 0);
+    run(&mut e, &clock, &mut io, 1000);
+    assert!(e.faults().is_empty(), "{:?}", e.faults());
+    // X last moved forward: the reversal state is +1.
+    let m = Model::load(&model_core::parse(&table).unwrap()).unwrap();
+    let want = m.eval_fixed(&Inputs {
+        pos_nm: [-5_000_000 + 1000, 0, 0],
+        rev_q30: [1 << 30, 0, 0],
+        temp_mc: [20_000; model_core::MAX_TEMPS],
+        tool_nm: 0,
+    });
+    assert_eq!(e.corr_nm(), want.corr_nm);
 }

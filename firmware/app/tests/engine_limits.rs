@@ -1,13 +1,17 @@
 //! The engine's output limits as properties (issue 14), over random tables
 //! (slew from 1 nm/ms to the format's limit of 10 000 000 nm/ms, max |correction| 0.1–100 µm), random
 //! motion, late ticks, table switches, temperature faults and their
-//! clearing:
+//! clearing, referencing (over the link and by X's home switch) and
+//! references lost (encoder jumps):
 //! - the output changes per tick by at most the rate in force (the table's
 //!   slew as the engine applies it, or the fault ramp while a fault is
 //!   active) plus 1 nm of rounding;
 //! - during a fault the output never grows;
 //! - above the active table's max |correction| the output never grows;
 //! - the pulses equal the rounded output every tick;
+//! - the output is zero until every axis has been referenced, and never
+//!   grows while an axis is not referenced (never referenced, or its
+//!   reference lost);
 //! - no tick panics.
 
 mod common;
@@ -18,7 +22,7 @@ use proptest::prelude::*;
 use trueaxis_app::engine::{round_div, Engine};
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::sim::{sample_spec, sim_engine_config};
-use trueaxis_protocol::{Slot, SlotInfo};
+use trueaxis_protocol::{Faults, Slot, SlotInfo};
 
 use common::fake::{Fake, FakeClock};
 
@@ -74,6 +78,12 @@ enum Op {
     Temp(bool),
     /// Clear latched faults.
     Clear,
+    /// Reference an axis at a position, nm.
+    Reference(usize, i32),
+    /// An axis's counter jumps (a glitch): its reference is lost.
+    Jump(usize),
+    /// An axis's home switch turns on or off (X has one at 12 mm).
+    Home(usize, bool),
 }
 
 fn op() -> impl Strategy<Value = Op> {
@@ -83,6 +93,9 @@ fn op() -> impl Strategy<Value = Op> {
         1 => (0usize..3).prop_map(Op::Switch),
         1 => any::<bool>().prop_map(Op::Temp),
         1 => Just(Op::Clear),
+        2 => (0usize..3, -400_000_000i32..400_000_000).prop_map(|(a, p)| Op::Reference(a, p)),
+        1 => (0usize..3).prop_map(Op::Jump),
+        1 => (0usize..3, any::<bool>()).prop_map(|(a, on)| Op::Home(a, on)),
     ]
 }
 
@@ -94,7 +107,12 @@ proptest! {
         tables in prop::collection::vec(table_case(), 3),
         ops in prop::collection::vec(op(), 1..250),
     ) {
-        let cfg = sim_engine_config();
+        let mut cfg = sim_engine_config();
+        // 1.5 m/s: a Move (≤ 2 mm per tick) is motion, a Jump (5 mm) a glitch.
+        for a in cfg.axes.iter_mut() {
+            a.max_speed_nm_per_ms = 1_500_000;
+        }
+        cfg.axes[0].home_nm = Some(12_000_000);
         let pulse_nm = cfg.axes.map(|a| a.pulse_nm as i64);
         let period = cfg.period_us as i64;
         let fault_ramp = cfg.fault_ramp_nm_per_ms as i64;
@@ -105,6 +123,11 @@ proptest! {
         let clock = FakeClock(Cell::new(0));
         let mut io = Fake::new();
         let mut prev = e.corr_nm();
+        // The test's own account of the references, and whether all three
+        // were ever referenced together.
+        let mut referenced = [false; 3];
+        let mut ever_all = false;
+        let mut last_home: Option<u8> = None;
         for op in ops {
             let mut dt = period as u64;
             match op {
@@ -121,7 +144,29 @@ proptest! {
                 }
                 Op::Temp(hot) => io.temps[0] = if hot { 95_000 } else { 20_000 },
                 Op::Clear => e.clear_faults(),
+                Op::Reference(axis, pos) => {
+                    prop_assert!(e.reference(axis, pos));
+                    referenced[axis] = true;
+                }
+                Op::Home(axis, on) => {
+                    if on {
+                        io.home |= 1 << axis;
+                    } else {
+                        io.home &= !(1 << axis);
+                    }
+                }
+                Op::Jump(axis) => {
+                    // Towards 0, so the counts stay within the ±3 M a Move keeps.
+                    io.counts[axis] += if io.counts[axis] > 0 { -50_000 } else { 50_000 };
+                    referenced[axis] = false;
+                }
             }
+            // The switch turning on references X (the only axis with a
+            // home position); on at the first tick is no edge.
+            if last_home.is_some_and(|h| io.home & !h & 1 != 0) {
+                referenced[0] = true;
+            }
+            last_home = Some(io.home);
             clock.0.set(clock.0.get() + dt);
             let (mut enc, mut t) = (io, io);
             let report = e.tick(&clock, &mut enc, &mut t, &mut io);
@@ -129,6 +174,16 @@ proptest! {
             let faulted = !report.faults.is_empty();
             let rate = if faulted { fault_ramp } else { e.slew_nm_per_ms() as i64 };
             let max_corr = tables[active].max_corr_nm as i64;
+            prop_assert_eq!(e.telemetry().referenced, referenced);
+            let all = referenced.iter().all(|&r| r);
+            ever_all |= all;
+            if !ever_all {
+                prop_assert_eq!(now, [0; 3], "output before every axis was referenced");
+                prop_assert_eq!(io.pulses, [0; 3]);
+            }
+            if !all {
+                prop_assert!(report.faults.contains(Faults::NOT_REFERENCED));
+            }
             for a in 0..3 {
                 let (p, n) = (prev[a] as i64, now[a] as i64);
                 let step = (n - p).abs();
@@ -138,6 +193,9 @@ proptest! {
                 );
                 if faulted {
                     prop_assert!(n.abs() <= p.abs(), "axis {a}: grew during a fault: {p} -> {n}");
+                }
+                if !all {
+                    prop_assert!(n.abs() <= p.abs(), "axis {a}: grew while not referenced: {p} -> {n}");
                 }
                 if n.abs() > max_corr {
                     prop_assert!(

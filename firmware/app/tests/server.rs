@@ -40,6 +40,133 @@ fn host_eval(table: &[u8], inj: &Injection) -> [i32; 3] {
     .corr_nm
 }
 
+/// References X, Y and Z at 0 over the link (the encoders rest at 0) and
+/// runs the tick that applies it.
+fn reference_all(b: &mut SimBoard, p: &mut Port) {
+    for axis in 0..3 {
+        assert_eq!(
+            call(
+                b,
+                p,
+                50 + u16::from(axis),
+                Request::Reference { axis, pos_nm: 0 }
+            ),
+            Response::Ok
+        );
+    }
+    b.tick(1);
+}
+
+fn status(b: &mut SimBoard, p: &mut Port) -> trueaxis_protocol::Telemetry {
+    let Response::Status(t) = call(b, p, 60, Request::Status) else {
+        panic!()
+    };
+    t
+}
+
+#[test]
+fn axes_are_referenced_over_the_link_only_at_rest() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    install(&mut b, &mut p, &sample_table(0));
+    b.tick(5);
+    let t = status(&mut b, &mut p);
+    assert_eq!((t.referenced, t.reference_needed), ([false; 3], [true; 3]));
+    assert!(t.faults.contains(Faults::NOT_REFERENCED));
+    assert_eq!(
+        call(&mut b, &mut p, 1, Request::Reference { axis: 3, pos_nm: 0 }),
+        Response::Error(LinkError::BadAxis)
+    );
+    // X moves: refused, and nothing changes.
+    for _ in 0..5 {
+        b.io.lock().unwrap().counts[0] += 10;
+        b.tick(1);
+    }
+    let moving = Request::Reference {
+        axis: 1,
+        pos_nm: 7_000_000,
+    };
+    assert_eq!(
+        call(&mut b, &mut p, 2, moving.clone()),
+        Response::Error(LinkError::NotStill { still_ms: 20 })
+    );
+    b.tick(5);
+    assert_eq!(status(&mut b, &mut p).referenced, [false; 3]);
+    // At rest for 20 ms: accepted, applied at the next tick.
+    b.tick(20);
+    assert_eq!(call(&mut b, &mut p, 3, moving), Response::Ok);
+    b.tick(1);
+    let t = status(&mut b, &mut p);
+    assert_eq!(t.referenced, [false, true, false]);
+    assert_eq!(t.pos_nm[1], 7_000_000);
+    reference_all(&mut b, &mut p);
+    let t = status(&mut b, &mut p);
+    assert_eq!(t.referenced, [true; 3]);
+    assert!(t.faults.is_empty(), "{:?}", t.faults);
+}
+
+#[test]
+fn an_injection_needs_the_axes_at_rest_and_ends_with_its_lease_or_its_client() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    install(&mut b, &mut p, &sample_table(0));
+    reference_all(&mut b, &mut p);
+    // Z moves 10 µm (beyond the 1 µm a servo at rest dithers).
+    b.io.lock().unwrap().counts[2] += 100;
+    b.tick(1);
+    let inj = injection([100_000_000, 0, 0]);
+    assert_eq!(
+        call(&mut b, &mut p, 1, Request::Inject(inj)),
+        Response::Error(LinkError::NotStill { still_ms: 20 })
+    );
+    b.tick(20);
+    assert!(matches!(
+        call(&mut b, &mut p, 2, Request::Inject(inj)),
+        Response::Correction(_)
+    ));
+    // The lease: 2 s at the sim's 1 ms ticks, renewed by each Inject.
+    b.tick(1500);
+    assert!(status(&mut b, &mut p).injecting);
+    call(&mut b, &mut p, 3, Request::Inject(inj));
+    b.tick(2000);
+    let t = status(&mut b, &mut p);
+    assert!(t.injecting);
+    assert_eq!(t.pos_nm, inj.pos_nm);
+    b.tick(1);
+    let t = status(&mut b, &mut p);
+    assert!(!t.injecting, "the lease ran out");
+    assert_eq!(t.pos_nm, [0, 0, 100 * 100]);
+    // Its client goes: the injection ends; another client going does not
+    // end it.
+    call(&mut b, &mut p, 4, Request::Inject(inj));
+    let mut other = Port::new();
+    status(&mut b, &mut other);
+    b.close(&mut other);
+    b.tick(1);
+    assert!(status(&mut b, &mut p).injecting);
+    // A refused injection (a reversal state no tracker has) takes nothing
+    // over: its client leaving leaves the injection running.
+    let mut refused = Port::new();
+    let mut bad = inj;
+    bad.rev_q30[0] = (1 << 30) + 1;
+    assert_eq!(
+        call(&mut b, &mut refused, 6, Request::Inject(bad)),
+        Response::Error(LinkError::BadInjection)
+    );
+    b.close(&mut refused);
+    b.tick(1);
+    assert!(status(&mut b, &mut p).injecting);
+    // A second client takes the injection over; the first one leaving no
+    // longer ends it.
+    call(&mut b, &mut other, 5, Request::Inject(inj));
+    b.close(&mut p);
+    b.tick(1);
+    assert!(status(&mut b, &mut other).injecting);
+    b.close(&mut other);
+    b.tick(1);
+    assert!(!status(&mut b, &mut other).injecting);
+}
+
 #[test]
 fn empty_board_identifies_and_reports_no_table() {
     let mut b = SimBoard::new();
@@ -73,6 +200,15 @@ fn install_inject_and_read_back_equals_model_core() {
     };
     assert_eq!(info.crc32, table_id(&table));
     assert_eq!((info.slot, info.seq), (Slot::A, 1));
+    // Not referenced: the output stays at zero whatever is injected.
+    call(&mut b, &mut p, 12, Request::Inject(injection([0; 3])));
+    b.tick(200);
+    let Response::Correction(c) = call(&mut b, &mut p, 13, Request::ReadCorrection) else {
+        panic!()
+    };
+    assert_eq!(c.corr_nm, [0; 3]);
+    assert_eq!(c.faults, Faults::NOT_REFERENCED);
+    reference_all(&mut b, &mut p);
 
     for (k, pos) in [
         [0, 0, 0],
@@ -647,4 +783,63 @@ proptest! {
         let answers = decode_all(&out);
         prop_assert!(answers.iter().any(|a| a.seq == 77));
     }
+}
+
+/// A reset (power loss) loses the references: the rebooted board runs the
+/// stored table but holds the output at zero until referenced again.
+#[test]
+fn a_reboot_loses_the_references_the_table_stays() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    let table = sample_table(0);
+    install(&mut b, &mut p, &table);
+    reference_all(&mut b, &mut p);
+    b.io.lock().unwrap().counts = [1_000_000, 0, 0];
+    b.tick(300);
+    let t = status(&mut b, &mut p);
+    assert!(t.faults.is_empty(), "{:?}", t.faults);
+    assert_ne!(t.corr_nm, [0; 3]);
+
+    let mut b = SimBoard::with_flash(b.into_flash());
+    let mut p = Port::new();
+    b.tick(300);
+    let t = status(&mut b, &mut p);
+    assert_eq!(t.active.map(|a| a.crc32), Some(table_id(&table)));
+    assert_eq!(t.referenced, [false; 3]);
+    assert_eq!(t.faults, Faults::NOT_REFERENCED);
+    assert_eq!(t.corr_nm, [0; 3]);
+    assert_eq!(t.steps, [0; 3]);
+    assert!(t.faults_latched.contains(Faults::NOT_REFERENCED));
+}
+
+/// A servo holding an axis dithers by a count or two: the axis is at rest
+/// (it can be referenced and injected on), while leaving the ±1 µm band
+/// is motion.
+#[test]
+fn a_dithering_axis_is_at_rest() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    install(&mut b, &mut p, &sample_table(0));
+    // A count or a few (0.1 µm each) either way, every tick for 100 ms:
+    // never more than 1 µm from where the axis first stood (count 1).
+    for k in 0..100 {
+        b.io.lock().unwrap().counts[0] = [1, -1, 5, -5, 11, -9][k % 6];
+        b.tick(1);
+    }
+    assert_eq!(
+        call(&mut b, &mut p, 1, Request::Reference { axis: 0, pos_nm: 0 }),
+        Response::Ok
+    );
+    assert!(matches!(
+        call(&mut b, &mut p, 2, Request::Inject(injection([0; 3]))),
+        Response::Correction(_)
+    ));
+    // 1.1 µm away from it: motion.
+    b.io.lock().unwrap().counts[0] = 12;
+    b.tick(1);
+    assert_eq!(
+        call(&mut b, &mut p, 3, Request::Reference { axis: 1, pos_nm: 0 }),
+        Response::Error(LinkError::NotStill { still_ms: 20 })
+    );
+    assert!(!status(&mut b, &mut p).injecting);
 }

@@ -23,7 +23,7 @@
 use embassy_executor::{InterruptExecutor, SendSpawner};
 use embassy_stm32::adc::{Adc, SampleTime};
 use embassy_stm32::flash::{Blocking, Flash};
-use embassy_stm32::gpio::{AnyPin, Level, Output, Pull, Speed};
+use embassy_stm32::gpio::{AnyPin, Input, Level, Output, Pull, Speed};
 use embassy_stm32::interrupt::{self, InterruptExt, Priority};
 use embassy_stm32::peripherals::{
     ADC1, IWDG, PC0, PC1, PC2, PC3, TIM2, TIM3, TIM4, USART1, USB_OTG_FS,
@@ -88,6 +88,9 @@ const AXIS: AxisConfig = AxisConfig {
     origin_nm: 0,
     pulse_nm: 100,
     max_speed_nm_per_ms: 500_000,
+    // The home switches (PC8-PC10) trip at the machine's origin; a build
+    // for a machine whose switches sit elsewhere sets that position here.
+    home_nm: Some(0),
 };
 
 /// Thermistors fitted on PC0-PC3.
@@ -145,18 +148,29 @@ pub fn start_high() -> SendSpawner {
     EXECUTOR_HIGH.start(interrupt::UART4)
 }
 
-/// The three encoders (TIM2/3/4 in encoder mode), widened to 32 bits.
+/// The three encoders (TIM2/3/4 in encoder mode), widened to 32 bits, and
+/// the axes' home switches.
 pub struct BoardEncoders {
     x: Qei<'static, TIM2>,
     y: Qei<'static, TIM3>,
     z: Qei<'static, TIM4>,
     wide: [Widen16; 3],
+    /// Home switches X, Y, Z: active low (a switch to ground, pull-up on),
+    /// so an unwired input never references an axis.
+    home: [Input<'static>; 3],
 }
 
 impl Encoders for BoardEncoders {
     fn read_counts(&mut self) -> [i32; 3] {
         let raw = [self.x.count(), self.y.count(), self.z.count()];
         core::array::from_fn(|i| self.wide[i].update(raw[i]))
+    }
+
+    fn home_switches(&mut self) -> u8 {
+        self.home
+            .iter()
+            .enumerate()
+            .fold(0, |m, (i, pin)| m | (u8::from(pin.is_low()) << i))
     }
 }
 
@@ -243,6 +257,11 @@ pub fn take(p: Peripherals) -> Parts {
         y: Qei::new(p.TIM3, p.PA6, p.PA7, qei),
         z: Qei::new(p.TIM4, p.PB6, p.PB7, qei),
         wide: [Widen16::new(0); 3],
+        home: [
+            Input::new(p.PC8, Pull::Up),
+            Input::new(p.PC9, Pull::Up),
+            Input::new(p.PC10, Pull::Up),
+        ],
     };
     let out = |pin: Peri<'static, AnyPin>| Output::new(pin, Level::Low, Speed::VeryHigh);
     let steps = StepDir {

@@ -1,7 +1,9 @@
 //! The link protocol on the board's two transports, USB CDC-ACM and
 //! USART1. Each task owns a `Port` (its own frame decoder) and hands the
 //! bytes to the one shared server; the server's answers go back on the
-//! transport they came from. The server itself is transport-agnostic
+//! transport they came from; a USB disconnect ends an injection the host
+//! started on it (the UART has no connection to lose: the injection's
+//! lease ends it). The server itself is transport-agnostic
 //! (trueaxis_app::server): these tasks only move bytes.
 
 use embassy_stm32::usart::BufferedUart;
@@ -101,6 +103,9 @@ pub async fn usb_link(
                 break 'connected;
             }
         }
+        // The host went (port closed, cable pulled): an injection it
+        // started ends with it instead of steering the correction on.
+        server.lock().await.port_closed(&mut port, engine);
     }
 }
 

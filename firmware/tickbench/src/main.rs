@@ -77,6 +77,7 @@ const CONFIG: EngineConfig = EngineConfig {
         origin_nm: 0,
         pulse_nm: 100,
         max_speed_nm_per_ms: 500_000,
+        home_nm: None,
     }; 3],
     period_us: 50,
     max_steps_per_tick: 2,
@@ -210,6 +211,11 @@ fn main() -> ! {
             Err(_) => panic!("board configuration refused"),
         };
         engine.set_model(&mut buf, info);
+        // Referenced, so the ticks measured run the correcting path (an
+        // unreferenced board holds the output at zero: faults=0x40).
+        for axis in 0..3 {
+            engine.reference(axis, 0);
+        }
         run(name, &mut engine, 1024, est);
     }
     semihosting::process::exit(0)

@@ -140,6 +140,7 @@ fn name(req: &Request<'_>) -> &'static str {
         Request::Inject(_) => "inject",
         Request::EndInject => "end inject",
         Request::ReadCorrection => "read correction",
+        Request::Reference { .. } => "reference",
     }
 }
 
@@ -462,6 +463,34 @@ impl Client {
         })
     }
 
+    /// References `axis` (0 = X) at machine position `pos_nm`: the board
+    /// takes the count its encoder reads at its next tick as that position
+    /// (`Reference`; refused while the axes move), then this waits until
+    /// the board's status shows the axis referenced (a tick is 50 µs on the
+    /// board; up to the request timeout is allowed) and returns that status.
+    pub fn reference(&mut self, axis: u8, pos_nm: i32) -> Result<Telemetry, ClientError> {
+        match self.request(&Request::Reference { axis, pos_nm })? {
+            Response::Ok => {}
+            r => return Err(unexpected("reference", r)),
+        }
+        let started = Instant::now();
+        loop {
+            let t = self.status()?;
+            if t.referenced.get(usize::from(axis)) == Some(&true) {
+                return Ok(t);
+            }
+            if started.elapsed() > self.timing.timeout {
+                return Err(ClientError::Timeout {
+                    port: self.port.clone(),
+                    what: "reference (the board accepted it but its status never showed the axis referenced)",
+                    tries: 1,
+                    timeout_ms: self.timing.timeout.as_millis() as u64,
+                });
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
     /// Clears the board's latched faults (`ClearFaults`): the correction
     /// slews back to the model's; a fault whose cause remains is raised
     /// again at the next tick.
@@ -533,6 +562,38 @@ pub fn slot_text(s: &SlotInfo) -> String {
     )
 }
 
+/// Axis names, in the order of the link's per-axis arrays.
+pub const AXES: [&str; 3] = ["x", "y", "z"];
+
+/// Per axis: referenced or not, and whether the board needs it to correct
+/// (`{"x": {"referenced": true, "reference_needed": true}, …}`).
+pub fn axes_json(t: &Telemetry) -> serde_json::Value {
+    let mut m = serde_json::Map::new();
+    for (a, name) in AXES.iter().enumerate() {
+        m.insert(
+            (*name).to_string(),
+            serde_json::json!({
+                "referenced": t.referenced[a],
+                "reference_needed": t.reference_needed[a],
+            }),
+        );
+    }
+    serde_json::Value::Object(m)
+}
+
+/// Per axis as text: `x referenced, y NOT REFERENCED, z no encoder`.
+pub fn axes_text(t: &Telemetry) -> String {
+    AXES.iter()
+        .enumerate()
+        .map(|(a, name)| match (t.reference_needed[a], t.referenced[a]) {
+            (_, true) => format!("{name} referenced"),
+            (true, false) => format!("{name} NOT REFERENCED"),
+            (false, false) => format!("{name} needs none"),
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// JSON for telemetry (fault bits by name).
 pub fn telemetry_json(t: &Telemetry) -> serde_json::Value {
     serde_json::json!({
@@ -551,6 +612,7 @@ pub fn telemetry_json(t: &Telemetry) -> serde_json::Value {
         "faults": t.faults.names().collect::<Vec<_>>(),
         "faults_latched": t.faults_latched.names().collect::<Vec<_>>(),
         "injecting": t.injecting,
+        "axes": axes_json(t),
         "active": t.active.as_ref().map(slot_json),
         "rx_bad_frames": t.rx_bad_frames,
     })

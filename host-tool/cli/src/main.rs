@@ -55,6 +55,8 @@ enum Command {
     Rollback(cmd::rollback::Args),
     /// Live telemetry from the board.
     Monitor(cmd::monitor::Args),
+    /// Tell the board where an axis is (it corrects only from referenced axes).
+    Reference(cmd::reference::Args),
     /// Write a table into a flash slot through a debug probe (probe-rs).
     Flash(cmd::flash::Args),
     /// The guided end-to-end job on built-in data.
@@ -80,6 +82,7 @@ fn main() -> ExitCode {
         Command::Status(a) => a.run(),
         Command::Rollback(a) => a.run(),
         Command::Monitor(a) => a.run(),
+        Command::Reference(a) => a.run(),
         Command::Flash(a) => a.run(),
         Command::Demo(a) => a.run(),
     };

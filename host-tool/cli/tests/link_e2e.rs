@@ -31,6 +31,8 @@ struct Board {
     port: String,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<SimBoard>>,
+    /// The board's sensors (tests move its encoders).
+    io: Arc<std::sync::Mutex<trueaxis_app::sim::SimIo>>,
 }
 
 impl Board {
@@ -39,11 +41,14 @@ impl Board {
         let port = format!("tcp://{}", listener.local_addr().unwrap());
         let stop = Arc::new(AtomicBool::new(false));
         let s = stop.clone();
-        let thread = std::thread::spawn(move || SimBoard::new().serve(listener, s));
+        let board = SimBoard::new();
+        let io = board.io.clone();
+        let thread = std::thread::spawn(move || board.serve(listener, s));
         Self {
             port,
             stop,
             thread: Some(thread),
+            io,
         }
     }
 }
@@ -110,6 +115,24 @@ fn table_file(name: &str, bytes: &[u8]) -> PathBuf {
     p
 }
 
+/// `trueaxis reference --axis A --at-mm 0` for X, Y and Z (the simulated
+/// encoders rest at 0).
+fn reference_all(port: &str) {
+    for axis in ["x", "y", "z"] {
+        let r = json_ok(&[
+            "reference",
+            "--port",
+            port,
+            "--axis",
+            axis,
+            "--at-mm",
+            "0",
+            "--json",
+        ]);
+        assert_eq!(r["axes"][axis]["referenced"], true, "{r}");
+    }
+}
+
 fn crc_hex(bytes: &[u8]) -> String {
     format!("{:#010x}", table_id(bytes))
 }
@@ -135,7 +158,9 @@ fn upload_status_monitor_and_read_back_equal_model_core() {
     assert_eq!(s["active"]["crc32"], crc_hex(&table));
     assert_eq!(s["table_format"], model_core::FORMAT_VERSION);
 
-    // Inject positions and read the corrections back over the link.
+    // Inject positions and read the corrections back over the link (the
+    // board corrects only from referenced axes).
+    reference_all(&board.port);
     let model = Model::load(&parse(&table).unwrap()).unwrap();
     let mut c = Client::open(&board.port, Timing::default()).unwrap();
     for pos_nm in [
@@ -672,16 +697,21 @@ fn status_clear_faults_clears_the_latched_faults() {
     let board = Board::start();
     let path = table_file("clear", &sample_table(0));
     upload_json(&path, &board.port);
+    reference_all(&board.port);
     let s = status_json(&board.port);
     assert!(s["cleared_faults"].is_null(), "{s}");
     assert_eq!(s["telemetry"]["faults"], serde_json::json!([]), "{s}");
     assert_eq!(
         s["telemetry"]["faults_latched"],
-        serde_json::json!(["no_table"]),
+        serde_json::json!(["no_table", "not_referenced"]),
         "{s}"
     );
     let s = json_ok(&["status", "--port", &board.port, "--json", "--clear-faults"]);
-    assert_eq!(s["cleared_faults"], serde_json::json!(["no_table"]), "{s}");
+    assert_eq!(
+        s["cleared_faults"],
+        serde_json::json!(["no_table", "not_referenced"]),
+        "{s}"
+    );
     assert_eq!(
         s["telemetry"]["faults_latched"],
         serde_json::json!([]),
@@ -736,4 +766,184 @@ fn a_lost_link_during_upload_says_how_to_check_the_board() {
         )),
         "{err}"
     );
+}
+
+/// Issue 14: the board corrects only after every axis is referenced, with
+/// `trueaxis reference`; `status` and `monitor` show the state per axis
+/// (text and JSON); an injection ends when its client goes.
+#[test]
+fn the_board_corrects_only_after_trueaxis_reference_and_status_shows_it() {
+    let board = Board::start();
+    let table = sample_table(0);
+    upload_json(&table_file("ref", &table), &board.port);
+    let s = status_json(&board.port);
+    let t = &s["telemetry"];
+    assert_eq!(t["faults"], serde_json::json!(["not_referenced"]), "{s}");
+    assert_eq!(
+        t["axes"]["y"],
+        serde_json::json!({"referenced": false, "reference_needed": true})
+    );
+    let out = trueaxis(&["status", "--port", &board.port]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("referencing:   x NOT REFERENCED, y NOT REFERENCED, z NOT REFERENCED\n"),
+        "{text}"
+    );
+
+    // Injected, not referenced: the output stays at zero.
+    let pos_nm = [250_000_000, -120_000_000, 30_000_000];
+    let inj = Injection {
+        pos_nm,
+        rev_q30: [0; 3],
+        temp_mc: [20_000; LINK_TEMPS],
+        tool_nm: 0,
+    };
+    let mut c = Client::open(&board.port, Timing::default()).unwrap();
+    let Response::Correction(got) = c.request(&Request::Inject(inj)).unwrap() else {
+        panic!()
+    };
+    assert_ne!(got.model_corr_nm, [0; 3]);
+    std::thread::sleep(Duration::from_millis(300));
+    let Response::Correction(now) = c.request(&Request::ReadCorrection).unwrap() else {
+        panic!()
+    };
+    assert_eq!(now.corr_nm, [0; 3]);
+
+    // One axis: text says which are still missing.
+    let out = trueaxis(&[
+        "reference",
+        "--port",
+        &board.port,
+        "--axis",
+        "x",
+        "--at-mm",
+        "0",
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("x referenced at 0.000000 mm on ") && text.contains("y NOT REFERENCED"),
+        "{text}"
+    );
+    assert!(
+        text.contains("the correction stays at zero until"),
+        "{text}"
+    );
+    let r = json_ok(&[
+        "reference",
+        "--port",
+        &board.port,
+        "--axis",
+        "y",
+        "--at-mm",
+        "0",
+        "--json",
+    ]);
+    assert_eq!(r["all_referenced"], false, "{r}");
+    let r = json_ok(&[
+        "reference",
+        "--port",
+        &board.port,
+        "--axis",
+        "z",
+        "--at-mm",
+        "0",
+        "--json",
+    ]);
+    assert_eq!(r["all_referenced"], true, "{r}");
+    assert_eq!(r["faults"], serde_json::json!([]), "{r}");
+    assert_eq!(r["pos_nm"], 0);
+
+    // Now the output ramps in to the model's (500 nm/ms: < 150 ms).
+    c.request(&Request::Inject(inj)).unwrap();
+    std::thread::sleep(Duration::from_millis(400));
+    let Response::Correction(now) = c.request(&Request::ReadCorrection).unwrap() else {
+        panic!()
+    };
+    assert_eq!(now.corr_nm, got.model_corr_nm);
+    let out = trueaxis(&["monitor", "--port", &board.port, "--count", "1"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains(" ref=[x,y,z] "), "{text}");
+    assert_eq!(status_json(&board.port)["telemetry"]["injecting"], true);
+    // The injecting client goes: the board is back on its sensors.
+    drop(c);
+    std::thread::sleep(Duration::from_millis(100));
+    let t = &status_json(&board.port)["telemetry"];
+    assert_eq!(t["injecting"], false, "{t}");
+    assert_eq!(t["pos_nm"], serde_json::json!([0, 0, 0]), "{t}");
+
+    // A negative position is a value, not a flag (docs/cli.md); status then
+    // reports the position it names.
+    let r = json_ok(&[
+        "reference",
+        "--port",
+        &board.port,
+        "--axis",
+        "y",
+        "--at-mm",
+        "-12.5",
+        "--json",
+    ]);
+    assert_eq!(r["pos_nm"], -12_500_000, "{r}");
+    let t = &status_json(&board.port)["telemetry"];
+    assert_eq!(t["pos_nm"], serde_json::json!([0, -12_500_000, 0]), "{t}");
+
+    // A position the link cannot carry is refused before anything is sent.
+    let out = trueaxis(&[
+        "reference",
+        "--port",
+        &board.port,
+        "--axis",
+        "x",
+        "--at-mm",
+        "5000",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--at-mm 5000: expected a position within ±2147 mm"),
+        "{err}"
+    );
+}
+
+/// `trueaxis reference` while an axis moves: refused by the board, exit 1,
+/// the reason named; nothing referenced.
+#[test]
+fn reference_is_refused_while_an_axis_moves() {
+    let board = Board::start();
+    let moving = Arc::new(AtomicBool::new(true));
+    let (m, io) = (moving.clone(), board.io.clone());
+    // X creeps 1 µm (10 counts) every millisecond: 1 mm/s.
+    let mover = std::thread::spawn(move || {
+        while m.load(Ordering::Relaxed) {
+            io.lock().unwrap().counts[0] += 10;
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    });
+    std::thread::sleep(Duration::from_millis(50));
+    let out = trueaxis(&[
+        "reference",
+        "--port",
+        &board.port,
+        "--axis",
+        "y",
+        "--at-mm",
+        "0",
+    ]);
+    moving.store(false, Ordering::Relaxed);
+    mover.join().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("referencing y on tcp://")
+            && err.contains("the board refused reference: the axes are moving")
+            && err.contains("at rest (within 1 µm) for 20 ms"),
+        "{err}"
+    );
+    let t = &status_json(&board.port)["telemetry"];
+    assert_eq!(t["axes"]["y"]["referenced"], false, "{t}");
 }

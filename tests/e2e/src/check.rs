@@ -267,14 +267,22 @@ fn settle_output(
             other => err("ReadCorrection", other),
         }
     };
+    // The injection is a lease (2 s of board ticks): each poll renews it
+    // with the same point, and its answer carries the output too.
+    let inject = |link: &mut LinkClient, inj: &Injection| -> Result<Correction, String> {
+        match req(link, &Request::Inject(*inj))? {
+            Response::Correction(c) => Ok(c),
+            other => err("Inject", other),
+        }
+    };
     let mut longest = Duration::ZERO;
     let mut overruns = 0u32;
     for (i, inj) in points.iter().enumerate() {
         let before = read(link)?.corr_nm;
         let (want, _) = t.expect(inj);
-        match req(link, &Request::Inject(*inj))? {
-            Response::Correction(c) if c.model_corr_nm == want => {}
-            other => return err("Inject before the output settles", other),
+        let c = inject(link, inj)?;
+        if c.model_corr_nm != want {
+            return err("Inject before the output settles", Response::Correction(c));
         }
         let dist = (0..3)
             .map(|a| u64::from(want[a].abs_diff(before[a])))
@@ -284,7 +292,7 @@ fn settle_output(
         let started = std::time::Instant::now();
         loop {
             std::thread::sleep(Duration::from_millis(20));
-            let c = read(link)?;
+            let c = inject(link, inj)?;
             if c.faults == Faults::LOOP_OVERRUN && overruns < 20 {
                 overruns += 1;
                 match req(link, &Request::ClearFaults)? {
@@ -314,6 +322,115 @@ fn settle_output(
         }
     }
     Ok((longest, overruns))
+}
+
+fn status(link: &mut LinkClient) -> Result<trueaxis_protocol::Telemetry, String> {
+    match req(link, &Request::Status)? {
+        Response::Status(t) => Ok(t),
+        other => err("Status", other),
+    }
+}
+
+/// Before any reference: an injected point's correction is computed, but
+/// the loop's output stays at zero with `not_referenced` (checked for
+/// 300 ms, the injection renewed).
+fn not_referenced_holds_zero(link: &mut LinkClient, inj: &Injection) -> Result<(), String> {
+    let t = status(link)?;
+    if t.referenced != [false; 3] || t.reference_needed != [true; 3] {
+        return Err(format!(
+            "a fresh board: referenced {:?}, needed {:?}",
+            t.referenced, t.reference_needed
+        ));
+    }
+    let started = std::time::Instant::now();
+    while started.elapsed() < Duration::from_millis(300) {
+        let c = match req(link, &Request::Inject(*inj))? {
+            Response::Correction(c) => c,
+            other => return err("Inject", other),
+        };
+        if c.model_corr_nm == [0; 3] {
+            return Err("the test point has no correction to hold back".into());
+        }
+        if c.corr_nm != [0; 3] || !c.faults.contains(Faults::NOT_REFERENCED) {
+            return Err(format!(
+                "not referenced, yet the output is {:?} (faults {:?})",
+                c.corr_nm,
+                c.faults.names().collect::<Vec<_>>()
+            ));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Ok(())
+}
+
+/// References X, Y and Z at 0 (the image's encoders rest at 0): with
+/// `trueaxis reference` when the host tool is given, else with this
+/// program's client. Returns the (re)connected link.
+fn reference_axes(cli: &Cli, link: LinkClient) -> Result<LinkClient, String> {
+    let mut link = match &cli.trueaxis {
+        Some(bin) => {
+            drop(link);
+            let port_arg = format!("tcp://127.0.0.1:{}", cli.port);
+            for axis in ["x", "y", "z"] {
+                run_trueaxis(
+                    bin,
+                    &[
+                        "reference",
+                        "--port",
+                        &port_arg,
+                        "--axis",
+                        axis,
+                        "--at-mm",
+                        "0",
+                        "--json",
+                    ],
+                )?;
+            }
+            connect(cli.port)?
+        }
+        None => {
+            let mut link = link;
+            for axis in 0..3 {
+                match req(&mut link, &Request::Reference { axis, pos_nm: 0 })? {
+                    Response::Ok => {}
+                    other => return err("Reference", other),
+                }
+            }
+            std::thread::sleep(Duration::from_millis(100));
+            link
+        }
+    };
+    let t = status(&mut link)?;
+    if t.referenced != [true; 3] || t.faults.contains(Faults::NOT_REFERENCED) {
+        return Err(format!(
+            "after referencing: referenced {:?}, faults {:?}",
+            t.referenced,
+            t.faults.names().collect::<Vec<_>>()
+        ));
+    }
+    Ok(link)
+}
+
+/// Stops renewing the injection and waits (up to 10 s of wall time) until
+/// the board is back on its sensors; returns how long that took.
+fn injection_lease(link: &mut LinkClient) -> Result<Duration, String> {
+    let started = std::time::Instant::now();
+    loop {
+        let t = status(link)?;
+        if !t.injecting {
+            if t.pos_nm != [0; 3] {
+                return Err(format!(
+                    "the injection ended but the position is {:?}, not the encoders' 0",
+                    t.pos_nm
+                ));
+            }
+            return Ok(started.elapsed());
+        }
+        if started.elapsed() > Duration::from_secs(10) {
+            return Err("the injection outlived its 2 s lease by 8 s".into());
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
 }
 
 /// The end-to-end test.
@@ -407,6 +524,12 @@ pub fn check(cli: &Cli) -> Result<(), String> {
         "e2e: {} injected points, board == host (fixed point, bit exact; {flagged} flagged at the edges)",
         points.len()
     );
+    // Not referenced yet: whatever is injected, the loop's output stays at
+    // zero and says why. Then `trueaxis reference` for each axis.
+    not_referenced_holds_zero(&mut link, &points[300])?;
+    let mut link = reference_axes(cli, link)?;
+    eprintln!("e2e: output held at zero until referenced; X, Y, Z referenced at 0");
+
     // The loop's output, after the slew limit, at points across the
     // trajectory (one beyond the travel, index 49).
     let settle: Vec<Injection> = [0, 49, 150, 300, 450, 599]
@@ -418,6 +541,14 @@ pub fn check(cli: &Cli) -> Result<(), String> {
         "e2e: the loop's output corr_nm settled on the host's evaluation at {} points (longest {} ms; {overruns} emulation overruns cleared on the way)",
         settle.len(),
         longest.as_millis()
+    );
+
+    // The injection's lease: not renewed, it ends by itself (2 s counted
+    // in the board's ticks).
+    let lease = injection_lease(&mut link)?;
+    eprintln!(
+        "e2e: the injection ended {} ms after the last Inject (lease 2 s of board ticks)",
+        lease.as_millis()
     );
 
     // 4. A cut upload: half of another table, then the connection drops.

@@ -109,6 +109,7 @@ fn engine_config() -> EngineConfig {
         pulse_nm: 100,
         // Injected positions jump along the trajectory: no jump check.
         max_speed_nm_per_ms: 0,
+        home_nm: None,
     };
     EngineConfig {
         axes: [axis; 3],

@@ -18,6 +18,8 @@ pub struct Fake {
     pub pulses: [i64; 3],
     /// Most pulses asked for in one call.
     pub max_pulses_per_call: i32,
+    /// Home switches, bit per axis.
+    pub home: u8,
 }
 
 impl Fake {
@@ -28,6 +30,7 @@ impl Fake {
             temps: [20_000; LINK_TEMPS],
             pulses: [0; 3],
             max_pulses_per_call: 0,
+            home: 0,
         }
     }
 }
@@ -35,6 +38,9 @@ impl Fake {
 impl Encoders for Fake {
     fn read_counts(&mut self) -> [i32; 3] {
         self.counts
+    }
+    fn home_switches(&mut self) -> u8 {
+        self.home
     }
 }
 impl TemperatureSource for Fake {
@@ -55,5 +61,14 @@ pub struct FakeClock(pub Cell<u64>);
 impl Clock for FakeClock {
     fn now_us(&self) -> u64 {
         self.0.get()
+    }
+}
+
+/// References every axis of `e` at position 0 for the counts its next tick
+/// reads (the engine corrects only from referenced axes): with counts 0 and
+/// a configured origin 0 the positions are what they were unreferenced.
+pub fn reference_at_zero(e: &mut trueaxis_app::engine::Engine<'_>) {
+    for axis in 0..3 {
+        assert!(e.reference(axis, 0));
     }
 }

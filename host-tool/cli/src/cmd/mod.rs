@@ -14,6 +14,7 @@ pub mod monitor;
 pub mod out;
 pub mod probe;
 pub mod progress;
+pub mod reference;
 pub mod rollback;
 pub mod separate;
 pub mod simulate;
@@ -22,7 +23,7 @@ pub mod upload;
 pub mod workpiece;
 
 /// `--port`: the board a link command (`upload`, `rollback`, `status`,
-/// `monitor`) talks to.
+/// `monitor`, `reference`) talks to.
 #[derive(clap::Args, Debug)]
 pub struct BoardPort {
     /// Serial port of the board (`/dev/ttyACM0`, `COM3`) or `tcp://HOST:PORT`.

@@ -1,5 +1,5 @@
 //! `trueaxis monitor --port PORT` — live telemetry: one line per sample
-//! (positions, temperatures, model and output corrections, model flags,
+//! (positions, per-axis referencing, temperatures, model and output corrections, model flags,
 //! loop timing, faults). With
 //! `--json`, the samples are collected and written as one JSON document
 //! (`{"samples": [...]}`) at the end, so `--count` defaults to 1 there.
@@ -43,9 +43,10 @@ impl Args {
             } else {
                 let faults: Vec<_> = t.faults.names().collect();
                 outln!(
-                    "t={:>10.3}s pos_nm={:?} temps=[{}] corr_nm={:?} model_nm={:?} model_flags={} worst_loop_us={} faults={}",
+                    "t={:>10.3}s pos_nm={:?} ref=[{}] temps=[{}] corr_nm={:?} model_nm={:?} model_flags={} worst_loop_us={} faults={}",
                     t.uptime_us as f64 / 1e6,
                     t.pos_nm,
+                    ref_flags(&t),
                     temps_text(&t.temp_mc),
                     t.corr_nm,
                     t.model_corr_nm,
@@ -75,4 +76,17 @@ impl Args {
         }
         Ok(())
     }
+}
+
+/// Per axis, compact: `x` referenced, `-` not referenced though needed,
+/// `.` needs none (`ref=[x,-,.]`).
+fn ref_flags(t: &trueaxis_protocol::Telemetry) -> String {
+    (0..3)
+        .map(|a| match (t.referenced[a], t.reference_needed[a]) {
+            (true, _) => crate::link::AXES[a],
+            (false, true) => "-",
+            (false, false) => ".",
+        })
+        .collect::<Vec<_>>()
+        .join(",")
 }

@@ -1,14 +1,14 @@
 //! `trueaxis status --port PORT` — the board's identity (firmware,
 //! protocol and table-format versions, active and standby tables) and its
-//! telemetry (positions, temperatures, corrections, model flags, loop
-//! timing, faults). `--clear-faults` first clears the board's latched
+//! telemetry (positions, per-axis referencing, temperatures, corrections,
+//! model flags, loop timing, faults). `--clear-faults` first clears the board's latched
 //! faults (`ClearFaults`), then reports.
 
 use anyhow::Result;
 
 use crate::cmd::out::outln;
 use crate::cmd::{model_flag_names, names_or_none, telemetry_json, temps_text, BoardPort};
-use crate::link::{slot_json, slot_text};
+use crate::link::{axes_text, slot_json, slot_text};
 
 /// Arguments of `trueaxis status`.
 #[derive(clap::Args, Debug)]
@@ -87,6 +87,7 @@ impl Args {
             t.pos_nm,
             if t.injecting { " (injected)" } else { "" }
         )?;
+        outln!("referencing:   {}", axes_text(&t))?;
         outln!("temperatures:  {}", temps_text(&t.temp_mc))?;
         outln!(
             "correction nm: {:?} (model {:?})",
