@@ -101,7 +101,7 @@ fn a_probe_calibrated_on_a_master_ball_corrects_a_part_scan() {
     ]));
     let r = doc["probe"]["probe_radius_mm"].as_f64().unwrap();
     // The radius is reported with a form error of zero mean and no tilt
-    // over the calibrated arc (docs/probe.md): the true probe's in that
+    // over the calibrated arc (docs/on-machine.md): the true probe's in that
     // convention is 0.49715 mm plus the mean part of its form.
     let angles: Vec<f64> = (0..=400)
         .map(|i| (10.0 + 160.0 * i as f64 / 400.0f64).to_radians())

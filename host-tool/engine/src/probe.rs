@@ -1,4 +1,4 @@
-//! On-machine probing (docs/probe.md): the probe's effective radius and its
+//! On-machine probing (docs/on-machine.md): the probe's effective radius and its
 //! form error as a function of contact angle, calibrated on a master ball,
 //! and the correction of a workpiece scan with them.
 //!
@@ -44,7 +44,7 @@ pub const PROBE_FORMAT: &str = "trueaxis-probe/1";
 pub const MAX_ORDER: usize = 12;
 
 /// A calibrated probe: what `probe calibrate` writes and `probe correct`
-/// reads (docs/probe.md).
+/// reads (docs/on-machine.md).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ProbeFile {
     /// [`PROBE_FORMAT`].
@@ -537,7 +537,7 @@ pub fn rad(deg: f64) -> f64 {
 
 /// Reads a probe scan: a CSV with a header naming the two columns of the
 /// plane (`x_mm,z_mm` for `plane = ["x", "z"]`), `#` comment lines, one
-/// probe-centre position per row (docs/probe.md). Other columns are
+/// probe-centre position per row (docs/on-machine.md). Other columns are
 /// ignored. Errors name the file, line and column.
 pub fn read_scan(text: &str, name: &str, plane: [&str; 2]) -> Result<Vec<[f64; 2]>> {
     let cols = [format!("{}_mm", plane[0]), format!("{}_mm", plane[1])];

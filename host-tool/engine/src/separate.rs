@@ -1,4 +1,4 @@
-//! Error separation (docs/probe.md § separate): the reversal method splits
+//! Error separation (docs/on-machine.md § separate): the reversal method splits
 //! a straightness measurement into the part's form and the slide's
 //! straightness. Run 1 (part at 0°, probe on one side) reads
 //! `T1(x) = P(x) + S(x)`; after turning the part 180° about the travel axis

@@ -1,5 +1,5 @@
 //! Workpiece form from on-machine probing of a turned or ground part, and
-//! the correction pass (docs/probe.md § workpiece): points along several
+//! the correction pass (docs/on-machine.md § workpiece): points along several
 //! generatrices (lines along z at fixed rotation angles c), the radial
 //! deviation from the nominal at each. The seed fits a least-squares cubic
 //! along each generatrix and across the circumference; here the surface is

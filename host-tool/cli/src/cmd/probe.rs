@@ -1,6 +1,6 @@
 //! `trueaxis probe calibrate` and `trueaxis probe correct` — the probe's
 //! effective radius and form error from a master-ball scan, and a workpiece
-//! scan corrected with them (docs/probe.md).
+//! scan corrected with them (docs/on-machine.md).
 
 use std::fmt::Write as _;
 use std::path::PathBuf;

@@ -1,5 +1,5 @@
 //! `trueaxis separate reversal` — part form and slide straightness from
-//! two runs, the part turned 180° between them (docs/probe.md § separate).
+//! two runs, the part turned 180° between them (docs/on-machine.md § separate).
 
 use std::fmt::Write as _;
 use std::path::PathBuf;

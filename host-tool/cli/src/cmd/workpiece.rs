@@ -1,6 +1,6 @@
 //! `trueaxis workpiece` — a turned or ground part's form from on-machine
 //! probing, the correction pass as G-code and CSV, and the part's history
-//! pass by pass (docs/probe.md § workpiece).
+//! pass by pass (docs/on-machine.md § workpiece).
 
 use std::fmt::Write as _;
 use std::path::PathBuf;

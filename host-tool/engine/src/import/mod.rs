@@ -155,7 +155,7 @@ pub fn read_columns(
 
 /// Reads named numeric columns of a small CSV (a header line, `#` comment
 /// lines, other columns ignored): probe scans, reversal runs, workpiece
-/// scans (docs/probe.md). A `*_mm` value must lie within ±10 000 mm, a
+/// scans (docs/on-machine.md). A `*_mm` value must lie within ±10 000 mm, a
 /// `*_um` value within ±10 000 µm (the measurement CSV's plausibility
 /// limits), a `*_deg` value within ±3600°; `what` says what the columns
 /// are in the message for a header without them. Returns one row per line
