@@ -97,3 +97,47 @@ fn the_floor_is_the_simulated_noise_across_plans_and_presets() {
     }
     assert!(bad.is_empty(), "{bad:#?}");
 }
+
+/// `at_noise_floor` only when every target is within 1.3× its floor: the
+/// wavy preset's long waves (~1 µm against 0.2 µm of noise) are left by
+/// cubic19 and no candidate names them, so the verdict is
+/// `above_noise_floor` with the targets, ratios and worst cells; the plain
+/// preset, which cubic19 holds, is at the floor.
+#[test]
+fn at_noise_floor_only_when_the_residual_is_at_the_floor() {
+    use trueaxis_engine::diagnose::{diagnose, Options, Verdict};
+    let wavy = sim("mill800-wavy", &["grid:50"], &[], 0.2, 5);
+    let d = diagnose(&wavy, &Options::seed("cubic19")).unwrap();
+    assert_eq!(d.verdict, Verdict::AboveNoiseFloor, "{:#?}", d.unexplained);
+    assert!(d.candidates.iter().all(|c| !c.significant));
+    let left: Vec<&str> = d.unexplained.iter().map(|u| u.target.as_str()).collect();
+    assert!(left.contains(&"ex") && left.contains(&"ey"), "{left:?}");
+    for u in &d.unexplained {
+        assert!(u.ratio > 1.3 && u.region.is_some(), "{u:?}");
+        let nf = d.noise_floor_um[&u.target].unwrap();
+        assert!((0.7..=1.4).contains(&(nf / 0.2)), "{nf}");
+    }
+    assert_eq!(
+        serde_json::to_value(&d).unwrap()["verdict"],
+        "above_noise_floor"
+    );
+
+    // improve stops there and says so, with the worst cell.
+    let out = std::env::temp_dir().join(format!("trueaxis-noise-{}.json", std::process::id()));
+    let imp = trueaxis_engine::improve::improve(&wavy, "cubic19", &out, |_| {}).unwrap();
+    let last = imp.steps.last().unwrap();
+    assert_eq!(imp.verdict, Verdict::AboveNoiseFloor);
+    let outcome = last.outcome();
+    assert!(
+        outcome.starts_with("no significant candidate left, but above the noise floor: ex ")
+            && outcome.contains("worst in x "),
+        "{outcome}"
+    );
+    let _ = std::fs::remove_file(&out);
+    let _ = std::fs::remove_file(trueaxis_engine::history::history_path(&out));
+
+    let plain = sim("mill800", &["grid:50"], &[], 0.2, 5);
+    let d = diagnose(&plain, &Options::seed("cubic19")).unwrap();
+    assert_eq!(d.verdict, Verdict::AtNoiseFloor, "{:#?}", d.unexplained);
+    assert!(d.unexplained.is_empty());
+}

@@ -526,7 +526,7 @@ fn demo_stage(
                 );
             }
         }
-        if st.verdict == Verdict::AtNoiseFloor {
+        if st.verdict != Verdict::MissingEffect {
             let nf: Vec<String> = st
                 .noise_floor_um
                 .iter()

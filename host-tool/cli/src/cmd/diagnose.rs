@@ -114,9 +114,18 @@ pub fn text(d: &Diagnosis, data_path: &Path) -> String {
     }
     match d.verdict {
         Verdict::MissingEffect => s.push_str("verdict: missing_effect\n"),
-        Verdict::AtNoiseFloor => {
-            s.push_str("verdict: at_noise_floor — no candidate is significant\n")
+        Verdict::AtNoiseFloor => s.push_str(
+            "verdict: at_noise_floor — no candidate is significant and every target is within 1.3× its noise floor\n",
+        ),
+        Verdict::AboveNoiseFloor => {
+            s.push_str("verdict: above_noise_floor — no candidate is significant, but systematic error is left:\n")
         }
+    }
+    if d.verdict == Verdict::MissingEffect && !d.unexplained.is_empty() {
+        s.push_str("left above the noise floor after the path:\n");
+    }
+    for u in &d.unexplained {
+        s.push_str(&format!("  {}\n", u.text()));
     }
     s.push_str("candidates (best first):\n");
     for (i, c) in d
