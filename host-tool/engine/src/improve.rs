@@ -12,6 +12,7 @@ use anyhow::Result;
 use serde::Serialize;
 
 use crate::data::Dataset;
+use crate::diagnose::outliers::{self, Outlier};
 use crate::diagnose::{self, Options, Verdict};
 use crate::effect::Effect;
 use crate::fit::{self, FitOptions};
@@ -121,14 +122,20 @@ pub struct Improvement {
     /// What the user should know about the data (`aux_misspelled`,
     /// `aux_columns`), as diagnose's `warnings`.
     pub warnings: Vec<diagnose::Warning>,
+    /// Readings left out of every fit as outliers, found with the final
+    /// model (empty with `keep_outliers`).
+    pub outliers: Vec<Outlier>,
 }
 
 /// Runs the loop on `data`, writing each fit to `out` (and its history);
-/// `on_step` sees each step as it completes (for printing).
+/// `on_step` sees each step as it completes (for printing). Outliers are
+/// found with each step's model and left out of its fit and diagnosis
+/// (`diagnose::outliers`) unless `keep_outliers`.
 pub fn improve(
     data: &Dataset,
     seed: &str,
     out: &std::path::Path,
+    keep_outliers: bool,
     mut on_step: impl FnMut(&ImproveStep),
 ) -> Result<Improvement> {
     let mut adds: Vec<String> = Vec::new();
@@ -139,14 +146,24 @@ pub fn improve(
             .iter()
             .map(|a| Effect::parse(a))
             .collect::<Result<Vec<_>>>()?;
-        let model = fit::fit(data, seed, &effects, &FitOptions::default())?;
+        let found = if keep_outliers {
+            Vec::new()
+        } else {
+            outliers::find(data, seed, &effects)?
+        };
+        let clean = outliers::without(data, &found);
+        let mut model = fit::fit(&clean, seed, &effects, &FitOptions::default())?;
+        // The model was fitted to the measurement file, whichever readings
+        // the screen left out at this step: the history follows the file.
+        model.data.sha256 = crate::import::content_hash(data);
         history::save_with_model(out, &model)?;
         let d = diagnose::diagnose(
-            data,
+            &clean,
             &Options {
                 seed: seed.to_string(),
                 adds: adds.clone(),
                 follow_path: false,
+                keep_outliers: true,
             },
         )?;
         let above_noise_floor = d
@@ -193,6 +210,7 @@ pub fn improve(
                 steps,
                 verdict: d.verdict,
                 warnings: Vec::new(),
+                outliers: found,
             });
         }
     }

@@ -124,7 +124,7 @@ fn at_noise_floor_only_when_the_residual_is_at_the_floor() {
 
     // improve stops there and says so, with the worst cell.
     let out = std::env::temp_dir().join(format!("trueaxis-noise-{}.json", std::process::id()));
-    let imp = trueaxis_engine::improve::improve(&wavy, "cubic19", &out, |_| {}).unwrap();
+    let imp = trueaxis_engine::improve::improve(&wavy, "cubic19", &out, false, |_| {}).unwrap();
     let last = imp.steps.last().unwrap();
     assert_eq!(imp.verdict, Verdict::AboveNoiseFloor);
     let outcome = last.outcome();

@@ -491,7 +491,7 @@ fn demo_stage(
             .collect::<Vec<_>>()
             .join(", ")
     };
-    let r = improve(data, seed, model_path, |st| {
+    let r = improve(data, seed, model_path, false, |st| {
         match st.added_effects.as_slice() {
             [] => {
                 let _ = writeln!(

@@ -14,7 +14,9 @@
 //! another candidate → `confounded`), then the model is partialled out
 //! (Frisch–Waugh–Lovell) and the candidate scored: ΔBIC, the gain in
 //! block-held-out RMS, and its physical parameter with a 95 % interval and a
-//! plausibility check. A candidate is significant only with ΔBIC < −10, a
+//! plausibility check. Readings far off the model and off their
+//! neighbours (beam breaks) are found first and left out of all of it
+//! (`outliers`; `keep_outliers` keeps them). A candidate is significant only with ΔBIC < −10, a
 //! held-out gain ≥ 10 % and a ΔBIC at least 10 better than the best
 //! competing (overlapping) candidate. Without one the verdict is
 //! `at_noise_floor` only when every target's residual is within 1.3× its
@@ -40,6 +42,7 @@
 mod candidates;
 pub mod linalg;
 pub mod noise;
+pub mod outliers;
 mod path;
 pub mod periodogram;
 mod physical;
@@ -107,6 +110,9 @@ pub struct Options {
     /// Follow the BIC-ordered path past the first effect (several missing
     /// effects). `improve` turns it off: it refits between steps itself.
     pub follow_path: bool,
+    /// Keep outlying readings in (`--keep-outliers`); by default they are
+    /// found with the model (`outliers::find`), reported and left out.
+    pub keep_outliers: bool,
 }
 
 impl Options {
@@ -116,6 +122,7 @@ impl Options {
             seed: seed.to_string(),
             adds: Vec::new(),
             follow_path: true,
+            keep_outliers: false,
         }
     }
 }
@@ -397,6 +404,8 @@ pub struct Diagnosis {
     pub worst_regions: Vec<Region>,
     /// Design and identifiability warnings.
     pub warnings: Vec<Warning>,
+    /// Readings left out as outliers (empty with `keep_outliers`).
+    pub outliers: Vec<outliers::Outlier>,
     /// How hold-out blocks were formed (`pass_id` or `spatial cells`).
     pub hold_out: String,
     /// Plot material.
@@ -413,10 +422,26 @@ impl Diagnosis {
 
 /// Runs the diagnosis of `data` with the model of `opts`.
 pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
+    let effects = opts
+        .adds
+        .iter()
+        .map(|a| Effect::parse(a))
+        .collect::<Result<Vec<_>>>()?;
+    // Outliers first: left in, they would lift the noise floor and be
+    // "explained" by some effect. (A seed that is not linear is refused
+    // below, with its own message.)
+    let linear = matches!(
+        crate::model::Seed::parse(&opts.seed),
+        Ok(crate::model::Seed::Cubic19 | crate::model::Seed::Kinematic)
+    );
+    let outliers = if opts.keep_outliers || !linear {
+        Vec::new()
+    } else {
+        outliers::find(data, &opts.seed, &effects)?
+    };
+    let cleaned = (!outliers.is_empty()).then(|| outliers::without(data, &outliers));
+    let data = cleaned.as_ref().unwrap_or(data);
     let norm = Norm::from_data(data);
-    for a in &opts.adds {
-        Effect::parse(a)?;
-    }
     let model = std::iter::once(opts.seed.clone())
         .chain(opts.adds.iter().cloned())
         .collect::<Vec<_>>()
@@ -515,6 +540,7 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
         path,
         worst_regions: regions,
         warnings,
+        outliers,
         hold_out,
         evidence: ev,
     })
