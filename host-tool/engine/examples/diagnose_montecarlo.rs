@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use anyhow::{Context, Result};
 use serde_json::json;
 use trueaxis_engine::diagnose::synth::{generate, Hidden, SynthConfig};
-use trueaxis_engine::diagnose::{diagnose, library, Options, Verdict};
+use trueaxis_engine::diagnose::{diagnose, library, Options};
 
 const NOISE_UM: f64 = 0.3;
 
@@ -122,7 +122,7 @@ fn run_trial(id: usize, sc: Scenario, trial: usize, out: &std::path::Path) -> Re
         "noise_um": NOISE_UM,
         "trial": trial,
         "ours": {
-            "verdict": match d.verdict { Verdict::MissingEffect => "missing_effect", Verdict::AtNoiseFloor => "at_noise_floor" },
+            "verdict": d.verdict.as_str(),
             "best": best,
             "correct": correct,
             "path": d.path.iter().map(|s| s.add.clone()).collect::<Vec<_>>(),

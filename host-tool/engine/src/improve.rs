@@ -1,5 +1,6 @@
 //! The improve loop — fit, diagnose, add the best significant effect of
-//! each target, refit — until the diagnosis finds nothing significant:
+//! each target, refit — until the diagnosis finds nothing significant
+//! (`at_noise_floor`, or `above_noise_floor` when the residual is not):
 //! what `trueaxis improve` and the demo's diagnosis stage both run. Every
 //! fit is written to the model file and appended to its history, so
 //! `trueaxis history` shows the same steps afterwards. The loop reports
@@ -11,6 +12,7 @@ use anyhow::Result;
 use serde::Serialize;
 
 use crate::data::Dataset;
+use crate::diagnose::outliers::{self, Outlier};
 use crate::diagnose::{self, Options, Verdict};
 use crate::effect::Effect;
 use crate::fit::{self, FitOptions};
@@ -57,9 +59,12 @@ pub struct ImproveStep {
     /// The diagnosis of this fit.
     pub verdict: Verdict,
     /// Targets whose RMS is still more than `ABOVE_NOISE_RATIO` × their noise
-    /// floor, with the ratio: `at_noise_floor` says no candidate is
-    /// significant, this says whether the data is really explained.
+    /// floor, with the ratio (the diagnosis' `unexplained`).
     pub above_noise_floor: BTreeMap<String, f64>,
+    /// The same targets with RMS, floor and worst region, for the closing
+    /// line (the JSON has the ratios above).
+    #[serde(skip)]
+    pub unexplained: Vec<diagnose::Unexplained>,
 }
 
 /// `"added"`, `"evidence"` (the best effect's, or null) and
@@ -84,20 +89,20 @@ fn ser_added<S: serde::Serializer>(
 }
 
 impl ImproveStep {
-    /// What the step's verdict means, in words (for the closing line).
+    /// What the step's verdict means, in words (for the closing line):
+    /// "at the noise floor" only when the diagnosis says so — every target
+    /// within `ABOVE_NOISE_RATIO`× its floor.
     pub fn outcome(&self) -> String {
         match self.verdict {
             Verdict::MissingEffect => "stopped after the step limit".into(),
-            Verdict::AtNoiseFloor if self.above_noise_floor.is_empty() => {
-                "at the noise floor".into()
-            }
-            Verdict::AtNoiseFloor => format!(
-                "no significant candidate left, but above the noise floor ({})",
-                self.above_noise_floor
+            Verdict::AtNoiseFloor => "at the noise floor".into(),
+            Verdict::AboveNoiseFloor => format!(
+                "no significant candidate left, but above the noise floor: {}",
+                self.unexplained
                     .iter()
-                    .map(|(t, r)| format!("{t} {r:.1}×"))
+                    .map(diagnose::Unexplained::text)
                     .collect::<Vec<_>>()
-                    .join(", ")
+                    .join("; ")
             ),
         }
     }
@@ -117,14 +122,20 @@ pub struct Improvement {
     /// What the user should know about the data (`aux_misspelled`,
     /// `aux_columns`), as diagnose's `warnings`.
     pub warnings: Vec<diagnose::Warning>,
+    /// Readings left out of every fit as outliers, found with the final
+    /// model (empty with `keep_outliers`).
+    pub outliers: Vec<Outlier>,
 }
 
 /// Runs the loop on `data`, writing each fit to `out` (and its history);
-/// `on_step` sees each step as it completes (for printing).
+/// `on_step` sees each step as it completes (for printing). Outliers are
+/// found with each step's model and left out of its fit and diagnosis
+/// (`diagnose::outliers`) unless `keep_outliers`.
 pub fn improve(
     data: &Dataset,
     seed: &str,
     out: &std::path::Path,
+    keep_outliers: bool,
     mut on_step: impl FnMut(&ImproveStep),
 ) -> Result<Improvement> {
     let mut adds: Vec<String> = Vec::new();
@@ -135,24 +146,30 @@ pub fn improve(
             .iter()
             .map(|a| Effect::parse(a))
             .collect::<Result<Vec<_>>>()?;
-        let model = fit::fit(data, seed, &effects, &FitOptions::default())?;
+        let found = if keep_outliers {
+            Vec::new()
+        } else {
+            outliers::find(data, seed, &effects)?
+        };
+        let clean = outliers::without(data, &found);
+        let mut model = fit::fit(&clean, seed, &effects, &FitOptions::default())?;
+        // The model was fitted to the measurement file, whichever readings
+        // the screen left out at this step: the history follows the file.
+        model.data.sha256 = crate::import::content_hash(data);
         history::save_with_model(out, &model)?;
         let d = diagnose::diagnose(
-            data,
+            &clean,
             &Options {
                 seed: seed.to_string(),
                 adds: adds.clone(),
                 follow_path: false,
+                keep_outliers: true,
             },
         )?;
-        let above_noise_floor = model
-            .stats
-            .rms_um
+        let above_noise_floor = d
+            .unexplained
             .iter()
-            .filter_map(|(t, rms)| {
-                let nf = d.noise_floor_um.get(t).copied().flatten()?;
-                Some((t.clone(), diagnose::above_noise(*rms, nf)?))
-            })
+            .map(|u| (u.target.clone(), u.ratio))
             .collect();
         let step = ImproveStep {
             step: steps.len() + 1,
@@ -163,6 +180,7 @@ pub fn improve(
             noise_floor_um: d.noise_floor_um.clone(),
             verdict: d.verdict,
             above_noise_floor,
+            unexplained: d.unexplained.clone(),
         };
         on_step(&step);
         steps.push(step);
@@ -192,6 +210,7 @@ pub fn improve(
                 steps,
                 verdict: d.verdict,
                 warnings: Vec::new(),
+                outliers: found,
             });
         }
     }

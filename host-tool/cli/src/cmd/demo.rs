@@ -491,7 +491,7 @@ fn demo_stage(
             .collect::<Vec<_>>()
             .join(", ")
     };
-    let r = improve(data, seed, model_path, |st| {
+    let r = improve(data, seed, model_path, false, |st| {
         match st.added_effects.as_slice() {
             [] => {
                 let _ = writeln!(
@@ -526,7 +526,7 @@ fn demo_stage(
                 );
             }
         }
-        if st.verdict == Verdict::AtNoiseFloor {
+        if st.verdict != Verdict::MissingEffect {
             let nf: Vec<String> = st
                 .noise_floor_um
                 .iter()

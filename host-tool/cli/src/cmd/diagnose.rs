@@ -29,6 +29,10 @@ pub struct Args {
     /// Write the evidence plots (SVG) and an index.html into this directory.
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
+    /// Keep outlying readings (beam breaks, bad readings) in; by default
+    /// they are found, listed with their file line and left out.
+    #[arg(long)]
+    pub keep_outliers: bool,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -50,6 +54,7 @@ impl Args {
                 seed,
                 adds,
                 follow_path: true,
+                keep_outliers: self.keep_outliers,
             },
         )
         .with_context(|| format!("{}: cannot diagnose", self.data.display()))?;
@@ -170,9 +175,18 @@ pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path) -> String {
     }
     match d.verdict {
         Verdict::MissingEffect => s.push_str("verdict: missing_effect\n"),
-        Verdict::AtNoiseFloor => {
-            s.push_str("verdict: at_noise_floor — no candidate is significant\n")
+        Verdict::AtNoiseFloor => s.push_str(
+            "verdict: at_noise_floor — no candidate is significant and every target is within 1.3× its noise floor\n",
+        ),
+        Verdict::AboveNoiseFloor => {
+            s.push_str("verdict: above_noise_floor — no candidate is significant, but systematic error is left:\n")
         }
+    }
+    if d.verdict == Verdict::MissingEffect && !d.unexplained.is_empty() {
+        s.push_str("left above the noise floor after the path:\n");
+    }
+    for u in &d.unexplained {
+        s.push_str(&format!("  {}\n", u.text()));
     }
     s.push_str("candidates (best first):\n");
     for (i, c) in d
@@ -221,6 +235,16 @@ pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path) -> String {
                 r.rms_um,
                 r.points
             ));
+        }
+    }
+    if !d.outliers.is_empty() {
+        s.push_str(&format!(
+            "outliers ({}, left out; --keep-outliers keeps them):\n",
+            d.outliers.len()
+        ));
+        let src = data_path.display().to_string();
+        for o in &d.outliers {
+            s.push_str(&format!("  {}\n", o.text(&src)));
         }
     }
     if !d.warnings.is_empty() {

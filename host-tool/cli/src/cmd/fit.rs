@@ -11,6 +11,7 @@ use anyhow::{Context, Result};
 use crate::cmd::out::{self, outln};
 use crate::input;
 use crate::workflow::model_output;
+use trueaxis_engine::diagnose::outliers;
 use trueaxis_engine::effect::Effect;
 use trueaxis_engine::fit::{self, nn::NnOptions, FitOptions};
 
@@ -43,6 +44,11 @@ pub struct Args {
     /// Network training: RNG seed of the initial weights (nn only).
     #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     pub seed: u64,
+    /// Keep outlying readings (beam breaks, bad readings) in; by default
+    /// they are found with a linear screen (the seed, or cubic19 for nn and
+    /// grid), listed with their file line and left out of the fit.
+    #[arg(long)]
+    pub keep_outliers: bool,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -69,10 +75,26 @@ impl Args {
             },
             progress: crate::cmd::progress::bar(!self.json),
         };
+        // Outliers: a screen that cannot run (too few points for its
+        // linear model) is said, and the fit below then names the problem
+        // itself when it has the same one.
+        let mut screen_warning = None;
+        let found = if self.keep_outliers {
+            Vec::new()
+        } else {
+            outliers::find(&data, &self.model, &adds).unwrap_or_else(|e| {
+                screen_warning = Some(format!("outliers: not screened ({e:#})"));
+                Vec::new()
+            })
+        };
+        let clean = outliers::without(&data, &found);
         // The fit's own messages name the target (`ex: 3 distinct points
         // but the model has 4 terms`); the file is named here.
-        let mut model = fit::fit(&data, &self.model, &adds, &opts)
+        let mut model = fit::fit(&clean, &self.model, &adds, &opts)
             .with_context(|| format!("{}: cannot fit {}", self.data.display(), self.model))?;
+        model.stats.warnings.extend(screen_warning);
+        // Fitted to the file (less its outliers): the history follows the file.
+        model.data.sha256 = trueaxis_engine::import::content_hash(&data);
         // Fit's warnings are strings (MODEL.json `stats.warnings`); the
         // code leads, as `warning (code): …` elsewhere.
         for (code, detail) in input::data_warnings(&data) {
@@ -85,6 +107,7 @@ impl Args {
         if self.json {
             let mut doc = model.summary_json(Some(&out));
             input::add_skipped_count(&mut doc, &data);
+            doc["outliers"] = serde_json::to_value(&found)?;
             out::json(&doc)?;
             return Ok(());
         }
@@ -126,6 +149,16 @@ impl Args {
             )?;
         }
         outln!("  hold-out: {}", s.holdout)?;
+        if !found.is_empty() {
+            outln!(
+                "  outliers ({}, left out; --keep-outliers keeps them):",
+                found.len()
+            )?;
+            let src = self.data.display().to_string();
+            for o in &found {
+                outln!("    {}", o.text(&src))?;
+            }
+        }
         outln!("  model written to {}", out.display())?;
         Ok(())
     }

@@ -25,6 +25,10 @@ pub struct Args {
     /// Where to write the final model (default: `<data>.model.json`).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    /// Keep outlying readings (beam breaks, bad readings) in; by default
+    /// they are found, listed with their file line and left out of every fit.
+    #[arg(long)]
+    pub keep_outliers: bool,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -56,7 +60,7 @@ impl Args {
         // stops the printing, not the loop — the model file is the result —
         // and is returned once the loop is done.
         let mut write_err: Option<anyhow::Error> = None;
-        let r = improve(&data, &seed, &out, |s| {
+        let r = improve(&data, &seed, &out, self.keep_outliers, |s| {
             if json || write_err.is_some() {
                 return;
             }
@@ -91,6 +95,17 @@ impl Args {
             input::add_skipped_count(&mut doc, &data);
             out::json_pretty(&doc)?;
         } else {
+            if !r.outliers.is_empty() {
+                let src = self.data.display().to_string();
+                let mut text = format!(
+                    "outliers ({}, left out; --keep-outliers keeps them):\n",
+                    r.outliers.len()
+                );
+                for o in &r.outliers {
+                    text.push_str(&format!("  {}\n", o.text(&src)));
+                }
+                out::print(&text)?;
+            }
             outln!(
                 "{}: model {} written to {}",
                 r.steps.last().map_or(String::new(), ImproveStep::outcome),

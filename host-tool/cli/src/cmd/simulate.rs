@@ -51,6 +51,10 @@ pub struct Args {
     /// Time spent at each point (settle + read), s.
     #[arg(long, default_value_t = 3.0, allow_negative_numbers = true)]
     pub dwell_s: f64,
+    /// Spikes on top of the noise, `FRAC,AMP_UM`: each error value with
+    /// probability FRAC gets ±AMP_UM…2·AMP_UM (beam breaks, e.g. 0.005,20).
+    #[arg(long, value_name = "FRAC,AMP_UM")]
+    pub spikes: Option<String>,
     /// Output CSV.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -80,6 +84,7 @@ impl Args {
         cfg.tool_mm = self.tool_mm;
         cfg.timing.feed_mm_s = self.feed_mm_s;
         cfg.timing.dwell_s = self.dwell_s;
+        cfg.spikes = self.spikes.as_deref().map(str::parse).transpose()?;
         if let Some(r) = &self.reference {
             let v: Vec<f64> = r
                 .split(',')
@@ -131,6 +136,7 @@ impl Args {
                 "columns": import::column_names(&data),
                 "seed": cfg.seed,
                 "noise_um": cfg.noise_um,
+                "spikes": cfg.spikes.map(|s| s.to_string()),
                 "plans": cfg.plans.iter().map(ToString::to_string).collect::<Vec<_>>(),
                 "effects": cfg.effects.iter().map(ToString::to_string).collect::<Vec<_>>(),
                 "warnings": warnings,

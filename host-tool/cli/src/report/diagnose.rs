@@ -85,10 +85,7 @@ pub fn write_with_history(
     page.paragraph(format!(
         "Model {}; verdict {}; hold-out: {}.",
         d.model,
-        match d.verdict {
-            trueaxis_engine::diagnose::Verdict::MissingEffect => "missing_effect",
-            trueaxis_engine::diagnose::Verdict::AtNoiseFloor => "at_noise_floor",
-        },
+        d.verdict.as_str(),
         d.hold_out
     ));
     let rows: Vec<Vec<String>> = d

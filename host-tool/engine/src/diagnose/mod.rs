@@ -14,10 +14,14 @@
 //! another candidate → `confounded`), then the model is partialled out
 //! (Frisch–Waugh–Lovell) and the candidate scored: ΔBIC, the gain in
 //! block-held-out RMS, and its physical parameter with a 95 % interval and a
-//! plausibility check. A candidate is significant only with ΔBIC < −10, a
+//! plausibility check. Readings far off the model and off their
+//! neighbours (beam breaks) are found first and left out of all of it
+//! (`outliers`; `keep_outliers` keeps them). A candidate is significant only with ΔBIC < −10, a
 //! held-out gain ≥ 10 % and a ΔBIC at least 10 better than the best
-//! competing (overlapping) candidate; otherwise the verdict is
-//! `at_noise_floor`. An implausible parameter does not block acceptance
+//! competing (overlapping) candidate. Without one the verdict is
+//! `at_noise_floor` only when every target's residual is within 1.3× its
+//! noise floor, else `above_noise_floor`, with what is left and where
+//! (`unexplained`). An implausible parameter does not block acceptance
 //! (the effect is still what explains the error): it is flagged with an
 //! `implausible_parameter` warning, and a residual left clearly above the
 //! noise floor with `above_noise_floor`, whatever the verdict. Several missing effects are found by a BIC-ordered
@@ -38,6 +42,7 @@
 mod candidates;
 pub mod linalg;
 pub mod noise;
+pub mod outliers;
 mod path;
 pub mod periodogram;
 mod physical;
@@ -105,6 +110,9 @@ pub struct Options {
     /// Follow the BIC-ordered path past the first effect (several missing
     /// effects). `improve` turns it off: it refits between steps itself.
     pub follow_path: bool,
+    /// Keep outlying readings in (`--keep-outliers`); by default they are
+    /// found with the model (`outliers::find`), reported and left out.
+    pub keep_outliers: bool,
 }
 
 impl Options {
@@ -114,18 +122,69 @@ impl Options {
             seed: seed.to_string(),
             adds: Vec::new(),
             follow_path: true,
+            keep_outliers: false,
         }
     }
 }
 
-/// `at_noise_floor` or `missing_effect` (docs/cli.md).
+/// `missing_effect`, `at_noise_floor` or `above_noise_floor` (docs/cli.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Verdict {
     /// At least one candidate is significant.
     MissingEffect,
-    /// No candidate is significant.
+    /// No candidate is significant and every target's residual is within
+    /// [`ABOVE_NOISE_RATIO`]× its noise floor.
     AtNoiseFloor,
+    /// No candidate is significant, but a target's residual is more than
+    /// [`ABOVE_NOISE_RATIO`]× its noise floor: something systematic is left
+    /// that no candidate explains (`unexplained` says what and where).
+    AboveNoiseFloor,
+}
+
+impl Verdict {
+    /// The JSON string.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Verdict::MissingEffect => "missing_effect",
+            Verdict::AtNoiseFloor => "at_noise_floor",
+            Verdict::AboveNoiseFloor => "above_noise_floor",
+        }
+    }
+}
+
+/// A target whose final residual is above its noise floor.
+#[derive(Clone, Debug, Serialize)]
+pub struct Unexplained {
+    /// `ex`, `ey` or `ez`.
+    pub target: String,
+    /// In-sample residual RMS after the path, µm.
+    pub rms_um: f64,
+    /// Its noise floor, µm.
+    pub noise_floor_um: f64,
+    /// RMS over the floor (> [`ABOVE_NOISE_RATIO`]).
+    pub ratio: f64,
+    /// The cell where that residual is worst (diagnose's 4×4×4 cells), if
+    /// one has enough points.
+    pub region: Option<Region>,
+}
+
+impl Unexplained {
+    /// `ex 2.4× its noise floor (0.480 µm RMS against 0.200), worst in x 600…800, y 150…350 (0.900 µm)`.
+    pub fn text(&self) -> String {
+        let mut s = format!(
+            "{} {:.1}× its noise floor ({:.3} µm RMS against {:.3})",
+            self.target, self.ratio, self.rms_um, self.noise_floor_um
+        );
+        if let Some(r) = &self.region {
+            s.push_str(&format!(
+                ", worst in {} ({:.3} µm)",
+                crate::regions::bbox_text(&r.bbox_mm),
+                r.rms_um
+            ));
+        }
+        s
+    }
 }
 
 /// A physical parameter of a candidate with its 95 % interval.
@@ -329,8 +388,13 @@ pub struct Diagnosis {
     pub noise_floor_um: BTreeMap<String, Option<f64>>,
     /// How each noise floor was estimated.
     pub noise_method: BTreeMap<String, Option<NoiseMethod>>,
-    /// `missing_effect` or `at_noise_floor`.
+    /// `missing_effect`, `at_noise_floor` or `above_noise_floor`.
     pub verdict: Verdict,
+    /// Targets whose residual after the path is more than
+    /// [`ABOVE_NOISE_RATIO`]× their noise floor, with where it is worst:
+    /// what `above_noise_floor` (or a `missing_effect` path that stops
+    /// short of the noise) leaves.
+    pub unexplained: Vec<Unexplained>,
     /// Candidates, best first.
     pub candidates: Vec<Candidate>,
     /// The BIC-ordered path of effects that pass, per target in order.
@@ -340,6 +404,8 @@ pub struct Diagnosis {
     pub worst_regions: Vec<Region>,
     /// Design and identifiability warnings.
     pub warnings: Vec<Warning>,
+    /// Readings left out as outliers (empty with `keep_outliers`).
+    pub outliers: Vec<outliers::Outlier>,
     /// How hold-out blocks were formed (`pass_id` or `spatial cells`).
     pub hold_out: String,
     /// Plot material.
@@ -356,10 +422,26 @@ impl Diagnosis {
 
 /// Runs the diagnosis of `data` with the model of `opts`.
 pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
+    let effects = opts
+        .adds
+        .iter()
+        .map(|a| Effect::parse(a))
+        .collect::<Result<Vec<_>>>()?;
+    // Outliers first: left in, they would lift the noise floor and be
+    // "explained" by some effect. (A seed that is not linear is refused
+    // below, with its own message.)
+    let linear = matches!(
+        crate::model::Seed::parse(&opts.seed),
+        Ok(crate::model::Seed::Cubic19 | crate::model::Seed::Kinematic)
+    );
+    let outliers = if opts.keep_outliers || !linear {
+        Vec::new()
+    } else {
+        outliers::find(data, &opts.seed, &effects)?
+    };
+    let cleaned = (!outliers.is_empty()).then(|| outliers::without(data, &outliers));
+    let data = cleaned.as_ref().unwrap_or(data);
     let norm = Norm::from_data(data);
-    for a in &opts.adds {
-        Effect::parse(a)?;
-    }
     let model = std::iter::once(opts.seed.clone())
         .chain(opts.adds.iter().cloned())
         .collect::<Vec<_>>()
@@ -374,6 +456,7 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
     let mut path = Vec::new();
     let mut regions = Vec::new();
     let mut hold_out = String::new();
+    let mut unexplained = Vec::new();
     for t in data.targets() {
         let (rows, y): (Vec<usize>, Vec<f64>) = data.measured(t).unzip();
         let (fold, nfolds, how) = hold_out_blocks(data, &rows, &norm);
@@ -401,6 +484,17 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
         let nf = noise_floor(data, &td.rows, &st.resid);
         if let Some(nf) = &nf {
             warnings.extend(above_noise_warning(&tn, st.rms(), nf, !first));
+            if let Some(ratio) = above_noise(st.rms(), nf.sigma_um) {
+                unexplained.push(Unexplained {
+                    target: tn.clone(),
+                    rms_um: st.rms(),
+                    noise_floor_um: nf.sigma_um,
+                    ratio,
+                    region: crate::regions::worst_cells(data, &td.norm, t, &td.rows, &st.resid)
+                        .into_iter()
+                        .next(),
+                });
+            }
         }
         noise_floor_um.insert(tn.clone(), nf.map(|n: NoiseFloor| n.sigma_um));
         noise_method.insert(tn.clone(), nf.map(|n| n.method));
@@ -423,10 +517,15 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
                     .total_cmp(&b.delta_bic.unwrap_or(f64::INFINITY)),
             )
     });
+    // `at_noise_floor` only when it is true: nothing significant *and*
+    // every target within 1.3× its floor (a target without an estimate
+    // does not block it).
     let verdict = if candidates.iter().any(|c| c.significant) {
         Verdict::MissingEffect
-    } else {
+    } else if unexplained.is_empty() {
         Verdict::AtNoiseFloor
+    } else {
+        Verdict::AboveNoiseFloor
     };
     dedup_warnings(&mut warnings);
     Ok(Diagnosis {
@@ -436,10 +535,12 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
         noise_floor_um,
         noise_method,
         verdict,
+        unexplained,
         candidates,
         path,
         worst_regions: regions,
         warnings,
+        outliers,
         hold_out,
         evidence: ev,
     })

@@ -9,7 +9,7 @@ use crate::features::Norm;
 use crate::lines::densest_lines;
 
 use super::candidates::fmt_num;
-use super::noise::{NoiseFloor, NoiseMethod};
+use super::noise::NoiseFloor;
 use super::{Candidate, Warning, ABOVE_NOISE_RATIO, ALIASING_SPACING_MM, CONSTANT_TEMPERATURE_K};
 
 /// The `implausible_parameter` warning for an effect the diagnosis accepts
@@ -60,10 +60,7 @@ pub(super) fn above_noise_warning(
             "{target}: the residual {} is {rms:.3} µm RMS, {ratio:.1}× the noise floor {:.3} µm (from {}): systematic error is left that no candidate explains significantly — smooth shape the seed cannot follow (a finer model: grid or nn) or an effect outside the library; see worst_regions for where it is",
             if after_path { "after the path" } else { "of the model" },
             nf.sigma_um,
-            match nf.method {
-                NoiseMethod::Repeats => "repeated points",
-                NoiseMethod::Differences => "neighbour differences along lines",
-            }
+            nf.method.describe()
         ),
     })
 }

@@ -159,6 +159,11 @@ impl Limit {
     }
     /// Noise σ of the instrument: a laser reads to nm, a dial gauge to µm.
     pub const NOISE_UM: Limit = Limit::closed(0.0, 100.0, "µm");
+    /// Share of error values with a spike.
+    pub const SPIKE_FRAC: Limit = Limit::closed(0.0, 0.2, "");
+    /// Smallest spike (the largest is twice it; ≤ 2000 µm stays inside the
+    /// import's ±10 000 µm plausibility limit with the machine's errors).
+    pub const SPIKE_UM: Limit = Limit::closed(0.0, 1000.0, "µm");
     /// Tool length / probe offset (and every Abbe tool length).
     pub const TOOL_MM: Limit = Limit::closed(-1000.0, 1000.0, "mm");
     /// Traverse feed: up to 120 m/min rapids.
@@ -244,6 +249,47 @@ pub struct SimConfig {
     pub timing: Timing,
     /// Tool length when no Abbe effect varies it, mm.
     pub tool_mm: f64,
+    /// Spikes (beam breaks, bad readings) on top of the noise; none by default.
+    #[serde(default)]
+    pub spikes: Option<Spikes>,
+}
+
+/// Spikes: each error value (row × target) independently, with probability
+/// `frac`, gets ±`amp_um`·(1 + u), u uniform in [0, 1) — 20–40 µm for
+/// `amp_um` 20, the size of a laser's beam break — from a random stream of
+/// its own, so the data without spikes is the same value for value.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Spikes {
+    /// Share of the error values that get a spike, 0…0.2.
+    pub frac: f64,
+    /// Smallest spike, µm (the largest is twice it), 0…1000.
+    pub amp_um: f64,
+}
+
+impl std::str::FromStr for Spikes {
+    type Err = anyhow::Error;
+    /// `FRAC,AMP_UM`, e.g. `0.005,20`.
+    fn from_str(s: &str) -> anyhow::Result<Spikes> {
+        let v: Vec<f64> = s
+            .split(',')
+            .map(|p| p.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .ok()
+            .filter(|v: &Vec<f64>| v.len() == 2)
+            .ok_or_else(|| {
+                anyhow::anyhow!("--spikes `{s}`: expected FRAC,AMP_UM, e.g. 0.005,20")
+            })?;
+        Ok(Spikes {
+            frac: v[0],
+            amp_um: v[1],
+        })
+    }
+}
+
+impl std::fmt::Display for Spikes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "frac={},amp_um={}", self.frac, self.amp_um)
+    }
 }
 
 impl SimConfig {
@@ -258,6 +304,7 @@ impl SimConfig {
             reference: None,
             timing: Timing::default(),
             tool_mm: 0.0,
+            spikes: None,
         })
     }
 
@@ -406,6 +453,10 @@ impl SimConfig {
         Limit::TOOL_MM.check("--tool-mm", self.tool_mm)?;
         Limit::FEED_MM_S.check("--feed-mm-s", self.timing.feed_mm_s)?;
         Limit::DWELL_S.check("--dwell-s", self.timing.dwell_s)?;
+        if let Some(sp) = &self.spikes {
+            Limit::SPIKE_FRAC.check("--spikes FRAC", sp.frac)?;
+            Limit::SPIKE_UM.check("--spikes AMP_UM", sp.amp_um)?;
+        }
         for p in &self.plans {
             // The kind only: the full spec would repeat the bad number.
             let kind = p.to_string();

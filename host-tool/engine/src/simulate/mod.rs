@@ -25,7 +25,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::data::{Dataset, TempChannel, AXES};
 
-pub use config::{Effect, Limit, RefReturn, SimConfig, Timing};
+pub use config::{Effect, Limit, RefReturn, SimConfig, Spikes, Timing};
 pub use machine::{AxisErrors, ErrorFn, Machine, Realistic, Squareness, Wave, PRESETS, REALISTIC};
 pub use plan::{iso_targets, stations, Plan, Visit};
 
@@ -36,6 +36,8 @@ pub struct SimOutput {
     pub data: Dataset,
     /// Noise-free errors ex, ey, ez per row, µm (geometry + effects).
     pub truth_um: [Vec<f64>; 3],
+    /// The error values that got a spike (`SimConfig::spikes`): (row, target).
+    pub spikes: Vec<(usize, usize)>,
 }
 
 /// Standard normal from two uniforms (Box–Muller). Hand-written rather than
@@ -301,6 +303,27 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
             }
         }
     }
+    // Spikes from a stream of their own, drawn row by row (one uniform per
+    // value, two more per spike), so they change nothing else.
+    let mut spike_um = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+    let mut spikes = Vec::new();
+    if let Some(sp) = cfg.spikes.filter(|sp| sp.frac > 0.0) {
+        let mut rng_spike = ChaCha8Rng::seed_from_u64(cfg.seed);
+        rng_spike.set_stream(3);
+        for r in 0..n {
+            for (i, col) in spike_um.iter_mut().enumerate() {
+                if plan::unit(&mut rng_spike) < sp.frac {
+                    let sign = if plan::unit(&mut rng_spike) < 0.5 {
+                        -1.0
+                    } else {
+                        1.0
+                    };
+                    col[r] = sign * sp.amp_um * (1.0 + plan::unit(&mut rng_spike));
+                    spikes.push((r, i));
+                }
+            }
+        }
+    }
     let mut err: [Option<Vec<Option<f64>>>; 3] = Default::default();
     for (i, slot) in err.iter_mut().enumerate() {
         let mut col = Vec::with_capacity(n);
@@ -310,7 +333,7 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
             } else {
                 0.0
             };
-            col.push(Some(round_dec(truth[i][r] + noise, 4)));
+            col.push(Some(round_dec(truth[i][r] + noise + spike_um[i][r], 4)));
         }
         *slot = Some(col);
     }
@@ -338,6 +361,9 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
             cfg.timing.feed_mm_s, cfg.timing.dwell_s, cfg.tool_mm
         ),
     ));
+    if let Some(sp) = &cfg.spikes {
+        metadata.push(("spikes".into(), sp.to_string()));
+    }
     if let Some(r) = &cfg.reference {
         metadata.push((
             "reference".into(),
@@ -392,5 +418,6 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
     SimOutput {
         data,
         truth_um: truth,
+        spikes,
     }
 }

@@ -1,0 +1,260 @@
+//! Outliers: single readings far off the current model — a laser's beam
+//! break, a probe that touched a chip — found before anything is fitted or
+//! diagnosed, reported with the file line of their row, and left out
+//! (`--keep-outliers` keeps them). Left in, a 0.5 % share of 20–40 µm
+//! spikes pulls a least-squares fit, lifts the noise floor and tempts the
+//! diagnosis to "explain" them with an effect.
+//!
+//! The rule is conservative: per target, fit the current model (the seed
+//! and the effects already added — a linear seed; other seeds are screened
+//! with cubic19), take the residual's robust scale s = 1.4826·MAD (the
+//! median absolute deviation from the median, over the readings not yet
+//! flagged) and flag a reading whose residual is more than [`OUTLIER_K`]·s
+//! from the median *and* whose deviation from the median residual of the
+//! readings just before and after it (two each side, same approach
+//! directions, tool length and session) is more than [`OUTLIER_K`] times
+//! the robust scale of those deviations and than [`OUTLIER_K`] times the
+//! robust spread of those neighbours: a run of neighbouring readings off
+//! together is shape the model lacks — a reversal, a bump — and a short
+//! period sampled coarsely varies from reading to reading (its neighbours
+//! spread about as widely as it lies off), while a beam break is far off
+//! all three. The rule prefers keeping a bad reading to dropping a good
+//! one. Then refit without the flagged readings and repeat until the set
+//! no longer changes (at most [`MAX_ROUNDS`] rounds): the
+//! first fit is pulled towards the spikes, the refit is not. The scale is
+//! the model's residual, not the noise floor, so smooth shape the model has
+//! not caught yet widens it instead of being flagged: only readings far off
+//! everything around them go.
+
+use anyhow::Result;
+use serde::Serialize;
+
+use crate::data::{Dataset, TARGETS};
+use crate::effect::Effect;
+use crate::model::Seed;
+
+/// Residuals beyond this many robust σ from the median are outliers
+/// (a normal reading is beyond 7σ once in 4·10¹¹).
+pub const OUTLIER_K: f64 = 7.0;
+/// Most fit → flag rounds.
+pub const MAX_ROUNDS: usize = 5;
+/// 1/Φ⁻¹(3/4): the MAD of a normal times this is its σ.
+const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
+
+/// One reading left out as an outlier.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Outlier {
+    /// Line of the row in the source file (1-based); null for data that did
+    /// not come from a file (`simulate` in memory).
+    pub line: Option<usize>,
+    /// Data row (0-based, the order of the file's data rows).
+    pub row: usize,
+    /// `ex`, `ey` or `ez`.
+    pub target: String,
+    /// The measured error, µm.
+    pub value_um: f64,
+    /// Its residual from the model fitted without the outliers, µm.
+    pub resid_um: f64,
+    /// The residual's robust scale (1.4826·MAD), µm.
+    pub scale_um: f64,
+}
+
+impl Outlier {
+    /// Target index (0 = ex).
+    fn target_index(&self) -> usize {
+        TARGETS.iter().position(|t| *t == self.target).unwrap_or(0)
+    }
+
+    /// `data.csv:123: ex = 31.2 µm, 29.9 µm off the model (52× its robust scale 0.57 µm)`.
+    pub fn text(&self, source: &str) -> String {
+        let at = match self.line {
+            Some(l) => format!("{source}:{l}"),
+            None => format!("{source} row {}", self.row + 1),
+        };
+        format!(
+            "{at}: {} = {:.3} µm, {:.3} µm off the model ({:.0}× its robust scale {:.3} µm)",
+            self.target,
+            self.value_um,
+            self.resid_um,
+            self.resid_um.abs() / self.scale_um,
+            self.scale_um
+        )
+    }
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_unstable_by(f64::total_cmp);
+    let n = v.len();
+    if n == 0 {
+        return 0.0;
+    }
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Readings on each side a reading is compared with.
+const NEIGHBOURS: usize = 2;
+/// How far (in rows) to look for them.
+const NEIGHBOUR_WINDOW: usize = 10;
+
+/// Per reading of `resid` (rows in file order, residuals), its deviation
+/// from the median residual of the readings taken just before and after
+/// it ([`NEIGHBOURS`] on each side within [`NEIGHBOUR_WINDOW`] rows) that
+/// share its approach directions, tool length and session, and the robust
+/// spread of those neighbours' residuals (1.4826·MAD: a spike among them
+/// does not widen it); `None` without any. Consecutive readings are neighbours on the machine (a line, a run),
+/// so shape cancels here and a lone bad reading does not.
+fn local_deviation(data: &Dataset, resid: &[(usize, f64, f64)]) -> Vec<Option<(f64, f64)>> {
+    let inputs = |row: usize| {
+        (
+            [0, 1, 2].map(|a| data.dir[a].as_ref().map_or(0, |d| d[row])),
+            data.tool_mm.as_ref().map(|v| v[row].to_bits()),
+            data.session_id.as_ref().map(|v| v[row]),
+        )
+    };
+    (0..resid.len())
+        .map(|i| {
+            let own = inputs(resid[i].0);
+            let lo = i.saturating_sub(NEIGHBOUR_WINDOW);
+            let hi = (i + NEIGHBOUR_WINDOW + 1).min(resid.len());
+            let same = |j: &usize| inputs(resid[*j].0) == own;
+            let mut v: Vec<f64> = (lo..i)
+                .rev()
+                .filter(same)
+                .take(NEIGHBOURS)
+                .chain((i + 1..hi).filter(same).take(NEIGHBOURS))
+                .map(|j| resid[j].2)
+                .collect();
+            (!v.is_empty()).then(|| {
+                let m = median(&mut v);
+                let mut spread: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
+                (resid[i].2 - m, MAD_TO_SIGMA * median(&mut spread))
+            })
+        })
+        .collect()
+}
+
+/// `data` with the outliers' error cells emptied ("not measured on this
+/// row"), so that every fit and diagnosis leaves them out; the rest of the
+/// row (its other targets) stays.
+pub fn without(data: &Dataset, outliers: &[Outlier]) -> Dataset {
+    let mut d = data.clone();
+    for o in outliers {
+        if let Some(col) = d.err_um[o.target_index()].as_mut() {
+            col[o.row] = None;
+        }
+    }
+    d
+}
+
+/// The outliers of `data` under the model `seed` + `adds` (see the module
+/// doc), by target then row.
+pub fn find(data: &Dataset, seed: &str, adds: &[Effect]) -> Result<Vec<Outlier>> {
+    let seed = match Seed::parse(seed)? {
+        s @ (Seed::Cubic19 | Seed::Kinematic) => s.to_string(),
+        _ => "cubic19".to_string(),
+    };
+    let mut found: Vec<Outlier> = Vec::new();
+    for _ in 0..MAX_ROUNDS {
+        let clean = without(data, &found);
+        let (model, _) = crate::fit::linear::fit(&clean, &seed, adds, 2)?;
+        let pred = model.predict(data)?;
+        let mut next = Vec::new();
+        for t in data.targets() {
+            let Some(p) = &pred[t] else { continue };
+            let resid: Vec<(usize, f64, f64)> =
+                data.measured(t).map(|(r, v)| (r, v, v - p[r])).collect();
+            let flagged = |r: usize| found.iter().any(|o| o.row == r && o.target_index() == t);
+            let mut kept: Vec<f64> = resid
+                .iter()
+                .filter(|(r, _, _)| !flagged(*r))
+                .map(|x| x.2)
+                .collect();
+            let med = median(&mut kept);
+            let mut dev: Vec<f64> = kept.iter().map(|v| (v - med).abs()).collect();
+            let scale = MAD_TO_SIGMA * median(&mut dev);
+            if scale <= 0.0 {
+                continue;
+            }
+            // Far off the model *and* off its neighbours, each against its
+            // own robust scale: a run of neighbouring readings off together
+            // is shape the model lacks (a reversal, a bump), and a short
+            // period sampled coarsely varies from reading to reading — the
+            // local scale widens for it — while a beam break is far off both.
+            let local = local_deviation(data, &resid);
+            let mut dev: Vec<f64> = resid
+                .iter()
+                .zip(&local)
+                .filter(|((r, _, _), _)| !flagged(*r))
+                .filter_map(|(_, d)| d.map(|d| d.0.abs()))
+                .collect();
+            let local_scale = MAD_TO_SIGMA * median(&mut dev);
+            for (&(r, v, e), d) in resid.iter().zip(&local) {
+                if (e - med).abs() > OUTLIER_K * scale
+                    && d.is_none_or(|(d, spread)| {
+                        d.abs() > OUTLIER_K * local_scale && d.abs() > OUTLIER_K * spread
+                    })
+                {
+                    next.push(Outlier {
+                        line: data.line.get(r).copied(),
+                        row: r,
+                        target: TARGETS[t].to_string(),
+                        value_um: v,
+                        resid_um: e,
+                        scale_um: scale,
+                    });
+                }
+            }
+        }
+        let same = next.len() == found.len()
+            && next
+                .iter()
+                .zip(&found)
+                .all(|(a, b)| a.row == b.row && a.target == b.target);
+        found = next;
+        if same {
+            break;
+        }
+    }
+    Ok(found)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_spike_is_found_on_its_line_and_left_out() {
+        // 200 points of a cubic along x with ±0.1 µm of pattern "noise" and
+        // one 30 µm spike at row 57 (file line 60).
+        let n = 200;
+        let x: Vec<f64> = (0..n).map(|i| i as f64 * 4.0).collect();
+        let e: Vec<Option<f64>> = (0..n)
+            .map(|i| {
+                let u = x[i] / 800.0;
+                let noise = 0.1 * ((i * 7919 % 13) as f64 / 6.0 - 1.0);
+                Some(3.0 * u * u * u - 2.0 * u + noise + if i == 57 { 30.0 } else { 0.0 })
+            })
+            .collect();
+        let d = Dataset {
+            source: "t.csv".into(),
+            pos_mm: [Some(x), None, None],
+            err_um: [Some(e), None, None],
+            line: (0..n).map(|i| i + 3).collect(),
+            ..Dataset::default()
+        };
+        let o = find(&d, "cubic19", &[]).unwrap();
+        assert_eq!(o.len(), 1, "{o:?}");
+        assert_eq!(
+            (o[0].row, o[0].line, o[0].target.as_str()),
+            (57, Some(60), "ex")
+        );
+        assert!((o[0].resid_um - 30.0).abs() < 0.5, "{o:?}");
+        assert!(o[0].text("t.csv").starts_with("t.csv:60: ex = "));
+        let clean = without(&d, &o);
+        assert_eq!(clean.measured(0).count(), n - 1);
+    }
+}
