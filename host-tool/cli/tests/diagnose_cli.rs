@@ -156,7 +156,19 @@ fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
         s(&report),
     ]));
     let svg = std::fs::read_to_string(report.join("history.svg")).expect("history.svg");
-    assert!(svg.contains("ey rms") && svg.contains("ey held-out rms"));
+    assert!(svg.contains("ey RMS") && svg.contains("ey held-out RMS"));
+    // The page opens with the verdict card, and it ends with a command.
+    let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+    let body = &html[html.find("</h1>").expect("a title") + 5..];
+    assert!(
+        body.trim_start().starts_with("<section id=\"verdict\""),
+        "{}",
+        &body[..300.min(body.len())]
+    );
+    assert!(
+        body.contains("<pre class=\"next\">trueaxis "),
+        "a next command"
+    );
     // A usage error (unknown seed) is exit 1 with a message, not a panic.
     common::expect_exit(
         &["diagnose", s(&csv), "--model", "nn:8"],

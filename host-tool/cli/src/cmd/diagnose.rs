@@ -173,22 +173,7 @@ pub fn text(d: &Diagnosis, data_path: &Path) -> String {
             s.push_str(&format!("  [{}] {}\n", w.code, w.detail));
         }
     }
-    if !d.path.is_empty() {
-        let mut cmd = format!(
-            "trueaxis fit {} --model {}",
-            data_path.display(),
-            d.model.split(" + ").next().unwrap_or("cubic19")
-        );
-        // Every effect the path found, in order; one that replaces an effect
-        // of the model (the same effect with another lag, period, order or
-        // degree) takes its place.
-        let mut adds: Vec<String> = d.model.split(" + ").skip(1).map(String::from).collect();
-        for p in &d.path {
-            diagnose::swap_in(&mut adds, &p.add, p.replaces.as_deref());
-        }
-        for a in adds {
-            cmd.push_str(&format!(" --add '{a}'"));
-        }
+    if let Some(cmd) = crate::report::diagnose::fit_command(d, &data_path.display().to_string()) {
         s.push_str(&format!("next: {cmd}\n"));
     }
     s

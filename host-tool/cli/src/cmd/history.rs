@@ -29,7 +29,12 @@ impl Args {
     pub fn run(self) -> Result<()> {
         let h = history::load(&self.model)?;
         if let Some(dir) = &self.report {
-            let index = write_report(&h, &self.model.display().to_string(), dir)?;
+            let index = write_report(
+                &h,
+                &self.model.display().to_string(),
+                dir,
+                &Default::default(),
+            )?;
             if !self.json {
                 outln!("report: {}", index.display())?;
             }

@@ -14,8 +14,294 @@ use trueaxis_engine::data::{Dataset, AXES, TARGETS};
 use trueaxis_engine::diagnose::{Candidate, Diagnosis};
 use trueaxis_engine::effect::Family;
 
-use crate::report::plot::{heat_map_pair, HeatMap, Series, XyPlot};
-use crate::report::Page;
+use trueaxis_engine::diagnose::{Verdict as DVerdict, ABOVE_NOISE_RATIO};
+
+use crate::report::plot::{axis_title, format_value, heat_map_pair, HeatMap, Series, XyPlot};
+use crate::report::{thin, Page, Tone, Verdict, MAX_SCATTER};
+
+/// Warning codes that undermine a verdict (shown on the card); the rest
+/// (`in_model_span`, `aux_columns`, …) stay in the Warnings section.
+pub const UNDERMINING: [&str; 7] = [
+    "aliasing",
+    "one_direction",
+    "constant_temperature",
+    "no_temperature",
+    "confounded",
+    "implausible_parameter",
+    "aux_misspelled",
+];
+
+/// The `fit` command that adds every effect the path found (one that
+/// replaces an effect of the model takes its place); None without a path.
+/// The text output's `next:` line and the verdict card's.
+pub fn fit_command(d: &Diagnosis, data_path: &str) -> Option<String> {
+    if d.path.is_empty() {
+        return None;
+    }
+    let mut cmd = format!(
+        "trueaxis fit {data_path} --model {}",
+        d.model.split(" + ").next().unwrap_or("cubic19")
+    );
+    let mut adds: Vec<String> = d.model.split(" + ").skip(1).map(String::from).collect();
+    for p in &d.path {
+        trueaxis_engine::diagnose::swap_in(&mut adds, &p.add, p.replaces.as_deref());
+    }
+    for a in adds {
+        cmd.push_str(&format!(" --add '{a}'"));
+    }
+    Some(cmd)
+}
+
+/// An effect in words: "a periodic error of ex along x".
+pub fn effect_words(c: &Candidate) -> String {
+    let along = c
+        .axis
+        .as_deref()
+        .map_or(String::new(), |a| format!(" along {a}"));
+    let t = &c.target;
+    match c.effect {
+        Family::Periodic => format!("a periodic error of {t}{along} (lead screw or scale pitch)"),
+        Family::Thermal => format!(
+            "thermal growth of {t} with the {}{}",
+            c.channel
+                .as_deref()
+                .map_or("temperature".into(), |c| axis_title(c).replace(" (°C)", "")),
+            c.axis
+                .as_deref()
+                .map_or(String::new(), |a| format!(", growing along {a}"))
+        ),
+        Family::Reversal => format!("a reversal error (backlash) of {t}{along}"),
+        Family::Abbe => format!("an Abbe error of {t} (a tilt times the tool length){along}"),
+        Family::Drift => format!("a drift of {t} with time"),
+        Family::Squareness => format!("out-of-squareness: {t} growing{along}"),
+        Family::HigherOrder => format!(
+            "a smooth shape of {t}{along} the seed cannot follow (higher order, not a named physical effect)"
+        ),
+    }
+}
+
+/// The physical value in words: "amplitude 3.08 µm (95 %: 3.03 … 3.13)",
+/// with the searched parameter (period, lag) first.
+fn physical_words(c: &Candidate) -> String {
+    let mut parts = Vec::new();
+    if let Some(p) = c.params.get("period_mm") {
+        parts.push(format!("period {} mm", format_value(*p)));
+    }
+    if let Some(l) = c.params.get("lag_s").filter(|l| **l > 0.0) {
+        parts.push(format!("lag {} s", format_value(*l)));
+    }
+    if let Some(ph) = &c.physical {
+        parts.push(format!(
+            "{} {} {} (95 %: {} … {})",
+            ph.name.replace('_', " "),
+            format_value(ph.value),
+            ph.unit,
+            format_value(ph.ci95[0]),
+            format_value(ph.ci95[1])
+        ));
+    }
+    parts.join(", ")
+}
+
+/// How sure, in plain words: ΔBIC and the held-out gain.
+fn sureness(c: &Candidate) -> String {
+    let bic = c.delta_bic.map_or("no ΔBIC".into(), |b| {
+        let word = if b < -100.0 {
+            "overwhelming"
+        } else if b < -30.0 {
+            "very strong"
+        } else {
+            "strong"
+        };
+        format!("ΔBIC {b:.0} — {word} evidence (the rule asks for < −10)")
+    });
+    let held = match (c.gain, c.held_out_rms_um_after) {
+        (Some(g), Some(after)) if g < 1.0 => format!(
+            "on blocks the fit never saw, the {} error falls from {} to {} µm ({:.0} % lower; the rule asks for 10 %)",
+            c.target,
+            format_value(after / (1.0 - g)),
+            format_value(after),
+            100.0 * g
+        ),
+        _ => "no held-out figure".into(),
+    };
+    format!("{bic}; {held}")
+}
+
+/// The diagnose page's verdict: what is missing (effect, target, value
+/// ± 95 %, how sure) or that nothing named is, what is left above the
+/// noise and where, the warnings that undermine it, and the next command.
+pub fn verdict(d: &Diagnosis, data_path: &str) -> Verdict {
+    let um = |v: f64| format!("{} µm", format_value(v));
+    let path_cands: Vec<&Candidate> = d
+        .path
+        .iter()
+        .filter_map(|p| d.candidates.iter().find(|c| c.on_path() && c.add == p.add))
+        .collect();
+    let mut details = Vec::new();
+    let mut warnings: Vec<String> = d
+        .warnings
+        .iter()
+        .filter(|w| UNDERMINING.contains(&w.code.as_str()))
+        .map(|w| format!("{} ({})", w.detail, w.code))
+        .collect();
+    // What is left after the path, per target, against its noise floor.
+    let final_rms = |t: &str| {
+        d.path
+            .iter()
+            .rev()
+            .find(|p| p.target == t)
+            .map_or(d.rms_um.get(t).copied().unwrap_or(f64::NAN), |p| p.rms_um)
+    };
+    let mut left = Vec::new();
+    let mut unknown_noise = Vec::new();
+    for t in d.rms_um.keys() {
+        match d.noise_floor_um.get(t).copied().flatten() {
+            Some(nf) if nf > 0.0 => {
+                let r = final_rms(t);
+                if r > ABOVE_NOISE_RATIO * nf {
+                    left.push((t.clone(), r, nf));
+                }
+            }
+            _ => unknown_noise.push(t.clone()),
+        }
+    }
+    let region = |t: &str| {
+        d.worst_regions
+            .iter()
+            .filter(|r| r.target == t)
+            .max_by(|a, b| a.rms_um.total_cmp(&b.rms_um))
+            .map(|r| trueaxis_engine::regions::bbox_text(&r.bbox_mm))
+    };
+    let left_words: Vec<String> = left
+        .iter()
+        .map(|(t, r, nf)| {
+            format!(
+                "{t} at {:.1}× the noise ({} against {}{})",
+                r / nf,
+                um(*r),
+                um(*nf),
+                region(t).map_or(String::new(), |b| format!(", worst in {b} mm"))
+            )
+        })
+        .collect();
+    let noise_words: Vec<String> = d
+        .rms_um
+        .keys()
+        .map(|t| {
+            let nf = d.noise_floor_um.get(t).copied().flatten();
+            format!(
+                "{t} {} (noise {})",
+                um(final_rms(t)),
+                nf.map_or("unknown".into(), um)
+            )
+        })
+        .collect();
+    let (headline, tone, next) = match d.verdict {
+        DVerdict::MissingEffect if !path_cands.is_empty() => {
+            let names: Vec<String> = path_cands.iter().map(|c| effect_words(c)).collect();
+            for (k, c) in path_cands.iter().enumerate() {
+                details.push(format!(
+                    "{}. {}: {}. How sure: {}.",
+                    k + 1,
+                    effect_words(c),
+                    physical_words(c),
+                    sureness(c)
+                ));
+                if let Some(ph) = c.physical.as_ref().filter(|p| !p.plausible) {
+                    warnings.push(format!(
+                        "{} {} {} is outside the plausible range ({}): check the sensor and the unit before trusting the value",
+                        ph.name, format_value(ph.value), ph.unit, ph.expected
+                    ));
+                }
+            }
+            details.push(if left.is_empty() {
+                format!(
+                    "With {}: {} — nothing else is left above the noise.",
+                    if names.len() == 1 { "it" } else { "them" },
+                    noise_words.join(", ")
+                )
+            } else {
+                format!(
+                    "Even with {}, {} is left above the noise: another effect, or one outside the library.",
+                    if names.len() == 1 { "it" } else { "them" },
+                    left_words.join("; ")
+                )
+            });
+            (
+                format!("Missing: {}.", names.join("; and ")),
+                Tone::Action,
+                fit_command(d, data_path),
+            )
+        }
+        _ if left.is_empty() && unknown_noise.is_empty() => {
+            details.push(format!("Residual: {}.", noise_words.join(", ")));
+            details.push(
+                "No candidate effect passes the rules (ΔBIC < −10 and 10 % lower held-out error)."
+                    .into(),
+            );
+            (
+                "Nothing is missing: every target is at the noise floor of the measurement.".into(),
+                if warnings.is_empty() {
+                    Tone::Good
+                } else {
+                    Tone::Unknown
+                },
+                Some(format!(
+                    "trueaxis fit {data_path} --model {} -o model.json && trueaxis export model.json -o table.bin",
+                    d.model.replace(" + ", " --add ")
+                )),
+            )
+        }
+        _ if left.is_empty() => {
+            details.push(format!("Residual: {}.", noise_words.join(", ")));
+            (
+                format!(
+                    "Nothing named is missing, but the noise floor of {} cannot be estimated (no repeated points or dense lines): whether anything is left is unknown.",
+                    unknown_noise.join(", ")
+                ),
+                Tone::Unknown,
+                Some("measure a few points repeatedly (or a dense line), then run diagnose again".into()),
+            )
+        }
+        _ => {
+            details.push(
+                "No candidate effect of the library passes the rules (ΔBIC < −10 and 10 % lower held-out error): what is left is a smooth shape the seed cannot follow, an effect outside the library, or one the measurement cannot show (see below)."
+                    .into(),
+            );
+            let next = d
+                .warnings
+                .iter()
+                .find(|w| ["aliasing", "one_direction", "constant_temperature", "no_temperature"].contains(&w.code.as_str()))
+                .map(|w| format!("measure first: {}", w.detail))
+                .or_else(|| {
+                    Some(format!(
+                        "trueaxis fit {data_path} --model {} -o model.json && trueaxis compare {data_path} --model model.json --report report",
+                        d.model.replace(" + ", " --add ")
+                    ))
+                });
+            (
+                format!(
+                    "Nothing named is missing, but {} is left above the noise: {}.",
+                    left.iter()
+                        .map(|l| l.0.clone())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    left_words.join("; ")
+                ),
+                Tone::Action,
+                next,
+            )
+        }
+    };
+    Verdict {
+        headline,
+        details,
+        warnings,
+        next,
+        tone,
+    }
+}
 
 /// The channel a candidate follows, as (label, value per data row).
 fn channel(data: &Dataset, c: &Candidate) -> Option<(String, Vec<f64>)> {
@@ -30,10 +316,13 @@ fn channel(data: &Dataset, c: &Candidate) -> Option<(String, Vec<f64>)> {
                 .as_deref()?
                 .strip_prefix("T_")?
                 .strip_suffix("_C")?;
-            Some((format!("T_{name}_C (°C)"), data.temp(name)?.temp_c.clone()))
+            Some((
+                axis_title(&format!("T_{name}_C")),
+                data.temp(name)?.temp_c.clone(),
+            ))
         }
-        Family::Drift => Some(("t_s (s)".into(), data.t_s.clone()?)),
-        Family::Abbe => Some(("tool_mm (mm)".into(), data.tool_mm.clone()?)),
+        Family::Drift => Some((axis_title("t_s"), data.t_s.clone()?)),
+        Family::Abbe => Some((axis_title("tool_mm"), data.tool_mm.clone()?)),
         _ => {
             let a = axis?;
             Some((format!("{} (mm)", AXES[a]), data.pos_mm[a].clone()?))
@@ -80,7 +369,21 @@ pub fn write_with_history(
     dir: &Path,
     history: Option<&trueaxis_engine::history::History>,
 ) -> Result<PathBuf> {
+    write_for(d, data, &data.source, dir, history)
+}
+
+/// [`write_with_history`], with the data file named as the user would
+/// type it in the verdict card's next command (`data.source` may be a
+/// generator's name, `simulate:mill800`).
+pub fn write_for(
+    d: &Diagnosis,
+    data: &Dataset,
+    data_path: &str,
+    dir: &Path,
+    history: Option<&trueaxis_engine::history::History>,
+) -> Result<PathBuf> {
     let mut page = Page::new(format!("trueaxis diagnose — {}", data.source));
+    page.verdict(verdict(d, data_path));
     page.heading("Diagnosis");
     page.paragraph(format!(
         "Model {}; verdict {}; hold-out: {}.",
@@ -161,7 +464,12 @@ pub fn write_with_history(
     }
     if let Some(h) = history.filter(|h| !h.steps.is_empty()) {
         page.subheading("History of the model");
-        crate::report::history::add_to_page(&mut page, h)?;
+        let noise: std::collections::BTreeMap<String, f64> = d
+            .noise_floor_um
+            .iter()
+            .filter_map(|(t, v)| v.map(|v| (t.clone(), v)))
+            .collect();
+        crate::report::history::add_to_page(&mut page, h, &noise)?;
     }
     page.heading("Evidence");
     // Periodograms: every target and axis with dense lines at the starting
@@ -286,8 +594,14 @@ pub fn write_with_history(
             format!("{} (mm)", AXES[*a]),
             "residual (µm)",
         )
-        .with(Series::points(format!("dir_{} = +1", AXES[*a]), up))
-        .with(Series::points(format!("dir_{} = −1", AXES[*a]), down));
+        .with(Series::points(
+            format!("dir_{} = +1", AXES[*a]),
+            thin(&up, MAX_SCATTER),
+        ))
+        .with(Series::points(
+            format!("dir_{} = −1", AXES[*a]),
+            thin(&down, MAX_SCATTER),
+        ));
         page.figure(
             format!("reversal_{}_{}", TARGETS[*t], AXES[*a]),
             caption.clone(),
@@ -326,8 +640,14 @@ pub fn write_with_history(
             label,
             format!("{} (µm)", TARGETS[t]),
         )
-        .with(Series::points("component + residual", partial))
-        .with(Series::points("fitted component", fitted));
+        .with(Series::points(
+            "component + residual",
+            thin(&partial, MAX_SCATTER),
+        ))
+        .with(Series::points(
+            "fitted component",
+            thin(&fitted, MAX_SCATTER),
+        ));
         page.figure(
             format!("component_{}_{}", TARGETS[t], comp.step),
             format!(
@@ -354,14 +674,18 @@ pub fn write_with_history(
                     .collect()
             };
             let tn = TARGETS[*t];
+            // The cells are the measured grid's lines; a dense line's
+            // readings are averaged into them (one cell per reading made
+            // 3 MB maps of grey columns).
+            let snap = 1e-3;
             let mk = |title: &str, v: &[f64]| {
-                HeatMap::from_points(
+                HeatMap::from_grid_points(
                     title,
                     format!("{} (mm)", AXES[a]),
                     format!("{} (mm)", AXES[b]),
                     "µm",
                     &pts(v),
-                    1e-3,
+                    snap,
                 )
             };
             let hb = mk(&format!("{tn} residual, {}", d.model), before);

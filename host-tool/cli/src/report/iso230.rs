@@ -22,7 +22,8 @@ pub fn plot_svg(res: &Iso230, path: &Path) -> Result<()> {
     let pad = ((hi - lo) * 0.1).max(0.05);
     let (x0, x1) = (t[0].pos_mm, t[t.len() - 1].pos_mm);
     let xpad = ((x1 - x0) * 0.03).max(1.0);
-    let root = SVGBackend::new(path, (900, 520)).into_drawing_area();
+    let mut buf = String::new();
+    let root = SVGBackend::with_string(&mut buf, (900, 520)).into_drawing_area();
     let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
         root.fill(&WHITE)?;
         let mut chart = ChartBuilder::on(&root)
@@ -39,8 +40,8 @@ pub fn plot_svg(res: &Iso230, path: &Path) -> Result<()> {
             .build_cartesian_2d((x0 - xpad)..(x1 + xpad), (lo - pad)..(hi + pad))?;
         chart
             .configure_mesh()
-            .x_desc(format!("{} target position / mm", res.axis))
-            .y_desc("deviation / µm")
+            .x_desc(format!("target position along {} (mm)", res.axis))
+            .y_desc("deviation (µm)")
             .draw()?;
         let up = BLUE;
         let down = RED;
@@ -84,5 +85,9 @@ pub fn plot_svg(res: &Iso230, path: &Path) -> Result<()> {
         root.present()?;
         Ok(())
     };
-    draw().map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))
+    draw().map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))?;
+    drop(root);
+    // Scales to the window like every report figure (viewBox, no width).
+    std::fs::write(path, crate::report::plot::responsive(buf))
+        .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))
 }
