@@ -702,3 +702,163 @@ pub fn write_for(
     }
     page.write(dir)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use trueaxis_engine::diagnose::{Evidence, PathStep, Physical, Region, Warning};
+
+    fn diagnosis(rms_ex: f64, noise_ex: Option<f64>) -> Diagnosis {
+        let m = |ex: f64| -> BTreeMap<String, f64> {
+            [("ex".to_string(), ex), ("ey".to_string(), 0.2)].into()
+        };
+        Diagnosis {
+            model: "cubic19".into(),
+            rms_um: m(rms_ex),
+            held_out_rms_um: m(rms_ex * 1.01),
+            noise_floor_um: [("ex".to_string(), noise_ex), ("ey".to_string(), Some(0.2))].into(),
+            noise_method: BTreeMap::new(),
+            verdict: DVerdict::AtNoiseFloor,
+            candidates: Vec::new(),
+            path: Vec::new(),
+            worst_regions: vec![Region {
+                target: "ex".into(),
+                bbox_mm: [("x".to_string(), [600.0, 800.0])].into(),
+                rms_um: 3.9,
+                ratio: None,
+                points: 40,
+                share: None,
+            }],
+            warnings: Vec::new(),
+            hold_out: "spatial cells".into(),
+            evidence: Evidence::default(),
+        }
+    }
+    use std::collections::BTreeMap;
+
+    #[test]
+    fn at_the_noise_floor_the_card_says_nothing_is_missing_and_proposes_export() {
+        let v = verdict(&diagnosis(0.2, Some(0.2)), "d.csv");
+        assert_eq!(v.tone, Tone::Good);
+        assert!(
+            v.headline.starts_with("Nothing is missing"),
+            "{}",
+            v.headline
+        );
+        assert!(v.next.unwrap().contains("trueaxis export model.json"));
+    }
+
+    #[test]
+    fn a_residual_above_the_noise_is_named_with_its_region_and_what_undermines_it() {
+        let mut d = diagnosis(0.5, Some(0.2));
+        d.warnings = vec![
+            Warning {
+                code: "aliasing".into(),
+                detail: "add a dense line along y".into(),
+            },
+            Warning {
+                code: "in_model_span".into(),
+                detail: "squareness cannot be told".into(),
+            },
+        ];
+        let v = verdict(&d, "d.csv");
+        assert_eq!(v.tone, Tone::Action);
+        assert!(
+            v.headline.starts_with(
+                "Nothing named is missing, but ex is left above the noise: ex at 2.5× the noise"
+            ),
+            "{}",
+            v.headline
+        );
+        assert!(
+            v.headline.contains("worst in x 600…800 mm"),
+            "{}",
+            v.headline
+        );
+        assert_eq!(
+            v.warnings,
+            vec!["add a dense line along y (aliasing)".to_string()]
+        );
+        assert_eq!(
+            v.next.as_deref(),
+            Some("measure first: add a dense line along y")
+        );
+        // Without a noise floor the card does not claim either way.
+        let v = verdict(&diagnosis(0.5, None), "d.csv");
+        assert_eq!(v.tone, Tone::Unknown);
+        assert!(v.headline.contains("cannot be estimated"), "{}", v.headline);
+    }
+
+    #[test]
+    fn a_missing_effect_is_named_with_its_value_and_how_sure() {
+        let mut d = diagnosis(2.0, Some(0.2));
+        d.verdict = DVerdict::MissingEffect;
+        let add = "periodic:target=ex,axis=x,period_mm=5";
+        d.path = vec![PathStep {
+            target: "ex".into(),
+            add: add.into(),
+            delta_bic: -6751.0,
+            rms_um: 0.21,
+            held_out_rms_um: 0.22,
+            replaces: None,
+        }];
+        d.candidates = vec![Candidate {
+            effect: Family::Periodic,
+            target: "ex".into(),
+            axis: Some("x".into()),
+            channel: None,
+            params: [("period_mm".to_string(), 5.0)].into(),
+            add: add.into(),
+            held_out_rms_um_after: Some(1.0),
+            gain: Some(0.5),
+            identifiable: true,
+            evidence: String::new(),
+            delta_bic: Some(-6751.0),
+            rms_um_after: Some(0.99),
+            out_of_span_share: 1.0,
+            significant: true,
+            physical: Some(Physical {
+                name: "amplitude".into(),
+                unit: "µm".into(),
+                value: 3.08,
+                ci95: [3.03, 3.13],
+                plausible: false,
+                expected: "≤ 20 µm".into(),
+            }),
+            confounded_with: Vec::new(),
+            replaces: None,
+            step: Some(1),
+        }];
+        let v = verdict(&d, "d.csv");
+        assert_eq!(v.tone, Tone::Action);
+        assert_eq!(
+            v.headline,
+            "Missing: a periodic error of ex along x (lead screw or scale pitch)."
+        );
+        let one = &v.details[0];
+        for part in [
+            "period 5.00 mm",
+            "amplitude 3.08 µm (95 %: 3.03 … 3.13)",
+            "ΔBIC -6751 — overwhelming evidence",
+            "falls from 2.00 to 1.00 µm (50 % lower",
+        ] {
+            assert!(one.contains(part), "{part} in {one}");
+        }
+        assert!(
+            v.details[1].contains("nothing else is left above the noise"),
+            "{:?}",
+            v.details
+        );
+        assert!(
+            v.warnings[0].contains("outside the plausible range"),
+            "{:?}",
+            v.warnings
+        );
+        assert_eq!(
+            v.next.as_deref(),
+            Some(
+                "trueaxis fit d.csv --model cubic19 --add 'periodic:target=ex,axis=x,period_mm=5'"
+            )
+        );
+    }
+}
