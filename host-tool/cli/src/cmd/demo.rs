@@ -570,6 +570,7 @@ fn demo_stage(
         let p = crate::report::history::write_report(
             &h,
             &model_path.display().to_string(),
+            &data_path.display().to_string(),
             &dir.join("history"),
             &noise,
         )?;

@@ -182,11 +182,21 @@ pub fn verdict(c: &Comparison, sources: Option<Sources>, dir: &Path) -> Verdict 
     }
     for p in trends.iter().take(3) {
         action = true;
+        let slope = p.slope_um_per_unit.unwrap_or(f64::NAN);
+        // The slope in the channel's own terms.
+        let size = if p.channel.starts_with("dir_") {
+            format!("a step of {} from −1 to +1", um(2.0 * slope))
+        } else if p.channel == "t_s" {
+            format!("{} µm per hour", format_value(3600.0 * slope))
+        } else if p.channel.starts_with("T_") {
+            format!("{} µm per K", format_value(slope))
+        } else {
+            format!("{} per unit", um(slope))
+        };
         details.push(format!(
-            "What it follows: {wt}'s residual follows {} (r = {:+.2}, {} per unit) — a trend the model does not hold.",
+            "What it follows: {wt}'s residual follows {} (r = {:+.2}, {size}) — a trend the model does not hold.",
             axis_title(&p.channel),
             p.corr.unwrap_or(0.0),
-            um(p.slope_um_per_unit.unwrap_or(f64::NAN))
         ));
     }
     if let Some(h) = wr.held_out_rms_um {

@@ -109,11 +109,12 @@ pub fn plot(h: &History, noise_um: &BTreeMap<String, f64>) -> XyPlot {
 pub fn write_report(
     h: &History,
     name: &str,
+    data: &str,
     dir: &std::path::Path,
     noise_um: &BTreeMap<String, f64>,
 ) -> Result<PathBuf> {
     let mut page = Page::new(format!("trueaxis history — {name}"));
-    page.verdict(verdict(h, name, noise_um));
+    page.verdict(verdict(h, name, data, noise_um));
     page.heading("History");
     add_to_page(&mut page, h, noise_um)?;
     page.write(dir)
@@ -121,15 +122,16 @@ pub fn write_report(
 
 /// The history page's verdict: how far the error fell over the fits, what
 /// each step bought, whether the last fit is at the noise floor (when it is
-/// known), and the next command.
-pub fn verdict(h: &History, model: &str, noise_um: &BTreeMap<String, f64>) -> Verdict {
+/// known), and the next command (`data`: the data file the model was
+/// fitted to, for it).
+pub fn verdict(h: &History, model: &str, data: &str, noise_um: &BTreeMap<String, f64>) -> Verdict {
     let um = |v: f64| format!("{} µm", format_value(v));
     let (Some(first), Some(last)) = (h.steps.first(), h.steps.last()) else {
         return Verdict {
             headline: "The history is empty: no fit was recorded.".into(),
             details: Vec::new(),
             warnings: Vec::new(),
-            next: Some(format!("trueaxis fit DATA.csv --model cubic19 -o {model}")),
+            next: Some(format!("trueaxis fit {data} --model cubic19 -o {model}")),
             tone: Tone::Unknown,
         };
     };
@@ -206,7 +208,7 @@ pub fn verdict(h: &History, model: &str, noise_um: &BTreeMap<String, f64>) -> Ve
         );
         (
             Tone::Unknown,
-            format!("trueaxis diagnose DATA.csv --model {model} --report report/diagnose"),
+            format!("trueaxis diagnose {data} --model {model} --report report/diagnose"),
         )
     } else if left.is_empty() {
         details.push(format!(
@@ -226,7 +228,7 @@ pub fn verdict(h: &History, model: &str, noise_um: &BTreeMap<String, f64>) -> Ve
         details.push(format!("Left above the noise: {}.", left.join("; ")));
         (
             Tone::Action,
-            format!("trueaxis diagnose DATA.csv --model {model} --report report/diagnose"),
+            format!("trueaxis diagnose {data} --model {model} --report report/diagnose"),
         )
     };
     Verdict {
@@ -325,7 +327,7 @@ mod tests {
         }
         // A marker per fit and target (in-sample and held-out).
         assert!(svg.matches("<circle").count() >= 12);
-        let v = verdict(&h, "m.json", &noise);
+        let v = verdict(&h, "m.json", "d.csv", &noise);
         assert_eq!(v.tone, Tone::Good);
         assert!(
             v.headline.contains("fell from 2.00 µm to 0.200 µm"),
@@ -337,9 +339,12 @@ mod tests {
             Some("trueaxis export m.json -o table.bin")
         );
         // Without the noise floor the card does not claim it.
-        let v = verdict(&h, "m.json", &BTreeMap::new());
+        let v = verdict(&h, "m.json", "d.csv", &BTreeMap::new());
         assert_eq!(v.tone, Tone::Unknown);
-        assert!(v.next.unwrap().starts_with("trueaxis diagnose"));
+        assert!(v
+            .next
+            .unwrap()
+            .starts_with("trueaxis diagnose d.csv --model m.json"));
     }
 
     #[test]
@@ -350,7 +355,7 @@ mod tests {
             svg.matches("<circle").count() >= 4,
             "ex, ey: RMS and held-out"
         );
-        let v = verdict(&h, "m.json", &BTreeMap::new());
+        let v = verdict(&h, "m.json", "d.csv", &BTreeMap::new());
         assert!(v.headline.starts_with("One fit so far"), "{}", v.headline);
     }
 }
