@@ -57,6 +57,8 @@ pub struct Measure {
     pub viewport: f64,
     /// `document.documentElement.scrollWidth`.
     pub scroll_width: f64,
+    /// `document.documentElement.scrollHeight` (reported, not limited).
+    pub height: f64,
     /// Figures (`figure > svg`) on the page.
     pub figures: usize,
     /// Figures drawn with no size, or reaching past the window.
@@ -79,6 +81,7 @@ const SCRIPT: &str = r#"<script>
   var vw = window.innerWidth;
   out.push('viewport=' + vw);
   out.push('scroll_width=' + document.documentElement.scrollWidth);
+  out.push('height=' + document.documentElement.scrollHeight);
   var figs = document.querySelectorAll('figure > svg');
   out.push('figures=' + figs.length);
   figs.forEach(function (s) {
@@ -123,6 +126,7 @@ pub fn parse(dom: &str) -> std::result::Result<Measure, String> {
         match k {
             "viewport" => m.viewport = num()?,
             "scroll_width" => m.scroll_width = num()?,
+            "height" => m.height = num()?,
             "figures" => m.figures = num()? as usize,
             "bad_figure" => m.bad_figures.push(v.to_string()),
             "images" => m.images = num()? as usize,
@@ -340,12 +344,13 @@ pub fn test(args: &[String]) -> Result<()> {
         let (m, bytes, wall_s, f) = check_page(&browser, &page, &shot)
             .map_err(|e| format!("{name} page ({}): {e}", page.display()))?;
         eprintln!(
-            "{name:<9} {:>5.2} MB  laid out in {:>5.0} ms (browser {wall_s:.1} s)  {} figures  width {}/{} px  verdict first: {}  {}",
+            "{name:<9} {:>5.2} MB  laid out in {:>5.0} ms (browser {wall_s:.1} s)  {} figures  width {}/{} px  height {} px  verdict first: {}  {}",
             bytes as f64 / 1e6,
             m.layout_ms,
             m.figures,
             m.scroll_width,
             m.viewport,
+            m.height,
             m.verdict_first,
             if f.is_empty() { "ok" } else { "FAILED" }
         );
@@ -375,6 +380,7 @@ mod tests {
         Measure {
             viewport: 1280.0,
             scroll_width: 1280.0,
+            height: 5000.0,
             figures: 3,
             bad_figures: vec![],
             images: 0,
@@ -387,10 +393,11 @@ mod tests {
 
     #[test]
     fn dumped_dom_is_read_back() {
-        let dom = "<html><body><h1>t</h1><pre id=\"browser-check\">\nviewport=1280\nscroll_width=1295\nfigures=2\nbad_figure=map_ex 1440x420 right 1460\nimages=1\nbroken_image=a.png\nverdict_first=false\nverdict_top=812.5\nlayout_ms=123.4\n</pre></body></html>";
+        let dom = "<html><body><h1>t</h1><pre id=\"browser-check\">\nviewport=1280\nscroll_width=1295\nheight=9000\nfigures=2\nbad_figure=map_ex 1440x420 right 1460\nimages=1\nbroken_image=a.png\nverdict_first=false\nverdict_top=812.5\nlayout_ms=123.4\n</pre></body></html>";
         let m = parse(dom).unwrap();
         assert_eq!(m.viewport, 1280.0);
         assert_eq!(m.scroll_width, 1295.0);
+        assert_eq!(m.height, 9000.0);
         assert_eq!(m.figures, 2);
         assert_eq!(m.bad_figures, vec!["map_ex 1440x420 right 1460"]);
         assert_eq!(m.broken_images, vec!["a.png"]);

@@ -298,6 +298,12 @@ fn report_opens_offline_with_every_figure() {
         }
     }
     assert!(html.contains("<div class=\"grid\">"), "planes side by side");
+    // x–y plots two per row, not one 30 000 px column.
+    assert!(
+        html.contains("<div class=\"grid wide\">\n<figure id=\"channel0\""),
+        "channel plots in a grid"
+    );
+    assert!(html.contains("<div class=\"grid wide\">\n<figure id=\"before_after_rms\""));
 }
 
 /// Three planes, one per orientation (the plans of a user who measures

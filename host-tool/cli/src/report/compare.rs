@@ -303,17 +303,17 @@ pub fn build_report(
     let names: Vec<String> = c.targets.keys().cloned().collect();
     let before: Vec<f64> = c.targets.values().map(|r| r.before.rms_um).collect();
     let after: Vec<f64> = c.targets.values().map(|r| r.after.rms_um).collect();
-    page.figure(
-        "before_after_rms",
-        "RMS error per target before compensation (the raw measured error) and after (the residual the model leaves).",
-        before_after("Before vs after: RMS", "RMS (µm)", &names, &before, &after).to_svg()?,
-    );
+    let rms_fig = Figure {
+        name: "before_after_rms".into(),
+        caption: "RMS error per target before compensation (the raw measured error) and after (the residual the model leaves).".into(),
+        svg: before_after("Before vs after: RMS", "RMS (µm)", &names, &before, &after).to_svg()?,
+    };
     let before: Vec<f64> = c.targets.values().map(|r| r.before.max_abs_um).collect();
     let after: Vec<f64> = c.targets.values().map(|r| r.after.max_abs_um).collect();
-    page.figure(
-        "before_after_max",
-        "Largest |error| per target before and after compensation.",
-        before_after(
+    let max_fig = Figure {
+        name: "before_after_max".into(),
+        caption: "Largest |error| per target before and after compensation.".into(),
+        svg: before_after(
             "Before vs after: max |e|",
             "max |e| (µm)",
             &names,
@@ -321,7 +321,8 @@ pub fn build_report(
             &after,
         )
         .to_svg()?,
-    );
+    };
+    page.grid_wide(vec![rms_fig, max_fig]);
 
     page.heading("Worst regions");
     page.paragraph(format!(
@@ -529,11 +530,11 @@ pub fn build_report(
             // the full resolution.
             resid = resid.with(Series::line(TARGETS[t], rr));
         }
-        page.figure(
-            format!("line{k}_measured"),
-            format!("Measured error and model along {ax} at {}.", line.label),
-            meas.to_svg()?,
-        );
+        let mut figs = vec![Figure {
+            name: format!("line{k}_measured"),
+            caption: format!("Measured error and model along {ax} at {}.", line.label),
+            svg: meas.to_svg()?,
+        }];
         // Zoom on the first 60 mm of a long line: short periods (a lead
         // screw's pitch) are unreadable over the whole travel.
         let lo = data.pos(line.axis, line.rows[0]);
@@ -546,18 +547,19 @@ pub fn build_report(
             }
             z
         });
-        page.figure(
-            format!("line{k}_residual"),
-            format!("Residual along {ax} at {}.", line.label),
-            resid.to_svg()?,
-        );
+        figs.push(Figure {
+            name: format!("line{k}_residual"),
+            caption: format!("Residual along {ax} at {}.", line.label),
+            svg: resid.to_svg()?,
+        });
         if let Some(z) = zoom {
-            page.figure(
-                format!("line{k}_residual_zoom"),
-                format!("Residual along {ax} at {}, the first 60 mm.", line.label),
-                z.to_svg()?,
-            );
+            figs.push(Figure {
+                name: format!("line{k}_residual_zoom"),
+                caption: format!("Residual along {ax} at {}, the first 60 mm.", line.label),
+                svg: z.to_svg()?,
+            });
         }
+        page.grid_wide(figs);
     }
 
     // Measured vs model over all points.
@@ -593,6 +595,7 @@ pub fn build_report(
     // Residual against every axis and channel.
     page.heading("Residual against positions and channels");
     page.paragraph("A trend here is an effect the model lacks: a slope against a temperature is thermal growth, a step between dir = −1 and +1 is reversal (backlash), a drift with t_s is drift.");
+    let mut figs = Vec::new();
     for (k, (channel, values)) in channels(data).iter().enumerate() {
         let mut plot = XyPlot::new(
             format!("residual against {}", axis_title(channel)),
@@ -626,15 +629,16 @@ pub fn build_report(
                 ));
             }
         }
-        page.figure(
-            format!("channel{k}"),
-            format!(
+        figs.push(Figure {
+            name: format!("channel{k}"),
+            caption: format!(
                 "Residual against {} (column {channel}), with the mean per bin.",
                 axis_title(channel)
             ),
-            plot.to_svg()?,
-        );
+            svg: plot.to_svg()?,
+        });
     }
+    page.grid_wide(figs);
     let rows = c
         .channels
         .iter()

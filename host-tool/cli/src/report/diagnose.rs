@@ -17,7 +17,7 @@ use trueaxis_engine::effect::Family;
 use trueaxis_engine::diagnose::{Verdict as DVerdict, ABOVE_NOISE_RATIO};
 
 use crate::report::plot::{axis_title, format_value, heat_map_pair, HeatMap, Series, XyPlot};
-use crate::report::{thin, Page, Tone, Verdict, MAX_SCATTER};
+use crate::report::{thin, Figure, Page, Tone, Verdict, MAX_SCATTER};
 
 /// Warning codes that undermine a verdict (shown on the card); the rest
 /// (`in_model_span`, `aux_columns`, …) stay in the Warnings section.
@@ -472,6 +472,8 @@ pub fn write_for(
         crate::report::history::add_to_page(&mut page, h, &noise)?;
     }
     page.heading("Evidence");
+    // The x–y evidence side by side, two per row; the maps below full width.
+    let mut figs: Vec<Figure> = Vec::new();
     // Periodograms: every target and axis with dense lines at the starting
     // model (at most 3 × 3), plus the one that found each periodic effect
     // added at a later path step.
@@ -500,15 +502,17 @@ pub fn write_for(
                 format!("{:.3} mm", 1.0 / e.pg.freq_per_mm[k]),
             );
         }
-        page.figure(
-            if e.step > 1 {
+        figs.push(Figure {
+            name: if e.step > 1 {
                 format!("periodogram_{tn}_{ax}_step{}", e.step)
             } else {
                 format!("periodogram_{tn}_{ax}")
             },
-            format!("Lomb–Scargle periodogram of the {tn} residual along {ax}{at} (dense lines)"),
-            plot.to_svg()?,
-        );
+            caption: format!(
+                "Lomb–Scargle periodogram of the {tn} residual along {ax}{at} (dense lines)"
+            ),
+            svg: plot.to_svg()?,
+        });
     }
     // Forward/backward split of each reversal on the path: the partial
     // residual (final residual plus the fitted reversal component), so that
@@ -602,11 +606,11 @@ pub fn write_for(
             format!("dir_{} = −1", AXES[*a]),
             thin(&down, MAX_SCATTER),
         ));
-        page.figure(
-            format!("reversal_{}_{}", TARGETS[*t], AXES[*a]),
-            caption.clone(),
-            plot.to_svg()?,
-        );
+        figs.push(Figure {
+            name: format!("reversal_{}_{}", TARGETS[*t], AXES[*a]),
+            caption: caption.clone(),
+            svg: plot.to_svg()?,
+        });
     }
     // Component + residual of every effect on the path.
     for comp in &d.evidence.components {
@@ -648,15 +652,16 @@ pub fn write_for(
             "fitted component",
             thin(&fitted, MAX_SCATTER),
         ));
-        page.figure(
-            format!("component_{}_{}", TARGETS[t], comp.step),
-            format!(
+        figs.push(Figure {
+            name: format!("component_{}_{}", TARGETS[t], comp.step),
+            caption: format!(
                 "Path step {} of {}: the fitted {} component with the final residual added back",
                 comp.step, TARGETS[t], c.effect
             ),
-            plot.to_svg()?,
-        );
+            svg: plot.to_svg()?,
+        });
     }
+    page.grid_wide(figs);
     // Spatial residual maps before and after the path.
     if let Some((a, b)) = map_axes(data) {
         for (t, rows, before) in &d.evidence.resid_before {

@@ -49,7 +49,16 @@ enum Block {
     Figure(Figure),
     /// Figures side by side, as many per row as the window holds (small
     /// multiples: the planes of one target on one colour scale).
-    Grid(Vec<Figure>),
+    Grid(Vec<Figure>, GridKind),
+}
+
+/// How wide the cells of a grid of figures are at least.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum GridKind {
+    /// 340 px: heat maps of planes (three per row at 1280 px).
+    Small,
+    /// 560 px: x–y plots whose text must stay readable (two per row).
+    Wide,
 }
 
 /// One figure: an SVG with a caption, written as `<name>.svg`.
@@ -168,7 +177,16 @@ impl Page {
     /// Figures side by side in a grid that fills the window's width.
     pub fn grid(&mut self, figures: Vec<Figure>) -> &mut Page {
         if !figures.is_empty() {
-            self.blocks.push(Block::Grid(figures));
+            self.blocks.push(Block::Grid(figures, GridKind::Small));
+        }
+        self
+    }
+
+    /// Figures side by side, two per row in a 1280 px window (x–y plots:
+    /// smaller cells would shrink their text below reading size).
+    pub fn grid_wide(&mut self, figures: Vec<Figure>) -> &mut Page {
+        if !figures.is_empty() {
+            self.blocks.push(Block::Grid(figures, GridKind::Wide));
         }
         self
     }
@@ -176,7 +194,7 @@ impl Page {
     fn figures(&self) -> impl Iterator<Item = &Figure> {
         self.blocks.iter().flat_map(|b| match b {
             Block::Figure(f) => std::slice::from_ref(f),
-            Block::Grid(g) => g.as_slice(),
+            Block::Grid(g, _) => g.as_slice(),
             _ => &[],
         })
     }
@@ -221,15 +239,25 @@ impl Page {
                     for r in rows {
                         h.push_str("<tr>");
                         for c in r {
-                            let _ = write!(h, "<td>{}</td>", esc(c));
+                            // Numbers align right (their digits line up),
+                            // words left (a right-aligned sentence is hard
+                            // to read).
+                            if is_number_cell(c) {
+                                let _ = write!(h, "<td>{}</td>", esc(c));
+                            } else {
+                                let _ = write!(h, "<td class=\"t\">{}</td>", esc(c));
+                            }
                         }
                         h.push_str("</tr>\n");
                     }
                     h.push_str("</tbody>\n</table></div>\n");
                 }
                 Block::Figure(f) => write_figure(&mut h, f),
-                Block::Grid(figs) => {
-                    h.push_str("<div class=\"grid\">\n");
+                Block::Grid(figs, kind) => {
+                    h.push_str(match kind {
+                        GridKind::Small => "<div class=\"grid\">\n",
+                        GridKind::Wide => "<div class=\"grid wide\">\n",
+                    });
                     for f in figs {
                         write_figure(&mut h, f);
                     }
@@ -323,6 +351,17 @@ fn write_figure(h: &mut String, f: &Figure) {
     );
 }
 
+/// A cell that reads as a number (`2.0137`, `-6751`, `47 %`, `14.4×`, `—`).
+fn is_number_cell(c: &str) -> bool {
+    let c = c.trim();
+    let short_number = c.chars().count() <= 16
+        && !c.contains(' ')
+        && c.chars()
+            .next()
+            .is_some_and(|f| f.is_ascii_digit() || matches!(f, '-' | '−' | '+' | '.'));
+    c == "—" || short_number || (c.ends_with(" %") && c.len() <= 10)
+}
+
 /// The width of an SVG's `viewBox` (its drawing's width in user units).
 fn svg_width(svg: &str) -> Option<u32> {
     let i = svg.find("viewBox=\"")? + "viewBox=\"".len();
@@ -363,12 +402,12 @@ const STYLE: &str = "body{font-family:sans-serif;max-width:1500px;margin:1em aut
 h1{font-size:1.5em}h2{font-size:1.25em;border-bottom:1px solid #ccc;margin-top:1.6em}\
 h3{font-size:1.05em}table{border-collapse:collapse;margin:.6em 0}\
 th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right;font-variant-numeric:tabular-nums}\
-th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}\
+th{background:#f3f3f3}td:first-child,th:first-child,td.t{text-align:left}\
 .scroll{max-width:100%;overflow-x:auto}\
 figure{margin:.6em 0}figure svg{display:block;width:100%;height:auto}\
 figcaption{font-size:.9em;color:#555;max-width:720px}pre{background:#f6f6f6;padding:.6em;overflow-x:auto}\
 .grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(340px,1fr));gap:.4em 1em}\
-.grid figure{margin:0}\
+.grid.wide{grid-template-columns:repeat(auto-fill,minmax(560px,1fr))}.grid figure{margin:0}\
 .verdict{border:2px solid #999;border-left-width:10px;border-radius:6px;padding:.4em 1em;margin:1em 0;background:#fafafa}\
 .verdict.good{border-color:#009e73;background:#eefaf5}.verdict.action{border-color:#d55e00;background:#fff4ec}\
 .verdict.unknown{border-color:#e69f00;background:#fffaeb}\
@@ -439,9 +478,17 @@ mod tests {
             caption: "c".into(),
             svg: "<svg viewBox=\"0 0 460 380\"></svg>".into(),
         };
-        p.grid(vec![f("a"), f("b")])
-            .table(&["h"], vec![vec!["v".into()]]);
+        p.grid(vec![f("a"), f("b")]).table(
+            &["add", "ΔBIC", "gain", "evidence"],
+            vec![vec![
+                "periodic:target=ex".into(),
+                "-6751".into(),
+                "47 %".into(),
+                "periodogram of the ex residual".into(),
+            ]],
+        );
         let html = p.to_html();
+        assert!(html.contains("<td class=\"t\">periodic:target=ex</td><td>-6751</td><td>47 %</td><td class=\"t\">periodogram of the ex residual</td>"), "{html}");
         assert!(html.contains("<div class=\"grid\">\n<figure id=\"a\""));
         assert!(html.contains("<div class=\"scroll\"><table>"));
         assert_eq!(p.figure_count(), 2);
