@@ -6,6 +6,7 @@
 //! under QEMU. Kept dependency-free on purpose: it is the first thing a fresh
 //! clone compiles, and it must work before anything else is installed.
 
+mod browser;
 mod qemu;
 
 use std::env;
@@ -32,6 +33,7 @@ fn main() -> ExitCode {
         "demo" => demo(rest),
         "bench-mcu" => setup().and_then(|()| qemu::bench_mcu(rest)),
         "test-qemu" => setup().and_then(|()| qemu::test_all()),
+        "test-browser" => setup().and_then(|()| browser::test(rest)),
         "-h" | "--help" | "help" => {
             println!("{USAGE}");
             Ok(())
@@ -53,10 +55,15 @@ fn main() -> ExitCode {
 const USAGE: &str = "usage: cargo xtask <task>
 
 tasks:
-  setup       install what is missing (thumb target, qemu-system-arm, defmt-print)
+  setup       install what is missing (thumb target, qemu-system-arm, defmt-print,
+              chromium)
   test        every test: fmt, clippy, host tests, no_std build, firmware, QEMU
   demo        the main job, end to end (writes into out/demo)
   test-qemu   only the QEMU suites and the end-to-end run (part of `test`)
+  test-browser  the demo's report pages in headless Chromium at 1280 px: figures
+              drawn, nothing wider than the window, verdict first, weight and
+              layout time within limits; screenshots in out/screens (part of
+              `test`); --pages DIR checks a demo already written to DIR
   bench-mcu   instruction counts per model update under QEMU (-icount shift=0);
               --calibrate: model-core's cost estimate against the counts of
               the bench tables and 191 seeded random ones (BENCHMARKS.md)";
@@ -133,7 +140,42 @@ pub fn setup() -> Result<()> {
     if !have("defmt-print") {
         run(&root, "cargo", &["install", "defmt-print", "--locked"])?;
     }
+    // The browser check of the report pages needs Chromium. Without root it
+    // is not installed here (the demo does not need it); `test-browser`
+    // then fails naming what to run.
+    if browser::chromium().is_none() {
+        if is_root() {
+            run(&root, "apt-get", &["update", "-q"])?;
+            run_env(
+                &root,
+                "apt-get",
+                &chromium_install_args(),
+                &[("DEBIAN_FRONTEND", "noninteractive")],
+            )
+            .map_err(|e| {
+                format!("{e}\ninstalling chromium failed; nothing was removed (--no-remove)")
+            })?;
+        } else {
+            eprintln!(
+                "note: chromium is missing and this is not root: `cargo xtask test-browser` \
+                 needs it (`sudo cargo xtask setup` installs the Debian package)"
+            );
+        }
+    }
     Ok(())
+}
+
+/// `apt-get` arguments installing Debian's `chromium` (headless use only:
+/// no recommends), never removing a package.
+fn chromium_install_args() -> Vec<&'static str> {
+    vec![
+        "install",
+        "-y",
+        "-q",
+        "--no-remove",
+        "--no-install-recommends",
+        "chromium",
+    ]
 }
 
 /// Where `qemu-system-arm` comes from: the release's own archive, or its
@@ -297,6 +339,9 @@ fn test(args: &[String]) -> Result<()> {
     // Host tests (model-core, protocol, test-support, the host engine and CLI, xtask).
     run(&root, "cargo", &["test", "--workspace"])?;
 
+    // The report pages in a real browser (a separate step: `test-browser`).
+    browser::test(&[])?;
+
     // model-core and the link protocol must stay no_std: build and lint
     // them for the MCU.
     run(
@@ -413,6 +458,14 @@ mod tests {
         assert!(args.contains(&"--no-install-recommends".to_string()));
         assert_eq!(args.last().map(String::as_str), Some("qemu-system-arm"));
         assert!(backports_source("bookworm-backports").contains("Suites: bookworm-backports\n"));
+    }
+
+    #[test]
+    fn chromium_is_installed_without_removing_anything() {
+        let args = chromium_install_args();
+        assert!(args.contains(&"--no-remove"));
+        assert!(args.contains(&"--no-install-recommends"));
+        assert_eq!(args.last(), Some(&"chromium"));
     }
 
     #[test]

@@ -57,11 +57,14 @@ pub fn model_spec(model: &str) -> Result<(String, Vec<String>)> {
 }
 
 /// Runs the comparison of `data` with `model` (and writes the report when
-/// `report` is given). The building block `compare` and `demo` share.
+/// `report` is given; `sources` names the data and model files for the
+/// command its verdict card proposes). The building block `compare` and
+/// `demo` share.
 pub fn run_compare(
     data: &Dataset,
     model: &ModelFile,
     report: Option<&std::path::Path>,
+    sources: Option<crate::report::compare::Sources>,
 ) -> Result<Comparison> {
     let predicted = model
         .model
@@ -89,7 +92,7 @@ pub fn run_compare(
         });
     }
     if let Some(dir) = report {
-        let index = crate::report::compare::write_report(dir, data, &predicted, &c)?;
+        let index = crate::report::compare::write_report_from(dir, data, &predicted, &c, sources)?;
         c.report = Some(index.display().to_string());
     }
     Ok(c)

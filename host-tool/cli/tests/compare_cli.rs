@@ -251,6 +251,59 @@ fn report_opens_offline_with_every_figure() {
     // (names, never fetched) may appear.
     assert!(no_network(&html));
     assert!(!html.contains("<script src") && !html.contains("<link"));
+    // The page opens with the verdict (what is left, where, the next
+    // command), before any table or figure.
+    let body = &html[html.find("</h1>").unwrap() + 5..];
+    assert!(
+        body.trim_start().starts_with("<section id=\"verdict\""),
+        "{}",
+        &body[..300.min(body.len())]
+    );
+    let verdict = &body[..body.find("</section>").unwrap()];
+    assert!(verdict.contains("After compensation e"), "{verdict}");
+    assert!(
+        verdict.contains(&format!(
+            "trueaxis diagnose {} --model {}",
+            s(&csv),
+            s(&model)
+        )),
+        "{verdict}"
+    );
+    // Figures scale to the window: no fixed pixel width on any SVG.
+    for l in &svgs {
+        let text = std::fs::read_to_string(rep.join(l)).unwrap();
+        let head = &text[..text.find('>').unwrap()];
+        assert!(
+            head.contains("viewBox=") && !head.contains(" width="),
+            "{l}: {head}"
+        );
+    }
+    // The planes of a target are small multiples on one colour scale: the
+    // page names the scale, and every map's colour bar ends at it.
+    for t in ["ex", "ey"] {
+        let key = format!("{t} residual on the measured planes — one colour scale, ±");
+        let at = html.find(&key).unwrap_or_else(|| panic!("{key}"));
+        let limit = html[at + key.len()..].split(' ').next().unwrap();
+        let maps: Vec<&&&str> = svgs
+            .iter()
+            .filter(|l| l.starts_with(&format!("map_{t}_")) && !l.contains("before_after"))
+            .collect();
+        assert!(maps.len() >= 2, "{maps:?}");
+        for l in maps {
+            let text = std::fs::read_to_string(rep.join(l)).unwrap();
+            assert!(
+                text.contains(&format!("\n{limit}\n</text>")),
+                "{l}: colour bar does not end at ±{limit}"
+            );
+        }
+    }
+    assert!(html.contains("<div class=\"grid\">"), "planes side by side");
+    // x–y plots two per row, not one 30 000 px column.
+    assert!(
+        html.contains("<div class=\"grid wide\">\n<figure id=\"channel0\""),
+        "channel plots in a grid"
+    );
+    assert!(html.contains("<div class=\"grid wide\">\n<figure id=\"before_after_rms\""));
 }
 
 /// Three planes, one per orientation (the plans of a user who measures

@@ -145,6 +145,22 @@ fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
     assert!(v["rms_um"]["ey"].as_f64().unwrap() < 0.4, "{v}");
     let h = json(&run(&["history", s(&model), "--json"]));
     assert_eq!(h["steps"].as_array().unwrap().len(), 1);
+    // Its page opens with the verdict, which sends to diagnose on the data
+    // the model was fitted to (the history holds no noise floor).
+    let hist = dir.join("hist");
+    stderr_ok(&run(&["history", s(&model), "--report", s(&hist)]));
+    let html = std::fs::read_to_string(hist.join("index.html")).unwrap();
+    let body = &html[html.find("</h1>").unwrap() + 5..];
+    assert!(body.trim_start().starts_with("<section id=\"verdict\""));
+    assert!(body.contains("One fit so far"), "{body}");
+    assert!(
+        body.contains(&format!(
+            "trueaxis diagnose {} --model {}",
+            s(&csv),
+            s(&model)
+        )),
+        "{body}"
+    );
     // Diagnosing that model with --report shows its history as well.
     let report = dir.join("report");
     stderr_ok(&run(&[
@@ -156,7 +172,19 @@ fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
         s(&report),
     ]));
     let svg = std::fs::read_to_string(report.join("history.svg")).expect("history.svg");
-    assert!(svg.contains("ey rms") && svg.contains("ey held-out rms"));
+    assert!(svg.contains("ey RMS") && svg.contains("ey held-out RMS"));
+    // The page opens with the verdict card, and it ends with a command.
+    let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+    let body = &html[html.find("</h1>").expect("a title") + 5..];
+    assert!(
+        body.trim_start().starts_with("<section id=\"verdict\""),
+        "{}",
+        &body[..300.min(body.len())]
+    );
+    assert!(
+        body.contains("<pre class=\"next\">trueaxis "),
+        "a next command"
+    );
     // A usage error (unknown seed) is exit 1 with a message, not a panic.
     common::expect_exit(
         &["diagnose", s(&csv), "--model", "nn:8"],

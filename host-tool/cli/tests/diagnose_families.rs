@@ -499,7 +499,7 @@ fn three_effects_on_one_target_are_all_found_and_reported() {
     }
     // Component + residual against the effect's channel.
     let abbe = ex.iter().position(|s| s.add == "abbe:target=ex").unwrap();
-    assert!(svg(&format!("component_ex_{}.svg", abbe + 1)).contains("tool_mm (mm)"));
+    assert!(svg(&format!("component_ex_{}.svg", abbe + 1)).contains("tool length (mm)"));
     let map = svg("residual_map_ex.svg");
     assert!(map.contains("ex residual, cubic19") && map.contains("ex residual after the path"));
     let index = svg("index.html");

@@ -144,6 +144,16 @@ fn cli_json_keys_and_plot() {
     assert!(svg.starts_with("<svg"), "an SVG document");
     assert!(svg.contains("<text"), "labels as SVG text");
     assert!(svg.contains("A = 10.74"), "caption with A");
+    // The page: the verdict card first, then the plot and the table.
+    assert_eq!(v["report"], s(&dir.join("index.html")));
+    let html = std::fs::read_to_string(dir.join("index.html")).expect("page written");
+    let body = &html[html.find("</h1>").unwrap() + 5..];
+    assert!(
+        body.trim_start().starts_with("<section id=\"verdict\""),
+        "{body}"
+    );
+    assert!(body.contains("Axis x: accuracy A = 10.7 µm"), "{body}");
+    assert!(body.contains("<pre class=\"next\">trueaxis fit "), "{body}");
     let _ = std::fs::remove_dir_all(dir);
 }
 

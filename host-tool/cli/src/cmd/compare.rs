@@ -134,7 +134,11 @@ impl Args {
     pub fn run(self) -> Result<()> {
         let data = input::load_data(&self.data, None)?;
         let model = ModelFile::load(&self.model)?;
-        let c = run_compare(&data, &model, self.report.as_deref())?;
+        let sources = crate::report::compare::Sources {
+            data: &self.data,
+            model: &self.model,
+        };
+        let c = run_compare(&data, &model, self.report.as_deref(), Some(sources))?;
         if self.json {
             // In the JSON too, but also on stderr so a script's log shows them.
             for w in &c.warnings {

@@ -194,7 +194,12 @@ impl Demo {
         report: &Path,
         json: &Path,
     ) -> Result<Comparison> {
-        let c = crate::workflow::run_compare(data, model, Some(report))?;
+        let (csv, mj) = (self.data_csv(), self.model_json());
+        let sources = crate::report::compare::Sources {
+            data: &csv,
+            model: &mj,
+        };
+        let c = crate::workflow::run_compare(data, model, Some(report), Some(sources))?;
         std::fs::write(json, serde_json::to_string_pretty(&c)? + "\n")
             .with_context(|| format!("cannot write {}", json.display()))?;
         Ok(c)
@@ -206,6 +211,7 @@ impl Demo {
     pub fn improve(&self, data: &Dataset) -> Result<(ModelFile, String, Improvement)> {
         demo_stage(
             data,
+            &self.data_csv(),
             SEED_MODEL,
             &self.model_json(),
             Some(&self.report_dir()),
@@ -462,6 +468,7 @@ impl Args {
 /// Returns the final model, the story told and the steps.
 fn demo_stage(
     data: &Dataset,
+    data_path: &std::path::Path,
     seed: &str,
     model_path: &std::path::Path,
     report_dir: Option<&std::path::Path>,
@@ -482,7 +489,14 @@ fn demo_stage(
         );
     }
     if let Some(dir) = report_dir {
-        let p = crate::report::diagnose::write(&first, data, &dir.join("diagnose"))?;
+        let p = crate::report::diagnose::write_for(
+            &first,
+            data,
+            &data_path.display().to_string(),
+            &model_path.display().to_string(),
+            &dir.join("diagnose"),
+            None,
+        )?;
         let _ = writeln!(s, "   evidence: {}", p.display());
     }
     let fmt = |m: &BTreeMap<String, f64>| {
@@ -542,10 +556,24 @@ fn demo_stage(
     })?;
     if let Some(dir) = report_dir {
         let h = history::load(model_path)?;
+        // The loop's last diagnosis measured the noise floor: the plot
+        // draws it, and the verdict says whether the last fit reached it.
+        let noise: BTreeMap<String, f64> = r
+            .steps
+            .last()
+            .map(|st| {
+                st.noise_floor_um
+                    .iter()
+                    .filter_map(|(t, v)| v.map(|v| (t.clone(), v)))
+                    .collect()
+            })
+            .unwrap_or_default();
         let p = crate::report::history::write_report(
             &h,
             &model_path.display().to_string(),
+            &data_path.display().to_string(),
             &dir.join("history"),
+            &noise,
         )?;
         let _ = writeln!(s, "   the error falling: {}", p.display());
     }

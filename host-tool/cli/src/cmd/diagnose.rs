@@ -64,6 +64,7 @@ impl Args {
                 detail,
             });
         }
+        let model_out = next_model_path(&self.model, &self.data);
         if let Some(dir) = &self.report {
             // A model file's history (MODEL.history.json beside it), when
             // there is one: the report then shows the error falling too.
@@ -72,13 +73,19 @@ impl Args {
                 .is_file()
                 .then(|| trueaxis_engine::history::load(model_path).ok())
                 .flatten();
-            let index =
-                crate::report::diagnose::write_with_history(&d, &data, dir, history.as_ref())?;
+            // The card's next command is the text's `next:` line.
+            let index = crate::report::diagnose::write_for(
+                &d,
+                &data,
+                &self.data.display().to_string(),
+                &model_out.display().to_string(),
+                dir,
+                history.as_ref(),
+            )?;
             if !self.json {
                 outln!("report: {}", index.display())?;
             }
         }
-        let model_out = next_model_path(&self.model, &self.data);
         if self.json {
             let mut doc = serde_json::to_value(&d)?;
             doc["next_command"] = next_command(&d, &self.data, &model_out).into();
@@ -88,20 +95,6 @@ impl Args {
             crate::cmd::out::print(&text(&d, &self.data, &model_out))?;
         }
         Ok(())
-    }
-}
-
-/// A path as one shell word: as it is when it has only characters no
-/// shell treats specially, else in single quotes.
-fn shell_word(p: &Path) -> String {
-    let s = p.display().to_string();
-    if !s.is_empty()
-        && s.chars()
-            .all(|c| c.is_ascii_alphanumeric() || "/._-+,:=@%".contains(c))
-    {
-        s
-    } else {
-        format!("'{}'", s.replace('\'', r"'\''"))
     }
 }
 
@@ -121,28 +114,14 @@ fn next_model_path(model: &str, data_path: &Path) -> PathBuf {
 }
 
 /// The `fit` command that adds every effect the path found — the one
-/// command to run next — or `None` when the path found nothing.
+/// command to run next, the same on the report's verdict card — or `None`
+/// when the path found nothing.
 pub fn next_command(d: &Diagnosis, data_path: &Path, model_out: &Path) -> Option<String> {
-    if d.path.is_empty() {
-        return None;
-    }
-    let mut cmd = format!(
-        "trueaxis fit {} --model {}",
-        shell_word(data_path),
-        d.model.split(" + ").next().unwrap_or("cubic19")
-    );
-    // Every effect the path found, in order; one that replaces an effect
-    // of the model (the same effect with another lag, period, order or
-    // degree) takes its place.
-    let mut adds: Vec<String> = d.model.split(" + ").skip(1).map(String::from).collect();
-    for p in &d.path {
-        diagnose::swap_in(&mut adds, &p.add, p.replaces.as_deref());
-    }
-    for a in adds {
-        cmd.push_str(&format!(" --add '{a}'"));
-    }
-    cmd.push_str(&format!(" -o {}", shell_word(model_out)));
-    Some(cmd)
+    crate::report::diagnose::fit_command(
+        d,
+        &data_path.display().to_string(),
+        &model_out.display().to_string(),
+    )
 }
 
 /// The human summary; `model_out` is where the `next:` command writes.

@@ -11,6 +11,7 @@ use trueaxis_engine::history;
 
 use crate::cmd::out::outln;
 use crate::report::history::write_report;
+use trueaxis_engine::model::ModelFile;
 
 /// Arguments of `trueaxis history`.
 #[derive(clap::Args, Debug)]
@@ -29,7 +30,19 @@ impl Args {
     pub fn run(self) -> Result<()> {
         let h = history::load(&self.model)?;
         if let Some(dir) = &self.report {
-            let index = write_report(&h, &self.model.display().to_string(), dir)?;
+            // The data file the model was fitted to, for the next command
+            // the page proposes (a placeholder when the model is unreadable:
+            // the history is still worth its page).
+            let data = ModelFile::load(&self.model)
+                .map(|m| m.data.source)
+                .unwrap_or_else(|_| "DATA.csv".into());
+            let index = write_report(
+                &h,
+                &self.model.display().to_string(),
+                &data,
+                dir,
+                &Default::default(),
+            )?;
             if !self.json {
                 outln!("report: {}", index.display())?;
             }

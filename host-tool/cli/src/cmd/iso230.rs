@@ -44,23 +44,34 @@ impl Args {
         };
         let res = iso230::evaluate(&data, axis)?;
         let mut plot = None;
+        let mut page = None;
         if let Some(dir) = &self.report {
             std::fs::create_dir_all(dir)
                 .with_context(|| format!("cannot create {}", dir.display()))?;
-            let path = dir.join(format!("iso230_{}.svg", res.axis));
-            crate::report::iso230::plot_svg(&res, &path)?;
-            plot = Some(path);
+            // The page writes the plot beside it as iso230_<axis>.svg.
+            page = Some(crate::report::iso230::write_page(
+                &res,
+                &self.data.display().to_string(),
+                dir,
+            )?);
+            plot = Some(dir.join(format!("iso230_{}.svg", res.axis)));
         }
         if self.json {
             let mut v = serde_json::to_value(&res)?;
             if let (Some(p), Some(obj)) = (&plot, v.as_object_mut()) {
                 obj.insert("plot".into(), p.display().to_string().into());
             }
+            if let (Some(p), Some(obj)) = (&page, v.as_object_mut()) {
+                obj.insert("report".into(), p.display().to_string().into());
+            }
             outln!("{v}")?;
         } else {
             crate::cmd::out::print(&res.table())?;
             if let Some(p) = plot {
                 outln!("\nplot: {}", p.display())?;
+            }
+            if let Some(p) = page {
+                outln!("report: {}", p.display())?;
             }
         }
         Ok(())

@@ -14,21 +14,31 @@ use trueaxis_engine::compare::{
 };
 use trueaxis_engine::data::{Dataset, AXES, TARGETS};
 
-use crate::report::plot::{before_after, heat_map_pair, HeatMap, Series, Style, XyPlot};
-use crate::report::Page;
+use crate::report::plot::{
+    axis_title, before_after, format_value, heat_map_pair, ticks_for, HeatMap, Series, Style,
+    XyPlot,
+};
+use crate::report::{thin, Figure, Page, Tone, Verdict, MAX_SCATTER};
 
-/// Deterministic thinning for scatter plots: every k-th point so that at
-/// most `max` remain (a 2000-point grid stays readable and the SVG small).
-fn thin<T: Copy>(v: &[T], max: usize) -> Vec<T> {
-    if v.len() <= max || max == 0 {
-        return v.to_vec();
-    }
-    let k = v.len().div_ceil(max);
-    v.iter().step_by(k).copied().collect()
+/// Where the data and the model came from, for the command the verdict
+/// card proposes (`trueaxis diagnose DATA --model MODEL.json`).
+#[derive(Clone, Copy, Debug)]
+pub struct Sources<'a> {
+    /// The data file as the user named it.
+    pub data: &'a Path,
+    /// The model file.
+    pub model: &'a Path,
 }
 
-/// Points per scatter series in the report.
-const MAX_SCATTER: usize = 800;
+/// |r| from which the verdict card names a channel the residual follows.
+pub const TREND_CORR: f64 = 0.2;
+/// A worst region this many times the target's RMS turns the card orange:
+/// at the noise, a 4 × 4 × 4 cell of ~80 points often reaches 1.3× by
+/// chance (the demo's final model: 1.35× with every target at its noise).
+pub const REGION_ACTION: f64 = 1.5;
+/// Size of one map in the grid of planes (small multiples).
+const SMALL_MAP: (u32, u32) = (460, 380);
+
 /// Minimum distinct positions for a line to count as dense.
 pub const DENSE_LINE_POINTS: usize = 25;
 /// Plots of dense lines at most.
@@ -87,9 +97,154 @@ pub fn write_report(
     predicted: &[Option<Vec<f64>>; 3],
     c: &Comparison,
 ) -> Result<PathBuf> {
+    write_report_from(dir, data, predicted, c, None)
+}
+
+/// [`write_report`], with the files named so the verdict card can give the
+/// next command verbatim.
+pub fn write_report_from(
+    dir: &Path,
+    data: &Dataset,
+    predicted: &[Option<Vec<f64>>; 3],
+    c: &Comparison,
+    sources: Option<Sources>,
+) -> Result<PathBuf> {
     let mut page = Page::new(format!("trueaxis compare — {} vs {}", c.data, c.model));
+    page.verdict(verdict(c, sources, dir));
     build_report(&mut page, data, predicted, c)?;
     page.write(dir)
+}
+
+/// The compare page's verdict: what is left after compensation, where, and
+/// what it follows — and that `diagnose` names what is missing.
+pub fn verdict(c: &Comparison, sources: Option<Sources>, dir: &Path) -> Verdict {
+    let um = |v: f64| format!("{} µm", format_value(v));
+    let worst = c
+        .targets
+        .iter()
+        .max_by(|a, b| a.1.after.rms_um.total_cmp(&b.1.after.rms_um));
+    let Some((wt, wr)) = worst else {
+        return Verdict {
+            headline: "No target of the data is predicted by the model: nothing to compare.".into(),
+            details: Vec::new(),
+            warnings: c.warnings.iter().map(|w| w.detail.clone()).collect(),
+            next: None,
+            tone: Tone::Unknown,
+        };
+    };
+    let others: Vec<String> = c
+        .targets
+        .iter()
+        .filter(|(t, _)| *t != wt)
+        .map(|(t, r)| format!("{t} {}", um(r.after.rms_um)))
+        .collect();
+    let headline = format!(
+        "After compensation {wt} is left at {} RMS (max {}), {:.0}× less than uncompensated{}.",
+        um(wr.after.rms_um),
+        um(wr.after.max_abs_um),
+        wr.improvement,
+        if others.is_empty() {
+            String::new()
+        } else {
+            format!("; {}", others.join(", "))
+        }
+    );
+    let mut details = Vec::new();
+    let mut action = false;
+    if let Some(r) = c.worst_regions.iter().find(|r| &r.target == wt) {
+        let ratio = r.ratio.unwrap_or(f64::NAN);
+        action |= ratio >= REGION_ACTION;
+        details.push(format!(
+            "Where: {wt} is worst in {} mm — {} RMS, {:.1}× its average, {:.0} % of its squared error{}.",
+            trueaxis_engine::regions::bbox_text(&r.bbox_mm),
+            um(r.rms_um),
+            ratio,
+            100.0 * r.share.unwrap_or(f64::NAN),
+            if ratio < REGION_RATIO {
+                " (no region stands out: the residual is spread evenly)"
+            } else {
+                ""
+            }
+        ));
+    }
+    let mut trends: Vec<_> = c
+        .channels
+        .iter()
+        .filter(|p| &p.target == wt && !["x_mm", "y_mm", "z_mm"].contains(&p.channel.as_str()))
+        .filter(|p| p.corr.is_some_and(|r| r.abs() >= TREND_CORR))
+        .collect();
+    trends.sort_by(|a, b| {
+        b.corr
+            .unwrap_or(0.0)
+            .abs()
+            .total_cmp(&a.corr.unwrap_or(0.0).abs())
+    });
+    if trends.is_empty() {
+        details.push(format!(
+            "What it follows: no temperature, time, direction or other channel (every |r| < {TREND_CORR})."
+        ));
+    }
+    for p in trends.iter().take(3) {
+        action = true;
+        let slope = p.slope_um_per_unit.unwrap_or(f64::NAN);
+        // The slope in the channel's own terms.
+        let size = if p.channel.starts_with("dir_") {
+            format!("a step of {} from −1 to +1", um(2.0 * slope))
+        } else if p.channel == "t_s" {
+            format!("{} µm per hour", format_value(3600.0 * slope))
+        } else if p.channel.starts_with("T_") {
+            format!("{} µm per K", format_value(slope))
+        } else {
+            format!("{} per unit", um(slope))
+        };
+        details.push(format!(
+            "What it follows: {wt}'s residual follows {} (r = {:+.2}, {size}) — a trend the model does not hold.",
+            axis_title(&p.channel),
+            p.corr.unwrap_or(0.0),
+        ));
+    }
+    if let Some(h) = wr.held_out_rms_um {
+        let ratio = h / wr.after.rms_um.max(1e-12);
+        details.push(if ratio > 1.2 {
+            format!(
+                "Held out: {} on blocks the fit did not see, {ratio:.1}× the in-sample — the model follows the data more closely than it predicts it (too many terms for the data)",
+                um(h)
+            )
+        } else {
+            format!(
+                "Held out: {} on blocks the fit did not see ({ratio:.2}× the in-sample): the model predicts as well as it fits.",
+                um(h)
+            )
+        });
+    }
+    details.push(
+        "Whether this is the noise of the measurement or a missing effect is diagnose's answer: the command below."
+            .into(),
+    );
+    let next = Some(match sources {
+        Some(s) => format!(
+            "trueaxis diagnose {} --model {} --report {}",
+            s.data.display(),
+            s.model.display(),
+            dir.join("diagnose").display()
+        ),
+        None => format!(
+            "trueaxis diagnose {} --model MODEL.json --report {}",
+            c.data,
+            dir.join("diagnose").display()
+        ),
+    });
+    Verdict {
+        headline,
+        details,
+        warnings: c
+            .warnings
+            .iter()
+            .map(|w| format!("{} ({})", w.detail, w.code))
+            .collect(),
+        next,
+        tone: if action { Tone::Action } else { Tone::Unknown },
+    }
 }
 
 /// Adds the comparison's sections to `page` (so `demo` and `diagnose` can
@@ -152,17 +307,17 @@ pub fn build_report(
     let names: Vec<String> = c.targets.keys().cloned().collect();
     let before: Vec<f64> = c.targets.values().map(|r| r.before.rms_um).collect();
     let after: Vec<f64> = c.targets.values().map(|r| r.after.rms_um).collect();
-    page.figure(
-        "before_after_rms",
-        "RMS error per target before compensation (the raw measured error) and after (the residual the model leaves).",
-        before_after("Before vs after: RMS", "RMS (µm)", &names, &before, &after).to_svg()?,
-    );
+    let rms_fig = Figure {
+        name: "before_after_rms".into(),
+        caption: "RMS error per target before compensation (the raw measured error) and after (the residual the model leaves).".into(),
+        svg: before_after("Before vs after: RMS", "RMS (µm)", &names, &before, &after).to_svg()?,
+    };
     let before: Vec<f64> = c.targets.values().map(|r| r.before.max_abs_um).collect();
     let after: Vec<f64> = c.targets.values().map(|r| r.after.max_abs_um).collect();
-    page.figure(
-        "before_after_max",
-        "Largest |error| per target before and after compensation.",
-        before_after(
+    let max_fig = Figure {
+        name: "before_after_max".into(),
+        caption: "Largest |error| per target before and after compensation.".into(),
+        svg: before_after(
             "Before vs after: max |e|",
             "max |e| (µm)",
             &names,
@@ -170,7 +325,8 @@ pub fn build_report(
             &after,
         )
         .to_svg()?,
-    );
+    };
+    page.grid_wide(vec![rms_fig, max_fig]);
 
     page.heading("Worst regions");
     page.paragraph(format!(
@@ -241,6 +397,11 @@ pub fn build_report(
         }
         for t in data.targets() {
             let res = residuals(data, predicted, t);
+            // Small multiples: every plane shown of this target, side by
+            // side, on one colour scale — planes are compared by colour,
+            // so a scale per map would make a 3 µm plane look as hot as a
+            // 6 µm one.
+            let mut maps = Vec::new();
             for same in &groups {
                 for i in pick_evenly(same.len(), MAX_PLANES_PER_NORMAL) {
                     let plane = &same[i];
@@ -254,13 +415,36 @@ pub fn build_report(
                     } else {
                         format!("{} residual", TARGETS[t])
                     };
-                    page.figure(
+                    let mut m = plane_map(data, plane, title, |r| res[r]);
+                    m.size = SMALL_MAP;
+                    maps.push((
                         format!("map_{}_{}{}", TARGETS[t], AXES[plane.normal], i),
-                        format!("Residual of {} on a measured plane.", TARGETS[t]),
-                        plane_map(data, plane, title, |r| res[r]).to_svg()?,
-                    );
+                        plane,
+                        m,
+                    ));
                 }
             }
+            let limit = maps.iter().fold(0.0f64, |l, m| l.max(m.2.max_abs()));
+            page.subheading(format!(
+                "{} residual on the measured planes — one colour scale, ±{} µm",
+                TARGETS[t],
+                format_value(limit)
+            ));
+            let mut figs = Vec::with_capacity(maps.len());
+            for (name, plane, mut m) in maps {
+                m.limit = Some(limit);
+                figs.push(Figure {
+                    name,
+                    caption: format!(
+                        "Residual of {} on the plane {} = {} mm.",
+                        TARGETS[t],
+                        AXES[plane.normal],
+                        plot_num(plane.at_mm)
+                    ),
+                    svg: m.to_svg()?,
+                });
+            }
+            page.grid(figs);
             // Before vs after on the middle plane, one colour scale.
             let plane = &first[first.len() / 2];
             let raw = data.err_um[t].as_ref();
@@ -350,11 +534,11 @@ pub fn build_report(
             // the full resolution.
             resid = resid.with(Series::line(TARGETS[t], rr));
         }
-        page.figure(
-            format!("line{k}_measured"),
-            format!("Measured error and model along {ax} at {}.", line.label),
-            meas.to_svg()?,
-        );
+        let mut figs = vec![Figure {
+            name: format!("line{k}_measured"),
+            caption: format!("Measured error and model along {ax} at {}.", line.label),
+            svg: meas.to_svg()?,
+        }];
         // Zoom on the first 60 mm of a long line: short periods (a lead
         // screw's pitch) are unreadable over the whole travel.
         let lo = data.pos(line.axis, line.rows[0]);
@@ -367,18 +551,19 @@ pub fn build_report(
             }
             z
         });
-        page.figure(
-            format!("line{k}_residual"),
-            format!("Residual along {ax} at {}.", line.label),
-            resid.to_svg()?,
-        );
+        figs.push(Figure {
+            name: format!("line{k}_residual"),
+            caption: format!("Residual along {ax} at {}.", line.label),
+            svg: resid.to_svg()?,
+        });
         if let Some(z) = zoom {
-            page.figure(
-                format!("line{k}_residual_zoom"),
-                format!("Residual along {ax} at {}, the first 60 mm.", line.label),
-                z.to_svg()?,
-            );
+            figs.push(Figure {
+                name: format!("line{k}_residual_zoom"),
+                caption: format!("Residual along {ax} at {}, the first 60 mm.", line.label),
+                svg: z.to_svg()?,
+            });
         }
+        page.grid_wide(figs);
     }
 
     // Measured vs model over all points.
@@ -414,12 +599,14 @@ pub fn build_report(
     // Residual against every axis and channel.
     page.heading("Residual against positions and channels");
     page.paragraph("A trend here is an effect the model lacks: a slope against a temperature is thermal growth, a step between dir = −1 and +1 is reversal (backlash), a drift with t_s is drift.");
+    let mut figs = Vec::new();
     for (k, (channel, values)) in channels(data).iter().enumerate() {
         let mut plot = XyPlot::new(
-            format!("residual vs {channel}"),
-            channel.clone(),
+            format!("residual against {}", axis_title(channel)),
+            axis_title(channel),
             "residual (µm)",
         )
+        .with_x_ticks(ticks_for(channel))
         .with_hline(0.0, "");
         for t in data.targets() {
             let res = residuals(data, predicted, t);
@@ -446,12 +633,16 @@ pub fn build_report(
                 ));
             }
         }
-        page.figure(
-            format!("channel{k}"),
-            format!("Residual against {channel}, with the mean per bin."),
-            plot.to_svg()?,
-        );
+        figs.push(Figure {
+            name: format!("channel{k}"),
+            caption: format!(
+                "Residual against {} (column {channel}), with the mean per bin.",
+                axis_title(channel)
+            ),
+            svg: plot.to_svg()?,
+        });
     }
+    page.grid_wide(figs);
     let rows = c
         .channels
         .iter()
@@ -485,6 +676,73 @@ mod tests {
         assert_eq!(pick_evenly(6, 5), vec![0, 1, 3, 4, 5]);
         assert_eq!(pick_evenly(0, 5), Vec::<usize>::new());
     }
+    #[test]
+    fn the_card_turns_orange_for_a_trend_or_a_clear_region_only() {
+        let mut d = Dataset {
+            source: "d.csv".into(),
+            ..Dataset::default()
+        };
+        let n = 40;
+        d.pos_mm = [
+            Some((0..n).map(|i| f64::from(i) * 10.0).collect()),
+            None,
+            None,
+        ];
+        d.err_um = [
+            Some(
+                (0..n)
+                    .map(|i| Some(if i % 2 == 0 { 0.2 } else { -0.2 }))
+                    .collect(),
+            ),
+            None,
+            None,
+        ];
+        let pred = [Some(vec![0.0; n as usize]), None, None];
+        let mut c = compare(&d, "cubic19", &pred, [None; 3]);
+        let region = |ratio: f64| trueaxis_engine::regions::Region {
+            target: "ex".into(),
+            bbox_mm: [("x".to_string(), [0.0, 100.0])].into(),
+            rms_um: 0.2 * ratio,
+            ratio: Some(ratio),
+            points: 10,
+            share: Some(0.3),
+        };
+        c.worst_regions = vec![region(1.35)];
+        c.channels.clear();
+        let dir = Path::new("rep");
+        let v = verdict(&c, None, dir);
+        assert_eq!(v.tone, Tone::Unknown, "1.35× is within chance at the noise");
+        assert!(
+            v.headline
+                .starts_with("After compensation ex is left at 0.200 µm RMS"),
+            "{}",
+            v.headline
+        );
+        assert_eq!(
+            v.next.as_deref(),
+            Some("trueaxis diagnose d.csv --model MODEL.json --report rep/diagnose")
+        );
+        c.worst_regions = vec![region(1.6)];
+        assert_eq!(verdict(&c, None, dir).tone, Tone::Action);
+        c.worst_regions = vec![region(1.1)];
+        c.channels = vec![trueaxis_engine::compare::ChannelProfile {
+            channel: "dir_x".into(),
+            target: "ex".into(),
+            corr: Some(-0.4),
+            slope_um_per_unit: Some(-0.5),
+            bins: Vec::new(),
+        }];
+        let v = verdict(&c, None, dir);
+        assert_eq!(v.tone, Tone::Action);
+        assert!(
+            v.details.iter().any(|l| l.contains(
+                "approach direction along x (r = -0.40, a step of -1.00 µm from −1 to +1)"
+            )),
+            "{:?}",
+            v.details
+        );
+    }
+
     #[test]
     fn planes_and_lines_of_a_plan() {
         // Grid 5 × 4 × 3 plus a dense line along x at y = 0, z = 0.

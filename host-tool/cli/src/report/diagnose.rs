@@ -14,8 +14,311 @@ use trueaxis_engine::data::{Dataset, AXES, TARGETS};
 use trueaxis_engine::diagnose::{Candidate, Diagnosis};
 use trueaxis_engine::effect::Family;
 
-use crate::report::plot::{heat_map_pair, HeatMap, Series, XyPlot};
-use crate::report::Page;
+use trueaxis_engine::diagnose::{Verdict as DVerdict, ABOVE_NOISE_RATIO};
+
+use crate::report::plot::{axis_title, format_value, heat_map_pair, HeatMap, Series, XyPlot};
+use crate::report::{thin, Figure, Page, Tone, Verdict, MAX_SCATTER};
+
+/// Warning codes that undermine a verdict (shown on the card); the rest
+/// (`in_model_span`, `aux_columns`, …) stay in the Warnings section.
+pub const UNDERMINING: [&str; 7] = [
+    "aliasing",
+    "one_direction",
+    "constant_temperature",
+    "no_temperature",
+    "confounded",
+    "implausible_parameter",
+    "aux_misspelled",
+];
+
+/// The `fit` command that adds every effect the path found (one that
+/// replaces an effect of the model takes its place); None without a path.
+/// The text output's `next:` line and the verdict card's.
+pub fn fit_command(d: &Diagnosis, data_path: &str, model_out: &str) -> Option<String> {
+    if d.path.is_empty() {
+        return None;
+    }
+    let mut cmd = format!(
+        "trueaxis fit {} --model {}",
+        shell_word(data_path),
+        d.model.split(" + ").next().unwrap_or("cubic19")
+    );
+    let mut adds: Vec<String> = d.model.split(" + ").skip(1).map(String::from).collect();
+    for p in &d.path {
+        trueaxis_engine::diagnose::swap_in(&mut adds, &p.add, p.replaces.as_deref());
+    }
+    for a in adds {
+        cmd.push_str(&format!(" --add '{a}'"));
+    }
+    // Written over the diagnosed model (or `model.json` for a seed name),
+    // so the command runs as printed and the history continues.
+    cmd.push_str(&format!(" -o {}", shell_word(model_out)));
+    Some(cmd)
+}
+
+/// A path as one shell word: as it is when it has only characters no
+/// shell treats specially, else in single quotes.
+pub fn shell_word(s: &str) -> String {
+    if !s.is_empty()
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || "/._-+,:=@%".contains(c))
+    {
+        s.to_string()
+    } else {
+        format!("'{}'", s.replace('\'', r"'\''"))
+    }
+}
+
+/// An effect in words: "a periodic error of ex along x".
+pub fn effect_words(c: &Candidate) -> String {
+    let along = c
+        .axis
+        .as_deref()
+        .map_or(String::new(), |a| format!(" along {a}"));
+    let t = &c.target;
+    match c.effect {
+        Family::Periodic => format!("a periodic error of {t}{along} (lead screw or scale pitch)"),
+        Family::Thermal => format!(
+            "thermal growth of {t} with the {}{}",
+            c.channel
+                .as_deref()
+                .map_or("temperature".into(), |c| axis_title(c).replace(" (°C)", "")),
+            c.axis
+                .as_deref()
+                .map_or(String::new(), |a| format!(", growing along {a}"))
+        ),
+        Family::Reversal => format!("a reversal error (backlash) of {t}{along}"),
+        Family::Abbe => format!("an Abbe error of {t} (a tilt times the tool length){along}"),
+        Family::Drift => format!("a drift of {t} with time"),
+        Family::Squareness => format!("out-of-squareness: {t} growing{along}"),
+        Family::HigherOrder => format!(
+            "a smooth shape of {t}{along} the seed cannot follow (higher order, not a named physical effect)"
+        ),
+    }
+}
+
+/// The physical value in words: "amplitude 3.08 µm (95 %: 3.03 … 3.13)",
+/// with the searched parameter (period, lag) first.
+fn physical_words(c: &Candidate) -> String {
+    let mut parts = Vec::new();
+    if let Some(p) = c.params.get("period_mm") {
+        parts.push(format!("period {} mm", format_value(*p)));
+    }
+    if let Some(l) = c.params.get("lag_s").filter(|l| **l > 0.0) {
+        parts.push(format!("lag {} s", format_value(*l)));
+    }
+    if let Some(ph) = &c.physical {
+        parts.push(format!(
+            "{} {} {} (95 %: {} … {})",
+            ph.name.replace('_', " "),
+            format_value(ph.value),
+            ph.unit,
+            format_value(ph.ci95[0]),
+            format_value(ph.ci95[1])
+        ));
+    }
+    parts.join(", ")
+}
+
+/// How sure, in plain words: ΔBIC and the held-out gain.
+fn sureness(c: &Candidate) -> String {
+    let bic = c.delta_bic.map_or("no ΔBIC".into(), |b| {
+        let word = if b < -100.0 {
+            "overwhelming"
+        } else if b < -30.0 {
+            "very strong"
+        } else {
+            "strong"
+        };
+        format!("ΔBIC {b:.0} — {word} evidence (the rule asks for < −10)")
+    });
+    let held = match (c.gain, c.held_out_rms_um_after) {
+        (Some(g), Some(after)) if g < 1.0 => format!(
+            "on blocks the fit never saw, the {} error falls from {} to {} µm ({:.0} % lower; the rule asks for 10 %)",
+            c.target,
+            format_value(after / (1.0 - g)),
+            format_value(after),
+            100.0 * g
+        ),
+        _ => "no held-out figure".into(),
+    };
+    format!("{bic}; {held}")
+}
+
+/// The diagnose page's verdict: what is missing (effect, target, value
+/// ± 95 %, how sure) or that nothing named is, what is left above the
+/// noise and where, the warnings that undermine it, and the next command.
+pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
+    let um = |v: f64| format!("{} µm", format_value(v));
+    let path_cands: Vec<&Candidate> = d
+        .path
+        .iter()
+        .filter_map(|p| d.candidates.iter().find(|c| c.on_path() && c.add == p.add))
+        .collect();
+    let mut details = Vec::new();
+    let mut warnings: Vec<String> = d
+        .warnings
+        .iter()
+        .filter(|w| UNDERMINING.contains(&w.code.as_str()))
+        .map(|w| format!("{} ({})", w.detail, w.code))
+        .collect();
+    // What is left after the path, per target, against its noise floor.
+    let final_rms = |t: &str| {
+        d.path
+            .iter()
+            .rev()
+            .find(|p| p.target == t)
+            .map_or(d.rms_um.get(t).copied().unwrap_or(f64::NAN), |p| p.rms_um)
+    };
+    let mut left = Vec::new();
+    let mut unknown_noise = Vec::new();
+    for t in d.rms_um.keys() {
+        match d.noise_floor_um.get(t).copied().flatten() {
+            Some(nf) if nf > 0.0 => {
+                let r = final_rms(t);
+                if r > ABOVE_NOISE_RATIO * nf {
+                    left.push((t.clone(), r, nf));
+                }
+            }
+            _ => unknown_noise.push(t.clone()),
+        }
+    }
+    let region = |t: &str| {
+        d.worst_regions
+            .iter()
+            .filter(|r| r.target == t)
+            .max_by(|a, b| a.rms_um.total_cmp(&b.rms_um))
+            .map(|r| trueaxis_engine::regions::bbox_text(&r.bbox_mm))
+    };
+    let left_words: Vec<String> = left
+        .iter()
+        .map(|(t, r, nf)| {
+            format!(
+                "{t} at {:.1}× the noise ({} against {}{})",
+                r / nf,
+                um(*r),
+                um(*nf),
+                region(t).map_or(String::new(), |b| format!(", worst in {b} mm"))
+            )
+        })
+        .collect();
+    let noise_words: Vec<String> = d
+        .rms_um
+        .keys()
+        .map(|t| {
+            let nf = d.noise_floor_um.get(t).copied().flatten();
+            format!(
+                "{t} {} (noise {})",
+                um(final_rms(t)),
+                nf.map_or("unknown".into(), um)
+            )
+        })
+        .collect();
+    let (headline, tone, next) = match d.verdict {
+        DVerdict::MissingEffect if !path_cands.is_empty() => {
+            let names: Vec<String> = path_cands.iter().map(|c| effect_words(c)).collect();
+            for (k, c) in path_cands.iter().enumerate() {
+                details.push(format!(
+                    "{}. {}: {}. How sure: {}.",
+                    k + 1,
+                    effect_words(c),
+                    physical_words(c),
+                    sureness(c)
+                ));
+                if let Some(ph) = c.physical.as_ref().filter(|p| !p.plausible) {
+                    warnings.push(format!(
+                        "{} {} {} is outside the plausible range ({}): check the sensor and the unit before trusting the value",
+                        ph.name, format_value(ph.value), ph.unit, ph.expected
+                    ));
+                }
+            }
+            details.push(if left.is_empty() {
+                format!(
+                    "With {}: {} — nothing else is left above the noise.",
+                    if names.len() == 1 { "it" } else { "them" },
+                    noise_words.join(", ")
+                )
+            } else {
+                format!(
+                    "Even with {}, {} is left above the noise: another effect, or one outside the library.",
+                    if names.len() == 1 { "it" } else { "them" },
+                    left_words.join("; ")
+                )
+            });
+            (
+                format!("Missing: {}.", names.join("; and ")),
+                Tone::Action,
+                fit_command(d, data_path, model_out),
+            )
+        }
+        _ if left.is_empty() && unknown_noise.is_empty() => {
+            details.push(format!("Residual: {}.", noise_words.join(", ")));
+            details.push(
+                "No candidate effect passes the rules (ΔBIC < −10 and 10 % lower held-out error)."
+                    .into(),
+            );
+            (
+                "Nothing is missing: every target is at the noise floor of the measurement.".into(),
+                if warnings.is_empty() {
+                    Tone::Good
+                } else {
+                    Tone::Unknown
+                },
+                Some(format!(
+                    "trueaxis fit {data_path} --model {} -o model.json && trueaxis export model.json -o table.bin",
+                    d.model.replace(" + ", " --add ")
+                )),
+            )
+        }
+        _ if left.is_empty() => {
+            details.push(format!("Residual: {}.", noise_words.join(", ")));
+            (
+                format!(
+                    "Nothing named is missing, but the noise floor of {} cannot be estimated (no repeated points or dense lines): whether anything is left is unknown.",
+                    unknown_noise.join(", ")
+                ),
+                Tone::Unknown,
+                Some("measure a few points repeatedly (or a dense line), then run diagnose again".into()),
+            )
+        }
+        _ => {
+            details.push(
+                "No candidate effect of the library passes the rules (ΔBIC < −10 and 10 % lower held-out error): what is left is a smooth shape the seed cannot follow, an effect outside the library, or one the measurement cannot show (see below)."
+                    .into(),
+            );
+            let next = d
+                .warnings
+                .iter()
+                .find(|w| ["aliasing", "one_direction", "constant_temperature", "no_temperature"].contains(&w.code.as_str()))
+                .map(|w| format!("measure first: {}", w.detail))
+                .or_else(|| {
+                    Some(format!(
+                        "trueaxis fit {data_path} --model {} -o model.json && trueaxis compare {data_path} --model model.json --report report",
+                        d.model.replace(" + ", " --add ")
+                    ))
+                });
+            (
+                format!(
+                    "Nothing named is missing, but {} is left above the noise: {}.",
+                    left.iter()
+                        .map(|l| l.0.clone())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    left_words.join("; ")
+                ),
+                Tone::Action,
+                next,
+            )
+        }
+    };
+    Verdict {
+        headline,
+        details,
+        warnings,
+        next,
+        tone,
+    }
+}
 
 /// The channel a candidate follows, as (label, value per data row).
 fn channel(data: &Dataset, c: &Candidate) -> Option<(String, Vec<f64>)> {
@@ -30,10 +333,13 @@ fn channel(data: &Dataset, c: &Candidate) -> Option<(String, Vec<f64>)> {
                 .as_deref()?
                 .strip_prefix("T_")?
                 .strip_suffix("_C")?;
-            Some((format!("T_{name}_C (°C)"), data.temp(name)?.temp_c.clone()))
+            Some((
+                axis_title(&format!("T_{name}_C")),
+                data.temp(name)?.temp_c.clone(),
+            ))
         }
-        Family::Drift => Some(("t_s (s)".into(), data.t_s.clone()?)),
-        Family::Abbe => Some(("tool_mm (mm)".into(), data.tool_mm.clone()?)),
+        Family::Drift => Some((axis_title("t_s"), data.t_s.clone()?)),
+        Family::Abbe => Some((axis_title("tool_mm"), data.tool_mm.clone()?)),
         _ => {
             let a = axis?;
             Some((format!("{} (mm)", AXES[a]), data.pos_mm[a].clone()?))
@@ -80,7 +386,22 @@ pub fn write_with_history(
     dir: &Path,
     history: Option<&trueaxis_engine::history::History>,
 ) -> Result<PathBuf> {
+    write_for(d, data, &data.source, "model.json", dir, history)
+}
+
+/// [`write_with_history`], with the data file named as the user would
+/// type it in the verdict card's next command (`data.source` may be a
+/// generator's name, `simulate:mill800`).
+pub fn write_for(
+    d: &Diagnosis,
+    data: &Dataset,
+    data_path: &str,
+    model_out: &str,
+    dir: &Path,
+    history: Option<&trueaxis_engine::history::History>,
+) -> Result<PathBuf> {
     let mut page = Page::new(format!("trueaxis diagnose — {}", data.source));
+    page.verdict(verdict(d, data_path, model_out));
     page.heading("Diagnosis");
     page.paragraph(format!(
         "Model {}; verdict {}; hold-out: {}.",
@@ -158,9 +479,16 @@ pub fn write_with_history(
     }
     if let Some(h) = history.filter(|h| !h.steps.is_empty()) {
         page.subheading("History of the model");
-        crate::report::history::add_to_page(&mut page, h)?;
+        let noise: std::collections::BTreeMap<String, f64> = d
+            .noise_floor_um
+            .iter()
+            .filter_map(|(t, v)| v.map(|v| (t.clone(), v)))
+            .collect();
+        crate::report::history::add_to_page(&mut page, h, &noise)?;
     }
     page.heading("Evidence");
+    // The x–y evidence side by side, two per row; the maps below full width.
+    let mut figs: Vec<Figure> = Vec::new();
     // Periodograms: every target and axis with dense lines at the starting
     // model (at most 3 × 3), plus the one that found each periodic effect
     // added at a later path step.
@@ -189,15 +517,17 @@ pub fn write_with_history(
                 format!("{:.3} mm", 1.0 / e.pg.freq_per_mm[k]),
             );
         }
-        page.figure(
-            if e.step > 1 {
+        figs.push(Figure {
+            name: if e.step > 1 {
                 format!("periodogram_{tn}_{ax}_step{}", e.step)
             } else {
                 format!("periodogram_{tn}_{ax}")
             },
-            format!("Lomb–Scargle periodogram of the {tn} residual along {ax}{at} (dense lines)"),
-            plot.to_svg()?,
-        );
+            caption: format!(
+                "Lomb–Scargle periodogram of the {tn} residual along {ax}{at} (dense lines)"
+            ),
+            svg: plot.to_svg()?,
+        });
     }
     // Forward/backward split of each reversal on the path: the partial
     // residual (final residual plus the fitted reversal component), so that
@@ -283,13 +613,19 @@ pub fn write_with_history(
             format!("{} (mm)", AXES[*a]),
             "residual (µm)",
         )
-        .with(Series::points(format!("dir_{} = +1", AXES[*a]), up))
-        .with(Series::points(format!("dir_{} = −1", AXES[*a]), down));
-        page.figure(
-            format!("reversal_{}_{}", TARGETS[*t], AXES[*a]),
-            caption.clone(),
-            plot.to_svg()?,
-        );
+        .with(Series::points(
+            format!("dir_{} = +1", AXES[*a]),
+            thin(&up, MAX_SCATTER),
+        ))
+        .with(Series::points(
+            format!("dir_{} = −1", AXES[*a]),
+            thin(&down, MAX_SCATTER),
+        ));
+        figs.push(Figure {
+            name: format!("reversal_{}_{}", TARGETS[*t], AXES[*a]),
+            caption: caption.clone(),
+            svg: plot.to_svg()?,
+        });
     }
     // Component + residual of every effect on the path.
     for comp in &d.evidence.components {
@@ -323,17 +659,24 @@ pub fn write_with_history(
             label,
             format!("{} (µm)", TARGETS[t]),
         )
-        .with(Series::points("component + residual", partial))
-        .with(Series::points("fitted component", fitted));
-        page.figure(
-            format!("component_{}_{}", TARGETS[t], comp.step),
-            format!(
+        .with(Series::points(
+            "component + residual",
+            thin(&partial, MAX_SCATTER),
+        ))
+        .with(Series::points(
+            "fitted component",
+            thin(&fitted, MAX_SCATTER),
+        ));
+        figs.push(Figure {
+            name: format!("component_{}_{}", TARGETS[t], comp.step),
+            caption: format!(
                 "Path step {} of {}: the fitted {} component with the final residual added back",
                 comp.step, TARGETS[t], c.effect
             ),
-            plot.to_svg()?,
-        );
+            svg: plot.to_svg()?,
+        });
     }
+    page.grid_wide(figs);
     // Spatial residual maps before and after the path.
     if let Some((a, b)) = map_axes(data) {
         for (t, rows, before) in &d.evidence.resid_before {
@@ -351,14 +694,18 @@ pub fn write_with_history(
                     .collect()
             };
             let tn = TARGETS[*t];
+            // The cells are the measured grid's lines; a dense line's
+            // readings are averaged into them (one cell per reading made
+            // 3 MB maps of grey columns).
+            let snap = 1e-3;
             let mk = |title: &str, v: &[f64]| {
-                HeatMap::from_points(
+                HeatMap::from_grid_points(
                     title,
                     format!("{} (mm)", AXES[a]),
                     format!("{} (mm)", AXES[b]),
                     "µm",
                     &pts(v),
-                    1e-3,
+                    snap,
                 )
             };
             let hb = mk(&format!("{tn} residual, {}", d.model), before);
@@ -374,4 +721,164 @@ pub fn write_with_history(
         }
     }
     page.write(dir)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use trueaxis_engine::diagnose::{Evidence, PathStep, Physical, Region, Warning};
+
+    fn diagnosis(rms_ex: f64, noise_ex: Option<f64>) -> Diagnosis {
+        let m = |ex: f64| -> BTreeMap<String, f64> {
+            [("ex".to_string(), ex), ("ey".to_string(), 0.2)].into()
+        };
+        Diagnosis {
+            model: "cubic19".into(),
+            rms_um: m(rms_ex),
+            held_out_rms_um: m(rms_ex * 1.01),
+            noise_floor_um: [("ex".to_string(), noise_ex), ("ey".to_string(), Some(0.2))].into(),
+            noise_method: BTreeMap::new(),
+            verdict: DVerdict::AtNoiseFloor,
+            candidates: Vec::new(),
+            path: Vec::new(),
+            worst_regions: vec![Region {
+                target: "ex".into(),
+                bbox_mm: [("x".to_string(), [600.0, 800.0])].into(),
+                rms_um: 3.9,
+                ratio: None,
+                points: 40,
+                share: None,
+            }],
+            warnings: Vec::new(),
+            hold_out: "spatial cells".into(),
+            evidence: Evidence::default(),
+        }
+    }
+    use std::collections::BTreeMap;
+
+    #[test]
+    fn at_the_noise_floor_the_card_says_nothing_is_missing_and_proposes_export() {
+        let v = verdict(&diagnosis(0.2, Some(0.2)), "d.csv", "m.json");
+        assert_eq!(v.tone, Tone::Good);
+        assert!(
+            v.headline.starts_with("Nothing is missing"),
+            "{}",
+            v.headline
+        );
+        assert!(v.next.unwrap().contains("trueaxis export model.json"));
+    }
+
+    #[test]
+    fn a_residual_above_the_noise_is_named_with_its_region_and_what_undermines_it() {
+        let mut d = diagnosis(0.5, Some(0.2));
+        d.warnings = vec![
+            Warning {
+                code: "aliasing".into(),
+                detail: "add a dense line along y".into(),
+            },
+            Warning {
+                code: "in_model_span".into(),
+                detail: "squareness cannot be told".into(),
+            },
+        ];
+        let v = verdict(&d, "d.csv", "m.json");
+        assert_eq!(v.tone, Tone::Action);
+        assert!(
+            v.headline.starts_with(
+                "Nothing named is missing, but ex is left above the noise: ex at 2.5× the noise"
+            ),
+            "{}",
+            v.headline
+        );
+        assert!(
+            v.headline.contains("worst in x 600…800 mm"),
+            "{}",
+            v.headline
+        );
+        assert_eq!(
+            v.warnings,
+            vec!["add a dense line along y (aliasing)".to_string()]
+        );
+        assert_eq!(
+            v.next.as_deref(),
+            Some("measure first: add a dense line along y")
+        );
+        // Without a noise floor the card does not claim either way.
+        let v = verdict(&diagnosis(0.5, None), "d.csv", "m.json");
+        assert_eq!(v.tone, Tone::Unknown);
+        assert!(v.headline.contains("cannot be estimated"), "{}", v.headline);
+    }
+
+    #[test]
+    fn a_missing_effect_is_named_with_its_value_and_how_sure() {
+        let mut d = diagnosis(2.0, Some(0.2));
+        d.verdict = DVerdict::MissingEffect;
+        let add = "periodic:target=ex,axis=x,period_mm=5";
+        d.path = vec![PathStep {
+            target: "ex".into(),
+            add: add.into(),
+            delta_bic: -6751.0,
+            rms_um: 0.21,
+            held_out_rms_um: 0.22,
+            replaces: None,
+        }];
+        d.candidates = vec![Candidate {
+            effect: Family::Periodic,
+            target: "ex".into(),
+            axis: Some("x".into()),
+            channel: None,
+            params: [("period_mm".to_string(), 5.0)].into(),
+            add: add.into(),
+            held_out_rms_um_after: Some(1.0),
+            gain: Some(0.5),
+            identifiable: true,
+            evidence: String::new(),
+            delta_bic: Some(-6751.0),
+            rms_um_after: Some(0.99),
+            out_of_span_share: 1.0,
+            significant: true,
+            physical: Some(Physical {
+                name: "amplitude".into(),
+                unit: "µm".into(),
+                value: 3.08,
+                ci95: [3.03, 3.13],
+                plausible: false,
+                expected: "≤ 20 µm".into(),
+            }),
+            confounded_with: Vec::new(),
+            replaces: None,
+            step: Some(1),
+        }];
+        let v = verdict(&d, "d.csv", "m.json");
+        assert_eq!(v.tone, Tone::Action);
+        assert_eq!(
+            v.headline,
+            "Missing: a periodic error of ex along x (lead screw or scale pitch)."
+        );
+        let one = &v.details[0];
+        for part in [
+            "period 5.00 mm",
+            "amplitude 3.08 µm (95 %: 3.03 … 3.13)",
+            "ΔBIC -6751 — overwhelming evidence",
+            "falls from 2.00 to 1.00 µm (50 % lower",
+        ] {
+            assert!(one.contains(part), "{part} in {one}");
+        }
+        assert!(
+            v.details[1].contains("nothing else is left above the noise"),
+            "{:?}",
+            v.details
+        );
+        assert!(
+            v.warnings[0].contains("outside the plausible range"),
+            "{:?}",
+            v.warnings
+        );
+        assert_eq!(
+            v.next.as_deref(),
+            Some(
+                "trueaxis fit d.csv --model cubic19 --add 'periodic:target=ex,axis=x,period_mm=5'"
+            )
+        );
+    }
 }

@@ -22,6 +22,20 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
+/// Deterministic thinning for scatter plots: every k-th point so that at
+/// most `max` remain (a 5000-point data set stays readable, and the page
+/// light: each dot is ~100 bytes of SVG).
+pub fn thin<T: Copy>(v: &[T], max: usize) -> Vec<T> {
+    if v.len() <= max || max == 0 {
+        return v.to_vec();
+    }
+    let k = v.len().div_ceil(max);
+    v.iter().step_by(k).copied().collect()
+}
+
+/// Points per scatter series in a report.
+pub const MAX_SCATTER: usize = 400;
+
 /// One block of a page, in display order.
 #[derive(Clone, Debug)]
 enum Block {
@@ -32,17 +46,64 @@ enum Block {
         header: Vec<String>,
         rows: Vec<Vec<String>>,
     },
-    Figure {
-        name: String,
-        caption: String,
-        svg: String,
-    },
+    Figure(Figure),
+    /// Figures side by side, as many per row as the window holds (small
+    /// multiples: the planes of one target on one colour scale).
+    Grid(Vec<Figure>, GridKind),
+}
+
+/// How wide the cells of a grid of figures are at least.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum GridKind {
+    /// 340 px: heat maps of planes (three per row at 1280 px).
+    Small,
+    /// 560 px: x–y plots whose text must stay readable (two per row).
+    Wide,
+}
+
+/// One figure: an SVG with a caption, written as `<name>.svg`.
+#[derive(Clone, Debug)]
+pub struct Figure {
+    /// File stem (letters, digits, `-`, `_`), unique on the page.
+    pub name: String,
+    /// Caption under the figure.
+    pub caption: String,
+    /// The SVG document.
+    pub svg: String,
+}
+
+/// How a verdict reads at a glance (the card's colour).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Tone {
+    /// Nothing is left to do: at the noise floor.
+    Good,
+    /// Something is missing or left; the card says what.
+    Action,
+    /// Not enough to say (no noise floor, a warning undermines it).
+    Unknown,
+}
+
+/// The verdict card every report opens with: the answer in words, the
+/// warnings that undermine it, and the one command to run next.
+#[derive(Clone, Debug)]
+pub struct Verdict {
+    /// The answer in one sentence.
+    pub headline: String,
+    /// How sure, in plain words (one item per line).
+    pub details: Vec<String>,
+    /// Design and data warnings that undermine the answer.
+    pub warnings: Vec<String>,
+    /// The one command to run next.
+    pub next: Option<String>,
+    /// The card's colour.
+    pub tone: Tone,
 }
 
 /// An HTML report under construction.
 #[derive(Clone, Debug)]
 pub struct Page {
     title: String,
+    verdict: Option<Verdict>,
     blocks: Vec<Block>,
 }
 
@@ -51,8 +112,16 @@ impl Page {
     pub fn new(title: impl Into<String>) -> Page {
         Page {
             title: title.into(),
+            verdict: None,
             blocks: Vec::new(),
         }
+    }
+
+    /// Sets the verdict card; it is drawn first, right under the title,
+    /// wherever in the building of the page it is set.
+    pub fn verdict(&mut self, v: Verdict) -> &mut Page {
+        self.verdict = Some(v);
+        self
     }
 
     /// A section heading (level 2).
@@ -97,20 +166,42 @@ impl Page {
         caption: impl Into<String>,
         svg: String,
     ) -> &mut Page {
-        self.blocks.push(Block::Figure {
+        self.blocks.push(Block::Figure(Figure {
             name: name.into(),
             caption: caption.into(),
             svg,
-        });
+        }));
         self
+    }
+
+    /// Figures side by side in a grid that fills the window's width.
+    pub fn grid(&mut self, figures: Vec<Figure>) -> &mut Page {
+        if !figures.is_empty() {
+            self.blocks.push(Block::Grid(figures, GridKind::Small));
+        }
+        self
+    }
+
+    /// Figures side by side, two per row in a 1280 px window (x–y plots:
+    /// smaller cells would shrink their text below reading size).
+    pub fn grid_wide(&mut self, figures: Vec<Figure>) -> &mut Page {
+        if !figures.is_empty() {
+            self.blocks.push(Block::Grid(figures, GridKind::Wide));
+        }
+        self
+    }
+
+    fn figures(&self) -> impl Iterator<Item = &Figure> {
+        self.blocks.iter().flat_map(|b| match b {
+            Block::Figure(f) => std::slice::from_ref(f),
+            Block::Grid(g, _) => g.as_slice(),
+            _ => &[],
+        })
     }
 
     /// Number of figures on the page.
     pub fn figure_count(&self) -> usize {
-        self.blocks
-            .iter()
-            .filter(|b| matches!(b, Block::Figure { .. }))
-            .count()
+        self.figures().count()
     }
 
     /// The whole page as one HTML document.
@@ -123,6 +214,9 @@ impl Page {
             STYLE,
             esc(&self.title)
         );
+        if let Some(v) = &self.verdict {
+            write_verdict(&mut h, v);
+        }
         for b in &self.blocks {
             match b {
                 Block::Heading(level, t) => {
@@ -135,7 +229,9 @@ impl Page {
                     let _ = writeln!(h, "<pre>{}</pre>", esc(t));
                 }
                 Block::Table { header, rows } => {
-                    h.push_str("<table>\n<thead><tr>");
+                    // A wide table scrolls inside its box; the page never
+                    // gets wider than the window.
+                    h.push_str("<div class=\"scroll\"><table>\n<thead><tr>");
                     for c in header {
                         let _ = write!(h, "<th>{}</th>", esc(c));
                     }
@@ -143,21 +239,29 @@ impl Page {
                     for r in rows {
                         h.push_str("<tr>");
                         for c in r {
-                            let _ = write!(h, "<td>{}</td>", esc(c));
+                            // Numbers align right (their digits line up),
+                            // words left (a right-aligned sentence is hard
+                            // to read).
+                            if is_number_cell(c) {
+                                let _ = write!(h, "<td>{}</td>", esc(c));
+                            } else {
+                                let _ = write!(h, "<td class=\"t\">{}</td>", esc(c));
+                            }
                         }
                         h.push_str("</tr>\n");
                     }
-                    h.push_str("</tbody>\n</table>\n");
+                    h.push_str("</tbody>\n</table></div>\n");
                 }
-                Block::Figure { name, caption, svg } => {
-                    let _ = write!(
-                        h,
-                        "<figure id=\"{}\">\n{}\n<figcaption>{} <a href=\"{}.svg\">(SVG)</a></figcaption>\n</figure>\n",
-                        esc(name),
-                        strip_xml_declaration(svg),
-                        esc(caption),
-                        esc(name)
-                    );
+                Block::Figure(f) => write_figure(&mut h, f),
+                Block::Grid(figs, kind) => {
+                    h.push_str(match kind {
+                        GridKind::Small => "<div class=\"grid\">\n",
+                        GridKind::Wide => "<div class=\"grid wide\">\n",
+                    });
+                    for f in figs {
+                        write_figure(&mut h, f);
+                    }
+                    h.push_str("</div>\n");
                 }
             }
         }
@@ -171,8 +275,8 @@ impl Page {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("creating the report directory {}", dir.display()))?;
         let mut names: Vec<&str> = Vec::new();
-        for b in &self.blocks {
-            if let Block::Figure { name, svg, .. } = b {
+        for Figure { name, svg, .. } in self.figures() {
+            {
                 if name.is_empty()
                     || !name
                         .chars()
@@ -194,6 +298,75 @@ impl Page {
             .with_context(|| format!("writing {}", index.display()))?;
         Ok(index)
     }
+}
+
+/// The verdict card: `<section id="verdict">`, the first thing under the
+/// title.
+fn write_verdict(h: &mut String, v: &Verdict) {
+    let tone = match v.tone {
+        Tone::Good => "good",
+        Tone::Action => "action",
+        Tone::Unknown => "unknown",
+    };
+    let _ = write!(
+        h,
+        "<section id=\"verdict\" class=\"verdict {tone}\">\n<p class=\"headline\">{}</p>\n",
+        esc(&v.headline)
+    );
+    if !v.details.is_empty() {
+        h.push_str("<ul>\n");
+        for d in &v.details {
+            let _ = writeln!(h, "<li>{}</li>", esc(d));
+        }
+        h.push_str("</ul>\n");
+    }
+    if !v.warnings.is_empty() {
+        h.push_str("<div class=\"undermine\"><p><b>What undermines it</b></p>\n<ul>\n");
+        for w in &v.warnings {
+            let _ = writeln!(h, "<li>{}</li>", esc(w));
+        }
+        h.push_str("</ul></div>\n");
+    }
+    if let Some(n) = &v.next {
+        let _ = writeln!(
+            h,
+            "<p><b>Next</b></p>\n<pre class=\"next\">{}</pre>",
+            esc(n)
+        );
+    }
+    h.push_str("</section>\n");
+}
+
+/// A figure with its caption and a link to its SVG file; its width is at
+/// most the drawing's own (the SVG scales down to narrower windows).
+fn write_figure(h: &mut String, f: &Figure) {
+    let max = svg_width(&f.svg).map_or(String::new(), |w| format!(" style=\"max-width:{w}px\""));
+    let _ = write!(
+        h,
+        "<figure id=\"{}\"{max}>\n{}\n<figcaption>{} <a href=\"{}.svg\">(SVG)</a></figcaption>\n</figure>\n",
+        esc(&f.name),
+        strip_xml_declaration(&f.svg),
+        esc(&f.caption),
+        esc(&f.name)
+    );
+}
+
+/// A cell that reads as a number (`2.0137`, `-6751`, `47 %`, `14.4×`, `—`).
+fn is_number_cell(c: &str) -> bool {
+    let c = c.trim();
+    let short_number = c.chars().count() <= 16
+        && !c.contains(' ')
+        && c.chars()
+            .next()
+            .is_some_and(|f| f.is_ascii_digit() || matches!(f, '-' | '−' | '+' | '.'));
+    c == "—" || short_number || (c.ends_with(" %") && c.len() <= 10)
+}
+
+/// The width of an SVG's `viewBox` (its drawing's width in user units).
+fn svg_width(svg: &str) -> Option<u32> {
+    let i = svg.find("viewBox=\"")? + "viewBox=\"".len();
+    let v: Vec<&str> = svg[i..].split('"').next()?.split_whitespace().collect();
+    v.get(2)?.parse::<f64>().ok().map(|w| w.round() as u32)
 }
 
 /// HTML-escapes text for element content and attribute values.
@@ -222,14 +395,24 @@ fn strip_xml_declaration(svg: &str) -> &str {
     }
 }
 
-/// Print-friendly, dependency-free styling.
+/// Print-friendly, dependency-free styling. Figures scale to the window
+/// (`svg` at 100 % of a figure no wider than the drawing); a grid holds
+/// small multiples; the verdict card stands out by colour and border.
 const STYLE: &str = "body{font-family:sans-serif;max-width:1500px;margin:1em auto;padding:0 1em;color:#222}\
 h1{font-size:1.5em}h2{font-size:1.25em;border-bottom:1px solid #ccc;margin-top:1.6em}\
 h3{font-size:1.05em}table{border-collapse:collapse;margin:.6em 0}\
 th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right;font-variant-numeric:tabular-nums}\
-th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}\
-figure{display:inline-block;margin:.6em .6em .6em 0;vertical-align:top}\
-figcaption{font-size:.9em;color:#555;max-width:720px}pre{background:#f6f6f6;padding:.6em;overflow-x:auto}";
+th{background:#f3f3f3}td:first-child,th:first-child,td.t{text-align:left}\
+.scroll{max-width:100%;overflow-x:auto}\
+figure{margin:.6em 0}figure svg{display:block;width:100%;height:auto}\
+figcaption{font-size:.9em;color:#555;max-width:720px}pre{background:#f6f6f6;padding:.6em;overflow-x:auto}\
+.grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(340px,1fr));gap:.4em 1em}\
+.grid.wide{grid-template-columns:repeat(auto-fill,minmax(560px,1fr))}.grid figure{margin:0}\
+.verdict{border:2px solid #999;border-left-width:10px;border-radius:6px;padding:.4em 1em;margin:1em 0;background:#fafafa}\
+.verdict.good{border-color:#009e73;background:#eefaf5}.verdict.action{border-color:#d55e00;background:#fff4ec}\
+.verdict.unknown{border-color:#e69f00;background:#fffaeb}\
+.verdict .headline{font-size:1.25em;font-weight:bold;margin:.4em 0}\
+.verdict .undermine{color:#7a3b00}pre.next{white-space:pre-wrap;word-break:break-all;background:#fff;border:1px solid #ccc}";
 
 #[cfg(test)]
 mod tests {
@@ -256,6 +439,59 @@ mod tests {
         assert!(!html.contains("<?xml"));
         assert!(!html.contains("<script"));
         assert_eq!(p.figure_count(), 1);
+    }
+
+    #[test]
+    fn the_verdict_card_comes_first_wherever_it_is_set() {
+        let mut p = Page::new("t");
+        p.heading("Evidence")
+            .figure("f", "c", "<svg viewBox=\"0 0 720 420\"></svg>".into());
+        p.verdict(Verdict {
+            headline: "Missing: a periodic error of ex".into(),
+            details: vec!["ΔBIC −6751".into()],
+            warnings: vec!["aliasing along y".into()],
+            next: Some("trueaxis fit d.csv --model cubic19 --add 'p'".into()),
+            tone: Tone::Action,
+        });
+        let html = p.to_html();
+        let body = &html[html.find("</h1>").unwrap() + 5..];
+        assert!(
+            body.trim_start()
+                .starts_with("<section id=\"verdict\" class=\"verdict action\">"),
+            "{body}"
+        );
+        assert!(body.find("id=\"verdict\"").unwrap() < body.find("<h2>Evidence").unwrap());
+        assert!(body.contains("What undermines it"));
+        assert!(body.contains(
+            "<pre class=\"next\">trueaxis fit d.csv --model cubic19 --add &#39;p&#39;</pre>"
+        ));
+        // A figure is no wider than its drawing and scales below it.
+        assert!(body.contains("<figure id=\"f\" style=\"max-width:720px\">"));
+        assert!(STYLE.contains("figure svg{display:block;width:100%;height:auto}"));
+    }
+
+    #[test]
+    fn grids_hold_small_multiples_and_tables_scroll_inside() {
+        let mut p = Page::new("t");
+        let f = |n: &str| Figure {
+            name: n.into(),
+            caption: "c".into(),
+            svg: "<svg viewBox=\"0 0 460 380\"></svg>".into(),
+        };
+        p.grid(vec![f("a"), f("b")]).table(
+            &["add", "ΔBIC", "gain", "evidence"],
+            vec![vec![
+                "periodic:target=ex".into(),
+                "-6751".into(),
+                "47 %".into(),
+                "periodogram of the ex residual".into(),
+            ]],
+        );
+        let html = p.to_html();
+        assert!(html.contains("<td class=\"t\">periodic:target=ex</td><td>-6751</td><td>47 %</td><td class=\"t\">periodogram of the ex residual</td>"), "{html}");
+        assert!(html.contains("<div class=\"grid\">\n<figure id=\"a\""));
+        assert!(html.contains("<div class=\"scroll\"><table>"));
+        assert_eq!(p.figure_count(), 2);
     }
 
     #[test]

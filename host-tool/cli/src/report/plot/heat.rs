@@ -49,9 +49,73 @@ impl HeatMap {
             .collect();
         let xs = distinct(finite.iter().map(|p| p.0), snap);
         let ys = distinct(finite.iter().map(|p| p.1), snap);
+        HeatMap::on_cells(title, x_label, y_label, unit, &finite, xs, ys)
+    }
+
+    /// Like [`HeatMap::from_points`], but the cells are the lines of the
+    /// measured grid: along each axis, the positions that hold points at
+    /// two or more positions of the other axis. A dense line (a reading
+    /// every 0.5 mm at one y) then adds its readings to the grid's cells
+    /// instead of making a column per reading — thousands of one-reading
+    /// columns, grey everywhere else. Falls back to every position when
+    /// fewer than two such lines exist.
+    pub fn from_grid_points(
+        title: impl Into<String>,
+        x_label: impl Into<String>,
+        y_label: impl Into<String>,
+        unit: impl Into<String>,
+        points: &[(f64, f64, f64)],
+        snap: f64,
+    ) -> HeatMap {
+        let finite: Vec<(f64, f64, f64)> = points
+            .iter()
+            .copied()
+            .filter(|p| p.0.is_finite() && p.1.is_finite() && p.2.is_finite())
+            .collect();
+        let xs = distinct(finite.iter().map(|p| p.0), snap);
+        let ys = distinct(finite.iter().map(|p| p.1), snap);
+        // Positions along one axis that are grid lines: points there sit at
+        // ≥ 2 distinct positions of the other.
+        let lines = |along: &[f64], other: &[f64], a: fn(&(f64, f64, f64)) -> (f64, f64)| {
+            let mut seen: Vec<Vec<usize>> = vec![Vec::new(); along.len()];
+            for p in &finite {
+                let (u, v) = a(p);
+                let (i, j) = (nearest(along, u), nearest(other, v));
+                if !seen[i].contains(&j) {
+                    seen[i].push(j);
+                }
+            }
+            let kept: Vec<f64> = along
+                .iter()
+                .zip(&seen)
+                .filter(|(_, s)| s.len() >= 2)
+                .map(|(c, _)| *c)
+                .collect();
+            if kept.len() >= 2 {
+                kept
+            } else {
+                along.to_vec()
+            }
+        };
+        let gx = lines(&xs, &ys, |p| (p.0, p.1));
+        let gy = lines(&ys, &xs, |p| (p.1, p.0));
+        HeatMap::on_cells(title, x_label, y_label, unit, &finite, gx, gy)
+    }
+
+    /// Averages finite (x, y, value) samples onto the cells centred at
+    /// `xs` × `ys` (each sample to the nearest centre).
+    fn on_cells(
+        title: impl Into<String>,
+        x_label: impl Into<String>,
+        y_label: impl Into<String>,
+        unit: impl Into<String>,
+        finite: &[(f64, f64, f64)],
+        xs: Vec<f64>,
+        ys: Vec<f64>,
+    ) -> HeatMap {
         let mut sum = vec![0.0; xs.len() * ys.len()];
         let mut count = vec![0usize; xs.len() * ys.len()];
-        for &(x, y, v) in &finite {
+        for &(x, y, v) in finite {
             let ix = nearest(&xs, x);
             let iy = nearest(&ys, y);
             sum[iy * xs.len() + ix] += v;
@@ -106,6 +170,10 @@ impl HeatMap {
             .disable_mesh()
             .x_desc(&self.x_label)
             .y_desc(&self.y_label)
+            .x_labels(6)
+            .y_labels(8)
+            .x_label_formatter(&|v| format_tick(*v))
+            .y_label_formatter(&|v| format_tick(*v))
             .draw()
             .map_err(plot_err)?;
         let nx = self.x.len();
@@ -172,7 +240,7 @@ impl HeatMap {
             self.draw(&root)?;
             root.present().map_err(plot_err)?;
         }
-        Ok(buf)
+        Ok(responsive(buf))
     }
 }
 
@@ -196,7 +264,7 @@ pub fn heat_map_pair(before: &HeatMap, after: &HeatMap) -> Result<String> {
         }
         root.present().map_err(plot_err)?;
     }
-    Ok(buf)
+    Ok(responsive(buf))
 }
 
 /// Diverging colour for t in [−1, 1]: blue (negative) – white – red

@@ -14,6 +14,7 @@ use std::fmt::Write as _;
 
 use anyhow::{anyhow, Result};
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 mod heat;
 
@@ -114,8 +115,27 @@ pub struct XyPlot {
     pub vlines: Vec<(f64, String)>,
     /// Horizontal marker lines with a label (a noise floor, a limit).
     pub hlines: Vec<(f64, String)>,
+    /// Horizontal dashed lines with a label, drawn in the series colour
+    /// `(y, label, palette index)` (a target's noise floor).
+    pub dashed: Vec<(f64, String, usize)>,
+    /// Text labels at data coordinates (what each fit step added).
+    pub notes: Vec<(f64, f64, String)>,
+    /// How the x axis is ticked.
+    pub x_ticks: Ticks,
     /// Size in pixels.
     pub size: (u32, u32),
+}
+
+/// How an axis is ticked.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ticks {
+    /// plotters' own round numbers.
+    Auto,
+    /// Whole numbers only (fit steps): the range is widened by ½ on both
+    /// sides and nothing between two integers gets a label.
+    Integer,
+    /// A categorical ±1 axis (`dir_x`): ticks at −1 and +1 only.
+    Direction,
 }
 
 impl XyPlot {
@@ -133,8 +153,29 @@ impl XyPlot {
             bands: Vec::new(),
             vlines: Vec::new(),
             hlines: Vec::new(),
+            dashed: Vec::new(),
+            notes: Vec::new(),
+            x_ticks: Ticks::Auto,
             size: SIZE,
         }
+    }
+
+    /// Sets how the x axis is ticked.
+    pub fn with_x_ticks(mut self, t: Ticks) -> XyPlot {
+        self.x_ticks = t;
+        self
+    }
+
+    /// Adds a dashed horizontal line in the colour of palette entry `colour`.
+    pub fn with_dashed(mut self, y: f64, label: impl Into<String>, colour: usize) -> XyPlot {
+        self.dashed.push((y, label.into(), colour));
+        self
+    }
+
+    /// Adds a text label at (x, y) in data coordinates.
+    pub fn with_note(mut self, x: f64, y: f64, text: impl Into<String>) -> XyPlot {
+        self.notes.push((x, y, text.into()));
+        self
     }
 
     /// Adds a series.
@@ -184,7 +225,54 @@ impl XyPlot {
         }
         xs.extend(self.vlines.iter().map(|v| v.0).filter(|v| v.is_finite()));
         ys.extend(self.hlines.iter().map(|v| v.0).filter(|v| v.is_finite()));
-        (padded_range(&xs, 0.02), padded_range(&ys, 0.08))
+        ys.extend(self.dashed.iter().map(|v| v.0).filter(|v| v.is_finite()));
+        ys.extend(self.notes.iter().map(|v| v.1).filter(|v| v.is_finite()));
+        let x = match self.x_ticks {
+            Ticks::Auto => padded_range(&xs, 0.02),
+            // Half a step beyond the first and last: a single fit is a
+            // point in the middle, not an empty axis from 1.0 to 1.0.
+            Ticks::Integer => {
+                let lo = xs.iter().copied().fold(f64::INFINITY, f64::min);
+                let hi = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                if lo.is_finite() {
+                    (lo.floor() - 0.5, hi.ceil() + 0.5)
+                } else {
+                    (0.5, 1.5)
+                }
+            }
+            Ticks::Direction => (-1.6, 1.6),
+        };
+        (x, padded_range(&ys, 0.08))
+    }
+
+    /// Legend entries: (text, colour, is a band, is points only).
+    fn legend_entries(&self) -> Vec<(String, RGBColor, LegendMark)> {
+        let mut v = Vec::new();
+        for (i, b) in self.bands.iter().enumerate() {
+            if !b.name.is_empty() {
+                v.push((b.name.clone(), PALETTE[i % PALETTE.len()], LegendMark::Area));
+            }
+        }
+        for (i, s) in self.series.iter().enumerate() {
+            if !s.name.is_empty() {
+                let mark = match s.style {
+                    Style::Points => LegendMark::Dot,
+                    Style::LinePoints => LegendMark::LineDot,
+                    Style::Line | Style::Step => LegendMark::Line,
+                };
+                v.push((s.name.clone(), PALETTE[i % PALETTE.len()], mark));
+            }
+        }
+        for (_, label, c) in &self.dashed {
+            if !label.is_empty() {
+                v.push((
+                    label.clone(),
+                    PALETTE[c % PALETTE.len()],
+                    LegendMark::Dashed,
+                ));
+            }
+        }
+        v
     }
 
     /// Renders the plot as an SVG document.
@@ -193,22 +281,63 @@ impl XyPlot {
         {
             let root = SVGBackend::with_string(&mut buf, self.size).into_drawing_area();
             root.fill(&WHITE).map_err(plot_err)?;
+            // The legend gets a strip of its own right of the plot, so it
+            // never covers data (a legend in a corner sat on the hottest
+            // points).
+            let entries = self.legend_entries();
+            let plot_area = if entries.is_empty() {
+                root.clone()
+            } else {
+                let w = legend_width(&entries);
+                let (p, l) = root.split_horizontally(self.size.0.saturating_sub(w));
+                draw_legend(&l, &entries)?;
+                p
+            };
             let ((x0, x1), (y0, y1)) = self.ranges();
-            let mut chart = ChartBuilder::on(&root)
+            let mut chart = ChartBuilder::on(&plot_area)
                 .caption(&self.title, ("sans-serif", 17))
                 .margin(12)
                 .x_label_area_size(42)
                 .y_label_area_size(64)
                 .build_cartesian_2d(x0..x1, y0..y1)
                 .map_err(plot_err)?;
-            chart
-                .configure_mesh()
-                .x_desc(&self.x_label)
+            let ticks = self.x_ticks;
+            let x_fmt = move |v: &f64| -> String {
+                match ticks {
+                    Ticks::Auto => format_tick(*v),
+                    Ticks::Integer => {
+                        if (v - v.round()).abs() < 1e-9 {
+                            format!("{}", v.round() as i64)
+                        } else {
+                            String::new()
+                        }
+                    }
+                    Ticks::Direction => {
+                        if (v + 1.0).abs() < 1e-9 {
+                            "−1".into()
+                        } else if (v - 1.0).abs() < 1e-9 {
+                            "+1".into()
+                        } else {
+                            String::new()
+                        }
+                    }
+                }
+            };
+            let n_x = match ticks {
+                Ticks::Auto => 10,
+                Ticks::Integer => ((x1 - x0).round() as usize).clamp(1, 30),
+                Ticks::Direction => 3,
+            };
+            let mut mesh = chart.configure_mesh();
+            mesh.x_desc(&self.x_label)
                 .y_desc(&self.y_label)
-                .light_line_style(RGBColor(235, 235, 235))
-                .draw()
-                .map_err(plot_err)?;
-            let mut legend = false;
+                .x_labels(n_x)
+                .x_label_formatter(&x_fmt)
+                .light_line_style(RGBColor(235, 235, 235));
+            if ticks != Ticks::Auto {
+                mesh.disable_x_mesh();
+            }
+            mesh.draw().map_err(plot_err)?;
             for (i, b) in self.bands.iter().enumerate() {
                 let colour = PALETTE[i % PALETTE.len()];
                 let pts: Vec<_> = b
@@ -226,12 +355,7 @@ impl XyPlot {
                         poly,
                         colour.mix(0.18).filled(),
                     )))
-                    .map_err(plot_err)?
-                    .label(&b.name)
-                    .legend(move |(x, y)| {
-                        Rectangle::new([(x, y - 5), (x + 18, y + 5)], colour.mix(0.25).filled())
-                    });
-                legend |= !b.name.is_empty();
+                    .map_err(plot_err)?;
             }
             for (y, label) in &self.hlines {
                 let style = ShapeStyle::from(&RGBColor(120, 120, 120)).stroke_width(1);
@@ -241,13 +365,26 @@ impl XyPlot {
                         style,
                     )))
                     .map_err(plot_err)?;
-                chart
-                    .draw_series(std::iter::once(Text::new(
-                        label.clone(),
-                        (x0 + 0.01 * (x1 - x0), *y),
-                        ("sans-serif", 12).into_font().color(&RGBColor(90, 90, 90)),
-                    )))
-                    .map_err(plot_err)?;
+                if !label.is_empty() {
+                    chart
+                        .draw_series(std::iter::once(Text::new(
+                            label.clone(),
+                            (x0 + 0.01 * (x1 - x0), *y),
+                            ("sans-serif", 12).into_font().color(&RGBColor(90, 90, 90)),
+                        )))
+                        .map_err(plot_err)?;
+                }
+            }
+            for (y, _, c) in &self.dashed {
+                let colour = PALETTE[c % PALETTE.len()];
+                let style = ShapeStyle::from(&colour).stroke_width(2);
+                let n = 48;
+                let dashes = (0..n).step_by(2).map(|k| {
+                    let a = x0 + (x1 - x0) * k as f64 / n as f64;
+                    let b = x0 + (x1 - x0) * (k + 1) as f64 / n as f64;
+                    PathElement::new(vec![(a, *y), (b, *y)], style)
+                });
+                chart.draw_series(dashes).map_err(plot_err)?;
             }
             for (i, s) in self.series.iter().enumerate() {
                 let colour = PALETTE[i % PALETTE.len()];
@@ -258,10 +395,12 @@ impl XyPlot {
                     .filter(|p| p.0.is_finite() && p.1.is_finite())
                     .collect();
                 let line_style = ShapeStyle::from(&colour).stroke_width(2);
-                let anno = match s.style {
-                    Style::Line => chart
-                        .draw_series(LineSeries::new(pts, line_style))
-                        .map_err(plot_err)?,
+                match s.style {
+                    Style::Line => {
+                        chart
+                            .draw_series(LineSeries::new(pts, line_style))
+                            .map_err(plot_err)?;
+                    }
                     Style::Step => {
                         let mut steps = Vec::with_capacity(pts.len() * 2);
                         for (k, p) in pts.iter().enumerate() {
@@ -272,25 +411,21 @@ impl XyPlot {
                         }
                         chart
                             .draw_series(LineSeries::new(steps, line_style))
-                            .map_err(plot_err)?
+                            .map_err(plot_err)?;
                     }
-                    Style::Points => chart
-                        .draw_series(pts.iter().map(|p| Circle::new(*p, 2, colour.filled())))
-                        .map_err(plot_err)?,
+                    Style::Points => {
+                        chart
+                            .draw_series(pts.iter().map(|p| Circle::new(*p, 2, colour.filled())))
+                            .map_err(plot_err)?;
+                    }
                     Style::LinePoints => {
                         chart
                             .draw_series(LineSeries::new(pts.clone(), line_style))
                             .map_err(plot_err)?;
                         chart
-                            .draw_series(pts.iter().map(|p| Circle::new(*p, 3, colour.filled())))
-                            .map_err(plot_err)?
+                            .draw_series(pts.iter().map(|p| Circle::new(*p, 4, colour.filled())))
+                            .map_err(plot_err)?;
                     }
-                };
-                if !s.name.is_empty() {
-                    anno.label(&s.name).legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(3))
-                    });
-                    legend = true;
                 }
             }
             for (x, label) in &self.vlines {
@@ -309,20 +444,189 @@ impl XyPlot {
                     )))
                     .map_err(plot_err)?;
             }
-            if legend {
+            for (x, y, text) in &self.notes {
                 chart
-                    .configure_series_labels()
-                    .position(SeriesLabelPosition::UpperRight)
-                    .background_style(WHITE.mix(0.85))
-                    .border_style(RGBColor(180, 180, 180))
-                    .label_font(("sans-serif", 12))
-                    .draw()
+                    .draw_series(std::iter::once(Text::new(
+                        text.clone(),
+                        (*x, *y),
+                        ("sans-serif", 12)
+                            .into_font()
+                            .color(&RGBColor(40, 40, 40))
+                            .pos(Pos::new(HPos::Center, VPos::Bottom)),
+                    )))
                     .map_err(plot_err)?;
             }
             root.present().map_err(plot_err)?;
         }
-        Ok(buf)
+        Ok(responsive(buf))
     }
+}
+
+/// How a legend entry is drawn.
+#[derive(Clone, Copy, Debug)]
+enum LegendMark {
+    Line,
+    Dot,
+    LineDot,
+    Area,
+    Bar,
+    Dashed,
+}
+
+/// Pixels for a legend strip holding `entries` (the built-in font's
+/// metrics are not known here: ~6.6 px per character at 12 px).
+fn legend_width(entries: &[(String, RGBColor, LegendMark)]) -> u32 {
+    let chars = entries
+        .iter()
+        .map(|e| e.0.chars().count())
+        .max()
+        .unwrap_or(0);
+    ((chars as f64 * 6.6) as u32 + 40).clamp(90, 260)
+}
+
+/// Draws the legend entries top-down in `area` (a strip right of the plot).
+fn draw_legend<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    entries: &[(String, RGBColor, LegendMark)],
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let font = ("sans-serif", 12).into_font();
+    for (k, (name, colour, mark)) in entries.iter().enumerate() {
+        let y = 48 + 20 * k as i32;
+        let c = *colour;
+        match mark {
+            LegendMark::Line => area
+                .draw(&PathElement::new(vec![(4, y), (24, y)], c.stroke_width(3)))
+                .map_err(plot_err)?,
+            LegendMark::Dot => area
+                .draw(&Circle::new((14, y), 3, c.filled()))
+                .map_err(plot_err)?,
+            LegendMark::LineDot => {
+                area.draw(&PathElement::new(vec![(4, y), (24, y)], c.stroke_width(2)))
+                    .map_err(plot_err)?;
+                area.draw(&Circle::new((14, y), 4, c.filled()))
+                    .map_err(plot_err)?
+            }
+            LegendMark::Area => area
+                .draw(&Rectangle::new(
+                    [(4, y - 5), (24, y + 5)],
+                    c.mix(0.3).filled(),
+                ))
+                .map_err(plot_err)?,
+            LegendMark::Bar => area
+                .draw(&Rectangle::new([(4, y - 5), (24, y + 5)], c.filled()))
+                .map_err(plot_err)?,
+            LegendMark::Dashed => {
+                for x in [4, 12, 20] {
+                    area.draw(&PathElement::new(
+                        vec![(x, y), (x + 5, y)],
+                        c.stroke_width(2),
+                    ))
+                    .map_err(plot_err)?;
+                }
+            }
+        }
+        area.draw(&Text::new(
+            name.clone(),
+            (30, y),
+            font.clone()
+                .color(&BLACK)
+                .pos(Pos::new(HPos::Left, VPos::Center)),
+        ))
+        .map_err(plot_err)?;
+    }
+    Ok(())
+}
+
+/// An axis title in words with its unit for a data column name: `x_mm` →
+/// "x (mm)", `t_s` → "time (s)", `T_bed_C` → "bed temperature (°C)",
+/// `dir_x` → "approach direction along x", `tool_mm` → "tool length (mm)",
+/// `ex_um` → "ex error (µm)"; an auxiliary column with a unit suffix the
+/// contract knows (`humidity_pct`) → "humidity (%)", any other name as it is.
+pub fn axis_title(column: &str) -> String {
+    if let Some(a) = column.strip_prefix("dir_") {
+        return format!("approach direction along {a}");
+    }
+    if let Some(name) = column.strip_prefix("T_").and_then(|c| c.strip_suffix("_C")) {
+        return format!("{} temperature (°C)", name.replace('_', " "));
+    }
+    match column {
+        "t_s" => return "time (s)".into(),
+        "tool_mm" => return "tool length (mm)".into(),
+        "x_mm" | "y_mm" | "z_mm" => return format!("{} (mm)", &column[..1]),
+        "ex_um" | "ey_um" | "ez_um" => return format!("{} error (µm)", &column[..2]),
+        _ => {}
+    }
+    for (suffix, unit) in [
+        ("_pct", "%"),
+        ("_mm", "mm"),
+        ("_um", "µm"),
+        ("_s", "s"),
+        ("_C", "°C"),
+        ("_K", "K"),
+    ] {
+        if let Some(name) = column.strip_suffix(suffix).filter(|n| !n.is_empty()) {
+            return format!("{} ({unit})", name.replace('_', " "));
+        }
+    }
+    column.to_string()
+}
+
+/// How to tick a data column on the x axis: direction columns are the
+/// categories −1 and +1, not a number line from −0.8 to 0.8.
+pub fn ticks_for(column: &str) -> Ticks {
+    if column.starts_with("dir_") {
+        Ticks::Direction
+    } else {
+        Ticks::Auto
+    }
+}
+
+/// `head` without its attribute ` name="…"` (unchanged when absent).
+fn drop_attr(head: &str, name: &str) -> String {
+    let key = format!(" {name}=\"");
+    match head.find(&key) {
+        Some(i) => match head[i + key.len()..].find('"') {
+            Some(j) => format!("{}{}", &head[..i], &head[i + key.len() + j + 1..]),
+            None => head.to_string(),
+        },
+        None => head.to_string(),
+    }
+}
+
+/// Tick text for a round number: no `-0.0`, at most 6 decimals.
+pub(crate) fn format_tick(v: f64) -> String {
+    let v = if v.abs() < 1e-12 { 0.0 } else { v };
+    let s = format!("{v:.6}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    s.replace('-', "−")
+}
+
+/// The SVG scaled to its container: plotters writes a fixed `width` and
+/// `height` in pixels (1440 px for a before/after pair, cut off in a 1400 px
+/// window); without them the `viewBox` makes the browser scale the drawing
+/// to the width it is given, keeping its proportions.
+pub fn responsive(svg: String) -> String {
+    let Some(start) = svg.find("<svg ") else {
+        return svg;
+    };
+    let Some(end) = svg[start..].find('>').map(|e| start + e) else {
+        return svg;
+    };
+    let head = &svg[start..end];
+    if !head.contains("viewBox=") {
+        return svg;
+    }
+    // Drop ` width="…"` and ` height="…"` of the root element only.
+    let head = drop_attr(&drop_attr(head, "width"), "height");
+    let mut out = String::with_capacity(svg.len());
+    out.push_str(&svg[..start]);
+    out.push_str(&head);
+    out.push_str(" preserveAspectRatio=\"xMidYMid meet\"");
+    out.push_str(&svg[end..]);
+    out
 }
 
 /// A grouped bar plot: one group of bars per category (a target, a fit
@@ -365,6 +669,15 @@ impl BarPlot {
         {
             let root = SVGBackend::with_string(&mut buf, self.size).into_drawing_area();
             root.fill(&WHITE).map_err(plot_err)?;
+            let entries: Vec<(String, RGBColor, LegendMark)> = self
+                .groups
+                .iter()
+                .enumerate()
+                .map(|(k, (name, _))| (name.clone(), PALETTE[k % PALETTE.len()], LegendMark::Bar))
+                .collect();
+            let (root, legend) =
+                root.split_horizontally(self.size.0.saturating_sub(legend_width(&entries)));
+            draw_legend(&legend, &entries)?;
             let cats = self.categories.clone();
             let fmt = move |x: &f64| -> String {
                 let i = x.floor();
@@ -392,7 +705,7 @@ impl BarPlot {
                 .draw()
                 .map_err(plot_err)?;
             let width = 0.8 / g as f64;
-            for (k, (name, values)) in self.groups.iter().enumerate() {
+            for (k, (_, values)) in self.groups.iter().enumerate() {
                 let colour = PALETTE[k % PALETTE.len()];
                 let bars = values
                     .iter()
@@ -402,13 +715,7 @@ impl BarPlot {
                         let x0 = i as f64 + 0.1 + k as f64 * width;
                         Rectangle::new([(x0, 0.0), (x0 + width * 0.92, *v)], colour.filled())
                     });
-                chart
-                    .draw_series(bars)
-                    .map_err(plot_err)?
-                    .label(name)
-                    .legend(move |(x, y)| {
-                        Rectangle::new([(x, y - 5), (x + 14, y + 5)], colour.filled())
-                    });
+                chart.draw_series(bars).map_err(plot_err)?;
                 // The value on top of each bar: a report is read for numbers.
                 let labels = values
                     .iter()
@@ -424,17 +731,9 @@ impl BarPlot {
                     });
                 chart.draw_series(labels).map_err(plot_err)?;
             }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .background_style(WHITE.mix(0.85))
-                .border_style(RGBColor(180, 180, 180))
-                .label_font(("sans-serif", 12))
-                .draw()
-                .map_err(plot_err)?;
             root.present().map_err(plot_err)?;
         }
-        Ok(buf)
+        Ok(responsive(buf))
     }
 }
 
@@ -517,6 +816,130 @@ mod tests {
         assert!(!svg.contains("NaN"));
     }
 
+    /// The root `<svg …>` element of a document.
+    fn root(svg: &str) -> &str {
+        &svg[..svg.find('>').unwrap()]
+    }
+
+    #[test]
+    fn svgs_scale_to_the_window_and_keep_legends_off_the_data() {
+        let p = XyPlot::new("t", "x (mm)", "e (µm)").with(Series::line(
+            "a long legend entry",
+            vec![(0.0, 0.0), (1.0, 1.0)],
+        ));
+        let svg = p.to_svg().unwrap();
+        let head = root(&svg);
+        assert!(head.contains("viewBox=\"0 0 720 420\""), "{head}");
+        assert!(
+            !head.contains(" width=") && !head.contains(" height="),
+            "{head}"
+        );
+        // The legend text sits right of the plot area, which ends before
+        // the legend strip (x of the text > the last x tick's position).
+        let at = svg.find("a long legend entry").unwrap();
+        let text = &svg[svg[..at].rfind("<text").unwrap()..at];
+        let x: f64 = text
+            .split("x=\"")
+            .nth(1)
+            .unwrap()
+            .split('"')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(
+            x > 720.0 - legend_width(&p.legend_entries()) as f64,
+            "{text}"
+        );
+        let m = HeatMap::from_points(
+            "m",
+            "x",
+            "y",
+            "µm",
+            &[(0.0, 0.0, 1.0), (1.0, 1.0, -1.0)],
+            0.1,
+        );
+        let pair = heat_map_pair(&m, &m).unwrap();
+        assert!(!root(&pair).contains("width=\"1440\""), "{}", root(&pair));
+        assert!(root(&pair).contains("viewBox=\"0 0 1440 420\""));
+    }
+
+    #[test]
+    fn axis_titles_are_words_with_units() {
+        assert_eq!(axis_title("T_bed_C"), "bed temperature (°C)");
+        assert_eq!(axis_title("t_s"), "time (s)");
+        assert_eq!(axis_title("x_mm"), "x (mm)");
+        assert_eq!(axis_title("tool_mm"), "tool length (mm)");
+        assert_eq!(axis_title("dir_x"), "approach direction along x");
+        assert_eq!(axis_title("humidity_pct"), "humidity (%)");
+        assert_eq!(axis_title("operator"), "operator");
+        assert_eq!(ticks_for("dir_y"), Ticks::Direction);
+        assert_eq!(ticks_for("T_bed_C"), Ticks::Auto);
+    }
+
+    /// The text of every `<text>` element.
+    fn texts(svg: &str) -> Vec<String> {
+        svg.split("<text")
+            .skip(1)
+            .map(|t| {
+                let t = &t[t.find('>').unwrap() + 1..];
+                t[..t.find("</text>").unwrap()].trim().to_string()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn direction_axes_are_ticked_minus_one_and_plus_one_only() {
+        let pts = vec![(-1.0, 0.3), (1.0, -0.2), (-1.0, 0.1), (1.0, 0.0)];
+        let svg = XyPlot::new("r", "approach direction along x", "µm")
+            .with(Series::points("", pts))
+            .with_x_ticks(Ticks::Direction)
+            .to_svg()
+            .unwrap();
+        let t = texts(&svg);
+        assert!(
+            t.contains(&"−1".to_string()) && t.contains(&"+1".to_string()),
+            "{t:?}"
+        );
+        for bad in ["0.8", "-0.8", "−0.8", "0.5", "0"] {
+            assert!(!t.contains(&bad.to_string()), "{bad} in {t:?}");
+        }
+    }
+
+    #[test]
+    fn integer_ticks_and_a_single_step_is_a_point() {
+        let svg = XyPlot::new("h", "fit step", "µm")
+            // y in whole hundreds, so every fractional tick would be x's.
+            .with(Series::styled(
+                "ex RMS",
+                vec![(1.0, 200.0), (2.0, 100.0), (3.0, 20.0)],
+                Style::LinePoints,
+            ))
+            .with_x_ticks(Ticks::Integer)
+            .to_svg()
+            .unwrap();
+        let t = texts(&svg);
+        for k in ["1", "2", "3"] {
+            assert!(t.contains(&k.to_string()), "{k} in {t:?}");
+        }
+        assert!(
+            !t.iter()
+                .any(|s| s.parse::<f64>().is_ok_and(|v| v.fract() != 0.0)),
+            "fractional step ticks: {t:?}"
+        );
+        let one = XyPlot::new("h", "fit step", "µm")
+            .with(Series::styled(
+                "ex RMS",
+                vec![(1.0, 2.0)],
+                Style::LinePoints,
+            ))
+            .with_x_ticks(Ticks::Integer)
+            .to_svg()
+            .unwrap();
+        assert!(one.contains("<circle"), "one fit is drawn as a point");
+        assert!(texts(&one).contains(&"1".to_string()));
+    }
+
     #[test]
     fn empty_plot_still_renders() {
         let svg = XyPlot::new("nothing", "x", "y").to_svg().unwrap();
@@ -541,6 +964,34 @@ mod tests {
         assert_eq!(m.values[0], Some(2.0));
         assert_eq!(m.values[11], Some(1.0));
         assert!(m.to_svg().unwrap().contains("µm"));
+    }
+
+    #[test]
+    fn a_dense_line_is_averaged_into_the_grid_cells() {
+        // A 3 × 3 grid every 50 mm and a dense line at y = 50 every 0.5 mm.
+        let mut pts = Vec::new();
+        for iy in 0..3 {
+            for ix in 0..3 {
+                pts.push((50.0 * f64::from(ix), 50.0 * f64::from(iy), 1.0));
+            }
+        }
+        for i in 0..=200 {
+            pts.push((0.5 * f64::from(i), 50.0, 3.0));
+        }
+        let m = HeatMap::from_grid_points("t", "x", "y", "µm", &pts, 1e-3);
+        assert_eq!(m.x, vec![0.0, 50.0, 100.0]);
+        assert_eq!(m.y, vec![0.0, 50.0, 100.0]);
+        assert!(m.values.iter().all(|v| v.is_some()), "no grey columns");
+        // The middle row holds the line's readings; the others the grid's.
+        assert_eq!(m.values[0], Some(1.0));
+        assert!(m.values[4].unwrap() > 2.9);
+        // One cell per reading without it.
+        assert!(
+            HeatMap::from_points("t", "x", "y", "µm", &pts, 1e-3)
+                .x
+                .len()
+                > 200
+        );
     }
 
     #[test]

@@ -1,0 +1,478 @@
+//! `cargo xtask test-browser` (part of `cargo xtask test`): the demo's
+//! report pages opened in a real browser — headless Chromium at 1280 px —
+//! and checked the way a person would look at them: every figure is drawn
+//! (has a size) and every image loaded, nothing is wider than the window,
+//! the verdict card is the first thing under the title and visible without
+//! scrolling, the page weight and the time to lay it out stay within
+//! limits. A screenshot of each page is written to `out/screens/` to look
+//! at.
+//!
+//! How: a copy of each page gets a small script at the end of its body that
+//! measures the laid-out page (`scrollWidth`, each figure's box, each
+//! `<img>`'s `naturalWidth`, the verdict's position, `performance.now()`)
+//! and writes the figures as `key=value` lines into a `<pre>`;
+//! `chromium --dump-dom` prints the DOM after load and the lines are read
+//! back from it. No driver, no network, no npm: only the `chromium` Debian
+//! package (`cargo xtask setup` installs it as root).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use crate::{root, Result};
+
+/// The window width the pages are checked at (a laptop; the issue's 1400 px
+/// screen cut the 1440 px colour bar off).
+pub const VIEWPORT_PX: u32 = 1280;
+/// A page (HTML with its inlined SVGs) may weigh at most this much.
+pub const MAX_PAGE_BYTES: u64 = 4_000_000;
+/// From navigation start to the end of the body, laid out, at most.
+pub const MAX_LAYOUT_MS: f64 = 8_000.0;
+/// One Chromium run (start, load, dump) at most, wall clock.
+pub const MAX_BROWSER_S: u64 = 120;
+
+/// The browser: `$CHROMIUM`, else the first of the Debian and the usual
+/// names that runs.
+pub fn chromium() -> Option<String> {
+    let mut names: Vec<String> = std::env::var("CHROMIUM").ok().into_iter().collect();
+    names.extend(
+        ["chromium", "chromium-browser", "google-chrome"]
+            .iter()
+            .map(|s| s.to_string()),
+    );
+    names.into_iter().find(|n| {
+        Command::new(n)
+            .arg("--version")
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success())
+    })
+}
+
+/// What the in-page script measured.
+#[derive(Debug, Default, PartialEq)]
+pub struct Measure {
+    /// `window.innerWidth`.
+    pub viewport: f64,
+    /// `document.documentElement.scrollWidth`.
+    pub scroll_width: f64,
+    /// `document.documentElement.scrollHeight` (reported, not limited).
+    pub height: f64,
+    /// Figures (`figure > svg`) on the page.
+    pub figures: usize,
+    /// Figures drawn with no size, or reaching past the window.
+    pub bad_figures: Vec<String>,
+    /// `<img>` elements, and those not loaded (`naturalWidth` 0).
+    pub images: usize,
+    pub broken_images: Vec<String>,
+    /// The element right after the `<h1>` is `#verdict`.
+    pub verdict_first: bool,
+    /// Top of the verdict card, px (must be inside the first screen).
+    pub verdict_top: f64,
+    /// `performance.now()` when the end of the body was laid out.
+    pub layout_ms: f64,
+}
+
+/// The script injected at the end of the page's body.
+const SCRIPT: &str = r#"<script>
+(function () {
+  var out = [];
+  var vw = window.innerWidth;
+  out.push('viewport=' + vw);
+  out.push('scroll_width=' + document.documentElement.scrollWidth);
+  out.push('height=' + document.documentElement.scrollHeight);
+  var figs = document.querySelectorAll('figure > svg');
+  out.push('figures=' + figs.length);
+  figs.forEach(function (s) {
+    var b = s.getBoundingClientRect();
+    if (b.width < 10 || b.height < 10 || b.right > vw + 0.5) {
+      out.push('bad_figure=' + s.parentElement.id + ' ' + Math.round(b.width) + 'x' + Math.round(b.height) + ' right ' + Math.round(b.right));
+    }
+  });
+  var imgs = document.querySelectorAll('img');
+  out.push('images=' + imgs.length);
+  imgs.forEach(function (i) {
+    if (!i.complete || i.naturalWidth === 0) { out.push('broken_image=' + i.getAttribute('src')); }
+  });
+  var h1 = document.querySelector('body > h1');
+  var first = h1 ? h1.nextElementSibling : null;
+  out.push('verdict_first=' + (first !== null && first.id === 'verdict'));
+  var v = document.getElementById('verdict');
+  out.push('verdict_top=' + (v ? v.getBoundingClientRect().top : -1));
+  out.push('layout_ms=' + performance.now());
+  var pre = document.createElement('pre');
+  pre.id = 'browser-check';
+  pre.textContent = '\n' + out.join('\n') + '\n';
+  document.body.appendChild(pre);
+})();
+</script>
+"#;
+
+/// Reads the `key=value` lines of the `<pre id="browser-check">` in a
+/// dumped DOM.
+pub fn parse(dom: &str) -> std::result::Result<Measure, String> {
+    let start = dom
+        .find("id=\"browser-check\">")
+        .ok_or("the page's check script did not run (no #browser-check in the DOM)")?;
+    let body = &dom[start..];
+    let end = body.find("</pre>").unwrap_or(body.len());
+    let mut m = Measure::default();
+    for line in body[..end].lines().skip(1) {
+        let Some((k, v)) = line.split_once('=') else {
+            continue;
+        };
+        let num = || v.trim().parse::<f64>().map_err(|e| format!("{k}={v}: {e}"));
+        match k {
+            "viewport" => m.viewport = num()?,
+            "scroll_width" => m.scroll_width = num()?,
+            "height" => m.height = num()?,
+            "figures" => m.figures = num()? as usize,
+            "bad_figure" => m.bad_figures.push(v.to_string()),
+            "images" => m.images = num()? as usize,
+            "broken_image" => m.broken_images.push(v.to_string()),
+            "verdict_first" => m.verdict_first = v.trim() == "true",
+            "verdict_top" => m.verdict_top = num()?,
+            "layout_ms" => m.layout_ms = num()?,
+            _ => {}
+        }
+    }
+    Ok(m)
+}
+
+/// Every way the page fails the check, in words (empty: it passes).
+pub fn failures(m: &Measure, page_bytes: u64) -> Vec<String> {
+    let mut f = Vec::new();
+    if (m.viewport - f64::from(VIEWPORT_PX)).abs() > 0.5 {
+        f.push(format!(
+            "the window was {} px wide, not {VIEWPORT_PX}: the check did not run at the width it means",
+            m.viewport
+        ));
+    }
+    if m.scroll_width > m.viewport + 0.5 {
+        f.push(format!(
+            "the page is {} px wide in a {} px window: something overflows (a horizontal scroll bar)",
+            m.scroll_width, m.viewport
+        ));
+    }
+    if m.figures == 0 {
+        f.push("no figure on the page".into());
+    }
+    for b in &m.bad_figures {
+        f.push(format!("figure not drawn inside the window: {b}"));
+    }
+    for i in &m.broken_images {
+        f.push(format!("image did not load: {i}"));
+    }
+    if !m.verdict_first {
+        f.push("the verdict card is not the first thing under the title".into());
+    }
+    if !(0.0..=600.0).contains(&m.verdict_top) {
+        f.push(format!(
+            "the verdict card starts at {} px: not on the first screen",
+            m.verdict_top
+        ));
+    }
+    if m.layout_ms > MAX_LAYOUT_MS {
+        f.push(format!(
+            "laid out after {:.0} ms, above the {MAX_LAYOUT_MS:.0} ms allowed",
+            m.layout_ms
+        ));
+    }
+    if page_bytes > MAX_PAGE_BYTES {
+        f.push(format!(
+            "the page weighs {page_bytes} bytes, above the {MAX_PAGE_BYTES} allowed"
+        ));
+    }
+    f
+}
+
+/// Runs `cmd` with a time limit, returning its stdout.
+fn output_within(cmd: &mut Command, limit: Duration) -> std::result::Result<String, String> {
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .map_err(|e| format!("cannot start the browser: {e}"))?;
+    let mut stdout = child.stdout.take().ok_or("no stdout")?;
+    let reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = std::io::Read::read_to_string(&mut stdout, &mut s);
+        s
+    });
+    let t0 = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().map_err(|e| e.to_string())? {
+            let out = reader.join().unwrap_or_default();
+            return if status.success() {
+                Ok(out)
+            } else {
+                Err(format!("the browser failed ({status})"))
+            };
+        }
+        if t0.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            return Err(format!("the browser did not finish within {limit:?}"));
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Common flags: headless, no sandbox (root in a container), no GPU, the
+/// window size, nothing from the network.
+fn browser_cmd(browser: &str) -> Command {
+    let mut c = Command::new(browser);
+    c.args([
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--hide-scrollbars",
+        "--no-first-run",
+        &format!("--window-size={VIEWPORT_PX},2000"),
+    ]);
+    c
+}
+
+/// Checks one page; writes its screenshot to `shot`. Returns the measure
+/// and the failures.
+pub fn check_page(
+    browser: &str,
+    page: &Path,
+    shot: &Path,
+) -> std::result::Result<(Measure, u64, f64, Vec<String>), String> {
+    // file:// needs an absolute path.
+    let page = &page
+        .canonicalize()
+        .map_err(|e| format!("{}: {e}", page.display()))?;
+    let html = std::fs::read_to_string(page).map_err(|e| format!("{}: {e}", page.display()))?;
+    let bytes = html.len() as u64;
+    let end = html
+        .rfind("</body>")
+        .ok_or_else(|| format!("{}: no </body>", page.display()))?;
+    // The copy sits beside the page so that relative links resolve alike.
+    let copy = page.with_file_name("index.browser-check.html");
+    let injected = format!("{}{SCRIPT}{}", &html[..end], &html[end..]);
+    std::fs::write(&copy, injected).map_err(|e| format!("{}: {e}", copy.display()))?;
+    let url = |p: &Path| format!("file://{}", p.display());
+    let t0 = Instant::now();
+    let dom = output_within(
+        browser_cmd(browser).arg("--dump-dom").arg(url(&copy)),
+        Duration::from_secs(MAX_BROWSER_S),
+    );
+    let wall_s = t0.elapsed().as_secs_f64();
+    let _ = std::fs::remove_file(&copy);
+    let m = parse(&dom?)?;
+    if let Some(dir) = shot.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    }
+    output_within(
+        browser_cmd(browser)
+            .arg(format!("--screenshot={}", shot.display()))
+            .arg(url(page)),
+        Duration::from_secs(MAX_BROWSER_S),
+    )?;
+    let f = failures(&m, bytes);
+    Ok((m, bytes, wall_s, f))
+}
+
+/// The pages the demo writes, with a short name for the screenshot.
+fn demo_pages(out: &Path) -> Vec<(&'static str, PathBuf)> {
+    let r = out.join("report");
+    vec![
+        ("compare", r.join("index.html")),
+        ("diagnose", r.join("diagnose").join("index.html")),
+        ("history", r.join("history").join("index.html")),
+        ("final", r.join("final").join("index.html")),
+    ]
+}
+
+/// `cargo xtask test-browser [--pages DIR]`: the demo (debug build) into
+/// `out/browser/demo`, then every report page checked in Chromium;
+/// screenshots in `out/screens/<page>.png`. `--pages DIR` checks the pages
+/// of a demo already written to DIR (no demo run) — an older build's, say.
+pub fn test(args: &[String]) -> Result<()> {
+    let browser = chromium().ok_or(
+        "no Chromium found (chromium, chromium-browser, google-chrome or $CHROMIUM): \
+         run `sudo cargo xtask setup` (installs the Debian package `chromium`)",
+    )?;
+    let root = root();
+    let given = match args {
+        [] => None,
+        [flag, dir] if flag == "--pages" => Some(PathBuf::from(dir)),
+        _ => {
+            return Err(format!(
+            "test-browser: unexpected arguments {args:?} (usage: test-browser [--pages DEMO_DIR])"
+        ))
+        }
+    };
+    let screens = match &given {
+        Some(dir) => dir.join("screens"),
+        None => root.join("out").join("screens"),
+    };
+    let out = match given {
+        Some(dir) => dir,
+        None => {
+            let out = root.join("out").join("browser").join("demo");
+            std::fs::create_dir_all(&out).map_err(|e| format!("create {}: {e}", out.display()))?;
+            let out_s = out.to_string_lossy().into_owned();
+            // --json: the story goes to stderr, the summary (one long JSON
+            // line) to a file beside the pages rather than the terminal.
+            let args = [
+                "run", "--quiet", "-p", "trueaxis", "--", "demo", "--out", &out_s, "--json",
+            ];
+            eprintln!("\n$ cargo {}", args.join(" "));
+            let summary = out.join("demo.json");
+            let file = std::fs::File::create(&summary)
+                .map_err(|e| format!("create {}: {e}", summary.display()))?;
+            let status = Command::new("cargo")
+                .args(args)
+                .current_dir(&root)
+                .stdout(file)
+                .status()
+                .map_err(|e| format!("cannot start cargo: {e}"))?;
+            if !status.success() {
+                return Err(format!("`cargo {}` failed ({status})", args.join(" ")));
+            }
+            out
+        }
+    };
+    let mut failed = Vec::new();
+    for (name, page) in demo_pages(&out) {
+        let shot = screens.join(format!("{name}.png"));
+        let (m, bytes, wall_s, f) = check_page(&browser, &page, &shot)
+            .map_err(|e| format!("{name} page ({}): {e}", page.display()))?;
+        eprintln!(
+            "{name:<9} {:>5.2} MB  laid out in {:>5.0} ms (browser {wall_s:.1} s)  {} figures  width {}/{} px  height {} px  verdict first: {}  {}",
+            bytes as f64 / 1e6,
+            m.layout_ms,
+            m.figures,
+            m.scroll_width,
+            m.viewport,
+            m.height,
+            m.verdict_first,
+            if f.is_empty() { "ok" } else { "FAILED" }
+        );
+        for x in &f {
+            eprintln!("    {x}");
+        }
+        if !f.is_empty() {
+            failed.push(format!("{name} ({}): {}", page.display(), f.join("; ")));
+        }
+    }
+    eprintln!("screenshots: {}", screens.display());
+    if failed.is_empty() {
+        Ok(())
+    } else {
+        Err(format!(
+            "report pages fail in the browser:\n  {}",
+            failed.join("\n  ")
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn good() -> Measure {
+        Measure {
+            viewport: 1280.0,
+            scroll_width: 1280.0,
+            height: 5000.0,
+            figures: 3,
+            bad_figures: vec![],
+            images: 0,
+            broken_images: vec![],
+            verdict_first: true,
+            verdict_top: 70.0,
+            layout_ms: 400.0,
+        }
+    }
+
+    #[test]
+    fn dumped_dom_is_read_back() {
+        let dom = "<html><body><h1>t</h1><pre id=\"browser-check\">\nviewport=1280\nscroll_width=1295\nheight=9000\nfigures=2\nbad_figure=map_ex 1440x420 right 1460\nimages=1\nbroken_image=a.png\nverdict_first=false\nverdict_top=812.5\nlayout_ms=123.4\n</pre></body></html>";
+        let m = parse(dom).unwrap();
+        assert_eq!(m.viewport, 1280.0);
+        assert_eq!(m.scroll_width, 1295.0);
+        assert_eq!(m.height, 9000.0);
+        assert_eq!(m.figures, 2);
+        assert_eq!(m.bad_figures, vec!["map_ex 1440x420 right 1460"]);
+        assert_eq!(m.broken_images, vec!["a.png"]);
+        assert!(!m.verdict_first);
+        assert_eq!(m.verdict_top, 812.5);
+        assert!(parse("<html></html>").is_err());
+    }
+
+    #[test]
+    fn each_failure_is_named() {
+        assert!(failures(&good(), 1000).is_empty());
+        let cases: Vec<(Measure, u64, &str)> = vec![
+            (
+                Measure {
+                    scroll_width: 1460.0,
+                    ..good()
+                },
+                1000,
+                "overflows",
+            ),
+            (
+                Measure {
+                    bad_figures: vec!["x".into()],
+                    ..good()
+                },
+                1000,
+                "figure not drawn",
+            ),
+            (
+                Measure {
+                    broken_images: vec!["a.png".into()],
+                    ..good()
+                },
+                1000,
+                "did not load",
+            ),
+            (
+                Measure {
+                    verdict_first: false,
+                    ..good()
+                },
+                1000,
+                "not the first thing",
+            ),
+            (
+                Measure {
+                    verdict_top: 900.0,
+                    ..good()
+                },
+                1000,
+                "first screen",
+            ),
+            (
+                Measure {
+                    layout_ms: 9000.0,
+                    ..good()
+                },
+                1000,
+                "laid out after",
+            ),
+            (good(), MAX_PAGE_BYTES + 1, "weighs"),
+            (
+                Measure {
+                    viewport: 800.0,
+                    scroll_width: 800.0,
+                    ..good()
+                },
+                1000,
+                "window was",
+            ),
+        ];
+        for (m, bytes, want) in cases {
+            let f = failures(&m, bytes);
+            assert_eq!(f.len(), 1, "{want}: {f:?}");
+            assert!(f[0].contains(want), "{want}: {f:?}");
+        }
+    }
+}
