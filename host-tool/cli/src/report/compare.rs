@@ -167,40 +167,39 @@ pub fn verdict(c: &Comparison, sources: Option<Sources>, dir: &Path) -> Verdict 
             }
         ));
     }
-    let mut trends: Vec<_> = c
-        .channels
-        .iter()
-        .filter(|p| &p.target == wt && !["x_mm", "y_mm", "z_mm"].contains(&p.channel.as_str()))
-        .filter(|p| p.corr.is_some_and(|r| r.abs() >= TREND_CORR))
-        .collect();
-    trends.sort_by(|a, b| {
-        b.corr
-            .unwrap_or(0.0)
-            .abs()
-            .total_cmp(&a.corr.unwrap_or(0.0).abs())
-    });
+    // Ranked by the share of the residual each channel explains once
+    // position is accounted for (compare::ranked_channels): a channel that
+    // only follows the travel explains nothing position does not.
+    let trends = trueaxis_engine::compare::ranked_channels(
+        c,
+        wt,
+        trueaxis_engine::compare::RANK_MIN_SHARE,
+    );
     if trends.is_empty() {
         details.push(format!(
-            "What it follows: no temperature, time, direction or other channel (every |r| < {TREND_CORR})."
+            "What it follows: no temperature, time, direction or other channel explains {:.0} % of the residual beyond position.",
+            100.0 * trueaxis_engine::compare::RANK_MIN_SHARE
         ));
     }
     for p in trends.iter().take(3) {
         action = true;
-        let slope = p.slope_um_per_unit.unwrap_or(f64::NAN);
-        // The slope in the channel's own terms.
+        let slope = p.partial_slope.unwrap_or(f64::NAN);
+        // The slope in the channel's own terms (a direction's is already
+        // the step from −1 to +1).
         let size = if p.channel.starts_with("dir_") {
-            format!("a step of {} from −1 to +1", um(2.0 * slope))
+            format!("a step of {} from −1 to +1", um(slope))
         } else if p.channel == "t_s" {
             format!("{} µm per hour", format_value(3600.0 * slope))
         } else if p.channel.starts_with("T_") {
             format!("{} µm per K", format_value(slope))
         } else {
-            format!("{} per unit", um(slope))
+            format!("{} {}", format_value(slope), p.slope_unit)
         };
         details.push(format!(
-            "What it follows: {wt}'s residual follows {} (r = {:+.2}, {size}) — a trend the model does not hold.",
+            "What it follows: {wt}'s residual follows {} ({size}; {:.0} % of the residual beyond position, r = {:+.2}) — a trend the model does not hold.",
             axis_title(&p.channel),
-            p.corr.unwrap_or(0.0),
+            100.0 * p.explains_share.unwrap_or(0.0),
+            p.partial_corr.unwrap_or(0.0),
         ));
     }
     if let Some(h) = wr.held_out_rms_um {
@@ -684,7 +683,7 @@ mod tests {
         };
         let n = 40;
         d.pos_mm = [
-            Some((0..n).map(|i| f64::from(i) * 10.0).collect()),
+            Some((0..n).map(|i| i as f64 * 10.0).collect()),
             None,
             None,
         ];
@@ -730,13 +729,17 @@ mod tests {
             target: "ex".into(),
             corr: Some(-0.4),
             slope_um_per_unit: Some(-0.5),
+            slope_unit: "µm per direction change".into(),
+            partial_corr: Some(-0.4),
+            partial_slope: Some(-1.0),
+            explains_share: Some(0.16),
             bins: Vec::new(),
         }];
         let v = verdict(&c, None, dir);
         assert_eq!(v.tone, Tone::Action);
         assert!(
             v.details.iter().any(|l| l.contains(
-                "approach direction along x (r = -0.40, a step of -1.00 µm from −1 to +1)"
+                "approach direction along x (a step of -1.00 µm from −1 to +1; 16 % of the residual beyond position, r = -0.40)"
             )),
             "{:?}",
             v.details

@@ -752,6 +752,8 @@ mod tests {
             warnings: Vec::new(),
             hold_out: "spatial cells".into(),
             evidence: Evidence::default(),
+            unexplained: Vec::new(),
+            outliers: Vec::new(),
         }
     }
     use std::collections::BTreeMap;
