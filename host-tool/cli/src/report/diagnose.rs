@@ -879,7 +879,7 @@ mod tests {
         assert_eq!(
             v.next.as_deref(),
             Some(
-                "trueaxis fit d.csv --model cubic19 --add 'periodic:target=ex,axis=x,period_mm=5'"
+                "trueaxis fit d.csv --model cubic19 --add 'periodic:target=ex,axis=x,period_mm=5' -o m.json"
             )
         );
     }
