@@ -1,0 +1,81 @@
+//! Time series at one point are first-class: the spindle thermal test
+//! (`simulate --scenario spindle-thermal`, 48 h at one position, 12
+//! temperature sensors, readings quantised to 0.25 µm) is fitted, not
+//! refused; `diagnose` and `improve` name a temperature channel as the cause
+//! of the growth, not a polynomial in time; no held-out RMS is NaN.
+
+mod common;
+
+use common::{json, run, s, tmp_dir};
+
+#[test]
+fn a_thermal_test_at_one_point_is_fitted_and_its_temperature_named() {
+    let dir = tmp_dir("timeseries", "spindle");
+    let csv = dir.join("spindle.csv");
+    let sim = json(&run(&[
+        "simulate",
+        "--scenario",
+        "spindle-thermal",
+        "--seed",
+        "1",
+        "-o",
+        s(&csv),
+        "--json",
+    ]));
+    assert_eq!(sim["rows"], 2881);
+    // fit: a constant per target, said in a warning (it used to stop with
+    // "every measured point lies at one position").
+    let fit = json(&run(&[
+        "fit",
+        s(&csv),
+        "--model",
+        "cubic19",
+        "-o",
+        s(&dir.join("m.json")),
+        "--json",
+    ]));
+    assert_eq!(fit["terms"], 1);
+    assert!(fit["warnings"][0]
+        .as_str()
+        .unwrap()
+        .contains("reduced to a constant per target"));
+    for t in ["ex", "ey", "ez"] {
+        assert!(fit["held_out_rms_um"][t].as_f64().unwrap().is_finite());
+    }
+    // diagnose: held-out RMS finite everywhere; the growth of ez is a
+    // spindle temperature's, and no drift is significant.
+    let d = json(&run(&["diagnose", s(&csv), "--model", "cubic19", "--json"]));
+    assert_eq!(d["verdict"], "missing_effect");
+    for t in ["ex", "ey", "ez"] {
+        assert!(d["held_out_rms_um"][t].as_f64().unwrap().is_finite(), "{t}");
+    }
+    let cands = d["candidates"].as_array().unwrap();
+    let best = &cands[0];
+    assert_eq!(best["significant"], true);
+    assert_eq!(best["effect"], "thermal");
+    assert_eq!(best["target"], "ez");
+    assert_eq!(best["hold_out"], "forward");
+    assert!(
+        best["channel"].as_str().unwrap().starts_with("T_spindle_"),
+        "{best}"
+    );
+    assert!(cands
+        .iter()
+        .all(|c| c["effect"] != "drift" || c["significant"] == false));
+    // improve: the loop adds the temperature, never drift.
+    let imp = json(&run(&[
+        "improve",
+        s(&csv),
+        "--model",
+        "cubic19",
+        "-o",
+        s(&dir.join("imp.json")),
+        "--json",
+    ]));
+    let model = imp["model"].as_str().unwrap();
+    assert!(
+        model.contains("thermal:target=ez,channel=spindle_"),
+        "{model}"
+    );
+    assert!(!model.contains("drift"), "{model}");
+}
