@@ -49,6 +49,17 @@ fn a_thermal_test_at_one_point_is_fitted_and_its_temperature_named() {
     for t in ["ex", "ey", "ez"] {
         assert!(d["held_out_rms_um"][t].as_f64().unwrap().is_finite(), "{t}");
     }
+    // No candidate in position along an axis that never moves (squareness,
+    // thermal × x, higher_order …): each was an `in_model_span` line.
+    assert!(
+        d["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|w| w["code"] != "in_model_span"),
+        "{}",
+        d["warnings"]
+    );
     let cands = d["candidates"].as_array().unwrap();
     let best = &cands[0];
     assert_eq!(best["significant"], true);
@@ -78,4 +89,32 @@ fn a_thermal_test_at_one_point_is_fitted_and_its_temperature_named() {
         "{model}"
     );
     assert!(!model.contains("drift"), "{model}");
+}
+
+#[test]
+fn in_model_span_is_one_line_in_text_and_every_one_in_json_and_verbose() {
+    let dir = tmp_dir("timeseries", "in_span");
+    let csv = common::simulate_grid(&dir, "g.csv", 3);
+    let j = json(&run(&["diagnose", s(&csv), "--model", "cubic19", "--json"]));
+    let n = j["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|w| w["code"] == "in_model_span")
+        .count();
+    assert!(n >= 2, "{n}");
+    let lines = |args: &[&str]| {
+        let out = run(args);
+        common::assert_success(&out);
+        String::from_utf8(out.stdout)
+            .unwrap()
+            .lines()
+            .filter(|l| l.contains("[in_model_span]"))
+            .count()
+    };
+    assert_eq!(lines(&["diagnose", s(&csv), "--model", "cubic19"]), 1);
+    assert_eq!(
+        lines(&["diagnose", s(&csv), "--model", "cubic19", "--verbose"]),
+        n
+    );
 }

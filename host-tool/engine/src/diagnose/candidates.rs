@@ -86,6 +86,11 @@ pub(super) fn propose(
     let data = td.data;
     let tn = TARGETS[td.t];
     let axes = data.axes();
+    // Terms in position only along axes that move: one held at one position
+    // (every axis of a thermal test at one point) has no travel to fit
+    // them on — `fit` refuses them — and each would only be reported as
+    // `in_model_span`.
+    let moving = data.varying_axes();
     let want = |family: Family, axis: Option<Axis>, channel: Option<&str>, times: Option<Axis>| {
         only.is_none_or(|k| k.admits(family, axis, channel, times))
     };
@@ -96,7 +101,7 @@ pub(super) fn propose(
         local[r] = i;
     }
     // periodic: Lomb–Scargle along each axis on the densest lines.
-    for &a in &axes {
+    for &a in &moving {
         if !want(Family::Periodic, Axis::from_index(a), None, None) {
             continue;
         }
@@ -206,7 +211,7 @@ pub(super) fn propose(
             continue;
         }
         let times: Vec<Option<usize>> = std::iter::once(None)
-            .chain(axes.iter().map(|&a| Some(a)))
+            .chain(moving.iter().map(|&a| Some(a)))
             .collect();
         for tm in times {
             if !want(
@@ -327,7 +332,7 @@ pub(super) fn propose(
     if let Some(tool) = &data.tool_mm {
         let lo = tool.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = tool.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        for tm in std::iter::once(None).chain(axes.iter().map(|&a| Some(a))) {
+        for tm in std::iter::once(None).chain(moving.iter().map(|&a| Some(a))) {
             if !want(Family::Abbe, None, None, tm.and_then(Axis::from_index)) {
                 continue;
             }
@@ -383,7 +388,7 @@ pub(super) fn propose(
         });
     }
     // squareness: linear cross terms.
-    for &a in &axes {
+    for &a in &moving {
         if a == td.t || !want(Family::Squareness, Axis::from_index(a), None, None) {
             continue;
         }
@@ -397,7 +402,7 @@ pub(super) fn propose(
         });
     }
     // higher_order: degree 4, or 5 when it buys ΔBIC < −10.
-    for &a in &axes {
+    for &a in &moving {
         if !want(Family::HigherOrder, Axis::from_index(a), None, None) {
             continue;
         }
