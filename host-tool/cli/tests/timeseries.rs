@@ -118,3 +118,63 @@ fn in_model_span_is_one_line_in_text_and_every_one_in_json_and_verbose() {
         n
     );
 }
+
+#[test]
+fn a_thermal_model_at_one_point_compares_and_exports() {
+    let dir = tmp_dir("timeseries", "export");
+    let csv = dir.join("spindle.csv");
+    common::assert_success(&run(&[
+        "simulate",
+        "--scenario",
+        "spindle-thermal",
+        "-o",
+        s(&csv),
+    ]));
+    let model = dir.join("m.json");
+    let add = "thermal:target=ez,channel=spindle_housing";
+    json(&run(&[
+        "fit",
+        s(&csv),
+        "--model",
+        "cubic19",
+        "--add",
+        add,
+        "-o",
+        s(&model),
+        "--json",
+    ]));
+    let c = json(&run(&["compare", s(&csv), "--model", s(&model), "--json"]));
+    assert!(c["rms_um"]["ez"].as_f64().unwrap() < 1.0, "{}", c["rms_um"]);
+    let table = dir.join("t.bin");
+    let e = json(&run(&["export", s(&model), "-o", s(&table), "--json"]));
+    assert!(e["max_f32_error_nm"].as_f64().unwrap() < 5.0);
+    assert_eq!(
+        e["envelope"]["travel_mm"],
+        serde_json::json!([null, null, null])
+    );
+    let w = common::find_warning(&e, "measured_at_one_point").expect("warned");
+    assert!(w["detail"].as_str().unwrap().contains("x = 400 mm"), "{w}");
+    // A sensor name longer than the table's 16 bytes: named, with the limit.
+    let long = dir.join("long.csv");
+    let text = std::fs::read_to_string(&csv)
+        .unwrap()
+        .replace("T_spindle_housing_C", "T_spindle_housing_sensor_C");
+    std::fs::write(&long, text).unwrap();
+    let lm = dir.join("long.json");
+    json(&run(&[
+        "fit",
+        s(&long),
+        "--model",
+        "cubic19",
+        "--add",
+        "thermal:target=ez,channel=spindle_housing_sensor",
+        "-o",
+        s(&lm),
+        "--json",
+    ]));
+    common::expect_exit(
+        &["export", s(&lm), "-o", s(&dir.join("l.bin"))],
+        1,
+        &["T_spindle_housing_sensor_C", "at most 16 bytes"],
+    );
+}

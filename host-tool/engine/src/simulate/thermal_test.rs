@@ -63,8 +63,8 @@ pub const T_REF_C: f64 = 20.0;
 /// constant of its response to the spindle's heat (s), time constant of
 /// its response to the ambient (s).
 const SENSORS: [(&str, f64, f64, f64); 12] = [
-    ("spindle_front_bearing", 11.0, 900.0, 1800.0),
-    ("spindle_rear_bearing", 8.0, 1500.0, 1800.0),
+    ("spindle_front", 11.0, 900.0, 1800.0),
+    ("spindle_rear", 8.0, 1500.0, 1800.0),
     ("spindle_motor", 15.0, 600.0, 1200.0),
     ("spindle_housing", 9.0, 2400.0, 3600.0),
     ("coolant_in", 2.0, 300.0, 600.0),
