@@ -211,6 +211,26 @@ pub(super) fn score(
                 }
             ));
         }
+        // A multi-sensor thermal effect: every sensor's µm/K (the physical
+        // parameter above is the first one's).
+        if let Ok(e) = Effect::parse(&p.spec) {
+            let per: Vec<String> = e
+                .features
+                .iter()
+                .zip(&ff.fit.beta)
+                .filter_map(|(f, b)| match f {
+                    Feature::Thermal {
+                        channel,
+                        exp: [0, 0, 0],
+                        ..
+                    } => Some(format!("T_{channel}_C {b:.3} µm/K")),
+                    _ => None,
+                })
+                .collect();
+            if per.len() > 1 && per.len() == e.features.len() {
+                evidence.push_str(&format!("; per sensor: {}", per.join(", ")));
+            }
+        }
         if ff.share < 0.05 {
             evidence.push_str(&format!(
                 "; only {:.1} % of it lies outside the model's span",
