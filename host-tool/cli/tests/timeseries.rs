@@ -185,3 +185,50 @@ fn a_thermal_model_at_one_point_compares_and_exports() {
         &["T_spindle_housing_sensor_C", "at most 16 bytes"],
     );
 }
+
+/// The user-eye test: the thermal test with a fake travel added
+/// (x stepping 400 … 440 mm, so the seed has position terms and the old
+/// hold-out was spatial) — `improve` picked `drift:order=3` over the
+/// temperatures. It adds the two driving sensors now.
+#[test]
+fn with_a_fake_travel_improve_still_picks_the_temperatures_not_drift() {
+    let dir = tmp_dir("timeseries", "fake_travel");
+    let csv = dir.join("spindle.csv");
+    common::assert_success(&run(&[
+        "simulate",
+        "--scenario",
+        "spindle-thermal",
+        "-o",
+        s(&csv),
+    ]));
+    let mut row = 0usize;
+    let text: Vec<String> = std::fs::read_to_string(&csv)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            if l.starts_with('#') || l.starts_with("x_mm") {
+                return l.to_string();
+            }
+            let rest = l.split_once(',').unwrap().1;
+            row += 1;
+            format!("{},{rest}", 400 + ((row - 1) % 5) * 10)
+        })
+        .collect();
+    let fake = dir.join("fake.csv");
+    std::fs::write(&fake, text.join("\n") + "\n").unwrap();
+    let imp = json(&run(&[
+        "improve",
+        s(&fake),
+        "--model",
+        "cubic19",
+        "-o",
+        s(&dir.join("m.json")),
+        "--json",
+    ]));
+    let model = imp["model"].as_str().unwrap();
+    assert!(
+        model.contains("thermal:target=ez,channel=column_front+spindle_housing"),
+        "{model}"
+    );
+    assert!(!model.contains("drift"), "{model}");
+}
