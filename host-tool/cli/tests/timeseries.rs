@@ -46,7 +46,19 @@ fn a_thermal_test_at_one_point_is_fitted_and_its_temperature_named() {
     }
     // diagnose: held-out RMS finite everywhere; the growth of ez is a
     // spindle temperature's, and no drift is significant.
-    let d = json(&run(&["diagnose", s(&csv), "--model", "cubic19", "--json"]));
+    let report = dir.join("report");
+    let d = json(&run(&[
+        "diagnose",
+        s(&csv),
+        "--model",
+        "cubic19",
+        "--report",
+        s(&report),
+        "--json",
+    ]));
+    // The multi-sensor component is drawn against time.
+    let svg = std::fs::read_to_string(report.join("component_ez_1.svg")).unwrap();
+    assert!(svg.contains("t_s (s)"));
     assert_eq!(d["verdict"], "missing_effect");
     for t in ["ex", "ey", "ez"] {
         assert!(d["held_out_rms_um"][t].as_f64().unwrap().is_finite(), "{t}");

@@ -24,6 +24,11 @@ fn channel(data: &Dataset, c: &Candidate) -> Option<(String, Vec<f64>)> {
         .as_deref()
         .and_then(|a| AXES.iter().position(|x| *x == a));
     match c.effect {
+        // Several sensors: no one temperature to plot against — the
+        // component over time shows the warm-up and cool-down it follows.
+        Family::Thermal if c.channel.as_deref().is_some_and(|ch| ch.contains('+')) => {
+            Some(("t_s (s)".into(), data.t_s.clone()?))
+        }
         Family::Thermal => {
             let name = c
                 .channel
