@@ -245,3 +245,39 @@ fn with_a_fake_travel_improve_still_picks_the_temperatures_not_drift() {
     );
     assert!(!model.contains("drift"), "{model}");
 }
+
+/// A warm-up read at one point for 30 min (`point:` plan, one spindle
+/// sensor with a 600 s lag): a cubic in time explains the same residual
+/// nearly as well (ΔBIC −1880 against −1884), and both predict the rest of
+/// a smooth warm-up. Before, neither was significant ("no clear gap to the
+/// competing candidate") and the verdict was `at_noise_floor` with 1 µm
+/// left; the temperature is now taken, and its evidence names the drift.
+#[test]
+fn a_temperature_is_preferred_over_a_drift_that_explains_the_same_warm_up() {
+    let dir = tmp_dir("timeseries", "warm_up");
+    let csv = dir.join("warm.csv");
+    common::assert_success(&run(&[
+        "simulate",
+        "--preset",
+        "perfect800",
+        "--plan",
+        "point:x=400,y=250,z=250,repeats=600",
+        "--effect",
+        "thermal:channel=spindle,target=ez,times=none,offset_um_per_k=-2,cte_um_per_m_k=0,rise_c=8,tau_s=5400,lag_s=600",
+        "--noise-um",
+        "0.2",
+        "-o",
+        s(&csv),
+    ]));
+    let d = json(&run(&["diagnose", s(&csv), "--model", "cubic19", "--json"]));
+    assert_eq!(d["verdict"], "missing_effect");
+    let best = &d["candidates"][0];
+    assert_eq!(best["significant"], true, "{best}");
+    assert_eq!(best["effect"], "thermal", "{best}");
+    assert_eq!(best["channel"], "T_spindle_C");
+    let ev = best["evidence"].as_str().unwrap();
+    assert!(
+        ev.contains("preferred over `drift:target=ez,order=3`"),
+        "{ev}"
+    );
+}

@@ -119,8 +119,9 @@ pub(super) fn rank_target(
     // directions overlap, the thermal one passes on its own, and — unless
     // the drift fails the forward test — the data do not separate them:
     // ΔBIC less than the gap rule's margin worse, forward-chained RMS
-    // within 10 %), the thermal one is the candidate — a temperature says why and goes on predicting after
-    // the session; t³ does not. Drift is then no competitor of it.
+    // within 10 %), the thermal one is the candidate — a temperature says
+    // why and goes on predicting after the session; t³ does not. Drift is
+    // then no competitor of it.
     let passes = |c: &Candidate| {
         c.delta_bic.is_some_and(|d| d < DBIC_SIGNIFICANT)
             && c.gain.is_some_and(|g| g >= MIN_HELD_OUT_GAIN)
