@@ -101,6 +101,14 @@ fn no_error_column() {
 #[test]
 fn no_position_column() {
     fails_at("no_position.csv", 1, None, "no position column");
+    // It has t_s: the message says how a time series at one point gets its
+    // position.
+    fails_at(
+        "no_position.csv",
+        1,
+        None,
+        "add it as a constant column, e.g. x_mm",
+    );
 }
 
 #[test]

@@ -285,7 +285,7 @@ pub fn same_effect(a: &str, b: &str) -> bool {
 /// | family | keys | columns added to `target` |
 /// | --- | --- | --- |
 /// | `periodic` | target, axis, period_mm, harmonics (1..4, default 1) | sin, cos(2πk·p/period), k = 1..harmonics |
-/// | `thermal` | target, channel, [times=x\|y\|z], [offset=0\|1], [lag_s], [t_ref_c] | ΔT, or ΔT·u_axis (and ΔT with offset=1: expansion about an unknown fixed point) |
+/// | `thermal` | target, channel (or several joined by `+`), [times=x\|y\|z], [offset=0\|1], [lag_s, one per channel joined by `+`, or one for all], [t_ref_c] | per channel ΔT, or ΔT·u_axis (and ΔT with offset=1: expansion about an unknown fixed point) |
 /// | `reversal` | target, axis | dir_axis |
 /// | `abbe` | target, [times=x\|y\|z] | tool_mm, or tool_mm·u_axis |
 /// | `drift` | target, [order=1..3] | (t/1 h)^p, p = 1..order |
@@ -413,10 +413,43 @@ impl Effect {
                     .collect()
             }
             Family::Thermal => {
-                let channel = need("channel")?.to_string();
-                let lag_s = get("lag_s").map_or(Ok(0.0), |v| parse_f64(v, "lag_s"))?;
-                if lag_s < 0.0 {
-                    bail!("`lag_s={lag_s}`: expected ≥ 0");
+                // Several sensors in one effect (`channel=housing+column`,
+                // `lag_s=600+0`, one lag per channel or one for all): a
+                // multi-sensor thermal model, when no one sensor follows the
+                // structure's growth.
+                let channels: Vec<String> = need("channel")?
+                    .split('+')
+                    .map(|c| c.trim().to_string())
+                    .collect();
+                if let Some(c) = channels.iter().find(|c| c.is_empty()) {
+                    bail!("`channel={c}`: expected channel names joined by +, e.g. housing+column");
+                }
+                if let Some((i, c)) = channels
+                    .iter()
+                    .enumerate()
+                    .find(|(i, c)| channels[..*i].contains(c))
+                {
+                    bail!("`channel=`: {c} is named twice (position {})", i + 1);
+                }
+                let lags: Vec<f64> = match get("lag_s") {
+                    None => vec![0.0; channels.len()],
+                    Some(v) => {
+                        let l: Vec<f64> = v
+                            .split('+')
+                            .map(|x| parse_f64(x.trim(), "lag_s"))
+                            .collect::<Result<_>>()?;
+                        match l.len() {
+                            1 => vec![l[0]; channels.len()],
+                            k if k == channels.len() => l,
+                            k => bail!(
+                                "`lag_s={v}`: {k} lags for {} channels (expected one, or one per channel)",
+                                channels.len()
+                            ),
+                        }
+                    }
+                };
+                if let Some(l) = lags.iter().find(|l| **l < 0.0) {
+                    bail!("`lag_s={l}`: expected ≥ 0");
                 }
                 let t_ref_c = get("t_ref_c").map_or(Ok(T_REF_C), |v| parse_f64(v, "t_ref_c"))?;
                 let exp = times("times")?;
@@ -424,19 +457,22 @@ impl Effect {
                 // rarely the travel's centre: `offset=1` adds the plain ΔT
                 // column so that the fixed point is fitted too.
                 let offset = get("offset").map_or(Ok(0), |v| parse_u8(v, "offset", 0, 1))?;
-                let mut f = vec![Feature::Thermal {
-                    channel: channel.clone(),
-                    t_ref_c,
-                    lag_s,
-                    exp,
-                }];
-                if offset == 1 && exp != [0, 0, 0] {
+                let mut f = Vec::new();
+                for (channel, &lag_s) in channels.into_iter().zip(&lags) {
                     f.push(Feature::Thermal {
-                        channel,
+                        channel: channel.clone(),
                         t_ref_c,
                         lag_s,
-                        exp: [0, 0, 0],
+                        exp,
                     });
+                    if offset == 1 && exp != [0, 0, 0] {
+                        f.push(Feature::Thermal {
+                            channel,
+                            t_ref_c,
+                            lag_s,
+                            exp: [0, 0, 0],
+                        });
+                    }
                 }
                 f
             }
@@ -497,6 +533,34 @@ impl Effect {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_thermal_effect_may_follow_several_channels() {
+        let e = Effect::parse("thermal:target=ez,channel=housing+column,lag_s=600+0").unwrap();
+        assert_eq!(
+            e.spec,
+            "thermal:target=ez,channel=housing+column,lag_s=600+0"
+        );
+        let ch: Vec<(String, f64)> = e
+            .features
+            .iter()
+            .map(|f| match f {
+                Feature::Thermal { channel, lag_s, .. } => (channel.clone(), *lag_s),
+                _ => panic!("{f:?}"),
+            })
+            .collect();
+        assert_eq!(ch, vec![("housing".into(), 600.0), ("column".into(), 0.0)]);
+        let e = Effect::parse("thermal:target=ex,channel=a+b,times=x,offset=1,lag_s=60").unwrap();
+        assert_eq!(e.features.len(), 4);
+        for bad in [
+            "thermal:target=ez,channel=a+b,lag_s=1+2+3",
+            "thermal:target=ez,channel=a+a",
+            "thermal:target=ez,channel=a+",
+            "thermal:target=ez,channel=a+b,lag_s=1+-2",
+        ] {
+            assert!(Effect::parse(bad).is_err(), "{bad}");
+        }
+    }
 
     #[test]
     fn effect_parsing() {

@@ -73,6 +73,10 @@ pub fn describe(data: &Dataset, rows: &[usize], k: usize) -> String {
             b.len(),
             AXES[axis]
         ),
+        BlockKind::Time => format!(
+            "{} blocks of contiguous time (t_s; a single position: contiguous stretches dealt round-robin)",
+            b.len()
+        ),
         BlockKind::None => "no hold-out possible (a single position)".into(),
     }
 }
@@ -80,7 +84,29 @@ pub fn describe(data: &Dataset, rows: &[usize], k: usize) -> String {
 enum BlockKind {
     Passes,
     Spatial(usize),
+    /// A time series at one position without passes: contiguous stretches
+    /// of time, like the spatial slabs.
+    Time,
     None,
+}
+
+/// The time order key of `row`: (session, t_s) — `t_s` restarts in each
+/// session.
+fn time_key(data: &Dataset, row: usize) -> (i64, f64) {
+    (
+        data.session_id.as_ref().map_or(0, |s| s[row]),
+        data.t_s.as_ref().map_or(0.0, |t| t[row]),
+    )
+}
+
+/// `rows` in time order (session, then t_s; ties keep their order).
+pub fn time_order(data: &Dataset, rows: &[usize]) -> Vec<usize> {
+    let mut out = rows.to_vec();
+    out.sort_by(|&a, &b| {
+        let (ka, kb) = (time_key(data, a), time_key(data, b));
+        ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1))
+    });
+    out
 }
 
 fn block_kind(data: &Dataset, rows: &[usize]) -> BlockKind {
@@ -108,6 +134,7 @@ fn block_kind(data: &Dataset, rows: &[usize]) -> BlockKind {
     let best = (0..3).max_by(|&a, &b| span(a).total_cmp(&span(b)).then(b.cmp(&a)));
     match best {
         Some(a) if span(a) > 0.0 => BlockKind::Spatial(a),
+        _ if rows.len() >= 2 && data.t_s.is_some() => BlockKind::Time,
         _ => BlockKind::None,
     }
 }
@@ -150,6 +177,14 @@ pub fn blocks(data: &Dataset, rows: &[usize], k: usize) -> Vec<Vec<usize>> {
                 let chunk = ((mid / total) * n_chunks as f64).floor() as usize;
                 out[chunk.min(n_chunks - 1) % k].extend_from_slice(g);
                 seen += g.len();
+            }
+        }
+        BlockKind::Time => {
+            let ordered = time_order(data, rows);
+            let n_chunks = ordered.len().min(4 * k);
+            let total = ordered.len();
+            for (i, &r) in ordered.iter().enumerate() {
+                out[(i * n_chunks / total) % k].push(r);
             }
         }
         BlockKind::None => out[0].extend_from_slice(rows),
@@ -199,7 +234,7 @@ pub fn held_out_residuals(
     let bl = blocks(data, &rows, k);
     if bl.len() < 2 {
         bail!(
-            "{}: cannot hold out blocks — every measured point lies at one position and in one pass",
+            "{}: cannot hold out blocks — every measured point lies at one position, in one pass and without t_s",
             TARGETS[target]
         );
     }

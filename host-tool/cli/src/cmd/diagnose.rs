@@ -36,6 +36,10 @@ pub struct Args {
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
+    /// List every `in_model_span` warning in the text output (by default
+    /// one line per model; `--json` always has them all).
+    #[arg(long)]
+    pub verbose: bool,
 }
 
 impl Args {
@@ -92,7 +96,7 @@ impl Args {
             input::add_skipped_count(&mut doc, &data);
             out::json_pretty(&doc)?;
         } else {
-            crate::cmd::out::print(&text(&d, &self.data, &model_out))?;
+            crate::cmd::out::print(&text(&d, &self.data, &model_out, self.verbose))?;
         }
         Ok(())
     }
@@ -124,8 +128,10 @@ pub fn next_command(d: &Diagnosis, data_path: &Path, model_out: &Path) -> Option
     )
 }
 
-/// The human summary; `model_out` is where the `next:` command writes.
-pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path) -> String {
+/// The human summary; `model_out` is where the `next:` command writes;
+/// `verbose` lists every `in_model_span` warning instead of one line per
+/// model.
+pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path, verbose: bool) -> String {
     let mut s = String::new();
     s.push_str(&format!(
         "{}: model {} (hold-out: {})\n",
@@ -144,13 +150,21 @@ pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path) -> String {
             .copied()
             .flatten()
             .map_or("—".to_string(), |v| format!("{v:.4}"));
+        let held = d
+            .held_out_rms_um
+            .get(t)
+            .copied()
+            .filter(|v| v.is_finite())
+            .map_or_else(|| "n/a".to_string(), |v| format!("{v:.4}"));
         s.push_str(&format!(
-            "  {:<6} {:>10.4} {:>16.4} {:>14}\n",
-            t,
-            rms,
-            d.held_out_rms_um.get(t).copied().unwrap_or(f64::NAN),
-            nf
+            "  {:<6} {:>10.4} {:>16} {:>14}\n",
+            t, rms, held, nf
         ));
+    }
+    if d.held_out_rms_um.values().any(|v| !v.is_finite()) {
+        s.push_str(
+            "  (held-out n/a: no block could be held out — one position, one pass and no t_s)\n",
+        );
     }
     match d.verdict {
         Verdict::MissingEffect => s.push_str("verdict: missing_effect\n"),
@@ -228,7 +242,29 @@ pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path) -> String {
     }
     if !d.warnings.is_empty() {
         s.push_str("warnings:\n");
+        // `in_model_span` says the same thing for every candidate the seed
+        // already contains (45 lines on a thermal test): one line per
+        // model, naming them, unless --verbose.
+        let in_span: Vec<&str> = d
+            .warnings
+            .iter()
+            .filter(|w| w.code == "in_model_span")
+            .filter_map(|w| w.detail.split('`').nth(1))
+            .collect();
+        let mut collapsed = false;
         for w in &d.warnings {
+            if w.code == "in_model_span" && !verbose && in_span.len() > 1 {
+                if !collapsed {
+                    collapsed = true;
+                    let seed = d.model.split(" + ").next().unwrap_or("the model");
+                    s.push_str(&format!(
+                        "  [in_model_span] {seed} already contains {} candidates' columns, so they cannot be told from it: {} (details: --verbose or --json)\n",
+                        in_span.len(),
+                        in_span.iter().map(|a| format!("`{a}`")).collect::<Vec<_>>().join(", ")
+                    ));
+                }
+                continue;
+            }
             s.push_str(&format!("  [{}] {}\n", w.code, w.detail));
         }
     }

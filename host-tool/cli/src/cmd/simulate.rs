@@ -24,8 +24,14 @@ pub struct Args {
     /// plane:<ab>:<step_mm>, line:<a>:<step_mm>, iso230:<a>, point:x=,y=,z=,
     /// pause:<s>[,new_session]
     /// (options after commas, see docs/cli.md).
-    #[arg(long, required = true, num_args = 1..)]
+    #[arg(long, required_unless_present = "scenario", num_args = 1..)]
     pub plan: Vec<String>,
+    /// A whole measurement campaign instead of plans and effects:
+    /// spindle-thermal (an ISO 230-3 thermal test at one point, 48 h, a
+    /// reading a minute, 12 temperature sensors; see docs/cli.md). Only
+    /// --seed and -o apply.
+    #[arg(long, conflicts_with_all = ["plan", "effect", "reference"])]
+    pub scenario: Option<String>,
     /// Physical effect (repeatable): periodic:…, thermal:…, reversal:…,
     /// abbe:…, drift:… (see docs/cli.md).
     #[arg(long)]
@@ -63,7 +69,50 @@ pub struct Args {
     pub json: bool,
 }
 
+/// Writes `data` to `path` as the measurement CSV.
+fn write_data(data: &trueaxis_engine::data::Dataset, path: &std::path::Path) -> Result<()> {
+    let f =
+        std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+    let mut w = std::io::BufWriter::new(f);
+    import::write_csv(data, &mut w)?;
+    w.flush()
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
 impl Args {
+    /// `--scenario NAME`: the whole campaign from the engine's generator.
+    fn run_scenario(&self, name: &str) -> Result<()> {
+        let data = simulate::scenario(name, self.seed)?.data;
+        write_data(&data, &self.output)?;
+        let duration_s = data
+            .t_s
+            .as_ref()
+            .and_then(|t| t.last().copied())
+            .unwrap_or(0.0);
+        if self.json {
+            let doc = json!({
+                "output": self.output.display().to_string(),
+                "scenario": name,
+                "rows": data.len(),
+                "passes": 0,
+                "duration_s": duration_s,
+                "columns": import::column_names(&data),
+                "seed": self.seed,
+                "warnings": Vec::<String>::new(),
+                "sha256": trueaxis_engine::import::content_hash(&data),
+            });
+            outln!("{doc}")?;
+        } else {
+            outln!(
+                "simulated {} rows ({:.0} s) of scenario {name} → {}",
+                data.len(),
+                duration_s,
+                self.output.display()
+            )?;
+        }
+        Ok(())
+    }
+
     /// The simulation config these arguments describe.
     pub fn config(&self) -> Result<SimConfig> {
         let mut cfg = SimConfig::preset(&self.preset)?;
@@ -103,6 +152,9 @@ impl Args {
     }
 
     pub fn run(self) -> Result<()> {
+        if let Some(name) = &self.scenario {
+            return self.run_scenario(name);
+        }
         let cfg = self.config()?;
         let data = simulate::simulate(&cfg);
         let f = std::fs::File::create(&self.output)

@@ -170,11 +170,8 @@ pub fn verdict(c: &Comparison, sources: Option<Sources>, dir: &Path) -> Verdict 
     // Ranked by the share of the residual each channel explains once
     // position is accounted for (compare::ranked_channels): a channel that
     // only follows the travel explains nothing position does not.
-    let trends = trueaxis_engine::compare::ranked_channels(
-        c,
-        wt,
-        trueaxis_engine::compare::RANK_MIN_SHARE,
-    );
+    let trends =
+        trueaxis_engine::compare::ranked_channels(c, wt, trueaxis_engine::compare::RANK_MIN_SHARE);
     if trends.is_empty() {
         details.push(format!(
             "What it follows: no temperature, time, direction or other channel explains {:.0} % of the residual beyond position.",
@@ -682,11 +679,7 @@ mod tests {
             ..Dataset::default()
         };
         let n = 40;
-        d.pos_mm = [
-            Some((0..n).map(|i| i as f64 * 10.0).collect()),
-            None,
-            None,
-        ];
+        d.pos_mm = [Some((0..n).map(|i| i as f64 * 10.0).collect()), None, None];
         d.err_um = [
             Some(
                 (0..n)

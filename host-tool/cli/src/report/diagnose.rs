@@ -327,6 +327,11 @@ fn channel(data: &Dataset, c: &Candidate) -> Option<(String, Vec<f64>)> {
         .as_deref()
         .and_then(|a| AXES.iter().position(|x| *x == a));
     match c.effect {
+        // Several sensors: no one temperature to plot against — the
+        // component over time shows the warm-up and cool-down it follows.
+        Family::Thermal if c.channel.as_deref().is_some_and(|ch| ch.contains('+')) => {
+            Some(("t_s (s)".into(), data.t_s.clone()?))
+        }
         Family::Thermal => {
             let name = c
                 .channel
@@ -832,6 +837,8 @@ mod tests {
             params: [("period_mm".to_string(), 5.0)].into(),
             add: add.into(),
             held_out_rms_um_after: Some(1.0),
+            held_out_rms_um_before: Some(2.0),
+            hold_out: trueaxis_engine::diagnose::HoldOutKind::Blocks,
             gain: Some(0.5),
             identifiable: true,
             evidence: String::new(),

@@ -13,9 +13,10 @@ use super::linalg::small_fit;
 use crate::lines::densest_lines;
 
 use super::periodogram::{self, periodogram};
-use super::target::{fwl, State, TargetData};
+use super::target::{forward_blocks, forward_rms, fwl, State, TargetData};
 use super::{
-    Evidence, PeriodogramEvidence, CONSTANT_TEMPERATURE_K, DBIC_SIGNIFICANT, PERIODIC_MAX_PERIOD_MM,
+    Evidence, PeriodogramEvidence, CONSTANT_TEMPERATURE_K, DBIC_SIGNIFICANT, MIN_HELD_OUT_GAIN,
+    PERIODIC_MAX_PERIOD_MM,
 };
 
 /// A candidate before scoring: its spec and what the search learned.
@@ -86,6 +87,11 @@ pub(super) fn propose(
     let data = td.data;
     let tn = TARGETS[td.t];
     let axes = data.axes();
+    // Terms in position only along axes that move: one held at one position
+    // (every axis of a thermal test at one point) has no travel to fit
+    // them on — `fit` refuses them — and each would only be reported as
+    // `in_model_span`.
+    let moving = data.varying_axes();
     let want = |family: Family, axis: Option<Axis>, channel: Option<&str>, times: Option<Axis>| {
         only.is_none_or(|k| k.admits(family, axis, channel, times))
     };
@@ -96,7 +102,7 @@ pub(super) fn propose(
         local[r] = i;
     }
     // periodic: Lomb–Scargle along each axis on the densest lines.
-    for &a in &axes {
+    for &a in &moving {
         if !want(Family::Periodic, Axis::from_index(a), None, None) {
             continue;
         }
@@ -206,7 +212,7 @@ pub(super) fn propose(
             continue;
         }
         let times: Vec<Option<usize>> = std::iter::once(None)
-            .chain(axes.iter().map(|&a| Some(a)))
+            .chain(moving.iter().map(|&a| Some(a)))
             .collect();
         for tm in times {
             if !want(
@@ -284,6 +290,15 @@ pub(super) fn propose(
             });
         }
     }
+    // thermal, several sensors: when no one sensor follows the growth.
+    let multi_wanted = only.is_none_or(|k| {
+        k.family == Family::Thermal
+            && k.times.is_none()
+            && k.channel.as_deref().is_some_and(|c| c.contains('+'))
+    });
+    if multi_wanted && data.t_s.is_some() {
+        out.extend(multi_sensor(td, st));
+    }
     // reversal: each axis approached from both sides.
     for &a in &axes {
         if !want(Family::Reversal, Axis::from_index(a), None, None) {
@@ -327,7 +342,7 @@ pub(super) fn propose(
     if let Some(tool) = &data.tool_mm {
         let lo = tool.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = tool.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        for tm in std::iter::once(None).chain(axes.iter().map(|&a| Some(a))) {
+        for tm in std::iter::once(None).chain(moving.iter().map(|&a| Some(a))) {
             if !want(Family::Abbe, None, None, tm.and_then(Axis::from_index)) {
                 continue;
             }
@@ -383,7 +398,7 @@ pub(super) fn propose(
         });
     }
     // squareness: linear cross terms.
-    for &a in &axes {
+    for &a in &moving {
         if a == td.t || !want(Family::Squareness, Axis::from_index(a), None, None) {
             continue;
         }
@@ -397,7 +412,7 @@ pub(super) fn propose(
         });
     }
     // higher_order: degree 4, or 5 when it buys ΔBIC < −10.
-    for &a in &axes {
+    for &a in &moving {
         if !want(Family::HigherOrder, Axis::from_index(a), None, None) {
             continue;
         }
@@ -415,4 +430,170 @@ pub(super) fn propose(
         });
     }
     out
+}
+
+/// Most sensors in a multi-sensor thermal candidate.
+const MAX_SENSORS: usize = 3;
+
+/// A multi-sensor thermal candidate for the target (growth independent of
+/// position, each sensor with its own lag), or None when one sensor does as
+/// well. Sensors are chosen by forward selection over every varying `T_*`
+/// channel and the lag grid, each addition followed by one pass of swaps
+/// (every member's channel and lag tried again with the others held):
+/// correlated sensors make the greedy first choice a proxy of the true
+/// pair (the rear bearing, a lagged mix of the housing and the column),
+/// and the swap pass replaces it. An addition is kept only with ΔBIC < −10
+/// (a channel and a lag charged for it).
+fn multi_sensor(td: &TargetData, st: &State) -> Option<Proposal> {
+    let data = td.data;
+    let tn = TARGETS[td.t];
+    let chans: Vec<&str> = data
+        .temps
+        .iter()
+        .filter(|ch| {
+            let lo = ch.temp_c.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = ch.temp_c.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            hi - lo >= CONSTANT_TEMPERATURE_K
+        })
+        .map(|ch| ch.name.as_str())
+        .collect();
+    if chans.len() < 2 {
+        return None;
+    }
+    // Every (channel, lag) column with the model partialled out.
+    let mut cols: Vec<Vec<Vec<f64>>> = Vec::with_capacity(chans.len());
+    for ch in &chans {
+        let mut per_lag = Vec::with_capacity(LAGS_S.len());
+        for &lag_s in &LAGS_S {
+            let f = crate::features::Feature::Thermal {
+                channel: (*ch).to_string(),
+                t_ref_c: crate::effect::T_REF_C,
+                lag_s,
+                exp: [0, 0, 0],
+            };
+            per_lag.push(st.basis.residual(&td.col(&f).ok()?));
+        }
+        cols.push(per_lag);
+    }
+    let rss_of = |set: &[(usize, usize)]| -> f64 {
+        let cs: Vec<Vec<f64>> = set.iter().map(|&(c, l)| cols[c][l].clone()).collect();
+        small_fit(&cs, &st.resid).rss
+    };
+    let all: Vec<(usize, usize)> = (0..chans.len())
+        .flat_map(|c| (0..LAGS_S.len()).map(move |l| (c, l)))
+        .collect();
+    let single = all
+        .iter()
+        .map(|&cl| (rss_of(&[cl]), cl))
+        .min_by(|a, b| a.0.total_cmp(&b.0))?;
+    let n = td.rows.len() as f64;
+    let forward = forward_blocks(td);
+    // Whether `big` (rss `r_big`) earns its extra sensor over `small`:
+    // ΔBIC < −10 with a channel and a lag charged, and — the acceptance
+    // rule's 10 % — a better forward-chained prediction of later data (with
+    // thousands of readings ΔBIC alone takes a sensor for a few nm).
+    let earns = |big: &[(usize, usize)], r_big: f64, small: &[(usize, usize)], r_small: f64| {
+        let forward_ok = forward.as_ref().is_none_or(|b| {
+            let f = |set: &[(usize, usize)]| {
+                let cs: Vec<Vec<f64>> = set.iter().map(|&(c, l)| cols[c][l].clone()).collect();
+                forward_rms(b, &st.resid, &cs).1
+            };
+            f(big) <= (1.0 - MIN_HELD_OUT_GAIN) * f(small)
+        });
+        forward_ok
+            && n * (r_big.max(1e-300) / r_small.max(1e-300)).ln() + 2.0 * n.ln() < DBIC_SIGNIFICANT
+    };
+    let mut set = vec![single.1];
+    let mut cur = single.0;
+    while set.len() < MAX_SENSORS {
+        let mut best: Option<(f64, Vec<(usize, usize)>)> = None;
+        for &(c, l) in &all {
+            if set.iter().any(|m| m.0 == c) {
+                continue;
+            }
+            let mut t = set.clone();
+            t.push((c, l));
+            let r = rss_of(&t);
+            if best.as_ref().is_none_or(|b| r < b.0) {
+                best = Some((r, t));
+            }
+        }
+        let Some((mut r, mut t)) = best else { break };
+        // One pass of swaps: each member's channel and lag searched again.
+        for i in 0..t.len() {
+            for &(c, l) in &all {
+                if t.iter().enumerate().any(|(j, m)| j != i && m.0 == c) {
+                    continue;
+                }
+                let mut u = t.clone();
+                u[i] = (c, l);
+                let ru = rss_of(&u);
+                if ru < r {
+                    r = ru;
+                    t = u;
+                }
+            }
+        }
+        // And the addition must predict later data better by the
+        // acceptance rule's 10 % (forward chaining): with thousands of
+        // readings ΔBIC alone takes a third sensor for a few nm.
+        if earns(&t, r, &set, cur) {
+            set = t;
+            cur = r;
+        } else {
+            break;
+        }
+    }
+    // Backward: a member chosen early that the later ones made redundant
+    // (a proxy of them) is dropped, the least useful first.
+    while set.len() > 1 {
+        let weakest = (0..set.len())
+            .map(|i| {
+                let mut u = set.clone();
+                u.remove(i);
+                let ru = rss_of(&u);
+                (ru, u)
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))?;
+        if earns(&set, cur, &weakest.1, weakest.0) {
+            break;
+        }
+        set = weakest.1;
+        cur = weakest.0;
+    }
+    if set.len() < 2 {
+        return None;
+    }
+    let names: Vec<&str> = set.iter().map(|&(c, _)| chans[c]).collect();
+    let lags: Vec<String> = set.iter().map(|&(_, l)| fmt_num(LAGS_S[l], 0)).collect();
+    let mut spec = format!("thermal:target={tn},channel={}", names.join("+"));
+    if set.iter().any(|&(_, l)| LAGS_S[l] > 0.0) {
+        spec.push_str(&format!(",lag_s={}", lags.join("+")));
+    }
+    let listed: Vec<String> = set
+        .iter()
+        .map(|&(c, l)| format!("T_{}_C (lag {} s)", chans[c], fmt_num(LAGS_S[l], 0)))
+        .collect();
+    Some(Proposal {
+        family: Family::Thermal,
+        spec,
+        axis: None,
+        channel: Some(
+            names
+                .iter()
+                .map(|c| format!("T_{c}_C"))
+                .collect::<Vec<_>>()
+                .join("+"),
+        ),
+        // A channel and a lag chosen per sensor.
+        searched: 2 * set.len(),
+        note: format!(
+            "no one sensor follows the {tn} residual: a multi-sensor model of {} (forward selection with swaps over {} channels and their lags: RMS {:.3} µm, the best single sensor T_{}_C leaves {:.3} µm)",
+            listed.join(", "),
+            chans.len(),
+            (cur / n).sqrt(),
+            chans[single.1 .0],
+            (single.0 / n).sqrt()
+        ),
+    })
 }

@@ -187,6 +187,18 @@ impl Unexplained {
     }
 }
 
+/// How a candidate's held-out gain was measured.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HoldOutKind {
+    /// The model's block hold-out (passes, spatial cells or time stretches
+    /// in 5 folds, each predicted from all the others).
+    Blocks,
+    /// Forward chaining: the rows in time order cut into 6 contiguous
+    /// blocks, block i predicted from blocks 0..i only.
+    Forward,
+}
+
 /// A physical parameter of a candidate with its 95 % interval.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Physical {
@@ -228,6 +240,13 @@ pub struct Candidate {
     /// Block-held-out RMS of the target with the effect added, µm (null when
     /// not identifiable).
     pub held_out_rms_um_after: Option<f64>,
+    /// The held-out RMS of the target before the effect, under the
+    /// candidate's hold-out (`hold_out`), µm.
+    pub held_out_rms_um_before: Option<f64>,
+    /// Which hold-out judged it: `blocks` (the model's block hold-out) or
+    /// `forward` (thermal and drift: contiguous time blocks, each predicted
+    /// from the earlier ones only).
+    pub hold_out: HoldOutKind,
     /// 1 − held-out RMS after / before.
     pub gain: Option<f64>,
     /// False when the effect lies in the model's span.
@@ -630,6 +649,8 @@ mod tests {
             params: BTreeMap::from([("order".to_string(), 2.0)]),
             add: "drift:target=ez,order=2".into(),
             held_out_rms_um_after: None,
+            held_out_rms_um_before: None,
+            hold_out: HoldOutKind::Blocks,
             gain: None,
             identifiable: true,
             evidence: String::new(),

@@ -109,16 +109,66 @@ pub(super) fn rank_target(
     // `drift:order=3` because its plain ΔT column is — though its ΔT·z
     // column is not, and the data told the two apart. One basis per
     // contender, not one per pair.
-    let spans: Vec<Basis> = top
+    let mut top = top;
+    let mut spans: Vec<Basis> = top
         .iter()
         .map(|&i| Basis::new(&sc[i].partialled, n))
         .collect();
+    // A physical cause before a polynomial in time: when the best is a
+    // drift and a thermal candidate explains the same residual (their new
+    // directions overlap, the thermal one passes on its own, and — unless
+    // the drift fails the forward test — the data do not separate them:
+    // ΔBIC less than the gap rule's margin worse, forward-chained RMS
+    // within 10 %), the thermal one is the candidate — a temperature says
+    // why and goes on predicting after the session; t³ does not. Drift is
+    // then no competitor of it.
+    let passes = |c: &Candidate| {
+        c.delta_bic.is_some_and(|d| d < DBIC_SIGNIFICANT)
+            && c.gain.is_some_and(|g| g >= MIN_HELD_OUT_GAIN)
+    };
+    let mut preferred_over: Vec<String> = Vec::new();
+    if let Some(&b0) = top.first() {
+        if sc[b0].cand.effect == Family::Drift {
+            let drift = &sc[b0].cand;
+            let pick = (1..top.len()).find(|&jj| {
+                let th = &sc[top[jj]].cand;
+                th.effect == Family::Thermal
+                    && passes(th)
+                    && spans[0].overlap(&spans[jj]) >= COMPETING_OVERLAP
+                    && (!passes(drift)
+                        || (th.delta_bic.unwrap_or(f64::INFINITY)
+                            < drift.delta_bic.unwrap_or(f64::INFINITY) + MIN_GAP_DBIC
+                            && th.held_out_rms_um_after.unwrap_or(f64::INFINITY)
+                                <= 1.1 * drift.held_out_rms_um_after.unwrap_or(0.0)))
+            });
+            if let Some(jj) = pick {
+                top.swap(0, jj);
+                spans.swap(0, jj);
+            }
+        }
+    }
     let mut competing_best: Option<f64> = None;
     for (ii, &i) in top.iter().enumerate() {
         for (jj, &j) in top.iter().enumerate().skip(ii + 1) {
             let ov = spans[ii].overlap(&spans[jj]);
-            if ii == 0 && ov >= COMPETING_OVERLAP && competing_best.is_none() {
-                competing_best = sc[j].cand.delta_bic;
+            if ii == 0 && ov >= COMPETING_OVERLAP {
+                if sc[i].cand.effect == Family::Thermal && sc[j].cand.effect == Family::Drift {
+                    let d = &sc[j].cand;
+                    preferred_over.push(format!(
+                        "`{}` (ΔBIC {:.0}, {} gain {})",
+                        d.add,
+                        d.delta_bic.unwrap_or(f64::NAN),
+                        if d.hold_out == super::HoldOutKind::Forward {
+                            "forward-chained"
+                        } else {
+                            "held-out"
+                        },
+                        d.gain
+                            .map_or("n/a".into(), |g| format!("{:.0} %", 100.0 * g))
+                    ));
+                } else if competing_best.is_none() {
+                    competing_best = sc[j].cand.delta_bic;
+                }
             }
             let strong = |k: usize| sc[k].cand.delta_bic.is_some_and(|d| d < DBIC_SIGNIFICANT);
             // Two candidates the data does separate (ΔBIC at least the gap
@@ -193,6 +243,12 @@ pub(super) fn rank_target(
         };
         sc[b].cand.significant = ok;
         sc[b].cand.evidence.push_str(&format!(" — {why}"));
+        if !preferred_over.is_empty() {
+            sc[b].cand.evidence.push_str(&format!(
+                "; preferred over {} — the same residual, explained by a temperature rather than a polynomial in time",
+                preferred_over.join(", ")
+            ));
+        }
     }
     sc
 }

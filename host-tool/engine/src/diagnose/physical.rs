@@ -161,6 +161,13 @@ pub(super) fn lag_aware_xtx_inv(
     ff: &FwlFit,
 ) -> Option<nalgebra::DMatrix<f64>> {
     let e = Effect::parse(spec).ok()?;
+    // A multi-sensor effect has a lag per channel: the one-lag derivative
+    // below does not apply (its intervals take the lags as known).
+    if e.features.iter().any(|f| {
+        matches!((f, e.features.first()), (Feature::Thermal { channel: a, .. }, Some(Feature::Thermal { channel: b, .. })) if a != b)
+    }) {
+        return None;
+    }
     let lag = match e.features.first()? {
         Feature::Thermal { lag_s, .. } if *lag_s > 0.0 => *lag_s,
         _ => return None,

@@ -10,8 +10,8 @@ use crate::features::Feature;
 
 use super::candidates::Proposal;
 use super::physical::{lag_aware_xtx_inv, param_key, physical};
-use super::target::{fwl, State, TargetData};
-use super::{Candidate, Warning, IN_SPAN_SHARE};
+use super::target::{forward_blocks, forward_rms, fwl, State, TargetData};
+use super::{Candidate, HoldOutKind, Warning, IN_SPAN_SHARE};
 
 /// The scored candidates of one target, with the columns needed for overlaps.
 pub(super) struct Scored {
@@ -84,6 +84,8 @@ pub(super) fn score(
             params,
             add: p.spec.clone(),
             held_out_rms_um_after: None,
+            held_out_rms_um_before: None,
+            hold_out: HoldOutKind::Blocks,
             gain: None,
             identifiable: false,
             evidence: String::new(),
@@ -131,8 +133,34 @@ pub(super) fn score(
             });
             continue;
         }
-        let held = st.holdout.rms(&ff.cols);
-        let gain = held.map(|h| 1.0 - h / ref_held);
+        // Time-dependent families are judged by predicting later data from
+        // earlier data (forward chaining): a polynomial in time interpolates
+        // any smooth curve in a block hold-out, but cannot say where a
+        // cool-down or the next day goes; a temperature that causes the
+        // error can. The other families keep the block hold-out.
+        let forward = matches!(p.family, Family::Thermal | Family::Drift)
+            .then(|| forward_blocks(td))
+            .flatten();
+        let (ref_held, held, kind) = match &forward {
+            Some(blocks) => {
+                let (before, after) = forward_rms(blocks, &st.resid, &ff.partialled);
+                let before = match repl {
+                    // Against the current model: its own residual, forward.
+                    Some(r) => {
+                        let tail: Vec<f64> = blocks[1..]
+                            .iter()
+                            .flatten()
+                            .map(|&i| r.current.resid[i])
+                            .collect();
+                        crate::holdout::rms(tail.into_iter())
+                    }
+                    None => before,
+                };
+                (before, Some(after), HoldOutKind::Forward)
+            }
+            None => (ref_held, st.holdout.rms(&ff.cols), HoldOutKind::Blocks),
+        };
+        let gain = held.map(|h| 1.0 - h / ref_held).filter(|g| g.is_finite());
         let dof = n.saturating_sub(st.basis.rank() + ff.fit.rank).max(1) as f64;
         let sigma2 = ff.fit.rss / dof;
         if let Some(inv) = lag_aware_xtx_inv(td, st, &p.spec, &ff) {
@@ -145,16 +173,28 @@ pub(super) fn score(
         }
         let rms_after = (ff.fit.rss / n as f64).sqrt();
         let mut evidence = format!(
-            "{}{}; ΔBIC {:.0}; block-held-out RMS {:.3} → {} µm (gain {})",
+            "{}{}; ΔBIC {:.0}; {} RMS {} → {} µm (gain {})",
             p.note,
             repl.map_or(String::new(), |r| format!(
                 "; replaces `{}` (the same effect, its parameter searched again without it)",
                 r.old
             )),
             ff.dbic,
-            ref_held,
-            held.map_or("?".into(), |h| format!("{h:.3}")),
-            gain.map_or("?".into(), |g| format!("{:.0} %", 100.0 * g))
+            match kind {
+                HoldOutKind::Forward => "forward-chained (earlier time predicts later)",
+                HoldOutKind::Blocks => "block-held-out",
+            },
+            if ref_held.is_finite() {
+                format!("{ref_held:.3}")
+            } else {
+                "n/a".into()
+            },
+            held.filter(|h| h.is_finite())
+                .map_or("n/a".into(), |h| format!("{h:.3}")),
+            gain.map_or("n/a: no block could be held out".into(), |g| format!(
+                "{:.0} %",
+                100.0 * g
+            ))
         );
         if let Some(ph) = &phys {
             evidence.push_str(&format!(
@@ -171,6 +211,26 @@ pub(super) fn score(
                 }
             ));
         }
+        // A multi-sensor thermal effect: every sensor's µm/K (the physical
+        // parameter above is the first one's).
+        if let Ok(e) = Effect::parse(&p.spec) {
+            let per: Vec<String> = e
+                .features
+                .iter()
+                .zip(&ff.fit.beta)
+                .filter_map(|(f, b)| match f {
+                    Feature::Thermal {
+                        channel,
+                        exp: [0, 0, 0],
+                        ..
+                    } => Some(format!("T_{channel}_C {b:.3} µm/K")),
+                    _ => None,
+                })
+                .collect();
+            if per.len() > 1 && per.len() == e.features.len() {
+                evidence.push_str(&format!("; per sensor: {}", per.join(", ")));
+            }
+        }
         if ff.share < 0.05 {
             evidence.push_str(&format!(
                 "; only {:.1} % of it lies outside the model's span",
@@ -179,7 +239,9 @@ pub(super) fn score(
         }
         out.push(Scored {
             cand: Candidate {
-                held_out_rms_um_after: held,
+                held_out_rms_um_after: held.filter(|h| h.is_finite()),
+                held_out_rms_um_before: ref_held.is_finite().then_some(ref_held),
+                hold_out: kind,
                 gain,
                 identifiable: true,
                 evidence,

@@ -187,6 +187,24 @@ pub(super) fn hold_out_blocks(
             );
         }
     }
+    // A time series at one position (a thermal test): every row is in one
+    // spatial cell, so the folds are contiguous stretches of time, dealt
+    // round-robin (20 stretches in 5 folds).
+    if data.varying_axes().is_empty() && data.t_s.is_some() && rows.len() >= 2 * K {
+        let ordered = crate::holdout::time_order(data, rows);
+        let chunks = (4 * K).min(rows.len());
+        let mut fold = vec![0; rows.len()];
+        let index: std::collections::HashMap<usize, usize> =
+            rows.iter().enumerate().map(|(i, &r)| (r, i)).collect();
+        for (i, r) in ordered.iter().enumerate() {
+            fold[index[r]] = (i * chunks / rows.len()) % K;
+        }
+        return (
+            fold,
+            K,
+            format!("contiguous time blocks (t_s; one position: {chunks} stretches in {K} folds)"),
+        );
+    }
     // Spatial cells, 6 per axis, assigned to folds by a pattern that keeps
     // neighbouring cells in different folds.
     const CELLS: usize = 6;
@@ -203,4 +221,115 @@ pub(super) fn hold_out_blocks(
         })
         .collect();
     (fold, K, "spatial cells (6 per axis) in 5 folds".into())
+}
+
+/// Contiguous time blocks for the forward-chaining hold-out.
+pub(super) const FORWARD_BLOCKS: usize = 6;
+
+/// The forward-chaining hold-out of one target: its rows (local indices)
+/// in time order (session, then `t_s`), cut into [`FORWARD_BLOCKS`]
+/// contiguous blocks of about equal size. Block i is predicted from blocks
+/// 0..i only — what a user asks of a time-dependent term: does it predict
+/// *later* data from earlier data? None without `t_s`, or with fewer than
+/// two rows per block.
+pub(super) fn forward_blocks(td: &TargetData) -> Option<Vec<Vec<usize>>> {
+    let t_s = td.data.t_s.as_ref()?;
+    let n = td.rows.len();
+    if n < 2 * FORWARD_BLOCKS {
+        return None;
+    }
+    let first = t_s[td.rows[0]];
+    if td.rows.iter().all(|&r| t_s[r] == first) && td.data.session_id.is_none() {
+        return None;
+    }
+    let index: std::collections::HashMap<usize, usize> =
+        td.rows.iter().enumerate().map(|(i, &r)| (r, i)).collect();
+    let ordered = crate::holdout::time_order(td.data, &td.rows);
+    let mut blocks = vec![Vec::new(); FORWARD_BLOCKS];
+    for (i, r) in ordered.iter().enumerate() {
+        blocks[i * FORWARD_BLOCKS / n].push(index[r]);
+    }
+    Some(blocks)
+}
+
+/// Forward-chained RMS (µm) over blocks 1.. of `blocks` of the model's
+/// residual `resid` (the model fitted on all rows, as in the ΔBIC) before
+/// and after adding the candidate's columns `partialled` (the model
+/// partialled out), whose coefficients are fitted on the earlier blocks
+/// only: (before, after).
+pub(super) fn forward_rms(
+    blocks: &[Vec<usize>],
+    resid: &[f64],
+    partialled: &[Vec<f64>],
+) -> (f64, f64) {
+    let (mut ss0, mut ss1, mut m) = (0.0, 0.0, 0usize);
+    let mut train: Vec<usize> = blocks[0].clone();
+    for block in &blocks[1..] {
+        let cols: Vec<Vec<f64>> = partialled
+            .iter()
+            .map(|c| train.iter().map(|&i| c[i]).collect())
+            .collect();
+        let y: Vec<f64> = train.iter().map(|&i| resid[i]).collect();
+        let fit = small_fit(&cols, &y);
+        for &i in block {
+            let pred: f64 = fit.beta.iter().zip(partialled).map(|(b, c)| b * c[i]).sum();
+            ss0 += resid[i] * resid[i];
+            ss1 += (resid[i] - pred).powi(2);
+            m += 1;
+        }
+        train.extend_from_slice(block);
+    }
+    let m = m.max(1) as f64;
+    ((ss0 / m).sqrt(), (ss1 / m).sqrt())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::target::hold_out_blocks;
+    use crate::simulate::thermal_test::spindle_thermal;
+
+    /// The spindle thermal test at one point: a cubic in time follows the
+    /// whole 48 h when each block of time is predicted from the others on
+    /// both sides of it, but not when the later blocks are predicted from
+    /// the earlier ones — the cool-down and the second day are not where a
+    /// polynomial fitted to the warm-up goes. A temperature predicts them.
+    #[test]
+    fn forward_chaining_rejects_a_drift_the_block_hold_out_accepts() {
+        // The first day to the evening: an hour cold, 8 h of warm-up to a
+        // steady state, 7 h of cool-down — one smooth hump.
+        let full = spindle_thermal(1).data;
+        let day: Vec<usize> = (0..=16 * 60).collect();
+        let data = crate::holdout::subset(&full, &day);
+        let norm = Norm::from_data(&data);
+        let (rows, y): (Vec<usize>, Vec<f64>) = data.measured(2).unzip();
+        let (fold, nfolds, how) = hold_out_blocks(&data, &rows, &norm);
+        assert!(how.contains("time"), "{how}");
+        let td = TargetData {
+            data: &data,
+            norm,
+            t: 2,
+            rows,
+            y,
+            fold,
+            nfolds,
+        };
+        let st = State::new(&td, "cubic19", &[]).unwrap();
+        assert!(st.held_out_rms.is_finite());
+        let blocks = forward_blocks(&td).unwrap();
+        let gains = |spec: &str| {
+            let ff = fwl(&td, &st, spec, 0).unwrap();
+            let block = 1.0 - st.holdout.rms(&ff.cols).unwrap() / st.held_out_rms;
+            let (before, after) = forward_rms(&blocks, &st.resid, &ff.partialled);
+            (block, 1.0 - after / before)
+        };
+        let (block, forward) = gains("drift:target=ez,order=3");
+        assert!(block >= 0.10, "block hold-out gain of t³ {block}");
+        assert!(forward < 0.10, "forward gain of t³ {forward}");
+        let (_, forward) = gains("thermal:target=ez,channel=spindle_housing");
+        assert!(
+            forward > 0.5,
+            "forward gain of the housing sensor {forward}"
+        );
+    }
 }

@@ -104,7 +104,10 @@ pub(super) fn design_warnings(data: &Dataset) -> Vec<Warning> {
             });
         }
     }
-    for &a in &axes {
+    // An axis that never moves (every axis of a thermal test at one point)
+    // has no backlash to find: no direction warning for it.
+    let moving = data.varying_axes();
+    for &a in axes.iter().filter(|a| moving.contains(a)) {
         let fix = "measure bidirectionally (ISO 230-2: at least 5 runs each way) and record the approach direction";
         match &data.dir[a] {
             None => w.push(Warning {

@@ -164,13 +164,17 @@ pub fn fit(
     // An axis held at one position is treated like an absent one (its
     // monomials would be zero columns); `fit::fit` says so in a warning.
     let axes = data.varying_axes();
-    if axes.is_empty() {
-        bail!(
-            "{}: every measured point lies at one position; a polynomial needs travel on some axis",
-            data.source
-        );
-    }
     let mut stats = FitStats::default();
+    if axes.is_empty() {
+        // A time series at one point (an ISO 230-3 thermal test): no
+        // position term can be fitted, so the seed leaves its constant per
+        // target, and the `--add` effects (temperatures, time) carry what
+        // changes.
+        stats.warnings.push(format!(
+            "{}: every measured point lies at one position; {seed} is reduced to a constant per target (no travel to fit a polynomial to) — the --add effects (thermal, drift) model what changes over time",
+            data.source
+        ));
+    }
     let mut outputs = Vec::new();
     // Targets with the same features measured on the same rows (a seed
     // model on a full grid) share one solve; the rest are fitted alone.
@@ -502,12 +506,30 @@ mod tests {
         // The held axis' normalisation stays finite: u = 0 on the data.
         assert_eq!(m.norm.centre_mm[1], 250.0);
         assert!(m.norm.half_span_mm[1] > 0.0);
-        // A data set at one position has nothing to fit a polynomial to.
-        let one = holdout::subset(&d, &[3, 3, 3]);
-        let e = fit(&one, "cubic19", &[], 5).unwrap_err().to_string();
+        // A data set at one position (a time series at one point) is fitted
+        // by the seed's constant per target, and says so.
+        let one = holdout::subset(&d, &[3, 3, 5]);
+        let mut one = one;
+        for a in 0..3 {
+            if let Some(c) = one.pos_mm[a].as_mut() {
+                let p = c[0];
+                c.iter_mut().for_each(|v| *v = p);
+            }
+        }
+        let (m1, s1) = fit(&one, "cubic19", &[], 5).unwrap();
+        let FittedModel::Linear(m1) = m1 else {
+            panic!()
+        };
+        assert_eq!(s1.terms, 1);
+        let ex = one.err_um[0].as_ref().unwrap();
+        let mean = ex.iter().map(|v| v.unwrap()).sum::<f64>() / 3.0;
+        assert!((m1.outputs[0].coef_um[0] - mean).abs() < 1e-9);
         assert!(
-            e.contains("every measured point lies at one position"),
-            "{e}"
+            s1.warnings
+                .iter()
+                .any(|w| w.contains("every measured point lies at one position")),
+            "{:?}",
+            s1.warnings
         );
     }
 

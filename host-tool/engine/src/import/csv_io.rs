@@ -366,11 +366,18 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
         cols.push(classify(h).map_err(|m| ImportError::at(name, header_line, Some(i + 1), m))?);
     }
     if !cols.iter().any(|c| matches!(c, Col::Pos(_))) {
+        // A time series written without positions (a thermal test at one
+        // point): say how to give it one rather than only what is missing.
+        let hint = if cols.iter().any(|c| matches!(c, Col::Time)) {
+            "; a time series measured at one point (a thermal test) still needs the point: add it as a constant column, e.g. x_mm with the same value on every row"
+        } else {
+            ""
+        };
         return Err(ImportError::at(
             name,
             header_line,
             None,
-            "no position column; expected at least one of x_mm, y_mm, z_mm",
+            format!("no position column; expected at least one of x_mm, y_mm, z_mm{hint}"),
         ));
     }
     if !cols.iter().any(|c| matches!(c, Col::Err(_))) {

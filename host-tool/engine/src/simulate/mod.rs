@@ -17,6 +17,7 @@ mod config;
 mod machine;
 mod plan;
 mod spec;
+pub mod thermal_test;
 
 use std::f64::consts::TAU;
 
@@ -28,6 +29,7 @@ use crate::data::{Dataset, TempChannel, AXES};
 pub use config::{Effect, Limit, RefReturn, SimConfig, Spikes, Timing};
 pub use machine::{AxisErrors, ErrorFn, Machine, Realistic, Squareness, Wave, PRESETS, REALISTIC};
 pub use plan::{iso_targets, stations, Plan, Visit};
+pub use thermal_test::{scenario, SCENARIOS};
 
 /// The simulated data and what it would be without noise.
 #[derive(Clone, Debug, PartialEq)]

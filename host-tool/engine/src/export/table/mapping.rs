@@ -265,6 +265,20 @@ pub(super) fn terms_of(
             channels.join(", ")
         );
     }
+    // model-core stores each channel's name in 16 bytes; say which column
+    // is too long here rather than "bad temperature channel name #0" from
+    // the encoder.
+    if let Some(c) = channels
+        .iter()
+        .find(|c| c.len() > model_core::table::CHANNEL_NAME_LEN)
+    {
+        bail!(
+            "the model reads T_{c}_C: a table holds a channel name of at most {} bytes and `{c}` has {}; rename the column in the data (e.g. T_{}_C) and refit",
+            model_core::table::CHANNEL_NAME_LEN,
+            c.len(),
+            c.chars().take(model_core::table::CHANNEL_NAME_LEN).collect::<String>()
+        );
+    }
     Ok((terms, channels, warnings))
 }
 

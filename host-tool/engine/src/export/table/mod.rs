@@ -259,6 +259,27 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
     // The envelope's ranges, the sweep inside them and the host's
     // corrections there, then the envelope's limits from the sweep.
     let (travel, scaling) = envelope::travel_and_scaling(&model)?;
+    // A time series at one point (a thermal test): no term depends on
+    // position, so model-core's table has no travel axis — the correction
+    // is the same everywhere. That is what the table can express; it was
+    // only measured at one point, so say where.
+    if let FittedModel::Linear(m) = &model {
+        if (0..3).all(|a| crate::export::axis_travel_mm(&model, a).is_none())
+            && m.norm.half_span_mm.iter().any(|&h| h <= 1e-3)
+        {
+            let at: Vec<String> = (0..3)
+                .filter(|&a| m.norm.half_span_mm[a] <= 1e-3)
+                .map(|a| format!("{} = {} mm", crate::data::AXES[a], m.norm.centre_mm[a]))
+                .collect();
+            warnings.push(Warning::new(
+                "measured_at_one_point",
+                format!(
+                    "no term depends on position: the data were measured at one point ({}), so the table's correction is the same over the whole travel (no travel axis, unbounded) — it is valid at that point; measure elsewhere before relying on it there",
+                    at.join(", ")
+                ),
+            ));
+        }
+    }
     let temps_c = envelope::temp_ranges(file, &channels, opts.temp_range_c, &mut warnings)?;
     let has_abbe = mapping::has(&model, |f| matches!(f, Feature::Abbe { .. }));
     let tool_mm = envelope::tool_range(opts.tool_range_mm, has_abbe)?;
