@@ -139,6 +139,17 @@ fn squareness_alone_is_found_with_kinematic() {
 #[test]
 fn higher_order_alone_is_found() {
     check_family(Hidden::HigherOrder);
+    // Its size comes with an interval that has a width (it was
+    // [value, value]: a certainty the data do not give), about ±1.96 σ/√n.
+    let d = run(vec![Hidden::HigherOrder], 7, Hidden::HigherOrder.seed());
+    let ph = d.candidates[0].physical.as_ref().expect("component_rms");
+    assert_eq!(ph.name, "component_rms");
+    let width = ph.ci95[1] - ph.ci95[0];
+    assert!(
+        width > 0.0 && ph.ci95[0] < ph.value && ph.value < ph.ci95[1],
+        "{ph:?}"
+    );
+    assert!(width < 0.5 * ph.value, "{ph:?}");
 }
 
 #[test]

@@ -135,11 +135,16 @@ pub(super) fn physical(
                 })
                 .sum();
             let amp = (comp / n).sqrt();
+            // amp² = βᵀ(XᵀX/n)β with X the partialled columns; by the delta
+            // method var(amp) = σ²·βᵀXᵀX(XᵀX)⁻¹XᵀXβ/(n²·amp²) = σ²/n. (The
+            // interval was [amp, amp] before: a zero-width interval is a
+            // claim of certainty the data do not give.)
+            let se = (sigma2.max(0.0) / n).sqrt();
             Some(Physical {
                 name: "component_rms".into(),
                 unit: "µm".into(),
                 value: amp,
-                ci95: [amp, amp],
+                ci95: [(amp - 1.96 * se).max(0.0), amp + 1.96 * se],
                 plausible: true,
                 expected: "any".into(),
             })
