@@ -425,10 +425,6 @@ pub fn calibrate(p: &[[f64; 2]], ball_radius_mm: f64) -> Result<Calibration> {
     let resid_nm: Vec<f64> = fit.resid.iter().map(|v| v * 1e6).collect();
     probe.residual_rms_nm =
         (resid_nm.iter().map(|v| v * v).sum::<f64>() / resid_nm.len() as f64).sqrt();
-    let pv = |v: &[f64]| {
-        v.iter().copied().fold(f64::NEG_INFINITY, f64::max)
-            - v.iter().copied().fold(f64::INFINITY, f64::min)
-    };
     let without: Vec<f64> = rigid.resid.iter().map(|v| v * 1e6).collect();
     if order == 0 {
         warnings.push(
@@ -524,11 +520,7 @@ pub fn form_deviation_nm(s: &[[f64; 2]], circle: bool) -> Result<Vec<f64>> {
     }
 }
 
-/// Peak to valley of `v`.
-pub fn pv(v: &[f64]) -> f64 {
-    v.iter().copied().fold(f64::NEG_INFINITY, f64::max)
-        - v.iter().copied().fold(f64::INFINITY, f64::min)
-}
+pub use crate::separate::pv;
 
 /// `theta` in the convention of the module, from degrees.
 pub fn rad(deg: f64) -> f64 {

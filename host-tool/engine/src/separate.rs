@@ -50,7 +50,9 @@ fn line_removed(x: &[f64], y: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-fn pv(v: &[f64]) -> f64 {
+/// Peak to valley of `v` (the one definition the probing commands —
+/// separate, probe, workpiece — use).
+pub fn pv(v: &[f64]) -> f64 {
     v.iter().copied().fold(f64::NEG_INFINITY, f64::max)
         - v.iter().copied().fold(f64::INFINITY, f64::min)
 }

@@ -275,8 +275,7 @@ pub fn fit(p: &[Point], warnings: &mut Vec<String>) -> Result<Form> {
         .map(|(c, z)| form.at(c, z))
         .collect();
     let mean = grid.iter().sum::<f64>() / grid.len() as f64;
-    form.form_pv_um = grid.iter().copied().fold(f64::NEG_INFINITY, f64::max)
-        - grid.iter().copied().fold(f64::INFINITY, f64::min);
+    form.form_pv_um = crate::separate::pv(&grid);
     form.form_rms_um =
         (grid.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / grid.len() as f64).sqrt();
     if h >= 1 {
@@ -302,6 +301,24 @@ pub enum Dialect {
     Siemens,
 }
 
+/// The points of the correction pass `[c_deg, z_mm]`: at each of
+/// `z_steps + 1` stations along the measured length, a closed turn (0° …
+/// 360°) in steps of about `c_step_deg` (360° divided evenly). The G-code
+/// and the CSV of the pass both walk it.
+pub fn pass_points(form: &Form, c_step_deg: f64, z_steps: usize) -> Result<Vec<[f64; 2]>> {
+    if !(c_step_deg > 0.0 && c_step_deg <= 90.0) || z_steps == 0 {
+        bail!("the C step must be in (0, 90]° and the Z stations at least 2 (--z-steps ≥ 1)");
+    }
+    let [z0, z1] = form.z_range_mm;
+    let steps = (360.0 / c_step_deg).round() as usize;
+    Ok((0..=z_steps)
+        .flat_map(|k| {
+            let z = z0 + (z1 - z0) * k as f64 / z_steps as f64;
+            (0..=steps).map(move |i| [360.0 * i as f64 / steps as f64, z])
+        })
+        .collect())
+}
+
 /// The correction pass as G-code: `X` in diameter (mm), `Z` (mm), `C` (°),
 /// a point every `c_step_deg` around at each of `z_steps + 1` stations
 /// along the measured length, `X = nominal diameter + 2 · offset`.
@@ -316,29 +333,23 @@ pub fn gcode(
     if !nominal_diameter_mm.is_finite() || nominal_diameter_mm <= 0.0 {
         bail!("the nominal diameter must be a positive number of mm");
     }
-    let step_ok = c_step_deg > 0.0 && c_step_deg <= 90.0;
-    if !step_ok || z_steps == 0 || feed_mm_min.is_nan() || feed_mm_min <= 0.0 {
-        bail!("the C step must be in (0, 90]°, the Z stations at least 2 and the feed positive");
+    if feed_mm_min.is_nan() || feed_mm_min <= 0.0 {
+        bail!("the feed must be positive");
     }
+    let points = pass_points(form, c_step_deg, z_steps)?;
     let mut s = String::new();
     let head = match dialect {
         Dialect::Fanuc => "%\nO1000 (TRUEAXIS CORRECTION PASS)\nG90 G21 G94\n",
         Dialect::Siemens => "; trueaxis correction pass\nG90 G71 G94\n",
     };
     s.push_str(head);
-    let [z0, z1] = form.z_range_mm;
-    let steps = (360.0 / c_step_deg).round() as usize;
-    for k in 0..=z_steps {
-        let z = z0 + (z1 - z0) * k as f64 / z_steps as f64;
-        for i in 0..=steps {
-            let c = c_step_deg * i as f64;
-            let x = nominal_diameter_mm + 2.0 * correction_um(form, c, z) * 1e-3;
-            let line = match dialect {
-                Dialect::Fanuc => format!("G01 X{x:.4} Z{z:.3} C{c:.3} F{feed_mm_min:.1}\n"),
-                Dialect::Siemens => format!("G1 X={x:.4} Z={z:.3} C={c:.3} F={feed_mm_min:.1}\n"),
-            };
-            s.push_str(&line);
-        }
+    for [c, z] in points {
+        let x = nominal_diameter_mm + 2.0 * correction_um(form, c, z) * 1e-3;
+        let line = match dialect {
+            Dialect::Fanuc => format!("G01 X{x:.4} Z{z:.3} C{c:.3} F{feed_mm_min:.1}\n"),
+            Dialect::Siemens => format!("G1 X={x:.4} Z={z:.3} C={c:.3} F={feed_mm_min:.1}\n"),
+        };
+        s.push_str(&line);
     }
     s.push_str(match dialect {
         Dialect::Fanuc => "M30\n%\n",
@@ -411,9 +422,7 @@ mod tests {
             .iter()
             .map(|q| q.dev_um + correction_um(&f, q.c_deg, q.z_mm))
             .collect();
-        let pv = |v: &[f64]| {
-            v.iter().copied().fold(f64::MIN, f64::max) - v.iter().copied().fold(f64::MAX, f64::min)
-        };
+        let pv = crate::separate::pv;
         let before: Vec<f64> = p.iter().map(|q| q.dev_um).collect();
         assert!(
             pv(&before) > 10.0 && pv(&after) < 0.01,

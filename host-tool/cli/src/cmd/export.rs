@@ -12,7 +12,9 @@ use crate::cmd::out::outln;
 use crate::workflow::{export_table, write_file};
 use trueaxis_engine::data::{AXES, TARGETS};
 use trueaxis_engine::export::table::TableOptions;
-use trueaxis_engine::export::{bedmesh, crc32_hex, linuxcnc, sample_axis, sinumerik, Warning};
+use trueaxis_engine::export::{
+    bedmesh, crc32_hex, fmt_no_neg_zero, linuxcnc, sample_axis, sinumerik, Warning,
+};
 use trueaxis_engine::model::ModelFile;
 
 /// Output format of `trueaxis export`.
@@ -174,17 +176,6 @@ fn parse_range(s: &str, what: &str) -> Result<(f64, f64)> {
         bail!("{what} `{s}`: expected finite LO ≤ HI");
     }
     Ok((lo, hi))
-}
-
-/// `v` with `decimals` decimals, without a "−0.000" for a value that
-/// rounds to zero.
-fn fmt_no_neg_zero(v: f64, decimals: usize) -> String {
-    let s = format!("{v:.decimals$}");
-    if s.starts_with('-') && s[1..].chars().all(|c| c == '0' || c == '.') {
-        s[1..].to_string()
-    } else {
-        s
-    }
 }
 
 /// The table's creation time: `SOURCE_DATE_EPOCH` when set (the

@@ -111,15 +111,13 @@ impl Args {
         }
         if let Some(path) = &self.pass_csv {
             let mut csv = String::from("c_deg,z_mm,fitted_um,offset_um\n");
-            let [z0, z1] = form.z_range_mm;
-            let steps = (360.0 / self.c_step_deg).round().max(1.0) as usize;
-            for k in 0..=self.z_steps.max(1) {
-                let z = z0 + (z1 - z0) * k as f64 / self.z_steps.max(1) as f64;
-                for i in 0..steps {
-                    let c = 360.0 * i as f64 / steps as f64;
-                    let f = form.at(c, z);
-                    let _ = writeln!(csv, "{c:.3},{z:.3},{f:.4},{:.4}", -f);
-                }
+            for [c, z] in workpiece::pass_points(&form, self.c_step_deg, self.z_steps)? {
+                let f = form.at(c, z);
+                let _ = writeln!(
+                    csv,
+                    "{c:.3},{z:.3},{f:.4},{:.4}",
+                    workpiece::correction_um(&form, c, z)
+                );
             }
             crate::workflow::write_file(path, csv.as_bytes())?;
         }

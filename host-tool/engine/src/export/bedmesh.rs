@@ -14,7 +14,7 @@ use std::fmt::Write as _;
 
 use anyhow::{bail, Result};
 
-use super::{axis_travel_mm, predict_points, thermal_channels, Point, Warning};
+use super::{axis_travel_mm, fmt_no_neg_zero, predict_points, thermal_channels, Point, Warning};
 use crate::features::Feature;
 use crate::model::{FittedModel, ModelFile};
 
@@ -204,19 +204,6 @@ pub fn sample_mesh(file: &ModelFile, counts: [usize; 2]) -> Result<MeshSamples> 
     })
 }
 
-/// A height as a mesh file writes it, `decimals` places, never `-0`.
-fn fmt_h(v: f64, decimals: usize) -> String {
-    let s = format!("{v:.decimals$}");
-    if s.trim_start_matches('-')
-        .chars()
-        .all(|c| c == '0' || c == '.')
-    {
-        s.trim_start_matches('-').to_string()
-    } else {
-        s
-    }
-}
-
 /// RepRapFirmware `heightmap.csv` (the v2 label line every RRF since 2.x
 /// reads). Heights with three decimals; a height that rounds to zero is
 /// written `0.000`, never the bare `0` that means "not probed". `header`
@@ -236,10 +223,10 @@ pub fn write_rrf(mesh: &MeshSamples, header: &str) -> String {
     let sy = mesh.y_mm[1] - mesh.y_mm[0];
     let mut s = format!(
         "RepRapFirmware height map file v2 {header}, min error {}, max error {}, mean {}, deviation {}\n",
-        fmt_h(lo, 3),
-        fmt_h(hi, 3),
-        fmt_h(mean, 3),
-        fmt_h(dev, 3)
+        fmt_no_neg_zero(lo, 3),
+        fmt_no_neg_zero(hi, 3),
+        fmt_no_neg_zero(mean, 3),
+        fmt_no_neg_zero(dev, 3)
     );
     s.push_str("xmin,xmax,ymin,ymax,radius,xspacing,yspacing,xnum,ynum\n");
     let _ = writeln!(
@@ -253,7 +240,10 @@ pub fn write_rrf(mesh: &MeshSamples, header: &str) -> String {
         sy
     );
     for row in &mesh.height_mm {
-        let cells: Vec<String> = row.iter().map(|h| format!("{:>7}", fmt_h(*h, 3))).collect();
+        let cells: Vec<String> = row
+            .iter()
+            .map(|h| format!("{:>7}", fmt_no_neg_zero(*h, 3)))
+            .collect();
         s.push_str(&cells.join(","));
         s.push('\n');
     }
@@ -269,7 +259,7 @@ pub fn write_klipper(mesh: &MeshSamples, profile: &str) -> Result<String> {
     let (nx, ny) = (mesh.x_mm.len(), mesh.y_mm.len());
     let mut s = format!("#*# [bed_mesh {profile}]\n#*# version = 1\n#*# points =\n");
     for row in &mesh.height_mm {
-        let cells: Vec<String> = row.iter().map(|h| fmt_h(*h, 6)).collect();
+        let cells: Vec<String> = row.iter().map(|h| fmt_no_neg_zero(*h, 6)).collect();
         let _ = writeln!(s, "#*# \t  {}", cells.join(", "));
     }
     // Klipper's bicubic interpolation needs 4 nodes per axis; lagrange

@@ -66,12 +66,7 @@ pub fn write(nominal_mm: &[f64], err_fwd_um: &[f64], err_rev_um: &[f64]) -> Resu
 
 /// A number in mm with 6 decimals, without a negative zero.
 fn fmt_mm(v: f64) -> String {
-    let s = format!("{v:.6}");
-    if s == "-0.000000" {
-        "0.000000".into()
-    } else {
-        s
-    }
+    super::fmt_no_neg_zero(v, 6)
 }
 
 /// Reads a file the way LinuxCNC does (three numbers per line, stop at the

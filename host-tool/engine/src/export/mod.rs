@@ -377,6 +377,17 @@ pub fn sample_axis(file: &ModelFile, axis: usize, points: usize) -> Result<AxisS
     })
 }
 
+/// `v` with `decimals` decimals, never a "−0.000…" for a value that rounds
+/// to zero (a minus sign on a zero reads as a direction): the number format
+/// of every controller file, bed mesh and export message.
+pub fn fmt_no_neg_zero(v: f64, decimals: usize) -> String {
+    let s = format!("{v:.decimals$}");
+    match s.strip_prefix('-') {
+        Some(rest) if rest.chars().all(|c| c == '0' || c == '.') => rest.to_string(),
+        _ => s,
+    }
+}
+
 /// Refuses an export whose largest |correction| on every output is below
 /// [`crate::units::TINY_CORRECTION_UM`] unless `accept` (the flag
 /// `--accept-tiny-corrections`): such a file compensates nothing a machine

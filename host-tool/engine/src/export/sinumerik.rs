@@ -73,12 +73,7 @@ pub fn write(axis: &str, min_mm: f64, step_mm: f64, errors_um: &[f64]) -> Result
 }
 
 fn fmt_mm(v: f64) -> String {
-    let s = format!("{v:.6}");
-    if s == "-0.000000" {
-        "0.000000".into()
-    } else {
-        s
-    }
+    super::fmt_no_neg_zero(v, 6)
 }
 
 #[cfg(test)]
