@@ -37,6 +37,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::lsq;
 
+pub mod sphere;
+
 /// Format tag of a probe file.
 pub const PROBE_FORMAT: &str = "trueaxis-probe/1";
 
@@ -459,13 +461,28 @@ pub struct Contact {
 /// surface where the probe touches it, roughly (`[0, 1]`: the probe is
 /// above, +z): it orients the normals.
 pub fn correct(probe: &ProbeFile, p: &[[f64; 2]], side: [f64; 2]) -> Result<Vec<Contact>> {
+    correct_with(p, side, probe.probe_radius_mm, |t| {
+        probe.covers(t).then(|| probe.form_nm_at(t))
+    })
+}
+
+/// [`correct`] with any calibrated probe: radius `r` (mm) and `form(θ)`,
+/// the form error at contact angle θ (rad, in the scan's plane), nm, or
+/// `None` outside the calibrated directions (corrected with the radius
+/// only, flagged). A 3-D probe file gives it with
+/// [`sphere::Probe3d::in_plane`].
+pub fn correct_with(
+    p: &[[f64; 2]],
+    side: [f64; 2],
+    r: f64,
+    form: impl Fn(f64) -> Option<f64>,
+) -> Result<Vec<Contact>> {
     if p.len() < 3 {
         bail!(
             "{} points; a scan needs at least 3 to take normals from",
             p.len()
         );
     }
-    let r = probe.probe_radius_mm;
     let mut out = Vec::with_capacity(p.len());
     for i in 0..p.len() {
         let (a, b) = (p[i.saturating_sub(1)], p[(i + 1).min(p.len() - 1)]);
@@ -483,12 +500,9 @@ pub fn correct(probe: &ProbeFile, p: &[[f64; 2]], side: [f64; 2]) -> Result<Vec<
             n = [-n[0], -n[1]];
         }
         let theta = n[1].atan2(n[0]);
-        let calibrated = probe.covers(theta);
-        let form_nm = if calibrated {
-            probe.form_nm_at(theta)
-        } else {
-            0.0
-        };
+        let known = form(theta);
+        let calibrated = known.is_some();
+        let form_nm = known.unwrap_or(0.0);
         let d = r + form_nm * 1e-6;
         out.push(Contact {
             surface_mm: [p[i][0] - d * n[0], p[i][1] - d * n[1]],

@@ -9,6 +9,7 @@ use anyhow::{bail, Context, Result};
 use serde_json::json;
 
 use crate::cmd::out::{self, outln};
+use trueaxis_engine::probe::sphere::{self, Probe3d};
 use trueaxis_engine::probe::{self, ProbeFile};
 
 /// Arguments of `trueaxis probe`.
@@ -21,7 +22,8 @@ pub struct Args {
 /// The probe subcommands.
 #[derive(clap::Subcommand, Debug)]
 pub enum Sub {
-    /// Calibrate a probe on a master ball (2-D scan in one plane).
+    /// Calibrate a probe on a master ball (a 2-D scan in one plane, or a 3-D
+    /// scan over the ball with `--plane xyz`).
     Calibrate(Calibrate),
     /// Correct a workpiece scan with a calibrated probe.
     Correct(Correct),
@@ -51,7 +53,8 @@ pub struct Calibrate {
     /// The master ball's calibrated diameter, mm (its certificate).
     #[arg(long)]
     pub ball_diameter_mm: f64,
-    /// The plane of the scan [default: xz].
+    /// The plane of the scan, or `xyz` for a 3-D scan over the ball
+    /// [default: xz].
     #[arg(long, default_value = "xz")]
     pub plane: String,
     /// Where to write the probe file.
@@ -65,7 +68,10 @@ pub struct Calibrate {
 impl Calibrate {
     fn run(self) -> Result<()> {
         crate::input::refuse_overwrite(&[("the scan", &self.scan)], &[("-o", &self.output)])?;
-        let pl = plane(&self.plane)?;
+        if self.plane == "xyz" {
+            return self.run_3d();
+        }
+        let pl = plane(&self.plane).map_err(|e| anyhow::anyhow!("{e} (or xyz for a 3-D scan)"))?;
         let p = read(&self.scan, pl)?;
         let cal = probe::calibrate(&p, self.ball_diameter_mm / 2.0)
             .with_context(|| format!("{}: cannot calibrate", self.scan.display()))?;
@@ -121,6 +127,92 @@ impl Calibrate {
     }
 }
 
+impl Calibrate {
+    /// `--plane xyz`: the 3-D calibration (docs/on-machine.md).
+    fn run_3d(self) -> Result<()> {
+        let text = std::fs::read_to_string(&self.scan)
+            .with_context(|| format!("cannot read {}", self.scan.display()))?;
+        let p = sphere::read_scan(&text, &self.scan.display().to_string())?;
+        let cal = sphere::calibrate(&p, self.ball_diameter_mm / 2.0)
+            .with_context(|| format!("{}: cannot calibrate", self.scan.display()))?;
+        let pr = &cal.probe;
+        crate::workflow::write_file(
+            &self.output,
+            (serde_json::to_string_pretty(pr)? + "\n").as_bytes(),
+        )?;
+        for w in &cal.warnings {
+            eprintln!("warning: {w}");
+        }
+        if self.json {
+            let doc = json!({
+                "scan": self.scan.display().to_string(),
+                "output": self.output.display().to_string(),
+                "probe": pr,
+                "pv_without_form_nm": cal.pv_without_form_nm,
+                "pv_with_form_nm": cal.pv_with_form_nm,
+                "warnings": cal.warnings,
+            });
+            return out::json_pretty(&doc);
+        }
+        let mut s = String::new();
+        let a = pr.cone_axis;
+        let _ = writeln!(
+            s,
+            "{}: {} contacts within {:.1}° of ({:.3}, {:.3}, {:.3}) on a {} mm master ball",
+            self.scan.display(),
+            pr.points,
+            pr.cone_half_angle_deg,
+            a[0],
+            a[1],
+            a[2],
+            self.ball_diameter_mm
+        );
+        let _ = writeln!(
+            s,
+            "  probe radius   {:.6} mm ± {:.6} mm (95 %)",
+            pr.probe_radius_mm, pr.probe_radius_ci95_mm
+        );
+        let c = pr.centre_mm;
+        let _ = writeln!(
+            s,
+            "  ball centre    x={:.6} mm, y={:.6} mm, z={:.6} mm",
+            c[0], c[1], c[2]
+        );
+        if pr.degree >= 2 {
+            let _ = writeln!(s, "  form error     {:.1} nm PV over the calibrated directions, degree 2…{} in the contact direction (chosen by held-out RMS)", pr.form_pv_nm, pr.degree);
+        } else {
+            let _ = writeln!(s, "  form error     none supported by held-out data");
+        }
+        let _ = writeln!(s, "  on the ball    {:.1} nm PV with the radius only → {:.1} nm PV with the form (residual RMS {:.1} nm)", cal.pv_without_form_nm, cal.pv_with_form_nm, pr.residual_rms_nm);
+        let _ = writeln!(s, "  probe file written to {}", self.output.display());
+        out::print(&s)
+    }
+}
+
+/// A probe file of either kind (its `format` tells which).
+enum AnyProbe {
+    Plane(ProbeFile),
+    Sphere(Probe3d),
+}
+
+fn read_probe(path: &PathBuf) -> Result<AnyProbe> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let v: serde_json::Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a trueaxis probe file (not JSON)", path.display()))?;
+    let bad = || format!("{}: not a valid probe file", path.display());
+    if v.get("format").and_then(|f| f.as_str()) == Some(sphere::PROBE3D_FORMAT) {
+        let pr: Probe3d = serde_json::from_value(v).with_context(bad)?;
+        pr.check().with_context(bad)?;
+        Ok(AnyProbe::Sphere(pr))
+    } else {
+        let pr: ProbeFile = serde_json::from_value(v)
+            .with_context(|| format!("{}: not a trueaxis probe file", path.display()))?;
+        pr.check().with_context(bad)?;
+        Ok(AnyProbe::Plane(pr))
+    }
+}
+
 /// `trueaxis probe correct SCAN.csv --probe PROBE.json -o SURFACE.csv`.
 #[derive(clap::Args, Debug)]
 pub struct Correct {
@@ -155,12 +247,7 @@ impl Correct {
             &[("-o", &self.output)],
         )?;
         let pl = plane(&self.plane)?;
-        let text = std::fs::read_to_string(&self.probe)
-            .with_context(|| format!("cannot read {}", self.probe.display()))?;
-        let pr: ProbeFile = serde_json::from_str(&text)
-            .with_context(|| format!("{}: not a trueaxis probe file", self.probe.display()))?;
-        pr.check()
-            .with_context(|| format!("{}: not a valid probe file", self.probe.display()))?;
+        let pr = read_probe(&self.probe)?;
         let side = match self.side.as_str() {
             s if s.len() == 2 && (s.starts_with('+') || s.starts_with('-')) => {
                 let sign = if s.starts_with('-') { -1.0 } else { 1.0 };
@@ -187,7 +274,29 @@ impl Correct {
             s => bail!("--nominal `{s}`: expected circle or line"),
         };
         let p = read(&self.scan, pl)?;
-        let contacts = probe::correct(&pr, &p, side)?;
+        let axis = |a: &str| match a {
+            "x" => 0,
+            "y" => 1,
+            _ => 2,
+        };
+        let (contacts, calibrated) = match &pr {
+            AnyProbe::Plane(pr) => (
+                probe::correct(pr, &p, side)?,
+                format!(
+                    "{:.1}°…{:.1}°",
+                    pr.theta_range_deg[0], pr.theta_range_deg[1]
+                ),
+            ),
+            AnyProbe::Sphere(pr) => (
+                probe::correct_with(&p, side, pr.probe_radius_mm, |t| {
+                    pr.in_plane([axis(pl[0]), axis(pl[1])], t)
+                })?,
+                format!(
+                    "directions (within {:.1}° of the calibration's mean direction)",
+                    pr.cone_half_angle_deg
+                ),
+            ),
+        };
         let outside = contacts.iter().filter(|c| !c.calibrated).count();
         let surf: Vec<[f64; 2]> = contacts.iter().map(|c| c.surface_mm).collect();
         // The same scan with the radius only (no form): what the form
@@ -220,10 +329,8 @@ impl Correct {
         let mut warnings = Vec::new();
         if outside > 0 {
             warnings.push(format!(
-                "{outside} of {} contacts have angles outside the calibrated {:.1}°…{:.1}°: corrected with the radius only (the form error there is unknown — calibrate over the angles the part presents)",
+                "{outside} of {} contacts have angles outside the calibrated {calibrated}: corrected with the radius only (the form error there is unknown — calibrate over the angles the part presents)",
                 contacts.len(),
-                pr.theta_range_deg[0],
-                pr.theta_range_deg[1]
             ));
         }
         for w in &warnings {
