@@ -666,3 +666,77 @@ fn a_probe_calibrated_in_3d_on_the_ball_corrects_a_scan_in_a_plane() {
         "{e}"
     );
 }
+
+#[test]
+fn multi_step_separates_roundness_and_names_what_the_steps_cannot() {
+    let dir = tmp_dir("probe", "multi");
+    let part = |t: f64| 2.0 * (3.0 * t).cos() + 1.0 * (5.0 * t + 0.4).sin() + 0.6 * (8.0 * t).cos();
+    let spindle = |t: f64| 0.8 * (2.0 * t + 0.2).cos() + 0.4 * (7.0 * t).sin();
+    // 4 steps of 90°, two turns of 360 readings each; every remounting
+    // recentres the part (harmonic 1) and moves the probe's zero; ±5 nm
+    // reading noise.
+    let write = |steps: &[f64], path: &std::path::Path| {
+        let mut s = String::from("# multi-step roundness\nc_deg,step_deg,p_um\n");
+        let mut k = 0u64;
+        for (j, &st) in steps.iter().enumerate() {
+            let phi = st.to_radians();
+            for turn in 0..2 {
+                for i in 0..360 {
+                    let t = (i as f64).to_radians();
+                    let v = part(t - phi)
+                        + spindle(t)
+                        + 2.0 * j as f64 * (t + 0.5).cos()
+                        + 0.3 * j as f64
+                        + 0.01 * noise(k);
+                    k += 1;
+                    s.push_str(&format!("{},{st},{v:.5}\n", i + 360 * turn));
+                }
+            }
+        }
+        std::fs::write(path, s).unwrap();
+    };
+    let scan = dir.join("steps.csv");
+    write(&[0.0, 90.0, 180.0, 270.0], &scan);
+    let outp = dir.join("ms.csv");
+    let o = run(&["separate", "multi-step", s(&scan), "-o", s(&outp), "--json"]);
+    let doc = json(&o);
+    assert_eq!(doc["steps"], 4, "{doc}");
+    assert_eq!(doc["inseparable_harmonics"][0], 4, "{doc}");
+    assert_eq!(doc["inseparable_harmonics"][1], 8, "{doc}");
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("harmonics 4, 8, 12") && e.contains("5 steps"),
+        "{e}"
+    );
+    // Point by point: the part without its 8th harmonic (a multiple of the
+    // 4 steps, which went to the spindle), the spindle with it.
+    let text = std::fs::read_to_string(&outp).unwrap();
+    let (mut wp, mut ws) = (0.0f64, 0.0f64);
+    for l in text.lines().skip(1) {
+        let v: Vec<f64> = l.split(',').map(|c| c.parse().unwrap()).collect();
+        let t = v[0].to_radians();
+        wp = wp.max((v[1] - (part(t) - 0.6 * (8.0 * t).cos())).abs());
+        ws = ws.max((v[2] - (spindle(t) + 0.6 * (8.0 * t).cos())).abs());
+    }
+    assert!(
+        wp < 0.01 && ws < 0.01,
+        "part off by {wp} µm, spindle by {ws} µm"
+    );
+    assert!(doc["point_ci95_um"].as_f64().unwrap() < 0.01, "{doc}");
+    // Steps not evenly spaced: refused with the file and what is expected.
+    let bad = dir.join("uneven.csv");
+    write(&[0.0, 90.0, 200.0, 270.0], &bad);
+    let o = run(&[
+        "separate",
+        "multi-step",
+        s(&bad),
+        "-o",
+        s(&dir.join("b.csv")),
+    ]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("uneven.csv: step_deg") && e.contains("not evenly spaced"),
+        "{e}"
+    );
+}

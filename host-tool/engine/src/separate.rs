@@ -416,3 +416,221 @@ mod three_probe_tests {
         assert!(three_probe(&r, [0.0, 180.0, 360.0]).is_err());
     }
 }
+
+/// The result of a multi-step roundness separation.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct MultiStep {
+    /// Samples per turn.
+    pub samples: usize,
+    /// Number of steps (part positions on the spindle).
+    pub steps: usize,
+    /// The part's roundness at part angle `k·360/samples` degrees, µm
+    /// (harmonics 2…samples/2 except the multiples of `steps`).
+    pub part_um: Vec<f64>,
+    /// The spindle's radial error motion along the probe at spindle angle
+    /// `k·360/samples`, µm (harmonics 2…; it also holds the part's
+    /// harmonics that are multiples of `steps`, which cannot be told apart).
+    pub spindle_um: Vec<f64>,
+    /// Peak to valley of the part's roundness, µm.
+    pub part_pv_um: f64,
+    /// Peak to valley of the spindle's motion, µm.
+    pub spindle_pv_um: f64,
+    /// The harmonics (multiples of `steps`, ≥ 2) the steps cannot separate.
+    pub inseparable_harmonics: Vec<usize>,
+    /// RMS of what neither the part nor the spindle explains, µm (reading
+    /// noise and what changed between steps).
+    pub residual_rms_um: f64,
+    /// Standard uncertainty of each point of `part_um` and `spindle_um`
+    /// from that residual, µm (σ/√steps).
+    pub point_sigma_um: f64,
+}
+
+/// Removes harmonics 0 and 1 (size and centring) from one turn of
+/// equally spaced samples.
+fn without_h01(v: &[f64]) -> Vec<f64> {
+    let n = v.len() as f64;
+    let (mut c0, mut a1, mut b1) = (0.0, 0.0, 0.0);
+    for (i, x) in v.iter().enumerate() {
+        let t = 2.0 * std::f64::consts::PI * i as f64 / n;
+        c0 += x / n;
+        a1 += 2.0 * x * t.cos() / n;
+        b1 += 2.0 * x * t.sin() / n;
+    }
+    v.iter()
+        .enumerate()
+        .map(|(i, x)| {
+            let t = 2.0 * std::f64::consts::PI * i as f64 / n;
+            x - c0 - a1 * t.cos() - b1 * t.sin()
+        })
+        .collect()
+}
+
+/// Separates a part's roundness from the spindle's radial error motion by
+/// the multi-step method: one probe, the part mounted on the spindle at
+/// `steps` equally spaced angular positions `φ_j = j·360°/steps` (turned
+/// by `+φ_j` against the spindle), each read at the same `samples` equally
+/// spaced spindle angles: `runs[j][i] = r(θ_i − φ_j) + s(θ_i)`. The mean over
+/// the steps at one spindle angle keeps the spindle's motion `s` and, of
+/// the part, only its harmonics that are multiples of `steps`; subtracting
+/// it from each step and turning back gives the part without them. Those
+/// harmonics cannot be separated by `steps` positions (they stay in the
+/// spindle's profile) and are named. `samples` must be a multiple of
+/// `steps` (each step a whole number of samples). Harmonics 0 and 1 (size,
+/// centring — each remounting recentres the part) are removed per step.
+pub fn multi_step(runs: &[Vec<f64>]) -> Result<MultiStep> {
+    let steps = runs.len();
+    if steps < 2 {
+        bail!("{steps} step(s); multi-step separation needs the part at 2 or more positions on the spindle");
+    }
+    let n = runs[0].len();
+    if n < 16 {
+        bail!("{n} samples per turn; multi-step separation needs at least 16");
+    }
+    if let Some(j) = runs.iter().position(|r| r.len() != n) {
+        bail!(
+            "step {j} has {} samples per turn, step 0 has {n}: every step must be read at the same spindle angles",
+            runs[j].len()
+        );
+    }
+    if !n.is_multiple_of(steps) {
+        bail!("{n} samples per turn is not a multiple of the {steps} steps: each step must turn the part by a whole number of samples ({} samples per step is not whole)", n as f64 / steps as f64);
+    }
+    let per = n / steps;
+    let m: Vec<Vec<f64>> = runs.iter().map(|r| without_h01(r)).collect();
+    let spindle: Vec<f64> = (0..n)
+        .map(|i| m.iter().map(|r| r[i]).sum::<f64>() / steps as f64)
+        .collect();
+    // Part angle ψ_i is at spindle angle ψ_i + φ_j in step j.
+    let part: Vec<f64> = (0..n)
+        .map(|i| {
+            (0..steps)
+                .map(|j| {
+                    let k = (i + j * per) % n;
+                    m[j][k] - spindle[k]
+                })
+                .sum::<f64>()
+                / steps as f64
+        })
+        .collect();
+    let mut ss = 0.0;
+    for (j, r) in m.iter().enumerate() {
+        for (k, v) in r.iter().enumerate() {
+            let psi = (k + n - j * per) % n;
+            let e = v - spindle[k] - part[psi];
+            ss += e * e;
+        }
+    }
+    // Fitted: n spindle values + n part values, less the n/steps… shared
+    // harmonics (counted once): about 2n − n/steps parameters of n·steps.
+    let dof = (n * steps) as f64 - (2 * n - per) as f64;
+    let residual_rms = (ss / (n * steps) as f64).sqrt();
+    let sigma = if dof > 0.0 {
+        (ss / dof).sqrt()
+    } else {
+        f64::NAN
+    };
+    let inseparable: Vec<usize> = (1..)
+        .map(|k| k * steps)
+        .take_while(|&k| k <= n / 2)
+        .filter(|&k| k >= 2)
+        .collect();
+    Ok(MultiStep {
+        samples: n,
+        steps,
+        part_pv_um: pv(&part),
+        spindle_pv_um: pv(&spindle),
+        part_um: part,
+        spindle_um: spindle,
+        inseparable_harmonics: inseparable,
+        residual_rms_um: residual_rms,
+        point_sigma_um: sigma / (steps as f64).sqrt(),
+    })
+}
+
+#[cfg(test)]
+mod multi_step_tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    fn part(t: f64) -> f64 {
+        2.0 * (3.0 * t).cos()
+            + 1.0 * (5.0 * t + 0.4).sin()
+            + 0.6 * (8.0 * t).cos()
+            + 0.3 * (13.0 * t + 1.0).sin()
+    }
+    fn spindle(t: f64) -> f64 {
+        0.8 * (2.0 * t + 0.2).cos() + 0.4 * (7.0 * t).sin() + 0.2 * (16.0 * t).cos()
+    }
+
+    fn runs(n: usize, steps: usize, noise: f64) -> Vec<Vec<f64>> {
+        let mut rng = trueaxis_test_support::SplitMix64(5);
+        (0..steps)
+            .map(|j| {
+                let phi = 2.0 * PI * j as f64 / steps as f64;
+                // Each remounting shifts the centre (harmonic 1) and the
+                // probe's zero.
+                let (e, z) = (3.0 * j as f64, 0.5 * j as f64);
+                (0..n)
+                    .map(|i| {
+                        let t = 2.0 * PI * i as f64 / n as f64;
+                        part(t - phi)
+                            + spindle(t)
+                            + e * (t + 0.7 * j as f64).cos()
+                            + z
+                            + noise * rng.normal()
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_steps_separate_part_and_spindle_except_their_common_harmonics() {
+        let (n, steps) = (360, 4);
+        let s = multi_step(&runs(n, steps, 0.0)).unwrap();
+        // With 4 steps, the part's 8th harmonic (a multiple of 4) goes to
+        // the spindle, and is named.
+        assert_eq!(s.inseparable_harmonics[..3], [4, 8, 12]);
+        let mut worst_p = 0.0f64;
+        let mut worst_s = 0.0f64;
+        for i in 0..n {
+            let t = 2.0 * PI * i as f64 / n as f64;
+            let p_seen = part(t) - 0.6 * (8.0 * t).cos();
+            let s_seen = spindle(t) + 0.6 * (8.0 * t).cos();
+            worst_p = worst_p.max((s.part_um[i] - p_seen).abs());
+            worst_s = worst_s.max((s.spindle_um[i] - s_seen).abs());
+        }
+        assert!(worst_p < 1e-9, "part off by {worst_p}");
+        assert!(worst_s < 1e-9, "spindle off by {worst_s}");
+        assert!(s.residual_rms_um < 1e-9);
+        // With 5 steps the 8th harmonic is separated (the 5th is not).
+        let s5 = multi_step(&runs(360, 5, 0.0)).unwrap();
+        assert!(s5.inseparable_harmonics.contains(&5) && !s5.inseparable_harmonics.contains(&8));
+        let worst5 = (0..360)
+            .map(|i| {
+                let t = 2.0 * PI * i as f64 / 360.0;
+                (s5.part_um[i] - (part(t) - 1.0 * (5.0 * t + 0.4).sin())).abs()
+            })
+            .fold(0.0f64, f64::max);
+        assert!(worst5 < 1e-9, "{worst5}");
+    }
+
+    #[test]
+    fn reading_noise_gives_the_uncertainty_and_bad_layouts_are_refused() {
+        let s = multi_step(&runs(360, 6, 0.05)).unwrap();
+        assert!(
+            (s.point_sigma_um - 0.05 / 6f64.sqrt()).abs() < 0.005,
+            "{}",
+            s.point_sigma_um
+        );
+        let e = multi_step(&runs(350, 4, 0.0)).unwrap_err().to_string();
+        assert!(e.contains("not a multiple of the 4 steps"), "{e}");
+        let mut r = runs(360, 3, 0.0);
+        r[2].pop();
+        assert!(multi_step(&r)
+            .unwrap_err()
+            .to_string()
+            .contains("same spindle angles"));
+        assert!(multi_step(&runs(360, 1, 0.0)).is_err());
+    }
+}

@@ -1,5 +1,6 @@
-//! `trueaxis separate reversal` — part form and slide straightness from
-//! two runs, the part turned 180° between them (docs/on-machine.md § separate).
+//! `trueaxis separate` — reversal (part form and slide straightness from two
+//! runs, the part turned 180° between them), three-probe and multi-step
+//! roundness (part roundness and spindle error motion; docs/on-machine.md).
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -24,6 +25,9 @@ pub enum Sub {
     Reversal(Reversal),
     /// Three probes: part roundness and spindle error motion.
     ThreeProbe(ThreeProbe),
+    /// Multi-step: part roundness and spindle error motion from one probe,
+    /// the part remounted at equally spaced steps.
+    MultiStep(MultiStep),
 }
 
 /// `trueaxis separate three-probe SCAN.csv --angles-deg 0,A,B -o OUT.csv`.
@@ -67,47 +71,17 @@ impl ThreeProbe {
             &["c_deg", "p1_um", "p2_um", "p3_um"],
             "the rotation angle and the three probes' readings",
         )?;
-        // Samples per turn from the distinct angles; several turns are
-        // averaged per angle; the spacing must be even.
-        let key = |c: f64| (c.rem_euclid(360.0) * 1000.0).round() as i64 % 360_000;
-        let mut bins: std::collections::BTreeMap<i64, ([f64; 3], usize)> = Default::default();
-        for r in &rows {
-            let e = bins.entry(key(r[0])).or_insert(([0.0; 3], 0));
-            for k in 0..3 {
-                e.0[k] += r[k + 1];
-            }
-            e.1 += 1;
-        }
-        let n = bins.len();
-        let step = 360_000 / n.max(1) as i64;
-        let first = *bins.keys().next().context("no readings")?;
-        if let Some((i, (&k, _))) = bins
-            .iter()
-            .enumerate()
-            .find(|(i, (&k, _))| (k - first - *i as i64 * step).abs() > 1)
-        {
-            bail!(
-                "{name}: the angles are not evenly spaced over the turn: the {}th distinct angle is {:.3}°, expected {:.3}° ({n} per turn); three-probe separation needs equal steps",
-                i + 1,
-                k as f64 / 1000.0,
-                (first + i as i64 * step) as f64 / 1000.0
-            );
-        }
-        let readings: Vec<[f64; 3]> = bins
-            .values()
-            .map(|(s, c)| [s[0] / *c as f64, s[1] / *c as f64, s[2] / *c as f64])
-            .collect();
+        let (keys, readings) = turn_bins(&rows, &name, "three-probe")?;
+        let n = keys.len();
+        let readings: Vec<[f64; 3]> = readings.iter().map(|v| [v[0], v[1], v[2]]).collect();
         let r = separate::three_probe(&readings, [angles[0], angles[1], angles[2]])
             .with_context(|| format!("{name}: cannot separate"))?;
         let mut csv = String::from("c_deg,part_um,spindle_x_um,spindle_y_um\n");
-        for (i, k) in bins.keys().enumerate() {
+        for (i, k) in keys.iter().enumerate() {
             let _ = writeln!(
                 csv,
                 "{:.3},{:.5},{:.5},{:.5}",
-                *k as f64 / 1000.0,
-                r.part_um[i],
-                r.spindle_x_um[i],
-                r.spindle_y_um[i]
+                k, r.part_um[i], r.spindle_x_um[i], r.spindle_y_um[i]
             );
         }
         crate::workflow::write_file(&self.output, csv.as_bytes())?;
@@ -146,6 +120,149 @@ impl ThreeProbe {
                 r.part_pv_um,
                 r.spindle_x_pv_um,
                 r.unseen_harmonics.len(),
+                self.output.display()
+            ))?;
+        }
+        Ok(())
+    }
+}
+
+/// One turn of readings from rows `[angle_deg, values…]`: the distinct
+/// angles (to 0.001°, wrapped to 0…360) in order and each one's values
+/// averaged over the turns that read it. The angles must be evenly spaced
+/// over the turn (`method` names the separation in the message).
+fn turn_bins(rows: &[Vec<f64>], name: &str, method: &str) -> Result<(Vec<f64>, Vec<Vec<f64>>)> {
+    let key = |c: f64| (c.rem_euclid(360.0) * 1000.0).round() as i64 % 360_000;
+    let width = rows.first().map_or(1, |r| r.len()) - 1;
+    let mut bins: std::collections::BTreeMap<i64, (Vec<f64>, usize)> = Default::default();
+    for r in rows {
+        let e = bins.entry(key(r[0])).or_insert((vec![0.0; width], 0));
+        for k in 0..width {
+            e.0[k] += r[k + 1];
+        }
+        e.1 += 1;
+    }
+    let n = bins.len();
+    let step = 360_000 / n.max(1) as i64;
+    let first = *bins.keys().next().context("no readings")?;
+    if let Some((i, (&k, _))) = bins
+        .iter()
+        .enumerate()
+        .find(|(i, (&k, _))| (k - first - *i as i64 * step).abs() > 1)
+    {
+        bail!(
+            "{name}: the angles are not evenly spaced over the turn: the {}th distinct angle is {:.3}°, expected {:.3}° ({n} per turn); {method} separation needs equal steps",
+            i + 1,
+            k as f64 / 1000.0,
+            (first + i as i64 * step) as f64 / 1000.0
+        );
+    }
+    Ok((
+        bins.keys().map(|k| *k as f64 / 1000.0).collect(),
+        bins.values()
+            .map(|(v, c)| v.iter().map(|x| x / *c as f64).collect())
+            .collect(),
+    ))
+}
+
+/// `trueaxis separate multi-step SCAN.csv -o OUT.csv`.
+#[derive(clap::Args, Debug)]
+pub struct MultiStep {
+    /// `c_deg,step_deg,p_um`: the spindle angle, the part's angular position
+    /// on the spindle (equally spaced steps over 360°) and the probe's
+    /// reading, one or more whole turns per step.
+    pub scan: PathBuf,
+    /// Where to write `angle_deg,part_um,spindle_um`.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Write one JSON document to stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl MultiStep {
+    fn run(self) -> Result<()> {
+        crate::input::refuse_overwrite(&[("the scan", &self.scan)], &[("-o", &self.output)])?;
+        let text = std::fs::read_to_string(&self.scan)
+            .with_context(|| format!("cannot read {}", self.scan.display()))?;
+        let name = self.scan.display().to_string();
+        let rows = import::read_table(
+            &text,
+            &name,
+            &["c_deg", "step_deg", "p_um"],
+            "the spindle angle, the part's step and the probe reading",
+        )?;
+        // Steps: the distinct part positions, evenly spaced over the turn.
+        let step_rows: Vec<Vec<f64>> = rows.iter().map(|r| vec![r[1], 0.0]).collect();
+        let (steps, _) = turn_bins(&step_rows, &format!("{name}: step_deg"), "multi-step")?;
+        let key = |c: f64| (c.rem_euclid(360.0) * 1000.0).round() as i64 % 360_000;
+        let mut runs = Vec::new();
+        let mut angles: Option<Vec<f64>> = None;
+        for &st in &steps {
+            let mine: Vec<Vec<f64>> = rows
+                .iter()
+                .filter(|r| key(r[1]) == key(st))
+                .map(|r| vec![r[0], r[2]])
+                .collect();
+            let (a, v) = turn_bins(&mine, &format!("{name}: step {st}°"), "multi-step")?;
+            match &angles {
+                None => angles = Some(a),
+                Some(a0) if a0 != &a => bail!(
+                    "{name}: step {st}° is read at {} spindle angles from {:.3}°, step {}° at {} from {:.3}°: every step must be read at the same spindle angles",
+                    a.len(),
+                    a[0],
+                    steps[0],
+                    a0.len(),
+                    a0[0]
+                ),
+                Some(_) => {}
+            }
+            runs.push(v.into_iter().map(|x| x[0]).collect::<Vec<f64>>());
+        }
+        let angles = angles.context("no readings")?;
+        let r = separate::multi_step(&runs).with_context(|| format!("{name}: cannot separate"))?;
+        let mut csv = String::from("angle_deg,part_um,spindle_um\n");
+        for (i, a) in angles.iter().enumerate() {
+            let _ = writeln!(csv, "{a:.3},{:.5},{:.5}", r.part_um[i], r.spindle_um[i]);
+        }
+        crate::workflow::write_file(&self.output, csv.as_bytes())?;
+        let list: Vec<String> = r
+            .inseparable_harmonics
+            .iter()
+            .take(8)
+            .map(|k| k.to_string())
+            .collect();
+        let warnings = vec![format!(
+            "with {} steps the part's harmonics {}{} cannot be told from the spindle's: they are left in spindle_um, not in part_um — measure again with a number of steps that is not a divisor of the lobes you look for (e.g. {} steps)",
+            r.steps,
+            list.join(", "),
+            if r.inseparable_harmonics.len() > 8 { ", …" } else { "" },
+            r.steps + 1
+        )];
+        for w in &warnings {
+            eprintln!("warning: {w}");
+        }
+        let ci = 1.96 * r.point_sigma_um;
+        if self.json {
+            out::json_pretty(&json!({
+                "output": self.output.display().to_string(),
+                "samples": r.samples,
+                "steps": r.steps,
+                "part_pv_um": r.part_pv_um,
+                "spindle_pv_um": r.spindle_pv_um,
+                "inseparable_harmonics": r.inseparable_harmonics,
+                "residual_rms_um": r.residual_rms_um,
+                "point_ci95_um": if ci.is_finite() { json!(ci) } else { json!(null) },
+                "warnings": warnings,
+            }))?;
+        } else {
+            out::print(&format!(
+                "{} steps × {} samples per turn: part roundness {:.3} µm PV, spindle error motion {:.3} µm PV (± {:.3} µm per point, 95 %); written to {}\n",
+                r.steps,
+                r.samples,
+                r.part_pv_um,
+                r.spindle_pv_um,
+                ci,
                 self.output.display()
             ))?;
         }
@@ -248,6 +365,7 @@ impl Args {
         match self.cmd {
             Sub::Reversal(r) => r.run(),
             Sub::ThreeProbe(t) => t.run(),
+            Sub::MultiStep(m) => m.run(),
         }
     }
 }
