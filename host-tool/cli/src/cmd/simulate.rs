@@ -6,12 +6,12 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use serde_json::json;
 
 use crate::cmd::out::outln;
 use trueaxis_engine::import;
-use trueaxis_engine::simulate::{self, Effect, Plan, RefReturn, SimConfig};
+use trueaxis_engine::simulate::{self, onmachine, Effect, Plan, RefReturn, SimConfig};
 
 /// Arguments of `trueaxis simulate`.
 #[derive(clap::Args, Debug)]
@@ -28,10 +28,17 @@ pub struct Args {
     pub plan: Vec<String>,
     /// A whole measurement campaign instead of plans and effects:
     /// spindle-thermal (an ISO 230-3 thermal test at one point, 48 h, a
-    /// reading a minute, 12 temperature sensors; see docs/cli.md). Only
-    /// --seed and -o apply.
+    /// reading a minute, 12 temperature sensors; see docs/cli.md), or
+    /// on-machine (every file the on-machine commands read, with the hidden
+    /// answers in truth.json; -o is then a directory; docs/on-machine.md).
+    /// Only --seed, -o and --after-pass apply.
     #[arg(long, conflicts_with_all = ["plan", "effect", "reference"])]
     pub scenario: Option<String>,
+    /// With `--scenario on-machine`: the correction pass (`trueaxis
+    /// workpiece --pass-csv`) the simulated grinder grinds; -o is then the
+    /// re-measured part's scan (CSV).
+    #[arg(long, requires = "scenario")]
+    pub after_pass: Option<PathBuf>,
     /// Physical effect (repeatable): periodic:…, thermal:…, reversal:…,
     /// abbe:…, drift:… (see docs/cli.md).
     #[arg(long)]
@@ -82,6 +89,12 @@ fn write_data(data: &trueaxis_engine::data::Dataset, path: &std::path::Path) -> 
 impl Args {
     /// `--scenario NAME`: the whole campaign from the engine's generator.
     fn run_scenario(&self, name: &str) -> Result<()> {
+        if name == onmachine::ON_MACHINE {
+            return self.run_on_machine();
+        }
+        if self.after_pass.is_some() {
+            bail!("--after-pass goes with --scenario on-machine, not `{name}`");
+        }
         let data = simulate::scenario(name, self.seed)?.data;
         write_data(&data, &self.output)?;
         let duration_s = data
@@ -108,6 +121,72 @@ impl Args {
                 data.len(),
                 duration_s,
                 self.output.display()
+            )?;
+        }
+        Ok(())
+    }
+
+    /// `--scenario on-machine`: the campaign's files into the directory
+    /// `-o`, or with `--after-pass` the part re-measured after that pass.
+    fn run_on_machine(&self) -> Result<()> {
+        if let Some(pass) = &self.after_pass {
+            crate::input::refuse_overwrite(&[("the pass", pass)], &[("-o", &self.output)])?;
+            let text = std::fs::read_to_string(pass)
+                .with_context(|| format!("cannot read {}", pass.display()))?;
+            let name = pass.display().to_string();
+            let rows: Vec<[f64; 3]> = import::read_table(
+                &text,
+                &name,
+                &["c_deg", "z_mm", "offset_um"],
+                "the correction pass of `trueaxis workpiece --pass-csv`",
+            )?
+            .into_iter()
+            .map(|r| [r[0], r[1], r[2]])
+            .collect();
+            let csv = onmachine::after_pass(self.seed, &rows)
+                .with_context(|| format!("{name}: cannot grind this pass"))?;
+            crate::workflow::write_file(&self.output, csv.as_bytes())?;
+            let e = onmachine::REMOVAL_EFFICIENCY;
+            if self.json {
+                outln!(
+                    "{}",
+                    json!({"output": self.output.display().to_string(), "scenario": onmachine::ON_MACHINE,
+                           "after_pass": name, "removal_efficiency": e, "seed": self.seed})
+                )?;
+            } else {
+                outln!(
+                    "ground the pass {name} (the grinder removes {:.0} % of each commanded depth) and measured the part again → {}",
+                    e * 100.0,
+                    self.output.display()
+                )?;
+            }
+            return Ok(());
+        }
+        let dir = &self.output;
+        if dir.is_file() {
+            bail!(
+                "-o {}: with --scenario on-machine -o is a directory, and this is a file",
+                dir.display()
+            );
+        }
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the directory {}", dir.display()))?;
+        let files = onmachine::campaign(self.seed);
+        for (f, content) in &files {
+            crate::workflow::write_file(&dir.join(f), content.as_bytes())?;
+        }
+        if self.json {
+            outln!(
+                "{}",
+                json!({"output": dir.display().to_string(), "scenario": onmachine::ON_MACHINE,
+                       "files": files.iter().map(|f| f.0).collect::<Vec<_>>(), "seed": self.seed,
+                       "truth": onmachine::truth(self.seed)})
+            )?;
+        } else {
+            outln!(
+                "simulated an on-machine campaign ({} files, the hidden answers in truth.json) → {}",
+                files.len(),
+                dir.display()
             )?;
         }
         Ok(())

@@ -15,6 +15,7 @@
 
 mod config;
 mod machine;
+pub mod onmachine;
 mod plan;
 mod spec;
 pub mod thermal_test;

@@ -101,7 +101,7 @@ pub fn scenario(name: &str, seed: u64) -> anyhow::Result<SimOutput> {
     match name {
         SPINDLE_THERMAL => Ok(spindle_thermal(seed)),
         other => anyhow::bail!(
-            "unknown scenario `{other}` (expected {})",
+            "unknown scenario `{other}` (expected {}, or on-machine with -o a directory)",
             SCENARIOS.join(", ")
         ),
     }
