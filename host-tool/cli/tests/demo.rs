@@ -217,5 +217,25 @@ fn demo_finds_both_hidden_effects_and_its_table_compensates_the_data() {
             "target {tgt}: compensated RMS {rms} µm"
         );
     }
+
+    // Chapter 6, on the machine: the probe's radius within 5 nm of the
+    // simulated one (plus the mean of its form over the arc, a few nm),
+    // the ball's PV falling with the form, and the ground part's form
+    // falling to 1 − the grinder's removal efficiency in one pass.
+    let om = &summary["on_machine"];
+    let r = om["probe_radius_mm"].as_f64().unwrap();
+    assert!((r - 0.49715).abs() < 2e-5, "{om}");
+    assert!(
+        om["ball_pv_with_form_nm"].as_f64().unwrap()
+            < om["ball_pv_without_form_nm"].as_f64().unwrap(),
+        "{om}"
+    );
+    let pv = om["ground_form_pv_um"].as_array().unwrap();
+    let ratio = pv[1].as_f64().unwrap() / pv[0].as_f64().unwrap();
+    let eta = om["removal_efficiency"].as_f64().unwrap();
+    assert!((ratio - (1.0 - eta)).abs() < 0.05, "{om}");
+    for f in ["probe.json", "pass.csv", "after.csv", "truth.json"] {
+        assert!(out.join("on-machine").join(f).exists(), "{f}");
+    }
     let _ = std::fs::remove_dir_all(&out);
 }

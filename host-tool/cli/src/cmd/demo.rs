@@ -15,7 +15,12 @@
 //!    improved model compared with the data → `DIR/report/final/`,
 //!    `DIR/compare_final.json`;
 //! 5. **export** the improved model's firmware table → `DIR/table.bin`,
-//!    with the accuracy check in `DIR/table.json`.
+//!    with the accuracy check in `DIR/table.json`;
+//! 6. **on the machine**: a simulated on-machine campaign
+//!    (`DIR/on-machine/`, docs/on-machine.md): calibrate the probe on the
+//!    master ball, correct a part scan with it, fit a ground part's form,
+//!    write the correction pass, grind it and measure again — the form
+//!    falls by the grinder's removal efficiency.
 //!
 //! The file names are stable: the QEMU stage of `xtask demo` uploads
 //! `table.bin` with `trueaxis upload` to the board firmware in QEMU and
@@ -415,6 +420,8 @@ impl Demo {
                 .join(", "),
             self.table_bin().display()
         ))?;
+        let (story, on_machine_json) = self.on_machine()?;
+        say(story)?;
         let elapsed_s = t0.elapsed().as_secs_f64();
         say(format!(
             "Done in {elapsed_s:.1} s. Files for the board stage: {}, {}, {}",
@@ -430,6 +437,7 @@ impl Demo {
             "improve": improve_json,
             "final": final_json,
             "table": table_json,
+            "on_machine": on_machine_json,
             "files": {
                 "data_csv": path(self.data_csv()),
                 "model_json": path(self.model_json()),
@@ -446,6 +454,111 @@ impl Demo {
             "elapsed_s": elapsed_s,
         });
         Ok(summary)
+    }
+}
+
+impl Demo {
+    /// Chapter 6: the on-machine loop on the simulated campaign
+    /// (`DIR/on-machine/`): the probe calibrated on the master ball, a part
+    /// scan corrected with it, the ground part's form, one correction pass
+    /// ground and the part measured again. Returns the story and its
+    /// numbers.
+    pub fn on_machine(&self) -> Result<(String, serde_json::Value)> {
+        use trueaxis_engine::simulate::onmachine;
+        use trueaxis_engine::{import, probe, workpiece};
+        let dir = self.out.join("on-machine");
+        let files = onmachine::campaign(SEED);
+        for (f, content) in &files {
+            crate::workflow::write_file(&dir.join(f), content.as_bytes())?;
+        }
+        let text = |name: &str| -> Result<(String, String)> {
+            let p = dir.join(name);
+            let t = std::fs::read_to_string(&p)
+                .with_context(|| format!("cannot read {}", p.display()))?;
+            Ok((t, p.display().to_string()))
+        };
+        // The probe on the master ball.
+        let (t, n) = text("ball.csv")?;
+        let ball = probe::read_scan(&t, &n, ["x", "z"])?;
+        let cal = probe::calibrate(&ball, onmachine::BALL_DIAMETER_MM / 2.0)?;
+        let pr = &cal.probe;
+        crate::workflow::write_file(
+            &dir.join("probe.json"),
+            (serde_json::to_string_pretty(pr)? + "\n").as_bytes(),
+        )?;
+        // A part scanned with it: the form with the probe's radius only,
+        // and with its form too.
+        let (t, n) = text("part.csv")?;
+        let scan = probe::read_scan(&t, &n, ["x", "z"])?;
+        let contacts = probe::correct(pr, &scan, [0.0, 1.0])?;
+        let surf: Vec<[f64; 2]> = contacts.iter().map(|c| c.surface_mm).collect();
+        let radius_only: Vec<[f64; 2]> = contacts
+            .iter()
+            .map(|c| {
+                let (t, d) = (c.theta_deg.to_radians(), c.form_nm * 1e-6);
+                [c.surface_mm[0] + d * t.cos(), c.surface_mm[1] + d * t.sin()]
+            })
+            .collect();
+        let part_pv = probe::pv(&probe::form_deviation_nm(&surf, true)?);
+        let part_pv_radius_only = probe::pv(&probe::form_deviation_nm(&radius_only, true)?);
+        // The ground part, its correction pass, ground and measured again.
+        let read_part = |name: &str| -> Result<Vec<workpiece::Point>> {
+            let (t, n) = text(name)?;
+            Ok(
+                import::read_table(&t, &n, &["c_deg", "z_mm", "dev_um"], "a part scan")?
+                    .iter()
+                    .map(|r| workpiece::Point {
+                        c_deg: r[0],
+                        z_mm: r[1],
+                        dev_um: r[2],
+                    })
+                    .collect(),
+            )
+        };
+        let mut warnings = Vec::new();
+        let form0 = workpiece::fit(&read_part("grinder.csv")?, &mut warnings)?;
+        let pass: Vec<[f64; 3]> = workpiece::pass_points(&form0, 5.0, 40)?
+            .into_iter()
+            .map(|[c, z]| [c, z, workpiece::correction_um(&form0, c, z)])
+            .collect();
+        let mut pass_csv = String::from("c_deg,z_mm,offset_um\n");
+        for [c, z, o] in &pass {
+            let _ = writeln!(pass_csv, "{c},{z},{o:.4}");
+        }
+        crate::workflow::write_file(&dir.join("pass.csv"), pass_csv.as_bytes())?;
+        let after = onmachine::after_pass(SEED, &pass)?;
+        crate::workflow::write_file(&dir.join("after.csv"), after.as_bytes())?;
+        let form1 = workpiece::fit(&read_part("after.csv")?, &mut warnings)?;
+        let story = format!(
+            "6. On the machine ({}): the probe calibrated on a {} mm master ball — radius {:.5} mm ± {:.1} nm (nominal {} mm), its form {:.0} nm PV (the ball's PV {:.0} → {:.0} nm with it); a part scanned with it: {:.0} nm PV about its least-squares circle ({:.0} nm with the radius only; the scan's 5 nm noise is in both). A ground part: form {:.1} µm PV; the correction pass ground (the simulated grinder removes {:.0} % of each commanded depth) and measured again: {:.1} µm PV ({:.0} % left).",
+            dir.display(),
+            onmachine::BALL_DIAMETER_MM,
+            pr.probe_radius_mm,
+            pr.probe_radius_ci95_mm * 1e6,
+            onmachine::PROBE_NOMINAL_RADIUS_MM,
+            pr.form_pv_nm,
+            cal.pv_without_form_nm,
+            cal.pv_with_form_nm,
+            part_pv,
+            part_pv_radius_only,
+            form0.form_pv_um,
+            onmachine::REMOVAL_EFFICIENCY * 100.0,
+            form1.form_pv_um,
+            100.0 * form1.form_pv_um / form0.form_pv_um
+        );
+        let json = serde_json::json!({
+            "dir": dir.display().to_string(),
+            "probe_radius_mm": pr.probe_radius_mm,
+            "probe_radius_ci95_mm": pr.probe_radius_ci95_mm,
+            "probe_form_pv_nm": pr.form_pv_nm,
+            "ball_pv_without_form_nm": cal.pv_without_form_nm,
+            "ball_pv_with_form_nm": cal.pv_with_form_nm,
+            "part_form_pv_nm": part_pv,
+            "part_form_pv_radius_only_nm": part_pv_radius_only,
+            "ground_form_pv_um": [form0.form_pv_um, form1.form_pv_um],
+            "removal_efficiency": onmachine::REMOVAL_EFFICIENCY,
+        });
+        Ok((story, json))
     }
 }
 
