@@ -241,8 +241,25 @@ fn the_on_machine_commands_find_the_simulated_answers() {
         s(&f("multi-step.csv")),
         "-o",
         s(&dir.join("ms.csv")),
+        "--report",
+        s(&dir.join("ms-report")),
         "--json",
     ]));
+    // The page opens with the answer and what the steps cannot know, then
+    // the part and the spindle as polar plots.
+    let html = std::fs::read_to_string(dir.join("ms-report").join("index.html")).unwrap();
+    let pv_text = format!("{:.3} µm out of round", ms["part_pv_um"].as_f64().unwrap());
+    assert!(html.contains(&pv_text), "{pv_text} not on the page");
+    assert!(
+        html.contains("cannot know: harmonics 5, 10"),
+        "the blind harmonics are not said"
+    );
+    assert!(
+        html.find(&pv_text) < html.find("<svg"),
+        "the verdict is not first"
+    );
+    let part_svg = std::fs::read_to_string(dir.join("ms-report").join("part.svg")).unwrap();
+    assert!(part_svg.contains("viewBox") && part_svg.contains("<path d=\"M"));
     assert!(
         ms["inseparable_harmonics"]
             .as_array()
@@ -298,8 +315,29 @@ fn the_on_machine_commands_find_the_simulated_answers() {
         s(&dir.join("after.csv")),
         "-o",
         s(&dir.join("form1.json")),
+        "--report",
+        s(&dir.join("wp-report")),
         "--json",
     ]));
+    let html = std::fs::read_to_string(dir.join("wp-report").join("index.html")).unwrap();
+    let pv_text = format!("{:.3} µm PV", after["form"]["form_pv_um"].as_f64().unwrap());
+    assert!(
+        html.contains(&pv_text),
+        "{pv_text} not on the workpiece page"
+    );
+    // 12 generatrices, at most 6 drawn, and the form around the part.
+    let gens = std::fs::read_dir(dir.join("wp-report"))
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .file_name()
+                .to_string_lossy()
+                .starts_with("gen")
+        })
+        .count();
+    assert_eq!(gens, 6);
+    assert!(dir.join("wp-report").join("around.svg").exists());
     let pv1 = after["form"]["form_pv_um"].as_f64().unwrap();
     let eta = truth["removal_efficiency"].as_f64().unwrap();
     let ratio = pv1 / pv0;

@@ -60,6 +60,10 @@ pub struct Calibrate {
     /// Where to write the probe file.
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Write an HTML page (verdict, the form against contact angle) into
+    /// this directory (2-D calibrations).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -69,6 +73,9 @@ impl Calibrate {
     fn run(self) -> Result<()> {
         crate::input::refuse_overwrite(&[("the scan", &self.scan)], &[("-o", &self.output)])?;
         if self.plane == "xyz" {
+            if self.report.is_some() {
+                bail!("--report draws 2-D calibrations (the form against contact angle); a 3-D calibration has no page yet — leave --report out");
+            }
             return self.run_3d();
         }
         let pl = plane(&self.plane).map_err(|e| anyhow::anyhow!("{e} (or xyz for a 3-D scan)"))?;
@@ -83,10 +90,37 @@ impl Calibrate {
         for w in &cal.warnings {
             eprintln!("warning: {w}");
         }
+        let report = self
+            .report
+            .as_ref()
+            .map(|dir| {
+                crate::report::onmachine::probe_page(
+                    &crate::report::onmachine::ProbePage {
+                        theta_deg: &cal.theta_deg,
+                        form_nm: cal
+                            .theta_deg
+                            .iter()
+                            .map(|t| pr.form_nm_at(t.to_radians()))
+                            .collect(),
+                        residual_nm: &cal.residual_nm,
+                        radius_mm: (pr.probe_radius_mm, pr.probe_radius_ci95_mm),
+                        form_pv_nm: pr.form_pv_nm,
+                        ball_pv_nm: [cal.pv_without_form_nm, cal.pv_with_form_nm],
+                        warnings: &cal.warnings,
+                        next: format!(
+                            "trueaxis probe correct SCAN.csv --probe {} -o SURFACE.csv",
+                            self.output.display()
+                        ),
+                    },
+                    dir,
+                )
+            })
+            .transpose()?;
         if self.json {
             let doc = json!({
                 "scan": self.scan.display().to_string(),
                 "output": self.output.display().to_string(),
+                "report": report.as_ref().map(|p| p.display().to_string()),
                 "probe": pr,
                 "pv_without_form_nm": cal.pv_without_form_nm,
                 "pv_with_form_nm": cal.pv_with_form_nm,
@@ -121,6 +155,9 @@ impl Calibrate {
             }
             let _ = writeln!(s, "  on the ball    {:.1} nm PV with the radius only → {:.1} nm PV with the form (residual RMS {:.1} nm)", cal.pv_without_form_nm, cal.pv_with_form_nm, pr.residual_rms_nm);
             let _ = writeln!(s, "  probe file written to {}", self.output.display());
+            if let Some(r) = &report {
+                let _ = writeln!(s, "  report: {}", r.display());
+            }
             out::print(&s)?;
         }
         Ok(())

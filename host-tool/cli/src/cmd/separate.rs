@@ -42,6 +42,9 @@ pub struct ThreeProbe {
     /// Where to write `c_deg,part_um,spindle_x_um,spindle_y_um`.
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Write an HTML page (verdict, plots) into this directory.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -104,9 +107,38 @@ impl ThreeProbe {
         for w in &warnings {
             eprintln!("warning: {w}");
         }
+        let report = self
+            .report
+            .as_ref()
+            .map(|dir| {
+                crate::report::onmachine::roundness_page(
+                    &crate::report::onmachine::Roundness {
+                        method: "three-probe",
+                        command: format!(
+                            "to see the {} hidden harmonic(s), measure again with other probe angles (0,99.84,202.5 sees every harmonic below 111)",
+                            r.unseen_harmonics.len()
+                        ),
+                        part_um: &r.part_um,
+                        spindle: vec![
+                            ("along probe 1", r.spindle_x_um.as_slice()),
+                            ("perpendicular", r.spindle_y_um.as_slice()),
+                        ],
+                        part_pv_um: r.part_pv_um,
+                        spindle_pv_um: r.spindle_x_pv_um,
+                        blind: &r.unseen_harmonics,
+                        blind_meaning: "of the part: the probe spacing cannot see them (left out of the roundness)",
+                        ci95_um: None,
+                        // The warning says what `blind` says: once.
+                        warnings: &[],
+                    },
+                    dir,
+                )
+            })
+            .transpose()?;
         if self.json {
             out::json_pretty(&json!({
                 "output": self.output.display().to_string(),
+                "report": report.as_ref().map(|p| p.display().to_string()),
                 "samples": r.samples,
                 "part_pv_um": r.part_pv_um,
                 "spindle_x_pv_um": r.spindle_x_pv_um,
@@ -122,6 +154,9 @@ impl ThreeProbe {
                 r.unseen_harmonics.len(),
                 self.output.display()
             ))?;
+            if let Some(p) = &report {
+                out::print(&format!("report: {}\n", p.display()))?;
+            }
         }
         Ok(())
     }
@@ -175,6 +210,9 @@ pub struct MultiStep {
     /// Where to write `angle_deg,part_um,spindle_um`.
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Write an HTML page (verdict, plots) into this directory.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -243,9 +281,37 @@ impl MultiStep {
             eprintln!("warning: {w}");
         }
         let ci = 1.96 * r.point_sigma_um;
+        let report = self
+            .report
+            .as_ref()
+            .map(|dir| {
+                crate::report::onmachine::roundness_page(
+                    &crate::report::onmachine::Roundness {
+                        method: "multi-step",
+                        command: format!(
+                            "to separate harmonics {}, {}, …: remount the part in {} steps and run trueaxis separate multi-step again",
+                            r.steps,
+                            2 * r.steps,
+                            r.steps + 1
+                        ),
+                        part_um: &r.part_um,
+                        spindle: vec![("along the probe", r.spindle_um.as_slice())],
+                        part_pv_um: r.part_pv_um,
+                        spindle_pv_um: r.spindle_pv_um,
+                        blind: &r.inseparable_harmonics,
+                        blind_meaning: "of the part cannot be told from the spindle's (they are in the spindle's profile)",
+                        ci95_um: ci.is_finite().then_some(ci),
+                        // The warning says what `blind` says: once.
+                        warnings: &[],
+                    },
+                    dir,
+                )
+            })
+            .transpose()?;
         if self.json {
             out::json_pretty(&json!({
                 "output": self.output.display().to_string(),
+                "report": report.as_ref().map(|p| p.display().to_string()),
                 "samples": r.samples,
                 "steps": r.steps,
                 "part_pv_um": r.part_pv_um,
@@ -265,6 +331,9 @@ impl MultiStep {
                 ci,
                 self.output.display()
             ))?;
+            if let Some(p) = &report {
+                out::print(&format!("report: {}\n", p.display()))?;
+            }
         }
         Ok(())
     }
@@ -283,6 +352,9 @@ pub struct Reversal {
     /// Where to write `<axis>_mm,part_um,slide_um`.
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Write an HTML page (verdict, plots) into this directory.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -334,9 +406,25 @@ impl Reversal {
                 self.run180.display()
             );
         }
+        let report = self
+            .report
+            .as_ref()
+            .map(|dir| {
+                crate::report::onmachine::reversal_page(
+                    &self.axis,
+                    &r.pos_mm,
+                    &r.part_um,
+                    &r.slide_um,
+                    [r.part_pv_um, r.slide_pv_um],
+                    ci,
+                    dir,
+                )
+            })
+            .transpose()?;
         if self.json {
             out::json_pretty(&json!({
                 "output": self.output.display().to_string(),
+                "report": report.as_ref().map(|p| p.display().to_string()),
                 "points": r.pos_mm.len(),
                 "part_pv_um": r.part_pv_um,
                 "slide_pv_um": r.slide_pv_um,
@@ -355,6 +443,9 @@ impl Reversal {
                 r.slide_pv_um,
                 self.output.display()
             ))?;
+            if let Some(p) = &report {
+                out::print(&format!("report: {}\n", p.display()))?;
+            }
         }
         Ok(())
     }

@@ -42,6 +42,10 @@ pub struct Args {
     /// Stations along z of the pass (intervals) [default: 20].
     #[arg(long, default_value_t = 20)]
     pub z_steps: usize,
+    /// Write an HTML page (the form along the generatrices and around the
+    /// part, the history) into this directory.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
     /// The part's history (appended: one entry per measured pass).
     #[arg(long)]
     pub history: Option<PathBuf>,
@@ -57,6 +61,7 @@ impl Args {
             ("--gcode-out", self.gcode_out.as_ref()),
             ("--pass-csv", self.pass_csv.as_ref()),
             ("--history", self.history.as_ref()),
+            ("--report", self.report.as_ref()),
         ]
         .into_iter()
         .filter_map(|(n, p)| p.map(|p| (n, p.as_path())))
@@ -147,11 +152,44 @@ impl Args {
         for w in &warnings {
             eprintln!("warning: {w}");
         }
+        let report = match &self.report {
+            Some(dir) => {
+                let pts: Vec<[f64; 3]> = pts.iter().map(|p| [p.c_deg, p.z_mm, p.dev_um]).collect();
+                let next = self.pass_csv.as_ref().map(|p| {
+                    format!(
+                        "grind the pass in {}, measure the part again and run trueaxis workpiece NEW.csv{}",
+                        p.display(),
+                        self.history
+                            .as_ref()
+                            .map_or(String::new(), |h| format!(" --history {}", h.display()))
+                    )
+                });
+                Some(crate::report::onmachine::workpiece_page(
+                    &crate::report::onmachine::WorkpiecePage {
+                        points: &pts,
+                        form: &form,
+                        z_range_mm: form.z_range_mm,
+                        form_pv_um: form.form_pv_um,
+                        form_rms_um: form.form_rms_um,
+                        eccentricity_um: form.eccentricity_um,
+                        history_pv_um: passes
+                            .iter()
+                            .filter_map(|p| p["form_pv_um"].as_f64())
+                            .collect(),
+                        warnings: &warnings,
+                        next,
+                    },
+                    dir,
+                )?)
+            }
+            None => None,
+        };
         if self.json {
             out::json_pretty(&json!({
                 "scan": self.scan.display().to_string(),
                 "form": form,
                 "history": passes,
+                "report": report.as_ref().map(|p| p.display().to_string()),
                 "warnings": warnings,
             }))?;
         } else {
@@ -178,6 +216,9 @@ impl Args {
                     p["form_pv_um"].as_f64().unwrap_or(f64::NAN),
                     p["scan"].as_str().unwrap_or("")
                 );
+            }
+            if let Some(r) = &report {
+                let _ = writeln!(s, "  report: {}", r.display());
             }
             out::print(&s)?;
         }

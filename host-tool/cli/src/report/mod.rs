@@ -15,6 +15,7 @@ pub mod compare;
 pub mod diagnose;
 pub mod history;
 pub mod iso230;
+pub mod onmachine;
 pub mod plot;
 
 use std::fmt::Write as _;

@@ -1,0 +1,397 @@
+//! The on-machine pages (docs/on-machine.md, "Reports"): `probe calibrate`,
+//! `separate reversal|three-probe|multi-step` and `workpiece` with
+//! `--report DIR`. Each opens with a verdict card; roundness is drawn as a
+//! polar plot (the profile around a base circle, deviations magnified),
+//! straightness and generatrices as profiles.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+
+use super::plot::{Series, XyPlot};
+use super::{esc, Page, Tone, Verdict};
+
+/// Colours of the polar plot's profiles (the pages' palette order).
+const COLOURS: [&str; 4] = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd"];
+
+/// A polar plot of profiles sampled at equally spaced angles (µm, angle
+/// `i·360/n` degrees, 0° at the right, counter-clockwise): each drawn as
+/// `base + gain·value` around a base circle, the gain chosen so that the
+/// largest |value| of all profiles takes 40 % of the base radius; dashed
+/// rings at ±that value say the scale. A hand-written SVG with a viewBox
+/// (it scales to its container).
+pub fn polar_svg(title: &str, profiles: &[(&str, &[f64])]) -> String {
+    let (w, h) = (560.0, 600.0);
+    let (cx, cy, base) = (280.0, 330.0, 160.0);
+    let max = profiles
+        .iter()
+        .flat_map(|p| p.1.iter())
+        .map(|v| v.abs())
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, f64::max)
+        .max(1e-9);
+    let gain = 0.4 * base / max;
+    let mut s = String::new();
+    let _ = write!(
+        s,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" preserveAspectRatio="xMidYMid meet" font-family="sans-serif"><title>{}</title><rect width="{w}" height="{h}" fill="white"/><text x="{}" y="28" font-size="18" text-anchor="middle">{}</text>"#,
+        esc(title),
+        w / 2.0,
+        esc(title)
+    );
+    // Rings: base ± max, and the base circle.
+    for (r, label) in [
+        (
+            base - gain * max,
+            format!("−{}", super::plot::format_value(max)),
+        ),
+        (base, "0".to_string()),
+        (
+            base + gain * max,
+            format!("+{} µm", super::plot::format_value(max)),
+        ),
+    ] {
+        let dash = if label == "0" {
+            ""
+        } else {
+            r#" stroke-dasharray="5,4""#
+        };
+        let _ = write!(
+            s,
+            r##"<circle cx="{cx}" cy="{cy}" r="{r:.1}" fill="none" stroke="#999"{dash}/><text x="{:.1}" y="{:.1}" font-size="12" fill="#555">{}</text>"##,
+            cx + 4.0,
+            cy - r - 3.0,
+            esc(&label)
+        );
+    }
+    // Angle spokes every 30°.
+    for k in 0..12 {
+        let a = (30.0 * k as f64).to_radians();
+        let (r0, r1) = (base - gain * max - 10.0, base + gain * max + 8.0);
+        let _ = write!(
+            s,
+            r##"<line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="#ddd"/><text x="{:.1}" y="{:.1}" font-size="12" text-anchor="middle" dominant-baseline="middle" fill="#555">{}°</text>"##,
+            cx + r0 * a.cos(),
+            cy - r0 * a.sin(),
+            cx + r1 * a.cos(),
+            cy - r1 * a.sin(),
+            cx + (r1 + 16.0) * a.cos(),
+            cy - (r1 + 16.0) * a.sin(),
+            30 * k
+        );
+    }
+    // The profiles, closed.
+    for (i, (name, v)) in profiles.iter().enumerate() {
+        let n = v.len().max(1);
+        let mut d = String::new();
+        for (k, x) in v.iter().enumerate() {
+            let a = std::f64::consts::TAU * k as f64 / n as f64;
+            let r = base + gain * if x.is_finite() { *x } else { 0.0 };
+            let _ = write!(
+                d,
+                "{}{:.1},{:.1} ",
+                if k == 0 { "M" } else { "L" },
+                cx + r * a.cos(),
+                cy - r * a.sin()
+            );
+        }
+        d.push('Z');
+        let c = COLOURS[i % COLOURS.len()];
+        let _ = write!(
+            s,
+            r#"<path d="{d}" fill="none" stroke="{c}" stroke-width="1.8"/><rect x="20" y="{:.0}" width="18" height="4" fill="{c}"/><text x="44" y="{:.0}" font-size="14">{}</text>"#,
+            50.0 + 20.0 * i as f64,
+            55.0 + 20.0 * i as f64,
+            esc(name)
+        );
+    }
+    s.push_str("</svg>");
+    s
+}
+
+/// Writes `page` into `dir` and returns the index.html path.
+fn write(page: &Page, dir: &Path) -> Result<PathBuf> {
+    page.write(dir)
+}
+
+/// The roundness page of `separate three-probe` and `separate multi-step`:
+/// the part and the spindle as polar plots, what the method cannot see.
+#[derive(Debug)]
+pub struct Roundness<'a> {
+    /// `three-probe` or `multi-step`.
+    pub method: &'a str,
+    /// The command that made it.
+    pub command: String,
+    /// Part roundness, µm, at equally spaced angles.
+    pub part_um: &'a [f64],
+    /// Spindle error motion profiles `(name, µm)`.
+    pub spindle: Vec<(&'a str, &'a [f64])>,
+    /// Part and spindle PV, µm.
+    pub part_pv_um: f64,
+    /// See above.
+    pub spindle_pv_um: f64,
+    /// Harmonics the method cannot see or separate.
+    pub blind: &'a [usize],
+    /// What the blind harmonics mean, in words.
+    pub blind_meaning: &'a str,
+    /// The per-point 95 % interval, µm, if known.
+    pub ci95_um: Option<f64>,
+    /// Warnings.
+    pub warnings: &'a [String],
+}
+
+/// Writes the roundness page into `dir`.
+pub fn roundness_page(r: &Roundness, dir: &Path) -> Result<PathBuf> {
+    let mut page = Page::new(format!("Roundness by {} separation", r.method));
+    let blind = if r.blind.is_empty() {
+        "every harmonic from 2 up is seen".to_string()
+    } else {
+        let list: Vec<String> = r.blind.iter().take(10).map(|k| k.to_string()).collect();
+        format!(
+            "harmonics {}{} {}",
+            list.join(", "),
+            if r.blind.len() > 10 { ", …" } else { "" },
+            r.blind_meaning
+        )
+    };
+    let mut details = vec![
+        format!("spindle error motion {:.3} µm PV", r.spindle_pv_um),
+        format!("cannot know: {blind}"),
+    ];
+    if let Some(ci) = r.ci95_um {
+        details.push(format!("each point ± {ci:.3} µm (95 %)"));
+    }
+    page.verdict(Verdict {
+        headline: format!(
+            "The part is {:.3} µm out of round (PV, harmonics 0 and 1 — size and centring — removed).",
+            r.part_pv_um
+        ),
+        details,
+        warnings: r.warnings.to_vec(),
+        next: Some(r.command.clone()),
+        tone: if r.blind.is_empty() { Tone::Good } else { Tone::Action },
+    });
+    page.heading("Part and spindle");
+    page.grid_wide(vec![
+        super::Figure {
+            name: "part".into(),
+            caption: "the part's roundness around its base circle (deviations magnified)".into(),
+            svg: polar_svg("part roundness (µm)", &[("part", r.part_um)]),
+        },
+        super::Figure {
+            name: "spindle".into(),
+            caption: "the spindle's radial error motion (deviations magnified)".into(),
+            svg: polar_svg("spindle error motion (µm)", &r.spindle),
+        },
+    ]);
+    write(&page, dir)
+}
+
+/// The reversal page: part form and slide straightness along the travel.
+pub fn reversal_page(
+    axis: &str,
+    pos_mm: &[f64],
+    part_um: &[f64],
+    slide_um: &[f64],
+    pv: [f64; 2],
+    ci95_um: Option<f64>,
+    dir: &Path,
+) -> Result<PathBuf> {
+    let mut page = Page::new("Reversal: part form and slide straightness");
+    page.verdict(Verdict {
+        headline: format!(
+            "Part form {:.3} µm PV, slide straightness {:.3} µm PV (least-squares lines removed).",
+            pv[0], pv[1]
+        ),
+        details: vec![
+            ci95_um.map_or("the per-point uncertainty is unknown (fewer than 8 readings per run)".into(), |c| {
+                format!("each point ± {c:.3} µm (95 %), from the runs' own noise")
+            }),
+            "cannot know: the part's and the slide's straight lines (offset and tilt of the set-ups), nor an error that changed between the two runs (thermal drift adds to both halves)".into(),
+        ],
+        warnings: Vec::new(),
+        next: None,
+        tone: Tone::Good,
+    });
+    let pts = |v: &[f64]| pos_mm.iter().copied().zip(v.iter().copied()).collect();
+    let plot = XyPlot::new(
+        "part form and slide straightness",
+        format!("{axis} (mm)"),
+        "deviation (µm)",
+    )
+    .with(Series::line("part form", pts(part_um)))
+    .with(Series::line("slide straightness", pts(slide_um)));
+    page.figure(
+        "profiles",
+        "the two separated profiles along the travel",
+        plot.to_svg()?,
+    );
+    write(&page, dir)
+}
+
+/// The probe calibration page: the probe's form against contact angle and
+/// the ball's residual with and without it.
+#[derive(Debug)]
+pub struct ProbePage<'a> {
+    /// Contact angles, degrees.
+    pub theta_deg: &'a [f64],
+    /// Form error at each contact, nm.
+    pub form_nm: Vec<f64>,
+    /// Residual with the form, nm.
+    pub residual_nm: &'a [f64],
+    /// Radius ± 95 %, mm.
+    pub radius_mm: (f64, f64),
+    /// Form PV, nm, and the ball's PV before/after.
+    pub form_pv_nm: f64,
+    /// See above.
+    pub ball_pv_nm: [f64; 2],
+    /// Warnings.
+    pub warnings: &'a [String],
+    /// The command to run next.
+    pub next: String,
+}
+
+/// Writes the probe calibration page into `dir`.
+pub fn probe_page(p: &ProbePage, dir: &Path) -> Result<PathBuf> {
+    let mut page = Page::new("Probe calibration on the master ball");
+    page.verdict(Verdict {
+        headline: format!(
+            "Probe radius {:.6} mm ± {:.1} nm (95 %); form error {:.0} nm PV over the calibrated arc.",
+            p.radius_mm.0,
+            p.radius_mm.1 * 1e6,
+            p.form_pv_nm
+        ),
+        details: vec![format!(
+            "on the ball: {:.0} nm PV with the radius only → {:.0} nm PV with the form",
+            p.ball_pv_nm[0], p.ball_pv_nm[1]
+        ),
+        "cannot know: the form outside the calibrated angles (never extrapolated: such contacts get the radius only)".into()],
+        warnings: p.warnings.to_vec(),
+        next: Some(p.next.clone()),
+        tone: if p.warnings.is_empty() { Tone::Good } else { Tone::Unknown },
+    });
+    let xy = |v: &[f64]| -> Vec<(f64, f64)> {
+        p.theta_deg.iter().copied().zip(v.iter().copied()).collect()
+    };
+    let mut order: Vec<usize> = (0..p.theta_deg.len()).collect();
+    order.sort_by(|&a, &b| p.theta_deg[a].total_cmp(&p.theta_deg[b]));
+    let form: Vec<(f64, f64)> = order
+        .iter()
+        .map(|&i| (p.theta_deg[i], p.form_nm[i]))
+        .collect();
+    let plot = XyPlot::new(
+        "the probe's form error",
+        "contact angle (°)",
+        "form error (nm)",
+    )
+    .with(Series::line("fitted form", form))
+    .with(Series::points(
+        "residual on the ball with it",
+        super::thin(&xy(p.residual_nm), super::MAX_SCATTER),
+    ));
+    page.figure(
+        "form",
+        "the form error against contact angle, and what is left on the ball",
+        plot.to_svg()?,
+    );
+    write(&page, dir)
+}
+
+/// The workpiece page: the form along each generatrix (points and fit),
+/// the form around the part at mid-length, and the history.
+#[derive(Debug)]
+pub struct WorkpiecePage<'a> {
+    /// `(c_deg, z_mm, dev_um)` of the scan.
+    pub points: &'a [[f64; 3]],
+    /// The fitted form (its deviation at `(c_deg, z_mm)`, µm: `at`).
+    pub form: &'a trueaxis_engine::workpiece::Form,
+    /// The measured length, mm.
+    pub z_range_mm: [f64; 2],
+    /// Form PV, RMS and eccentricity, µm.
+    pub form_pv_um: f64,
+    /// See above.
+    pub form_rms_um: f64,
+    /// See above.
+    pub eccentricity_um: f64,
+    /// The part's history: form PV per pass, µm.
+    pub history_pv_um: Vec<f64>,
+    /// Warnings.
+    pub warnings: &'a [String],
+    /// The command to run next.
+    pub next: Option<String>,
+}
+
+/// Writes the workpiece page into `dir`.
+pub fn workpiece_page(w: &WorkpiecePage, dir: &Path) -> Result<PathBuf> {
+    let mut page = Page::new("Workpiece form");
+    let mut details = vec![format!(
+        "RMS {:.3} µm; eccentricity {:.3} µm (set-up, not form)",
+        w.form_rms_um, w.eccentricity_um
+    )];
+    if w.history_pv_um.len() > 1 {
+        details.push(format!(
+            "pass by pass: {} µm PV",
+            w.history_pv_um
+                .iter()
+                .map(|v| format!("{v:.2}"))
+                .collect::<Vec<_>>()
+                .join(" → ")
+        ));
+    }
+    page.verdict(Verdict {
+        headline: format!(
+            "The part's form is {:.3} µm PV over the measured length.",
+            w.form_pv_um
+        ),
+        details,
+        warnings: w.warnings.to_vec(),
+        next: w.next.clone(),
+        tone: Tone::Action,
+    });
+    // Generatrices: the distinct c angles (at most 6 drawn).
+    let mut cs: Vec<f64> = w.points.iter().map(|p| p[0]).collect();
+    cs.sort_by(f64::total_cmp);
+    cs.dedup_by(|a, b| (*a - *b).abs() < 1e-6);
+    let step = cs.len().div_ceil(6).max(1);
+    let mut figs = Vec::new();
+    for &c in cs.iter().step_by(step) {
+        let mut pts: Vec<(f64, f64)> = w
+            .points
+            .iter()
+            .filter(|p| (p[0] - c).abs() < 1e-6)
+            .map(|p| (p[1], p[2]))
+            .collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let [z0, z1] = w.z_range_mm;
+        let fit: Vec<(f64, f64)> = (0..=100)
+            .map(|k| {
+                let z = z0 + (z1 - z0) * k as f64 / 100.0;
+                (z, w.form.at(c, z))
+            })
+            .collect();
+        let plot = XyPlot::new(
+            format!("generatrix at c = {c:.0}°"),
+            "z (mm)",
+            "deviation (µm)",
+        )
+        .with(Series::points("measured", pts))
+        .with(Series::line("fitted form", fit));
+        figs.push(super::Figure {
+            name: format!("gen{}", (c * 10.0).round() as i64),
+            caption: format!("along z at c = {c:.1}°"),
+            svg: plot.to_svg()?,
+        });
+    }
+    let zm = 0.5 * (w.z_range_mm[0] + w.z_range_mm[1]);
+    let around: Vec<f64> = (0..360).map(|k| w.form.at(k as f64, zm)).collect();
+    page.heading("Around the part at mid-length");
+    page.figure(
+        "around",
+        format!("the fitted form around the part at z = {zm:.1} mm (deviations magnified)"),
+        polar_svg("form around the part (µm)", &[("fitted form", &around)]),
+    );
+    page.heading("Along the generatrices");
+    page.grid_wide(figs);
+    write(&page, dir)
+}
