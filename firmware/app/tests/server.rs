@@ -843,3 +843,93 @@ fn a_dithering_axis_is_at_rest() {
     );
     assert!(!status(&mut b, &mut p).injecting);
 }
+
+fn identity(b: &mut SimBoard, p: &mut Port) -> trueaxis_protocol::Identity {
+    let Response::Identity(id) = call(b, p, 70, Request::Identify) else {
+        panic!()
+    };
+    id
+}
+
+/// The boot fallback (trueaxis_app::boot): a table that faults the board
+/// during its trial window (5 s of ticks; 1 ms ticks here) is revoked by
+/// the next boot, the previous table runs and `status` says why; after its
+/// window a table is confirmed and a fault no longer throws it away; a
+/// reset without a fault, or a power cut, is not held against a table.
+#[test]
+fn a_table_that_faults_during_its_trial_falls_back_to_the_previous_one() {
+    use trueaxis_app::boot::Fault;
+    let (t1, t2) = (sample_table(0), sample_table(1));
+    for fault in [Fault::Panic, Fault::HardFault, Fault::Watchdog] {
+        let mut b = SimBoard::new();
+        let mut p = Port::new();
+        install(&mut b, &mut p, &t1);
+        b.tick(5000); // t1 confirmed
+        install(&mut b, &mut p, &t2);
+        b.tick(4000); // t2 still on trial
+        let mut b = b.fault_reset(fault);
+        let t = status(&mut b, &mut p);
+        assert_eq!(t.active.map(|a| a.crc32), Some(table_id(&t1)), "{fault:?}");
+        assert!(t
+            .faults_latched
+            .contains(Faults::TRIAL_FAILED.union(fault.bit())));
+        assert!(!t.faults.contains(Faults::TRIAL_FAILED), "latched only");
+        // t2 is revoked: nothing to roll back to, and a power cycle (RAM
+        // lost) keeps t1.
+        assert_eq!(identity(&mut b, &mut p).standby, None);
+        let mut b = SimBoard::with_flash(b.into_flash());
+        assert_eq!(
+            status(&mut b, &mut p).active.map(|a| a.crc32),
+            Some(table_id(&t1))
+        );
+    }
+
+    // Confirmed after its window: a later fault keeps the table.
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    install(&mut b, &mut p, &t1);
+    b.tick(5000);
+    install(&mut b, &mut p, &t2);
+    b.tick(5000);
+    let mut b = b.fault_reset(Fault::Panic);
+    let t = status(&mut b, &mut p);
+    assert_eq!(t.active.map(|a| a.crc32), Some(table_id(&t2)));
+    assert!(!t.faults_latched.contains(Faults::TRIAL_FAILED));
+    // After that boot t2 is on trial again: a fault now falls back.
+    b.tick(100);
+    let mut b = b.fault_reset(Fault::Panic);
+    assert_eq!(
+        status(&mut b, &mut p).active.map(|a| a.crc32),
+        Some(table_id(&t1))
+    );
+
+    // A reset without a fault during the trial keeps the new table.
+    let mut b = SimBoard::new();
+    install(&mut b, &mut p, &t1);
+    b.tick(5000);
+    install(&mut b, &mut p, &t2);
+    b.tick(10);
+    let mut b = b.plain_reset();
+    assert_eq!(
+        status(&mut b, &mut p).active.map(|a| a.crc32),
+        Some(table_id(&t2))
+    );
+
+    // The only table faults: the board runs none rather than reset-loop,
+    // until a power cycle gives the table a new trial.
+    let mut b = SimBoard::new();
+    install(&mut b, &mut p, &t1);
+    b.tick(10);
+    let mut b = b.fault_reset(Fault::Panic);
+    let t = status(&mut b, &mut p);
+    assert_eq!(t.active, None);
+    assert!(t.faults.contains(Faults::NO_TABLE));
+    assert!(t.faults_latched.contains(Faults::TRIAL_FAILED));
+    let mut b = b.fault_reset(Fault::Panic);
+    assert_eq!(status(&mut b, &mut p).active, None);
+    let mut b = SimBoard::with_flash(b.into_flash());
+    assert_eq!(
+        status(&mut b, &mut p).active.map(|a| a.crc32),
+        Some(table_id(&t1))
+    );
+}
