@@ -48,7 +48,7 @@ use trueaxis_protocol::{
     Response, SlotInfo, MAX_CHUNK_BYTES, MAX_FRAME_BYTES, PROTOCOL_VERSION,
 };
 
-use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
+use embedded_storage::nor_flash::{MultiwriteNorFlash, ReadNorFlash};
 use model_core::board::{check_cost, LimitError};
 
 use crate::boot::{self, BootRecord, ResetCause, TrialFailed, RECORD_WORDS};
@@ -185,7 +185,7 @@ pub struct Server<'b, 'm, F> {
     sink: Sink<'b>,
 }
 
-impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
+impl<'b, 'm, F: MultiwriteNorFlash + ReadNorFlash> Server<'b, 'm, F> {
     /// A server over `store`, staging uploads in `stage` (its length is the
     /// largest table accepted), with two model buffers: one for the engine,
     /// one to load the next table into.

@@ -18,7 +18,6 @@
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicI32, AtomicU32};
 
-use embassy_stm32::flash::{Blocking, Flash};
 use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, ThreadModeRawMutex};
 use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
 use embassy_sync::mutex::Mutex;
@@ -38,7 +37,7 @@ impl EngineAccess<'static> for SharedEngine {
 }
 
 /// The link server type of the board.
-pub type BoardServer = Server<'static, 'static, Flash<'static, Blocking>>;
+pub type BoardServer = Server<'static, 'static, crate::board::TableFlash>;
 
 /// Largest table the board accepts over the link, bytes (the staging
 /// buffer; a slot could hold 128 KiB, RAM cannot). Defined in model-core,
