@@ -489,10 +489,18 @@ impl<'b, 'm, F: MultiwriteNorFlash + ReadNorFlash> Server<'b, 'm, F> {
                     self.upload = None;
                     return Err(LinkError::CrcMismatch);
                 }
-                // A valid table the loop cannot evaluate every period is
-                // refused before anything is written (and before waiting
-                // for the axes to stop): the active table stays. An
-                // invalid one is the store's to refuse below.
+                // Refused before anything is written (and before waiting
+                // for the axes to stop), the active table staying, in the
+                // order of `model_core::board::check` — what `trueaxis
+                // export`, `upload` and `flash` refuse with: a table that
+                // does not load into the board's model (format, capacity,
+                // ranges), then one the loop cannot evaluate every period.
+                if model::load_into(&self.stage[..u.size as usize], spare(&mut self.spares))
+                    .is_err()
+                {
+                    self.upload = None;
+                    return Err(LinkError::InvalidTable);
+                }
                 if let Ok(t) = model_core::parse(&self.stage[..u.size as usize]) {
                     if let Err(LimitError::TooSlow { estimate, budget }) =
                         check_cost(&t, self.cfg.model_budget_instr)

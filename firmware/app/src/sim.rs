@@ -253,7 +253,10 @@ impl SimBoard {
         let record = BootRecord::decode(&ram.0.lock().unwrap());
         let sink: &'static mut SimResetRam = Box::leak(Box::new(ram.clone()));
         let store = TableStore::new(flash, SIM_LAYOUT).expect("sim layout fits");
-        let stage: &'static mut [u8] = Box::leak(vec![0u8; 48 * 1024].into_boxed_slice());
+        // The board's staging buffer: the sim accepts the uploads the board
+        // accepts (48 KiB here once let a 28 KB table reach the model load).
+        let stage: &'static mut [u8] =
+            Box::leak(vec![0u8; model_core::board::STAGE_BYTES].into_boxed_slice());
         let m1: &'static mut ModelBuf = Box::leak(Box::default());
         let m2: &'static mut ModelBuf = Box::leak(Box::default());
         let engine = Box::new(RefCell::new(
