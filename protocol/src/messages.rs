@@ -446,6 +446,19 @@ mod tests {
         assert_eq!(bytes(&LinkError::BadAxis), [15]);
         assert_eq!(Faults::NOT_REFERENCED.0, 1 << 6);
         assert!(Faults::NOT_REFERENCED.names().eq(["not_referenced"]));
+        // The boot fallback's bits (latched only), named as the host's
+        // JSON shows them.
+        let fallback = Faults::TRIAL_FAILED
+            .union(Faults::RESET_BY_PANIC)
+            .union(Faults::RESET_BY_HARDFAULT)
+            .union(Faults::RESET_BY_WATCHDOG);
+        assert_eq!(fallback.0, 0b1111 << 7);
+        assert!(fallback.names().eq([
+            "trial_failed",
+            "reset_by_panic",
+            "reset_by_hardfault",
+            "reset_by_watchdog"
+        ]));
         assert_eq!(crate::PROTOCOL_VERSION, 2);
     }
 }

@@ -165,7 +165,11 @@ async fn watchdog(
         if now != last {
             iwdg.pet();
         }
-        server.lock().await.poll_trial(engine);
+        // Never wait for the server here (a link task may hold it): the
+        // trial is confirmed at the next round instead.
+        if let Ok(mut s) = server.try_lock() {
+            s.poll_trial(engine);
+        }
         last = now;
     }
 }

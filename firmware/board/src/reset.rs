@@ -16,6 +16,7 @@
 
 use core::mem::MaybeUninit;
 use core::ptr::addr_of_mut;
+use core::sync::atomic::{AtomicBool, Ordering};
 
 use trueaxis_app::boot::{BootRecord, Fault, ResetCause, RECORD_WORDS};
 use trueaxis_app::server::ResetRecord;
@@ -80,9 +81,15 @@ pub fn reset_cause() -> ResetCause {
     }
 }
 
+/// Set by the first panic: a panic inside the logger (or while logging
+/// the panic) resets without logging again.
+static PANICKING: AtomicBool = AtomicBool::new(false);
+
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
-    defmt::error!("panic: {}", defmt::Display2Format(info));
+    if !PANICKING.swap(true, Ordering::Relaxed) {
+        defmt::error!("panic: {}", defmt::Display2Format(info));
+    }
     record_fault_and_reset(Fault::Panic)
 }
 
