@@ -141,6 +141,20 @@ impl Faults {
     /// power-up or reset, or its reference was lost (an encoder jump). Live:
     /// it clears when the axis is referenced again.
     pub const NOT_REFERENCED: Faults = Faults(1 << 6);
+    /// Boot fallback (latched only, never active: the correction runs on
+    /// the previous table): the newest table was still in its trial window
+    /// when a fault reset the board, so the boot revoked it and activated
+    /// the other slot (or none, when there was no other). One of the three
+    /// `RESET_BY_*` bits below says which fault.
+    pub const TRIAL_FAILED: Faults = Faults(1 << 7);
+    /// With [`TRIAL_FAILED`](Self::TRIAL_FAILED): the fault was a panic.
+    pub const RESET_BY_PANIC: Faults = Faults(1 << 8);
+    /// With [`TRIAL_FAILED`](Self::TRIAL_FAILED): a HardFault (bus, memory
+    /// or usage fault).
+    pub const RESET_BY_HARDFAULT: Faults = Faults(1 << 9);
+    /// With [`TRIAL_FAILED`](Self::TRIAL_FAILED): the watchdog (the
+    /// correction loop stopped).
+    pub const RESET_BY_WATCHDOG: Faults = Faults(1 << 10);
 
     /// True when no bit is set.
     pub const fn is_empty(self) -> bool {
@@ -156,7 +170,7 @@ impl Faults {
     }
     /// Names of the set bits, for humans.
     pub fn names(self) -> impl Iterator<Item = &'static str> {
-        const NAMES: [&str; 7] = [
+        const NAMES: [&str; 11] = [
             "no_table",
             "bad_table",
             "sensor_range",
@@ -164,6 +178,10 @@ impl Faults {
             "not_finite",
             "encoder_jump",
             "not_referenced",
+            "trial_failed",
+            "reset_by_panic",
+            "reset_by_hardfault",
+            "reset_by_watchdog",
         ];
         NAMES
             .into_iter()
@@ -428,6 +446,19 @@ mod tests {
         assert_eq!(bytes(&LinkError::BadAxis), [15]);
         assert_eq!(Faults::NOT_REFERENCED.0, 1 << 6);
         assert!(Faults::NOT_REFERENCED.names().eq(["not_referenced"]));
+        // The boot fallback's bits (latched only), named as the host's
+        // JSON shows them.
+        let fallback = Faults::TRIAL_FAILED
+            .union(Faults::RESET_BY_PANIC)
+            .union(Faults::RESET_BY_HARDFAULT)
+            .union(Faults::RESET_BY_WATCHDOG);
+        assert_eq!(fallback.0, 0b1111 << 7);
+        assert!(fallback.names().eq([
+            "trial_failed",
+            "reset_by_panic",
+            "reset_by_hardfault",
+            "reset_by_watchdog"
+        ]));
         assert_eq!(crate::PROTOCOL_VERSION, 2);
     }
 }

@@ -12,6 +12,9 @@
 //! ```
 //!
 //! The valid, non-revoked slot with the highest `seq` is the one that boots.
+//! A revoked slot also has its magic programmed to zero (the board's
+//! rollback, trueaxis_app::store): its header is then invalid too, which a
+//! torn erase of the slot cannot undo by restoring the marker alone.
 
 use crate::{Slot, SlotInfo, FRAME_CRC};
 

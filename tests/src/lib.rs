@@ -22,12 +22,42 @@ pub fn exit(code: i32) -> ! {
     semihosting::process::exit(code)
 }
 
+/// Which fault reached a handler (for [`set_fault_hook`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
+pub enum FaultKind {
+    /// The panic handler.
+    Panic,
+    /// The HardFault handler.
+    HardFault,
+}
+
+/// What a panic or a HardFault does instead of exiting 1.
+pub type FaultHook = fn(FaultKind) -> !;
+
+/// The hook, when set.
+static FAULT_HOOK: critical_section::Mutex<core::cell::Cell<Option<FaultHook>>> =
+    critical_section::Mutex::new(core::cell::Cell::new(None));
+
+/// Makes a panic or HardFault call `hook` instead of ending the run with
+/// exit 1: the boot-fallback image (bin/fallback.rs) records the fault and
+/// resets, as the board does. Every other image keeps "a fault fails".
+pub fn set_fault_hook(hook: FaultHook) {
+    critical_section::with(|cs| FAULT_HOOK.borrow(cs).set(Some(hook)));
+}
+
+fn fault_hook() -> Option<FaultHook> {
+    critical_section::with(|cs| FAULT_HOOK.borrow(cs).get())
+}
+
 /// A panic is a failed test: log it (defmt-print shows it) and exit 1.
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     // Print the location through defmt's Display2Format; the message itself
     // is formatted by core::fmt, which is fine on a failure path.
     defmt::error!("panicked: {}", defmt::Display2Format(info));
+    if let Some(hook) = fault_hook() {
+        hook(FaultKind::Panic)
+    }
     exit(1)
 }
 
@@ -41,6 +71,9 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 #[cortex_m_rt::exception]
 unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
     use core::fmt::Write as _;
+    if let Some(hook) = fault_hook() {
+        hook(FaultKind::HardFault)
+    }
     let at = frame as *const cortex_m_rt::ExceptionFrame as usize;
     let readable = (0x2000_0000..0x2002_0000 - 32).contains(&at);
     if let Ok(mut err) = semihosting::io::stderr() {

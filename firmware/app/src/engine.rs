@@ -418,6 +418,13 @@ impl<'m> Engine<'m> {
         self.latched = self.live;
     }
 
+    /// Latches `f` (shown in `faults_latched` until `ClearFaults`) without
+    /// making it active: how the boot reports a fallback
+    /// ([`Faults::TRIAL_FAILED`], crate::boot) while the correction runs.
+    pub fn latch(&mut self, f: Faults) {
+        self.latched = self.latched.union(f);
+    }
+
     /// Faults active now.
     pub fn faults(&self) -> Faults {
         self.live.union(self.sticky)

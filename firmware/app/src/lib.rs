@@ -3,6 +3,8 @@
 //!
 //! - [`engine`]: the fixed-rate correction (sensors → model → envelope →
 //!   slew limit → step pulses, faults ramp to zero).
+//! - [`boot`]: the boot fallback (a table on trial until it has run
+//!   without a fault reset; a failed trial falls back to the other slot).
 //! - [`store`]: the A/B table slots in NOR flash, power-cut safe.
 //! - [`server`]: the link server (bytes in, bytes out) for upload, commit,
 //!   activate, rollback, status and injection.
@@ -15,6 +17,7 @@
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![forbid(unsafe_code)]
 
+pub mod boot;
 pub mod engine;
 pub mod hw;
 pub mod memflash;

@@ -1,23 +1,32 @@
 //! A RAM-backed NOR flash (embassy's `MemFlash` idea) that behaves like the
 //! real thing where the table store depends on it, and can lose power.
 //!
-//! - Erase sets whole erase units to `0xFF`; a write may only program
-//!   erased bytes (the STM32F4 flags a programming error otherwise), and
-//!   both must be aligned to `ERASE`/`WRITE` — mistakes the store could
-//!   make on hardware fail here too.
-//! - A **power cut** after `n` operations: operation `n + 1` is *torn*
-//!   (a write programs only its first half, an erase erases only its first
-//!   half, the rest keeps its old content, and the caller sees
-//!   [`MemFlashError::PowerCut`]) and every later operation fails
-//!   with [`MemFlashError::PowerCut`] without touching the contents. The
-//!   power-cut tests run a commit with `n = 0, 1, 2, …` until it completes,
-//!   "reboot" on what is left, and check that a valid table is active.
+//! - Erase sets whole erase units to `0xFF`, one operation per unit
+//!   (the F405 erases a whole sector in one step); both erase and write
+//!   must be aligned to `ERASE`/`WRITE` — mistakes the store could make on
+//!   hardware fail here too.
+//! - A write can only clear bits: the result is the old contents AND the
+//!   data (`MultiwriteNorFlash`, what the STM32F4 does — no ECC, ST's
+//!   AN3969 EEPROM emulation programs status words over programmed ones);
+//!   a write that would need a 0 bit back to 1 fails with
+//!   [`MemFlashError::NotErased`] (the chip would silently keep the 0).
+//! - A **power cut** during operation `op` ([`Cut`]): a write is *torn at
+//!   a word* — the words before it programmed, that word partly (some of
+//!   its bits to be cleared are, chosen by a seed), the rest untouched; an
+//!   erase is torn as an arbitrary mix — every bit either its old value or
+//!   erased, chosen by the seed (the F405 does not document the order in
+//!   which a sector erase proceeds) — or, with [`Cut::ordered_erase`],
+//!   a prefix erased (the header first). The cut operation and every later
+//!   one fail with [`MemFlashError::PowerCut`], the later ones without
+//!   touching the contents. The power-cut tests cut at every operation (and
+//!   every word of every write) of a commit, "reboot" on what is left, and
+//!   check that a valid table is active.
 //!
 //! Generic over the buffer (`Vec<u8>` in host tests, a `&mut [u8]` or an
 //! array in QEMU images), no allocation, no `unsafe`.
 
 use embedded_storage::nor_flash::{
-    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+    ErrorType, MultiwriteNorFlash, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
 
 /// What a [`MemFlash`] operation can fail with.
@@ -28,7 +37,7 @@ pub enum MemFlashError {
     NotAligned,
     /// Past the end of the memory.
     OutOfBounds,
-    /// Programming a byte that is not erased.
+    /// Programming a 1 over a 0 bit (needs an erase first).
     NotErased,
     /// The power is gone.
     PowerCut,
@@ -44,12 +53,47 @@ impl NorFlashError for MemFlashError {
     }
 }
 
+/// Where a power cut lands (see the module documentation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Cut {
+    /// The operation (counted from 0 since the cut was armed) that is torn.
+    pub op: usize,
+    /// For a write: the word (of `WRITE` bytes) torn; the ones before it
+    /// are programmed. Past the write's end: the whole write done.
+    pub word: usize,
+    /// Chooses which bits of the torn word, or of the torn erase, changed.
+    pub seed: u64,
+    /// A torn erase erases a prefix (half the unit) instead of a mix.
+    pub ordered_erase: bool,
+}
+
+impl Cut {
+    /// Operation `op` torn half way (word: half the write; erase: the
+    /// first half of the unit), every bit of the torn word kept.
+    pub const fn half(op: usize) -> Self {
+        Self {
+            op,
+            word: usize::MAX,
+            seed: 0,
+            ordered_erase: true,
+        }
+    }
+}
+
 /// RAM-backed NOR flash with write size `WRITE` and erase size `ERASE`.
 #[derive(Debug, Clone)]
 pub struct MemFlash<B, const WRITE: usize, const ERASE: usize> {
     mem: B,
     ops: usize,
-    cut_after: Option<usize>,
+    cut: Option<Cut>,
+}
+
+/// xorshift64*: the seeded choice of torn bits (no dependency, no_std).
+fn mix(seed: &mut u64) -> u8 {
+    *seed ^= *seed << 13;
+    *seed ^= *seed >> 7;
+    *seed ^= *seed << 17;
+    (seed.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 56) as u8
 }
 
 impl<B: AsRef<[u8]> + AsMut<[u8]>, const WRITE: usize, const ERASE: usize>
@@ -61,7 +105,7 @@ impl<B: AsRef<[u8]> + AsMut<[u8]>, const WRITE: usize, const ERASE: usize>
         Self {
             mem,
             ops: 0,
-            cut_after: None,
+            cut: None,
         }
     }
 
@@ -70,14 +114,21 @@ impl<B: AsRef<[u8]> + AsMut<[u8]>, const WRITE: usize, const ERASE: usize>
         Self {
             mem,
             ops: 0,
-            cut_after: None,
+            cut: None,
         }
     }
 
-    /// Cuts the power after `n` more erase/write operations (`None`: never).
+    /// Cuts the power after `n` more erase/write operations (`None`: never),
+    /// the cut one torn half way ([`Cut::half`]).
     pub fn cut_power_after(&mut self, n: Option<usize>) {
+        self.cut_power(n.map(Cut::half));
+    }
+
+    /// Cuts the power as `cut` says (`None`: never); operations count from
+    /// now.
+    pub fn cut_power(&mut self, cut: Option<Cut>) {
         self.ops = 0;
-        self.cut_after = n;
+        self.cut = cut;
     }
 
     /// Erase/write operations since the last `cut_power_after`.
@@ -100,15 +151,15 @@ impl<B: AsRef<[u8]> + AsMut<[u8]>, const WRITE: usize, const ERASE: usize>
         self.mem
     }
 
-    /// Counts one operation; returns whether it runs whole (`Ok(true)`),
-    /// torn (`Ok(false)`) or not at all.
-    fn begin_op(&mut self) -> Result<bool, MemFlashError> {
+    /// Counts one operation; returns `None` when it runs whole, the cut
+    /// when it is torn, an error when the power is already gone.
+    fn begin_op(&mut self) -> Result<Option<Cut>, MemFlashError> {
         let n = self.ops;
         self.ops += 1;
-        match self.cut_after {
-            Some(cut) if n > cut => Err(MemFlashError::PowerCut),
-            Some(cut) if n == cut => Ok(false),
-            _ => Ok(true),
+        match self.cut {
+            Some(cut) if n > cut.op => Err(MemFlashError::PowerCut),
+            Some(cut) if n == cut.op => Ok(Some(cut)),
+            _ => Ok(None),
         }
     }
 
@@ -156,18 +207,24 @@ impl<B: AsRef<[u8]> + AsMut<[u8]>, const WRITE: usize, const ERASE: usize> NorFl
             return Err(MemFlashError::NotAligned);
         }
         let r = self.range(from, (to - from) as usize)?;
-        let whole = self.begin_op()?;
-        let r = if whole {
-            r
-        } else {
-            r.start..r.start + r.len() / 2
-        };
-        self.mem.as_mut()[r].fill(0xFF);
-        if whole {
-            Ok(())
-        } else {
-            Err(MemFlashError::PowerCut)
+        // One operation per erase unit, as the chip erases sector by sector.
+        for unit in r.step_by(ERASE) {
+            let Some(cut) = self.begin_op()? else {
+                self.mem.as_mut()[unit..unit + ERASE].fill(0xFF);
+                continue;
+            };
+            let mem = &mut self.mem.as_mut()[unit..unit + ERASE];
+            if cut.ordered_erase {
+                mem[..ERASE / 2].fill(0xFF);
+            } else {
+                let mut seed = cut.seed | 1;
+                for b in mem.iter_mut() {
+                    *b |= mix(&mut seed);
+                }
+            }
+            return Err(MemFlashError::PowerCut);
         }
+        Ok(())
     }
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
@@ -175,22 +232,41 @@ impl<B: AsRef<[u8]> + AsMut<[u8]>, const WRITE: usize, const ERASE: usize> NorFl
             return Err(MemFlashError::NotAligned);
         }
         let r = self.range(offset, bytes.len())?;
-        if self.mem.as_ref()[r.clone()].iter().any(|&b| b != 0xFF) {
+        let old = &self.mem.as_ref()[r.clone()];
+        if old.iter().zip(bytes).any(|(&o, &d)| d & !o != 0) {
             return Err(MemFlashError::NotErased);
         }
-        let whole = self.begin_op()?;
-        let n = if whole {
-            bytes.len()
-        } else {
-            (bytes.len() / WRITE / 2) * WRITE
+        let Some(cut) = self.begin_op()? else {
+            for (m, &d) in self.mem.as_mut()[r].iter_mut().zip(bytes) {
+                *m &= d;
+            }
+            return Ok(());
         };
-        self.mem.as_mut()[r.start..r.start + n].copy_from_slice(&bytes[..n]);
-        if whole {
-            Ok(())
+        let words = bytes.len() / WRITE;
+        let torn = if cut.word == usize::MAX {
+            words / 2
         } else {
-            Err(MemFlashError::PowerCut)
+            cut.word.min(words)
+        };
+        let mem = &mut self.mem.as_mut()[r];
+        for (m, &d) in mem.iter_mut().zip(bytes).take(torn * WRITE) {
+            *m &= d;
         }
+        if torn < words && cut.word != usize::MAX {
+            // The torn word: each bit to be cleared is, or is not.
+            let mut seed = cut.seed | 1;
+            let at = torn * WRITE;
+            for (m, &d) in mem[at..at + WRITE].iter_mut().zip(&bytes[at..]) {
+                *m &= d | mix(&mut seed);
+            }
+        }
+        Err(MemFlashError::PowerCut)
     }
+}
+
+impl<B: AsRef<[u8]> + AsMut<[u8]>, const WRITE: usize, const ERASE: usize> MultiwriteNorFlash
+    for MemFlash<B, WRITE, ERASE>
+{
 }
 
 #[cfg(test)]
@@ -204,6 +280,8 @@ mod tests {
         assert_eq!(f.erase(0, 32), Err(MemFlashError::NotAligned));
         assert_eq!(f.write(256, &[0; 4]), Err(MemFlashError::OutOfBounds));
         f.write(0, &[1, 2, 3, 4]).unwrap();
+        // Clearing bits again is allowed (F4), setting one is not.
+        f.write(0, &[0, 2, 3, 4]).unwrap();
         assert_eq!(f.write(0, &[1, 2, 3, 4]), Err(MemFlashError::NotErased));
         f.cut_power_after(Some(1));
         f.erase(0, 64).unwrap(); // op 0: whole
@@ -215,5 +293,34 @@ mod tests {
         );
         assert_eq!(f.write(16, &[9; 4]), Err(MemFlashError::PowerCut));
         assert_eq!(f.contents()[16], 0xFF);
+    }
+
+    #[test]
+    fn a_torn_word_clears_some_of_its_bits_a_torn_erase_sets_some() {
+        let mut f: MemFlash<Vec<u8>, 4, 64> = MemFlash::new_erased(vec![0; 128]);
+        f.cut_power(Some(Cut {
+            op: 0,
+            word: 1,
+            seed: 7,
+            ordered_erase: false,
+        }));
+        assert_eq!(f.write(0, &[0; 16]), Err(MemFlashError::PowerCut));
+        let c = f.contents();
+        assert_eq!(&c[..4], &[0; 4]);
+        assert!(c[4..8].iter().any(|&b| b != 0) && c[4..8].iter().any(|&b| b != 0xFF));
+        assert_eq!(&c[8..16], &[0xFF; 8]);
+        // Two units: the first erased whole (op 0), the second torn.
+        let mut f: MemFlash<Vec<u8>, 4, 64> = MemFlash::from_contents(vec![0; 128]);
+        f.cut_power(Some(Cut {
+            op: 1,
+            word: 0,
+            seed: 3,
+            ordered_erase: false,
+        }));
+        assert_eq!(f.erase(0, 128), Err(MemFlashError::PowerCut));
+        let c = f.contents();
+        assert!(c[..64].iter().all(|&b| b == 0xFF));
+        let set: u32 = c[64..].iter().map(|b| b.count_ones()).sum();
+        assert!(set > 64 * 2 && set < 64 * 6, "a mix: {set} of 512 bits set");
     }
 }

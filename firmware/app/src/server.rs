@@ -29,6 +29,13 @@
 //! virtual time is not the wall clock), renewed by each `Inject`; it also
 //! ends when the port that started it closes ([`Server::port_closed`]).
 //!
+//! **Boot fallback.** Every table that starts running (boot, commit,
+//! rollback) is on trial for [`CONFIRM_MS`](crate::boot::CONFIRM_MS); the
+//! server keeps the trial's [`BootRecord`] in the board's reset-surviving
+//! RAM through a [`ResetRecord`], and [`Server::boot_after_reset`] falls
+//! back to the other slot when a fault reset the board during a trial
+//! (crate::boot says why the record lives in RAM).
+//!
 //! **Loop budget.** A commit is also refused (`LinkError::TooSlow`) when
 //! the table's fixed-point evaluation is estimated (`model_core::cost`)
 //! above `ServerConfig::model_budget_instr`: a table valid in every other
@@ -37,13 +44,14 @@
 use core::cell::RefCell;
 
 use trueaxis_protocol::{
-    decode_message, encode_frame, FrameDecoder, Identity, LinkError, Packet, Request, Response,
-    SlotInfo, MAX_CHUNK_BYTES, MAX_FRAME_BYTES, PROTOCOL_VERSION,
+    decode_message, encode_frame, Faults, FrameDecoder, Identity, LinkError, Packet, Request,
+    Response, SlotInfo, MAX_CHUNK_BYTES, MAX_FRAME_BYTES, PROTOCOL_VERSION,
 };
 
-use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
+use embedded_storage::nor_flash::{MultiwriteNorFlash, ReadNorFlash};
 use model_core::board::{check_cost, LimitError};
 
+use crate::boot::{self, BootRecord, ResetCause, TrialFailed, RECORD_WORDS};
 use crate::engine::{Engine, STILL_US};
 use crate::model::{self, ModelBuf};
 use crate::store::{StoreError, TableStore};
@@ -63,6 +71,39 @@ impl<'m> EngineAccess<'m> for RefCell<Engine<'m>> {
     fn with_engine<R>(&self, f: impl FnOnce(&mut Engine<'m>) -> R) -> R {
         f(&mut self.borrow_mut())
     }
+}
+
+/// Where the server keeps the [`BootRecord`] (`Send`: the simulated board
+/// is served from a thread): RAM that survives a reset
+/// (a `.uninit` static on the board and in QEMU), written at once so that
+/// a table that crashes on its first tick is already on record.
+pub trait ResetRecord {
+    /// Stores the record's words.
+    fn write(&mut self, words: [u32; RECORD_WORDS]);
+}
+
+/// The record sink, or none (host tests and the simulated board).
+struct Sink<'b>(Option<&'b mut (dyn ResetRecord + Send)>);
+
+impl core::fmt::Debug for Sink<'_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(if self.0.is_some() {
+            "Sink(..)"
+        } else {
+            "Sink(none)"
+        })
+    }
+}
+
+/// What [`Server::boot_after_reset`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BootReport {
+    /// The table the correction runs on.
+    pub active: Option<SlotInfo>,
+    /// The newest table's trial failed: it was revoked (when another table
+    /// was there to take over) and is not running.
+    pub failed: Option<TrialFailed>,
 }
 
 /// Server settings.
@@ -137,9 +178,14 @@ pub struct Server<'b, 'm, F> {
     rx_bad_frames: u32,
     /// Bumped each time a port other than the last injecting one injects.
     inject_gen: u32,
+    /// The running table's trial (crate::boot), mirrored to `sink`.
+    record: BootRecord,
+    /// Engine tick at which the running table's trial started.
+    trial_start_tick: u64,
+    sink: Sink<'b>,
 }
 
-impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
+impl<'b, 'm, F: MultiwriteNorFlash + ReadNorFlash> Server<'b, 'm, F> {
     /// A server over `store`, staging uploads in `stage` (its length is the
     /// largest table accepted), with two model buffers: one for the engine,
     /// one to load the next table into.
@@ -159,16 +205,96 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
             cfg,
             rx_bad_frames: 0,
             inject_gen: 0,
+            record: BootRecord::trial(None),
+            trial_start_tick: 0,
+            sink: Sink(None),
         }
     }
 
-    /// Boot: scans both slots and activates the newest valid table (or
-    /// leaves the engine without one: it reports `NO_TABLE`).
+    /// Keeps the boot record in `sink` from now on (call before booting).
+    pub fn set_reset_record(&mut self, sink: &'b mut (dyn ResetRecord + Send)) {
+        self.sink = Sink(Some(sink));
+    }
+
+    /// Boot after a power-up: scans both slots and activates the newest
+    /// valid table (or leaves the engine without one: it reports
+    /// `NO_TABLE`).
     pub fn boot(&mut self, engine: &impl EngineAccess<'m>) -> Option<SlotInfo> {
+        self.boot_after_reset(engine, ResetCause::PowerOn, None)
+            .active
+    }
+
+    /// Boot after a reset of cause `reset`, with the record that survived
+    /// it (`None` after a power cut or when RAM held none): scans both
+    /// slots; when the newest table failed its trial (crate::boot), revokes
+    /// it, latches `TRIAL_FAILED` and the fault's bit, and activates the
+    /// other one — or none, if there is none; otherwise activates the
+    /// newest. The table activated starts its own trial.
+    pub fn boot_after_reset(
+        &mut self,
+        engine: &impl EngineAccess<'m>,
+        reset: ResetCause,
+        record: Option<BootRecord>,
+    ) -> BootReport {
         let spare = spare(&mut self.spares);
         self.store
             .scan(self.stage, |b| model::load_into(b, spare).is_ok());
-        self.activate_newest(engine).ok()
+        let failed = boot::failed_trial(record, reset, self.store.active());
+        if let Some(f) = failed {
+            engine.with_engine(|e| e.latch(Faults::TRIAL_FAILED.union(f.fault.bit())));
+            if self.store.rollback().is_err() {
+                // Nothing to fall back to (or the revoke failed): run no
+                // table rather than the one that crashed the board. The
+                // record stays, so another fault reset keeps it so; a
+                // power-up gives the table a new trial.
+                if let Some(r) = record {
+                    self.record = r;
+                }
+                return BootReport {
+                    active: None,
+                    failed,
+                };
+            }
+        }
+        BootReport {
+            active: self.activate_newest(engine).ok(),
+            failed,
+        }
+    }
+
+    /// Confirms the running table once it has run
+    /// [`CONFIRM_MS`](boot::CONFIRM_MS) of engine ticks since its trial
+    /// began; call it periodically (the board's watchdog task). Returns
+    /// whether the record changed.
+    pub fn poll_trial(&mut self, engine: &impl EngineAccess<'m>) -> bool {
+        if self.record.confirmed || self.record.table.is_none() {
+            return false;
+        }
+        let (ticks, period) = engine.with_engine(|e| (e.telemetry().ticks, e.config().period_us));
+        let need = u64::from(boot::CONFIRM_MS) * 1000 / u64::from(period.max(1));
+        if ticks.saturating_sub(self.trial_start_tick) < need.max(1) {
+            return false;
+        }
+        self.record.confirmed = true;
+        self.write_record();
+        true
+    }
+
+    /// The boot record as the server keeps it.
+    pub fn boot_record(&self) -> BootRecord {
+        self.record
+    }
+
+    fn start_trial(&mut self, table: Option<SlotInfo>, engine: &impl EngineAccess<'m>) {
+        self.record = BootRecord::trial(table);
+        self.trial_start_tick = engine.with_engine(|e| e.telemetry().ticks);
+        self.write_record();
+    }
+
+    fn write_record(&mut self) {
+        if let Some(s) = self.sink.0.as_mut() {
+            s.write(self.record.encode());
+        }
     }
 
     fn give_back(&mut self, m: Option<&'m mut ModelBuf>) {
@@ -363,10 +489,18 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
                     self.upload = None;
                     return Err(LinkError::CrcMismatch);
                 }
-                // A valid table the loop cannot evaluate every period is
-                // refused before anything is written (and before waiting
-                // for the axes to stop): the active table stays. An
-                // invalid one is the store's to refuse below.
+                // Refused before anything is written (and before waiting
+                // for the axes to stop), the active table staying, in the
+                // order of `model_core::board::check` — what `trueaxis
+                // export`, `upload` and `flash` refuse with: a table that
+                // does not load into the board's model (format, capacity,
+                // ranges), then one the loop cannot evaluate every period.
+                if model::load_into(&self.stage[..u.size as usize], spare(&mut self.spares))
+                    .is_err()
+                {
+                    self.upload = None;
+                    return Err(LinkError::InvalidTable);
+                }
                 if let Ok(t) = model_core::parse(&self.stage[..u.size as usize]) {
                     if let Err(LimitError::TooSlow { estimate, budget }) =
                         check_cost(&t, self.cfg.model_budget_instr)
@@ -497,6 +631,10 @@ impl<'b, 'm, F: NorFlash + ReadNorFlash> Server<'b, 'm, F> {
         };
         match loaded {
             Ok(()) => {
+                if self.record.table != Some(info) {
+                    // On record before its first tick runs.
+                    self.start_trial(Some(info), engine);
+                }
                 let m = self.spares[slot].take();
                 if let Some(m) = m {
                     let old = engine.with_engine(|e| e.set_model(m, info));

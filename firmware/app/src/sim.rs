@@ -26,11 +26,12 @@ use model_core::spec::{PolyCoef, TableSpec, TermSpec};
 use model_core::{Envelope, InputScaling};
 use trueaxis_protocol::LINK_TEMPS;
 
+use crate::boot::{BootRecord, Fault, ResetCause, RECORD_WORDS};
 use crate::engine::{AxisConfig, Engine, EngineConfig};
 use crate::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use crate::memflash::MemFlash;
 use crate::model::ModelBuf;
-use crate::server::{Port, Server, ServerConfig};
+use crate::server::{Port, ResetRecord, Server, ServerConfig};
 use crate::store::{Layout, TableStore};
 
 /// The RAM flash of the simulated board: two 64 KiB slots, 4-byte writes,
@@ -184,15 +185,28 @@ impl Clock for SimClock {
     }
 }
 
+/// The board's RAM that survives a reset (not a power cut): where the
+/// server keeps the boot record (crate::boot).
+#[derive(Debug, Clone, Default)]
+pub struct SimResetRam(Arc<Mutex<[u32; RECORD_WORDS]>>);
+
+impl ResetRecord for SimResetRam {
+    fn write(&mut self, words: [u32; RECORD_WORDS]) {
+        *self.0.lock().unwrap() = words;
+    }
+}
+
 /// The simulated board: application core + fakes, served over TCP by
 /// [`SimBoard::serve`]. Its flash survives [`SimBoard::into_flash`] for a
-/// "reboot" on the same contents.
+/// "reboot" on the same contents; [`SimBoard::fault_reset`] resets it
+/// keeping its RAM record too.
 pub struct SimBoard {
     /// Sensor values and pulses.
     pub io: Arc<Mutex<SimIo>>,
     engine: Box<RefCell<Engine<'static>>>,
     server: Server<'static, 'static, SimFlash>,
     clock: SimClock,
+    ram: SimResetRam,
 }
 
 impl core::fmt::Debug for SimBoard {
@@ -211,8 +225,38 @@ impl SimBoard {
     /// buffer are leaked (≈ 100 KiB per board; test processes create a
     /// few hundred at most).
     pub fn with_flash(flash: SimFlash) -> Self {
+        Self::boot(flash, SimResetRam::default(), ResetCause::PowerOn)
+    }
+
+    /// A fault resets the board: the fault's handler records it in the RAM
+    /// that survives the reset (a watchdog reset records nothing: the
+    /// reset flags say it), then the board boots on the same flash and RAM.
+    pub fn fault_reset(self, fault: Fault) -> Self {
+        let ram = self.ram.clone();
+        let cause = match fault {
+            Fault::Watchdog => ResetCause::Watchdog,
+            f => {
+                BootRecord::record_fault(&mut ram.0.lock().unwrap(), f);
+                ResetCause::Other
+            }
+        };
+        Self::boot(self.into_flash(), ram, cause)
+    }
+
+    /// A reset with no fault (the reset pin): flash and RAM kept.
+    pub fn plain_reset(self) -> Self {
+        let ram = self.ram.clone();
+        Self::boot(self.into_flash(), ram, ResetCause::Other)
+    }
+
+    fn boot(flash: SimFlash, ram: SimResetRam, cause: ResetCause) -> Self {
+        let record = BootRecord::decode(&ram.0.lock().unwrap());
+        let sink: &'static mut SimResetRam = Box::leak(Box::new(ram.clone()));
         let store = TableStore::new(flash, SIM_LAYOUT).expect("sim layout fits");
-        let stage: &'static mut [u8] = Box::leak(vec![0u8; 48 * 1024].into_boxed_slice());
+        // The board's staging buffer: the sim accepts the uploads the board
+        // accepts (48 KiB here once let a 28 KB table reach the model load).
+        let stage: &'static mut [u8] =
+            Box::leak(vec![0u8; model_core::board::STAGE_BYTES].into_boxed_slice());
         let m1: &'static mut ModelBuf = Box::leak(Box::default());
         let m2: &'static mut ModelBuf = Box::leak(Box::default());
         let engine = Box::new(RefCell::new(
@@ -229,12 +273,14 @@ impl SimBoard {
                 model_budget_instr: model_core::board::MODEL_BUDGET_INSTR,
             },
         );
-        server.boot(&*engine);
+        server.set_reset_record(sink);
+        server.boot_after_reset(&*engine, cause, record);
         Self {
             io: Arc::new(Mutex::new(SimIo::at_rest())),
             engine,
             server,
             clock: SimClock::default(),
+            ram,
         }
     }
 
@@ -254,6 +300,7 @@ impl SimBoard {
             self.engine
                 .borrow_mut()
                 .tick(&self.clock, &mut io, &mut io2, &mut io3);
+            self.server.poll_trial(&*self.engine);
         }
     }
 

@@ -18,28 +18,36 @@
 //! new slot has a higher sequence number and wins. The active slot is never
 //! erased or written by a commit.
 //!
-//! **Rollback** programs the active slot's revoke marker to zero — one
-//! write that needs no erase (NOR flash can always clear bits) — so the
-//! other slot becomes the newest valid one. Torn, it leaves either marker
-//! state, both of which name a valid table. It is refused unless the other
-//! slot holds a valid table.
+//! **Rollback** programs the active slot's revoke marker to zero, then
+//! zeroes its header's magic word: two writes that need no erase, the
+//! second over programmed bits, which is why rollback needs a
+//! `MultiwriteNorFlash` (the STM32F4 clears bits over programmed ones: no
+//! ECC; ST's AN3969 EEPROM emulation relies on it; the board wraps
+//! embassy-stm32's `Flash` to say so). After either write the other slot
+//! is the newest valid one; torn, each leaves a state that names a valid
+//! table (a marker with any bit cleared is "revoked", a magic with any bit
+//! cleared is no header). It is refused unless the other slot holds a
+//! valid table.
 //!
-//! Assumption, stated because it matters: a *torn erase* of a slot is
-//! modelled as erasing a prefix of it (the header first). Real NOR may leave
-//! any mix of bits; the header and table CRCs make a half-erased slot
-//! invalid in every case but one — a previously revoked slot whose revoke
-//! marker erased while its header and table survived would come back (with
-//! its old, higher sequence number). The F405's sector erase is not
-//! documented to be ordered, so after a rollback the next commit is the
-//! moment to look at if that ever matters. Closing it needs a rollback
-//! that also zeroes the header's magic word — programming zeros over
-//! programmed bits, which not every flash allows (the test fake forbids
-//! writes to non-erased bytes).
+//! **The revoked slot and a torn erase.** After a rollback the revoked slot
+//! has the *higher* sequence number, and it is the next commit's target.
+//! A power cut during that commit's erase can leave any mix of erased and
+//! old bits (the F405's sector erase is one step whose order is not
+//! documented). Had the rollback only revoked, an erase torn so that the
+//! revoke marker came back to all-ones while header and table survived
+//! would resurrect the rolled-back table. With the magic zeroed too, the
+//! header is dead unless the erase brought back exactly the magic's bits
+//! and none of the others that the header CRC covers — and a header that
+//! comes back whole also needs the table's CRC to match. Tested with the
+//! worst order (the marker erased first, nothing else) and with seeded
+//! mixes.
 //!
 //! These claims are tested by cutting the power at every erase and write
-//! step of commits and rollbacks against [`MemFlash`](crate::memflash).
+//! step — and every word of every write — of commits and rollbacks against
+//! [`MemFlash`](crate::memflash), with model-core's parse + load as the
+//! validator and the F405's 128 KiB sectors (app/tests/store_power_cut.rs).
 
-use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
+use embedded_storage::nor_flash::{MultiwriteNorFlash, NorFlash, ReadNorFlash};
 use trueaxis_protocol::slot::{
     decode_header, encode_header, is_live, BODY_AT, HEADER_AT, HEADER_BYTES, REVOKE_AT,
     REVOKE_BYTES,
@@ -297,8 +305,11 @@ impl<F: NorFlash + ReadNorFlash> TableStore<F> {
         self.valid[ti] = Some(info);
         Ok(info)
     }
+}
 
-    /// Revokes the active table; the other slot's becomes active and is
+impl<F: MultiwriteNorFlash + ReadNorFlash> TableStore<F> {
+    /// Revokes the active table (marker, then the header's magic: see the
+    /// module documentation); the other slot's becomes active and is
     /// returned.
     pub fn rollback(&mut self) -> Result<SlotInfo, StoreError> {
         let active = self.active().ok_or(StoreError::Empty)?;
@@ -309,6 +320,11 @@ impl<F: NorFlash + ReadNorFlash> TableStore<F> {
             .write(base + REVOKE_AT, &[0u8; REVOKE_BYTES])
             .map_err(|_| StoreError::Flash)?;
         self.valid[ai] = None;
+        // The magic word (one write unit; `new` checked it fits the header).
+        let zeros = [0u8; HEADER_BYTES];
+        self.flash
+            .write(base + HEADER_AT, &zeros[..F::WRITE_SIZE.max(4)])
+            .map_err(|_| StoreError::Flash)?;
         Ok(standby)
     }
 }

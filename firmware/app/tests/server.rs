@@ -843,3 +843,255 @@ fn a_dithering_axis_is_at_rest() {
     );
     assert!(!status(&mut b, &mut p).injecting);
 }
+
+fn identity(b: &mut SimBoard, p: &mut Port) -> trueaxis_protocol::Identity {
+    let Response::Identity(id) = call(b, p, 70, Request::Identify) else {
+        panic!()
+    };
+    id
+}
+
+/// The boot fallback (trueaxis_app::boot): a table that faults the board
+/// during its trial window (5 s of ticks; 1 ms ticks here) is revoked by
+/// the next boot, the previous table runs and `status` says why; after its
+/// window a table is confirmed and a fault no longer throws it away; a
+/// reset without a fault, or a power cut, is not held against a table.
+#[test]
+fn a_table_that_faults_during_its_trial_falls_back_to_the_previous_one() {
+    use trueaxis_app::boot::Fault;
+    let (t1, t2) = (sample_table(0), sample_table(1));
+    for fault in [Fault::Panic, Fault::HardFault, Fault::Watchdog] {
+        let mut b = SimBoard::new();
+        let mut p = Port::new();
+        install(&mut b, &mut p, &t1);
+        b.tick(5000); // t1 confirmed
+        install(&mut b, &mut p, &t2);
+        b.tick(4000); // t2 still on trial
+        let mut b = b.fault_reset(fault);
+        let t = status(&mut b, &mut p);
+        assert_eq!(t.active.map(|a| a.crc32), Some(table_id(&t1)), "{fault:?}");
+        assert!(t
+            .faults_latched
+            .contains(Faults::TRIAL_FAILED.union(fault.bit())));
+        assert!(!t.faults.contains(Faults::TRIAL_FAILED), "latched only");
+        // t2 is revoked: nothing to roll back to, and a power cycle (RAM
+        // lost) keeps t1.
+        assert_eq!(identity(&mut b, &mut p).standby, None);
+        let mut b = SimBoard::with_flash(b.into_flash());
+        assert_eq!(
+            status(&mut b, &mut p).active.map(|a| a.crc32),
+            Some(table_id(&t1))
+        );
+    }
+
+    // Confirmed after its window: a later fault keeps the table.
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    install(&mut b, &mut p, &t1);
+    b.tick(5000);
+    install(&mut b, &mut p, &t2);
+    b.tick(5000);
+    let mut b = b.fault_reset(Fault::Panic);
+    let t = status(&mut b, &mut p);
+    assert_eq!(t.active.map(|a| a.crc32), Some(table_id(&t2)));
+    assert!(!t.faults_latched.contains(Faults::TRIAL_FAILED));
+    // After that boot t2 is on trial again: a fault now falls back.
+    b.tick(100);
+    let mut b = b.fault_reset(Fault::Panic);
+    assert_eq!(
+        status(&mut b, &mut p).active.map(|a| a.crc32),
+        Some(table_id(&t1))
+    );
+
+    // A reset without a fault during the trial keeps the new table.
+    let mut b = SimBoard::new();
+    install(&mut b, &mut p, &t1);
+    b.tick(5000);
+    install(&mut b, &mut p, &t2);
+    b.tick(10);
+    let mut b = b.plain_reset();
+    assert_eq!(
+        status(&mut b, &mut p).active.map(|a| a.crc32),
+        Some(table_id(&t2))
+    );
+
+    // The only table faults: the board runs none rather than reset-loop,
+    // until a power cycle gives the table a new trial.
+    let mut b = SimBoard::new();
+    install(&mut b, &mut p, &t1);
+    b.tick(10);
+    let mut b = b.fault_reset(Fault::Panic);
+    let t = status(&mut b, &mut p);
+    assert_eq!(t.active, None);
+    assert!(t.faults.contains(Faults::NO_TABLE));
+    assert!(t.faults_latched.contains(Faults::TRIAL_FAILED));
+    let mut b = b.fault_reset(Fault::Panic);
+    assert_eq!(status(&mut b, &mut p).active, None);
+    let mut b = SimBoard::with_flash(b.into_flash());
+    assert_eq!(
+        status(&mut b, &mut p).active.map(|a| a.crc32),
+        Some(table_id(&t1))
+    );
+}
+
+/// `trueaxis export`, `upload` and `flash` refuse a table with
+/// `model_core::board::check`'s message (export's JSON `board.refusal`);
+/// this walks every way `check` refuses — and a table it accepts — and
+/// requires the board itself (the real server, store and model load) to
+/// refuse the same tables, with the same figures where its answer carries
+/// them, and to write nothing.
+#[test]
+fn the_board_refuses_exactly_what_board_check_refuses() {
+    use model_core::board::{check, LimitError, MODEL_BUDGET_INSTR, MODEL_GRID, STAGE_BYTES};
+    use model_core::spec::{
+        GridAxisSpec, GridSpec, LayerSpec, MlpInputSpec, MlpSource, MlpSpec, TermSpec,
+    };
+    use model_core::LoadError;
+
+    let grid = |n: u16, value_nm: f64| {
+        let mut spec = trueaxis_app::sim::sample_spec(0);
+        let ax = GridAxisSpec {
+            nodes: n,
+            origin_nm: -400_000_000,
+            step_nm: 800_000_000 / (i32::from(n) - 1),
+        };
+        let one = GridAxisSpec {
+            nodes: 1,
+            origin_nm: 0,
+            step_nm: 1,
+        };
+        spec.terms = vec![TermSpec::Grid(GridSpec {
+            output: 0,
+            axes: [ax, ax, one],
+            values_nm: (0..usize::from(n) * usize::from(n))
+                .map(|i| {
+                    if i == 5 {
+                        value_nm
+                    } else {
+                        (i % 97) as f64 * 10.0
+                    }
+                })
+                .collect(),
+        })];
+        spec.encode().unwrap()
+    };
+    // A two-layer network of 32 units: 3·32+32 + 32·32+32 + 32·3+3 = 1283
+    // parameters.
+    let mlp = {
+        let mut spec = trueaxis_app::sim::sample_spec(0);
+        let layer = |i: usize, o: usize| LayerSpec {
+            weights: (0..i * o).map(|k| ((k % 7) as f64 - 3.0) * 0.1).collect(),
+            bias: vec![0.01; o],
+        };
+        spec.terms.push(TermSpec::Mlp(MlpSpec {
+            outputs: vec![0, 1, 2],
+            inputs: (0..3u8)
+                .map(|a| MlpInputSpec {
+                    source: MlpSource::Pos(a),
+                    min: -400e6,
+                    max: 400e6,
+                })
+                .collect(),
+            hidden: vec![layer(3, 32), layer(32, 32)],
+            output: layer(32, 3),
+            out_min_nm: vec![-20_000.0; 3],
+            out_max_nm: vec![20_000.0; 3],
+        }));
+        spec.encode().unwrap()
+    };
+    let slow = include_bytes!("../../../model-core/tests/golden/all_kinds.bin").to_vec();
+    let est = model_core::cost::estimate(&parse(&slow).unwrap()).fixed_instr;
+
+    /// Name, table, what `check` says, what the board answers (`None`:
+    /// it commits).
+    type Case = (
+        &'static str,
+        Vec<u8>,
+        Result<(), LimitError>,
+        Option<LinkError>,
+    );
+    let cases: Vec<Case> = vec![
+        ("fits", sample_table(0), Ok(()), None),
+        (
+            "grid capacity",
+            grid(40, 10.0),
+            Err(LimitError::Grid {
+                needed: 1600,
+                max: MODEL_GRID as u32,
+            }),
+            Some(LinkError::InvalidTable),
+        ),
+        (
+            "staging buffer",
+            grid(60, 10.0),
+            Err(LimitError::TooLarge {
+                bytes: grid(60, 10.0).len() as u32,
+                max: STAGE_BYTES as u32,
+            }),
+            Some(LinkError::TooLarge {
+                max_bytes: STAGE_BYTES as u32,
+            }),
+        ),
+        (
+            "parameter capacity",
+            mlp.clone(),
+            Err(LimitError::Params {
+                // The network and the sample table's two coefficients.
+                needed: 1283 + 2,
+                max: model_core::board::MODEL_PARAMS as u32,
+            }),
+            Some(LinkError::InvalidTable),
+        ),
+        (
+            "load (grid value range)",
+            grid(8, 5_000_000.0),
+            Err(LimitError::Load(LoadError::GridValueRange { term: 0 })),
+            Some(LinkError::InvalidTable),
+        ),
+        (
+            "loop budget",
+            slow,
+            Err(LimitError::TooSlow {
+                estimate: est,
+                budget: MODEL_BUDGET_INSTR,
+            }),
+            Some(LinkError::TooSlow {
+                estimate_instr: est,
+                budget_instr: MODEL_BUDGET_INSTR,
+            }),
+        ),
+    ];
+    for (name, table, want_check, want_board) in cases {
+        let got_check = parse(&table).map(|t| check(&t));
+        assert_eq!(got_check, Ok(want_check), "{name}: board::check");
+        let mut b = SimBoard::new();
+        let mut p = Port::new();
+        install(&mut b, &mut p, &sample_table(1));
+        let ops = b.flash_ops();
+        let begin = call(
+            &mut b,
+            &mut p,
+            1,
+            Request::UploadBegin {
+                size: table.len() as u32,
+                crc32: table_id(&table),
+            },
+        );
+        let answer = if let Response::Error(e) = begin {
+            Response::Error(e)
+        } else {
+            stage(&mut b, &mut p, 1, &table, table_id(&table));
+            call(&mut b, &mut p, 3, Request::Commit)
+        };
+        match want_board {
+            None => assert!(
+                matches!(answer, Response::Committed(_)),
+                "{name}: {answer:?}"
+            ),
+            Some(e) => {
+                assert_eq!(answer, Response::Error(e), "{name}");
+                assert_eq!(b.flash_ops(), ops, "{name}: nothing written");
+            }
+        }
+    }
+}

@@ -60,6 +60,47 @@ pub const LAYOUT: Layout = Layout {
     slot_bytes: slots::SLOT_BYTES,
 };
 
+/// The internal flash for the table store: embassy-stm32's blocking
+/// `Flash`, declared `MultiwriteNorFlash` — the STM32F4 programs zeros over
+/// programmed bits (no ECC, no "not erased" error; ST's AN3969 EEPROM
+/// emulation for the F40x relies on it), which the store's rollback uses
+/// to zero a revoked slot's header magic (trueaxis_app::store).
+pub struct TableFlash(pub Flash<'static, Blocking>);
+
+impl embedded_storage::nor_flash::ErrorType for TableFlash {
+    type Error = embassy_stm32::flash::Error;
+}
+
+impl embedded_storage::nor_flash::ReadNorFlash for TableFlash {
+    const READ_SIZE: usize =
+        <Flash<'static, Blocking> as embedded_storage::nor_flash::ReadNorFlash>::READ_SIZE;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        embedded_storage::nor_flash::ReadNorFlash::read(&mut self.0, offset, bytes)
+    }
+
+    fn capacity(&self) -> usize {
+        embedded_storage::nor_flash::ReadNorFlash::capacity(&self.0)
+    }
+}
+
+impl embedded_storage::nor_flash::NorFlash for TableFlash {
+    const WRITE_SIZE: usize =
+        <Flash<'static, Blocking> as embedded_storage::nor_flash::NorFlash>::WRITE_SIZE;
+    const ERASE_SIZE: usize =
+        <Flash<'static, Blocking> as embedded_storage::nor_flash::NorFlash>::ERASE_SIZE;
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        embedded_storage::nor_flash::NorFlash::erase(&mut self.0, from, to)
+    }
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        embedded_storage::nor_flash::NorFlash::write(&mut self.0, offset, bytes)
+    }
+}
+
+impl embedded_storage::nor_flash::MultiwriteNorFlash for TableFlash {}
+
 /// Correction loop rate (defined in model-core, which derives the loop's
 /// instruction budget from it).
 pub const LOOP_HZ: u64 = model_core::board::LOOP_HZ as u64;
@@ -236,7 +277,7 @@ pub struct Parts {
     /// USART1 link (UART link task).
     pub uart: BufferedUart<'static>,
     /// Internal flash (table store).
-    pub flash: Flash<'static, Blocking>,
+    pub flash: TableFlash,
     /// Watchdog, not started yet.
     pub iwdg: IndependentWatchdog<'static, IWDG>,
 }
@@ -312,7 +353,7 @@ pub fn take(p: Peripherals) -> Parts {
         thermistors,
         usb,
         uart,
-        flash: Flash::new_blocking(p.FLASH),
+        flash: TableFlash(Flash::new_blocking(p.FLASH)),
         iwdg: IndependentWatchdog::new(p.IWDG, WATCHDOG_US),
     }
 }

@@ -10,24 +10,28 @@
 //! - `watchdog` — pets the IWDG while the correction loop is alive.
 //!
 //! Boot: the table store scans both flash slots and the newest valid table
-//! becomes the active model before the loop starts.
+//! becomes the active model before the loop starts — unless it was on
+//! trial when a fault reset the board (reset.rs, trueaxis_app::boot): then
+//! it is revoked and the other slot's table runs. The watchdog task also
+//! confirms a table once it has run its trial window.
 #![no_std]
 #![no_main]
 
 mod board;
 mod link;
+mod reset;
 mod shared;
 
 use core::cell::RefCell;
 use core::sync::atomic::Ordering;
 
 use defmt::{info, unwrap};
+use defmt_rtt as _;
 use embassy_executor::Executor;
 use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
 use embassy_sync::mutex::Mutex;
 use embassy_time::{Duration, Instant, Ticker, Timer};
 use static_cell::StaticCell;
-use {defmt_rtt as _, panic_probe as _};
 
 use trueaxis_app::engine::Engine;
 use trueaxis_app::hw::{Clock, TemperatureSource};
@@ -43,6 +47,8 @@ const QUIET_MS: u32 = 500;
 
 #[cortex_m_rt::entry]
 fn main() -> ! {
+    let cause = reset::reset_cause();
+    let record = reset::read_record();
     let p = embassy_stm32::init(board::clocks());
     info!("trueaxis board {}", trueaxis_app::FIRMWARE_VERSION);
     let parts = board::take(p);
@@ -61,7 +67,17 @@ fn main() -> ! {
             model_budget_instr: model_core::board::MODEL_BUDGET_INSTR,
         },
     );
-    match server.boot(engine) {
+    static RECORD_RAM: StaticCell<reset::RecordRam> = StaticCell::new();
+    server.set_reset_record(RECORD_RAM.init(reset::RecordRam));
+    let booted = server.boot_after_reset(engine, cause, record);
+    if let Some(f) = booted.failed {
+        defmt::warn!(
+            "table seq {} failed its trial ({}): revoked, falling back",
+            f.table.seq,
+            f.fault
+        );
+    }
+    match booted.active {
         Some(t) => info!(
             "active table: slot {} seq {} crc {=u32:#x}",
             t.slot, t.seq, t.crc32
@@ -80,7 +96,7 @@ fn main() -> ! {
         spawner.spawn(unwrap!(link::usb_link(usb_class, server, engine)));
         spawner.spawn(unwrap!(link::uart_link(parts.uart, server, engine)));
         spawner.spawn(unwrap!(thermistors(parts.thermistors)));
-        spawner.spawn(unwrap!(watchdog(parts.iwdg)));
+        spawner.spawn(unwrap!(watchdog(parts.iwdg, server, engine)));
     })
 }
 
@@ -133,10 +149,13 @@ async fn thermistors(mut t: board::Thermistors) {
 
 /// Pets the watchdog only while the correction loop makes progress: a
 /// stuck loop (or a stuck thread executor, which runs this task) resets
-/// the board.
+/// the board. Also confirms the running table once its trial window has
+/// passed (trueaxis_app::boot).
 #[embassy_executor::task]
 async fn watchdog(
     mut iwdg: embassy_stm32::wdg::IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
+    server: &'static shared::ServerMutex,
+    engine: &'static SharedEngine,
 ) {
     iwdg.unleash();
     let mut last = shared::TICKS.load(Ordering::Relaxed);
@@ -145,6 +164,11 @@ async fn watchdog(
         let now = shared::TICKS.load(Ordering::Relaxed);
         if now != last {
             iwdg.pet();
+        }
+        // Never wait for the server here (a link task may hold it): the
+        // trial is confirmed at the next round instead.
+        if let Ok(mut s) = server.try_lock() {
+            s.poll_trial(engine);
         }
         last = now;
     }

@@ -4,7 +4,7 @@
 //! | static | written by | read by |
 //! | --- | --- | --- |
 //! | [`ENGINE`] | correction task (every tick); link tasks through the server (model swap, injection, clear faults) | the same |
-//! | [`SERVER`] | link tasks (USB and UART, one request at a time) | the same |
+//! | [`SERVER`] | link tasks (USB and UART, one request at a time); watchdog task (confirms a table's trial) | the same |
 //! | [`TEMPS_MC`] | thermistor task (10 Hz) | correction task |
 //! | [`TICKS`] | correction task | watchdog task |
 //!
@@ -18,7 +18,6 @@
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicI32, AtomicU32};
 
-use embassy_stm32::flash::{Blocking, Flash};
 use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, ThreadModeRawMutex};
 use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
 use embassy_sync::mutex::Mutex;
@@ -38,7 +37,7 @@ impl EngineAccess<'static> for SharedEngine {
 }
 
 /// The link server type of the board.
-pub type BoardServer = Server<'static, 'static, Flash<'static, Blocking>>;
+pub type BoardServer = Server<'static, 'static, crate::board::TableFlash>;
 
 /// Largest table the board accepts over the link, bytes (the staging
 /// buffer; a slot could hold 128 KiB, RAM cannot). Defined in model-core,
@@ -47,8 +46,11 @@ pub const STAGE_BYTES: usize = model_core::board::STAGE_BYTES;
 
 /// See the table above.
 pub static ENGINE: StaticCell<SharedEngine> = StaticCell::new();
+/// The server behind its async mutex.
+pub type ServerMutex = Mutex<ThreadModeRawMutex, BoardServer>;
+
 /// See the table above.
-pub static SERVER: StaticCell<Mutex<ThreadModeRawMutex, BoardServer>> = StaticCell::new();
+pub static SERVER: StaticCell<ServerMutex> = StaticCell::new();
 /// See the table above. `i32::MIN` until the first reading (a sensor
 /// fault for the engine, so the correction waits for real temperatures).
 pub static TEMPS_MC: [AtomicI32; LINK_TEMPS] = [const { AtomicI32::new(i32::MIN) }; LINK_TEMPS];

@@ -37,11 +37,15 @@ struct Board {
 
 impl Board {
     fn start() -> Self {
+        Self::serve(SimBoard::new())
+    }
+
+    /// Serves `board` (prepared in process) on a loopback port.
+    fn serve(board: SimBoard) -> Self {
         let listener = TcpListener::bind("127.0.0.1:0").unwrap();
         let port = format!("tcp://{}", listener.local_addr().unwrap());
         let stop = Arc::new(AtomicBool::new(false));
         let s = stop.clone();
-        let board = SimBoard::new();
         let io = board.io.clone();
         let thread = std::thread::spawn(move || board.serve(listener, s));
         Self {
@@ -946,4 +950,66 @@ fn reference_is_refused_while_an_axis_moves() {
     );
     let t = &status_json(&board.port)["telemetry"];
     assert_eq!(t["axes"]["y"]["referenced"], false, "{t}");
+}
+
+/// Sends `req` to the simulated board in process; its one answer.
+fn sim_call(b: &mut SimBoard, p: &mut trueaxis_app::server::Port, req: Request<'_>) -> Response {
+    let mut buf = [0u8; MAX_FRAME_BYTES];
+    let n = encode_frame(&Packet { seq: 1, msg: req }, &mut buf).unwrap();
+    let out = b.receive(p, &buf[..n]);
+    let mut dec: FrameDecoder = FrameDecoder::new();
+    let mut input = &out[..];
+    let frame = dec.feed(&mut input).unwrap().unwrap();
+    trueaxis_protocol::decode_message::<Packet<Response>>(frame)
+        .unwrap()
+        .msg
+}
+
+/// Uploads and commits `t` to the simulated board in process.
+fn sim_install(b: &mut SimBoard, t: &[u8]) {
+    let mut p = trueaxis_app::server::Port::new();
+    let begin = Request::UploadBegin {
+        size: t.len() as u32,
+        crc32: table_id(t),
+    };
+    assert!(matches!(
+        sim_call(b, &mut p, begin),
+        Response::UploadAck { .. }
+    ));
+    for (i, data) in t.chunks(trueaxis_protocol::MAX_CHUNK_BYTES).enumerate() {
+        let offset = (i * trueaxis_protocol::MAX_CHUNK_BYTES) as u32;
+        let r = sim_call(b, &mut p, Request::UploadChunk { offset, data });
+        assert!(matches!(r, Response::UploadAck { .. }), "{r:?}");
+    }
+    let r = sim_call(b, &mut p, Request::Commit);
+    assert!(matches!(r, Response::Committed(_)), "{r:?}");
+}
+
+/// The boot fallback as `trueaxis status` shows it: a table that panicked
+/// the board during its trial window is gone after the reset, the previous
+/// one runs, and the latched faults say why (JSON and text).
+#[test]
+fn status_shows_a_boot_fallback_and_why() {
+    let (t1, t2) = (sample_table(0), sample_table(1));
+    let mut sim = SimBoard::new();
+    sim_install(&mut sim, &t1);
+    sim.tick(5000); // t1 confirmed (5 s of 1 ms ticks)
+    sim_install(&mut sim, &t2);
+    sim.tick(100); // t2 on trial
+    let board = Board::serve(sim.fault_reset(trueaxis_app::boot::Fault::Panic));
+    let s = status_json(&board.port);
+    let t = &s["telemetry"];
+    assert_eq!(t["active"]["crc32"], crc_hex(&t1), "{s}");
+    let latched: Vec<&str> = t["faults_latched"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert!(latched.contains(&"trial_failed"), "{s}");
+    assert!(latched.contains(&"reset_by_panic"), "{s}");
+    assert!(!t["faults"].to_string().contains("trial_failed"), "{s}");
+    let out = trueaxis(&["status", "--port", &board.port]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("trial_failed, reset_by_panic"), "{text}");
 }
