@@ -325,6 +325,10 @@ fn the_on_machine_commands_find_the_simulated_answers() {
         html.contains(&pv_text),
         "{pv_text} not on the workpiece page"
     );
+    assert!(
+        html.contains("cannot know from one set-up"),
+        "identifiability not said"
+    );
     // 12 generatrices, at most 6 drawn, and the form around the part.
     let gens = std::fs::read_dir(dir.join("wp-report"))
         .unwrap()

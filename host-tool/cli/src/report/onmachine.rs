@@ -325,10 +325,13 @@ pub struct WorkpiecePage<'a> {
 /// Writes the workpiece page into `dir`.
 pub fn workpiece_page(w: &WorkpiecePage, dir: &Path) -> Result<PathBuf> {
     let mut page = Page::new("Workpiece form");
-    let mut details = vec![format!(
-        "RMS {:.3} µm; eccentricity {:.3} µm (set-up, not form)",
-        w.form_rms_um, w.eccentricity_um
-    )];
+    let mut details = vec![
+        format!(
+            "RMS {:.3} µm; eccentricity {:.3} µm (set-up, not form)",
+            w.form_rms_um, w.eccentricity_um
+        ),
+        "cannot know from one set-up: how much of this is the part and how much the machine measuring it (the slide's straightness along z, the spindle's error motion around c) — the correction pass corrects both while they repeat; to tell them apart, turn the part 180° and run trueaxis separate reversal, or remount it in steps and run trueaxis separate multi-step".into(),
+    ];
     if w.history_pv_um.len() > 1 {
         details.push(format!(
             "pass by pass: {} µm PV",
