@@ -201,10 +201,35 @@ impl DirTracker {
             // A full swing (2.0 = 2^31 in Q30) per transition_nm; clamping the
             // move first keeps the product inside i64.
             let d = delta.clamp(-t, t);
-            self.rev_q30 as i64 + d * (1i64 << 31) / t
+            self.rev_q30 as i64 + swing_step(d, transition_nm)
         };
         self.rev_q30 = next.clamp(-one, one) as i32;
         self.rev_q30
+    }
+}
+
+/// d · 2^31 / t truncated toward zero, for 0 < t and |d| ≤ t: the
+/// reversal state's change. Exactly the i64 division it replaces, but
+/// without it in the common case (an i64 division is a library call of
+/// ~60–100 instructions on the M4, once per axis per tick): with
+/// 2^31 = K·t + R (R < t), |d|·2^31 / t = |d|·K + |d|·R / t, and |d|·R
+/// fits u32 — one UDIV — whenever the move per tick or the transition is
+/// short; otherwise the u64 division.
+#[inline]
+pub(crate) fn swing_step(d: i64, transition_nm: i32) -> i64 {
+    let (m, t) = (d.unsigned_abs() as u32, transition_nm as u32);
+    let k = (1u32 << 31) / t;
+    let r = (1u32 << 31) - k * t;
+    let dr = m as u64 * r as u64;
+    let q = if dr <= u32::MAX as u64 {
+        m as u64 * k as u64 + (dr as u32 / t) as u64
+    } else {
+        ((m as u64) << 31) / t as u64
+    };
+    if d < 0 {
+        -(q as i64)
+    } else {
+        q as i64
     }
 }
 
@@ -635,6 +660,31 @@ mod tests {
         let f = Flags::TEMP_OUT_OF_RANGE | Flags::OUT_OF_TRAVEL_Y;
         assert!(f.names().eq(["out_of_travel_y", "temp_out_of_range"]));
         assert_eq!(Flags::from_bits(1 << 9).names().count(), 0);
+    }
+
+    #[test]
+    fn swing_step_is_the_i64_division() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        let mut long = 0;
+        for i in 0..200_000u32 {
+            // Transitions from 1 nm to 2^31 − 1, moves up to the transition.
+            let t = match i % 4 {
+                0 => (next() % 100) as i32 + 1,
+                1 => (next() % 100_000) as i32 + 1,
+                _ => (next() % i32::MAX as u64) as i32 + 1,
+            };
+            let d = (next() % (2 * t as u64 + 1)) as i64 - t as i64;
+            let d = if i % 7 == 0 { t as i64 } else { d };
+            long += (d.unsigned_abs() * ((1u64 << 31) % t as u64) > u32::MAX as u64) as u32;
+            assert_eq!(swing_step(d, t), d * (1i64 << 31) / t as i64, "d {d} t {t}");
+        }
+        assert!(long > 1000, "the u64 division was taken {long} times");
     }
 
     /// Sets max |correction| on every field that carries it.
