@@ -184,26 +184,27 @@ impl DirTracker {
             self.last_pos_nm = pos_nm;
             return self.rev_q30;
         }
-        let delta = pos_nm as i64 - self.last_pos_nm as i64;
+        // The difference in i32, with the same results as the i64 one: a
+        // saturated difference still has the right sign and clamps to the
+        // same ±transition.
+        let delta = pos_nm.saturating_sub(self.last_pos_nm);
         self.last_pos_nm = pos_nm;
         if delta == 0 {
             return self.rev_q30;
         }
-        let one = ONE_Q30 as i64;
         let next = if transition_nm <= 0 {
             if delta > 0 {
-                one
+                ONE_Q30
             } else {
-                -one
+                -ONE_Q30
             }
         } else {
-            let t = transition_nm as i64;
-            // A full swing (2.0 = 2^31 in Q30) per transition_nm; clamping the
-            // move first keeps the product inside i64.
-            let d = delta.clamp(-t, t);
-            self.rev_q30 as i64 + swing_step(d, transition_nm)
+            // A full swing (2.0 = 2^31 in Q30) per transition_nm.
+            let d = delta.clamp(-transition_nm, transition_nm);
+            let next = self.rev_q30 as i64 + swing_step(d as i64, transition_nm);
+            next.clamp(-ONE_Q30 as i64, ONE_Q30 as i64) as i32
         };
-        self.rev_q30 = next.clamp(-one, one) as i32;
+        self.rev_q30 = next.clamp(-ONE_Q30, ONE_Q30);
         self.rev_q30
     }
 }
@@ -220,11 +221,10 @@ pub(crate) fn swing_step(d: i64, transition_nm: i32) -> i64 {
     let (m, t) = (d.unsigned_abs() as u32, transition_nm as u32);
     let k = (1u32 << 31) / t;
     let r = (1u32 << 31) - k * t;
-    let dr = m as u64 * r as u64;
-    let q = if dr <= u32::MAX as u64 {
-        m as u64 * k as u64 + (dr as u32 / t) as u64
-    } else {
-        ((m as u64) << 31) / t as u64
+    // m·k ≤ t·(2^31 / t) ≤ 2^31 fits u32.
+    let q = match m.checked_mul(r) {
+        Some(mr) => (m * k + mr / t) as u64,
+        None => ((m as u64) << 31) / t as u64,
     };
     if d < 0 {
         -(q as i64)
@@ -685,6 +685,71 @@ mod tests {
             assert_eq!(swing_step(d, t), d * (1i64 << 31) / t as i64, "d {d} t {t}");
         }
         assert!(long > 1000, "the u64 division was taken {long} times");
+    }
+
+    /// The tracker as it was in i64 (before the i32 version).
+    fn reference_update(t: &mut (i32, i32, bool), pos_nm: i32, transition_nm: i32) -> i32 {
+        let (last, rev, started) = t;
+        if !*started {
+            *started = true;
+            *last = pos_nm;
+            return *rev;
+        }
+        let delta = pos_nm as i64 - *last as i64;
+        *last = pos_nm;
+        if delta == 0 {
+            return *rev;
+        }
+        let one = ONE_Q30 as i64;
+        let next = if transition_nm <= 0 {
+            if delta > 0 {
+                one
+            } else {
+                -one
+            }
+        } else {
+            let t = transition_nm as i64;
+            let d = delta.clamp(-t, t);
+            *rev as i64 + d * (1i64 << 31) / t
+        };
+        *rev = next.clamp(-one, one) as i32;
+        *rev
+    }
+
+    #[test]
+    fn dir_tracker_in_i32_is_the_i64_tracker() {
+        let mut seed = 0x0123_4567_89ab_cdefu64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for run in 0..400 {
+            let transition = match run % 5 {
+                0 => 0,
+                1 => -5,
+                2 => (next() % 1000) as i32 + 1,
+                3 => (next() % 200_000) as i32 + 1,
+                _ => (next() % i32::MAX as u64) as i32 + 1,
+            };
+            let (mut t, mut r) = (DirTracker::new(), (0, 0, false));
+            let mut pos = (next() as i32) / 2;
+            for step in 0..500 {
+                // Small moves, reversals, and jumps across the whole i32 range.
+                pos = match (next() % 10, step % 50) {
+                    (_, 0) => next() as i32,
+                    (0, _) => pos,
+                    (1..=4, _) => pos.saturating_add((next() % 600) as i32),
+                    _ => pos.saturating_sub((next() % 600) as i32),
+                };
+                assert_eq!(
+                    t.update(pos, transition),
+                    reference_update(&mut r, pos, transition),
+                    "run {run} step {step} transition {transition}"
+                );
+            }
+        }
     }
 
     /// Sets max |correction| on every field that carries it.
