@@ -197,10 +197,10 @@ pub struct TickReport {
 #[derive(Debug)]
 pub struct Engine<'m> {
     cfg: EngineConfig,
-    /// Per axis: an encoder step of at least this many pm in one tick is a
-    /// jump (`i64::MAX`: check disabled). Twice the distance at full speed
-    /// in one period, as margin for a late tick.
-    jump_threshold_pm: [i64; 3],
+    /// Per axis: an encoder step of at least this many counts in one tick is
+    /// a jump: twice the distance at full speed in one period, as margin for
+    /// a late tick ([`jump_threshold_counts`]).
+    jump_threshold_counts: [u64; 3],
     /// Per axis: the scale in whole nm per count, when it is one.
     nm_per_count: [Option<i64>; 3],
     slew_nm_per_ms: i32,
@@ -270,12 +270,15 @@ impl<'m> Engine<'m> {
             let max_nm = 2 * a.max_speed_nm_per_ms as i64 * cfg.period_us as i64 / 1000;
             (max_nm.max(1) + 1) * 1000
         });
+        let jump_threshold_counts: [u64; 3] = core::array::from_fn(|i| {
+            jump_threshold_counts(jump_threshold_pm[i], cfg.axes[i].pm_per_count)
+        });
         let nm_per_count = cfg
             .axes
             .map(|a| (a.pm_per_count % 1000 == 0).then_some(a.pm_per_count / 1000));
         Ok(Self {
             cfg,
-            jump_threshold_pm,
+            jump_threshold_counts,
             nm_per_count,
             slew_nm_per_ms: 0,
             model: None,
@@ -587,12 +590,12 @@ impl<'m> Engine<'m> {
             }
         }
         if let Some(prev) = self.last_counts {
-            for (i, a) in self.cfg.axes.iter().enumerate() {
+            for i in 0..3 {
                 // |Δcounts| · |pm/count| ≥ threshold ⇔ the jump exceeds
-                // the limit in whole nm (threshold precomputed: 64-bit
-                // divisions are library calls on the M4).
-                let d_counts = counts[i].wrapping_sub(prev[i]).unsigned_abs() as i64;
-                if d_counts.saturating_mul(a.pm_per_count.abs()) >= self.jump_threshold_pm[i] {
+                // the limit in whole nm, ⇔ |Δcounts| ≥ the threshold in
+                // counts (precomputed: no 64-bit multiply per tick).
+                let d_counts = counts[i].wrapping_sub(prev[i]).unsigned_abs() as u64;
+                if d_counts >= self.jump_threshold_counts[i] {
                     events = events.union(Faults::ENCODER_JUMP);
                     // Counts were lost or invented: the reference is gone.
                     self.referenced &= !(1 << i);
@@ -721,6 +724,20 @@ impl<'m> Engine<'m> {
     }
 }
 
+/// The encoder-jump threshold in counts: the smallest |Δcounts| with
+/// |Δcounts| · |pm/count| ≥ `threshold_pm` (the product saturating, as the
+/// tick once computed it), i.e. ⌈threshold / |pm/count|⌉, and `u64::MAX`
+/// (never) for a zero scale — so the tick compares instead of multiplying
+/// in 64 bits.
+fn jump_threshold_counts(threshold_pm: i64, pm_per_count: i64) -> u64 {
+    let (t, p) = (threshold_pm.max(0) as u64, pm_per_count.unsigned_abs());
+    if p == 0 {
+        u64::MAX
+    } else {
+        t.div_ceil(p)
+    }
+}
+
 fn inputs_of(inj: &Injection) -> ModelInputs {
     ModelInputs {
         pos_nm: inj.pos_nm,
@@ -751,7 +768,42 @@ pub fn round_div(a: i64, b: i64) -> i64 {
 
 #[cfg(test)]
 mod tests {
-    use super::round_div;
+    use super::{jump_threshold_counts, round_div};
+
+    #[test]
+    fn jump_threshold_in_counts_is_the_saturating_product_test() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for i in 0..100_000 {
+            let t = match i % 3 {
+                0 => i64::MAX,
+                _ => (next() % 10_000_000_000) as i64,
+            };
+            let p = match i % 5 {
+                0 => 0,
+                1 => -((next() % 100_000) as i64),
+                _ => (next() % 100_000) as i64,
+            };
+            let k = jump_threshold_counts(t, p);
+            let d = next() as u32 as i64;
+            for d in [
+                d,
+                k.min(u32::MAX as u64) as i64,
+                (k.min(u32::MAX as u64) as i64 - 1).max(0),
+            ] {
+                assert_eq!(
+                    d.saturating_mul(p.abs()) >= t,
+                    d as u64 >= k,
+                    "d {d} p {p} t {t}"
+                );
+            }
+        }
+    }
 
     /// The i64 definition `round_div` had before its u32 fast path.
     fn reference(a: i64, b: i64) -> i64 {
