@@ -198,15 +198,20 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         // takes s + 16 ∈ [32, 62]: the result is the high word shifted, and
         // the bias plus c₀·2^30 plus Σ|c·m| < 2^61 cannot overflow. (s < 16
         // needs Σ|c| ≥ 2^29 nm, s > 46 a block of almost nothing.)
-        let shifts_ok = self.block_shift.iter().all(|&s| poly_fixed_shift_ok(s));
+        // An output without coefficients (an absent one) is 0 whatever its
+        // scale (its Σ|c| = 0 gives the largest q): bias and shift 0.
+        let zero: [bool; 3] = core::array::from_fn(|o| self.block_q.iter().all(|c| c[o] == 0));
+        let shifts_ok = (0..3).all(|o| zero[o] || poly_fixed_shift_ok(self.block_shift[o]));
         self.poly_fixed = if shifts_ok { self.poly } else { PolyKind::None };
         for o in 0..3 {
             let s = self.block_shift[o];
-            self.poly_shift[o] = s.saturating_sub(16);
-            self.poly_bias_q[o] = if shifts_ok {
-                (1i64 << (s - 1)) + (1i64 << (s + 15)) + ((self.block_q[0][o] as i64) << 30)
+            (self.poly_shift[o], self.poly_bias_q[o]) = if shifts_ok && !zero[o] {
+                (
+                    s - 16,
+                    (1i64 << (s - 1)) + (1i64 << (s + 15)) + ((self.block_q[0][o] as i64) << 30),
+                )
             } else {
-                0
+                (0, 0)
             };
         }
         Ok(())

@@ -405,12 +405,13 @@ struct FactoredF32 {
 
 /// Whether the fixed-point polynomial fast path takes a block whose
 /// per-output Σ|c| (in nm, normalised monomials) are `sum_abs`: it needs
-/// every block shift s = q + 14 in [16, 46] (`load`), which holds for every
-/// real table. [`crate::cost`] asks the same to pick the path's cost.
+/// every block shift s = q + 14 in [16, 46] (`load`) — Σ|c| between
+/// ~0.25 nm and ~0.5 m — or an output without coefficients.
+/// [`crate::cost`] asks the same to pick the path's cost.
 pub(crate) fn poly_fixed_takes(sum_abs: [f64; 3]) -> bool {
-    sum_abs
-        .iter()
-        .all(|&s| kernels::choose_q(s, 0).is_some_and(|q| poly_fixed_shift_ok((q + 14) as u32)))
+    sum_abs.iter().all(|&s| {
+        s == 0.0 || kernels::choose_q(s, 0).is_some_and(|q| poly_fixed_shift_ok((q + 14) as u32))
+    })
 }
 
 /// See [`poly_fixed_takes`].
