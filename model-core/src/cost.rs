@@ -87,6 +87,9 @@ pub struct Features {
     pub generic_units: u32,
     /// See `generic_units`.
     pub generic_macs: u32,
+    /// The fixed-point polynomial fast path takes the block's scales
+    /// (`eval::poly_fixed_takes`; only matters for a polynomial-only table).
+    pub poly_fixed_ok: bool,
 }
 
 impl Features {
@@ -97,6 +100,8 @@ impl Features {
             flat: true,
             ..Features::default()
         };
+        // The block as `load` sums it, for its per-output scales.
+        let mut block = [[0.0f64; 3]; crate::limits::MAX_MONOMIALS];
         let env = table.envelope();
         let deg = |d: u8, f: &mut Features| {
             f.max_degree = Some(f.max_degree.map_or(d, |m| m.max(d)));
@@ -107,10 +112,13 @@ impl Features {
                 f.other_terms += 1;
             }
             match view {
-                TermView::Poly { coefs, .. } => {
+                TermView::Poly { coefs, output } => {
                     f.has_block = true;
-                    for (m, _) in coefs.iter() {
+                    for (m, c) in coefs.iter() {
                         deg(m[0] + m[1] + m[2], &mut f);
+                        if let Some(i) = crate::eval::mono_index(m) {
+                            block[i][output % 3] += c;
+                        }
                     }
                 }
                 TermView::Thermal { coefs, .. } | TermView::Abbe { coefs, .. } => {
@@ -181,9 +189,30 @@ impl Features {
                 }
             }
         }
+        let sums = [0, 1, 2].map(|o| block.iter().map(|r| r[o].abs()).sum::<f64>());
+        f.poly_fixed_ok = crate::eval::poly_fixed_takes(sums);
         f
     }
+
+    /// The straight-line kernel of a polynomial-only table of degree ≤ 3
+    /// (`eval`'s `PolyKind`): Some(1) for degree ≤ 1, Some(3) else.
+    fn poly_kind(&self) -> Option<u8> {
+        match (self.has_block && self.other_terms == 0, self.max_degree) {
+            (true, Some(0..=1)) => Some(1),
+            (true, Some(2..=3)) => Some(3),
+            _ => None,
+        }
+    }
 }
+
+/// Instructions of the polynomial-only kernels (degree ≤ 1, ≤ 3), f32 and
+/// fixed point: the worst call of the bench tables (`poly_deg1`, `cubic19`)
+/// plus the out-of-travel hold and the exact clamp they take on some
+/// inputs, rounded up (BENCHMARKS.md, "Instruction counts").
+const POLY1_F32: u32 = 136;
+const POLY3_F32: u32 = 250;
+const POLY1_FIXED: u32 = 185;
+const POLY3_FIXED: u32 = 500;
 
 /// Weights of one evaluation path, tenths of an instruction per unit of
 /// a feature (tenths keep the per-multiply-add costs exact enough in
@@ -262,7 +291,7 @@ const FIXED: Weights = Weights {
     mono20: 1261,
     mono56: 7598,
     block20: 3797,
-    block56: 9795,
+    block56: 10600,
     temp: 87,
     temp_channel: 53,
     tool: 0,
@@ -387,9 +416,22 @@ impl Features {
             self.terms(&F32_TERMS)
         };
         let instr = |tenths: u64| tenths.div_ceil(10).min(u64::from(u32::MAX)) as u32;
+        let (f32_instr, fixed_instr) = match self.poly_kind() {
+            Some(1) => (POLY1_F32, POLY1_FIXED),
+            Some(_) => (POLY3_F32, POLY3_FIXED),
+            None => (0, 0),
+        };
         CostEstimate {
-            f32_instr: instr(self.common(&F32) + f32_terms),
-            fixed_instr: instr(self.common(&FIXED) + self.terms(&FIXED_TERMS)),
+            f32_instr: if f32_instr > 0 {
+                f32_instr
+            } else {
+                instr(self.common(&F32) + f32_terms)
+            },
+            fixed_instr: if fixed_instr > 0 && self.poly_fixed_ok {
+                fixed_instr
+            } else {
+                instr(self.common(&FIXED) + self.terms(&FIXED_TERMS))
+            },
         }
     }
 }

@@ -430,3 +430,31 @@ fn load_into_reuses_a_static_and_a_failed_load_leaves_it_empty() {
     assert_eq!(m.eval_fixed(&inp).corr_nm, [0; 3]);
     assert_eq!(m.eval_f32(&inp).corr_nm, [0; 3]);
 }
+
+/// A polynomial-only table with absent outputs takes the fixed-point
+/// polynomial kernel (priced as it: `cost`'s POLY3_FIXED, 500) and stays
+/// within 1 nm of f64 — an absent output's empty block once sent such
+/// tables to the general path.
+#[test]
+fn polynomial_table_with_absent_outputs_takes_the_kernel() {
+    for seed in 0..8 {
+        let mut spec = random_spec(0x5100 + seed, &[Kind::Cubic19]);
+        let keep = (seed % 3) as u8;
+        spec.terms
+            .retain(|t| matches!(t, model_core::TermSpec::Poly { output, .. } if *output == keep));
+        spec.outputs = core::array::from_fn(|o| o as u8 == keep);
+        let bytes = spec.encode().expect("encode");
+        let table = parse(&bytes).expect("parse");
+        assert_eq!(
+            model_core::cost::estimate(&table).fixed_instr,
+            500,
+            "seed {seed}"
+        );
+        let model = load(&spec);
+        let (wf, wq) = worst_errors(&spec, &model, seed, 500);
+        assert!(
+            wf <= 1.0 && wq <= 1.0,
+            "seed {seed}: f32 {wf} nm, fixed {wq} nm"
+        );
+    }
+}

@@ -197,10 +197,10 @@ pub struct TickReport {
 #[derive(Debug)]
 pub struct Engine<'m> {
     cfg: EngineConfig,
-    /// Per axis: an encoder step of at least this many pm in one tick is a
-    /// jump (`i64::MAX`: check disabled). Twice the distance at full speed
-    /// in one period, as margin for a late tick.
-    jump_threshold_pm: [i64; 3],
+    /// Per axis: an encoder step of at least this many counts in one tick is
+    /// a jump: twice the distance at full speed in one period, as margin for
+    /// a late tick ([`jump_threshold_counts`]).
+    jump_threshold_counts: [u64; 3],
     /// Per axis: the scale in whole nm per count, when it is one.
     nm_per_count: [Option<i64>; 3],
     slew_nm_per_ms: i32,
@@ -270,12 +270,15 @@ impl<'m> Engine<'m> {
             let max_nm = 2 * a.max_speed_nm_per_ms as i64 * cfg.period_us as i64 / 1000;
             (max_nm.max(1) + 1) * 1000
         });
+        let jump_threshold_counts: [u64; 3] = core::array::from_fn(|i| {
+            jump_threshold_counts(jump_threshold_pm[i], cfg.axes[i].pm_per_count)
+        });
         let nm_per_count = cfg
             .axes
             .map(|a| (a.pm_per_count % 1000 == 0).then_some(a.pm_per_count / 1000));
         Ok(Self {
             cfg,
-            jump_threshold_pm,
+            jump_threshold_counts,
             nm_per_count,
             slew_nm_per_ms: 0,
             model: None,
@@ -594,12 +597,12 @@ impl<'m> Engine<'m> {
             }
         }
         if let Some(prev) = self.last_counts {
-            for (i, a) in self.cfg.axes.iter().enumerate() {
+            for i in 0..3 {
                 // |Δcounts| · |pm/count| ≥ threshold ⇔ the jump exceeds
-                // the limit in whole nm (threshold precomputed: 64-bit
-                // divisions are library calls on the M4).
-                let d_counts = counts[i].wrapping_sub(prev[i]).unsigned_abs() as i64;
-                if d_counts.saturating_mul(a.pm_per_count.abs()) >= self.jump_threshold_pm[i] {
+                // the limit in whole nm, ⇔ |Δcounts| ≥ the threshold in
+                // counts (precomputed: no 64-bit multiply per tick).
+                let d_counts = counts[i].wrapping_sub(prev[i]).unsigned_abs() as u64;
+                if d_counts >= self.jump_threshold_counts[i] {
                     events = events.union(Faults::ENCODER_JUMP);
                     // Counts were lost or invented: the reference is gone.
                     self.referenced &= !(1 << i);
@@ -728,6 +731,20 @@ impl<'m> Engine<'m> {
     }
 }
 
+/// The encoder-jump threshold in counts: the smallest |Δcounts| with
+/// |Δcounts| · |pm/count| ≥ `threshold_pm` (the product saturating, as the
+/// tick once computed it), i.e. ⌈threshold / |pm/count|⌉, and `u64::MAX`
+/// (never) for a zero scale — so the tick compares instead of multiplying
+/// in 64 bits.
+fn jump_threshold_counts(threshold_pm: i64, pm_per_count: i64) -> u64 {
+    let (t, p) = (threshold_pm.max(0) as u64, pm_per_count.unsigned_abs());
+    if p == 0 {
+        u64::MAX
+    } else {
+        t.div_ceil(p)
+    }
+}
+
 fn inputs_of(inj: &Injection) -> ModelInputs {
     ModelInputs {
         pos_nm: inj.pos_nm,
@@ -741,9 +758,102 @@ fn inputs_of(inj: &Injection) -> ModelInputs {
 /// count's definition of "round".
 pub fn round_div(a: i64, b: i64) -> i64 {
     let h = b / 2;
+    // The tick's case (|a| + b/2 and b within u32: output in mnm ≤ 4·10^9,
+    // corrections in nm): the M4's UDIV on the magnitude, the same result
+    // as the i64 division below (a library call of ~60–100 instructions).
+    let mag = a.unsigned_abs();
+    if 0 < b && b <= u32::MAX as i64 && mag + (h as u64) <= u32::MAX as u64 {
+        let q = ((mag + h as u64) as u32 / b as u32) as i64;
+        return if a >= 0 { q } else { -q };
+    }
     if a >= 0 {
         (a + h) / b
     } else {
         (a - h) / b
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{jump_threshold_counts, round_div};
+
+    #[test]
+    fn jump_threshold_in_counts_is_the_saturating_product_test() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for i in 0..100_000 {
+            let t = match i % 3 {
+                0 => i64::MAX,
+                _ => (next() % 10_000_000_000) as i64,
+            };
+            let p = match i % 5 {
+                0 => 0,
+                1 => -((next() % 100_000) as i64),
+                _ => (next() % 100_000) as i64,
+            };
+            let k = jump_threshold_counts(t, p);
+            let d = next() as u32 as i64;
+            for d in [
+                d,
+                k.min(u32::MAX as u64) as i64,
+                (k.min(u32::MAX as u64) as i64 - 1).max(0),
+            ] {
+                assert_eq!(
+                    d.saturating_mul(p.abs()) >= t,
+                    d as u64 >= k,
+                    "d {d} p {p} t {t}"
+                );
+            }
+        }
+    }
+
+    /// The i64 definition `round_div` had before its u32 fast path.
+    fn reference(a: i64, b: i64) -> i64 {
+        let h = b / 2;
+        if a >= 0 {
+            (a + h) / b
+        } else {
+            (a - h) / b
+        }
+    }
+
+    #[test]
+    fn round_div_fast_path_is_the_i64_division() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        let edges = [
+            0,
+            1,
+            499,
+            500,
+            501,
+            4_000_000_000,
+            u32::MAX as i64 - 500,
+            u32::MAX as i64 - 499,
+            u32::MAX as i64,
+            1 << 40,
+        ];
+        for b in [1i64, 2, 3, 100, 1000, 1001, u32::MAX as i64, 1 << 33] {
+            for &e in &edges {
+                for a in [e, -e, e + 1, -e - 1] {
+                    assert_eq!(round_div(a, b), reference(a, b), "{a} / {b}");
+                }
+            }
+        }
+        for i in 0..100_000 {
+            let a = (next() as i64) >> (i % 40);
+            let b = (next() % 5000) as i64 + 1;
+            assert_eq!(round_div(a, b), reference(a, b), "{a} / {b}");
+        }
     }
 }

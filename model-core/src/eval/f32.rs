@@ -5,31 +5,179 @@
 //! MLP, grid). Results are rounded to whole nm once, at the end.
 
 use super::kernels::{grid_cell, mlp_source, mono20_f32, mono56_f32, phase_turns};
-use super::{Factor, Flags, GridAxis, Inputs, ModelCap, Outputs, Term, MAX_TEMPS};
+use super::{Factor, Flags, GridAxis, Inputs, ModelCap, Outputs, PolyKind, Term, MAX_TEMPS};
 use crate::limits::{MAX_HIDDEN_UNITS, MAX_MLP_INPUTS, MAX_MONOMIALS};
 use crate::math::{sincos_f32, tanh_f32, ONE_Q30};
 
 impl<const P: usize, const G: usize> ModelCap<P, G> {
     /// Evaluate in f32 (the fast path on the Cortex-M4F).
     pub fn eval_f32(&self, inp: &Inputs) -> Outputs {
+        // A table that is only a polynomial gets straight-line code with
+        // no monomial vector (the common case on the board); each kind is
+        // its own function so that none pays for another's registers.
+        match self.poly {
+            PolyKind::Linear => self.eval_poly_f32::<1>(inp),
+            PolyKind::Cubic => self.eval_poly_f32::<3>(inp),
+            PolyKind::None => self.eval_general_f32(inp),
+        }
+    }
+
+    /// A polynomial-only table of degree ≤ `D` (1 or 3). Positions inside
+    /// the travel (the common case) go straight through; one outside is
+    /// held by [`ModelCap::eval_poly_held_f32`], the same evaluation out of
+    /// line.
+    #[inline(never)]
+    fn eval_poly_f32<const D: u8>(&self, inp: &Inputs) -> Outputs {
+        let p = inp.pos_nm;
+        if !self.inside_travel(p) {
+            return self.eval_poly_held_f32::<D>(p);
+        }
+        self.poly_f32::<D>(p, Flags::empty())
+    }
+
+    #[inline(never)]
+    fn eval_poly_held_f32<const D: u8>(&self, p: [i32; 3]) -> Outputs {
         let mut flags = Flags::empty();
-        let pos = self.hold_pos(inp.pos_nm, &mut flags);
-        // |p − c| ≤ half-span < 2^31 (validated), so the wrapping i32
-        // difference is exact.
-        // Computed only when the table has polynomials.
-        let u = || {
-            [
-                pos[0].wrapping_sub(self.centre_nm[0]) as f32 * self.inv_half_f32[0],
-                pos[1].wrapping_sub(self.centre_nm[1]) as f32 * self.inv_half_f32[1],
-                pos[2].wrapping_sub(self.centre_nm[2]) as f32 * self.inv_half_f32[2],
-            ]
+        let pos = self.hold_pos(p, &mut flags);
+        self.poly_f32::<D>(pos, flags)
+    }
+
+    #[inline(always)]
+    fn poly_f32<const D: u8>(&self, pos: [i32; 3], flags: Flags) -> Outputs {
+        let u = self.u_f32(&pos);
+        let out = if D == 1 {
+            self.poly1_f32(u)
+        } else {
+            self.poly3_f32(u)
         };
+        self.finish_f32(out, flags)
+    }
+
+    /// Every other table: the monomial vector, the block and the terms.
+    #[inline(never)]
+    fn eval_general_f32(&self, inp: &Inputs) -> Outputs {
+        let mut flags = Flags::empty();
+        let pos = self.hold_pos_fast(inp.pos_nm, &mut flags);
+        let out = self.general_f32(|| self.u_f32(&pos), &pos, inp, &mut flags);
+        self.finish_f32(out, flags)
+    }
+
+    /// The normalised positions u ∈ [−1, 1]. |p − c| ≤ half-span < 2^31
+    /// (validated), so the wrapping i32 difference is exact.
+    #[inline(always)]
+    fn u_f32(&self, pos: &[i32; 3]) -> [f32; 3] {
+        [
+            pos[0].wrapping_sub(self.centre_nm[0]) as f32 * self.inv_half_f32[0],
+            pos[1].wrapping_sub(self.centre_nm[1]) as f32 * self.inv_half_f32[1],
+            pos[2].wrapping_sub(self.centre_nm[2]) as f32 * self.inv_half_f32[2],
+        ]
+    }
+
+    /// Round to whole nm and clamp to ±max per output. Rounding is the
+    /// 1.5·2^23 trick (for |v| < 2^22 the sum's mantissa is the integer,
+    /// ties to even); results well inside ±max need no clamp, anything
+    /// else (near or beyond max, NaN, inf — whose bits land far outside the
+    /// window) takes the exact test, [`ModelCap::finish_exact_f32`], out of
+    /// line so that no value must live across a call in the common case.
+    #[inline(always)]
+    fn finish_f32(&self, out: [f32; 3], flags: Flags) -> Outputs {
+        let n = out.map(|v| ((v + ROUND_MAGIC).to_bits() as i32).wrapping_sub(ROUND_MAGIC_BITS));
+        let ok = |o: usize| (n[o].wrapping_add(self.round_lim[o]) as u32) < self.round_win[o];
+        if ok(0) && ok(1) && ok(2) {
+            Outputs { corr_nm: n, flags }
+        } else {
+            self.finish_exact_f32(out, flags)
+        }
+    }
+
+    #[inline(never)]
+    fn finish_exact_f32(&self, out: [f32; 3], mut flags: Flags) -> Outputs {
+        let mut corr = [0i32; 3];
+        for o in 0..3 {
+            let (c, f) = self.clamp_round_f32(out[o], o);
+            flags.insert(f);
+            corr[o] = c;
+        }
+        Outputs {
+            corr_nm: corr,
+            flags,
+        }
+    }
+
+    /// The exact output test: |v| ≤ max passes, beyond it the output is
+    /// held at ±max and flagged, NaN/inf gives 0 and its flag.
+    #[inline(always)]
+    fn clamp_round_f32(&self, v: f32, o: usize) -> (i32, Flags) {
+        let max = self.max_corr_f32[o % 3];
+        let (c, f) = if v.abs() <= max {
+            (v, Flags::empty()) // NaN fails the comparison
+        } else if v > max {
+            (max, Flags::CLAMPED)
+        } else if v < -max {
+            (-max, Flags::CLAMPED)
+        } else {
+            (0.0, Flags::NOT_FINITE)
+        };
+        // Exact for |c| < 2^22, which MAX_CORR_LIMIT_NM guarantees.
+        (((c + ROUND_MAGIC) - ROUND_MAGIC) as i32, f)
+    }
+
+    /// c₀ + c₁x + c₂y + c₃z per output.
+    #[inline(always)]
+    fn poly1_f32(&self, u: [f32; 3]) -> [f32; 3] {
+        let [x, y, z] = u;
+        let h = |c: &[f32; 20]| {
+            let (c0, c1, c2, c3) = (c[19], c[9], c[15], c[18]);
+            c0 + x * c1 + y * c2 + z * c3
+        };
+        [
+            h(&self.horner_f32[0]),
+            h(&self.horner_f32[1]),
+            h(&self.horner_f32[2]),
+        ]
+    }
+
+    /// A polynomial of degree ≤ 3 per output by the Horner scheme of
+    /// `kernels::HORNER20`: 19 multiply-adds per output and no monomial products,
+    /// the coefficients read in memory order.
+    #[inline(always)]
+    fn poly3_f32(&self, u: [f32; 3]) -> [f32; 3] {
+        let [x, y, z] = u;
+        let h = |c: &[f32; 20]| {
+            let a = c[0] + x * c[1] + y * c[2] + z * c[3];
+            let b = c[4] + y * c[5] + z * c[6];
+            let cc = c[7] + z * c[8];
+            let px = c[9] + x * a + y * b + z * cc;
+            let d = c[10] + y * c[11] + z * c[12];
+            let e = c[13] + z * c[14];
+            let py = c[15] + y * d + z * e;
+            let f = c[16] + z * c[17];
+            let pz = c[18] + z * f;
+            c[19] + x * px + y * py + z * pz
+        };
+        [
+            h(&self.horner_f32[0]),
+            h(&self.horner_f32[1]),
+            h(&self.horner_f32[2]),
+        ]
+    }
+
+    /// Every table that is not only a polynomial: the monomial vector, the
+    /// block and the terms.
+    #[inline(always)]
+    fn general_f32(
+        &self,
+        u: impl Fn() -> [f32; 3],
+        pos: &[i32; 3],
+        inp: &Inputs,
+        flags: &mut Flags,
+    ) -> [f32; 3] {
         // Monomials up to degree 3 (the common case) are one straight-line
         // expression and the block loop has a constant trip count. All other
         // terms are evaluated out of line (recomputing the monomials they
         // need), so they cost the polynomial path nothing — no spilled
         // monomials, no hoisted constants — when a table has none.
-        let out = if self.terms.is_empty() {
+        if self.terms.is_empty() {
             match self.n_monos {
                 0 => [0.0; 3],
                 1..=20 => self.block_f32(&mono20_f32(u())),
@@ -43,54 +191,29 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                 1..=20 => self.block_f32(&mono20_f32(uv)),
                 _ => self.block_f32(&mono56_f32(uv)),
             };
-            self.flat_f32(uv, &pos, inp, &mut flags, &mut out);
+            self.flat_f32(uv, pos, inp, flags, &mut out);
             out
         } else {
             // The monomials are handed to the thermal/Abbe terms.
             match self.n_monos {
                 0 => {
                     let mut out = [0.0; 3];
-                    self.terms_f32(&[], &pos, inp, &mut flags, &mut out);
+                    self.terms_f32(&[], pos, inp, flags, &mut out);
                     out
                 }
                 1..=20 => {
                     let mv = mono20_f32(u());
                     let mut out = self.block_f32(&mv);
-                    self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
+                    self.terms_f32(&mv, pos, inp, flags, &mut out);
                     out
                 }
                 _ => {
                     let mv = mono56_f32(u());
                     let mut out = self.block_f32(&mv);
-                    self.terms_f32(&mv, &pos, inp, &mut flags, &mut out);
+                    self.terms_f32(&mv, pos, inp, flags, &mut out);
                     out
                 }
             }
-        };
-        let mut corr = [0i32; 3];
-        for o in 0..3 {
-            // Absent outputs have no coefficients and no terms: they are 0.
-            let v = out[o];
-            let max = self.max_corr_f32[o];
-            let c = if v.abs() <= max {
-                v // the common case; NaN fails the comparison
-            } else if v > max {
-                flags.insert(Flags::CLAMPED);
-                max
-            } else if v < -max {
-                flags.insert(Flags::CLAMPED);
-                -max
-            } else {
-                flags.insert(Flags::NOT_FINITE);
-                0.0
-            };
-            // Round to nearest (ties to even) with the 1.5·2^23 trick: exact
-            // for |c| < 2^22, which MAX_CORR_LIMIT_NM guarantees.
-            corr[o] = ((c + ROUND_MAGIC) - ROUND_MAGIC) as i32;
-        }
-        Outputs {
-            corr_nm: corr,
-            flags,
         }
     }
 
@@ -428,3 +551,5 @@ fn dot_f32(row: &[f32], x: &[f32]) -> f32 {
 
 /// 1.5 · 2^23: adding and subtracting it rounds an f32 of magnitude < 2^22 to an integer.
 const ROUND_MAGIC: f32 = 12_582_912.0;
+/// The bits of [`ROUND_MAGIC`]: (v + ROUND_MAGIC)'s bits minus these are round(v) for |v| < 2^22.
+const ROUND_MAGIC_BITS: i32 = 0x4B40_0000;

@@ -6,7 +6,7 @@
 //! so the accumulations cannot overflow inside the envelope.
 
 use super::kernels::{grid_cell, mlp_source, mono20_q30, mono56_q30, phase_turns, rshr};
-use super::{Factor, Flags, GridAxis, Inputs, ModelCap, Outputs, Term, MAX_TEMPS};
+use super::{Factor, Flags, GridAxis, Inputs, ModelCap, Outputs, PolyKind, Term, MAX_TEMPS};
 use crate::limits::{MAX_HIDDEN_UNITS, MAX_MLP_INPUTS, MAX_MONOMIALS};
 use crate::math::{sincos_q30, tanh_q30, ONE_Q30, TANH_IN_FRAC};
 
@@ -47,6 +47,98 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
 
     /// Evaluate in integer-only fixed point (bit-exact on every target).
     pub fn eval_fixed(&self, inp: &Inputs) -> Outputs {
+        match self.poly_fixed {
+            PolyKind::Linear => self.eval_poly_fixed::<1>(inp),
+            PolyKind::Cubic => self.eval_poly_fixed::<3>(inp),
+            PolyKind::None => self.eval_general_fixed(inp),
+        }
+    }
+
+    /// A polynomial-only table of degree ≤ `D` (1 or 3): the same
+    /// integers as the general path (the same Q30 monomials, exact i64
+    /// sums, the same two roundings folded into one bias and one shift,
+    /// see `load`), in straight-line code. A position outside the travel
+    /// takes [`ModelCap::eval_poly_held_fixed`].
+    #[inline(never)]
+    fn eval_poly_fixed<const D: u8>(&self, inp: &Inputs) -> Outputs {
+        let p = inp.pos_nm;
+        if !self.inside_travel(p) {
+            return self.eval_poly_held_fixed::<D>(p);
+        }
+        self.poly_fixed::<D>(p, Flags::empty())
+    }
+
+    #[inline(never)]
+    fn eval_poly_held_fixed<const D: u8>(&self, p: [i32; 3]) -> Outputs {
+        let mut flags = Flags::empty();
+        let pos = self.hold_pos(p, &mut flags);
+        self.poly_fixed::<D>(pos, flags)
+    }
+
+    /// Σ c·m per output over the Q30 monomials of `mono20_q30`.
+    #[inline(always)]
+    fn poly_fixed<const D: u8>(&self, pos: [i32; 3], mut flags: Flags) -> Outputs {
+        let u = self.u_q30(&pos);
+        let mut acc = self.poly_bias_q;
+        // Monomial 0 (the constant) is in the bias.
+        if D == 1 {
+            for o in 0..3 {
+                let c = &self.poly_q[o];
+                acc[o] += c[1] as i64 * u[0] as i64
+                    + c[2] as i64 * u[1] as i64
+                    + c[3] as i64 * u[2] as i64;
+            }
+        } else {
+            // Through memory on purpose: read back as i32, every product is
+            // one SMLAL; kept as values, LLVM loses that the monomials are
+            // sign-extended i32 and multiplies in full 64 bits (measured:
+            // 796 instead of ~300 instructions for cubic19).
+            let mv = core::hint::black_box(mono20_q30(u));
+            // One output at a time over its own coefficient row (memory
+            // order, no bounds checks).
+            for o in 0..3 {
+                let mut a = acc[o];
+                for (&c, &m) in self.poly_q[o][1..].iter().zip(&mv[1..]) {
+                    a += c as i64 * m as i64;
+                }
+                acc[o] = a;
+            }
+        }
+        let mut corr = [0i32; 3];
+        for o in 0..3 {
+            // nm = the high word shifted (the shift is < 32).
+            let v = ((acc[o] >> 32) as i32) >> (self.poly_shift[o] & 31);
+            let max = self.env.max_corr_nm[o];
+            corr[o] = if (v.wrapping_add(max) as u32) <= (2 * max) as u32 {
+                v
+            } else {
+                flags.insert(Flags::CLAMPED);
+                if v > max {
+                    max
+                } else {
+                    -max
+                }
+            };
+        }
+        Outputs {
+            corr_nm: corr,
+            flags,
+        }
+    }
+
+    /// The normalised positions, Q30.
+    #[inline(always)]
+    fn u_q30(&self, pos: &[i32; 3]) -> [i32; 3] {
+        [
+            self.u_scale[0].apply(pos[0].wrapping_sub(self.centre_nm[0])),
+            self.u_scale[1].apply(pos[1].wrapping_sub(self.centre_nm[1])),
+            self.u_scale[2].apply(pos[2].wrapping_sub(self.centre_nm[2])),
+        ]
+    }
+
+    /// Every other table: the monomial vector, the block and the terms.
+    #[inline(never)]
+    fn eval_general_fixed(&self, inp: &Inputs) -> Outputs {
         let mut flags = Flags::empty();
         let pos = self.hold_pos(inp.pos_nm, &mut flags);
         // |p − c| ≤ half-span, so |u| ≤ 2^30 (+1 from rounding) fits i32.

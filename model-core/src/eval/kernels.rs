@@ -73,6 +73,15 @@ pub(super) const MONO_AXIS: [u8; MAX_MONOMIALS] = MONOS.2;
 /// Number of monomials of total degree ≤ d, for d = 0..=5.
 pub(super) const MONOS_UP_TO: [usize; 6] = [1, 4, 10, 20, 35, 56];
 
+/// The graded monomials of degree ≤ 3 in the order the f32 Horner scheme
+/// reads their coefficients (`ModelCap::poly3_f32`):
+/// x²(c₄ + c₁₀x + c₁₁y + c₁₂z), xy(c₅ + c₁₃y + c₁₄z), xz(c₆ + c₁₅z), then
+/// x(c₁ + …); y²(c₇ + c₁₆y + c₁₇z), yz(c₈ + c₁₈z), y(c₂ + …);
+/// z²(c₉ + c₁₉z), z(c₃ + …); and c₀ last.
+pub(super) const HORNER20: [u8; 20] = [
+    4, 10, 11, 12, 5, 13, 14, 6, 15, 1, 7, 16, 17, 8, 18, 2, 9, 19, 3, 0,
+];
+
 /// Index of a monomial in the graded list.
 pub fn mono_index(m: [u8; 3]) -> Option<usize> {
     MONO_EXPS.iter().position(|&e| e == m)

@@ -11,10 +11,12 @@ use core::num::NonZeroU32;
 
 use heapless::Vec;
 
-use super::kernels::{choose_q, mono_index, pow2, round_i64, to_q, Mul32, Turns, MONOS_UP_TO};
+use super::kernels::{
+    choose_q, mono_index, pow2, round_i64, to_q, Mul32, Turns, HORNER20, MONOS_UP_TO,
+};
 use super::{
-    Factor, FactoredF32, GridAxis, LoadError, MlpInput, ModelCap, PeriodicF32, Term,
-    MAX_MLP_INPUTS_TOTAL, MAX_TERMS,
+    poly_fixed_shift_ok, Factor, FactoredF32, GridAxis, LoadError, MlpInput, ModelCap, PeriodicF32,
+    PolyKind, Term, MAX_MLP_INPUTS_TOTAL, MAX_TERMS,
 };
 use crate::limits::{MAX_HIDDEN_LAYERS, MAX_MLP_INPUTS, MAX_MONOMIALS};
 use crate::table::{Envelope, GridView, MlpView, PolyCoefs, Table, TermView};
@@ -65,6 +67,10 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         self.reads_tool = false;
         self.has_factored = false;
         self.max_corr_f32 = [0.0; 3];
+        self.round_lim = [0; 3];
+        self.round_win = [0; 3];
+        self.poly = PolyKind::None;
+        self.poly_fixed = PolyKind::None;
         self.terms.clear();
         self.pf.clear();
         self.pq.clear();
@@ -181,6 +187,33 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             });
         }
         self.prepare_flat();
+        self.poly = match (self.terms.is_empty() && self.has_block, self.n_monos) {
+            (true, 1..=4) => PolyKind::Linear,
+            (true, 5..=20) => PolyKind::Cubic,
+            _ => PolyKind::None,
+        };
+        // rshr(rshr(a, s), 16) = (a + 2^(s−1) + 2^(s+15)) >> (s + 16)
+        // exactly (floor((floor(x/A) + B)/C) = floor((x + A·B)/(A·C))), so
+        // one bias and one shift replace the two roundings. The fast path
+        // takes s + 16 ∈ [32, 62]: the result is the high word shifted, and
+        // the bias plus c₀·2^30 plus Σ|c·m| < 2^61 cannot overflow. (s < 16
+        // needs Σ|c| ≥ 2^29 nm, s > 46 a block of almost nothing.)
+        // An output without coefficients (an absent one) is 0 whatever its
+        // scale (its Σ|c| = 0 gives the largest q): bias and shift 0.
+        let zero: [bool; 3] = core::array::from_fn(|o| self.block_q.iter().all(|c| c[o] == 0));
+        let shifts_ok = (0..3).all(|o| zero[o] || poly_fixed_shift_ok(self.block_shift[o]));
+        self.poly_fixed = if shifts_ok { self.poly } else { PolyKind::None };
+        for o in 0..3 {
+            let s = self.block_shift[o];
+            (self.poly_shift[o], self.poly_bias_q[o]) = if shifts_ok && !zero[o] {
+                (
+                    s - 16,
+                    (1i64 << (s - 1)) + (1i64 << (s + 15)) + ((self.block_q[0][o] as i64) << 30),
+                )
+            } else {
+                (0, 0)
+            };
+        }
         Ok(())
     }
 
@@ -195,6 +228,17 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         self.n_channels = table.channel_count() as u8;
         self.centre_nm = sc.centre_nm;
         self.max_corr_f32 = env.max_corr_nm.map(|v| v as f32);
+        for a in 0..3 {
+            // lo ≤ hi is validated, so the span fits u32.
+            self.hold_nm[a] = (
+                env.travel_min_nm[a],
+                env.travel_max_nm[a].wrapping_sub(env.travel_min_nm[a]) as u32,
+            );
+            // 0 ≤ max ≤ MAX_CORR_LIMIT_NM is validated.
+            let max = env.max_corr_nm[a].max(0);
+            self.round_lim[a] = (max - 1).max(0);
+            self.round_win[a] = (2 * max - 1).max(0) as u32;
+        }
         if table.term_count() > MAX_TERMS {
             return Err(LoadError::TooManyTerms {
                 count: table.term_count() as u32,
@@ -244,6 +288,12 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             for i in 0..MAX_MONOMIALS {
                 self.block_f32[i][o] = block[i][o] as f32;
                 self.block_q[i][o] = to_q(block[i][o], q);
+            }
+            for i in 0..20 {
+                self.poly_q[o][i] = self.block_q[i][o];
+            }
+            for (h, &i) in self.horner_f32[o].iter_mut().zip(HORNER20.iter()) {
+                *h = block[i as usize][o] as f32;
             }
         }
         Ok(())

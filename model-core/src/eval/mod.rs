@@ -184,27 +184,52 @@ impl DirTracker {
             self.last_pos_nm = pos_nm;
             return self.rev_q30;
         }
-        let delta = pos_nm as i64 - self.last_pos_nm as i64;
+        // The difference in i32, with the same results as the i64 one: a
+        // saturated difference still has the right sign and clamps to the
+        // same ±transition.
+        let delta = pos_nm.saturating_sub(self.last_pos_nm);
         self.last_pos_nm = pos_nm;
         if delta == 0 {
             return self.rev_q30;
         }
-        let one = ONE_Q30 as i64;
         let next = if transition_nm <= 0 {
             if delta > 0 {
-                one
+                ONE_Q30
             } else {
-                -one
+                -ONE_Q30
             }
         } else {
-            let t = transition_nm as i64;
-            // A full swing (2.0 = 2^31 in Q30) per transition_nm; clamping the
-            // move first keeps the product inside i64.
-            let d = delta.clamp(-t, t);
-            self.rev_q30 as i64 + d * (1i64 << 31) / t
+            // A full swing (2.0 = 2^31 in Q30) per transition_nm.
+            let d = delta.clamp(-transition_nm, transition_nm);
+            let next = self.rev_q30 as i64 + swing_step(d as i64, transition_nm);
+            next.clamp(-ONE_Q30 as i64, ONE_Q30 as i64) as i32
         };
-        self.rev_q30 = next.clamp(-one, one) as i32;
+        self.rev_q30 = next.clamp(-ONE_Q30, ONE_Q30);
         self.rev_q30
+    }
+}
+
+/// d · 2^31 / t truncated toward zero, for 0 < t and |d| ≤ t: the
+/// reversal state's change. Exactly the i64 division it replaces, but
+/// without it in the common case (an i64 division is a library call of
+/// ~60–100 instructions on the M4, once per axis per tick): with
+/// 2^31 = K·t + R (R < t), |d|·2^31 / t = |d|·K + |d|·R / t, and |d|·R
+/// fits u32 — one UDIV — whenever the move per tick or the transition is
+/// short; otherwise the u64 division.
+#[inline]
+pub(crate) fn swing_step(d: i64, transition_nm: i32) -> i64 {
+    let (m, t) = (d.unsigned_abs() as u32, transition_nm as u32);
+    let k = (1u32 << 31) / t;
+    let r = (1u32 << 31) - k * t;
+    // m·k ≤ t·(2^31 / t) ≤ 2^31 fits u32.
+    let q = match m.checked_mul(r) {
+        Some(mr) => (m * k + mr / t) as u64,
+        None => ((m as u64) << 31) / t as u64,
+    };
+    if d < 0 {
+        -(q as i64)
+    } else {
+        q as i64
     }
 }
 
@@ -378,15 +403,73 @@ struct FactoredF32 {
     c: [f32; 4],
 }
 
+/// Whether the fixed-point polynomial fast path takes a block whose
+/// per-output Σ|c| (in nm, normalised monomials) are `sum_abs`: it needs
+/// every block shift s = q + 14 in [16, 46] (`load`) — Σ|c| between
+/// ~0.25 nm and ~0.5 m — or an output without coefficients.
+/// [`crate::cost`] asks the same to pick the path's cost.
+pub(crate) fn poly_fixed_takes(sum_abs: [f64; 3]) -> bool {
+    sum_abs.iter().all(|&s| {
+        s == 0.0 || kernels::choose_q(s, 0).is_some_and(|q| poly_fixed_shift_ok((q + 14) as u32))
+    })
+}
+
+/// See [`poly_fixed_takes`].
+const fn poly_fixed_shift_ok(shift: u32) -> bool {
+    shift >= 16 && shift <= 46
+}
+
+/// Which straight-line f32 kernel evaluates a table that is nothing but a
+/// polynomial block (no other term).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum PolyKind {
+    /// Not such a table: the general path.
+    None,
+    /// Degree ≤ 1: c₀ + c₁x + c₂y + c₃z per output.
+    Linear,
+    /// Degree ≤ 3: the 20-coefficient Horner scheme.
+    Cubic,
+}
+
 /// A prepared, RAM-resident model with capacity `P` parameters and `G` grid
 /// values. Use the aliases [`Model`] and [`LargeModel`].
+///
+/// `repr(C)` with the fields the per-update fast paths read first: the
+/// M4's `vldr` reaches 1 KiB from its base register and `ldr` 4 KiB, so
+/// behind the parameter pools each of them would cost an extra address
+/// computation.
 #[derive(Clone, Debug)]
+#[repr(C)]
 pub struct ModelCap<const P: usize, const G: usize> {
+    /// The travel per axis as (minimum, span): a position p is inside when
+    /// `(p − min) as u32 ≤ span` — one subtraction and one unsigned compare
+    /// per axis per update (precomputed at load, [`ModelCap::hold_pos_fast`]).
+    hold_nm: [(i32, u32); 3],
+    /// The window of rounded corrections that certainly need no clamp,
+    /// n ∈ [−(max−1), max−1] as `(n + max − 1) as u32 < 2·max − 1`
+    /// (0 when max is 0: every value takes the exact test).
+    round_lim: [i32; 3],
+    round_win: [u32; 3],
+    /// f32 fast path of a table that is only a polynomial block
+    /// ([`PolyKind`]), and its coefficients in the order the Horner scheme
+    /// of [`ModelCap::poly3_f32`] reads them, per output.
+    poly: PolyKind,
+    horner_f32: [[f32; 20]; 3],
+    /// Fixed-point fast path of a polynomial-only table (`PolyKind::None`
+    /// when a block scale is outside what it handles, see
+    /// [`ModelCap::poly_fixed`]): the accumulators start at
+    /// `poly_bias_q` (both roundings and the constant coefficient) and the
+    /// result in nm is the high word shifted right by `poly_shift`.
+    poly_fixed: PolyKind,
+    poly_bias_q: [i64; 3],
+    poly_shift: [u32; 3],
+    /// The block's fixed-point coefficients of degree ≤ 3 per output, graded order.
+    poly_q: [[i32; 20]; 3],
+    centre_nm: [i32; 3],
+    inv_half_f32: [f32; 3],
     env: Envelope,
     outputs: u8,
     n_channels: u8,
-    centre_nm: [i32; 3],
-    inv_half_f32: [f32; 3],
     u_scale: [Mul32; 3],
     /// Number of graded monomials needed (0 = no polynomial at all).
     n_monos: u8,
@@ -447,6 +530,15 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             reads_tool: false,
             has_factored: false,
             max_corr_f32: [0.0; 3],
+            hold_nm: [(0, 0); 3],
+            round_lim: [0; 3],
+            round_win: [0; 3],
+            poly: PolyKind::None,
+            horner_f32: [[0.0; 20]; 3],
+            poly_fixed: PolyKind::None,
+            poly_bias_q: [0; 3],
+            poly_shift: [0; 3],
+            poly_q: [[0; 20]; 3],
             terms: Vec::new(),
             pf: Vec::new(),
             pq: Vec::new(),
@@ -484,6 +576,31 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             } if a as usize == axis => Some(transition_nm),
             _ => None,
         })
+    }
+
+    /// The positions held inside the travel: the common case (every axis
+    /// inside) is three subtract-and-compare pairs against the load-time
+    /// (minimum, span); only a position outside takes [`ModelCap::hold_pos`],
+    /// which holds it at the edge and raises its flag.
+    #[inline(always)]
+    fn hold_pos_fast(&self, p: [i32; 3], flags: &mut Flags) -> [i32; 3] {
+        if self.inside_travel(p) {
+            p
+        } else {
+            self.hold_pos_slow(p, flags)
+        }
+    }
+
+    /// Every axis inside the travel.
+    #[inline(always)]
+    fn inside_travel(&self, p: [i32; 3]) -> bool {
+        let inside = |a: usize| p[a].wrapping_sub(self.hold_nm[a].0) as u32 <= self.hold_nm[a].1;
+        inside(0) && inside(1) && inside(2)
+    }
+
+    #[inline(never)]
+    fn hold_pos_slow(&self, p: [i32; 3], flags: &mut Flags) -> [i32; 3] {
+        self.hold_pos(p, flags)
     }
 
     /// Hold the positions inside the travel, raising the per-axis flags.
@@ -544,5 +661,178 @@ mod tests {
         let f = Flags::TEMP_OUT_OF_RANGE | Flags::OUT_OF_TRAVEL_Y;
         assert!(f.names().eq(["out_of_travel_y", "temp_out_of_range"]));
         assert_eq!(Flags::from_bits(1 << 9).names().count(), 0);
+    }
+
+    #[test]
+    fn swing_step_is_the_i64_division() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        let mut long = 0;
+        for i in 0..200_000u32 {
+            // Transitions from 1 nm to 2^31 − 1, moves up to the transition.
+            let t = match i % 4 {
+                0 => (next() % 100) as i32 + 1,
+                1 => (next() % 100_000) as i32 + 1,
+                _ => (next() % i32::MAX as u64) as i32 + 1,
+            };
+            let d = (next() % (2 * t as u64 + 1)) as i64 - t as i64;
+            let d = if i % 7 == 0 { t as i64 } else { d };
+            long += (d.unsigned_abs() * ((1u64 << 31) % t as u64) > u32::MAX as u64) as u32;
+            assert_eq!(swing_step(d, t), d * (1i64 << 31) / t as i64, "d {d} t {t}");
+        }
+        assert!(long > 1000, "the u64 division was taken {long} times");
+    }
+
+    /// The tracker as it was in i64 (before the i32 version).
+    fn reference_update(t: &mut (i32, i32, bool), pos_nm: i32, transition_nm: i32) -> i32 {
+        let (last, rev, started) = t;
+        if !*started {
+            *started = true;
+            *last = pos_nm;
+            return *rev;
+        }
+        let delta = pos_nm as i64 - *last as i64;
+        *last = pos_nm;
+        if delta == 0 {
+            return *rev;
+        }
+        let one = ONE_Q30 as i64;
+        let next = if transition_nm <= 0 {
+            if delta > 0 {
+                one
+            } else {
+                -one
+            }
+        } else {
+            let t = transition_nm as i64;
+            let d = delta.clamp(-t, t);
+            *rev as i64 + d * (1i64 << 31) / t
+        };
+        *rev = next.clamp(-one, one) as i32;
+        *rev
+    }
+
+    #[test]
+    fn dir_tracker_in_i32_is_the_i64_tracker() {
+        let mut seed = 0x0123_4567_89ab_cdefu64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for run in 0..400 {
+            let transition = match run % 5 {
+                0 => 0,
+                1 => -5,
+                2 => (next() % 1000) as i32 + 1,
+                3 => (next() % 200_000) as i32 + 1,
+                _ => (next() % i32::MAX as u64) as i32 + 1,
+            };
+            let (mut t, mut r) = (DirTracker::new(), (0, 0, false));
+            let mut pos = (next() as i32) / 2;
+            for step in 0..500 {
+                // Small moves, reversals, and jumps across the whole i32 range.
+                pos = match (next() % 10, step % 50) {
+                    (_, 0) => next() as i32,
+                    (0, _) => pos,
+                    (1..=4, _) => pos.saturating_add((next() % 600) as i32),
+                    _ => pos.saturating_sub((next() % 600) as i32),
+                };
+                assert_eq!(
+                    t.update(pos, transition),
+                    reference_update(&mut r, pos, transition),
+                    "run {run} step {step} transition {transition}"
+                );
+            }
+        }
+    }
+
+    /// Sets max |correction| on every field that carries it.
+    fn set_max(m: &mut Model, max: i32) {
+        m.env.max_corr_nm = [max; 3];
+        m.max_corr_f32 = [max as f32; 3];
+        m.round_lim = [(max - 1).max(0); 3];
+        m.round_win = [(2 * max - 1).max(0) as u32; 3];
+    }
+
+    /// The polynomial-only kernels (straight-line f32 Horner, fixed point
+    /// with the folded roundings) against the general paths on the same
+    /// model: fixed point bit for bit, f32 within 1 nm with the same flags —
+    /// inside and beyond the travel, unclamped and clamped.
+    #[test]
+    fn polynomial_fast_paths_equal_the_general_paths() {
+        let table = crate::parse(include_bytes!("../../tests/golden/cubic19.bin")).unwrap();
+        let cubic = Model::load(&table).unwrap();
+        assert_eq!(
+            (cubic.poly, cubic.poly_fixed),
+            (PolyKind::Cubic, PolyKind::Cubic)
+        );
+        // Its degree ≤ 1 part: the same model with the higher coefficients zeroed.
+        let mut linear = cubic.clone();
+        for i in 4..MAX_MONOMIALS {
+            linear.block_f32[i] = [0.0; 3];
+            linear.block_q[i] = [0; 3];
+        }
+        for o in 0..3 {
+            linear.poly_q[o][4..].fill(0);
+            for (h, &i) in linear.horner_f32[o]
+                .iter_mut()
+                .zip(kernels::HORNER20.iter())
+            {
+                if i >= 4 {
+                    *h = 0.0;
+                }
+            }
+        }
+        linear.poly = PolyKind::Linear;
+        linear.poly_fixed = PolyKind::Linear;
+        let env = *cubic.envelope();
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = |lo: i64, hi: i64| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            lo + (seed % (hi - lo + 1) as u64) as i64
+        };
+        let (mut clamped, mut held) = (0, 0);
+        for mut fast in [cubic, linear] {
+            for max in [env.max_corr_nm[0], 2_000, 0] {
+                set_max(&mut fast, max);
+                let mut general = fast.clone();
+                general.poly = PolyKind::None;
+                general.poly_fixed = PolyKind::None;
+                for _ in 0..2000 {
+                    let pos_nm = core::array::from_fn(|a| {
+                        let (lo, hi) = (env.travel_min_nm[a] as i64, env.travel_max_nm[a] as i64);
+                        let margin = (hi - lo) / 5;
+                        next(lo - margin, hi + margin) as i32
+                    });
+                    let inp = Inputs {
+                        pos_nm,
+                        ..Inputs::default()
+                    };
+                    let (a, b) = (fast.eval_fixed(&inp), general.eval_fixed(&inp));
+                    assert_eq!(a, b, "{inp:?}");
+                    let (a, b) = (fast.eval_f32(&inp), general.eval_f32(&inp));
+                    assert_eq!(a.flags, b.flags, "{inp:?}");
+                    for o in 0..3 {
+                        assert!(
+                            a.corr_nm[o].abs_diff(b.corr_nm[o]) <= 1,
+                            "{inp:?} {a:?} {b:?}"
+                        );
+                    }
+                    clamped += a.flags.contains(Flags::CLAMPED) as u32;
+                    held += (a.flags.bits() & 7 != 0) as u32;
+                }
+            }
+        }
+        // Both exact fallbacks were taken many times.
+        assert!(clamped > 1000 && held > 1000, "{clamped} {held}");
     }
 }
