@@ -17,7 +17,7 @@ use trueaxis_engine::effect::Family;
 use trueaxis_engine::diagnose::{Verdict as DVerdict, ABOVE_NOISE_RATIO};
 
 use crate::report::plot::{axis_title, format_value, heat_map_pair, HeatMap, Series, XyPlot};
-use crate::report::{thin, Figure, Page, Tone, Verdict, MAX_SCATTER};
+use crate::report::{Figure, Page, Tone, Verdict};
 
 /// Warning codes that undermine a verdict (shown on the card); the rest
 /// (`in_model_span`, `aux_columns`, …) stay in the Warnings section.
@@ -618,14 +618,8 @@ pub fn write_for(
             format!("{} (mm)", AXES[*a]),
             "residual (µm)",
         )
-        .with(Series::points(
-            format!("dir_{} = +1", AXES[*a]),
-            thin(&up, MAX_SCATTER),
-        ))
-        .with(Series::points(
-            format!("dir_{} = −1", AXES[*a]),
-            thin(&down, MAX_SCATTER),
-        ));
+        .with(Series::points(format!("dir_{} = +1", AXES[*a]), up))
+        .with(Series::points(format!("dir_{} = −1", AXES[*a]), down));
         figs.push(Figure {
             name: format!("reversal_{}_{}", TARGETS[*t], AXES[*a]),
             caption: caption.clone(),
@@ -664,14 +658,8 @@ pub fn write_for(
             label,
             format!("{} (µm)", TARGETS[t]),
         )
-        .with(Series::points(
-            "component + residual",
-            thin(&partial, MAX_SCATTER),
-        ))
-        .with(Series::points(
-            "fitted component",
-            thin(&fitted, MAX_SCATTER),
-        ));
+        .with(Series::points("component + residual", partial))
+        .with(Series::points("fitted component", fitted));
         figs.push(Figure {
             name: format!("component_{}_{}", TARGETS[t], comp.step),
             caption: format!(
@@ -889,5 +877,65 @@ mod tests {
                 "trueaxis fit d.csv --model cubic19 --add 'periodic:target=ex,axis=x,period_mm=5' -o m.json"
             )
         );
+    }
+
+    /// Issue 15: the page's size does not grow with the rows. 64 004
+    /// readings on four dense x lines (0.05 mm, no grid) with a periodogram
+    /// of 64 000 frequencies: under 2 MB, the map binned with its worst
+    /// reading ringed, the periodogram reduced and saying so. Before: every
+    /// x of the lines was a map column (4 × 16 001 cells, ~13 MB) and the
+    /// periodogram a polyline of every frequency.
+    #[test]
+    fn a_large_capture_gives_a_page_of_bounded_size() {
+        let (mut x, mut y) = (Vec::new(), Vec::new());
+        for k in 0..4 {
+            for i in 0..16_001 {
+                x.push(i as f64 * 0.05);
+                y.push(100.0 * k as f64);
+            }
+        }
+        let n = x.len();
+        let data = Dataset {
+            source: "big.csv".into(),
+            pos_mm: [Some(x.clone()), Some(y), Some(vec![250.0; n])],
+            err_um: [Some(vec![Some(0.0); n]), None, None],
+            ..Dataset::default()
+        };
+        let mut before: Vec<f64> = x.iter().map(|x| (x / 0.8).sin()).collect();
+        before[40_000] = 25.0;
+        let after: Vec<f64> = before.iter().map(|v| 0.1 * v).collect();
+        let rows: Vec<usize> = (0..n).collect();
+        let mut d = diagnosis(1.0, Some(0.2));
+        d.evidence = Evidence {
+            periodograms: vec![trueaxis_engine::diagnose::PeriodogramEvidence {
+                target: 0,
+                axis: 0,
+                step: 1,
+                pg: trueaxis_engine::diagnose::periodogram::Periodogram {
+                    freq_per_mm: (1..=64_000).map(|k| k as f64 / 6400.0).collect(),
+                    power: (1..=64_000).map(|k| ((k % 97) as f64) / 1e3).collect(),
+                },
+            }],
+            resid_before: vec![(0, rows.clone(), before)],
+            resid_after: vec![(0, rows, after)],
+            components: Vec::new(),
+        };
+        let dir = std::env::temp_dir().join(format!("trueaxis-diag-big-{}", std::process::id()));
+        let index = write(&d, &data, &dir).unwrap();
+        let html = std::fs::read_to_string(&index).unwrap();
+        assert!(html.len() < 2_000_000, "index.html is {} bytes", html.len());
+        assert!(
+            html.contains("64 004 readings averaged on"),
+            "the map says it is binned"
+        );
+        assert!(
+            html.contains("ringed: the worst, 25.0 µm"),
+            "the worst is ringed"
+        );
+        assert!(
+            html.contains("64 000 points shown as"),
+            "the periodogram is reduced"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

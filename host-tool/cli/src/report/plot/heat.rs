@@ -27,6 +27,29 @@ pub struct HeatMap {
     pub limit: Option<f64>,
     /// Size in pixels.
     pub size: (u32, u32),
+    /// The reading with the largest |value|, (x, y, value): ringed on the
+    /// map, so averaging into cells never hides where the model fails most.
+    pub worst: Option<(f64, f64, f64)>,
+    /// Readings averaged into the cells.
+    pub readings: usize,
+}
+
+/// Cells per axis at most: past it the cells are even bins over the range
+/// (a plane with a dense line at 0.05 mm made a column per reading).
+pub const MAX_CELLS: usize = 60;
+/// Cells per map at most (~100 bytes of SVG each): both axes are binned
+/// more coarsely, in proportion, when their product is larger.
+pub const MAX_MAP_CELLS: usize = 1600;
+
+/// `centres` as they are, or `max` evenly spaced ones over their range.
+fn cap_cells(centres: Vec<f64>, max: usize) -> Vec<f64> {
+    if centres.len() <= max || max < 2 {
+        return centres;
+    }
+    let (lo, hi) = (centres[0], centres[centres.len() - 1]);
+    (0..max)
+        .map(|i| lo + (hi - lo) * i as f64 / (max - 1) as f64)
+        .collect()
 }
 
 impl HeatMap {
@@ -113,6 +136,16 @@ impl HeatMap {
         xs: Vec<f64>,
         ys: Vec<f64>,
     ) -> HeatMap {
+        let (mut xs, mut ys) = (cap_cells(xs, MAX_CELLS), cap_cells(ys, MAX_CELLS));
+        if xs.len() * ys.len() > MAX_MAP_CELLS {
+            let f = (MAX_MAP_CELLS as f64 / (xs.len() * ys.len()) as f64).sqrt();
+            let (nx, ny) = (
+                ((xs.len() as f64 * f) as usize).max(2),
+                ((ys.len() as f64 * f) as usize).max(2),
+            );
+            xs = cap_cells(xs, nx);
+            ys = cap_cells(ys, ny);
+        }
         let mut sum = vec![0.0; xs.len() * ys.len()];
         let mut count = vec![0usize; xs.len() * ys.len()];
         for &(x, y, v) in finite {
@@ -136,7 +169,30 @@ impl HeatMap {
             values,
             limit: None,
             size: SIZE,
+            worst: finite
+                .iter()
+                .copied()
+                .max_by(|a, b| a.2.abs().total_cmp(&b.2.abs())),
+            readings: finite.len(),
         }
+    }
+
+    /// What the map does not show by itself: how many readings were
+    /// averaged into how many cells, and the worst reading (ringed).
+    pub fn note(&self) -> Option<String> {
+        let cells = self.values.iter().flatten().count();
+        let (x, y, v) = self.worst?;
+        (self.readings > cells).then(|| {
+            format!(
+                "{} readings averaged on {} cells; ringed: the worst, {} {} at ({}, {})",
+                decimate::group_digits(self.readings),
+                decimate::group_digits(cells),
+                format_value(v),
+                self.unit,
+                format_value(x),
+                format_value(y)
+            )
+        })
     }
 
     /// The largest |value| on the map (0 for an empty map).
@@ -152,6 +208,15 @@ impl HeatMap {
         DB::ErrorType: 'static,
     {
         let limit = self.limit.unwrap_or_else(|| self.max_abs()).max(1e-12);
+        let area = match self.note() {
+            Some(text) => {
+                let h = area.dim_in_pixel().1;
+                let (a, strip) = area.split_vertically(h.saturating_sub(NOTE_STRIP));
+                draw_note(&strip, &text)?;
+                a
+            }
+            None => area.clone(),
+        };
         let (map_area, bar_area) =
             area.split_horizontally(area.dim_in_pixel().0.saturating_sub(86));
         let xe = edges(&self.x);
@@ -187,6 +252,14 @@ impl HeatMap {
             Rectangle::new([(xe[ix], ye[iy]), (xe[ix + 1], ye[iy + 1])], style)
         });
         chart.draw_series(cells).map_err(plot_err)?;
+        if let Some((x, y, _)) = self.worst {
+            chart
+                .draw_series([
+                    Circle::new((x, y), 7, ShapeStyle::from(&BLACK).stroke_width(2)),
+                    Circle::new((x, y), 9, ShapeStyle::from(&WHITE).stroke_width(1)),
+                ])
+                .map_err(plot_err)?;
+        }
         // Colour bar: a vertical strip from −limit to +limit, labelled by
         // hand on its right (x 0..1 is the strip, 1..3 the labels), which
         // keeps the labels inside the chart whatever the font metrics.

@@ -16,8 +16,10 @@ use anyhow::{anyhow, Result};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
+pub mod decimate;
 mod heat;
 
+pub use decimate::Reduction;
 pub use heat::{diverging, heat_map_pair, HeatMap};
 
 /// Default plot size in pixels (SVG user units).
@@ -275,12 +277,64 @@ impl XyPlot {
         v
     }
 
-    /// Renders the plot as an SVG document.
+    /// The plot with every series reduced to what its pixels can show
+    /// ([`decimate`]: a line's envelope per pixel column, a scatter capped
+    /// with the lowest and highest point of every x bin kept), and how many
+    /// points that left out.
+    pub fn reduced(&self) -> (XyPlot, Reduction) {
+        let mut r = Reduction::default();
+        let mut plot = self.clone();
+        for s in &mut plot.series {
+            let finite: Vec<(f64, f64)> = s
+                .points
+                .iter()
+                .copied()
+                .filter(|p| p.0.is_finite() && p.1.is_finite())
+                .collect();
+            let kept = match s.style {
+                Style::Points => decimate::scatter(
+                    &finite,
+                    decimate::MAX_SCATTER_POINTS,
+                    decimate::SCATTER_BINS,
+                ),
+                Style::Line | Style::Step | Style::LinePoints => {
+                    decimate::line(&finite, decimate::LINE_BINS)
+                }
+            };
+            r.add(finite.len(), kept.len());
+            s.points = kept;
+        }
+        (plot, r)
+    }
+
+    /// Renders the plot as an SVG document. A series with more points than
+    /// the plot has pixels is reduced first ([`XyPlot::reduced`]) and the
+    /// plot says so in a line under it: the SVG's size is bounded whatever
+    /// the number of rows.
     pub fn to_svg(&self) -> Result<String> {
+        let (plot, reduction) = self.reduced();
+        Ok(decimate::drop_repeated_dots(
+            plot.draw_svg(reduction.note())?,
+        ))
+    }
+
+    fn draw_svg(&self, note: Option<String>) -> Result<String> {
         let mut buf = String::new();
         {
-            let root = SVGBackend::with_string(&mut buf, self.size).into_drawing_area();
+            let size = match note {
+                Some(_) => (self.size.0, self.size.1 + NOTE_STRIP),
+                None => self.size,
+            };
+            let root = SVGBackend::with_string(&mut buf, size).into_drawing_area();
             root.fill(&WHITE).map_err(plot_err)?;
+            let root = match &note {
+                Some(text) => {
+                    let (plot, strip) = root.split_vertically(self.size.1);
+                    draw_note(&strip, text)?;
+                    plot
+                }
+                None => root,
+            };
             // The legend gets a strip of its own right of the plot, so it
             // never covers data (a legend in a corner sat on the hottest
             // points).
@@ -460,6 +514,28 @@ impl XyPlot {
         }
         Ok(responsive(buf))
     }
+}
+
+/// Pixels of the strip under a plot that says how it was reduced.
+pub const NOTE_STRIP: u32 = 18;
+
+/// The reduction note, grey, left-aligned in its strip.
+pub(crate) fn draw_note<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    text: &str,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    area.draw(&Text::new(
+        text.to_string(),
+        (12, 2),
+        ("sans-serif", 11)
+            .into_font()
+            .color(&RGBColor(90, 90, 90))
+            .pos(Pos::new(HPos::Left, VPos::Top)),
+    ))
+    .map_err(plot_err)
 }
 
 /// How a legend entry is drawn.
@@ -985,12 +1061,12 @@ mod tests {
         // The middle row holds the line's readings; the others the grid's.
         assert_eq!(m.values[0], Some(1.0));
         assert!(m.values[4].unwrap() > 2.9);
-        // One cell per reading without it.
-        assert!(
+        // Without it, one cell per reading — up to MAX_CELLS even bins.
+        assert_eq!(
             HeatMap::from_points("t", "x", "y", "µm", &pts, 1e-3)
                 .x
-                .len()
-                > 200
+                .len(),
+            heat::MAX_CELLS
         );
     }
 
