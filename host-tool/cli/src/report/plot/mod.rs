@@ -122,6 +122,9 @@ pub struct XyPlot {
     pub dashed: Vec<(f64, String, usize)>,
     /// Text labels at data coordinates (what each fit step added).
     pub notes: Vec<(f64, f64, String)>,
+    /// Grey dotted vertical marks with a label at the foot (the sampling
+    /// comb of a plan on a periodogram).
+    pub vmarks: Vec<(f64, String)>,
     /// How the x axis is ticked.
     pub x_ticks: Ticks,
     /// Size in pixels.
@@ -138,6 +141,9 @@ pub enum Ticks {
     Integer,
     /// A categorical ±1 axis (`dir_x`): ticks at −1 and +1 only.
     Direction,
+    /// A frequency axis (cycles/mm) labelled with the period 1/f in mm at
+    /// each tick: a user knows a lead as "5 mm", not "0.2 cycles/mm".
+    Period,
 }
 
 impl XyPlot {
@@ -157,6 +163,7 @@ impl XyPlot {
             hlines: Vec::new(),
             dashed: Vec::new(),
             notes: Vec::new(),
+            vmarks: Vec::new(),
             x_ticks: Ticks::Auto,
             size: SIZE,
         }
@@ -198,6 +205,12 @@ impl XyPlot {
         self
     }
 
+    /// Adds a grey dotted vertical mark, labelled at its foot.
+    pub fn with_vmark(mut self, x: f64, label: impl Into<String>) -> XyPlot {
+        self.vmarks.push((x, label.into()));
+        self
+    }
+
     /// Adds a horizontal marker line.
     pub fn with_hline(mut self, y: f64, label: impl Into<String>) -> XyPlot {
         self.hlines.push((y, label.into()));
@@ -226,11 +239,12 @@ impl XyPlot {
             }
         }
         xs.extend(self.vlines.iter().map(|v| v.0).filter(|v| v.is_finite()));
+        xs.extend(self.vmarks.iter().map(|v| v.0).filter(|v| v.is_finite()));
         ys.extend(self.hlines.iter().map(|v| v.0).filter(|v| v.is_finite()));
         ys.extend(self.dashed.iter().map(|v| v.0).filter(|v| v.is_finite()));
         ys.extend(self.notes.iter().map(|v| v.1).filter(|v| v.is_finite()));
         let x = match self.x_ticks {
-            Ticks::Auto => padded_range(&xs, 0.02),
+            Ticks::Auto | Ticks::Period => padded_range(&xs, 0.02),
             // Half a step beyond the first and last: a single fit is a
             // point in the middle, not an empty axis from 1.0 to 1.0.
             Ticks::Integer => {
@@ -359,6 +373,13 @@ impl XyPlot {
             let x_fmt = move |v: &f64| -> String {
                 match ticks {
                     Ticks::Auto => format_tick(*v),
+                    Ticks::Period => {
+                        if *v > 1e-12 {
+                            format_value(1.0 / v)
+                        } else {
+                            String::new()
+                        }
+                    }
                     Ticks::Integer => {
                         if (v - v.round()).abs() < 1e-9 {
                             format!("{}", v.round() as i64)
@@ -378,7 +399,7 @@ impl XyPlot {
                 }
             };
             let n_x = match ticks {
-                Ticks::Auto => 10,
+                Ticks::Auto | Ticks::Period => 10,
                 Ticks::Integer => ((x1 - x0).round() as usize).clamp(1, 30),
                 Ticks::Direction => 3,
             };
@@ -388,7 +409,7 @@ impl XyPlot {
                 .x_labels(n_x)
                 .x_label_formatter(&x_fmt)
                 .light_line_style(RGBColor(235, 235, 235));
-            if ticks != Ticks::Auto {
+            if !matches!(ticks, Ticks::Auto | Ticks::Period) {
                 mesh.disable_x_mesh();
             }
             mesh.draw().map_err(plot_err)?;
@@ -425,6 +446,28 @@ impl XyPlot {
                             label.clone(),
                             (x0 + 0.01 * (x1 - x0), *y),
                             ("sans-serif", 12).into_font().color(&RGBColor(90, 90, 90)),
+                        )))
+                        .map_err(plot_err)?;
+                }
+            }
+            for (x, label) in &self.vmarks {
+                let style = ShapeStyle::from(&RGBColor(110, 110, 110)).stroke_width(1);
+                let n = 40;
+                let dots = (0..n).step_by(2).map(|k| {
+                    let a = y0 + (y1 - y0) * k as f64 / n as f64;
+                    let b = y0 + (y1 - y0) * (k + 1) as f64 / n as f64;
+                    PathElement::new(vec![(*x, a), (*x, b)], style)
+                });
+                chart.draw_series(dots).map_err(plot_err)?;
+                if !label.is_empty() {
+                    chart
+                        .draw_series(std::iter::once(Text::new(
+                            label.clone(),
+                            (*x, y1 - 0.1 * (y1 - y0)),
+                            ("sans-serif", 11)
+                                .into_font()
+                                .color(&RGBColor(90, 90, 90))
+                                .pos(Pos::new(HPos::Left, VPos::Bottom)),
                         )))
                         .map_err(plot_err)?;
                 }
