@@ -380,6 +380,143 @@ pub fn false_alarm_level(n_points: usize, n_freq: usize, fap: f64) -> Option<f64
     Some((2.0 * (m / fap).ln() / n_points as f64).min(1.0))
 }
 
+/// Least-squares slope and intercept of y on x; None for fewer than 3
+/// points or no spread in x.
+fn line_fit(pts: &[(f64, f64)]) -> Option<(f64, f64)> {
+    let n = pts.len() as f64;
+    if pts.len() < 3 {
+        return None;
+    }
+    let (mx, my) = (
+        pts.iter().map(|p| p.0).sum::<f64>() / n,
+        pts.iter().map(|p| p.1).sum::<f64>() / n,
+    );
+    let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    (sxx > 1e-12 * n).then(|| (sxy / sxx, my - sxy / sxx * mx))
+}
+
+/// The thermal evidence as the slope a user wants (issue 13): a one-sensor
+/// thermal effect's component plus the final residual against the sensor's
+/// temperature — per metre of travel when the growth scales with an axis
+/// (rows within 20 % of the axis' largest |position| left out: dividing by
+/// a short arm blows the noise up) — with the least-squares line and its
+/// slope (µm/m/K: the CTE; µm/K without an axis), the fit's value ± 95 %
+/// and the lag beside it. None for other effects or without the sensor.
+fn thermal_slope(
+    data: &Dataset,
+    c: &Candidate,
+    step: usize,
+    rows: &[usize],
+    component: &[f64],
+    after: &[f64],
+) -> Result<Option<Figure>> {
+    if c.effect != Family::Thermal {
+        return Ok(None);
+    }
+    let Some(column) = c.channel.as_deref().filter(|ch| !ch.contains('+')) else {
+        return Ok(None);
+    };
+    let name = column
+        .strip_prefix("T_")
+        .and_then(|n| n.strip_suffix("_C"))
+        .unwrap_or(column);
+    let Some(temp) = data.temp(name).map(|t| &t.temp_c) else {
+        return Ok(None);
+    };
+    let column = format!("T_{name}_C");
+    let axis = c
+        .axis
+        .as_deref()
+        .and_then(|a| AXES.iter().position(|x| *x == a));
+    let arm = axis.and_then(|a| data.pos_mm[a].as_ref());
+    let reach = arm.map_or(0.0, |p| {
+        rows.iter().map(|&r| p[r].abs()).fold(0.0, f64::max)
+    });
+    let pts: Vec<(f64, f64)> = rows
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &r)| {
+            let y = component[i] + after[i];
+            match arm {
+                Some(p) if p[r].abs() >= 0.2 * reach && reach > 0.0 => {
+                    Some((temp[r], y / (p[r] / 1000.0)))
+                }
+                Some(_) => None,
+                None => Some((temp[r], y)),
+            }
+        })
+        .filter(|p| p.0.is_finite() && p.1.is_finite())
+        .collect();
+    let Some((slope, icpt)) = line_fit(&pts) else {
+        return Ok(None);
+    };
+    let (unit, y_label) = match axis {
+        Some(a) => (
+            "µm/m/K",
+            format!("{} per metre of {} travel (µm/m)", c.target, AXES[a]),
+        ),
+        None => ("µm/K", format!("{} (µm)", c.target)),
+    };
+    let (lo, hi) = pts
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| {
+            (l.min(p.0), h.max(p.0))
+        });
+    let t_title = axis_title(&column);
+    let plot = XyPlot::new(
+        format!(
+            "Thermal growth of {}{}: the slope",
+            c.target,
+            axis.map_or(String::new(), |a| format!(" along {}", AXES[a]))
+        ),
+        t_title.clone(),
+        y_label,
+    )
+    .with(Series::points("component + residual", pts.clone()))
+    .with(Series::line(
+        format!("least squares: {} {unit}", format_value(slope)),
+        vec![(lo, icpt + slope * lo), (hi, icpt + slope * hi)],
+    ));
+    let fitted = c.physical.as_ref().map_or(String::new(), |ph| {
+        format!(
+            "; the model's {} is {} {} (95 %: {} … {})",
+            ph.name.replace('_', " "),
+            format_value(ph.value),
+            ph.unit,
+            format_value(ph.ci95[0]),
+            format_value(ph.ci95[1])
+        )
+    });
+    let lag = c.params.get("lag_s").copied().filter(|l| *l > 0.0).map_or(
+        String::new(),
+        |l| {
+            format!(
+                ". The structure follows the sensor with a lag of {} s, so warm-up and cool-down lie on two branches around the line",
+                format_value(l)
+            )
+        },
+    );
+    Ok(Some(Figure {
+        name: format!("thermal_slope_{}_{step}", c.target),
+        caption: format!(
+            "Path step {step} of {}: component + final residual{} against the {t_title}; the slope of the least-squares line, {} {unit}, is the {}{fitted}{lag}.",
+            c.target,
+            axis.map_or(String::new(), |a| format!(
+                " per metre of {} travel (rows within 20 % of the largest |{}| left out)",
+                AXES[a], AXES[a]
+            )),
+            format_value(slope),
+            if axis.is_some() {
+                "thermal expansion coefficient (CTE)"
+            } else {
+                "growth per kelvin"
+            },
+        ),
+        svg: plot.to_svg()?,
+    }))
+}
+
 /// The channel a candidate follows, as (label, value per data row).
 fn channel(data: &Dataset, c: &Candidate) -> Option<(String, Vec<f64>)> {
     let axis = c
@@ -777,6 +914,9 @@ pub fn write_for(
             ),
             svg: plot.to_svg()?,
         });
+        if let Some(fig) = thermal_slope(data, c, comp.step, rows, &comp.values, after)? {
+            figs.push(fig);
+        }
     }
     page.grid_wide(figs);
     // Spatial residual maps before and after the path.
@@ -1133,5 +1273,85 @@ mod tests {
         assert!(html.contains("periods 50.0, 25.0, 16.7 mm"), "comb named");
         assert!(html.contains("period (mm), on a frequency scale"));
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Issue 13: thermal evidence is the slope. Steel growing 11.5 µm/m/K
+    /// along x with the bed temperature (20 → 23 °C over 400 readings, x
+    /// 0…800 mm, a ±0.2 µm residual): the figure shows the error per metre
+    /// of x against the temperature with a least-squares slope of 11.5
+    /// µm/m/K and the model's value beside it.
+    #[test]
+    fn thermal_evidence_is_the_slope_against_temperature() {
+        let n = 400;
+        let x: Vec<f64> = (0..n).map(|i| ((i * 37) % 401) as f64 * 2.0).collect();
+        let t: Vec<f64> = (0..n).map(|i| 20.0 + 3.0 * i as f64 / n as f64).collect();
+        let data = Dataset {
+            source: "d.csv".into(),
+            pos_mm: [Some(x.clone()), Some(vec![0.0; n]), Some(vec![0.0; n])],
+            err_um: [Some(vec![Some(0.0); n]), None, None],
+            temps: vec![trueaxis_engine::data::TempChannel {
+                name: "bed".into(),
+                temp_c: t.clone(),
+            }],
+            ..Dataset::default()
+        };
+        let comp: Vec<f64> = (0..n).map(|i| 11.5e-3 * x[i] * (t[i] - 20.0)).collect();
+        let after: Vec<f64> = (0..n)
+            .map(|i| if i % 2 == 0 { 0.2 } else { -0.2 })
+            .collect();
+        let mut d = diagnosis(0.2, Some(0.2));
+        let add = "thermal:target=ex,channel=bed,times=x";
+        d.candidates = vec![Candidate {
+            effect: Family::Thermal,
+            target: "ex".into(),
+            axis: Some("x".into()),
+            channel: Some("T_bed_C".into()),
+            params: BTreeMap::new(),
+            add: add.into(),
+            held_out_rms_um_after: Some(0.2),
+            held_out_rms_um_before: Some(5.0),
+            hold_out: trueaxis_engine::diagnose::HoldOutKind::Blocks,
+            gain: Some(0.9),
+            identifiable: true,
+            evidence: String::new(),
+            delta_bic: Some(-900.0),
+            rms_um_after: Some(0.2),
+            out_of_span_share: 1.0,
+            significant: true,
+            physical: Some(Physical {
+                name: "cte".into(),
+                unit: "µm/m/K".into(),
+                value: 11.49,
+                ci95: [11.3, 11.7],
+                plausible: true,
+                expected: String::new(),
+            }),
+            confounded_with: Vec::new(),
+            replaces: None,
+            step: Some(1),
+        }];
+        let rows: Vec<usize> = (0..n).collect();
+        let fig = thermal_slope(&data, &d.candidates[0], 1, &rows, &comp, &after)
+            .unwrap()
+            .expect("a slope figure");
+        assert_eq!(fig.name, "thermal_slope_ex_1");
+        assert!(
+            fig.svg.contains("least squares: 11.5 µm/m/K"),
+            "slope in the legend"
+        );
+        assert!(fig.svg.contains("ex per metre of x travel (µm/m)"));
+        assert!(fig.svg.contains("bed temperature (°C)"));
+        assert!(
+            fig.caption
+                .contains("the model's cte is 11.5 µm/m/K (95 %: 11.3 … 11.7)"),
+            "{}",
+            fig.caption
+        );
+        // Not for another family.
+        let mut other = d.candidates[0].clone();
+        other.effect = Family::Drift;
+        assert!(thermal_slope(&data, &other, 1, &rows, &comp, &after)
+            .unwrap()
+            .is_none());
     }
 }
