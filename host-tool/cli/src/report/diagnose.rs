@@ -380,6 +380,127 @@ pub fn false_alarm_level(n_points: usize, n_freq: usize, fap: f64) -> Option<f64
     Some((2.0 * (m / fap).ln() / n_points as f64).min(1.0))
 }
 
+/// Bins per axis of the working-volume overview at most.
+const OVERVIEW_BINS: usize = 12;
+
+/// Where in the working volume the final residual is large, on the first
+/// screen (issue 13): per target, the RMS of the residual after the path in
+/// even bins (≤ 12 per axis) projected on each pair of moving axes — small
+/// maps side by side on one colour scale per target (0 white … the largest
+/// cell red), the worst reading ringed. Nothing for fewer than two moving
+/// axes.
+fn volume_overview(page: &mut Page, d: &Diagnosis, data: &Dataset) -> Result<()> {
+    let axes = data.varying_axes();
+    if axes.len() < 2 {
+        return Ok(());
+    }
+    let pairs: Vec<(usize, usize)> = (0..axes.len())
+        .flat_map(|i| (i + 1..axes.len()).map(move |j| (i, j)))
+        .map(|(i, j)| (axes[i], axes[j]))
+        .collect();
+    let mut figs = Vec::new();
+    let mut scales = Vec::new();
+    for (t, rows, after) in &d.evidence.resid_after {
+        let tn = TARGETS[*t];
+        let mut maps = Vec::new();
+        for &(a, b) in &pairs {
+            let (Some(pa), Some(pb)) = (data.pos_mm[a].as_ref(), data.pos_mm[b].as_ref()) else {
+                continue;
+            };
+            let bins = |p: &[f64]| {
+                let (lo, hi) = rows
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &r| {
+                        (l.min(p[r]), h.max(p[r]))
+                    });
+                let mut distinct: Vec<i64> =
+                    rows.iter().map(|&r| (p[r] * 1e3).round() as i64).collect();
+                distinct.sort_unstable();
+                distinct.dedup();
+                (lo, hi, distinct.len().clamp(1, OVERVIEW_BINS))
+            };
+            let ((alo, ahi, na), (blo, bhi, nb)) = (bins(pa), bins(pb));
+            let cell = |v: f64, lo: f64, hi: f64, n: usize| {
+                if hi > lo {
+                    (((v - lo) / (hi - lo) * n as f64) as usize).min(n - 1)
+                } else {
+                    0
+                }
+            };
+            let mut ss = vec![0.0; na * nb];
+            let mut count = vec![0usize; na * nb];
+            let mut worst: Option<(f64, f64, f64)> = None;
+            for (i, &r) in rows.iter().enumerate() {
+                let v = after[i];
+                if !v.is_finite() {
+                    continue;
+                }
+                let k = cell(pb[r], blo, bhi, nb) * na + cell(pa[r], alo, ahi, na);
+                ss[k] += v * v;
+                count[k] += 1;
+                if worst.is_none_or(|w| v.abs() > w.2.abs()) {
+                    worst = Some((pa[r], pb[r], v));
+                }
+            }
+            let centres = |lo: f64, hi: f64, n: usize| -> Vec<f64> {
+                (0..n)
+                    .map(|k| lo + (hi - lo) * (k as f64 + 0.5) / n as f64)
+                    .collect()
+            };
+            let values = ss
+                .iter()
+                .zip(&count)
+                .map(|(s, &c)| (c > 0).then(|| (s / c as f64).sqrt()))
+                .collect();
+            let mut m = HeatMap::from_cells(
+                format!("{tn} RMS over {}–{}", AXES[a], AXES[b]),
+                format!("{} (mm)", AXES[a]),
+                format!("{} (mm)", AXES[b]),
+                "µm",
+                centres(alo, ahi, na),
+                centres(blo, bhi, nb),
+                values,
+                worst,
+                rows.len(),
+            );
+            m.size = (460, 380);
+            maps.push((format!("overview_{tn}_{}{}", AXES[a], AXES[b]), m));
+        }
+        // At the noise a map must look pale, not red: the scale reaches at
+        // least 3× the noise floor.
+        let noise = d.noise_floor_um.get(tn).copied().flatten();
+        let limit = maps
+            .iter()
+            .fold(noise.map_or(0.0, |n| 3.0 * n), |l, m| l.max(m.1.max_abs()));
+        scales.push(format!(
+            "{tn} 0…{} µm{}",
+            format_value(limit),
+            noise.map_or(String::new(), |n| format!(", noise {}", format_value(n)))
+        ));
+        for (name, mut m) in maps {
+            m.limit = Some(limit);
+            figs.push(Figure {
+                name,
+                caption: format!(
+                    "RMS of the {tn} residual after the path per cell, projected on {}–{} (red: where the model fails most).",
+                    m.x_label, m.y_label
+                ),
+                svg: m.to_svg()?,
+            });
+        }
+    }
+    if figs.is_empty() {
+        return Ok(());
+    }
+    page.heading("Where the model fails");
+    page.paragraph(format!(
+        "RMS of the residual after the path, in bins of the working volume projected on each pair of axes; one colour scale per target, reaching at least 3× its noise floor so that a map at the noise stays pale ({}); the worst reading ringed.",
+        scales.join(", ")
+    ));
+    page.grid(figs);
+    Ok(())
+}
+
 /// Least-squares slope and intercept of y on x; None for fewer than 3
 /// points or no spread in x.
 fn line_fit(pts: &[(f64, f64)]) -> Option<(f64, f64)> {
@@ -604,6 +725,7 @@ pub fn write_for(
 ) -> Result<PathBuf> {
     let mut page = Page::new(format!("trueaxis diagnose — {}", data.source));
     page.verdict(verdict(d, data_path, model_out));
+    volume_overview(&mut page, d, data)?;
     page.heading("Diagnosis");
     page.paragraph(format!(
         "Model {}; verdict {}; hold-out: {}.",
@@ -1174,7 +1296,7 @@ mod tests {
         let html = std::fs::read_to_string(&index).unwrap();
         assert!(html.len() < 2_000_000, "index.html is {} bytes", html.len());
         assert!(
-            html.contains("64 004 readings averaged on"),
+            html.contains("64 004 readings on"),
             "the map says it is binned"
         );
         assert!(
@@ -1353,5 +1475,70 @@ mod tests {
         assert!(thermal_slope(&data, &other, 1, &rows, &comp, &after)
             .unwrap()
             .is_none());
+    }
+
+    /// Issue 13: the first thing after the verdict card is where in the
+    /// working volume the residual is large. A 5 × 5 × 5 grid with the
+    /// residual at the noise except near x = y = 400 mm: the overview's
+    /// maps come before the tables, ring the worst reading there and keep
+    /// the scale at ≥ 3× the noise floor.
+    #[test]
+    fn the_overview_shows_where_in_the_volume_the_model_fails() {
+        let (mut x, mut y, mut z) = (Vec::new(), Vec::new(), Vec::new());
+        for iz in 0..5 {
+            for iy in 0..5 {
+                for ix in 0..5 {
+                    x.push(100.0 * ix as f64);
+                    y.push(100.0 * iy as f64);
+                    z.push(100.0 * iz as f64);
+                }
+            }
+        }
+        let n = x.len();
+        let after: Vec<f64> = (0..n)
+            .map(|r| {
+                if x[r] == 400.0 && y[r] == 400.0 {
+                    if z[r] == 200.0 {
+                        5.0
+                    } else {
+                        3.0
+                    }
+                } else if r % 2 == 0 {
+                    0.2
+                } else {
+                    -0.2
+                }
+            })
+            .collect();
+        let data = Dataset {
+            source: "d.csv".into(),
+            pos_mm: [Some(x), Some(y), Some(z)],
+            err_um: [Some(vec![Some(0.0); n]), None, None],
+            ..Dataset::default()
+        };
+        let mut d = diagnosis(0.2, Some(0.2));
+        let rows: Vec<usize> = (0..n).collect();
+        d.evidence.resid_after = vec![(0, rows, after)];
+        let mut page = Page::new("t");
+        volume_overview(&mut page, &d, &data).unwrap();
+        let html = page.to_html();
+        for name in ["overview_ex_xy", "overview_ex_xz", "overview_ex_yz"] {
+            assert!(html.contains(name), "{name}");
+        }
+        assert!(html.contains("ringed: the worst, 5.00 µm at (400, 400)"));
+        let at = html.find("one colour scale").unwrap();
+        assert!(
+            html.contains("ex 0…3.49 µm, noise 0.200"),
+            "scale: the worst cell, √((4·3² + 5²)/5): {}",
+            &html[at..at + 300]
+        );
+        let dir = std::env::temp_dir().join(format!("trueaxis-diag-ov-{}", std::process::id()));
+        let html = std::fs::read_to_string(write(&d, &data, &dir).unwrap()).unwrap();
+        let (ov, tables) = (
+            html.find("Where the model fails").unwrap(),
+            html.find("<h2>Diagnosis").unwrap(),
+        );
+        assert!(ov < tables, "the overview comes first");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -32,6 +32,9 @@ pub struct HeatMap {
     pub worst: Option<(f64, f64, f64)>,
     /// Readings averaged into the cells.
     pub readings: usize,
+    /// Values are magnitudes (an RMS, ≥ 0): the colour bar runs from 0
+    /// (white) to `limit` (red) only.
+    pub magnitude: bool,
 }
 
 /// Cells per axis at most: past it the cells are even bins over the range
@@ -174,6 +177,38 @@ impl HeatMap {
                 .copied()
                 .max_by(|a, b| a.2.abs().total_cmp(&b.2.abs())),
             readings: finite.len(),
+            magnitude: false,
+        }
+    }
+
+    /// A map of values already reduced per cell (an RMS per bin): centres
+    /// ascending, `values[iy * xs.len() + ix]`, with the reading to ring and
+    /// the number of readings behind the cells.
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_cells(
+        title: impl Into<String>,
+        x_label: impl Into<String>,
+        y_label: impl Into<String>,
+        unit: impl Into<String>,
+        xs: Vec<f64>,
+        ys: Vec<f64>,
+        values: Vec<Option<f64>>,
+        worst: Option<(f64, f64, f64)>,
+        readings: usize,
+    ) -> HeatMap {
+        HeatMap {
+            title: title.into(),
+            x_label: x_label.into(),
+            y_label: y_label.into(),
+            unit: unit.into(),
+            x: xs,
+            y: ys,
+            values,
+            limit: None,
+            size: SIZE,
+            worst,
+            readings,
+            magnitude: true,
         }
     }
 
@@ -184,7 +219,7 @@ impl HeatMap {
         let (x, y, v) = self.worst?;
         (self.readings > cells).then(|| {
             format!(
-                "{} readings averaged on {} cells; ringed: the worst, {} {} at ({}, {})",
+                "{} readings on {} cells; ringed: the worst, {} {} at ({}, {})",
                 decimate::group_digits(self.readings),
                 decimate::group_digits(cells),
                 format_value(v),
@@ -263,23 +298,29 @@ impl HeatMap {
         // Colour bar: a vertical strip from −limit to +limit, labelled by
         // hand on its right (x 0..1 is the strip, 1..3 the labels), which
         // keeps the labels inside the chart whatever the font metrics.
+        let bottom = if self.magnitude { 0.0 } else { -limit };
         let mut bar = ChartBuilder::on(&bar_area)
             .margin_top(40)
             .margin_bottom(54)
             .margin_right(4)
-            .build_cartesian_2d(0.0..3.0, -limit * 1.04..limit * 1.04)
+            .build_cartesian_2d(0.0..3.0, bottom * 1.04..limit * 1.04)
             .map_err(plot_err)?;
         let steps = 64;
         bar.draw_series((0..steps).map(|i| {
-            let a = -limit + 2.0 * limit * i as f64 / steps as f64;
-            let b = -limit + 2.0 * limit * (i + 1) as f64 / steps as f64;
+            let a = bottom + (limit - bottom) * i as f64 / steps as f64;
+            let b = bottom + (limit - bottom) * (i + 1) as f64 / steps as f64;
             Rectangle::new(
                 [(0.0, a), (1.0, b)],
                 diverging(0.5 * (a + b) / limit).filled(),
             )
         }))
         .map_err(plot_err)?;
-        bar.draw_series([-1.0, -0.5, 0.0, 0.5, 1.0].map(|f| {
+        let marks = if self.magnitude {
+            [0.0, 0.25, 0.5, 0.75, 1.0]
+        } else {
+            [-1.0, -0.5, 0.0, 0.5, 1.0]
+        };
+        bar.draw_series(marks.map(|f| {
             Text::new(
                 format_value(f * limit),
                 (1.15, f * limit),
