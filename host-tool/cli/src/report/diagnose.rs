@@ -17,7 +17,7 @@ use trueaxis_engine::effect::Family;
 use trueaxis_engine::diagnose::{Verdict as DVerdict, ABOVE_NOISE_RATIO};
 
 use crate::report::plot::{
-    axis_title, format_value, heat_map_pair, HeatMap, Series, Ticks, XyPlot,
+    axis_title, format_value, heat_map_pair, HeatMap, Series, Style, Ticks, XyPlot,
 };
 use crate::report::{Figure, Page, Tone, Verdict};
 
@@ -378,6 +378,37 @@ pub fn false_alarm_level(n_points: usize, n_freq: usize, fap: f64) -> Option<f64
     }
     let m = independent_frequencies(n_freq) as f64;
     Some((2.0 * (m / fap).ln() / n_points as f64).min(1.0))
+}
+
+/// Bins along the travel of a forward/backward profile.
+const PROFILE_BINS: usize = 40;
+
+/// The mean y per x bin (`bins` even bins over the x range), at the bin's
+/// mean x, for the bins that hold points: a profile through a scatter.
+fn binned_mean(pts: &[(f64, f64)], bins: usize) -> Vec<(f64, f64)> {
+    let (lo, hi) = pts
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| {
+            (l.min(p.0), h.max(p.0))
+        });
+    if pts.is_empty() || bins == 0 {
+        return Vec::new();
+    }
+    let mut acc = vec![(0.0, 0.0, 0usize); bins];
+    for &(x, y) in pts.iter().filter(|p| p.0.is_finite() && p.1.is_finite()) {
+        let k = if hi > lo {
+            (((x - lo) / (hi - lo) * bins as f64) as usize).min(bins - 1)
+        } else {
+            0
+        };
+        acc[k].0 += x;
+        acc[k].1 += y;
+        acc[k].2 += 1;
+    }
+    acc.into_iter()
+        .filter(|a| a.2 > 0)
+        .map(|(sx, sy, n)| (sx / n as f64, sy / n as f64))
+        .collect()
 }
 
 /// Bins per axis of the working-volume overview at most.
@@ -986,11 +1017,26 @@ pub fn write_for(
             format!("{} (mm)", AXES[*a]),
             "residual (µm)",
         )
-        .with(Series::points(format!("dir_{} = +1", AXES[*a]), up))
-        .with(Series::points(format!("dir_{} = −1", AXES[*a]), down));
+        .with(Series::points(format!("dir_{} = +1", AXES[*a]), up.clone()))
+        .with(Series::points(
+            format!("dir_{} = −1", AXES[*a]),
+            down.clone(),
+        ))
+        .with(Series::styled(
+            "forward profile (mean per bin)",
+            binned_mean(&up, PROFILE_BINS),
+            Style::LinePoints,
+        ))
+        .with(Series::styled(
+            "backward profile (mean per bin)",
+            binned_mean(&down, PROFILE_BINS),
+            Style::LinePoints,
+        ));
         figs.push(Figure {
             name: format!("reversal_{}_{}", TARGETS[*t], AXES[*a]),
-            caption: caption.clone(),
+            caption: format!(
+                "{caption}; lines: the forward and the backward profile, the mean per {PROFILE_BINS}th of the travel — the gap between them is the reversal"
+            ),
             svg: plot.to_svg()?,
         });
     }
@@ -1540,5 +1586,27 @@ mod tests {
         );
         assert!(ov < tables, "the overview comes first");
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Issue 13: reversal as forward vs backward profiles — the mean per
+    /// bin of each direction, their gap the backlash.
+    #[test]
+    fn forward_and_backward_profiles_show_the_gap() {
+        let up: Vec<(f64, f64)> = (0..800)
+            .map(|i| (i as f64, 4.0 + (i % 3) as f64 - 1.0))
+            .collect();
+        let down: Vec<(f64, f64)> = (0..800)
+            .map(|i| (i as f64, -4.0 + (i % 3) as f64 - 1.0))
+            .collect();
+        let (pu, pd) = (
+            binned_mean(&up, PROFILE_BINS),
+            binned_mean(&down, PROFILE_BINS),
+        );
+        assert_eq!(pu.len(), PROFILE_BINS);
+        for (u, d) in pu.iter().zip(&pd) {
+            assert!((u.1 - d.1 - 8.0).abs() < 0.1, "{u:?} {d:?}");
+            assert_eq!(u.0, d.0);
+        }
+        assert!(binned_mean(&[], 10).is_empty());
     }
 }
