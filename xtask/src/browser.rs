@@ -72,7 +72,15 @@ pub struct Measure {
     pub verdict_top: f64,
     /// `performance.now()` when the end of the body was laid out.
     pub layout_ms: f64,
+    /// Top of the first working-volume overview map (`figure#overview_…`,
+    /// diagnose's "Where the model fails"), px; None when the page has none.
+    pub overview_top: Option<f64>,
 }
+
+/// The overview of where the model fails must start within this many px of
+/// the top (the 2000 px window's first screen): diagnose's page says where
+/// before the tables and the evidence.
+pub const MAX_OVERVIEW_TOP: f64 = 2000.0;
 
 /// The script injected at the end of the page's body.
 const SCRIPT: &str = r#"<script>
@@ -100,6 +108,8 @@ const SCRIPT: &str = r#"<script>
   out.push('verdict_first=' + (first !== null && first.id === 'verdict'));
   var v = document.getElementById('verdict');
   out.push('verdict_top=' + (v ? v.getBoundingClientRect().top : -1));
+  var ov = document.querySelector('figure[id^="overview_"]');
+  if (ov) { out.push('overview_top=' + ov.getBoundingClientRect().top); }
   out.push('layout_ms=' + performance.now());
   var pre = document.createElement('pre');
   pre.id = 'browser-check';
@@ -134,10 +144,22 @@ pub fn parse(dom: &str) -> std::result::Result<Measure, String> {
             "verdict_first" => m.verdict_first = v.trim() == "true",
             "verdict_top" => m.verdict_top = num()?,
             "layout_ms" => m.layout_ms = num()?,
+            "overview_top" => m.overview_top = Some(num()?),
             _ => {}
         }
     }
     Ok(m)
+}
+
+/// Diagnose's page must show where the model fails on its first screen.
+pub fn overview_failures(m: &Measure) -> Vec<String> {
+    match m.overview_top {
+        None => vec!["no working-volume overview (figure#overview_…): the page does not say where the model fails".into()],
+        Some(top) if top > MAX_OVERVIEW_TOP => vec![format!(
+            "the working-volume overview starts at {top:.0} px: not on the first screen ({MAX_OVERVIEW_TOP:.0} px)"
+        )],
+        Some(_) => Vec::new(),
+    }
 }
 
 /// Every way the page fails the check, in words (empty: it passes).
@@ -341,8 +363,11 @@ pub fn test(args: &[String]) -> Result<()> {
     let mut failed = Vec::new();
     for (name, page) in demo_pages(&out) {
         let shot = screens.join(format!("{name}.png"));
-        let (m, bytes, wall_s, f) = check_page(&browser, &page, &shot)
+        let (m, bytes, wall_s, mut f) = check_page(&browser, &page, &shot)
             .map_err(|e| format!("{name} page ({}): {e}", page.display()))?;
+        if name == "diagnose" {
+            f.extend(overview_failures(&m));
+        }
         eprintln!(
             "{name:<9} {:>5.2} MB  laid out in {:>5.0} ms (browser {wall_s:.1} s)  {} figures  width {}/{} px  height {} px  verdict first: {}  {}",
             bytes as f64 / 1e6,
@@ -388,6 +413,7 @@ mod tests {
             verdict_first: true,
             verdict_top: 70.0,
             layout_ms: 400.0,
+            overview_top: None,
         }
     }
 
@@ -404,6 +430,21 @@ mod tests {
         assert!(!m.verdict_first);
         assert_eq!(m.verdict_top, 812.5);
         assert!(parse("<html></html>").is_err());
+    }
+
+    #[test]
+    fn a_diagnose_page_must_say_where_the_model_fails_on_its_first_screen() {
+        let dom = "<pre id=\"browser-check\">\noverview_top=812.5\nlayout_ms=3\n</pre>";
+        let m = parse(dom).unwrap();
+        assert_eq!(m.overview_top, Some(812.5));
+        assert!(overview_failures(&m).is_empty());
+        let none = parse("<pre id=\"browser-check\">\nlayout_ms=3\n</pre>").unwrap();
+        assert!(overview_failures(&none)[0].contains("no working-volume overview"));
+        let low = Measure {
+            overview_top: Some(2400.0),
+            ..m
+        };
+        assert!(overview_failures(&low)[0].contains("not on the first screen"));
     }
 
     #[test]

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 
 use trueaxis_engine::compare::{
-    channels, dense_lines, planes, plot_num, residuals, Comparison, Plane, REGION_BINS,
+    channels, dense_lines, planes, plot_num, residuals, Comparison, Line, Plane, REGION_BINS,
     REGION_RATIO, SNAP_MM,
 };
 use trueaxis_engine::data::{Dataset, AXES, TARGETS};
@@ -18,7 +18,7 @@ use crate::report::plot::{
     axis_title, before_after, format_value, heat_map_pair, ticks_for, HeatMap, Series, Style,
     XyPlot,
 };
-use crate::report::{thin, Figure, Page, Tone, Verdict, MAX_SCATTER};
+use crate::report::{Figure, Page, Tone, Verdict};
 
 /// Where the data and the model came from, for the command the verdict
 /// card proposes (`trueaxis diagnose DATA --model MODEL.json`).
@@ -63,6 +63,31 @@ pub fn pick_evenly(n: usize, max: usize) -> Vec<usize> {
         .collect();
     v.dedup();
     v
+}
+
+/// The dense lines with the passes along the same line (same axis, same
+/// fixed coordinates) joined, rows in position order, each with its number
+/// of passes; in the order each line first appears.
+fn merge_passes(lines: Vec<Line>, data: &Dataset) -> Vec<(Line, usize)> {
+    let mut out: Vec<(Line, usize)> = Vec::new();
+    for l in lines {
+        match out
+            .iter_mut()
+            .find(|(m, _)| m.axis == l.axis && m.label == l.label)
+        {
+            Some((m, n)) => {
+                m.rows.extend(l.rows);
+                *n += 1;
+            }
+            None => out.push((l, 1)),
+        }
+    }
+    for (l, _) in &mut out {
+        let a = l.axis;
+        l.rows
+            .sort_by(|&r, &s| data.pos(a, r).total_cmp(&data.pos(a, s)));
+    }
+    out
 }
 
 /// Heat map of `vals` (µm per row, `None` where there is none) on the rows
@@ -469,16 +494,23 @@ pub fn build_report(
         }
     }
 
-    // Dense lines: residual along the line, measured vs model.
-    let lines = dense_lines(data, DENSE_LINE_POINTS);
+    // Dense lines: residual along the line, measured vs model. The passes
+    // of one line (forward and backward, repeated runs) are one plot: six
+    // runs of the same line made six near-identical plots (and 2 MB).
+    let lines = merge_passes(dense_lines(data, DENSE_LINE_POINTS), data);
     if !lines.is_empty() {
         page.heading("Dense lines");
         page.paragraph(format!(
             "Lines with at least {DENSE_LINE_POINTS} positions along one axis: the measured error with the model's prediction, and the residual. Short-period errors (a lead screw's pitch) show here and not on a coarse grid."
         ));
     }
-    for (k, line) in lines.iter().take(MAX_LINE_PLOTS).enumerate() {
+    for (k, (line, passes)) in lines.iter().take(MAX_LINE_PLOTS).enumerate() {
         let ax = AXES[line.axis];
+        let passes = if *passes > 1 {
+            format!(", {passes} passes overlaid")
+        } else {
+            String::new()
+        };
         let mut meas = XyPlot::new(
             format!("measured vs model along {ax} ({})", line.label),
             format!("{ax} (mm)"),
@@ -521,10 +553,7 @@ pub fn build_report(
                 continue;
             }
             meas = meas
-                .with(Series::points(
-                    format!("{} measured", TARGETS[t]),
-                    thin(&m, MAX_SCATTER),
-                ))
+                .with(Series::points(format!("{} measured", TARGETS[t]), m))
                 .with(Series::line(format!("{} model", TARGETS[t]), p));
             // A polyline of every point: compact, and the zoom below needs
             // the full resolution.
@@ -532,7 +561,10 @@ pub fn build_report(
         }
         let mut figs = vec![Figure {
             name: format!("line{k}_measured"),
-            caption: format!("Measured error and model along {ax} at {}.", line.label),
+            caption: format!(
+                "Measured error and model along {ax} at {}{passes}.",
+                line.label
+            ),
             svg: meas.to_svg()?,
         }];
         // Zoom on the first 60 mm of a long line: short periods (a lead
@@ -549,13 +581,16 @@ pub fn build_report(
         });
         figs.push(Figure {
             name: format!("line{k}_residual"),
-            caption: format!("Residual along {ax} at {}.", line.label),
+            caption: format!("Residual along {ax} at {}{passes}.", line.label),
             svg: resid.to_svg()?,
         });
         if let Some(z) = zoom {
             figs.push(Figure {
                 name: format!("line{k}_residual_zoom"),
-                caption: format!("Residual along {ax} at {}, the first 60 mm.", line.label),
+                caption: format!(
+                    "Residual along {ax} at {}, the first 60 mm{passes}.",
+                    line.label
+                ),
                 svg: z.to_svg()?,
             });
         }
@@ -581,7 +616,7 @@ pub fn build_report(
             lo = lo.min(p.0.min(p.1));
             hi = hi.max(p.0.max(p.1));
         }
-        mv = mv.with(Series::points(TARGETS[t], thin(&pts, MAX_SCATTER)));
+        mv = mv.with(Series::points(TARGETS[t], pts));
     }
     if lo.is_finite() {
         mv = mv.with(Series::line("y = x", vec![(lo, lo), (hi, hi)]));
@@ -611,7 +646,7 @@ pub fn build_report(
                 .zip(values)
                 .filter_map(|(r, x)| r.map(|r| (*x, r)))
                 .collect();
-            plot = plot.with(Series::points(TARGETS[t], thin(&pts, MAX_SCATTER)));
+            plot = plot.with(Series::points(TARGETS[t], pts));
             if let Some(p) = c
                 .channels
                 .iter()

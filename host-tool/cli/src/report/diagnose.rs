@@ -16,8 +16,10 @@ use trueaxis_engine::effect::Family;
 
 use trueaxis_engine::diagnose::{Verdict as DVerdict, ABOVE_NOISE_RATIO};
 
-use crate::report::plot::{axis_title, format_value, heat_map_pair, HeatMap, Series, XyPlot};
-use crate::report::{thin, Figure, Page, Tone, Verdict, MAX_SCATTER};
+use crate::report::plot::{
+    axis_title, format_value, heat_map_pair, HeatMap, Series, Style, Ticks, XyPlot,
+};
+use crate::report::{Figure, Page, Tone, Verdict};
 
 /// Warning codes that undermine a verdict (shown on the card); the rest
 /// (`in_model_span`, `aux_columns`, …) stay in the Warnings section.
@@ -320,6 +322,353 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
     }
 }
 
+/// False-alarm probability of the periodogram's significance line.
+pub const FALSE_ALARM: f64 = 0.01;
+/// Multiples of the grid's frequency marked as its sampling comb.
+const COMB_MARKS: usize = 6;
+
+/// What a periodogram was computed from: the readings on the densest lines
+/// along the axis (as the periodic search takes them) and the spacing of
+/// the coarser grid the plan also has along it (its sampling comb), if any.
+struct Sampling {
+    points: usize,
+    grid_mm: Option<f64>,
+}
+
+fn periodogram_sampling(data: &Dataset, axis: usize, rows: &[usize]) -> Option<Sampling> {
+    let dl = trueaxis_engine::lines::densest_lines(data, axis, rows)?;
+    let pos = data.pos_mm[axis].as_ref()?;
+    let grid_mm = if dl.from_lines {
+        let on: std::collections::HashSet<usize> = dl.rows.iter().copied().collect();
+        let mut p: Vec<i64> = rows
+            .iter()
+            .filter(|r| !on.contains(r))
+            .map(|&r| (pos[r] * 1000.0).round() as i64)
+            .collect();
+        p.sort_unstable();
+        p.dedup();
+        let mut gaps: Vec<i64> = p.windows(2).map(|w| w[1] - w[0]).collect();
+        gaps.sort_unstable();
+        gaps.get(gaps.len() / 2)
+            .map(|g| *g as f64 / 1000.0)
+            .filter(|g| *g > dl.spacing_mm * 1.5)
+    } else {
+        Some(dl.spacing_mm)
+    };
+    Some(Sampling {
+        points: dl.rows.len(),
+        grid_mm,
+    })
+}
+
+/// Independent frequencies among `n_freq` computed: the periodic search
+/// oversamples the natural resolution 1/span five times.
+fn independent_frequencies(n_freq: usize) -> usize {
+    n_freq.div_ceil(5).max(1)
+}
+
+/// The power that noise alone exceeds at some frequency of the band with
+/// probability `fap`: for Gaussian noise N·p/2 is about exponential at each
+/// independent frequency (the scale the periodic search's harmonic rule
+/// uses), so over M of them the level is 2·ln(M/fap)/N. None with too few
+/// readings to say.
+pub fn false_alarm_level(n_points: usize, n_freq: usize, fap: f64) -> Option<f64> {
+    if n_points < 8 || n_freq == 0 || !(fap > 0.0 && fap < 1.0) {
+        return None;
+    }
+    let m = independent_frequencies(n_freq) as f64;
+    Some((2.0 * (m / fap).ln() / n_points as f64).min(1.0))
+}
+
+/// Bins along the travel of a forward/backward profile.
+const PROFILE_BINS: usize = 40;
+
+/// The mean y per x bin (`bins` even bins over the x range), at the bin's
+/// mean x, for the bins that hold points: a profile through a scatter.
+fn binned_mean(pts: &[(f64, f64)], bins: usize) -> Vec<(f64, f64)> {
+    let (lo, hi) = pts
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| {
+            (l.min(p.0), h.max(p.0))
+        });
+    if pts.is_empty() || bins == 0 {
+        return Vec::new();
+    }
+    let mut acc = vec![(0.0, 0.0, 0usize); bins];
+    for &(x, y) in pts.iter().filter(|p| p.0.is_finite() && p.1.is_finite()) {
+        let k = if hi > lo {
+            (((x - lo) / (hi - lo) * bins as f64) as usize).min(bins - 1)
+        } else {
+            0
+        };
+        acc[k].0 += x;
+        acc[k].1 += y;
+        acc[k].2 += 1;
+    }
+    acc.into_iter()
+        .filter(|a| a.2 > 0)
+        .map(|(sx, sy, n)| (sx / n as f64, sy / n as f64))
+        .collect()
+}
+
+/// Bins per axis of the working-volume overview at most.
+const OVERVIEW_BINS: usize = 12;
+
+/// Where in the working volume the final residual is large, on the first
+/// screen (issue 13): per target, the RMS of the residual after the path in
+/// even bins (≤ 12 per axis) projected on each pair of moving axes — small
+/// maps side by side on one colour scale per target (0 white … the largest
+/// cell red), the worst reading ringed. Nothing for fewer than two moving
+/// axes.
+fn volume_overview(page: &mut Page, d: &Diagnosis, data: &Dataset) -> Result<()> {
+    let axes = data.varying_axes();
+    if axes.len() < 2 {
+        return Ok(());
+    }
+    let pairs: Vec<(usize, usize)> = (0..axes.len())
+        .flat_map(|i| (i + 1..axes.len()).map(move |j| (i, j)))
+        .map(|(i, j)| (axes[i], axes[j]))
+        .collect();
+    let mut figs = Vec::new();
+    let mut scales = Vec::new();
+    for (t, rows, after) in &d.evidence.resid_after {
+        let tn = TARGETS[*t];
+        let mut maps = Vec::new();
+        for &(a, b) in &pairs {
+            let (Some(pa), Some(pb)) = (data.pos_mm[a].as_ref(), data.pos_mm[b].as_ref()) else {
+                continue;
+            };
+            let bins = |p: &[f64]| {
+                let (lo, hi) = rows
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &r| {
+                        (l.min(p[r]), h.max(p[r]))
+                    });
+                let mut distinct: Vec<i64> =
+                    rows.iter().map(|&r| (p[r] * 1e3).round() as i64).collect();
+                distinct.sort_unstable();
+                distinct.dedup();
+                (lo, hi, distinct.len().clamp(1, OVERVIEW_BINS))
+            };
+            let ((alo, ahi, na), (blo, bhi, nb)) = (bins(pa), bins(pb));
+            let cell = |v: f64, lo: f64, hi: f64, n: usize| {
+                if hi > lo {
+                    (((v - lo) / (hi - lo) * n as f64) as usize).min(n - 1)
+                } else {
+                    0
+                }
+            };
+            let mut ss = vec![0.0; na * nb];
+            let mut count = vec![0usize; na * nb];
+            let mut worst: Option<(f64, f64, f64)> = None;
+            for (i, &r) in rows.iter().enumerate() {
+                let v = after[i];
+                if !v.is_finite() {
+                    continue;
+                }
+                let k = cell(pb[r], blo, bhi, nb) * na + cell(pa[r], alo, ahi, na);
+                ss[k] += v * v;
+                count[k] += 1;
+                if worst.is_none_or(|w| v.abs() > w.2.abs()) {
+                    worst = Some((pa[r], pb[r], v));
+                }
+            }
+            let centres = |lo: f64, hi: f64, n: usize| -> Vec<f64> {
+                (0..n)
+                    .map(|k| lo + (hi - lo) * (k as f64 + 0.5) / n as f64)
+                    .collect()
+            };
+            let values = ss
+                .iter()
+                .zip(&count)
+                .map(|(s, &c)| (c > 0).then(|| (s / c as f64).sqrt()))
+                .collect();
+            let mut m = HeatMap::from_cells(
+                format!("{tn} RMS over {}–{}", AXES[a], AXES[b]),
+                format!("{} (mm)", AXES[a]),
+                format!("{} (mm)", AXES[b]),
+                "µm",
+                centres(alo, ahi, na),
+                centres(blo, bhi, nb),
+                values,
+                worst,
+                rows.len(),
+            );
+            m.size = (460, 380);
+            maps.push((format!("overview_{tn}_{}{}", AXES[a], AXES[b]), m));
+        }
+        // At the noise a map must look pale, not red: the scale reaches at
+        // least 3× the noise floor.
+        let noise = d.noise_floor_um.get(tn).copied().flatten();
+        let limit = maps
+            .iter()
+            .fold(noise.map_or(0.0, |n| 3.0 * n), |l, m| l.max(m.1.max_abs()));
+        scales.push(format!(
+            "{tn} 0…{} µm{}",
+            format_value(limit),
+            noise.map_or(String::new(), |n| format!(", noise {}", format_value(n)))
+        ));
+        for (name, mut m) in maps {
+            m.limit = Some(limit);
+            figs.push(Figure {
+                name,
+                caption: format!(
+                    "RMS of the {tn} residual after the path per cell, projected on {}–{} (red: where the model fails most).",
+                    m.x_label, m.y_label
+                ),
+                svg: m.to_svg()?,
+            });
+        }
+    }
+    if figs.is_empty() {
+        return Ok(());
+    }
+    page.heading("Where the model fails");
+    page.paragraph(format!(
+        "RMS of the residual after the path, in bins of the working volume projected on each pair of axes; one colour scale per target, reaching at least 3× its noise floor so that a map at the noise stays pale ({}); the worst reading ringed.",
+        scales.join(", ")
+    ));
+    page.grid(figs);
+    Ok(())
+}
+
+/// Least-squares slope and intercept of y on x; None for fewer than 3
+/// points or no spread in x.
+fn line_fit(pts: &[(f64, f64)]) -> Option<(f64, f64)> {
+    let n = pts.len() as f64;
+    if pts.len() < 3 {
+        return None;
+    }
+    let (mx, my) = (
+        pts.iter().map(|p| p.0).sum::<f64>() / n,
+        pts.iter().map(|p| p.1).sum::<f64>() / n,
+    );
+    let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    (sxx > 1e-12 * n).then(|| (sxy / sxx, my - sxy / sxx * mx))
+}
+
+/// The thermal evidence as the slope a user wants (issue 13): a one-sensor
+/// thermal effect's component plus the final residual against the sensor's
+/// temperature — per metre of travel when the growth scales with an axis
+/// (rows within 20 % of the axis' largest |position| left out: dividing by
+/// a short arm blows the noise up) — with the least-squares line and its
+/// slope (µm/m/K: the CTE; µm/K without an axis), the fit's value ± 95 %
+/// and the lag beside it. None for other effects or without the sensor.
+fn thermal_slope(
+    data: &Dataset,
+    c: &Candidate,
+    step: usize,
+    rows: &[usize],
+    component: &[f64],
+    after: &[f64],
+) -> Result<Option<Figure>> {
+    if c.effect != Family::Thermal {
+        return Ok(None);
+    }
+    let Some(column) = c.channel.as_deref().filter(|ch| !ch.contains('+')) else {
+        return Ok(None);
+    };
+    let name = column
+        .strip_prefix("T_")
+        .and_then(|n| n.strip_suffix("_C"))
+        .unwrap_or(column);
+    let Some(temp) = data.temp(name).map(|t| &t.temp_c) else {
+        return Ok(None);
+    };
+    let column = format!("T_{name}_C");
+    let axis = c
+        .axis
+        .as_deref()
+        .and_then(|a| AXES.iter().position(|x| *x == a));
+    let arm = axis.and_then(|a| data.pos_mm[a].as_ref());
+    let reach = arm.map_or(0.0, |p| {
+        rows.iter().map(|&r| p[r].abs()).fold(0.0, f64::max)
+    });
+    let pts: Vec<(f64, f64)> = rows
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &r)| {
+            let y = component[i] + after[i];
+            match arm {
+                Some(p) if p[r].abs() >= 0.2 * reach && reach > 0.0 => {
+                    Some((temp[r], y / (p[r] / 1000.0)))
+                }
+                Some(_) => None,
+                None => Some((temp[r], y)),
+            }
+        })
+        .filter(|p| p.0.is_finite() && p.1.is_finite())
+        .collect();
+    let Some((slope, icpt)) = line_fit(&pts) else {
+        return Ok(None);
+    };
+    let (unit, y_label) = match axis {
+        Some(a) => (
+            "µm/m/K",
+            format!("{} per metre of {} travel (µm/m)", c.target, AXES[a]),
+        ),
+        None => ("µm/K", format!("{} (µm)", c.target)),
+    };
+    let (lo, hi) = pts
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| {
+            (l.min(p.0), h.max(p.0))
+        });
+    let t_title = axis_title(&column);
+    let plot = XyPlot::new(
+        format!(
+            "Thermal growth of {}{}: the slope",
+            c.target,
+            axis.map_or(String::new(), |a| format!(" along {}", AXES[a]))
+        ),
+        t_title.clone(),
+        y_label,
+    )
+    .with(Series::points("component + residual", pts.clone()))
+    .with(Series::line(
+        format!("least squares: {} {unit}", format_value(slope)),
+        vec![(lo, icpt + slope * lo), (hi, icpt + slope * hi)],
+    ));
+    let fitted = c.physical.as_ref().map_or(String::new(), |ph| {
+        format!(
+            "; the model's {} is {} {} (95 %: {} … {})",
+            ph.name.replace('_', " "),
+            format_value(ph.value),
+            ph.unit,
+            format_value(ph.ci95[0]),
+            format_value(ph.ci95[1])
+        )
+    });
+    let lag = c.params.get("lag_s").copied().filter(|l| *l > 0.0).map_or(
+        String::new(),
+        |l| {
+            format!(
+                ". The structure follows the sensor with a lag of {} s, so warm-up and cool-down lie on two branches around the line",
+                format_value(l)
+            )
+        },
+    );
+    Ok(Some(Figure {
+        name: format!("thermal_slope_{}_{step}", c.target),
+        caption: format!(
+            "Path step {step} of {}: component + final residual{} against the {t_title}; the slope of the least-squares line, {} {unit}, is the {}{fitted}{lag}.",
+            c.target,
+            axis.map_or(String::new(), |a| format!(
+                " per metre of {} travel (rows within 20 % of the largest |{}| left out)",
+                AXES[a], AXES[a]
+            )),
+            format_value(slope),
+            if axis.is_some() {
+                "thermal expansion coefficient (CTE)"
+            } else {
+                "growth per kelvin"
+            },
+        ),
+        svg: plot.to_svg()?,
+    }))
+}
+
 /// The channel a candidate follows, as (label, value per data row).
 fn channel(data: &Dataset, c: &Candidate) -> Option<(String, Vec<f64>)> {
     let axis = c
@@ -407,6 +756,7 @@ pub fn write_for(
 ) -> Result<PathBuf> {
     let mut page = Page::new(format!("trueaxis diagnose — {}", data.source));
     page.verdict(verdict(d, data_path, model_out));
+    volume_overview(&mut page, d, data)?;
     page.heading("Diagnosis");
     page.paragraph(format!(
         "Model {}; verdict {}; hold-out: {}.",
@@ -512,15 +862,66 @@ pub fn write_for(
         };
         let mut plot = XyPlot::new(
             format!("Periodogram of the {tn} residual along {ax}{at}"),
-            "frequency (cycles/mm)",
+            "period (mm), on a frequency scale",
             "share of variance",
         )
+        .with_x_ticks(Ticks::Period)
         .with(Series::line("Lomb–Scargle power", pts));
         if let Some(k) = e.pg.peak() {
             plot = plot.with_vline(
                 e.pg.freq_per_mm[k],
-                format!("{:.3} mm", 1.0 / e.pg.freq_per_mm[k]),
+                format!("{} mm", format_value(1.0 / e.pg.freq_per_mm[k])),
             );
+        }
+        let rows = d
+            .evidence
+            .resid_before
+            .iter()
+            .find(|r| r.0 == e.target)
+            .map(|r| r.1.as_slice())
+            .unwrap_or(&[]);
+        let sampling = periodogram_sampling(data, e.axis, rows);
+        let mut caption =
+            format!("Lomb–Scargle periodogram of the {tn} residual along {ax}{at} (dense lines)");
+        if let Some(level) = sampling
+            .as_ref()
+            .and_then(|s| false_alarm_level(s.points, e.pg.power.len(), FALSE_ALARM))
+        {
+            plot = plot.with_dashed(level, "1 % false-alarm level", 1);
+            caption.push_str(&format!(
+                "; dashed: the power noise alone passes somewhere in the band with 1 % probability ({} points, {} independent frequencies) — a peak below it is no finding",
+                sampling.as_ref().map_or(0, |s| s.points),
+                independent_frequencies(e.pg.power.len())
+            ));
+        }
+        if let Some(grid) = sampling.as_ref().and_then(|s| s.grid_mm) {
+            let (lo, hi) = (
+                e.pg.freq_per_mm.first().copied().unwrap_or(0.0),
+                e.pg.freq_per_mm.last().copied().unwrap_or(0.0),
+            );
+            let comb: Vec<f64> = (1..=COMB_MARKS)
+                .map(|k| k as f64 / grid)
+                .filter(|f| *f >= lo && *f <= hi)
+                .collect();
+            for (k, f) in comb.iter().enumerate() {
+                let label = if k == 0 {
+                    format!("{} mm grid comb", format_value(grid))
+                } else {
+                    String::new()
+                };
+                plot = plot.with_vmark(*f, label);
+            }
+            if !comb.is_empty() {
+                caption.push_str(&format!(
+                    "; dotted: the sampling comb of the {} mm grid along {ax} (periods {} mm …), where a coarse grid puts power of its own",
+                    format_value(grid),
+                    comb.iter()
+                        .take(3)
+                        .map(|f| format_value(1.0 / f))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ));
+            }
         }
         figs.push(Figure {
             name: if e.step > 1 {
@@ -528,9 +929,7 @@ pub fn write_for(
             } else {
                 format!("periodogram_{tn}_{ax}")
             },
-            caption: format!(
-                "Lomb–Scargle periodogram of the {tn} residual along {ax}{at} (dense lines)"
-            ),
+            caption,
             svg: plot.to_svg()?,
         });
     }
@@ -618,17 +1017,26 @@ pub fn write_for(
             format!("{} (mm)", AXES[*a]),
             "residual (µm)",
         )
-        .with(Series::points(
-            format!("dir_{} = +1", AXES[*a]),
-            thin(&up, MAX_SCATTER),
-        ))
+        .with(Series::points(format!("dir_{} = +1", AXES[*a]), up.clone()))
         .with(Series::points(
             format!("dir_{} = −1", AXES[*a]),
-            thin(&down, MAX_SCATTER),
+            down.clone(),
+        ))
+        .with(Series::styled(
+            "forward profile (mean per bin)",
+            binned_mean(&up, PROFILE_BINS),
+            Style::LinePoints,
+        ))
+        .with(Series::styled(
+            "backward profile (mean per bin)",
+            binned_mean(&down, PROFILE_BINS),
+            Style::LinePoints,
         ));
         figs.push(Figure {
             name: format!("reversal_{}_{}", TARGETS[*t], AXES[*a]),
-            caption: caption.clone(),
+            caption: format!(
+                "{caption}; lines: the forward and the backward profile, the mean per {PROFILE_BINS}th of the travel — the gap between them is the reversal"
+            ),
             svg: plot.to_svg()?,
         });
     }
@@ -664,14 +1072,8 @@ pub fn write_for(
             label,
             format!("{} (µm)", TARGETS[t]),
         )
-        .with(Series::points(
-            "component + residual",
-            thin(&partial, MAX_SCATTER),
-        ))
-        .with(Series::points(
-            "fitted component",
-            thin(&fitted, MAX_SCATTER),
-        ));
+        .with(Series::points("component + residual", partial))
+        .with(Series::points("fitted component", fitted));
         figs.push(Figure {
             name: format!("component_{}_{}", TARGETS[t], comp.step),
             caption: format!(
@@ -680,6 +1082,9 @@ pub fn write_for(
             ),
             svg: plot.to_svg()?,
         });
+        if let Some(fig) = thermal_slope(data, c, comp.step, rows, &comp.values, after)? {
+            figs.push(fig);
+        }
     }
     page.grid_wide(figs);
     // Spatial residual maps before and after the path.
@@ -889,5 +1294,319 @@ mod tests {
                 "trueaxis fit d.csv --model cubic19 --add 'periodic:target=ex,axis=x,period_mm=5' -o m.json"
             )
         );
+    }
+
+    /// Issue 15: the page's size does not grow with the rows. 64 004
+    /// readings on four dense x lines (0.05 mm, no grid) with a periodogram
+    /// of 64 000 frequencies: under 2 MB, the map binned with its worst
+    /// reading ringed, the periodogram reduced and saying so. Before: every
+    /// x of the lines was a map column (4 × 16 001 cells, ~13 MB) and the
+    /// periodogram a polyline of every frequency.
+    #[test]
+    fn a_large_capture_gives_a_page_of_bounded_size() {
+        let (mut x, mut y) = (Vec::new(), Vec::new());
+        for k in 0..4 {
+            for i in 0..16_001 {
+                x.push(i as f64 * 0.05);
+                y.push(100.0 * k as f64);
+            }
+        }
+        let n = x.len();
+        let data = Dataset {
+            source: "big.csv".into(),
+            pos_mm: [Some(x.clone()), Some(y), Some(vec![250.0; n])],
+            err_um: [Some(vec![Some(0.0); n]), None, None],
+            ..Dataset::default()
+        };
+        let mut before: Vec<f64> = x.iter().map(|x| (x / 0.8).sin()).collect();
+        before[40_000] = 25.0;
+        let after: Vec<f64> = before.iter().map(|v| 0.1 * v).collect();
+        let rows: Vec<usize> = (0..n).collect();
+        let mut d = diagnosis(1.0, Some(0.2));
+        d.evidence = Evidence {
+            periodograms: vec![trueaxis_engine::diagnose::PeriodogramEvidence {
+                target: 0,
+                axis: 0,
+                step: 1,
+                pg: trueaxis_engine::diagnose::periodogram::Periodogram {
+                    freq_per_mm: (1..=64_000).map(|k| k as f64 / 6400.0).collect(),
+                    power: (1..=64_000).map(|k| ((k % 97) as f64) / 1e3).collect(),
+                },
+            }],
+            resid_before: vec![(0, rows.clone(), before)],
+            resid_after: vec![(0, rows, after)],
+            components: Vec::new(),
+        };
+        let dir = std::env::temp_dir().join(format!("trueaxis-diag-big-{}", std::process::id()));
+        let index = write(&d, &data, &dir).unwrap();
+        let html = std::fs::read_to_string(&index).unwrap();
+        assert!(html.len() < 2_000_000, "index.html is {} bytes", html.len());
+        assert!(
+            html.contains("64 004 readings on"),
+            "the map says it is binned"
+        );
+        assert!(
+            html.contains("ringed: the worst, 25.0 µm"),
+            "the worst is ringed"
+        );
+        assert!(
+            html.contains("64 000 points shown as"),
+            "the periodogram is reduced"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// The 1 % false-alarm level is one: on pure noise (fixed seed, 1 601
+    /// readings every 0.5 mm) the highest power of the band stays under
+    /// it, and a 5 mm wave of 0.15× the noise's σ rises above it.
+    #[test]
+    fn noise_stays_under_the_false_alarm_level_and_a_small_wave_passes_it() {
+        use trueaxis_engine::diagnose::periodogram::periodogram;
+        let pos: Vec<f64> = (0..1601).map(|i| i as f64 * 0.5).collect();
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut gauss = || {
+            // Box–Muller on an xorshift stream: fixed, no crate.
+            let mut u = || {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state >> 11) as f64 / (1u64 << 53) as f64
+            };
+            let (a, b) = (u().max(1e-300), u());
+            (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
+        };
+        let noise: Vec<f64> = pos.iter().map(|_| gauss()).collect();
+        let pg = periodogram(&pos, &noise, 1.0, 400.0);
+        let level = false_alarm_level(pos.len(), pg.power.len(), FALSE_ALARM).unwrap();
+        let top = pg.power.iter().copied().fold(0.0, f64::max);
+        assert!(top < level, "noise peak {top} vs level {level}");
+        let wave: Vec<f64> = pos
+            .iter()
+            .zip(&noise)
+            .map(|(p, n)| {
+                n + 0.15 * std::f64::consts::SQRT_2 * (std::f64::consts::TAU * p / 5.0).sin()
+            })
+            .collect();
+        let pg = periodogram(&pos, &wave, 1.0, 400.0);
+        let k = pg.peak().unwrap();
+        assert!((1.0 / pg.freq_per_mm[k] - 5.0).abs() < 0.05);
+        assert!(pg.power[k] > level, "{} vs {level}", pg.power[k]);
+        assert_eq!(false_alarm_level(4, 100, FALSE_ALARM), None);
+    }
+
+    /// The periodogram figure draws the level and the grid's comb: a 50 mm
+    /// grid along x plus a dense 2 mm line.
+    #[test]
+    fn the_periodogram_shows_its_false_alarm_level_and_the_grid_comb() {
+        let (mut x, mut y) = (Vec::new(), Vec::new());
+        for iy in 0..3 {
+            for ix in 0..17 {
+                x.push(50.0 * ix as f64);
+                y.push(100.0 * iy as f64);
+            }
+        }
+        for i in 0..=400 {
+            x.push(2.0 * i as f64);
+            y.push(100.0);
+        }
+        let n = x.len();
+        let data = Dataset {
+            source: "d.csv".into(),
+            pos_mm: [Some(x.clone()), Some(y), Some(vec![0.0; n])],
+            err_um: [Some(vec![Some(0.0); n]), None, None],
+            ..Dataset::default()
+        };
+        let rows: Vec<usize> = (0..n).collect();
+        let s = periodogram_sampling(&data, 0, &rows).unwrap();
+        // The line's 401 readings and the grid's 17 on the same line.
+        assert_eq!(s.points, 418);
+        assert_eq!(s.grid_mm, Some(50.0));
+        let mut d = diagnosis(1.0, Some(0.2));
+        d.evidence.resid_before = vec![(0, rows.clone(), vec![0.0; n])];
+        d.evidence.periodograms = vec![trueaxis_engine::diagnose::PeriodogramEvidence {
+            target: 0,
+            axis: 0,
+            step: 1,
+            pg: trueaxis_engine::diagnose::periodogram::periodogram(
+                &x[51..],
+                &x[51..].iter().map(|p| (p / 0.8).sin()).collect::<Vec<_>>(),
+                4.0,
+                400.0,
+            ),
+        }];
+        let dir = std::env::temp_dir().join(format!("trueaxis-diag-pg-{}", std::process::id()));
+        let html = std::fs::read_to_string(write(&d, &data, &dir).unwrap()).unwrap();
+        assert!(html.contains("1 % false-alarm level"), "level drawn");
+        assert!(html.contains("50.0 mm grid comb"), "comb marked");
+        assert!(html.contains("periods 50.0, 25.0, 16.7 mm"), "comb named");
+        assert!(html.contains("period (mm), on a frequency scale"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Issue 13: thermal evidence is the slope. Steel growing 11.5 µm/m/K
+    /// along x with the bed temperature (20 → 23 °C over 400 readings, x
+    /// 0…800 mm, a ±0.2 µm residual): the figure shows the error per metre
+    /// of x against the temperature with a least-squares slope of 11.5
+    /// µm/m/K and the model's value beside it.
+    #[test]
+    fn thermal_evidence_is_the_slope_against_temperature() {
+        let n = 400;
+        let x: Vec<f64> = (0..n).map(|i| ((i * 37) % 401) as f64 * 2.0).collect();
+        let t: Vec<f64> = (0..n).map(|i| 20.0 + 3.0 * i as f64 / n as f64).collect();
+        let data = Dataset {
+            source: "d.csv".into(),
+            pos_mm: [Some(x.clone()), Some(vec![0.0; n]), Some(vec![0.0; n])],
+            err_um: [Some(vec![Some(0.0); n]), None, None],
+            temps: vec![trueaxis_engine::data::TempChannel {
+                name: "bed".into(),
+                temp_c: t.clone(),
+            }],
+            ..Dataset::default()
+        };
+        let comp: Vec<f64> = (0..n).map(|i| 11.5e-3 * x[i] * (t[i] - 20.0)).collect();
+        let after: Vec<f64> = (0..n)
+            .map(|i| if i % 2 == 0 { 0.2 } else { -0.2 })
+            .collect();
+        let mut d = diagnosis(0.2, Some(0.2));
+        let add = "thermal:target=ex,channel=bed,times=x";
+        d.candidates = vec![Candidate {
+            effect: Family::Thermal,
+            target: "ex".into(),
+            axis: Some("x".into()),
+            channel: Some("T_bed_C".into()),
+            params: BTreeMap::new(),
+            add: add.into(),
+            held_out_rms_um_after: Some(0.2),
+            held_out_rms_um_before: Some(5.0),
+            hold_out: trueaxis_engine::diagnose::HoldOutKind::Blocks,
+            gain: Some(0.9),
+            identifiable: true,
+            evidence: String::new(),
+            delta_bic: Some(-900.0),
+            rms_um_after: Some(0.2),
+            out_of_span_share: 1.0,
+            significant: true,
+            physical: Some(Physical {
+                name: "cte".into(),
+                unit: "µm/m/K".into(),
+                value: 11.49,
+                ci95: [11.3, 11.7],
+                plausible: true,
+                expected: String::new(),
+            }),
+            confounded_with: Vec::new(),
+            replaces: None,
+            step: Some(1),
+        }];
+        let rows: Vec<usize> = (0..n).collect();
+        let fig = thermal_slope(&data, &d.candidates[0], 1, &rows, &comp, &after)
+            .unwrap()
+            .expect("a slope figure");
+        assert_eq!(fig.name, "thermal_slope_ex_1");
+        assert!(
+            fig.svg.contains("least squares: 11.5 µm/m/K"),
+            "slope in the legend"
+        );
+        assert!(fig.svg.contains("ex per metre of x travel (µm/m)"));
+        assert!(fig.svg.contains("bed temperature (°C)"));
+        assert!(
+            fig.caption
+                .contains("the model's cte is 11.5 µm/m/K (95 %: 11.3 … 11.7)"),
+            "{}",
+            fig.caption
+        );
+        // Not for another family.
+        let mut other = d.candidates[0].clone();
+        other.effect = Family::Drift;
+        assert!(thermal_slope(&data, &other, 1, &rows, &comp, &after)
+            .unwrap()
+            .is_none());
+    }
+
+    /// Issue 13: the first thing after the verdict card is where in the
+    /// working volume the residual is large. A 5 × 5 × 5 grid with the
+    /// residual at the noise except near x = y = 400 mm: the overview's
+    /// maps come before the tables, ring the worst reading there and keep
+    /// the scale at ≥ 3× the noise floor.
+    #[test]
+    fn the_overview_shows_where_in_the_volume_the_model_fails() {
+        let (mut x, mut y, mut z) = (Vec::new(), Vec::new(), Vec::new());
+        for iz in 0..5 {
+            for iy in 0..5 {
+                for ix in 0..5 {
+                    x.push(100.0 * ix as f64);
+                    y.push(100.0 * iy as f64);
+                    z.push(100.0 * iz as f64);
+                }
+            }
+        }
+        let n = x.len();
+        let after: Vec<f64> = (0..n)
+            .map(|r| {
+                if x[r] == 400.0 && y[r] == 400.0 {
+                    if z[r] == 200.0 {
+                        5.0
+                    } else {
+                        3.0
+                    }
+                } else if r % 2 == 0 {
+                    0.2
+                } else {
+                    -0.2
+                }
+            })
+            .collect();
+        let data = Dataset {
+            source: "d.csv".into(),
+            pos_mm: [Some(x), Some(y), Some(z)],
+            err_um: [Some(vec![Some(0.0); n]), None, None],
+            ..Dataset::default()
+        };
+        let mut d = diagnosis(0.2, Some(0.2));
+        let rows: Vec<usize> = (0..n).collect();
+        d.evidence.resid_after = vec![(0, rows, after)];
+        let mut page = Page::new("t");
+        volume_overview(&mut page, &d, &data).unwrap();
+        let html = page.to_html();
+        for name in ["overview_ex_xy", "overview_ex_xz", "overview_ex_yz"] {
+            assert!(html.contains(name), "{name}");
+        }
+        assert!(html.contains("ringed: the worst, 5.00 µm at (400, 400)"));
+        let at = html.find("one colour scale").unwrap();
+        assert!(
+            html.contains("ex 0…3.49 µm, noise 0.200"),
+            "scale: the worst cell, √((4·3² + 5²)/5): {}",
+            &html[at..at + 300]
+        );
+        let dir = std::env::temp_dir().join(format!("trueaxis-diag-ov-{}", std::process::id()));
+        let html = std::fs::read_to_string(write(&d, &data, &dir).unwrap()).unwrap();
+        let (ov, tables) = (
+            html.find("Where the model fails").unwrap(),
+            html.find("<h2>Diagnosis").unwrap(),
+        );
+        assert!(ov < tables, "the overview comes first");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Issue 13: reversal as forward vs backward profiles — the mean per
+    /// bin of each direction, their gap the backlash.
+    #[test]
+    fn forward_and_backward_profiles_show_the_gap() {
+        let up: Vec<(f64, f64)> = (0..800)
+            .map(|i| (i as f64, 4.0 + (i % 3) as f64 - 1.0))
+            .collect();
+        let down: Vec<(f64, f64)> = (0..800)
+            .map(|i| (i as f64, -4.0 + (i % 3) as f64 - 1.0))
+            .collect();
+        let (pu, pd) = (
+            binned_mean(&up, PROFILE_BINS),
+            binned_mean(&down, PROFILE_BINS),
+        );
+        assert_eq!(pu.len(), PROFILE_BINS);
+        for (u, d) in pu.iter().zip(&pd) {
+            assert!((u.1 - d.1 - 8.0).abs() < 0.1, "{u:?} {d:?}");
+            assert_eq!(u.0, d.0);
+        }
+        assert!(binned_mean(&[], 10).is_empty());
     }
 }

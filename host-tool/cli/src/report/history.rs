@@ -41,6 +41,106 @@ pub fn step_label(s: &Step) -> String {
     format!("+ {}", short.join(", "))
 }
 
+/// The value of `key` in an effect spec (`periodic:target=ex,axis=x,…`).
+fn spec_value<'a>(add: &'a str, key: &str) -> Option<&'a str> {
+    add.split_once(':')?
+        .1
+        .split(',')
+        .filter_map(|kv| kv.split_once('='))
+        .find(|(k, _)| *k == key)
+        .map(|(_, v)| v)
+}
+
+/// An added effect in words, from its spec: "a periodic error of ex along
+/// x (lead screw or scale pitch), period 5 mm", "thermal growth of ex with
+/// the bed temperature, growing along x, lag 600 s".
+pub fn effect_words(add: &str) -> String {
+    let family = add.split(':').next().unwrap_or(add);
+    let t = spec_value(add, "target").unwrap_or("the error");
+    let along = spec_value(add, "axis").map_or(String::new(), |a| format!(" along {a}"));
+    let mut w = match family {
+        "periodic" => format!("a periodic error of {t}{along} (lead screw or scale pitch)"),
+        "thermal" => {
+            let ch = spec_value(add, "channel").unwrap_or("a sensor");
+            let sensors: Vec<String> = ch.split('+').map(|c| c.replace('_', " ")).collect();
+            format!(
+                "thermal growth of {t} with the {} temperature{}",
+                sensors.join(" and "),
+                spec_value(add, "times")
+                    .filter(|a| *a != "none")
+                    .map_or(String::new(), |a| format!(", growing along {a}"))
+            )
+        }
+        "reversal" => format!("a reversal error (backlash) of {t}{along}"),
+        "abbe" => format!("an Abbe error of {t} (a tilt times the tool length)"),
+        "drift" => format!("a drift of {t} with time"),
+        "squareness" => format!("out-of-squareness: {t} growing{along}"),
+        "higher_order" => format!("a smooth shape of {t}{along} the seed cannot follow"),
+        _ => add.to_string(),
+    };
+    if let Some(p) = spec_value(add, "period_mm").and_then(|p| p.parse::<f64>().ok()) {
+        w.push_str(&format!(", period {} mm", format_value(p)));
+    }
+    if let Some(l) = spec_value(add, "lag_s").filter(|l| l.parse::<f64>().is_ok_and(|v| v > 0.0)) {
+        w.push_str(&format!(", lag {l} s"));
+    }
+    w
+}
+
+/// What step `b` did after step `a`, one line per effect it added (a step
+/// of `improve` may add one per target): the effect in words and how its
+/// target's RMS changed — "Step 3 (2 of 2): + thermal growth of ey … — ey
+/// 3.20 µm → 0.200 µm."; a step that added nothing (a refit) says so.
+pub fn step_explained(a: &Step, b: &Step) -> Vec<String> {
+    let um = |v: f64| format!("{} µm", format_value(v));
+    let change = |t: &str| match (a.rms_um.get(t), b.rms_um.get(t)) {
+        (Some(p), Some(r)) if (p - r).abs() > 0.005 * p.abs().max(1e-9) => {
+            format!("{t} {} → {}", um(*p), um(*r))
+        }
+        (Some(_), Some(r)) => format!("{t} unchanged at {}", um(*r)),
+        _ => format!("{t} not in both fits"),
+    };
+    if b.added.is_empty() {
+        let changes: Vec<String> = b.rms_um.keys().map(|t| change(t)).collect();
+        return vec![format!(
+            "Step {}: {} refitted, nothing added — {}.",
+            b.step,
+            b.seed,
+            changes.join(", ")
+        )];
+    }
+    let n = b.added.len();
+    b.added
+        .iter()
+        .enumerate()
+        .map(|(j, add)| {
+            let of = if n > 1 {
+                format!(" ({} of {n})", j + 1)
+            } else {
+                String::new()
+            };
+            let target = spec_value(add, "target");
+            let shared = n > 1
+                && b.added
+                    .iter()
+                    .filter(|o| spec_value(o, "target") == target)
+                    .count()
+                    > 1;
+            format!(
+                "Step {}{of}: + {} — {}{}.",
+                b.step,
+                effect_words(add),
+                target.map_or("its target".into(), change),
+                if shared {
+                    " (together with the other effect(s) of this step on it)"
+                } else {
+                    ""
+                }
+            )
+        })
+        .collect()
+}
+
 /// The plot of RMS and held-out RMS per target against the step: whole
 /// steps, a marker per fit (one fit is a point), each step labelled with
 /// what it added, and `noise_um` per target as a dashed line in the
@@ -167,24 +267,7 @@ pub fn verdict(h: &History, model: &str, data: &str, noise_um: &BTreeMap<String,
     };
     let mut details = Vec::new();
     for w in h.steps.windows(2) {
-        let (a, b) = (&w[0], &w[1]);
-        let changes: Vec<String> = b
-            .rms_um
-            .iter()
-            .filter_map(|(t, r)| a.rms_um.get(t).map(|p| (t, *p, *r)))
-            .filter(|(_, p, r)| (p - r).abs() > 0.005 * p.abs().max(1e-9))
-            .map(|(t, p, r)| format!("{t} {} → {}", um(p), um(r)))
-            .collect();
-        details.push(format!(
-            "Step {}: {} — {}.",
-            b.step,
-            step_label(b),
-            if changes.is_empty() {
-                "no target changed".to_string()
-            } else {
-                changes.join(", ")
-            }
-        ));
+        details.extend(step_explained(&w[0], &w[1]));
     }
     let mut left = Vec::new();
     let mut known = 0;
@@ -345,6 +428,32 @@ mod tests {
             .next
             .unwrap()
             .starts_with("trueaxis diagnose d.csv --model m.json"));
+    }
+
+    /// Issue 13: a step of `improve` that adds several effects explains
+    /// every one of them on the history page, each with its target's fall.
+    #[test]
+    fn every_effect_a_step_adds_is_explained() {
+        let mut two = step(
+            2,
+            &[
+                "periodic:target=ex,axis=x,period_mm=5",
+                "thermal:target=ey,channel=bed,times=y,offset=1,lag_s=600",
+            ],
+            1.0,
+            1.05,
+        );
+        two.rms_um.insert("ey".into(), 0.05);
+        let h = history(vec![step(1, &[], 2.0, 2.05), two, step(3, &[], 1.0, 1.0)]);
+        let v = verdict(&h, "m.json", "d.csv", &BTreeMap::new());
+        assert_eq!(
+            v.details[..3],
+            [
+                "Step 2 (1 of 2): + a periodic error of ex along x (lead screw or scale pitch), period 5.00 mm — ex 2.00 µm → 1.00 µm.".to_string(),
+                "Step 2 (2 of 2): + thermal growth of ey with the bed temperature, growing along y, lag 600 s — ey 0.200 µm → 0.0500 µm.".to_string(),
+                "Step 3: cubic19 refitted, nothing added — ex unchanged at 1.00 µm, ey 0.0500 µm → 0.200 µm.".to_string(),
+            ]
+        );
     }
 
     #[test]

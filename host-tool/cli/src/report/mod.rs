@@ -23,20 +23,6 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
-/// Deterministic thinning for scatter plots: every k-th point so that at
-/// most `max` remain (a 5000-point data set stays readable, and the page
-/// light: each dot is ~100 bytes of SVG).
-pub fn thin<T: Copy>(v: &[T], max: usize) -> Vec<T> {
-    if v.len() <= max || max == 0 {
-        return v.to_vec();
-    }
-    let k = v.len().div_ceil(max);
-    v.iter().step_by(k).copied().collect()
-}
-
-/// Points per scatter series in a report.
-pub const MAX_SCATTER: usize = 400;
-
 /// One block of a page, in display order.
 #[derive(Clone, Debug)]
 enum Block {

@@ -27,6 +27,32 @@ pub struct HeatMap {
     pub limit: Option<f64>,
     /// Size in pixels.
     pub size: (u32, u32),
+    /// The reading with the largest |value|, (x, y, value): ringed on the
+    /// map, so averaging into cells never hides where the model fails most.
+    pub worst: Option<(f64, f64, f64)>,
+    /// Readings averaged into the cells.
+    pub readings: usize,
+    /// Values are magnitudes (an RMS, ≥ 0): the colour bar runs from 0
+    /// (white) to `limit` (red) only.
+    pub magnitude: bool,
+}
+
+/// Cells per axis at most: past it the cells are even bins over the range
+/// (a plane with a dense line at 0.05 mm made a column per reading).
+pub const MAX_CELLS: usize = 60;
+/// Cells per map at most (~100 bytes of SVG each): both axes are binned
+/// more coarsely, in proportion, when their product is larger.
+pub const MAX_MAP_CELLS: usize = 1600;
+
+/// `centres` as they are, or `max` evenly spaced ones over their range.
+fn cap_cells(centres: Vec<f64>, max: usize) -> Vec<f64> {
+    if centres.len() <= max || max < 2 {
+        return centres;
+    }
+    let (lo, hi) = (centres[0], centres[centres.len() - 1]);
+    (0..max)
+        .map(|i| lo + (hi - lo) * i as f64 / (max - 1) as f64)
+        .collect()
 }
 
 impl HeatMap {
@@ -113,6 +139,16 @@ impl HeatMap {
         xs: Vec<f64>,
         ys: Vec<f64>,
     ) -> HeatMap {
+        let (mut xs, mut ys) = (cap_cells(xs, MAX_CELLS), cap_cells(ys, MAX_CELLS));
+        if xs.len() * ys.len() > MAX_MAP_CELLS {
+            let f = (MAX_MAP_CELLS as f64 / (xs.len() * ys.len()) as f64).sqrt();
+            let (nx, ny) = (
+                ((xs.len() as f64 * f) as usize).max(2),
+                ((ys.len() as f64 * f) as usize).max(2),
+            );
+            xs = cap_cells(xs, nx);
+            ys = cap_cells(ys, ny);
+        }
         let mut sum = vec![0.0; xs.len() * ys.len()];
         let mut count = vec![0usize; xs.len() * ys.len()];
         for &(x, y, v) in finite {
@@ -136,7 +172,62 @@ impl HeatMap {
             values,
             limit: None,
             size: SIZE,
+            worst: finite
+                .iter()
+                .copied()
+                .max_by(|a, b| a.2.abs().total_cmp(&b.2.abs())),
+            readings: finite.len(),
+            magnitude: false,
         }
+    }
+
+    /// A map of values already reduced per cell (an RMS per bin): centres
+    /// ascending, `values[iy * xs.len() + ix]`, with the reading to ring and
+    /// the number of readings behind the cells.
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_cells(
+        title: impl Into<String>,
+        x_label: impl Into<String>,
+        y_label: impl Into<String>,
+        unit: impl Into<String>,
+        xs: Vec<f64>,
+        ys: Vec<f64>,
+        values: Vec<Option<f64>>,
+        worst: Option<(f64, f64, f64)>,
+        readings: usize,
+    ) -> HeatMap {
+        HeatMap {
+            title: title.into(),
+            x_label: x_label.into(),
+            y_label: y_label.into(),
+            unit: unit.into(),
+            x: xs,
+            y: ys,
+            values,
+            limit: None,
+            size: SIZE,
+            worst,
+            readings,
+            magnitude: true,
+        }
+    }
+
+    /// What the map does not show by itself: how many readings were
+    /// averaged into how many cells, and the worst reading (ringed).
+    pub fn note(&self) -> Option<String> {
+        let cells = self.values.iter().flatten().count();
+        let (x, y, v) = self.worst?;
+        (self.readings > cells).then(|| {
+            format!(
+                "{} readings on {} cells; ringed: the worst, {} {} at ({}, {})",
+                decimate::group_digits(self.readings),
+                decimate::group_digits(cells),
+                format_value(v),
+                self.unit,
+                format_value(x),
+                format_value(y)
+            )
+        })
     }
 
     /// The largest |value| on the map (0 for an empty map).
@@ -152,6 +243,15 @@ impl HeatMap {
         DB::ErrorType: 'static,
     {
         let limit = self.limit.unwrap_or_else(|| self.max_abs()).max(1e-12);
+        let area = match self.note() {
+            Some(text) => {
+                let h = area.dim_in_pixel().1;
+                let (a, strip) = area.split_vertically(h.saturating_sub(NOTE_STRIP));
+                draw_note(&strip, &text)?;
+                a
+            }
+            None => area.clone(),
+        };
         let (map_area, bar_area) =
             area.split_horizontally(area.dim_in_pixel().0.saturating_sub(86));
         let xe = edges(&self.x);
@@ -187,26 +287,40 @@ impl HeatMap {
             Rectangle::new([(xe[ix], ye[iy]), (xe[ix + 1], ye[iy + 1])], style)
         });
         chart.draw_series(cells).map_err(plot_err)?;
+        if let Some((x, y, _)) = self.worst {
+            chart
+                .draw_series([
+                    Circle::new((x, y), 7, ShapeStyle::from(&BLACK).stroke_width(2)),
+                    Circle::new((x, y), 9, ShapeStyle::from(&WHITE).stroke_width(1)),
+                ])
+                .map_err(plot_err)?;
+        }
         // Colour bar: a vertical strip from −limit to +limit, labelled by
         // hand on its right (x 0..1 is the strip, 1..3 the labels), which
         // keeps the labels inside the chart whatever the font metrics.
+        let bottom = if self.magnitude { 0.0 } else { -limit };
         let mut bar = ChartBuilder::on(&bar_area)
             .margin_top(40)
             .margin_bottom(54)
             .margin_right(4)
-            .build_cartesian_2d(0.0..3.0, -limit * 1.04..limit * 1.04)
+            .build_cartesian_2d(0.0..3.0, bottom * 1.04..limit * 1.04)
             .map_err(plot_err)?;
         let steps = 64;
         bar.draw_series((0..steps).map(|i| {
-            let a = -limit + 2.0 * limit * i as f64 / steps as f64;
-            let b = -limit + 2.0 * limit * (i + 1) as f64 / steps as f64;
+            let a = bottom + (limit - bottom) * i as f64 / steps as f64;
+            let b = bottom + (limit - bottom) * (i + 1) as f64 / steps as f64;
             Rectangle::new(
                 [(0.0, a), (1.0, b)],
                 diverging(0.5 * (a + b) / limit).filled(),
             )
         }))
         .map_err(plot_err)?;
-        bar.draw_series([-1.0, -0.5, 0.0, 0.5, 1.0].map(|f| {
+        let marks = if self.magnitude {
+            [0.0, 0.25, 0.5, 0.75, 1.0]
+        } else {
+            [-1.0, -0.5, 0.0, 0.5, 1.0]
+        };
+        bar.draw_series(marks.map(|f| {
             Text::new(
                 format_value(f * limit),
                 (1.15, f * limit),

@@ -16,8 +16,10 @@ use anyhow::{anyhow, Result};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
+pub mod decimate;
 mod heat;
 
+pub use decimate::Reduction;
 pub use heat::{diverging, heat_map_pair, HeatMap};
 
 /// Default plot size in pixels (SVG user units).
@@ -120,6 +122,9 @@ pub struct XyPlot {
     pub dashed: Vec<(f64, String, usize)>,
     /// Text labels at data coordinates (what each fit step added).
     pub notes: Vec<(f64, f64, String)>,
+    /// Grey dotted vertical marks with a label at the foot (the sampling
+    /// comb of a plan on a periodogram).
+    pub vmarks: Vec<(f64, String)>,
     /// How the x axis is ticked.
     pub x_ticks: Ticks,
     /// Size in pixels.
@@ -136,6 +141,9 @@ pub enum Ticks {
     Integer,
     /// A categorical ±1 axis (`dir_x`): ticks at −1 and +1 only.
     Direction,
+    /// A frequency axis (cycles/mm) labelled with the period 1/f in mm at
+    /// each tick: a user knows a lead as "5 mm", not "0.2 cycles/mm".
+    Period,
 }
 
 impl XyPlot {
@@ -155,6 +163,7 @@ impl XyPlot {
             hlines: Vec::new(),
             dashed: Vec::new(),
             notes: Vec::new(),
+            vmarks: Vec::new(),
             x_ticks: Ticks::Auto,
             size: SIZE,
         }
@@ -196,6 +205,12 @@ impl XyPlot {
         self
     }
 
+    /// Adds a grey dotted vertical mark, labelled at its foot.
+    pub fn with_vmark(mut self, x: f64, label: impl Into<String>) -> XyPlot {
+        self.vmarks.push((x, label.into()));
+        self
+    }
+
     /// Adds a horizontal marker line.
     pub fn with_hline(mut self, y: f64, label: impl Into<String>) -> XyPlot {
         self.hlines.push((y, label.into()));
@@ -224,11 +239,12 @@ impl XyPlot {
             }
         }
         xs.extend(self.vlines.iter().map(|v| v.0).filter(|v| v.is_finite()));
+        xs.extend(self.vmarks.iter().map(|v| v.0).filter(|v| v.is_finite()));
         ys.extend(self.hlines.iter().map(|v| v.0).filter(|v| v.is_finite()));
         ys.extend(self.dashed.iter().map(|v| v.0).filter(|v| v.is_finite()));
         ys.extend(self.notes.iter().map(|v| v.1).filter(|v| v.is_finite()));
         let x = match self.x_ticks {
-            Ticks::Auto => padded_range(&xs, 0.02),
+            Ticks::Auto | Ticks::Period => padded_range(&xs, 0.02),
             // Half a step beyond the first and last: a single fit is a
             // point in the middle, not an empty axis from 1.0 to 1.0.
             Ticks::Integer => {
@@ -275,12 +291,64 @@ impl XyPlot {
         v
     }
 
-    /// Renders the plot as an SVG document.
+    /// The plot with every series reduced to what its pixels can show
+    /// ([`decimate`]: a line's envelope per pixel column, a scatter capped
+    /// with the lowest and highest point of every x bin kept), and how many
+    /// points that left out.
+    pub fn reduced(&self) -> (XyPlot, Reduction) {
+        let mut r = Reduction::default();
+        let mut plot = self.clone();
+        for s in &mut plot.series {
+            let finite: Vec<(f64, f64)> = s
+                .points
+                .iter()
+                .copied()
+                .filter(|p| p.0.is_finite() && p.1.is_finite())
+                .collect();
+            let kept = match s.style {
+                Style::Points => decimate::scatter(
+                    &finite,
+                    decimate::MAX_SCATTER_POINTS,
+                    decimate::SCATTER_BINS,
+                ),
+                Style::Line | Style::Step | Style::LinePoints => {
+                    decimate::line(&finite, decimate::LINE_BINS)
+                }
+            };
+            r.add(finite.len(), kept.len());
+            s.points = kept;
+        }
+        (plot, r)
+    }
+
+    /// Renders the plot as an SVG document. A series with more points than
+    /// the plot has pixels is reduced first ([`XyPlot::reduced`]) and the
+    /// plot says so in a line under it: the SVG's size is bounded whatever
+    /// the number of rows.
     pub fn to_svg(&self) -> Result<String> {
+        let (plot, reduction) = self.reduced();
+        Ok(decimate::drop_repeated_dots(
+            plot.draw_svg(reduction.note())?,
+        ))
+    }
+
+    fn draw_svg(&self, note: Option<String>) -> Result<String> {
         let mut buf = String::new();
         {
-            let root = SVGBackend::with_string(&mut buf, self.size).into_drawing_area();
+            let size = match note {
+                Some(_) => (self.size.0, self.size.1 + NOTE_STRIP),
+                None => self.size,
+            };
+            let root = SVGBackend::with_string(&mut buf, size).into_drawing_area();
             root.fill(&WHITE).map_err(plot_err)?;
+            let root = match &note {
+                Some(text) => {
+                    let (plot, strip) = root.split_vertically(self.size.1);
+                    draw_note(&strip, text)?;
+                    plot
+                }
+                None => root,
+            };
             // The legend gets a strip of its own right of the plot, so it
             // never covers data (a legend in a corner sat on the hottest
             // points).
@@ -305,6 +373,13 @@ impl XyPlot {
             let x_fmt = move |v: &f64| -> String {
                 match ticks {
                     Ticks::Auto => format_tick(*v),
+                    Ticks::Period => {
+                        if *v > 1e-12 {
+                            format_value(1.0 / v)
+                        } else {
+                            String::new()
+                        }
+                    }
                     Ticks::Integer => {
                         if (v - v.round()).abs() < 1e-9 {
                             format!("{}", v.round() as i64)
@@ -324,7 +399,7 @@ impl XyPlot {
                 }
             };
             let n_x = match ticks {
-                Ticks::Auto => 10,
+                Ticks::Auto | Ticks::Period => 10,
                 Ticks::Integer => ((x1 - x0).round() as usize).clamp(1, 30),
                 Ticks::Direction => 3,
             };
@@ -334,7 +409,7 @@ impl XyPlot {
                 .x_labels(n_x)
                 .x_label_formatter(&x_fmt)
                 .light_line_style(RGBColor(235, 235, 235));
-            if ticks != Ticks::Auto {
+            if !matches!(ticks, Ticks::Auto | Ticks::Period) {
                 mesh.disable_x_mesh();
             }
             mesh.draw().map_err(plot_err)?;
@@ -371,6 +446,28 @@ impl XyPlot {
                             label.clone(),
                             (x0 + 0.01 * (x1 - x0), *y),
                             ("sans-serif", 12).into_font().color(&RGBColor(90, 90, 90)),
+                        )))
+                        .map_err(plot_err)?;
+                }
+            }
+            for (x, label) in &self.vmarks {
+                let style = ShapeStyle::from(&RGBColor(110, 110, 110)).stroke_width(1);
+                let n = 40;
+                let dots = (0..n).step_by(2).map(|k| {
+                    let a = y0 + (y1 - y0) * k as f64 / n as f64;
+                    let b = y0 + (y1 - y0) * (k + 1) as f64 / n as f64;
+                    PathElement::new(vec![(*x, a), (*x, b)], style)
+                });
+                chart.draw_series(dots).map_err(plot_err)?;
+                if !label.is_empty() {
+                    chart
+                        .draw_series(std::iter::once(Text::new(
+                            label.clone(),
+                            (*x, y1 - 0.1 * (y1 - y0)),
+                            ("sans-serif", 11)
+                                .into_font()
+                                .color(&RGBColor(90, 90, 90))
+                                .pos(Pos::new(HPos::Left, VPos::Bottom)),
                         )))
                         .map_err(plot_err)?;
                 }
@@ -460,6 +557,28 @@ impl XyPlot {
         }
         Ok(responsive(buf))
     }
+}
+
+/// Pixels of the strip under a plot that says how it was reduced.
+pub const NOTE_STRIP: u32 = 18;
+
+/// The reduction note, grey, left-aligned in its strip.
+pub(crate) fn draw_note<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    text: &str,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    area.draw(&Text::new(
+        text.to_string(),
+        (12, 2),
+        ("sans-serif", 11)
+            .into_font()
+            .color(&RGBColor(90, 90, 90))
+            .pos(Pos::new(HPos::Left, VPos::Top)),
+    ))
+    .map_err(plot_err)
 }
 
 /// How a legend entry is drawn.
@@ -985,12 +1104,12 @@ mod tests {
         // The middle row holds the line's readings; the others the grid's.
         assert_eq!(m.values[0], Some(1.0));
         assert!(m.values[4].unwrap() > 2.9);
-        // One cell per reading without it.
-        assert!(
+        // Without it, one cell per reading — up to MAX_CELLS even bins.
+        assert_eq!(
             HeatMap::from_points("t", "x", "y", "µm", &pts, 1e-3)
                 .x
-                .len()
-                > 200
+                .len(),
+            heat::MAX_CELLS
         );
     }
 
