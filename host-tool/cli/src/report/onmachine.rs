@@ -288,7 +288,7 @@ pub fn probe_page(p: &ProbePage, dir: &Path) -> Result<PathBuf> {
     .with(Series::line("fitted form", form))
     .with(Series::points(
         "residual on the ball with it",
-        super::thin(&xy(p.residual_nm), super::MAX_SCATTER),
+        xy(p.residual_nm),
     ));
     page.figure(
         "form",
