@@ -140,12 +140,13 @@ pub(super) fn propose(
         let mut best = (pg.power[k], f0);
         for width in [df, df / 20.0] {
             let centre = best.1;
-            for i in 0..=40 {
+            // One scan of the 41 frequencies (a phase recurrence per sample).
+            let powers = periodogram::gls_power_scan(&pos, &res, centre - width, width / 20.0, 41);
+            for (i, &p) in powers.iter().enumerate() {
                 let f = centre + width * (i as f64 - 20.0) / 20.0;
                 if f <= 0.0 {
                     continue;
                 }
-                let p = periodogram::gls_power(&pos, &res, f);
                 if p > best.0 {
                     best = (p, f);
                 }
