@@ -22,6 +22,8 @@ pub(super) struct TargetData<'a> {
     pub(super) y: Vec<f64>,
     pub(super) fold: Vec<usize>,
     pub(super) nfolds: usize,
+    /// Where progress lines go (`diagnose_with`).
+    pub(super) progress: super::Progress<'a>,
 }
 
 impl TargetData<'_> {
@@ -313,6 +315,7 @@ mod tests {
             y,
             fold,
             nfolds,
+            progress: &|_| {},
         };
         let st = State::new(&td, "cubic19", &[]).unwrap();
         assert!(st.held_out_rms.is_finite());
