@@ -417,3 +417,33 @@ fn too_few_rows_name_the_file_once() {
     );
     assert_eq!(err.matches(s(&csv)).count(), 1, "{err}");
 }
+
+/// diagnose and improve are not silent while they work: one stderr line per
+/// stage and target, in `--json` mode too (stdout stays one document).
+#[test]
+fn diagnose_and_improve_say_their_progress_on_stderr() {
+    let dir = tmp_dir("progress");
+    let csv = dir.join("grid.csv");
+    stderr_ok(&run(&["simulate", "--plan", "grid:100", "-o", s(&csv)]));
+    let out = diagnose_json(&csv, "cubic19");
+    assert!(json(&out).is_object());
+    let err = stderr_ok(&out);
+    for t in ["ex", "ey", "ez"] {
+        for stage in ["fitting the model to 324 rows", "scoring", "done"] {
+            assert!(
+                err.contains(&format!("diagnose: {t}: {stage}")),
+                "{t} {stage}: {err}"
+            );
+        }
+    }
+    let out = improve_json(&csv, &dir.join("m.json"));
+    assert!(json(&out).is_object());
+    let err = stderr_ok(&out);
+    assert!(
+        err.contains("improve: step 1: fitting cubic19 to 324 rows"),
+        "{err}"
+    );
+    assert!(err.contains("improve: step 1: diagnosing"), "{err}");
+    assert!(err.contains("diagnose: ex: scoring"), "{err}");
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -136,7 +136,20 @@ pub fn improve(
     seed: &str,
     out: &std::path::Path,
     keep_outliers: bool,
+    on_step: impl FnMut(&ImproveStep),
+) -> Result<Improvement> {
+    improve_with(data, seed, out, keep_outliers, on_step, &|_| {})
+}
+
+/// [`improve`], telling `progress` what it is doing (each step's outlier
+/// screen, fit and diagnosis, as [`diagnose::diagnose_with`] does).
+pub fn improve_with(
+    data: &Dataset,
+    seed: &str,
+    out: &std::path::Path,
+    keep_outliers: bool,
     mut on_step: impl FnMut(&ImproveStep),
+    progress: diagnose::Progress,
 ) -> Result<Improvement> {
     let mut adds: Vec<String> = Vec::new();
     let mut steps = Vec::new();
@@ -146,6 +159,12 @@ pub fn improve(
             .iter()
             .map(|a| Effect::parse(a))
             .collect::<Result<Vec<_>>>()?;
+        let k = steps.len() + 1;
+        progress(&format!(
+            "improve: step {k}: fitting {seed}{} to {} rows",
+            adds.iter().map(|a| format!(" + {a}")).collect::<String>(),
+            data.len()
+        ));
         let found = if keep_outliers {
             Vec::new()
         } else {
@@ -157,7 +176,8 @@ pub fn improve(
         // the screen left out at this step: the history follows the file.
         model.data.sha256 = crate::import::content_hash(data);
         history::save_with_model(out, &model)?;
-        let d = diagnose::diagnose(
+        progress(&format!("improve: step {k}: diagnosing"));
+        let d = diagnose::diagnose_with(
             &clean,
             &Options {
                 seed: seed.to_string(),
@@ -165,6 +185,7 @@ pub fn improve(
                 follow_path: false,
                 keep_outliers: true,
             },
+            progress,
         )?;
         let above_noise_floor = d
             .unexplained

@@ -52,7 +52,9 @@ impl Args {
             }
         }
         let data = input::load_data(&self.data, None)?;
-        let mut d = diagnose::diagnose(
+        // Progress on stderr (a million rows take a while; the lines say
+        // which target and stage), in both modes.
+        let mut d = diagnose::diagnose_with(
             &data,
             &Options {
                 seed,
@@ -60,6 +62,7 @@ impl Args {
                 follow_path: true,
                 keep_outliers: self.keep_outliers,
             },
+            &|line: &str| eprintln!("{line}"),
         )
         .with_context(|| format!("{}: cannot diagnose", self.data.display()))?;
         for (code, detail) in input::data_warnings(&data) {

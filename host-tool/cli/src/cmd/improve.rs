@@ -8,7 +8,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use trueaxis_engine::diagnose;
-use trueaxis_engine::improve::{improve, ImproveStep, Improvement};
+use trueaxis_engine::improve::{improve_with, ImproveStep, Improvement};
 
 use crate::cmd::out::{self, outln};
 use crate::input;
@@ -60,31 +60,40 @@ impl Args {
         // stops the printing, not the loop — the model file is the result —
         // and is returned once the loop is done.
         let mut write_err: Option<anyhow::Error> = None;
-        let r = improve(&data, &seed, &out, self.keep_outliers, |s| {
-            if json || write_err.is_some() {
-                return;
-            }
-            let best = s.added_effects.first();
-            let what = best.map_or(format!("fit {seed}"), |a| format!("add {}", a.add));
-            let mut text = format!("step {}: {what}\n", s.step);
-            for (t, rms) in &s.rms_um {
-                text.push_str(&format!(
-                    "  {t}: rms {rms:.4} µm, held-out {} µm, noise floor {} µm\n",
-                    s.held_out_rms_um
-                        .get(t)
-                        .map_or("—".into(), |v| format!("{v:.4}")),
-                    s.noise_floor_um
-                        .get(t)
-                        .copied()
-                        .flatten()
-                        .map_or("—".into(), |v| format!("{v:.4}"))
-                ));
-            }
-            if let Some(a) = best {
-                text.push_str(&format!("  because: {}\n", a.evidence));
-            }
-            write_err = out::print(&text).err();
-        })
+        // Progress on stderr in both modes (each step's fit and diagnosis).
+        let progress = |line: &str| eprintln!("{line}");
+        let r = improve_with(
+            &data,
+            &seed,
+            &out,
+            self.keep_outliers,
+            |s| {
+                if json || write_err.is_some() {
+                    return;
+                }
+                let best = s.added_effects.first();
+                let what = best.map_or(format!("fit {seed}"), |a| format!("add {}", a.add));
+                let mut text = format!("step {}: {what}\n", s.step);
+                for (t, rms) in &s.rms_um {
+                    text.push_str(&format!(
+                        "  {t}: rms {rms:.4} µm, held-out {} µm, noise floor {} µm\n",
+                        s.held_out_rms_um
+                            .get(t)
+                            .map_or("—".into(), |v| format!("{v:.4}")),
+                        s.noise_floor_um
+                            .get(t)
+                            .copied()
+                            .flatten()
+                            .map_or("—".into(), |v| format!("{v:.4}"))
+                    ));
+                }
+                if let Some(a) = best {
+                    text.push_str(&format!("  because: {}\n", a.evidence));
+                }
+                write_err = out::print(&text).err();
+            },
+            &progress,
+        )
         .with_context(|| format!("{}: cannot improve {seed}", self.data.display()))?;
         let r = Improvement { warnings, ..r };
         if let Some(e) = write_err {

@@ -6,6 +6,8 @@
 
 use std::f64::consts::TAU;
 
+use rayon::prelude::*;
+
 use crate::data::{AXES, TARGETS};
 use crate::effect::{Axis, EffectSpec, Family};
 
@@ -140,12 +142,13 @@ pub(super) fn propose(
         let mut best = (pg.power[k], f0);
         for width in [df, df / 20.0] {
             let centre = best.1;
-            for i in 0..=40 {
+            // One scan of the 41 frequencies (a phase recurrence per sample).
+            let powers = periodogram::gls_power_scan(&pos, &res, centre - width, width / 20.0, 41);
+            for (i, &p) in powers.iter().enumerate() {
                 let f = centre + width * (i as f64 - 20.0) / 20.0;
                 if f <= 0.0 {
                     continue;
                 }
-                let p = periodogram::gls_power(&pos, &res, f);
                 if p > best.0 {
                     best = (p, f);
                 }
@@ -214,81 +217,87 @@ pub(super) fn propose(
         let times: Vec<Option<usize>> = std::iter::once(None)
             .chain(moving.iter().map(|&a| Some(a)))
             .collect();
-        for tm in times {
-            if !want(
-                Family::Thermal,
-                None,
-                Some(ch.name.as_str()),
-                tm.and_then(Axis::from_index),
-            ) {
-                continue;
-            }
-            let spec_at = |lag: f64| {
-                let mut s = format!("thermal:target={tn},channel={}", ch.name);
-                if let Some(a) = tm {
-                    s.push_str(&format!(",times={},offset=1", AXES[a]));
+        // Each variant (alone, times each axis) searches its lag on its
+        // own: in parallel, joined in order.
+        let found: Vec<Option<Proposal>> = times
+            .par_iter()
+            .map(|&tm| {
+                if !want(
+                    Family::Thermal,
+                    None,
+                    Some(ch.name.as_str()),
+                    tm.and_then(Axis::from_index),
+                ) {
+                    return None;
                 }
-                if lag > 0.0 {
-                    s.push_str(&format!(",lag_s={}", fmt_num(lag, 0)));
+                let spec_at = |lag: f64| {
+                    let mut s = format!("thermal:target={tn},channel={}", ch.name);
+                    if let Some(a) = tm {
+                        s.push_str(&format!(",times={},offset=1", AXES[a]));
+                    }
+                    if lag > 0.0 {
+                        s.push_str(&format!(",lag_s={}", fmt_num(lag, 0)));
+                    }
+                    s
+                };
+                let lags: &[f64] = if data.t_s.is_some() {
+                    &LAGS_S
+                } else {
+                    &LAGS_S[..1]
+                };
+                let rss_at =
+                    |lag: f64| fwl(td, st, &spec_at(lag), 0).map_or(f64::INFINITY, |ff| ff.fit.rss);
+                let mut best = (f64::INFINITY, 0.0);
+                let mut best_i = 0;
+                let grid: Vec<f64> = lags.par_iter().map(|&lag| rss_at(lag)).collect();
+                for (i, (&lag, &rss)) in lags.iter().zip(&grid).enumerate() {
+                    if rss < best.0 {
+                        best = (rss, lag);
+                        best_i = i;
+                    }
                 }
-                s
-            };
-            let lags: &[f64] = if data.t_s.is_some() {
-                &LAGS_S
-            } else {
-                &LAGS_S[..1]
-            };
-            let rss_at =
-                |lag: f64| fwl(td, st, &spec_at(lag), 0).map_or(f64::INFINITY, |ff| ff.fit.rss);
-            let mut best = (f64::INFINITY, 0.0);
-            let mut best_i = 0;
-            for (i, &lag) in lags.iter().enumerate() {
-                let rss = rss_at(lag);
-                if rss < best.0 {
-                    best = (rss, lag);
-                    best_i = i;
+                if !best.0.is_finite() {
+                    return None;
                 }
-            }
-            if !best.0.is_finite() {
-                continue;
-            }
-            // The grid only brackets the lag (a true 1000 s was reported as
-            // 900 s, and the CTE's interval, which takes the lag as known,
-            // then missed the truth): refine between the grid neighbours of
-            // the best point by golden-section search to 1 s.
-            if lags.len() > 1 {
-                let lo = lags[best_i.saturating_sub(1)];
-                let hi = lags[(best_i + 1).min(lags.len() - 1)];
-                let (lag, rss) = golden_min(rss_at, lo, hi, 1.0);
-                if rss < best.0 {
-                    best = (rss, lag.round());
+                // The grid only brackets the lag (a true 1000 s was reported as
+                // 900 s, and the CTE's interval, which takes the lag as known,
+                // then missed the truth): refine between the grid neighbours of
+                // the best point by golden-section search to 1 s.
+                if lags.len() > 1 {
+                    let lo = lags[best_i.saturating_sub(1)];
+                    let hi = lags[(best_i + 1).min(lags.len() - 1)];
+                    let (lag, rss) = golden_min(rss_at, lo, hi, 1.0);
+                    if rss < best.0 {
+                        best = (rss, lag.round());
+                    }
                 }
-            }
-            let note = if data.t_s.is_some() {
-                format!(
-                    "the {tn} residual follows T_{}_C{} (range {:.2} K), lag {} s found by search",
-                    ch.name,
-                    tm.map_or(String::new(), |a| format!(" × {}", AXES[a])),
-                    hi - lo,
-                    fmt_num(best.1, 0)
-                )
-            } else {
-                format!(
-                    "the {tn} residual follows T_{}_C{} (range {:.2} K)",
-                    ch.name,
-                    tm.map_or(String::new(), |a| format!(" × {}", AXES[a])),
-                    hi - lo
-                )
-            };
-            out.push(Proposal {
-                family: Family::Thermal,
-                spec: spec_at(best.1),
-                axis: tm,
-                channel: Some(format!("T_{}_C", ch.name)),
-                searched: usize::from(data.t_s.is_some()),
-                note,
-            });
-        }
+                let note = if data.t_s.is_some() {
+                    format!(
+                        "the {tn} residual follows T_{}_C{} (range {:.2} K), lag {} s found by search",
+                        ch.name,
+                        tm.map_or(String::new(), |a| format!(" × {}", AXES[a])),
+                        hi - lo,
+                        fmt_num(best.1, 0)
+                    )
+                } else {
+                    format!(
+                        "the {tn} residual follows T_{}_C{} (range {:.2} K)",
+                        ch.name,
+                        tm.map_or(String::new(), |a| format!(" × {}", AXES[a])),
+                        hi - lo
+                    )
+                };
+                Some(Proposal {
+                    family: Family::Thermal,
+                    spec: spec_at(best.1),
+                    axis: tm,
+                    channel: Some(format!("T_{}_C", ch.name)),
+                    searched: usize::from(data.t_s.is_some()),
+                    note,
+                })
+            })
+            .collect();
+        out.extend(found.into_iter().flatten());
     }
     // thermal, several sensors: when no one sensor follows the growth.
     let multi_wanted = only.is_none_or(|k| {

@@ -10,6 +10,8 @@
 //! otherwise differ by 10⁴ in scale and the rank tolerance would mean
 //! nothing.
 
+use std::sync::Arc;
+
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 
 /// Relative singular-value tolerance below which a direction counts as
@@ -28,12 +30,15 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
-/// An orthonormal basis (n × r) of the span of a set of columns, stored as
-/// plain column vectors: projections are the inner loop of every candidate
-/// search, and plain slices keep them fast in unoptimised test builds too.
+/// An orthonormal basis (n × r) of the span of a set of columns: the kept
+/// columns of the SVD's U, read in place as plain slices (projections are
+/// the inner loop of every candidate search, and plain slices keep them
+/// fast in unoptimised test builds too; no copy of U: at a million rows
+/// each copy is ~8 MB per column).
 #[derive(Clone, Debug)]
 pub struct Basis {
-    u: Vec<Vec<f64>>,
+    u: DMatrix<f64>,
+    keep: Vec<usize>,
 }
 
 impl Basis {
@@ -47,22 +52,33 @@ impl Basis {
             .filter(|(_, s)| *s > 0.0 && s.is_finite())
             .collect();
         if keep.is_empty() || n == 0 {
-            return Basis { u: Vec::new() };
+            return Basis {
+                u: DMatrix::zeros(0, 0),
+                keep: Vec::new(),
+            };
         }
         let m = DMatrix::from_fn(n, keep.len(), |i, j| cols[keep[j].0][i] / keep[j].1);
         let svd = m.svd(true, false);
-        let u = svd.u.expect("SVD asked for U");
         let smax = svd.singular_values.max();
-        let u = (0..svd.singular_values.len())
+        let kept = (0..svd.singular_values.len())
             .filter(|&k| svd.singular_values[k] > RANK_TOL * smax)
-            .map(|k| u.column(k).iter().copied().collect())
             .collect();
-        Basis { u }
+        Basis {
+            u: svd.u.expect("SVD asked for U"),
+            keep: kept,
+        }
+    }
+
+    /// The basis vectors (columns of U, contiguous: U is column-major).
+    fn vectors(&self) -> impl Iterator<Item = &[f64]> {
+        let n = self.u.nrows();
+        let all = self.u.as_slice();
+        self.keep.iter().map(move |&k| &all[k * n..(k + 1) * n])
     }
 
     /// Dimension of the span.
     pub fn rank(&self) -> usize {
-        self.u.len()
+        self.keep.len()
     }
 
     /// How much two spans share: the mean squared cosine of their principal
@@ -76,9 +92,8 @@ impl Basis {
             return 0.0;
         }
         let ss: f64 = self
-            .u
-            .iter()
-            .flat_map(|a| other.u.iter().map(move |b| dot(a, b).powi(2)))
+            .vectors()
+            .flat_map(|a| other.vectors().map(move |b| dot(a, b).powi(2)))
             .sum();
         (ss / r as f64).clamp(0.0, 1.0)
     }
@@ -86,7 +101,7 @@ impl Basis {
     /// v − P v: the part of `v` orthogonal to the span.
     pub fn residual(&self, v: &[f64]) -> Vec<f64> {
         let mut r = v.to_vec();
-        for u in &self.u {
+        for u in self.vectors() {
             let c = dot(u, v);
             for (ri, ui) in r.iter_mut().zip(u) {
                 *ri -= c * ui;
@@ -171,8 +186,11 @@ pub fn small_fit(cols: &[Vec<f64>], y: &[f64]) -> SmallFit {
 pub struct HoldOut {
     fold: Vec<usize>,
     nfolds: usize,
-    /// Model columns scaled to unit RMS.
-    cols: Vec<Vec<f64>>,
+    /// The model's columns (shared with the model state, not copied: at a
+    /// million rows each copy is ~8 MB per column), the nonzero ones used
+    /// scaled to unit RMS: `cols[j][r] / scale[j]` for `(j, scale)` in `used`.
+    cols: Arc<Vec<Vec<f64>>>,
+    used: Vec<(usize, f64)>,
     y: Vec<f64>,
     /// Per-fold Σ x xᵀ over the fold's rows (model columns).
     gram: Vec<DMatrix<f64>>,
@@ -183,21 +201,22 @@ pub struct HoldOut {
 impl HoldOut {
     /// Prepares the model `cols` for hold-out refits with `fold[row]` ∈
     /// 0..nfolds giving each row's block.
-    pub fn new(cols: &[Vec<f64>], y: &[f64], fold: &[usize], nfolds: usize) -> HoldOut {
-        let cols: Vec<Vec<f64>> = cols
+    pub fn new(cols: Arc<Vec<Vec<f64>>>, y: &[f64], fold: &[usize], nfolds: usize) -> HoldOut {
+        let used: Vec<(usize, f64)> = cols
             .iter()
-            .filter_map(|c| {
+            .enumerate()
+            .filter_map(|(j, c)| {
                 let s = rms(c);
-                (s > 0.0).then(|| c.iter().map(|v| v / s).collect())
+                (s > 0.0).then_some((j, s))
             })
             .collect();
-        let p = cols.len();
+        let p = used.len();
         let mut g_raw = vec![0.0; nfolds * p * p];
         let mut xy_raw = vec![0.0; nfolds * p];
         let mut x = vec![0.0; p];
         for (r, &f) in fold.iter().enumerate() {
-            for j in 0..p {
-                x[j] = cols[j][r];
+            for (xj, &(j, s)) in x.iter_mut().zip(&used) {
+                *xj = cols[j][r] / s;
             }
             let g = &mut g_raw[f * p * p..(f + 1) * p * p];
             for i in 0..p {
@@ -217,6 +236,7 @@ impl HoldOut {
             fold: fold.to_vec(),
             nfolds,
             cols,
+            used,
             y: y.to_vec(),
             gram,
             xy,
@@ -227,7 +247,7 @@ impl HoldOut {
     /// others) of the model plus `extra` columns. `None` when a block cannot
     /// be predicted (no rows left to fit).
     pub fn rms(&self, extra: &[Vec<f64>]) -> Option<f64> {
-        let p = self.cols.len();
+        let p = self.used.len();
         let extra: Vec<Vec<f64>> = extra
             .iter()
             .filter_map(|c| {
@@ -250,8 +270,8 @@ impl HoldOut {
                     continue;
                 }
                 let mc = &mut mc_raw[f * p * k..(f + 1) * p * k];
-                for j in 0..p {
-                    mc[j * k + a] += self.cols[j][r] * ca;
+                for (j, &(c, s)) in self.used.iter().enumerate() {
+                    mc[j * k + a] += self.cols[c][r] / s * ca;
                 }
                 for b in 0..k {
                     cc_raw[f * k * k + a * k + b] += ca * extra[b][r];
@@ -301,7 +321,10 @@ impl HoldOut {
         for (r, &f) in self.fold.iter().enumerate() {
             let beta = &betas[f];
             let mut pred = 0.0;
-            for (b, c) in beta.iter().zip(self.cols.iter().chain(&extra)) {
+            for (b, &(c, s)) in beta.iter().zip(&self.used) {
+                pred += b * (self.cols[c][r] / s);
+            }
+            for (b, c) in beta[p..].iter().zip(&extra) {
                 pred += b * c[r];
             }
             ss += (self.y[r] - pred).powi(2);
@@ -373,7 +396,7 @@ mod tests {
         let s: Vec<f64> = x.iter().map(|v| (3.0 * v).sin()).collect();
         let y: Vec<f64> = (0..n).map(|i| 1.0 + 0.5 * x[i] + s[i]).collect();
         let fold: Vec<usize> = (0..n).map(|i| (i / 6) % 5).collect();
-        let h = HoldOut::new(&[one, x], &y, &fold, 5);
+        let h = HoldOut::new(Arc::new(vec![one, x]), &y, &fold, 5);
         let without = h.rms(&[]).unwrap();
         let with = h.rms(&[s]).unwrap();
         assert!(without > 0.3, "{without}");

@@ -55,6 +55,7 @@ mod warnings;
 use std::collections::BTreeMap;
 
 use anyhow::Result;
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::data::{Dataset, AXES, TARGETS};
@@ -67,7 +68,7 @@ pub use swap::swap_in;
 pub use warnings::above_noise;
 
 use candidates::propose;
-use noise::{noise_floor, NoiseFloor, NoiseMethod};
+use noise::{noise_floor, NoiseMethod};
 use periodogram::Periodogram;
 use target::{fwl, hold_out_blocks, State, TargetData};
 use warnings::{above_noise_warning, dedup_warnings, design_warnings};
@@ -439,8 +440,106 @@ impl Diagnosis {
     }
 }
 
+/// A progress hook: `diagnose` and `improve` call it with one line of what
+/// they are doing (`diagnose: ex: scoring 12 candidates (1/3)`), from any
+/// thread; the CLI prints the lines to stderr.
+pub type Progress<'a> = &'a (dyn Fn(&str) + Sync);
+
+/// What one target of [`diagnose_with`] found, before the targets are joined.
+struct TargetOut {
+    t: usize,
+    hold_out: String,
+    rms: f64,
+    held_out_rms: f64,
+    regions: Vec<Region>,
+    warnings: Vec<Warning>,
+    path: Vec<PathStep>,
+    candidates: Vec<Candidate>,
+    unexplained: Vec<Unexplained>,
+    noise_floor_um: Option<f64>,
+    noise_method: Option<NoiseMethod>,
+    ev: Evidence,
+}
+
+/// The diagnosis of target `t` (the `k`-th of `of.1`).
+fn one_target(
+    data: &Dataset,
+    norm: Norm,
+    t: usize,
+    opts: &Options,
+    progress: Progress,
+    of: (usize, usize),
+) -> Result<TargetOut> {
+    let mut warnings = Vec::new();
+    let mut ev = Evidence::default();
+    let mut path = Vec::new();
+    let (rows, y): (Vec<usize>, Vec<f64>) = data.measured(t).unzip();
+    let (fold, nfolds, how) = hold_out_blocks(data, &rows, &norm);
+    let tn = TARGETS[t].to_string();
+    progress(&format!(
+        "diagnose: {tn}: fitting the model to {} rows ({}/{})",
+        rows.len(),
+        of.0,
+        of.1
+    ));
+    let td = TargetData {
+        data,
+        norm,
+        t,
+        rows,
+        y,
+        fold,
+        nfolds,
+        progress,
+    };
+    let st0 = State::new(&td, &opts.seed, &opts.adds)?;
+    let rms = st0.rms();
+    let held_out_rms = st0.held_out_rms;
+    let regions = crate::regions::worst_cells(data, &td.norm, t, &td.rows, &st0.resid);
+    ev.resid_before
+        .push((t, td.rows.clone(), st0.resid.clone()));
+    let (candidates, st, first) = path::follow(&td, st0, opts, &mut warnings, &mut ev, &mut path)?;
+    let nf = noise_floor(data, &td.rows, &st.resid);
+    let mut unexplained = Vec::new();
+    if let Some(nf) = &nf {
+        warnings.extend(above_noise_warning(&tn, st.rms(), nf, !first));
+        if let Some(ratio) = above_noise(st.rms(), nf.sigma_um) {
+            unexplained.push(Unexplained {
+                target: tn.clone(),
+                rms_um: st.rms(),
+                noise_floor_um: nf.sigma_um,
+                ratio,
+                region: crate::regions::worst_cells(data, &td.norm, t, &td.rows, &st.resid)
+                    .into_iter()
+                    .next(),
+            });
+        }
+    }
+    ev.resid_after.push((t, td.rows.clone(), st.resid.clone()));
+    progress(&format!("diagnose: {tn}: done ({}/{})", of.0, of.1));
+    Ok(TargetOut {
+        t,
+        hold_out: how,
+        rms,
+        held_out_rms,
+        regions,
+        warnings,
+        path,
+        candidates,
+        unexplained,
+        noise_floor_um: nf.as_ref().map(|n| n.sigma_um),
+        noise_method: nf.map(|n| n.method),
+        ev,
+    })
+}
+
 /// Runs the diagnosis of `data` with the model of `opts`.
 pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
+    diagnose_with(data, opts, &|_| {})
+}
+
+/// [`diagnose`], telling `progress` what it is doing.
+pub fn diagnose_with(data: &Dataset, opts: &Options, progress: Progress) -> Result<Diagnosis> {
     let effects = opts
         .adds
         .iter()
@@ -476,48 +575,33 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
     let mut regions = Vec::new();
     let mut hold_out = String::new();
     let mut unexplained = Vec::new();
-    for t in data.targets() {
-        let (rows, y): (Vec<usize>, Vec<f64>) = data.measured(t).unzip();
-        let (fold, nfolds, how) = hold_out_blocks(data, &rows, &norm);
-        hold_out = how;
-        let td = TargetData {
-            data,
-            norm,
-            t,
-            rows,
-            y,
-            fold,
-            nfolds,
-        };
-        let tn = TARGETS[t].to_string();
-        let st0 = State::new(&td, &opts.seed, &opts.adds)?;
-        rms_um.insert(tn.clone(), st0.rms());
-        held_out_rms_um.insert(tn.clone(), st0.held_out_rms);
-        regions.extend(crate::regions::worst_cells(
-            data, &td.norm, t, &td.rows, &st0.resid,
-        ));
-        ev.resid_before
-            .push((t, td.rows.clone(), st0.resid.clone()));
-        let (list, st, first) = path::follow(&td, st0, opts, &mut warnings, &mut ev, &mut path)?;
-        candidates.extend(list);
-        let nf = noise_floor(data, &td.rows, &st.resid);
-        if let Some(nf) = &nf {
-            warnings.extend(above_noise_warning(&tn, st.rms(), nf, !first));
-            if let Some(ratio) = above_noise(st.rms(), nf.sigma_um) {
-                unexplained.push(Unexplained {
-                    target: tn.clone(),
-                    rms_um: st.rms(),
-                    noise_floor_um: nf.sigma_um,
-                    ratio,
-                    region: crate::regions::worst_cells(data, &td.norm, t, &td.rows, &st.resid)
-                        .into_iter()
-                        .next(),
-                });
-            }
-        }
-        noise_floor_um.insert(tn.clone(), nf.map(|n: NoiseFloor| n.sigma_um));
-        noise_method.insert(tn.clone(), nf.map(|n| n.method));
-        ev.resid_after.push((t, td.rows.clone(), st.resid.clone()));
+    // The targets are independent: searched and scored in parallel, each
+    // into its own lists, joined in target order (the same result as one
+    // after the other).
+    let targets = data.targets();
+    let nt = targets.len();
+    let outs: Vec<Result<TargetOut>> = targets
+        .par_iter()
+        .enumerate()
+        .map(|(i, &t)| one_target(data, norm, t, opts, progress, (i + 1, nt)))
+        .collect();
+    for out in outs {
+        let o = out?;
+        let tn = TARGETS[o.t].to_string();
+        hold_out = o.hold_out;
+        rms_um.insert(tn.clone(), o.rms);
+        held_out_rms_um.insert(tn.clone(), o.held_out_rms);
+        regions.extend(o.regions);
+        warnings.extend(o.warnings);
+        path.extend(o.path);
+        candidates.extend(o.candidates);
+        unexplained.extend(o.unexplained);
+        noise_floor_um.insert(tn.clone(), o.noise_floor_um);
+        noise_method.insert(tn, o.noise_method);
+        ev.periodograms.extend(o.ev.periodograms);
+        ev.components.extend(o.ev.components);
+        ev.resid_before.extend(o.ev.resid_before);
+        ev.resid_after.extend(o.ev.resid_after);
     }
     // Significant (on the path) first, by step — so the best of the
     // starting model leads — then the rest by ΔBIC.
@@ -609,6 +693,7 @@ pub fn library(data: &Dataset, opts: &Options) -> Result<Vec<TargetLibrary>> {
             y,
             fold,
             nfolds,
+            progress: &|_| {},
         };
         let st = State::new(&td, &opts.seed, &opts.adds)?;
         let mut groups = Vec::new();

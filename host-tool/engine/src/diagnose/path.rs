@@ -43,6 +43,12 @@ pub(super) fn rank_target(
             (Some(k.target) == Target::from_index(td.t)).then(|| (a.clone(), k))
         })
         .collect();
+    let tn = TARGETS[td.t];
+    (td.progress)(&format!(
+        "diagnose: {tn}: searching candidates (periodograms, lags) at {} + {} effect(s)",
+        seed_name,
+        st.adds.len()
+    ));
     let props: Vec<Proposal> = propose(td, st, ev, None)
         .into_iter()
         .filter(|p| {
@@ -51,6 +57,10 @@ pub(super) fn rank_target(
                 .map_or(true, |k| !own.iter().any(|(_, o)| o.same_effect(&k)))
         })
         .collect();
+    (td.progress)(&format!(
+        "diagnose: {tn}: scoring {} candidates",
+        props.len()
+    ));
     let mut sc = score(td, st, props, seed_name, warnings, None);
     for (old, key) in &own {
         let searchable = match key.family {
@@ -330,6 +340,11 @@ pub(super) fn follow(
                 }
             }
         }
+        (td.progress)(&format!(
+            "diagnose: {tn}: step {k}: {} (held-out RMS {:.3} µm)",
+            on_path.last().map_or("", |(_, a)| a.as_str()),
+            next.held_out_rms
+        ));
         st = next;
         if !opts.follow_path {
             break;

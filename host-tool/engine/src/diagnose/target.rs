@@ -22,6 +22,8 @@ pub(super) struct TargetData<'a> {
     pub(super) y: Vec<f64>,
     pub(super) fold: Vec<usize>,
     pub(super) nfolds: usize,
+    /// Where progress lines go (`diagnose_with`).
+    pub(super) progress: super::Progress<'a>,
 }
 
 impl TargetData<'_> {
@@ -36,7 +38,7 @@ pub(super) struct State {
     pub(super) adds: Vec<String>,
     /// The model's columns, and the `add` string each belongs to (None for
     /// the seed's): for the fitted component of each effect in the report.
-    pub(super) cols: Vec<Vec<f64>>,
+    pub(super) cols: std::sync::Arc<Vec<Vec<f64>>>,
     pub(super) owner: Vec<Option<String>>,
     pub(super) basis: Basis,
     pub(super) resid: Vec<f64>,
@@ -79,7 +81,8 @@ impl State {
         }
         let resid = basis.residual(&td.y);
         let rss = linalg::dot(&resid, &resid);
-        let holdout = HoldOut::new(&cols, &td.y, &td.fold, td.nfolds);
+        let cols = std::sync::Arc::new(cols);
+        let holdout = HoldOut::new(cols.clone(), &td.y, &td.fold, td.nfolds);
         let held_out_rms = holdout.rms(&[]).unwrap_or(f64::NAN);
         Ok(State {
             adds: adds.to_vec(),
@@ -313,6 +316,7 @@ mod tests {
             y,
             fold,
             nfolds,
+            progress: &|_| {},
         };
         let st = State::new(&td, "cubic19", &[]).unwrap();
         assert!(st.held_out_rms.is_finite());
