@@ -71,8 +71,17 @@ impl Args {
                 if json || write_err.is_some() {
                     return;
                 }
-                let best = s.added_effects.first();
-                let what = best.map_or(format!("fit {seed}"), |a| format!("add {}", a.add));
+                // Every effect the step added, each with its evidence (one
+                // per target can be added in one step).
+                let what = if s.added_effects.is_empty() {
+                    format!("fit {seed}")
+                } else {
+                    s.added_effects
+                        .iter()
+                        .map(|a| format!("add {}", a.add))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                };
                 let mut text = format!("step {}: {what}\n", s.step);
                 for (t, rms) in &s.rms_um {
                     text.push_str(&format!(
@@ -87,8 +96,12 @@ impl Args {
                             .map_or("—".into(), |v| format!("{v:.4}"))
                     ));
                 }
-                if let Some(a) = best {
-                    text.push_str(&format!("  because: {}\n", a.evidence));
+                for a in &s.added_effects {
+                    text.push_str(&format!(
+                        "  because ({}): {}\n",
+                        crate::report::history::effect_words(&a.add),
+                        a.evidence
+                    ));
                 }
                 write_err = out::print(&text).err();
             },

@@ -1,0 +1,59 @@
+//! `trueaxis improve`'s text: a step that adds several effects (one per
+//! target) names each of them and gives each its evidence — the text once
+//! explained only the first (issue 13).
+
+mod common;
+
+use common::{run, s, tmp_dir};
+
+#[test]
+fn a_step_that_adds_two_effects_explains_both() {
+    let dir = tmp_dir("improve_text", "two");
+    let data = dir.join("d.csv");
+    let o = run(&[
+        "simulate",
+        "--plan",
+        "grid:100",
+        "--plan",
+        "line:x:2,bidir",
+        "--plan",
+        "line:y:2,bidir",
+        "--effect",
+        "periodic:axis=x,target=ex,period_mm=25,amp_um=3",
+        "--effect",
+        "reversal:axis=y,backlash_um=8,target=ey",
+        "-o",
+        s(&data),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = run(&[
+        "improve",
+        s(&data),
+        "--model",
+        "cubic19",
+        "-o",
+        s(&dir.join("m.json")),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout);
+    let step = text
+        .lines()
+        .find(|l| l.starts_with("step 2:"))
+        .unwrap_or_else(|| panic!("no step 2 in\n{text}"));
+    assert!(
+        step.contains("add reversal:target=ey") && step.contains("add periodic:target=ex"),
+        "{step}"
+    );
+    let because: Vec<&str> = text.lines().filter(|l| l.contains("because (")).collect();
+    assert_eq!(because.len(), 2, "{text}");
+    assert!(
+        because
+            .iter()
+            .any(|l| l.contains("backlash 7.9") || l.contains("backlash 8.0")),
+        "{text}"
+    );
+    assert!(
+        because.iter().any(|l| l.contains("period 25.0 mm")),
+        "{text}"
+    );
+}
