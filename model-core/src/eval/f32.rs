@@ -7,7 +7,7 @@
 use super::kernels::{grid_cell, mlp_source, mono20_f32, mono56_f32, phase_turns};
 use super::{Factor, Flags, GridAxis, Inputs, ModelCap, Outputs, PolyKind, Term, MAX_TEMPS};
 use crate::limits::{MAX_HIDDEN_UNITS, MAX_MLP_INPUTS, MAX_MONOMIALS};
-use crate::math::{sincos_f32, tanh_f32, ONE_Q30};
+use crate::math::{sincos_f32, tanh_f32, tanh_over_lead_f32, ONE_Q30};
 
 impl<const P: usize, const G: usize> ModelCap<P, G> {
     /// Evaluate in f32 (the fast path on the Cortex-M4F).
@@ -434,6 +434,13 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             (16, 3) => fused_f32::<16, 3>(blk, src, width),
             _ => fused_f32_dyn(blk, src, width, n_out),
         };
+        if outputs == 0b111 {
+            // The common case: the net's outputs are x, y, z in order.
+            out[0] += acc[0];
+            out[1] += acc[1];
+            out[2] += acc[2];
+            return;
+        }
         let mut j = 0;
         for o in 0..3 {
             if outputs & (1 << o) != 0 {
@@ -478,7 +485,9 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
 }
 
 /// The last hidden layer fused with the output layer, f32: per unit the
-/// record [bias, NI weights, NO output weights]; then NO output biases.
+/// record [bias, NI weights, NO output weights × `TANH_F32_LEAD`] (so the
+/// unit's activation is [`tanh_over_lead_f32`], one instruction cheaper than
+/// `tanh_f32`); then NO output biases.
 #[inline(always)]
 fn fused_f32<const NI: usize, const NO: usize>(blk: &[f32], x: &[f32], width: usize) -> [f32; 3] {
     let mut acc = [0.0f32; 3];
@@ -505,7 +514,8 @@ fn fused_f32<const NI: usize, const NO: usize>(blk: &[f32], x: &[f32], width: us
         for i in 0..NI {
             z += w[i] * x[i];
         }
-        let h = tanh_f32(z);
+        // The output weights were scaled by TANH_F32_LEAD at load.
+        let h = tanh_over_lead_f32(z);
         for o in 0..NO {
             a[o] += wo[o] * h;
         }
@@ -531,7 +541,7 @@ fn fused_f32_dyn(blk: &[f32], x: &[f32], width: usize, n_out: usize) -> [f32; 3]
     }
     for u in units.chunks_exact(stride) {
         let (w, wo) = u[1..].split_at(x.len());
-        let h = tanh_f32(u[0] + dot_f32(w, x));
+        let h = tanh_over_lead_f32(u[0] + dot_f32(w, x));
         for (a, &wj) in acc.iter_mut().zip(wo) {
             *a += wj * h;
         }

@@ -19,6 +19,7 @@ use super::{
     PolyKind, Term, MAX_MLP_INPUTS_TOTAL, MAX_TERMS,
 };
 use crate::limits::{MAX_HIDDEN_LAYERS, MAX_MLP_INPUTS, MAX_MONOMIALS};
+use crate::math::TANH_F32_LEAD;
 use crate::table::{Envelope, GridView, MlpView, PolyCoefs, Table, TermView};
 
 struct Pools<'m, const P: usize> {
@@ -589,7 +590,10 @@ fn mlp_term<const P: usize>(
             push(pools, eff(last, j, Some(l)), qs[last]);
         }
         for o in 0..n_out {
-            push(pools, eff(n_layers, o, Some(j)), qs[2]);
+            // f32: × TANH_F32_LEAD, the evaluator's activation being
+            // tanh / TANH_F32_LEAD (tanh_over_lead_f32).
+            let v = eff(n_layers, o, Some(j));
+            pools.push((v * TANH_F32_LEAD as f64) as f32, to_q(v, qs[2] as i32), 0);
         }
     }
     for o in 0..n_out {
