@@ -428,10 +428,10 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         let blk = self.pf.get(k..).unwrap_or(&[]);
         // Monomorphised (fully unrolled) for the common shapes.
         let acc = match (prev, n_out) {
-            (3, 3) => fused_f32::<3, 3>(blk, src, width),
-            (4, 3) => fused_f32::<4, 3>(blk, src, width),
-            (3, 1) => fused_f32::<3, 1>(blk, src, width),
-            (16, 3) => fused_f32::<16, 3>(blk, src, width),
+            (3, 3) => fused_f32::<3, 3, 7>(blk, src, width),
+            (4, 3) => fused_f32::<4, 3, 8>(blk, src, width),
+            (3, 1) => fused_f32::<3, 1, 5>(blk, src, width),
+            (16, 3) => fused_f32::<16, 3, 20>(blk, src, width),
             _ => fused_f32_dyn(blk, src, width, n_out),
         };
         if outputs == 0b111 {
@@ -489,35 +489,37 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
 /// unit's activation is [`tanh_over_lead_f32`], one instruction cheaper than
 /// `tanh_f32`); then NO output biases.
 #[inline(always)]
-fn fused_f32<const NI: usize, const NO: usize>(blk: &[f32], x: &[f32], width: usize) -> [f32; 3] {
+fn fused_f32<const NI: usize, const NO: usize, const S: usize>(
+    blk: &[f32],
+    x: &[f32],
+    width: usize,
+) -> [f32; 3] {
     let mut acc = [0.0f32; 3];
     let Ok(x) = <&[f32; NI]>::try_from(x) else {
         return acc;
     };
-    let stride = 1 + NI + NO;
-    let (Some(units), Some(bo)) = (
-        blk.get(..width * stride),
-        blk.get(width * stride..width * stride + NO),
-    ) else {
+    // S = 1 + NI + NO, the record's length (a const parameter: stable Rust
+    // cannot write [f32; 1 + NI + NO]); the records as arrays make the loop
+    // a pointer walk with constant offsets (no length count, no bounds checks).
+    if S != 1 + NI + NO {
+        return acc;
+    }
+    let (Some(units), Some(bo)) = (blk.get(..width * S), blk.get(width * S..width * S + NO)) else {
         return acc;
     };
     let mut a = [0.0f32; NO];
     for (ai, &b) in a.iter_mut().zip(bo) {
         *ai = b;
     }
-    for u in units.chunks_exact(stride) {
-        let (b, w, wo) = (u[0], &u[1..1 + NI], &u[1 + NI..]);
-        let (Ok(w), Ok(wo)) = (<&[f32; NI]>::try_from(w), <&[f32; NO]>::try_from(wo)) else {
-            continue;
-        };
-        let mut z = b;
+    for u in units.as_chunks::<S>().0 {
+        let mut z = u[0];
         for i in 0..NI {
-            z += w[i] * x[i];
+            z += u[1 + i] * x[i];
         }
         // The output weights were scaled by TANH_F32_LEAD at load.
         let h = tanh_over_lead_f32(z);
         for o in 0..NO {
-            a[o] += wo[o] * h;
+            a[o] += u[1 + NI + o] * h;
         }
     }
     for (ac, ai) in acc.iter_mut().zip(a) {
