@@ -405,8 +405,9 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             .iter_mut()
             .zip(&self.mlp_in[in_start as usize..in_start as usize + n_in])
         {
-            // |v − mid| < 2^31 over the envelope (checked at load).
-            *xi = mlp_source(mi.src, pos, temp).wrapping_sub(mi.mid) as f32 * mi.k_f32;
+            // |v − mid| < 2^31 over the envelope (checked at load); the
+            // scale k is folded into the first layer's f32 weights at load.
+            *xi = mlp_source(mi.src, pos, temp).wrapping_sub(mi.mid) as f32;
         }
         let x = &x[..n_in];
         let mut k = start as usize;

@@ -571,11 +571,22 @@ fn mlp_term<const P: usize>(
     // output layer, one record per unit
     // [bias, weights from the previous layer, output weights],
     // then the output biases.
+    // f32 only: the first layer's weights × the inputs' scale k, so the
+    // f32 evaluator takes x = v − mid without a multiply (fixed point keeps
+    // k in its 32-bit shift).
+    let mut k_in = [0.0f64; MAX_MLP_INPUTS];
+    for (i, k) in k_in.iter_mut().enumerate().take(shape.n_in) {
+        let inp = net.input(i);
+        *k = input_scale(inp.min, inp.max);
+    }
+    let push_first = |pools: &mut Pools<'_, P>, v: f64, l: usize, q: u8| {
+        pools.push((v * k_in[l]) as f32, to_q(v, q as i32), 0)
+    };
     if n_layers == 2 {
         let (_, prev, width) = lay[0];
         for j in 0..width {
             for l in 0..prev {
-                push(pools, eff(0, j, Some(l)), qs[0]);
+                push_first(pools, eff(0, j, Some(l)), l, qs[0]);
             }
         }
         for j in 0..width {
@@ -587,7 +598,11 @@ fn mlp_term<const P: usize>(
     for j in 0..width {
         push(pools, eff(last, j, None), qs[last]);
         for l in 0..prev {
-            push(pools, eff(last, j, Some(l)), qs[last]);
+            if last == 0 {
+                push_first(pools, eff(last, j, Some(l)), l, qs[last]);
+            } else {
+                push(pools, eff(last, j, Some(l)), qs[last]);
+            }
         }
         for o in 0..n_out {
             // f32: × TANH_F32_LEAD, the evaluator's activation being
@@ -615,6 +630,11 @@ fn mlp_term<const P: usize>(
     })
 }
 
+/// An MLP input's scale: [min, max] → [−1, 1].
+fn input_scale(min: f64, max: f64) -> f64 {
+    2.0 / (max - min)
+}
+
 /// The inputs of an MLP term: x_s = (v − mid)·k + e with an integer mid, so
 /// the evaluators take v − mid as an i32 and scale it with a 32-bit constant
 /// shift. Returns the residuals e, which the caller folds into the first
@@ -633,7 +653,7 @@ fn mlp_inputs(
         let inp = net.input(i);
         let mid_true = (inp.min + inp.max) / 2.0;
         let mid = round_i64(mid_true).clamp(i32::MIN as i64, i32::MAX as i64) as i32;
-        let k = 2.0 / (inp.max - inp.min);
+        let k = input_scale(inp.min, inp.max);
         e[i] = (mid as f64 - mid_true) * k;
         // Range of the scaled input over the envelope.
         let (lo, hi) = match inp.source {
@@ -657,7 +677,6 @@ fn mlp_inputs(
         let _ = mlp_in.push(MlpInput {
             src: inp.source,
             mid,
-            k_f32: k as f32,
             k_q28: Mul32::new(k, 28),
         });
     }

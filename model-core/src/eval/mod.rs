@@ -321,7 +321,7 @@ struct GridAxis {
 struct MlpInput {
     src: u8,
     mid: i32,
-    k_f32: f32,
+    /// The scale k in fixed point (f32: folded into the first layer's weights).
     k_q28: Mul32,
 }
 
