@@ -162,28 +162,33 @@ pub const TANH_F32_LEAD: f32 = 0.017_463_349;
 /// |error · `TANH_F32_LEAD`| ≤ 5e-7 against f64 tanh (tested).
 #[inline(always)]
 pub fn tanh_over_lead_f32(x: f32) -> f32 {
-    const P0: f32 = 70_925_856.0;
-    const P1: f32 = 9_508_466.0;
-    const P2: f32 = 250_071.67;
-    const P3: f32 = 1_498.064_5;
-    const Q0: f32 = 1_238_603.0;
-    const Q1: f32 = 578_917.06;
-    const Q2: f32 = 32_192.693;
-    const Q3: f32 = 413.159_4;
     let x2 = x * x;
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
     if !(x2 <= TANH_F32_SAT2) {
         return tanh_over_lead_saturated(x);
     }
-    let mut p = x2 + P3;
-    p = p * x2 + P2;
-    p = p * x2 + P1;
-    p = p * x2 + P0;
+    tanh_over_lead_f32_bounded(x)
+}
+
+/// [`tanh_over_lead_f32`]'s numerator P / `TANH_F32_LEAD` (monic, P₄ = 1).
+const TANH_LEAD_P: [f32; 4] = [70_925_856.0, 9_508_466.0, 250_071.67, 1_498.064_5];
+/// [`tanh_f32`]'s denominator Q (monic, Q₄ = 1).
+const TANH_Q: [f32; 4] = [1_238_603.0, 578_917.06, 32_192.693, 413.159_4];
+
+/// [`tanh_over_lead_f32`] for |x| ≤ 8.5 known beforehand (no saturation
+/// test; the caller proves the bound): the same operations, the same result.
+#[inline(always)]
+pub fn tanh_over_lead_f32_bounded(x: f32) -> f32 {
+    let x2 = x * x;
+    let mut p = x2 + TANH_LEAD_P[3];
+    p = p * x2 + TANH_LEAD_P[2];
+    p = p * x2 + TANH_LEAD_P[1];
+    p = p * x2 + TANH_LEAD_P[0];
     p *= x;
-    let mut q = x2 + Q3;
-    q = q * x2 + Q2;
-    q = q * x2 + Q1;
-    q = q * x2 + Q0;
+    let mut q = x2 + TANH_Q[3];
+    q = q * x2 + TANH_Q[2];
+    q = q * x2 + TANH_Q[1];
+    q = q * x2 + TANH_Q[0];
     p / q
 }
 

@@ -506,7 +506,7 @@ fn mlp_term<const P: usize>(
     if in_start + shape.n_in > MAX_MLP_INPUTS_TOTAL {
         return Err(LoadError::MlpInputCapacity);
     }
-    let e = mlp_inputs(mlp_in, reads_temp, env, net, term)?;
+    let (e, x_max) = mlp_inputs(mlp_in, reads_temp, env, net, term)?;
     let n_layers = shape.n_layers;
     let n_out = shape.n_out;
     // (start, inputs, units) of each layer in the table's parameter order.
@@ -614,6 +614,17 @@ fn mlp_term<const P: usize>(
     for o in 0..n_out {
         push(pools, eff(n_layers, o, None), qs[2]);
     }
+    // |z| of every fused unit over the held inputs (the first layer's are
+    // within ±x_max, a second layer's within ±1), with 0.5 to spare for
+    // f32 rounding below tanh's saturation threshold 8.5.
+    let bounded = (0..width).all(|j| {
+        let mut z = eff(last, j, None).abs();
+        for l in 0..prev {
+            let m = if last == 0 { x_max[l] } else { 1.0 };
+            z += eff(last, j, Some(l)).abs() * m;
+        }
+        z <= MLP_BOUNDED_Z
+    });
     let mut widths = [0u8; MAX_HIDDEN_LAYERS];
     for (i, w) in widths.iter_mut().enumerate() {
         *w = shape.hidden[i] as u8;
@@ -627,8 +638,13 @@ fn mlp_term<const P: usize>(
         in_start: in_start as u8,
         start,
         q: qs,
+        bounded,
     })
 }
+
+/// The bound on a fused unit's |z| under which its f32 activation skips the
+/// saturation test (`Term::Mlp::bounded`).
+pub(crate) const MLP_BOUNDED_Z: f64 = 8.0;
 
 /// An MLP input's scale: [min, max] → [−1, 1].
 fn input_scale(min: f64, max: f64) -> f64 {
@@ -646,9 +662,10 @@ fn mlp_inputs(
     env: &Envelope,
     net: MlpView<'_>,
     term: u32,
-) -> Result<[f64; MAX_MLP_INPUTS], LoadError> {
+) -> Result<([f64; MAX_MLP_INPUTS], [f64; MAX_MLP_INPUTS]), LoadError> {
     let shape = net.shape();
     let mut e = [0.0f64; MAX_MLP_INPUTS];
+    let mut x_max = [0.0f64; MAX_MLP_INPUTS];
     for i in 0..shape.n_in {
         let inp = net.input(i);
         let mid_true = (inp.min + inp.max) / 2.0;
@@ -673,6 +690,7 @@ fn mlp_inputs(
         if xs_lo.abs() > 7.0 || xs_hi.abs() > 7.0 || d_max >= 2_147_483_647.0 || k > 2.0 {
             return Err(LoadError::MlpInputRange { term });
         }
+        x_max[i] = xs_lo.abs().max(xs_hi.abs());
         *reads_temp |= inp.source >= 3;
         let _ = mlp_in.push(MlpInput {
             src: inp.source,
@@ -680,5 +698,5 @@ fn mlp_inputs(
             k_q28: Mul32::new(k, 28),
         });
     }
-    Ok(e)
+    Ok((e, x_max))
 }

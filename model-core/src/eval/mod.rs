@@ -364,6 +364,10 @@ enum Term {
         in_start: u8,
         start: u16,
         q: [u8; 3],
+        /// Every unit of the fused last layer has |z| ≤ 8 for every input
+        /// the hold lets through (bound set at load): its f32 activation
+        /// skips the saturation test (which would never fire, |z| ≤ 8.5).
+        bounded: bool,
     },
     /// Grid on up to three axes, values (Q8 nm) in `grid[start..]`.
     Grid {
