@@ -7,7 +7,7 @@
 use super::kernels::{grid_cell, mlp_source, mono20_f32, mono56_f32, phase_turns};
 use super::{Factor, Flags, GridAxis, Inputs, ModelCap, Outputs, PolyKind, Term, MAX_TEMPS};
 use crate::limits::{MAX_HIDDEN_UNITS, MAX_MLP_INPUTS, MAX_MONOMIALS};
-use crate::math::{sincos_f32, tanh_f32, ONE_Q30};
+use crate::math::{sincos_f32, tanh_f32, tanh_over_lead_f32, tanh_over_lead_f32_bounded, ONE_Q30};
 
 impl<const P: usize, const G: usize> ModelCap<P, G> {
     /// Evaluate in f32 (the fast path on the Cortex-M4F).
@@ -393,6 +393,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             n_out,
             in_start,
             start,
+            bounded,
             ..
         } = *t
         else {
@@ -405,8 +406,9 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             .iter_mut()
             .zip(&self.mlp_in[in_start as usize..in_start as usize + n_in])
         {
-            // |v − mid| < 2^31 over the envelope (checked at load).
-            *xi = mlp_source(mi.src, pos, temp).wrapping_sub(mi.mid) as f32 * mi.k_f32;
+            // |v − mid| < 2^31 over the envelope (checked at load); the
+            // scale k is folded into the first layer's f32 weights at load.
+            *xi = mlp_source(mi.src, pos, temp).wrapping_sub(mi.mid) as f32;
         }
         let x = &x[..n_in];
         let mut k = start as usize;
@@ -428,12 +430,19 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         let blk = self.pf.get(k..).unwrap_or(&[]);
         // Monomorphised (fully unrolled) for the common shapes.
         let acc = match (prev, n_out) {
-            (3, 3) => fused_f32::<3, 3>(blk, src, width),
-            (4, 3) => fused_f32::<4, 3>(blk, src, width),
-            (3, 1) => fused_f32::<3, 1>(blk, src, width),
-            (16, 3) => fused_f32::<16, 3>(blk, src, width),
+            (3, 3) => fused_f32::<3, 3, 7>(blk, src, width, bounded),
+            (4, 3) => fused_f32::<4, 3, 8>(blk, src, width, bounded),
+            (3, 1) => fused_f32::<3, 1, 5>(blk, src, width, bounded),
+            (16, 3) => fused_f32::<16, 3, 20>(blk, src, width, bounded),
             _ => fused_f32_dyn(blk, src, width, n_out),
         };
+        if outputs == 0b111 {
+            // The common case: the net's outputs are x, y, z in order.
+            out[0] += acc[0];
+            out[1] += acc[1];
+            out[2] += acc[2];
+            return;
+        }
         let mut j = 0;
         for o in 0..3 {
             if outputs & (1 << o) != 0 {
@@ -478,42 +487,66 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
 }
 
 /// The last hidden layer fused with the output layer, f32: per unit the
-/// record [bias, NI weights, NO output weights]; then NO output biases.
+/// record [bias, NI weights, NO output weights × `TANH_F32_LEAD`] (so the
+/// unit's activation is [`tanh_over_lead_f32`], one instruction cheaper than
+/// `tanh_f32`); then NO output biases.
 #[inline(always)]
-fn fused_f32<const NI: usize, const NO: usize>(blk: &[f32], x: &[f32], width: usize) -> [f32; 3] {
+fn fused_f32<const NI: usize, const NO: usize, const S: usize>(
+    blk: &[f32],
+    x: &[f32],
+    width: usize,
+    bounded: bool,
+) -> [f32; 3] {
     let mut acc = [0.0f32; 3];
     let Ok(x) = <&[f32; NI]>::try_from(x) else {
         return acc;
     };
-    let stride = 1 + NI + NO;
-    let (Some(units), Some(bo)) = (
-        blk.get(..width * stride),
-        blk.get(width * stride..width * stride + NO),
-    ) else {
+    // S = 1 + NI + NO, the record's length (a const parameter: stable Rust
+    // cannot write [f32; 1 + NI + NO]); the records as arrays make the loop
+    // a pointer walk with constant offsets (no length count, no bounds checks).
+    if S != 1 + NI + NO {
+        return acc;
+    }
+    let (Some(units), Some(bo)) = (blk.get(..width * S), blk.get(width * S..width * S + NO)) else {
         return acc;
     };
     let mut a = [0.0f32; NO];
     for (ai, &b) in a.iter_mut().zip(bo) {
         *ai = b;
     }
-    for u in units.chunks_exact(stride) {
-        let (b, w, wo) = (u[0], &u[1..1 + NI], &u[1 + NI..]);
-        let (Ok(w), Ok(wo)) = (<&[f32; NI]>::try_from(w), <&[f32; NO]>::try_from(wo)) else {
-            continue;
-        };
-        let mut z = b;
-        for i in 0..NI {
-            z += w[i] * x[i];
-        }
-        let h = tanh_f32(z);
-        for o in 0..NO {
-            a[o] += wo[o] * h;
-        }
+    let units = units.as_chunks::<S>().0;
+    // The output weights were scaled by TANH_F32_LEAD at load. A net whose
+    // units have |z| ≤ 8 over the held inputs (`bounded`, set at load)
+    // skips the saturation test: the same results, 3 instructions less per unit.
+    if bounded {
+        fused_units::<NI, NO, S>(units, x, &mut a, tanh_over_lead_f32_bounded);
+    } else {
+        fused_units::<NI, NO, S>(units, x, &mut a, tanh_over_lead_f32);
     }
     for (ac, ai) in acc.iter_mut().zip(a) {
         *ac = ai;
     }
     acc
+}
+
+/// The unit loop of [`fused_f32`] with the activation `act`.
+#[inline(always)]
+fn fused_units<const NI: usize, const NO: usize, const S: usize>(
+    units: &[[f32; S]],
+    x: &[f32; NI],
+    a: &mut [f32; NO],
+    act: impl Fn(f32) -> f32,
+) {
+    for u in units {
+        let mut z = u[0];
+        for i in 0..NI {
+            z += u[1 + i] * x[i];
+        }
+        let h = act(z);
+        for o in 0..NO {
+            a[o] += u[1 + NI + o] * h;
+        }
+    }
 }
 
 /// [`fused_f32`] for any shape.
@@ -531,7 +564,7 @@ fn fused_f32_dyn(blk: &[f32], x: &[f32], width: usize, n_out: usize) -> [f32; 3]
     }
     for u in units.chunks_exact(stride) {
         let (w, wo) = u[1..].split_at(x.len());
-        let h = tanh_f32(u[0] + dot_f32(w, x));
+        let h = tanh_over_lead_f32(u[0] + dot_f32(w, x));
         for (a, &wj) in acc.iter_mut().zip(wo) {
             *a += wj * h;
         }
@@ -553,3 +586,73 @@ fn dot_f32(row: &[f32], x: &[f32]) -> f32 {
 const ROUND_MAGIC: f32 = 12_582_912.0;
 /// The bits of [`ROUND_MAGIC`]: (v + ROUND_MAGIC)'s bits minus these are round(v) for |v| < 2^22.
 const ROUND_MAGIC_BITS: i32 = 0x4B40_0000;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{parse, LargeModel};
+
+    /// A net whose fused units are `bounded` (set at load) evaluates to the
+    /// same f32 bits with and without the saturation test on every held
+    /// input, the envelope's corners included (golden nn_3x16x3, the bench's
+    /// net); all_kinds' net is not bounded (its z reaches beyond 8).
+    #[test]
+    fn bounded_mlp_equals_the_checked_one_on_held_inputs() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        let (mut tested, mut unbounded) = (0, 0);
+        for bytes in [
+            &include_bytes!("../../tests/golden/nn_3x16x3.bin")[..],
+            &include_bytes!("../../tests/golden/all_kinds.bin")[..],
+        ] {
+            let m = LargeModel::load(&parse(bytes).unwrap()).unwrap();
+            for t in m.terms.iter() {
+                let Term::Mlp { bounded, .. } = *t else {
+                    continue;
+                };
+                if !bounded {
+                    unbounded += 1;
+                    continue;
+                }
+                let mut checked = *t;
+                if let Term::Mlp { bounded, .. } = &mut checked {
+                    *bounded = false;
+                }
+                let env = &m.env;
+                let pick = |lo: i32, hi: i32, r: u64| match r % 8 {
+                    0 => lo,
+                    1 => hi,
+                    _ => (lo as i64 + (r >> 3) as i64 % (hi as i64 - lo as i64 + 1)) as i32,
+                };
+                for _ in 0..20_000 {
+                    let pos: [i32; 3] = core::array::from_fn(|a| {
+                        pick(env.travel_min_nm[a], env.travel_max_nm[a], next())
+                    });
+                    let temp: [i32; MAX_TEMPS] = core::array::from_fn(|c| {
+                        pick(
+                            env.temp_min_mc[c].min(env.temp_max_mc[c]),
+                            env.temp_max_mc[c],
+                            next(),
+                        )
+                    });
+                    let (mut a, mut b) = ([0.0f32; 3], [0.0f32; 3]);
+                    m.mlp_f32(t, &pos, &temp, &mut a);
+                    m.mlp_f32(&checked, &pos, &temp, &mut b);
+                    assert_eq!(
+                        a.map(f32::to_bits),
+                        b.map(f32::to_bits),
+                        "pos {pos:?} temp {temp:?}"
+                    );
+                }
+                tested += 1;
+            }
+        }
+        // nn_3x16x3's net is bounded, all_kinds' steeper one is not.
+        assert_eq!((tested, unbounded), (1, 1));
+    }
+}

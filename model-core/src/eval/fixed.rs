@@ -329,6 +329,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             in_start,
             start,
             q,
+            ..
         } = *t
         else {
             return;

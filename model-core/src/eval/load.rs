@@ -19,6 +19,7 @@ use super::{
     PolyKind, Term, MAX_MLP_INPUTS_TOTAL, MAX_TERMS,
 };
 use crate::limits::{MAX_HIDDEN_LAYERS, MAX_MLP_INPUTS, MAX_MONOMIALS};
+use crate::math::TANH_F32_LEAD;
 use crate::table::{Envelope, GridView, MlpView, PolyCoefs, Table, TermView};
 
 struct Pools<'m, const P: usize> {
@@ -505,7 +506,7 @@ fn mlp_term<const P: usize>(
     if in_start + shape.n_in > MAX_MLP_INPUTS_TOTAL {
         return Err(LoadError::MlpInputCapacity);
     }
-    let e = mlp_inputs(mlp_in, reads_temp, env, net, term)?;
+    let (e, x_max) = mlp_inputs(mlp_in, reads_temp, env, net, term)?;
     let n_layers = shape.n_layers;
     let n_out = shape.n_out;
     // (start, inputs, units) of each layer in the table's parameter order.
@@ -570,11 +571,22 @@ fn mlp_term<const P: usize>(
     // output layer, one record per unit
     // [bias, weights from the previous layer, output weights],
     // then the output biases.
+    // f32 only: the first layer's weights × the inputs' scale k, so the
+    // f32 evaluator takes x = v − mid without a multiply (fixed point keeps
+    // k in its 32-bit shift).
+    let mut k_in = [0.0f64; MAX_MLP_INPUTS];
+    for (i, k) in k_in.iter_mut().enumerate().take(shape.n_in) {
+        let inp = net.input(i);
+        *k = input_scale(inp.min, inp.max);
+    }
+    let push_first = |pools: &mut Pools<'_, P>, v: f64, l: usize, q: u8| {
+        pools.push((v * k_in[l]) as f32, to_q(v, q as i32), 0)
+    };
     if n_layers == 2 {
         let (_, prev, width) = lay[0];
         for j in 0..width {
             for l in 0..prev {
-                push(pools, eff(0, j, Some(l)), qs[0]);
+                push_first(pools, eff(0, j, Some(l)), l, qs[0]);
             }
         }
         for j in 0..width {
@@ -586,15 +598,33 @@ fn mlp_term<const P: usize>(
     for j in 0..width {
         push(pools, eff(last, j, None), qs[last]);
         for l in 0..prev {
-            push(pools, eff(last, j, Some(l)), qs[last]);
+            if last == 0 {
+                push_first(pools, eff(last, j, Some(l)), l, qs[last]);
+            } else {
+                push(pools, eff(last, j, Some(l)), qs[last]);
+            }
         }
         for o in 0..n_out {
-            push(pools, eff(n_layers, o, Some(j)), qs[2]);
+            // f32: × TANH_F32_LEAD, the evaluator's activation being
+            // tanh / TANH_F32_LEAD (tanh_over_lead_f32).
+            let v = eff(n_layers, o, Some(j));
+            pools.push((v * TANH_F32_LEAD as f64) as f32, to_q(v, qs[2] as i32), 0);
         }
     }
     for o in 0..n_out {
         push(pools, eff(n_layers, o, None), qs[2]);
     }
+    // |z| of every fused unit over the held inputs (the first layer's are
+    // within ±x_max, a second layer's within ±1), with 0.5 to spare for
+    // f32 rounding below tanh's saturation threshold 8.5.
+    let bounded = (0..width).all(|j| {
+        let mut z = eff(last, j, None).abs();
+        for l in 0..prev {
+            let m = if last == 0 { x_max[l] } else { 1.0 };
+            z += eff(last, j, Some(l)).abs() * m;
+        }
+        z <= MLP_BOUNDED_Z
+    });
     let mut widths = [0u8; MAX_HIDDEN_LAYERS];
     for (i, w) in widths.iter_mut().enumerate() {
         *w = shape.hidden[i] as u8;
@@ -608,7 +638,17 @@ fn mlp_term<const P: usize>(
         in_start: in_start as u8,
         start,
         q: qs,
+        bounded,
     })
+}
+
+/// The bound on a fused unit's |z| under which its f32 activation skips the
+/// saturation test (`Term::Mlp::bounded`).
+pub(crate) const MLP_BOUNDED_Z: f64 = 8.0;
+
+/// An MLP input's scale: [min, max] → [−1, 1].
+fn input_scale(min: f64, max: f64) -> f64 {
+    2.0 / (max - min)
 }
 
 /// The inputs of an MLP term: x_s = (v − mid)·k + e with an integer mid, so
@@ -622,14 +662,15 @@ fn mlp_inputs(
     env: &Envelope,
     net: MlpView<'_>,
     term: u32,
-) -> Result<[f64; MAX_MLP_INPUTS], LoadError> {
+) -> Result<([f64; MAX_MLP_INPUTS], [f64; MAX_MLP_INPUTS]), LoadError> {
     let shape = net.shape();
     let mut e = [0.0f64; MAX_MLP_INPUTS];
+    let mut x_max = [0.0f64; MAX_MLP_INPUTS];
     for i in 0..shape.n_in {
         let inp = net.input(i);
         let mid_true = (inp.min + inp.max) / 2.0;
         let mid = round_i64(mid_true).clamp(i32::MIN as i64, i32::MAX as i64) as i32;
-        let k = 2.0 / (inp.max - inp.min);
+        let k = input_scale(inp.min, inp.max);
         e[i] = (mid as f64 - mid_true) * k;
         // Range of the scaled input over the envelope.
         let (lo, hi) = match inp.source {
@@ -649,13 +690,13 @@ fn mlp_inputs(
         if xs_lo.abs() > 7.0 || xs_hi.abs() > 7.0 || d_max >= 2_147_483_647.0 || k > 2.0 {
             return Err(LoadError::MlpInputRange { term });
         }
+        x_max[i] = xs_lo.abs().max(xs_hi.abs());
         *reads_temp |= inp.source >= 3;
         let _ = mlp_in.push(MlpInput {
             src: inp.source,
             mid,
-            k_f32: k as f32,
             k_q28: Mul32::new(k, 28),
         });
     }
-    Ok(e)
+    Ok((e, x_max))
 }

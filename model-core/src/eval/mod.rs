@@ -321,7 +321,7 @@ struct GridAxis {
 struct MlpInput {
     src: u8,
     mid: i32,
-    k_f32: f32,
+    /// The scale k in fixed point (f32: folded into the first layer's weights).
     k_q28: Mul32,
 }
 
@@ -364,6 +364,10 @@ enum Term {
         in_start: u8,
         start: u16,
         q: [u8; 3],
+        /// Every unit of the fused last layer has |z| ≤ 8 for every input
+        /// the hold lets through (bound set at load): its f32 activation
+        /// skips the saturation test (which would never fire, |z| ≤ 8.5).
+        bounded: bool,
     },
     /// Grid on up to three axes, values (Q8 nm) in `grid[start..]`.
     Grid {
