@@ -186,6 +186,13 @@ pub(super) struct Lm {
     /// Activations and outputs of the current network on the training set.
     pub(super) act: Vec<f64>,
     pub(super) out: Vec<f64>,
+    /// Per-sample scratch: residuals by output (NaN: not measured) and
+    /// Σₒ w2[o,h]·e_o by hidden neuron.
+    e: Vec<f64>,
+    q: Vec<f64>,
+    /// JᵀJ + μI, factored in place (reused by every μ trial).
+    pub(super) a: DMatrix<f64>,
+    pub(super) delta: DVector<f64>,
 }
 
 impl Lm {
@@ -227,6 +234,10 @@ impl Lm {
             g: DVector::zeros(np),
             act: vec![0.0; n * nh],
             out: vec![0.0; n * nout],
+            e: vec![0.0; nout],
+            q: vec![0.0; nh],
+            a: DMatrix::zeros(np, np),
+            delta: DVector::zeros(np),
         }
     }
 
@@ -241,39 +252,77 @@ impl Lm {
         let pidx = |o: usize, r: usize| if r < nh { w2o + o * nh + r } else { b2o + o };
         self.g.fill(0.0);
         {
+            // Slices split once per sample instead of indexed (bounds-checked)
+            // accesses: this loop touches every sample and every parameter.
+            // The sums run in the same order as the indexed form did.
             let mt = self.mt.as_mut_slice();
-            let mut q = vec![0.0; nh];
+            let (g_hid, g_out) = self.g.as_mut_slice().split_at_mut(nz);
+            let (g_w1, g_b1) = g_hid.split_at_mut(nh * nin);
+            let (g_w2, g_b2) = g_out.split_at_mut(nout * nh);
+            let q = &mut self.q;
+            let e = &mut self.e;
             for (c, &s) in self.order.iter().enumerate() {
                 let x = &train.x[s * nin..(s + 1) * nin];
                 let a = &self.act[s * nh..(s + 1) * nh];
                 let sw = self.sw[s];
                 let col = &mut mt[c * nm..(c + 1) * nm];
-                for h in 0..nh {
-                    let d = sw * (1.0 - a[h] * a[h]);
-                    for (i, xi) in x.iter().enumerate() {
-                        col[h * nin + i] = d * xi;
-                    }
-                    col[nh * nin + h] = d;
-                    col[nz + h] = sw * a[h];
-                }
-                col[nz + nh] = sw;
+                let (z, at) = col.split_at_mut(nz);
+                let (zw, zb) = z.split_at_mut(nh * nin);
                 // Jᵀe: e_{s,o} = √w (y − t) on the measured outputs.
+                let targets = &self.target[s * nout..(s + 1) * nout];
+                let outs = &self.out[s * nout..(s + 1) * nout];
+                for o in 0..nout {
+                    e[o] = if targets[o].is_nan() {
+                        f64::NAN
+                    } else {
+                        sw * (outs[o] - targets[o])
+                    };
+                }
                 q.fill(0.0);
                 for o in 0..nout {
-                    let t = self.target[s * nout + o];
-                    if t.is_nan() {
+                    let eo = e[o];
+                    if eo.is_nan() {
                         continue;
                     }
-                    let e = sw * (self.out[s * nout + o] - t);
-                    for h in 0..nh {
-                        q[h] += w2[o * nh + h] * e;
-                    }
-                    for r in 0..=nh {
-                        self.g[pidx(o, r)] += col[nz + r] * e;
+                    for (qh, w) in q.iter_mut().zip(&w2[o * nh..(o + 1) * nh]) {
+                        *qh += w * eo;
                     }
                 }
-                for k in 0..nz {
-                    self.g[k] += col[k] * q[hid[k]];
+                for (h, ((zwh, zbh), ah)) in zw
+                    .chunks_exact_mut(nin)
+                    .zip(zb.iter_mut())
+                    .zip(a)
+                    .enumerate()
+                {
+                    let d = sw * (1.0 - ah * ah);
+                    for (zi, xi) in zwh.iter_mut().zip(x) {
+                        *zi = d * xi;
+                    }
+                    *zbh = d;
+                    at[h] = sw * ah;
+                }
+                at[nh] = sw;
+                for o in 0..nout {
+                    let eo = e[o];
+                    if eo.is_nan() {
+                        continue;
+                    }
+                    for (gk, ak) in g_w2[o * nh..(o + 1) * nh].iter_mut().zip(&at[..nh]) {
+                        *gk += ak * eo;
+                    }
+                    g_b2[o] += at[nh] * eo;
+                }
+                for ((gk, zk), qh) in g_w1
+                    .chunks_exact_mut(nin)
+                    .zip(zw.chunks_exact(nin))
+                    .zip(q.iter())
+                {
+                    for (gi, zi) in gk.iter_mut().zip(zk) {
+                        *gi += zi * qh;
+                    }
+                }
+                for ((gk, zk), qh) in g_b1.iter_mut().zip(zb.iter()).zip(q.iter()) {
+                    *gk += zk * qh;
                 }
             }
         }
@@ -372,15 +421,23 @@ pub(super) fn run_lm(
         }
         let mut improved = false;
         while mu <= opts.mu_max {
-            let mut a = lm.jtj.clone();
+            // The factor overwrites `lm.a` in place: no allocation per trial.
+            let mut a = std::mem::replace(&mut lm.a, DMatrix::zeros(0, 0));
+            a.copy_from(&lm.jtj);
             for k in 0..np {
                 a[(k, k)] += mu;
             }
-            if let Some(ch) = Cholesky::new(a) {
-                let delta = ch.solve(&lm.g);
+            let factored = Cholesky::new(a);
+            let ok = factored.is_some();
+            if let Some(ch) = &factored {
+                lm.delta.copy_from(&lm.g);
+                ch.solve_mut(&mut lm.delta);
                 for k in 0..np {
-                    trial.p[k] = net.p[k] - delta[k];
+                    trial.p[k] = net.p[k] - lm.delta[k];
                 }
+            }
+            lm.a = factored.map_or_else(|| DMatrix::zeros(np, np), Cholesky::unpack_dirty);
+            if ok {
                 train.forward(&trial, &mut t_act, &mut t_out);
                 let s_new = train.sse_of(&t_out, nout);
                 if s_new.is_finite() && s_new < sse {
