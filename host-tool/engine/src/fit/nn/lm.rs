@@ -378,7 +378,10 @@ pub(super) struct Run {
 }
 
 /// One trainlm run from `net` (see the module docs); `report` sees every
-/// epoch's network.
+/// epoch's network. With `to_beat` (the kept restart's validation MSE) the
+/// run stops at its first validation failure while its best validation MSE
+/// is above it (see [`NnOptions::abandon`]).
+#[allow(clippy::too_many_arguments)]
 pub(super) fn run_lm(
     train: &Samples,
     val: &Samples,
@@ -386,6 +389,7 @@ pub(super) fn run_lm(
     mut net: Net,
     opts: &NnOptions,
     restart: usize,
+    to_beat: Option<f64>,
     report: &mut dyn FnMut(&Epoch, &Net),
 ) -> Run {
     let (np, nh, nout) = (net.p.len(), net.nh, net.nout);
@@ -420,6 +424,7 @@ pub(super) fn run_lm(
             break;
         }
         let mut improved = false;
+        let sse_before = sse;
         while mu <= opts.mu_max {
             // The factor overwrites `lm.a` in place: no allocation per trial.
             let mut a = std::mem::replace(&mut lm.a, DMatrix::zeros(0, 0));
@@ -481,6 +486,18 @@ pub(super) fn run_lm(
         }
         if has_val && fails >= opts.max_fail {
             stop = "validation".into();
+            break;
+        }
+        // Abandon a losing restart once it has settled: a validation
+        // failure, its best above the kept one's, and training error no
+        // longer falling fast (under 1 % this epoch — during LM's steep
+        // descent validation error can rise for an epoch and then fall far).
+        if has_val
+            && fails > 0
+            && sse > 0.99 * sse_before
+            && to_beat.is_some_and(|k| best_val / n_val as f64 > k)
+        {
+            stop = "abandoned".into();
             break;
         }
     }
