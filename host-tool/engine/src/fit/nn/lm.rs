@@ -329,8 +329,23 @@ impl Lm {
         for (gi, &(_, c0, c1)) in self.groups.iter().enumerate() {
             // mtᵀ read as its transpose (a strided view, no copy).
             let cols = &self.mt.as_slice()[c0 * nm..c1 * nm];
-            let tview = DMatrixView::from_slice_with_strides(cols, c1 - c0, nm, nm, 1);
-            self.gram[gi].gemm(1.0, &self.mt.columns(c0, c1 - c0), &tview, 0.0);
+            let len = c1 - c0;
+            let tview = DMatrixView::from_slice_with_strides(cols, len, nm, nm, 1);
+            // Symmetric: only the blocks on and above the diagonal of a
+            // 3 × 3 block partition are multiplied (6 of 9 blocks' work is
+            // 5/9 of the rows × columns here), the rest mirrored.
+            let gram = &mut self.gram[gi];
+            let cuts = [0, nm / 3, 2 * nm / 3, nm];
+            for b in 0..3 {
+                let (r0, r1) = (cuts[b], cuts[b + 1]);
+                gram.view_mut((r0, r0), (r1 - r0, nm - r0)).gemm(
+                    1.0,
+                    &self.mt.view((r0, c0), (r1 - r0, len)),
+                    &tview.columns(r0, nm - r0),
+                    0.0,
+                );
+            }
+            gram.fill_lower_triangle_with_upper_triangle();
         }
         self.jtj.fill(0.0);
         let mut wp = vec![0.0; nh * nh];
