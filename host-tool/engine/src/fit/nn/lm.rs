@@ -158,8 +158,9 @@ impl Samples {
 ///
 /// All three are blocks of one Gram matrix of the per-sample vectors
 /// m_s = √w_s (z_s, ã_s), one per measurement pattern (usually a single
-/// one: every target measured on every row), formed by one GEMM each. For
-/// 3-16-3 on 1581 samples that is 81² × 1581 = 10 M multiply-adds where the
+/// one: every target measured on every row), formed by GEMMs of its upper
+/// block triangle, mirrored. For 3-16-3 on 1581 samples that is at most
+/// 81² × 1581 = 10 M multiply-adds (2/3 of it with the 3 × 3 blocks) where the
 /// product over the 4 743 rows of J takes 63 M (26 M when only its
 /// hidden/own-output blocks are multiplied), with Jᵀe from the same vectors.
 /// The weight of a sample is the same for all its outputs (u_um is per
@@ -332,8 +333,8 @@ impl Lm {
             let len = c1 - c0;
             let tview = DMatrixView::from_slice_with_strides(cols, len, nm, nm, 1);
             // Symmetric: only the blocks on and above the diagonal of a
-            // 3 × 3 block partition are multiplied (6 of 9 blocks' work is
-            // 5/9 of the rows × columns here), the rest mirrored.
+            // 3 × 3 block partition are multiplied (6 of the 9 blocks: 2/3 of
+            // the products), the rest mirrored.
             let gram = &mut self.gram[gi];
             let cuts = [0, nm / 3, 2 * nm / 3, nm];
             for b in 0..3 {
