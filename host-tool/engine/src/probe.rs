@@ -149,6 +149,39 @@ fn wrap_deg(d: f64) -> f64 {
     d
 }
 
+/// The form order chosen by held-out RMS, shared by the 2-D and 3-D
+/// calibrations: each order of `orders` is fitted (`fit(train rows,
+/// order)` → the residual of every point, mm) on 4 of the 5 folds
+/// (`fold[i]` ∈ 0…4) and scored on the fifth; an order whose fit fails on a
+/// fold is not scored. Returns the held-out RMS per order, nm, and the
+/// smallest order within 2 % of the best (0 when none was scored).
+pub(crate) fn choose_order(
+    orders: impl Iterator<Item = usize>,
+    fold: &[usize],
+    fit: impl Fn(&[usize], usize) -> Result<Vec<f64>>,
+) -> (Vec<(usize, f64)>, usize) {
+    let mut held: Vec<(usize, f64)> = Vec::new();
+    'orders: for order in orders {
+        let (mut ss, mut n) = (0.0, 0usize);
+        for k in 0..5 {
+            let train: Vec<usize> = (0..fold.len()).filter(|&i| fold[i] != k).collect();
+            let Ok(resid) = fit(&train, order) else {
+                continue 'orders;
+            };
+            for i in (0..fold.len()).filter(|&i| fold[i] == k) {
+                ss += resid[i] * resid[i];
+                n += 1;
+            }
+        }
+        if n > 0 {
+            held.push((order, (ss / n as f64).sqrt() * 1e6));
+        }
+    }
+    let best = held.iter().map(|h| h.1).fold(f64::INFINITY, f64::min);
+    let order = held.iter().find(|h| h.1 <= 1.02 * best).map_or(0, |h| h.0);
+    (held, order)
+}
+
 /// Columns of the design for rows at angles `theta`: `[cos θ, sin θ, 1,
 /// form…]` scaled for the Gauss–Newton step (centre x, centre z, radius,
 /// form in mm).
@@ -320,41 +353,12 @@ pub fn calibrate(p: &[[f64; 2]], ball_radius_mm: f64) -> Result<Calibration> {
         block % 5
     };
     let max_order = MAX_ORDER.min((p.len() / 10).saturating_sub(3) / 2 + 1);
-    let mut held: Vec<(usize, f64)> = Vec::new();
-    for order in std::iter::once(0).chain(2..=max_order) {
-        let mut ss = 0.0;
-        let mut n = 0usize;
-        let mut ok = true;
-        for fold in 0..5 {
-            let train: Vec<usize> = all
-                .iter()
-                .copied()
-                .filter(|&i| fold_of(i) != fold)
-                .collect();
-            let test: Vec<usize> = all
-                .iter()
-                .copied()
-                .filter(|&i| fold_of(i) == fold)
-                .collect();
-            match fit_order(p, &train, order, start) {
-                Ok(f) => {
-                    for &i in &test {
-                        ss += f.resid[i] * f.resid[i];
-                        n += 1;
-                    }
-                }
-                Err(_) => {
-                    ok = false;
-                    break;
-                }
-            }
-        }
-        if ok && n > 0 {
-            held.push((order, (ss / n as f64).sqrt() * 1e6));
-        }
-    }
-    let best = held.iter().map(|h| h.1).fold(f64::INFINITY, f64::min);
-    let order = held.iter().find(|h| h.1 <= 1.02 * best).map_or(0, |h| h.0);
+    let folds: Vec<usize> = (0..p.len()).map(fold_of).collect();
+    let (held, order) = choose_order(
+        std::iter::once(0).chain(2..=max_order),
+        &folds,
+        |train, order| Ok(fit_order(p, train, order, start)?.resid),
+    );
     let fit = fit_order(p, &all, order, start)?;
     // Make the form orthogonal to 1, cos θ, sin θ over the calibration
     // angles: that part belongs to radius and centre.

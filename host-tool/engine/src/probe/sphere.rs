@@ -360,36 +360,12 @@ pub fn calibrate(p: &[[f64; 3]], ball_radius_mm: f64) -> Result<Calibration3d> {
             (ring + sector) % 5
         })
         .collect();
-    let mut held: Vec<(usize, f64)> = Vec::new();
-    for degree in std::iter::once(0).chain(2..=MAX_DEGREE) {
-        let nterms = 4 + form_terms(degree.max(1)).len();
-        if nterms * 10 > p.len() {
-            break;
-        }
-        let mut ss = 0.0;
-        let mut n = 0usize;
-        let mut ok = true;
-        for k in 0..5 {
-            let train: Vec<usize> = all.iter().copied().filter(|&i| fold[i] != k).collect();
-            match fit_degree(p, &train, degree, start) {
-                Ok(f) => {
-                    for i in all.iter().filter(|&&i| fold[i] == k) {
-                        ss += f.resid[*i] * f.resid[*i];
-                        n += 1;
-                    }
-                }
-                Err(_) => {
-                    ok = false;
-                    break;
-                }
-            }
-        }
-        if ok && n > 0 {
-            held.push((degree, (ss / n as f64).sqrt() * 1e6));
-        }
-    }
-    let best = held.iter().map(|h| h.1).fold(f64::INFINITY, f64::min);
-    let degree = held.iter().find(|h| h.1 <= 1.02 * best).map_or(0, |h| h.0);
+    let degrees = std::iter::once(0)
+        .chain(2..=MAX_DEGREE)
+        .take_while(|&d| (4 + form_terms(d.max(1)).len()) * 10 <= p.len());
+    let (held, degree) = super::choose_order(degrees, &fold, |train, d| {
+        Ok(fit_degree(p, train, d, start)?.resid)
+    });
     let fit = fit_degree(p, &all, degree, start)?;
     let terms = if degree >= 2 {
         form_terms(degree)
