@@ -217,7 +217,7 @@ fn the_on_machine_commands_find_the_simulated_answers() {
     }
 
     // Three probes: roundness within 10 % of its PV.
-    let three = json(&run(&[
+    let o = run(&[
         "separate",
         "three-probe",
         s(&f("three-probe.csv")),
@@ -226,7 +226,15 @@ fn the_on_machine_commands_find_the_simulated_answers() {
         "-o",
         s(&dir.join("three.csv")),
         "--json",
-    ]));
+    ]);
+    // With the suggested spacing already in use, the advice is a probe
+    // more, not the same angles again.
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("add a fourth probe") && !e.contains("e.g. 0, 99.84"),
+        "{e}"
+    );
+    let three = json(&o);
     let (g, w) = (
         three["part_pv_um"].as_f64().unwrap(),
         truth["roundness_pv_um"].as_f64().unwrap(),

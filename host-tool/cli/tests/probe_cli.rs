@@ -486,7 +486,8 @@ fn three_probes_give_roundness_and_name_the_lobes_they_cannot_see() {
         "--json",
     ]);
     assert!(
-        String::from_utf8_lossy(&out.stderr).contains("cannot see"),
+        String::from_utf8_lossy(&out.stderr).contains("cannot see")
+            && String::from_utf8_lossy(&out.stderr).contains("e.g. 0, 99.84, 202.5"),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );

@@ -89,6 +89,10 @@ impl ThreeProbe {
         }
         crate::workflow::write_file(&self.output, csv.as_bytes())?;
         let mut warnings = Vec::new();
+        // The spacing suggested when another one is used; with it, the
+        // remedy is a probe more (its blind harmonics start at 111).
+        let good = [0.0, 99.84, 202.5];
+        let uses_good = angles.iter().zip(good).all(|(a, g)| (a - g).abs() < 0.01);
         if !r.unseen_harmonics.is_empty() {
             let list: Vec<String> = r
                 .unseen_harmonics
@@ -96,8 +100,13 @@ impl ThreeProbe {
                 .take(12)
                 .map(|k| k.to_string())
                 .collect();
+            let remedy = if uses_good {
+                "add a fourth probe to see them"
+            } else {
+                "change the angles (e.g. 0, 99.84, 202.5, blind only from harmonic 111 up) or add a probe"
+            };
             warnings.push(format!(
-                "probes at {}° cannot see {} harmonic(s) of the part ({}{}): lobes of those orders are left out of the roundness — change the angles (e.g. 0, 99.84, 202.5) or add a probe",
+                "probes at {}° cannot see {} harmonic(s) of the part ({}{}): lobes of those orders are left out of the roundness — {remedy}",
                 self.angles_deg,
                 r.unseen_harmonics.len(),
                 list.join(", "),
@@ -115,8 +124,13 @@ impl ThreeProbe {
                     &crate::report::onmachine::Roundness {
                         method: "three-probe",
                         command: format!(
-                            "to see the {} hidden harmonic(s), measure again with other probe angles (0,99.84,202.5 sees every harmonic below 111)",
-                            r.unseen_harmonics.len()
+                            "to see the {} hidden harmonic(s): {}",
+                            r.unseen_harmonics.len(),
+                            if uses_good {
+                                "add a fourth probe"
+                            } else {
+                                "measure again with the probes at 0, 99.84, 202.5° (blind only from harmonic 111 up)"
+                            }
                         ),
                         part_um: &r.part_um,
                         spindle: vec![
