@@ -779,13 +779,8 @@ mod tests {
 
     #[test]
     fn jump_threshold_in_counts_is_the_saturating_product_test() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut rng = trueaxis_test_support::XorShift64(0x9e37_79b9_7f4a_7c15u64);
+        let mut next = || rng.next_u64();
         for i in 0..100_000 {
             let t = match i % 3 {
                 0 => i64::MAX,
@@ -824,13 +819,8 @@ mod tests {
 
     #[test]
     fn round_div_fast_path_is_the_i64_division() {
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut rng = trueaxis_test_support::XorShift64(0x2545_f491_4f6c_dd1du64);
+        let mut next = || rng.next_u64();
         let edges = [
             0,
             1,

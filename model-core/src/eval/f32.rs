@@ -598,13 +598,8 @@ mod tests {
     /// net); all_kinds' net is not bounded (its z reaches beyond 8).
     #[test]
     fn bounded_mlp_equals_the_checked_one_on_held_inputs() {
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut rng = trueaxis_test_support::XorShift64(0x2545_f491_4f6c_dd1du64);
+        let mut next = || rng.next_u64();
         let (mut tested, mut unbounded) = (0, 0);
         for bytes in [
             &include_bytes!("../../tests/golden/nn_3x16x3.bin")[..],

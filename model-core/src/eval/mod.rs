@@ -669,13 +669,8 @@ mod tests {
 
     #[test]
     fn swing_step_is_the_i64_division() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut rng = trueaxis_test_support::XorShift64(0x9e37_79b9_7f4a_7c15u64);
+        let mut next = || rng.next_u64();
         let mut long = 0;
         for i in 0..200_000u32 {
             // Transitions from 1 nm to 2^31 − 1, moves up to the transition.
@@ -723,13 +718,8 @@ mod tests {
 
     #[test]
     fn dir_tracker_in_i32_is_the_i64_tracker() {
-        let mut seed = 0x0123_4567_89ab_cdefu64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut rng = trueaxis_test_support::XorShift64(0x0123_4567_89ab_cdefu64);
+        let mut next = || rng.next_u64();
         for run in 0..400 {
             let transition = match run % 5 {
                 0 => 0,
@@ -797,13 +787,8 @@ mod tests {
         linear.poly = PolyKind::Linear;
         linear.poly_fixed = PolyKind::Linear;
         let env = *cubic.envelope();
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = |lo: i64, hi: i64| {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            lo + (seed % (hi - lo + 1) as u64) as i64
-        };
+        let mut rng = trueaxis_test_support::XorShift64(0x2545_f491_4f6c_dd1du64);
+        let mut next = |lo: i64, hi: i64| rng.range(lo, hi);
         let (mut clamped, mut held) = (0, 0);
         for mut fast in [cubic, linear] {
             for max in [env.max_corr_nm[0], 2_000, 0] {

@@ -142,8 +142,6 @@ impl ThreeProbe {
                         blind: &r.unseen_harmonics,
                         blind_meaning: "of the part: the probe spacing cannot see them (left out of the roundness)",
                         ci95_um: None,
-                        // The warning says what `blind` says: once.
-                        warnings: &[],
                     },
                     dir,
                 )
@@ -315,8 +313,6 @@ impl MultiStep {
                         blind: &r.inseparable_harmonics,
                         blind_meaning: "of the part cannot be told from the spindle's (they are in the spindle's profile)",
                         ci95_um: ci.is_finite().then_some(ci),
-                        // The warning says what `blind` says: once.
-                        warnings: &[],
                     },
                     dir,
                 )

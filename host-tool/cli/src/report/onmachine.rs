@@ -137,8 +137,6 @@ pub struct Roundness<'a> {
     pub blind_meaning: &'a str,
     /// The per-point 95 % interval, µm, if known.
     pub ci95_um: Option<f64>,
-    /// Warnings.
-    pub warnings: &'a [String],
 }
 
 /// Writes the roundness page into `dir`.
@@ -168,7 +166,9 @@ pub fn roundness_page(r: &Roundness, dir: &Path) -> Result<PathBuf> {
             r.part_pv_um
         ),
         details,
-        warnings: r.warnings.to_vec(),
+        // What the method cannot see is in `details`; the command's warning
+        // says the same, so the card does not repeat it.
+        warnings: Vec::new(),
         next: Some(r.command.clone()),
         tone: if r.blind.is_empty() { Tone::Good } else { Tone::Action },
     });
