@@ -13,6 +13,7 @@ use anyhow::Result;
 use trueaxis_engine::data::{Dataset, AXES, TARGETS};
 use trueaxis_engine::diagnose::{Candidate, Diagnosis};
 use trueaxis_engine::effect::Family;
+use trueaxis_engine::features;
 
 use trueaxis_engine::diagnose::{Verdict as DVerdict, ABOVE_NOISE_RATIO};
 
@@ -573,9 +574,19 @@ fn thermal_slope(
         .strip_prefix("T_")
         .and_then(|n| n.strip_suffix("_C"))
         .unwrap_or(column);
-    let Some(temp) = data.temp(name).map(|t| &t.temp_c) else {
+    let Some(raw) = data.temp(name).map(|t| &t.temp_c) else {
         return Ok(None);
     };
+    // With a lag the structure follows the sensor's first-order lag, not
+    // its reading: against the raw reading warm-up and cool-down lie on
+    // two branches and the eye cannot find the slope. The points are drawn
+    // against the lagged temperature the model uses (the caption says so).
+    let lag_s = c.params.get("lag_s").copied().filter(|l| *l > 0.0);
+    let lagged = match (lag_s, data.t_s.as_deref()) {
+        (Some(tau), Some(t_s)) => Some(features::lagged(raw, t_s, data.session_id.as_deref(), tau)),
+        _ => None,
+    };
+    let temp = lagged.as_deref().unwrap_or(raw);
     let column = format!("T_{name}_C");
     let axis = c
         .axis
@@ -615,7 +626,14 @@ fn thermal_slope(
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| {
             (l.min(p.0), h.max(p.0))
         });
-    let t_title = axis_title(&column);
+    let t_title = match (&lagged, lag_s) {
+        (Some(_), Some(l)) => format!(
+            "{} lagged by {} s (°C)",
+            axis_title(&column).trim_end_matches(" (°C)"),
+            format_value(l)
+        ),
+        _ => axis_title(&column),
+    };
     let plot = XyPlot::new(
         format!(
             "Thermal growth of {}{}: the slope",
@@ -640,15 +658,17 @@ fn thermal_slope(
             format_value(ph.ci95[1])
         )
     });
-    let lag = c.params.get("lag_s").copied().filter(|l| *l > 0.0).map_or(
-        String::new(),
-        |l| {
-            format!(
-                ". The structure follows the sensor with a lag of {} s, so warm-up and cool-down lie on two branches around the line",
-                format_value(l)
-            )
-        },
-    );
+    let lag = match (lag_s, &lagged) {
+        (Some(l), Some(_)) => format!(
+            ". The structure follows the sensor with a lag of {} s (a first-order lag, as the model has it): the points are drawn against that lagged temperature, where warm-up and cool-down fall on one line; against the raw reading they would lie on two branches",
+            format_value(l)
+        ),
+        (Some(l), None) => format!(
+            ". The model lags the sensor by {} s, but the data have no time column to lag it with here, so warm-up and cool-down lie on two branches around the line",
+            format_value(l)
+        ),
+        _ => String::new(),
+    };
     Ok(Some(Figure {
         name: format!("thermal_slope_{}_{step}", c.target),
         caption: format!(
@@ -1443,6 +1463,39 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
     }
 
+    /// A significant one-sensor thermal candidate on ex along x (bed).
+    fn thermal_candidate() -> Candidate {
+        Candidate {
+            effect: Family::Thermal,
+            target: "ex".into(),
+            axis: Some("x".into()),
+            channel: Some("T_bed_C".into()),
+            params: BTreeMap::new(),
+            add: "thermal:target=ex,channel=bed,times=x".into(),
+            held_out_rms_um_after: Some(0.2),
+            held_out_rms_um_before: Some(5.0),
+            hold_out: trueaxis_engine::diagnose::HoldOutKind::Blocks,
+            gain: Some(0.9),
+            identifiable: true,
+            evidence: String::new(),
+            delta_bic: Some(-900.0),
+            rms_um_after: Some(0.2),
+            out_of_span_share: 1.0,
+            significant: true,
+            physical: Some(Physical {
+                name: "cte".into(),
+                unit: "µm/m/K".into(),
+                value: 11.49,
+                ci95: [11.3, 11.7],
+                plausible: true,
+                expected: String::new(),
+            }),
+            confounded_with: Vec::new(),
+            replaces: None,
+            step: Some(1),
+        }
+    }
+
     /// Issue 13: thermal evidence is the slope. Steel growing 11.5 µm/m/K
     /// along x with the bed temperature (20 → 23 °C over 400 readings, x
     /// 0…800 mm, a ±0.2 µm residual): the figure shows the error per metre
@@ -1468,36 +1521,7 @@ mod tests {
             .map(|i| if i % 2 == 0 { 0.2 } else { -0.2 })
             .collect();
         let mut d = diagnosis(0.2, Some(0.2));
-        let add = "thermal:target=ex,channel=bed,times=x";
-        d.candidates = vec![Candidate {
-            effect: Family::Thermal,
-            target: "ex".into(),
-            axis: Some("x".into()),
-            channel: Some("T_bed_C".into()),
-            params: BTreeMap::new(),
-            add: add.into(),
-            held_out_rms_um_after: Some(0.2),
-            held_out_rms_um_before: Some(5.0),
-            hold_out: trueaxis_engine::diagnose::HoldOutKind::Blocks,
-            gain: Some(0.9),
-            identifiable: true,
-            evidence: String::new(),
-            delta_bic: Some(-900.0),
-            rms_um_after: Some(0.2),
-            out_of_span_share: 1.0,
-            significant: true,
-            physical: Some(Physical {
-                name: "cte".into(),
-                unit: "µm/m/K".into(),
-                value: 11.49,
-                ci95: [11.3, 11.7],
-                plausible: true,
-                expected: String::new(),
-            }),
-            confounded_with: Vec::new(),
-            replaces: None,
-            step: Some(1),
-        }];
+        d.candidates = vec![thermal_candidate()];
         let rows: Vec<usize> = (0..n).collect();
         let fig = thermal_slope(&data, &d.candidates[0], 1, &rows, &comp, &after)
             .unwrap()
@@ -1521,6 +1545,62 @@ mod tests {
         assert!(thermal_slope(&data, &other, 1, &rows, &comp, &after)
             .unwrap()
             .is_none());
+    }
+
+    /// Issue 13: with a lag the slope is read against the lagged
+    /// temperature. The bed warms 20 → 23 °C over 2 h and cools back; the
+    /// growth follows it with a 1200 s first-order lag at 11.5 µm/m/K.
+    /// Against the lagged temperature the points lie on one line of slope
+    /// 11.5; against the raw reading (what the figure drew before) warm-up
+    /// and cool-down are two branches whose least-squares slope is not the
+    /// CTE.
+    #[test]
+    fn a_lagged_thermal_slope_is_read_against_the_lagged_temperature() {
+        let n = 480;
+        let t_s: Vec<f64> = (0..n).map(|i| i as f64 * 30.0).collect();
+        let x: Vec<f64> = (0..n)
+            .map(|i| 400.0 + ((i * 37) % 201) as f64 * 2.0)
+            .collect();
+        let temp: Vec<f64> = t_s
+            .iter()
+            .map(|&t| 20.0 + 3.0 * (std::f64::consts::PI * t / (n as f64 * 30.0)).sin())
+            .collect();
+        let tau = 1200.0;
+        let lag = features::lagged(&temp, &t_s, None, tau);
+        let data = Dataset {
+            source: "d.csv".into(),
+            pos_mm: [Some(x.clone()), Some(vec![0.0; n]), Some(vec![0.0; n])],
+            err_um: [Some(vec![Some(0.0); n]), None, None],
+            temps: vec![trueaxis_engine::data::TempChannel {
+                name: "bed".into(),
+                temp_c: temp.clone(),
+            }],
+            t_s: Some(t_s.clone()),
+            ..Dataset::default()
+        };
+        let comp: Vec<f64> = (0..n).map(|i| 11.5e-3 * x[i] * (lag[i] - 20.0)).collect();
+        let after = vec![0.0; n];
+        let mut c = thermal_candidate();
+        c.params.insert("lag_s".into(), tau);
+        let rows: Vec<usize> = (0..n).collect();
+        let fig = thermal_slope(&data, &c, 1, &rows, &comp, &after)
+            .unwrap()
+            .expect("a slope figure");
+        assert!(
+            fig.svg.contains("least squares: 11.5 µm/m/K"),
+            "the CTE, read against the lagged temperature"
+        );
+        assert!(fig.svg.contains("bed temperature lagged by 1200 s (°C)"));
+        assert!(fig
+            .caption
+            .contains("drawn against that lagged temperature"));
+        // Against the raw reading the same points give another slope: the
+        // figure would not show the CTE.
+        let raw: Vec<(f64, f64)> = (0..n)
+            .map(|i| (temp[i], comp[i] / (x[i] / 1000.0)))
+            .collect();
+        let (raw_slope, _) = line_fit(&raw).unwrap();
+        assert!((raw_slope - 11.5).abs() > 0.5, "raw slope {raw_slope}");
     }
 
     /// Issue 13: the first thing after the verdict card is where in the

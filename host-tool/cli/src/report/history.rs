@@ -188,19 +188,41 @@ pub fn plot(h: &History, noise_um: &BTreeMap<String, f64>) -> XyPlot {
             p = p.with_dashed(*nf, format!("{t} noise floor {} µm", format_value(*nf)), i);
         }
     }
-    let top = h
+    let values: Vec<f64> = h
         .steps
         .iter()
         .flat_map(|s| s.rms_um.values().chain(s.held_out_rms_um.values()))
+        .chain(noise_um.values())
         .copied()
-        .filter(|v| v.is_finite())
-        .fold(0.0f64, f64::max);
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .collect();
+    let top = values.iter().copied().fold(0.0f64, f64::max);
+    let log = log_scale_fits(&values);
+    if log {
+        p = p.with_log_y();
+    }
     for (k, s) in h.steps.iter().enumerate() {
-        // Alternate two heights so neighbouring labels do not overlap.
-        let y = top * if k % 2 == 0 { 1.14 } else { 1.06 };
+        // Alternate two heights so neighbouring labels do not overlap (on
+        // a log axis a height is a factor: the same gaps on the page).
+        let y = match (log, k % 2 == 0) {
+            (false, true) => top * 1.14,
+            (false, false) => top * 1.06,
+            (true, true) => top * 1.9,
+            (true, false) => top * 1.4,
+        };
         p = p.with_note(s.step as f64, y, step_label(s));
     }
     p
+}
+
+/// Whether the history plot's µm axis is logarithmic: when the values span
+/// more than a decade (an error falling from 20 µm to the 0.2 µm noise
+/// would leave every step after the first flat on the floor of a linear
+/// axis); a linear axis otherwise, where differences read directly.
+pub fn log_scale_fits(values: &[f64]) -> bool {
+    let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = values.iter().copied().fold(0.0f64, f64::max);
+    lo > 0.0 && hi / lo > 10.0
 }
 
 /// Writes `DIR/index.html` with the verdict, the table and the plot;
@@ -327,10 +349,18 @@ pub fn verdict(h: &History, model: &str, data: &str, noise_um: &BTreeMap<String,
 /// error falling (`history.svg`) on `page`: this command's report, and
 /// `diagnose --report` on a model that has a history.
 pub fn add_to_page(page: &mut Page, h: &History, noise_um: &BTreeMap<String, f64>) -> Result<()> {
+    let plot = plot(h, noise_um);
     page.figure(
         "history",
-        "Residual RMS (in-sample) and block-held-out RMS per target after each fit; each step is labelled with the effect it added; dashed: the noise floor of the measurement, where known.",
-        plot(h, noise_um).to_svg()?,
+        format!(
+            "Residual RMS (in-sample) and block-held-out RMS per target after each fit; each step is labelled with the effect it added; dashed: the noise floor of the measurement, where known.{}",
+            if plot.log_y {
+                " The µm axis is logarithmic (the values span more than a decade): equal heights are equal factors."
+            } else {
+                ""
+            }
+        ),
+        plot.to_svg()?,
     );
     let rows = h
         .steps
@@ -454,6 +484,39 @@ mod tests {
                 "Step 3: cubic19 refitted, nothing added — ex unchanged at 1.00 µm, ey 0.0500 µm → 0.200 µm.".to_string(),
             ]
         );
+    }
+
+    /// Issue 13: "log or linear µm axis". An error falling over two
+    /// decades is drawn on a log axis ticked at 1, 2, 5 × 10ᵏ µm (on a
+    /// linear one every step after the first lay flat on the floor); one
+    /// falling by less than a decade keeps the linear axis.
+    #[test]
+    fn an_error_falling_over_decades_gets_a_log_axis() {
+        let h = history(vec![
+            step(1, &[], 20.0, 21.0),
+            step(2, &["periodic:target=ex,axis=x,period_mm=5"], 2.0, 2.1),
+            step(3, &["reversal:target=ex,axis=x"], 0.2, 0.21),
+        ]);
+        let noise: BTreeMap<String, f64> = [("ex".to_string(), 0.2)].into();
+        let p = plot(&h, &noise);
+        assert!(p.log_y);
+        let labels = crate::report::plot::svg_texts(&p.to_svg().unwrap());
+        for tick in ["0.2", "0.5", "1", "2", "5", "10", "20"] {
+            assert!(labels.iter().any(|l| l == tick), "log tick {tick}");
+        }
+        for linear in ["15", "0.4", "7"] {
+            assert!(
+                !labels.iter().any(|l| l == linear),
+                "no linear tick {linear}"
+            );
+        }
+        let mut page = Page::new("t");
+        add_to_page(&mut page, &h, &noise).unwrap();
+        assert!(page.to_html().contains("logarithmic"));
+        let small = history(vec![step(1, &[], 1.5, 1.55), step(2, &[], 1.0, 1.05)]);
+        assert!(!plot(&small, &BTreeMap::new()).log_y);
+        assert!(!log_scale_fits(&[0.3, 2.9]));
+        assert!(log_scale_fits(&[0.2, 2.1]));
     }
 
     #[test]

@@ -127,6 +127,8 @@ pub struct XyPlot {
     pub vmarks: Vec<(f64, String)>,
     /// How the x axis is ticked.
     pub x_ticks: Ticks,
+    /// The y axis on a log10 scale ([`XyPlot::with_log_y`]).
+    pub log_y: bool,
     /// Size in pixels.
     pub size: (u32, u32),
 }
@@ -165,8 +167,47 @@ impl XyPlot {
             notes: Vec::new(),
             vmarks: Vec::new(),
             x_ticks: Ticks::Auto,
+            log_y: false,
             size: SIZE,
         }
+    }
+
+    /// Draws the y axis on a log10 scale, ticked at 1, 2 and 5 × 10ᵏ in the
+    /// data's unit: an error falling over decades stays readable at every
+    /// step. Values ≤ 0 have no place on it and are left out.
+    pub fn with_log_y(mut self) -> XyPlot {
+        self.log_y = true;
+        self
+    }
+
+    /// The plot with every y replaced by its log10 (what
+    /// [`XyPlot::with_log_y`] draws on a linear chart); values ≤ 0 dropped.
+    fn log10_of_y(&self) -> XyPlot {
+        let lg = |y: f64| if y > 0.0 { y.log10() } else { f64::NAN };
+        let mut p = self.clone();
+        for s in &mut p.series {
+            s.points = s
+                .points
+                .iter()
+                .map(|&(x, y)| (x, lg(y)))
+                .filter(|q| q.1.is_finite())
+                .collect();
+        }
+        for b in &mut p.bands {
+            b.points = b
+                .points
+                .iter()
+                .map(|&(x, lo, hi)| (x, lg(lo), lg(hi)))
+                .filter(|q| q.1.is_finite() && q.2.is_finite())
+                .collect();
+        }
+        p.hlines.retain(|h| h.0 > 0.0);
+        p.hlines.iter_mut().for_each(|h| h.0 = h.0.log10());
+        p.dashed.retain(|d| d.0 > 0.0);
+        p.dashed.iter_mut().for_each(|d| d.0 = d.0.log10());
+        p.notes.retain(|n| n.1 > 0.0);
+        p.notes.iter_mut().for_each(|n| n.1 = n.1.log10());
+        p
     }
 
     /// Sets how the x axis is ticked.
@@ -326,7 +367,11 @@ impl XyPlot {
     /// plot says so in a line under it: the SVG's size is bounded whatever
     /// the number of rows.
     pub fn to_svg(&self) -> Result<String> {
-        let (plot, reduction) = self.reduced();
+        let (plot, reduction) = if self.log_y {
+            self.log10_of_y().reduced()
+        } else {
+            self.reduced()
+        };
         Ok(decimate::drop_repeated_dots(
             plot.draw_svg(reduction.note())?,
         ))
@@ -403,12 +448,29 @@ impl XyPlot {
                 Ticks::Integer => ((x1 - x0).round() as usize).clamp(1, 30),
                 Ticks::Direction => 3,
             };
+            // On a log axis (y holds log10 of the value) only the ticks
+            // that land on 1, 2 or 5 × 10ᵏ are labelled, with the value.
+            let log_y = self.log_y;
+            let y_fmt = move |v: &f64| -> String {
+                let value = 10f64.powf(*v);
+                let decade = 10f64.powf(v.floor());
+                match [1.0, 2.0, 5.0, 10.0]
+                    .iter()
+                    .find(|m| (value / (decade * *m) - 1.0).abs() < 0.03)
+                {
+                    Some(m) => format_tick(decade * m),
+                    None => String::new(),
+                }
+            };
             let mut mesh = chart.configure_mesh();
             mesh.x_desc(&self.x_label)
                 .y_desc(&self.y_label)
                 .x_labels(n_x)
                 .x_label_formatter(&x_fmt)
                 .light_line_style(RGBColor(235, 235, 235));
+            if log_y {
+                mesh.y_label_formatter(&y_fmt).y_labels(30);
+            }
             if !matches!(ticks, Ticks::Auto | Ticks::Period) {
                 mesh.disable_x_mesh();
             }
@@ -910,6 +972,18 @@ fn padded_range(v: &[f64], pad: f64) -> (f64, f64) {
     (lo - pad * span, hi + pad * span)
 }
 
+/// The text of every `<text>` element of an SVG (tests read labels).
+#[cfg(test)]
+pub(crate) fn svg_texts(svg: &str) -> Vec<String> {
+    svg.split("<text")
+        .skip(1)
+        .map(|t| {
+            let t = &t[t.find('>').unwrap() + 1..];
+            t[..t.find("</text>").unwrap()].trim().to_string()
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -996,16 +1070,7 @@ mod tests {
         assert_eq!(ticks_for("T_bed_C"), Ticks::Auto);
     }
 
-    /// The text of every `<text>` element.
-    fn texts(svg: &str) -> Vec<String> {
-        svg.split("<text")
-            .skip(1)
-            .map(|t| {
-                let t = &t[t.find('>').unwrap() + 1..];
-                t[..t.find("</text>").unwrap()].trim().to_string()
-            })
-            .collect()
-    }
+    use super::svg_texts as texts;
 
     #[test]
     fn direction_axes_are_ticked_minus_one_and_plus_one_only() {
