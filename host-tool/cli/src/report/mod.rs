@@ -384,8 +384,11 @@ fn strip_xml_declaration(svg: &str) -> &str {
 
 /// Print-friendly, dependency-free styling. Figures scale to the window
 /// (`svg` at 100 % of a figure no wider than the drawing); a grid holds
-/// small multiples; the verdict card stands out by colour and border.
+/// small multiples; the verdict card stands out by colour and border. Text
+/// breaks inside a long unbroken token (an effect string of 150 characters
+/// in the simulate summary made the page 1400 px wide in a 1280 px window).
 const STYLE: &str = "body{font-family:sans-serif;max-width:1500px;margin:1em auto;padding:0 1em;color:#222}\
+p,li,figcaption,h1,h2,h3{overflow-wrap:break-word}\
 h1{font-size:1.5em}h2{font-size:1.25em;border-bottom:1px solid #ccc;margin-top:1.6em}\
 h3{font-size:1.05em}table{border-collapse:collapse;margin:.6em 0}\
 th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right;font-variant-numeric:tabular-nums}\
