@@ -160,7 +160,8 @@ pub fn find(data: &Dataset, seed: &str, adds: &[Effect]) -> Result<Vec<Outlier>>
     let mut found: Vec<Outlier> = Vec::new();
     for _ in 0..MAX_ROUNDS {
         let clean = without(data, &found);
-        let (model, _) = crate::fit::linear::fit(&clean, &seed, adds, 2)?;
+        // The screen needs the model only, not its held-out RMS (blocks 0).
+        let (model, _) = crate::fit::linear::fit(&clean, &seed, adds, 0)?;
         let pred = model.predict(data)?;
         let mut next = Vec::new();
         for t in data.targets() {

@@ -153,7 +153,8 @@ fn fit_targets(
         .collect())
 }
 
-/// Fits the linear model `seed` + `adds` to every target present.
+/// Fits the linear model `seed` + `adds` to every target present, with the
+/// held-out RMS over `blocks` hold-out blocks (none with `blocks` = 0).
 pub fn fit(
     data: &Dataset,
     seed: &str,
@@ -249,6 +250,12 @@ pub fn fit(
                 "{name}: ill-conditioned design (condition number {:.3e} > {ILL_CONDITIONED:.0e}): some terms nearly repeat each other on these points; coefficients are uncertain (see coef_sd_um) and extrapolation is unreliable",
                 tf.condition_number
             ));
+        }
+        // blocks = 0: the caller wants the fit only (the outlier screen's
+        // rounds), not its held-out RMS.
+        if blocks == 0 {
+            outputs.push(tf.output);
+            continue;
         }
         match holdout::held_out_rms_k(data, &tf.rows, features, t, &norm, blocks) {
             Ok(h) => {
