@@ -30,7 +30,7 @@ pub enum Sub {
 }
 
 /// The plane a 2-D scan lies in.
-fn plane(s: &str) -> Result<[&'static str; 2]> {
+pub(crate) fn plane(s: &str) -> Result<[&'static str; 2]> {
     Ok(match s {
         "xz" => ["x", "z"],
         "yz" => ["y", "z"],
@@ -60,8 +60,9 @@ pub struct Calibrate {
     /// Where to write the probe file.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Write an HTML page (verdict, the form against contact angle) into
-    /// this directory (2-D calibrations).
+    /// Write an HTML page (verdict, the form against contact angle — or,
+    /// in 3-D, a map of it over the calibrated directions) into this
+    /// directory.
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Write one JSON document to stdout instead of text.
@@ -73,9 +74,6 @@ impl Calibrate {
     fn run(self) -> Result<()> {
         crate::input::refuse_overwrite(&[("the scan", &self.scan)], &[("-o", &self.output)])?;
         if self.plane == "xyz" {
-            if self.report.is_some() {
-                bail!("--report draws 2-D calibrations (the form against contact angle); a 3-D calibration has no page yet — leave --report out");
-            }
             return self.run_3d();
         }
         let pl = plane(&self.plane).map_err(|e| anyhow::anyhow!("{e} (or xyz for a 3-D scan)"))?;
@@ -180,10 +178,31 @@ impl Calibrate {
         for w in &cal.warnings {
             eprintln!("warning: {w}");
         }
+        let report = self
+            .report
+            .as_ref()
+            .map(|dir| {
+                crate::report::onmachine::probe3d_page(
+                    &crate::report::onmachine::Probe3dPage {
+                        probe: pr,
+                        points: &p,
+                        residual_nm: &cal.residual_nm,
+                        ball_pv_nm: [cal.pv_without_form_nm, cal.pv_with_form_nm],
+                        warnings: &cal.warnings,
+                        next: format!(
+                            "trueaxis probe correct SCAN.csv --probe {} -o SURFACE.csv",
+                            self.output.display()
+                        ),
+                    },
+                    dir,
+                )
+            })
+            .transpose()?;
         if self.json {
             let doc = json!({
                 "scan": self.scan.display().to_string(),
                 "output": self.output.display().to_string(),
+                "report": report.as_ref().map(|p| p.display().to_string()),
                 "probe": pr,
                 "pv_without_form_nm": cal.pv_without_form_nm,
                 "pv_with_form_nm": cal.pv_with_form_nm,
@@ -222,17 +241,20 @@ impl Calibrate {
         }
         let _ = writeln!(s, "  on the ball    {:.1} nm PV with the radius only → {:.1} nm PV with the form (residual RMS {:.1} nm)", cal.pv_without_form_nm, cal.pv_with_form_nm, pr.residual_rms_nm);
         let _ = writeln!(s, "  probe file written to {}", self.output.display());
+        if let Some(r) = &report {
+            let _ = writeln!(s, "  report: {}", r.display());
+        }
         out::print(&s)
     }
 }
 
 /// A probe file of either kind (its `format` tells which).
-enum AnyProbe {
+pub(crate) enum AnyProbe {
     Plane(ProbeFile),
     Sphere(Probe3d),
 }
 
-fn read_probe(path: &PathBuf) -> Result<AnyProbe> {
+pub(crate) fn read_probe(path: &PathBuf) -> Result<AnyProbe> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     let v: serde_json::Value = serde_json::from_str(&text)
@@ -248,6 +270,30 @@ fn read_probe(path: &PathBuf) -> Result<AnyProbe> {
         pr.check().with_context(bad)?;
         Ok(AnyProbe::Plane(pr))
     }
+}
+
+/// `--side`: the outward direction of the surface, ± an axis of the plane.
+pub(crate) fn side(s: &str, pl: [&str; 2]) -> Result<[f64; 2]> {
+    Ok(match s {
+        s if s.len() == 2 && (s.starts_with('+') || s.starts_with('-')) => {
+            let sign = if s.starts_with('-') { -1.0 } else { 1.0 };
+            let axis = &s[1..];
+            match pl.iter().position(|a| *a == axis) {
+                Some(0) => [sign, 0.0],
+                Some(_) => [0.0, sign],
+                None => bail!(
+                    "--side `{s}`: expected ± one of the plane's axes {} and {}",
+                    pl[0],
+                    pl[1]
+                ),
+            }
+        }
+        s => bail!(
+            "--side `{s}`: expected +{0}, -{0}, +{1} or -{1}",
+            pl[0],
+            pl[1]
+        ),
+    })
 }
 
 /// `trueaxis probe correct SCAN.csv --probe PROBE.json -o SURFACE.csv`.
@@ -285,26 +331,7 @@ impl Correct {
         )?;
         let pl = plane(&self.plane)?;
         let pr = read_probe(&self.probe)?;
-        let side = match self.side.as_str() {
-            s if s.len() == 2 && (s.starts_with('+') || s.starts_with('-')) => {
-                let sign = if s.starts_with('-') { -1.0 } else { 1.0 };
-                let axis = &s[1..];
-                match pl.iter().position(|a| *a == axis) {
-                    Some(0) => [sign, 0.0],
-                    Some(_) => [0.0, sign],
-                    None => bail!(
-                        "--side `{s}`: expected ± one of the plane's axes {} and {}",
-                        pl[0],
-                        pl[1]
-                    ),
-                }
-            }
-            s => bail!(
-                "--side `{s}`: expected +{0}, -{0}, +{1} or -{1}",
-                pl[0],
-                pl[1]
-            ),
-        };
+        let side = side(&self.side, pl)?;
         let circle = match self.nominal.as_str() {
             "circle" => true,
             "line" => false,

@@ -230,32 +230,33 @@ pub struct MultiStep {
     pub json: bool,
 }
 
-impl MultiStep {
-    fn run(self) -> Result<()> {
-        crate::input::refuse_overwrite(&[("the scan", &self.scan)], &[("-o", &self.output)])?;
-        let text = std::fs::read_to_string(&self.scan)
-            .with_context(|| format!("cannot read {}", self.scan.display()))?;
-        let name = self.scan.display().to_string();
-        let rows = import::read_table(
-            &text,
-            &name,
-            &["c_deg", "step_deg", "p_um"],
-            "the spindle angle, the part's step and the probe reading",
-        )?;
-        // Steps: the distinct part positions, evenly spaced over the turn.
-        let step_rows: Vec<Vec<f64>> = rows.iter().map(|r| vec![r[1], 0.0]).collect();
-        let (steps, _) = turn_bins(&step_rows, &format!("{name}: step_deg"), "multi-step")?;
-        let key = |c: f64| (c.rem_euclid(360.0) * 1000.0).round() as i64 % 360_000;
-        let mut runs = Vec::new();
-        let mut angles: Option<Vec<f64>> = None;
-        for &st in &steps {
-            let mine: Vec<Vec<f64>> = rows
-                .iter()
-                .filter(|r| key(r[1]) == key(st))
-                .map(|r| vec![r[0], r[2]])
-                .collect();
-            let (a, v) = turn_bins(&mine, &format!("{name}: step {st}°"), "multi-step")?;
-            match &angles {
+/// Reads a multi-step file (`c_deg,step_deg,p_um`, docs/on-machine.md):
+/// the spindle angles and one turn of readings per step, each step read at
+/// the same evenly spaced angles (several turns averaged).
+pub(crate) fn read_multi_step(path: &PathBuf) -> Result<(Vec<f64>, Vec<Vec<f64>>)> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let name = path.display().to_string();
+    let rows = import::read_table(
+        &text,
+        &name,
+        &["c_deg", "step_deg", "p_um"],
+        "the spindle angle, the part's step and the probe reading",
+    )?;
+    // Steps: the distinct part positions, evenly spaced over the turn.
+    let step_rows: Vec<Vec<f64>> = rows.iter().map(|r| vec![r[1], 0.0]).collect();
+    let (steps, _) = turn_bins(&step_rows, &format!("{name}: step_deg"), "multi-step")?;
+    let key = |c: f64| (c.rem_euclid(360.0) * 1000.0).round() as i64 % 360_000;
+    let mut runs = Vec::new();
+    let mut angles: Option<Vec<f64>> = None;
+    for &st in &steps {
+        let mine: Vec<Vec<f64>> = rows
+            .iter()
+            .filter(|r| key(r[1]) == key(st))
+            .map(|r| vec![r[0], r[2]])
+            .collect();
+        let (a, v) = turn_bins(&mine, &format!("{name}: step {st}°"), "multi-step")?;
+        match &angles {
                 None => angles = Some(a),
                 Some(a0) if a0 != &a => bail!(
                     "{name}: step {st}° is read at {} spindle angles from {:.3}°, step {}° at {} from {:.3}°: every step must be read at the same spindle angles",
@@ -267,9 +268,32 @@ impl MultiStep {
                 ),
                 Some(_) => {}
             }
-            runs.push(v.into_iter().map(|x| x[0]).collect::<Vec<f64>>());
-        }
-        let angles = angles.context("no readings")?;
+        runs.push(v.into_iter().map(|x| x[0]).collect::<Vec<f64>>());
+    }
+    Ok((angles.context("no readings")?, runs))
+}
+
+/// Reads a straightness run: `<axis>_mm,d_um` (docs/on-machine.md).
+pub(crate) fn read_run(p: &PathBuf, axis: &str) -> Result<Vec<(f64, f64)>> {
+    let pos = format!("{axis}_mm");
+    let text =
+        std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
+    Ok(import::read_columns(
+        &text,
+        &p.display().to_string(),
+        [&pos, "d_um"],
+        "the position and the probe reading",
+    )?
+    .into_iter()
+    .map(|v| (v[0], v[1]))
+    .collect())
+}
+
+impl MultiStep {
+    fn run(self) -> Result<()> {
+        crate::input::refuse_overwrite(&[("the scan", &self.scan)], &[("-o", &self.output)])?;
+        let name = self.scan.display().to_string();
+        let (angles, runs) = read_multi_step(&self.scan)?;
         let r = separate::multi_step(&runs).with_context(|| format!("{name}: cannot separate"))?;
         let mut csv = String::from("angle_deg,part_um,spindle_um\n");
         for (i, a) in angles.iter().enumerate() {
@@ -377,19 +401,7 @@ impl Reversal {
             &[("-o", &self.output)],
         )?;
         let pos = format!("{}_mm", self.axis);
-        let read = |p: &PathBuf| -> Result<Vec<(f64, f64)>> {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read {}", p.display()))?;
-            Ok(import::read_columns(
-                &text,
-                &p.display().to_string(),
-                [&pos, "d_um"],
-                "the position and the probe reading",
-            )?
-            .into_iter()
-            .map(|v| (v[0], v[1]))
-            .collect())
-        };
+        let read = |p: &PathBuf| read_run(p, &self.axis);
         let r =
             separate::reversal(&read(&self.run0)?, &read(&self.run180)?).with_context(|| {
                 format!(
