@@ -14,7 +14,7 @@ use serde_json::json;
 use crate::cmd::out;
 use crate::cmd::probe::{plane, read_probe, side, AnyProbe};
 use crate::cmd::separate::{read_multi_step, read_run};
-use trueaxis_engine::import;
+use trueaxis_engine::import::{self, probe_csv, probe_csv::Small};
 use trueaxis_engine::part_diagnosis::{self, Evidence, KnownProbe, Scan, Source, Status};
 
 /// `trueaxis diagnose-part SCAN.csv [--probe P] [--reversal R] [--multi-step M]`.
@@ -49,6 +49,11 @@ pub struct Args {
     /// A roundness scan's multi-step set (`c_deg,step_deg,p_um`).
     #[arg(long)]
     pub multi_step: Option<PathBuf>,
+    /// A measurement CSV with probe columns: the session of the scan (a
+    /// straightness session with rows at `orientation_deg` 180 is its own
+    /// reversal pair).
+    #[arg(long)]
+    pub session: Option<i64>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -66,9 +71,35 @@ fn header(text: &str) -> Vec<String> {
 
 impl Args {
     pub fn run(self) -> Result<()> {
-        let text = std::fs::read_to_string(&self.scan)
+        let raw = std::fs::read_to_string(&self.scan)
             .with_context(|| format!("cannot read {}", self.scan.display()))?;
         let name = self.scan.display().to_string();
+        // One session of a measurement CSV with probe columns: its kind
+        // from what its rows hold (readings round a turn, readings along a
+        // travel, or probe-centre positions).
+        let mut pair = None;
+        let text = if probe_csv::is_probe_csv(&raw) {
+            let t = probe_csv::read(&raw, &name)?;
+            let rows = t.select(self.session)?;
+            let has = |c: &str| rows.iter().any(|r| r.get(c).is_some());
+            let a = self.axis.chars().next().unwrap_or('x');
+            let kind = if has("d_um") && has("c_deg") {
+                Small::Roundness
+            } else if has("d_um") {
+                if rows.iter().any(|r| {
+                    r.get("orientation_deg")
+                        .is_some_and(|o| o.rem_euclid(360.0) > 90.0)
+                }) {
+                    pair = Some(t.small(self.session, Small::Straightness(a, 180))?);
+                }
+                Small::Straightness(a, 0)
+            } else {
+                Small::Positions
+            };
+            t.small(self.session, kind)?
+        } else {
+            crate::input::scan_text(&self.scan, self.session, Small::Positions)?
+        };
         let head = header(&text);
         let has = |c: &str| head.iter().any(|h| h == c);
         let pos = format!("{}_mm", self.axis);
@@ -117,7 +148,11 @@ impl Args {
             }
             Ok(())
         };
-        refuse("--reversal", self.reversal.is_some(), "straightness")?;
+        refuse(
+            "--reversal",
+            self.reversal.is_some() || pair.is_some(),
+            "straightness",
+        )?;
         refuse("--multi-step", self.multi_step.is_some(), "roundness")?;
         refuse("--probe", self.probe.is_some(), "arc")?;
         refuse("--part-diameter-mm", self.part_diameter_mm.is_some(), "arc")?;
@@ -164,15 +199,20 @@ impl Args {
             t_s: timed.then(|| col(2)),
             probe: known,
             part_diameter_mm: self.part_diameter_mm,
-            reversal: self
-                .reversal
-                .as_ref()
-                .map(|p| read_run(p, &self.axis))
-                .transpose()?,
+            reversal: match (&self.reversal, &pair) {
+                (Some(p), _) => Some(read_run(p, &self.axis, None, 180)?),
+                (None, Some(text)) => Some(
+                    import::read_columns(text, &name, [pos.as_str(), "d_um"], "the 180° run")?
+                        .into_iter()
+                        .map(|v| (v[0], v[1]))
+                        .collect(),
+                ),
+                (None, None) => None,
+            },
             multi_step: self
                 .multi_step
                 .as_ref()
-                .map(|p| read_multi_step(p).map(|r| r.1))
+                .map(|p| read_multi_step(p, None).map(|r| r.1))
                 .transpose()?,
         };
         let d = part_diagnosis::diagnose(&scan, &ev)

@@ -9,6 +9,7 @@ use anyhow::{bail, Context, Result};
 use serde_json::json;
 
 use crate::cmd::out::{self, outln};
+use trueaxis_engine::import::probe_csv::Small;
 use trueaxis_engine::probe::sphere::{self, Probe3d};
 use trueaxis_engine::probe::{self, ProbeFile};
 
@@ -39,9 +40,8 @@ pub(crate) fn plane(s: &str) -> Result<[&'static str; 2]> {
     })
 }
 
-fn read(path: &PathBuf, pl: [&str; 2]) -> Result<Vec<[f64; 2]>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+fn read(path: &std::path::Path, pl: [&str; 2], session: Option<i64>) -> Result<Vec<[f64; 2]>> {
+    let text = crate::input::scan_text(path, session, Small::Positions)?;
     probe::read_scan(&text, &path.display().to_string(), pl)
 }
 
@@ -65,6 +65,10 @@ pub struct Calibrate {
     /// directory.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// A measurement CSV with probe columns: the session to read
+    /// (docs/cli.md § Measurement CSV, probe data).
+    #[arg(long)]
+    pub session: Option<i64>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -77,7 +81,7 @@ impl Calibrate {
             return self.run_3d();
         }
         let pl = plane(&self.plane).map_err(|e| anyhow::anyhow!("{e} (or xyz for a 3-D scan)"))?;
-        let p = read(&self.scan, pl)?;
+        let p = read(&self.scan, pl, self.session)?;
         let cal = probe::calibrate(&p, self.ball_diameter_mm / 2.0)
             .with_context(|| format!("{}: cannot calibrate", self.scan.display()))?;
         let pr = &cal.probe;
@@ -165,8 +169,7 @@ impl Calibrate {
 impl Calibrate {
     /// `--plane xyz`: the 3-D calibration (docs/on-machine.md).
     fn run_3d(self) -> Result<()> {
-        let text = std::fs::read_to_string(&self.scan)
-            .with_context(|| format!("cannot read {}", self.scan.display()))?;
+        let text = crate::input::scan_text(&self.scan, self.session, Small::Positions)?;
         let p = sphere::read_scan(&text, &self.scan.display().to_string())?;
         let cal = sphere::calibrate(&p, self.ball_diameter_mm / 2.0)
             .with_context(|| format!("{}: cannot calibrate", self.scan.display()))?;
@@ -318,6 +321,10 @@ pub struct Correct {
     /// Where to write the corrected contact points (CSV).
     #[arg(short, long)]
     pub output: PathBuf,
+    /// A measurement CSV with probe columns: the session to read
+    /// (docs/cli.md § Measurement CSV, probe data).
+    #[arg(long)]
+    pub session: Option<i64>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -337,7 +344,7 @@ impl Correct {
             "line" => false,
             s => bail!("--nominal `{s}`: expected circle or line"),
         };
-        let p = read(&self.scan, pl)?;
+        let p = read(&self.scan, pl, self.session)?;
         let axis = |a: &str| match a {
             "x" => 0,
             "y" => 1,
