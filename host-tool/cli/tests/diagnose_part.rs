@@ -321,3 +321,38 @@ fn lsq_rest(theta: &[f64], f: impl Fn(f64) -> f64) -> Vec<f64> {
         .map(|&t| f(t) - c[0] - c[1] * t.cos() - c[2] * t.sin())
         .collect()
 }
+
+#[test]
+fn the_page_opens_with_the_verdict_and_says_what_to_measure() {
+    let dir = tmp_dir("diagnose_part", "page");
+    let (camp, _) = campaign(&dir);
+    let rep = dir.join("rep");
+    let d = diagnose(&[s(&camp.join("run0.csv")), "--report", s(&rep)]);
+    assert_eq!(d["report"].as_str().unwrap(), s(&rep.join("index.html")));
+    let html = std::fs::read_to_string(rep.join("index.html")).unwrap();
+    // The verdict card first (the sentence of the JSON), then the sources
+    // with the measurement that tells part from slide, then the scan.
+    let v = d["verdict"].as_str().unwrap();
+    let first = html.find(&v[1..40]).expect("the verdict on the page");
+    let advice = html
+        .find("cannot know from these data — part form: turn the part 180°")
+        .expect("the reversal named in the card");
+    let table = html.find("<table").expect("the sources' table");
+    let plot = html.find("<svg").expect("the scan drawn");
+    assert!(first < advice && advice < table && table < plot);
+    // With the multi-step set, what the estimate leaves out is on the card.
+    let rep2 = dir.join("rep2");
+    diagnose(&[
+        s(&camp.join("roundness.csv")),
+        "--multi-step",
+        s(&camp.join("multi-step.csv")),
+        "--report",
+        s(&rep2),
+    ]);
+    let html = std::fs::read_to_string(rep2.join("index.html")).unwrap();
+    assert!(
+        html.contains("not in the estimate of the part form — the part&#39;s harmonics 5, 10")
+            || html.contains("not in the estimate of the part form — the part's harmonics 5, 10"),
+        "the inseparable harmonics not on the card"
+    );
+}

@@ -211,6 +211,15 @@ pub struct PartDiagnosis {
     pub findings: Vec<Finding>,
     /// The sums these data read but cannot split.
     pub combined: Vec<Combined>,
+    /// What the scan reads, for a plot: `(position, deviation)` — along
+    /// the travel (mm, line removed), round the turn (°, harmonics 0 and 1
+    /// removed) or over the contact angle (°, the least-squares circle
+    /// removed), a drift found removed; in `profile_unit`.
+    #[serde(skip)]
+    pub profile: Vec<(f64, f64)>,
+    /// Unit of the profile's deviations (`µm` or `nm`).
+    #[serde(skip)]
+    pub profile_unit: &'static str,
 }
 
 impl PartDiagnosis {
@@ -479,6 +488,8 @@ fn straightness(pos: &[f64], d: &[f64], ev: &Evidence) -> Result<PartDiagnosis> 
         noise_um: noise,
         findings,
         combined,
+        profile: pos.iter().copied().zip(sum).collect(),
+        profile_unit: "µm",
     })
 }
 
@@ -564,6 +575,8 @@ fn roundness(c_deg: &[f64], p: &[f64], ev: &Evidence) -> Result<PartDiagnosis> {
         noise_um: noise,
         findings,
         combined,
+        profile: c_deg.iter().copied().zip(sum).collect(),
+        profile_unit: "µm",
     })
 }
 
@@ -704,6 +717,12 @@ fn arc(p: &[[f64; 2]], side: [f64; 2], ev: &Evidence) -> Result<PartDiagnosis> {
         noise_um: noise,
         findings,
         combined,
+        profile: theta
+            .iter()
+            .zip(&resid)
+            .map(|(t, r)| (t.to_degrees(), r * 1e3))
+            .collect(),
+        profile_unit: "nm",
     })
 }
 

@@ -54,6 +54,10 @@ pub struct Args {
     /// reversal pair).
     #[arg(long)]
     pub session: Option<i64>,
+    /// Write an HTML page (verdict, the sources, the scan) into this
+    /// directory.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -218,6 +222,11 @@ impl Args {
         let d = part_diagnosis::diagnose(&scan, &ev)
             .with_context(|| format!("{name}: cannot diagnose"))?;
         let verdict = verdict(&d);
+        let report = self
+            .report
+            .as_ref()
+            .map(|dir| crate::report::onmachine::part_diagnosis_page(&d, &verdict, dir))
+            .transpose()?;
         if self.json {
             let doc = json!({
                 "scan": name,
@@ -227,6 +236,7 @@ impl Args {
                 "verdict": verdict,
                 "findings": d.findings,
                 "combined": d.combined,
+                "report": report.as_ref().map(|p| p.display().to_string()),
             });
             return out::json_pretty(&doc);
         }
@@ -259,6 +269,9 @@ impl Args {
             if let Some(m) = &f.measure {
                 let _ = writeln!(s, "  {:<21}   measure: {m}", "");
             }
+        }
+        if let Some(r) = &report {
+            let _ = writeln!(s, "  report: {}", r.display());
         }
         out::print(&s)
     }

@@ -436,6 +436,107 @@ pub fn probe3d_page(p: &Probe3dPage, dir: &Path) -> Result<PathBuf> {
     write(&page, dir)
 }
 
+/// The `diagnose-part` page: the verdict (what is identified, what these
+/// data cannot know and the sums they read), one row per source with its
+/// size or the measurement that would tell it, and the scan's profile.
+pub fn part_diagnosis_page(
+    d: &trueaxis_engine::part_diagnosis::PartDiagnosis,
+    verdict: &str,
+    dir: &Path,
+) -> Result<PathBuf> {
+    use trueaxis_engine::part_diagnosis::Status;
+    let mut page = Page::new("Which error is in this part scan");
+    // Every measurement that would tell more: for what cannot be known,
+    // and for what an estimate leaves out (a multi-step's inseparable
+    // harmonics, the slides in a corrected arc).
+    let measures: Vec<String> = d
+        .findings
+        .iter()
+        .filter_map(|f| {
+            let m = f.measure.as_ref()?;
+            Some(match f.status {
+                Status::CannotKnow => {
+                    format!("cannot know from these data — {}: {m}", f.source.label())
+                }
+                _ => format!("not in the estimate of the {} — {m}", f.source.label()),
+            })
+        })
+        .collect();
+    let unknown = !measures.is_empty();
+    let mut details = vec![format!(
+        "a {} scan, {} points{}",
+        d.kind,
+        d.points,
+        d.noise_um
+            .map(|n| format!(", reading noise {n:.3} µm"))
+            .unwrap_or_default()
+    )];
+    details.extend(measures);
+    page.verdict(Verdict {
+        headline: {
+            let mut c = verdict.chars();
+            c.next()
+                .map(|f| format!("{}{}.", f.to_uppercase(), c.as_str()))
+                .unwrap_or_default()
+        },
+        details,
+        warnings: Vec::new(),
+        next: None,
+        tone: if unknown { Tone::Unknown } else { Tone::Good },
+    });
+    let rows = d
+        .findings
+        .iter()
+        .map(|f| {
+            let size = match (f.value, f.ci95) {
+                (Some(v), Some([lo, hi])) => {
+                    let p = if f.unit == "mm" { 6 } else { 3 };
+                    format!("{v:.p$} {u} (95 %: {lo:.p$} … {hi:.p$})", u = f.unit)
+                }
+                _ => "—".into(),
+            };
+            let status = match f.status {
+                Status::Estimated => "estimated",
+                Status::NotInScan => "not in this scan",
+                Status::CannotKnow => "cannot know from these data",
+            };
+            vec![
+                f.source.label().to_string(),
+                status.to_string(),
+                size,
+                f.what.clone(),
+                f.measure.clone().unwrap_or_default(),
+            ]
+        })
+        .collect();
+    page.table(&["source", "status", "size", "what", "measure"], rows);
+    if !d.profile.is_empty() {
+        let (x, what) = match d.kind {
+            "straightness" => ("position (mm)", "the readings, line removed"),
+            "roundness" => (
+                "rotation angle (°)",
+                "the readings round the turn, harmonics 0 and 1 removed",
+            ),
+            _ => (
+                "contact angle (°)",
+                "the centre path against its least-squares circle",
+            ),
+        };
+        let plot = XyPlot::new(
+            "what the scan reads",
+            x,
+            format!("deviation ({})", d.profile_unit),
+        )
+        .with(Series::points("scan", d.profile.clone()));
+        page.figure(
+            "scan",
+            format!("{what}: every source it holds, summed (a drift found is removed)"),
+            plot.to_svg()?,
+        );
+    }
+    write(&page, dir)
+}
+
 /// The workpiece page: the form along each generatrix (points and fit),
 /// the form around the part at mid-length, and the history.
 #[derive(Debug)]
