@@ -239,24 +239,33 @@ fn an_arc_needs_the_ball_calibration_or_a_known_diameter_for_the_probe() {
     // passed on with its interval.
     within(&d, "probe_radius", r_cal, 1e-9);
     assert!((r_cal - r_true).abs() < 50e-6);
-    // The probe's form where the part was touched (20°…160°), in the
-    // probe file's convention (no mean and tilt over the ball's 10°…170°):
-    // within 10 nm PV.
+    // What the probe's form puts into the part's scan (20°…160°, less what
+    // a circle takes there): within 10 nm PV — from the 2-D file and from
+    // the 3-D one alike (their conventions differ, this does not).
     let theta: Vec<f64> = (0..=500)
         .map(|i| (20.0 + 140.0 * i as f64 / 500.0f64).to_radians())
         .collect();
-    let ball: Vec<f64> = (0..=400)
-        .map(|i| (10.0 + 160.0 * i as f64 / 400.0f64).to_radians())
-        .collect();
-    let c = lsq3(&ball, &probe_form_xz);
-    let probe_here: Vec<f64> = theta
-        .iter()
-        .map(|&t| probe_form_xz(t) - c[0] - c[1] * t.cos() - c[2] * t.sin())
-        .collect();
+    let probe_here = lsq_rest(&theta, probe_form_xz);
     within(&d, "probe_form", pv(&probe_here), 10.0);
     // The part: within 10 % of its PV.
     let lobes = lsq_rest(&theta, |t| 100.0 * (6.0 * t).cos());
     within(&d, "part_form", pv(&lobes), 0.1 * pv(&lobes));
+    let probe3 = dir.join("probe3d.json");
+    run(&[
+        "probe",
+        "calibrate",
+        s(&camp.join("ball3d.csv")),
+        "--ball-diameter-mm",
+        "4",
+        "--plane",
+        "xyz",
+        "-o",
+        s(&probe3),
+        "--json",
+    ]);
+    let d3 = diagnose(&[s(&part), "--probe", s(&probe3)]);
+    within(&d3, "probe_form", pv(&probe_here), 10.0);
+    within(&d3, "part_form", pv(&lobes), 0.1 * pv(&lobes));
 
     // No ball, but a part of known diameter (50 mm): the probe radius from
     // the centre path's radius, in the convention of forms with zero mean

@@ -649,22 +649,28 @@ fn arc(p: &[[f64; 2]], side: [f64; 2], ev: &Evidence) -> Result<PartDiagnosis> {
         Some(k) => {
             let contacts = probe::correct_with(p, side, k.radius_mm, |t| (k.form)(t))?;
             let outside = contacts.iter().filter(|x| !x.calibrated).count();
-            // The form where this scan touched: its PV over the contacts
-            // in the calibrated directions; the interval is the series'
-            // (a smooth function: its error at the peak and at the valley
-            // each within that).
-            let at: Vec<f64> = contacts
-                .iter()
-                .filter(|x| x.calibrated)
-                .map(|x| x.form_nm)
-                .collect();
+            // What the probe's form puts into this scan's form: its values
+            // at the calibrated contacts less what the least-squares circle
+            // takes (1, cos θ, sin θ over these angles) — the same whatever
+            // convention the probe file keeps (a 2-D file's form has no
+            // mean or tilt over the ball's arc, a 3-D file's over the
+            // sphere). The interval is the series' (a smooth function: its
+            // error at the peak and at the valley each within that).
+            let cal: Vec<&probe::Contact> = contacts.iter().filter(|x| x.calibrated).collect();
+            let in_scan = if cal.len() >= 4 {
+                let t: Vec<f64> = cal.iter().map(|x| x.theta_deg.to_radians()).collect();
+                let f: Vec<f64> = cal.iter().map(|x| x.form_nm).collect();
+                pv(&remove_fit(&t, &f, |t| vec![1.0, t.cos(), t.sin()])?.0)
+            } else {
+                0.0
+            };
             let mut pf = pv_estimated(
                 Source::ProbeForm,
-                if at.is_empty() { 0.0 } else { pv(&at) },
+                in_scan,
                 k.form_ci95_nm,
                 "nm",
                 format!(
-                    "peak to valley over this scan's contact angles, from the ball calibration ({:.1} nm PV over all the calibrated directions)",
+                    "peak to valley of its form over this scan's contact angles less what a circle takes there, from the ball calibration ({:.1} nm PV over all the calibrated directions)",
                     k.form_pv_nm
                 ),
             );
