@@ -175,6 +175,31 @@ pub fn add_skipped_count(doc: &mut serde_json::Value, data: &Dataset) {
     }
 }
 
+/// The text of an on-machine command's scan file: the file itself, or —
+/// for a measurement CSV with probe columns (`session_id`, `d_um`, …,
+/// docs/cli.md § Measurement CSV) — one session of it written as the small
+/// file `kind` the command reads (the same values, so the same results).
+/// `--session` on a small file is refused.
+pub fn scan_text(
+    path: &Path,
+    session: Option<i64>,
+    kind: import::probe_csv::Small,
+) -> Result<String> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    if import::probe_csv::is_probe_csv(&text) {
+        let t = import::probe_csv::read(&text, &path.display().to_string())?;
+        return t.small(session, kind);
+    }
+    if let Some(s) = session {
+        anyhow::bail!(
+            "--session {s}: {} is a scan file, not a measurement CSV with `session_id` and `d_um` columns",
+            path.display()
+        );
+    }
+    Ok(text)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -45,6 +45,8 @@ enum Command {
     Separate(cmd::separate::Args),
     /// A part's form from on-machine probing and the correction pass.
     Workpiece(cmd::workpiece::Args),
+    /// Which error is in a part scan: probe, part, slide, spindle or drift.
+    DiagnosePart(cmd::diagnose_part::Args),
     /// Export a model as a firmware table or a controller's compensation file.
     Export(cmd::export::Args),
     /// Upload a table to the board over the serial link.
@@ -77,6 +79,7 @@ fn main() -> ExitCode {
         Command::Probe(a) => a.run(),
         Command::Separate(a) => a.run(),
         Command::Workpiece(a) => a.run(),
+        Command::DiagnosePart(a) => a.run(),
         Command::Export(a) => a.run(),
         Command::Upload(a) => a.run(),
         Command::Status(a) => a.run(),

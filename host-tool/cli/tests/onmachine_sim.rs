@@ -358,3 +358,63 @@ fn the_on_machine_commands_find_the_simulated_answers() {
         "form {pv0} → {pv1} µm: ratio {ratio}, the grinder removes {eta}"
     );
 }
+
+#[test]
+fn a_3d_calibration_has_a_page_with_its_cone_and_the_form_over_the_ball() {
+    let dir = tmp_dir("onmachine", "probe3d-page");
+    let camp = dir.join("camp");
+    run(&[
+        "simulate",
+        "--scenario",
+        "on-machine",
+        "--seed",
+        "7",
+        "-o",
+        s(&camp),
+        "--json",
+    ]);
+    let rep = dir.join("rep");
+    let cal = json(&run(&[
+        "probe",
+        "calibrate",
+        s(&camp.join("ball3d.csv")),
+        "--ball-diameter-mm",
+        "4",
+        "--plane",
+        "xyz",
+        "-o",
+        s(&dir.join("p3.json")),
+        "--report",
+        s(&rep),
+        "--json",
+    ]));
+    assert_eq!(
+        cal["report"].as_str().unwrap(),
+        s(&rep.join("index.html")),
+        "{cal}"
+    );
+    let html = std::fs::read_to_string(rep.join("index.html")).unwrap();
+    // The verdict first: the radius with its interval, the form's PV and
+    // the calibrated cone (the scan's 85° round +z), and what the page
+    // cannot know outside it; then the map.
+    let pr = &cal["probe"];
+    let head = format!(
+        "Probe radius {:.6} mm ± {:.1} nm (95 %); form error {:.0} nm PV over a cone of {:.1}°",
+        pr["probe_radius_mm"].as_f64().unwrap(),
+        pr["probe_radius_ci95_mm"].as_f64().unwrap() * 1e6,
+        pr["form_pv_nm"].as_f64().unwrap(),
+        pr["cone_half_angle_deg"].as_f64().unwrap()
+    );
+    let verdict = html
+        .find(&head)
+        .unwrap_or_else(|| panic!("{head} not on the page"));
+    let unknown = html
+        .find("cannot know: the form in directions more than 85.0°")
+        .expect("what the cone cannot know");
+    let map = html.find("<svg").expect("a figure");
+    assert!(verdict < unknown && unknown < map);
+    // One figure, responsive, with the two maps' colour scale.
+    let svg = std::fs::read_to_string(rep.join("form-map.svg")).unwrap();
+    assert!(svg.contains("viewBox"), "not responsive");
+    assert!(svg.contains("fitted form error") && svg.contains("residual on the ball"));
+}

@@ -30,6 +30,7 @@
 //! - `workpiece`: a part's form from probed generatrices and the correction pass (G-code).
 //! - `separate`: error separation — the reversal method (part form vs slide straightness).
 //! - `probe`: on-machine probing — probe radius and form on a master ball, a scan corrected.
+//! - `part_diagnosis`: which error is in a part scan — probe, part, slide, spindle or drift — and what the data cannot tell.
 //! - `export`: the binary table for the board, controller compensation files and bed meshes.
 
 pub mod compare;
@@ -47,6 +48,7 @@ pub mod iso230;
 pub mod lines;
 pub mod lsq;
 pub mod model;
+pub mod part_diagnosis;
 pub mod probe;
 pub mod regions;
 pub mod separate;

@@ -204,7 +204,7 @@ struct Fit {
 }
 
 /// Algebraic (Kåsa) circle fit: centre and radius.
-fn kasa(p: &[[f64; 2]]) -> Result<([f64; 2], f64)> {
+pub fn kasa(p: &[[f64; 2]]) -> Result<([f64; 2], f64)> {
     let n = p.len();
     let a = DMatrix::from_fn(n, 3, |i, j| match j {
         0 => p[i][0],

@@ -59,8 +59,8 @@ pub fn pv(v: &[f64]) -> f64 {
 
 /// Noise from second differences of evenly enough spaced readings: the
 /// median |Δ²| scaled to σ (Δ² of white noise has variance 6σ²; the
-/// median of |N(0, 6σ²)| is 0.6745·√6·σ).
-fn noise(y: &[f64]) -> Option<f64> {
+/// median of |N(0, 6σ²)| is 0.6745·√6·σ). `None` with fewer than 8.
+pub fn noise(y: &[f64]) -> Option<f64> {
     if y.len() < 8 {
         return None;
     }

@@ -20,6 +20,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("probe", 3),
     ("separate", 2),
     ("workpiece", 3),
+    ("part_diagnosis", 4),
     ("model", 4),
     ("fit", 5),
     ("diagnose", 6),

@@ -3,6 +3,7 @@
 pub mod compare;
 pub mod demo;
 pub mod diagnose;
+pub mod diagnose_part;
 pub mod export;
 pub mod fit;
 pub mod flash;

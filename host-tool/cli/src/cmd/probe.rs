@@ -9,6 +9,7 @@ use anyhow::{bail, Context, Result};
 use serde_json::json;
 
 use crate::cmd::out::{self, outln};
+use trueaxis_engine::import::probe_csv::Small;
 use trueaxis_engine::probe::sphere::{self, Probe3d};
 use trueaxis_engine::probe::{self, ProbeFile};
 
@@ -30,7 +31,7 @@ pub enum Sub {
 }
 
 /// The plane a 2-D scan lies in.
-fn plane(s: &str) -> Result<[&'static str; 2]> {
+pub(crate) fn plane(s: &str) -> Result<[&'static str; 2]> {
     Ok(match s {
         "xz" => ["x", "z"],
         "yz" => ["y", "z"],
@@ -39,9 +40,8 @@ fn plane(s: &str) -> Result<[&'static str; 2]> {
     })
 }
 
-fn read(path: &PathBuf, pl: [&str; 2]) -> Result<Vec<[f64; 2]>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+fn read(path: &std::path::Path, pl: [&str; 2], session: Option<i64>) -> Result<Vec<[f64; 2]>> {
+    let text = crate::input::scan_text(path, session, Small::Positions)?;
     probe::read_scan(&text, &path.display().to_string(), pl)
 }
 
@@ -60,10 +60,15 @@ pub struct Calibrate {
     /// Where to write the probe file.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Write an HTML page (verdict, the form against contact angle) into
-    /// this directory (2-D calibrations).
+    /// Write an HTML page (verdict, the form against contact angle — or,
+    /// in 3-D, a map of it over the calibrated directions) into this
+    /// directory.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// A measurement CSV with probe columns: the session to read
+    /// (docs/cli.md § Measurement CSV, probe data).
+    #[arg(long)]
+    pub session: Option<i64>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -73,13 +78,10 @@ impl Calibrate {
     fn run(self) -> Result<()> {
         crate::input::refuse_overwrite(&[("the scan", &self.scan)], &[("-o", &self.output)])?;
         if self.plane == "xyz" {
-            if self.report.is_some() {
-                bail!("--report draws 2-D calibrations (the form against contact angle); a 3-D calibration has no page yet — leave --report out");
-            }
             return self.run_3d();
         }
         let pl = plane(&self.plane).map_err(|e| anyhow::anyhow!("{e} (or xyz for a 3-D scan)"))?;
-        let p = read(&self.scan, pl)?;
+        let p = read(&self.scan, pl, self.session)?;
         let cal = probe::calibrate(&p, self.ball_diameter_mm / 2.0)
             .with_context(|| format!("{}: cannot calibrate", self.scan.display()))?;
         let pr = &cal.probe;
@@ -167,8 +169,7 @@ impl Calibrate {
 impl Calibrate {
     /// `--plane xyz`: the 3-D calibration (docs/on-machine.md).
     fn run_3d(self) -> Result<()> {
-        let text = std::fs::read_to_string(&self.scan)
-            .with_context(|| format!("cannot read {}", self.scan.display()))?;
+        let text = crate::input::scan_text(&self.scan, self.session, Small::Positions)?;
         let p = sphere::read_scan(&text, &self.scan.display().to_string())?;
         let cal = sphere::calibrate(&p, self.ball_diameter_mm / 2.0)
             .with_context(|| format!("{}: cannot calibrate", self.scan.display()))?;
@@ -180,10 +181,31 @@ impl Calibrate {
         for w in &cal.warnings {
             eprintln!("warning: {w}");
         }
+        let report = self
+            .report
+            .as_ref()
+            .map(|dir| {
+                crate::report::onmachine::probe3d_page(
+                    &crate::report::onmachine::Probe3dPage {
+                        probe: pr,
+                        points: &p,
+                        residual_nm: &cal.residual_nm,
+                        ball_pv_nm: [cal.pv_without_form_nm, cal.pv_with_form_nm],
+                        warnings: &cal.warnings,
+                        next: format!(
+                            "trueaxis probe correct SCAN.csv --probe {} -o SURFACE.csv",
+                            self.output.display()
+                        ),
+                    },
+                    dir,
+                )
+            })
+            .transpose()?;
         if self.json {
             let doc = json!({
                 "scan": self.scan.display().to_string(),
                 "output": self.output.display().to_string(),
+                "report": report.as_ref().map(|p| p.display().to_string()),
                 "probe": pr,
                 "pv_without_form_nm": cal.pv_without_form_nm,
                 "pv_with_form_nm": cal.pv_with_form_nm,
@@ -222,17 +244,20 @@ impl Calibrate {
         }
         let _ = writeln!(s, "  on the ball    {:.1} nm PV with the radius only → {:.1} nm PV with the form (residual RMS {:.1} nm)", cal.pv_without_form_nm, cal.pv_with_form_nm, pr.residual_rms_nm);
         let _ = writeln!(s, "  probe file written to {}", self.output.display());
+        if let Some(r) = &report {
+            let _ = writeln!(s, "  report: {}", r.display());
+        }
         out::print(&s)
     }
 }
 
 /// A probe file of either kind (its `format` tells which).
-enum AnyProbe {
+pub(crate) enum AnyProbe {
     Plane(ProbeFile),
     Sphere(Probe3d),
 }
 
-fn read_probe(path: &PathBuf) -> Result<AnyProbe> {
+pub(crate) fn read_probe(path: &PathBuf) -> Result<AnyProbe> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     let v: serde_json::Value = serde_json::from_str(&text)
@@ -248,6 +273,30 @@ fn read_probe(path: &PathBuf) -> Result<AnyProbe> {
         pr.check().with_context(bad)?;
         Ok(AnyProbe::Plane(pr))
     }
+}
+
+/// `--side`: the outward direction of the surface, ± an axis of the plane.
+pub(crate) fn side(s: &str, pl: [&str; 2]) -> Result<[f64; 2]> {
+    Ok(match s {
+        s if s.len() == 2 && (s.starts_with('+') || s.starts_with('-')) => {
+            let sign = if s.starts_with('-') { -1.0 } else { 1.0 };
+            let axis = &s[1..];
+            match pl.iter().position(|a| *a == axis) {
+                Some(0) => [sign, 0.0],
+                Some(_) => [0.0, sign],
+                None => bail!(
+                    "--side `{s}`: expected ± one of the plane's axes {} and {}",
+                    pl[0],
+                    pl[1]
+                ),
+            }
+        }
+        s => bail!(
+            "--side `{s}`: expected +{0}, -{0}, +{1} or -{1}",
+            pl[0],
+            pl[1]
+        ),
+    })
 }
 
 /// `trueaxis probe correct SCAN.csv --probe PROBE.json -o SURFACE.csv`.
@@ -272,6 +321,10 @@ pub struct Correct {
     /// Where to write the corrected contact points (CSV).
     #[arg(short, long)]
     pub output: PathBuf,
+    /// A measurement CSV with probe columns: the session to read
+    /// (docs/cli.md § Measurement CSV, probe data).
+    #[arg(long)]
+    pub session: Option<i64>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -285,32 +338,13 @@ impl Correct {
         )?;
         let pl = plane(&self.plane)?;
         let pr = read_probe(&self.probe)?;
-        let side = match self.side.as_str() {
-            s if s.len() == 2 && (s.starts_with('+') || s.starts_with('-')) => {
-                let sign = if s.starts_with('-') { -1.0 } else { 1.0 };
-                let axis = &s[1..];
-                match pl.iter().position(|a| *a == axis) {
-                    Some(0) => [sign, 0.0],
-                    Some(_) => [0.0, sign],
-                    None => bail!(
-                        "--side `{s}`: expected ± one of the plane's axes {} and {}",
-                        pl[0],
-                        pl[1]
-                    ),
-                }
-            }
-            s => bail!(
-                "--side `{s}`: expected +{0}, -{0}, +{1} or -{1}",
-                pl[0],
-                pl[1]
-            ),
-        };
+        let side = side(&self.side, pl)?;
         let circle = match self.nominal.as_str() {
             "circle" => true,
             "line" => false,
             s => bail!("--nominal `{s}`: expected circle or line"),
         };
-        let p = read(&self.scan, pl)?;
+        let p = read(&self.scan, pl, self.session)?;
         let axis = |a: &str| match a {
             "x" => 0,
             "y" => 1,

@@ -9,6 +9,7 @@ use anyhow::{bail, Context, Result};
 use serde_json::json;
 
 use crate::cmd::out;
+use trueaxis_engine::import::probe_csv::Small;
 use trueaxis_engine::{import, separate};
 
 /// Arguments of `trueaxis separate`.
@@ -45,6 +46,10 @@ pub struct ThreeProbe {
     /// Write an HTML page (verdict, plots) into this directory.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// A measurement CSV with probe columns: the session to read
+    /// (docs/cli.md § Measurement CSV, probe data).
+    #[arg(long)]
+    pub session: Option<i64>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -65,8 +70,7 @@ impl ThreeProbe {
                     self.angles_deg
                 )
             })?;
-        let text = std::fs::read_to_string(&self.scan)
-            .with_context(|| format!("cannot read {}", self.scan.display()))?;
+        let text = crate::input::scan_text(&self.scan, self.session, Small::ThreeProbe)?;
         let name = self.scan.display().to_string();
         let rows = import::read_table(
             &text,
@@ -225,37 +229,44 @@ pub struct MultiStep {
     /// Write an HTML page (verdict, plots) into this directory.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// A measurement CSV with probe columns: the session to read
+    /// (docs/cli.md § Measurement CSV, probe data).
+    #[arg(long)]
+    pub session: Option<i64>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
 }
 
-impl MultiStep {
-    fn run(self) -> Result<()> {
-        crate::input::refuse_overwrite(&[("the scan", &self.scan)], &[("-o", &self.output)])?;
-        let text = std::fs::read_to_string(&self.scan)
-            .with_context(|| format!("cannot read {}", self.scan.display()))?;
-        let name = self.scan.display().to_string();
-        let rows = import::read_table(
-            &text,
-            &name,
-            &["c_deg", "step_deg", "p_um"],
-            "the spindle angle, the part's step and the probe reading",
-        )?;
-        // Steps: the distinct part positions, evenly spaced over the turn.
-        let step_rows: Vec<Vec<f64>> = rows.iter().map(|r| vec![r[1], 0.0]).collect();
-        let (steps, _) = turn_bins(&step_rows, &format!("{name}: step_deg"), "multi-step")?;
-        let key = |c: f64| (c.rem_euclid(360.0) * 1000.0).round() as i64 % 360_000;
-        let mut runs = Vec::new();
-        let mut angles: Option<Vec<f64>> = None;
-        for &st in &steps {
-            let mine: Vec<Vec<f64>> = rows
-                .iter()
-                .filter(|r| key(r[1]) == key(st))
-                .map(|r| vec![r[0], r[2]])
-                .collect();
-            let (a, v) = turn_bins(&mine, &format!("{name}: step {st}°"), "multi-step")?;
-            match &angles {
+/// Reads a multi-step file (`c_deg,step_deg,p_um`, docs/on-machine.md):
+/// the spindle angles and one turn of readings per step, each step read at
+/// the same evenly spaced angles (several turns averaged).
+pub(crate) fn read_multi_step(
+    path: &std::path::Path,
+    session: Option<i64>,
+) -> Result<(Vec<f64>, Vec<Vec<f64>>)> {
+    let text = crate::input::scan_text(path, session, Small::MultiStep)?;
+    let name = path.display().to_string();
+    let rows = import::read_table(
+        &text,
+        &name,
+        &["c_deg", "step_deg", "p_um"],
+        "the spindle angle, the part's step and the probe reading",
+    )?;
+    // Steps: the distinct part positions, evenly spaced over the turn.
+    let step_rows: Vec<Vec<f64>> = rows.iter().map(|r| vec![r[1], 0.0]).collect();
+    let (steps, _) = turn_bins(&step_rows, &format!("{name}: step_deg"), "multi-step")?;
+    let key = |c: f64| (c.rem_euclid(360.0) * 1000.0).round() as i64 % 360_000;
+    let mut runs = Vec::new();
+    let mut angles: Option<Vec<f64>> = None;
+    for &st in &steps {
+        let mine: Vec<Vec<f64>> = rows
+            .iter()
+            .filter(|r| key(r[1]) == key(st))
+            .map(|r| vec![r[0], r[2]])
+            .collect();
+        let (a, v) = turn_bins(&mine, &format!("{name}: step {st}°"), "multi-step")?;
+        match &angles {
                 None => angles = Some(a),
                 Some(a0) if a0 != &a => bail!(
                     "{name}: step {st}° is read at {} spindle angles from {:.3}°, step {}° at {} from {:.3}°: every step must be read at the same spindle angles",
@@ -267,9 +278,39 @@ impl MultiStep {
                 ),
                 Some(_) => {}
             }
-            runs.push(v.into_iter().map(|x| x[0]).collect::<Vec<f64>>());
-        }
-        let angles = angles.context("no readings")?;
+        runs.push(v.into_iter().map(|x| x[0]).collect::<Vec<f64>>());
+    }
+    Ok((angles.context("no readings")?, runs))
+}
+
+/// Reads a straightness run: `<axis>_mm,d_um` (docs/on-machine.md), or
+/// from a measurement CSV with probe columns the rows of `session` at
+/// `orientation` (0 or 180°).
+pub(crate) fn read_run(
+    p: &std::path::Path,
+    axis: &str,
+    session: Option<i64>,
+    orientation: u16,
+) -> Result<Vec<(f64, f64)>> {
+    let pos = format!("{axis}_mm");
+    let a = axis.chars().next().unwrap_or('x');
+    let text = crate::input::scan_text(p, session, Small::Straightness(a, orientation))?;
+    Ok(import::read_columns(
+        &text,
+        &p.display().to_string(),
+        [&pos, "d_um"],
+        "the position and the probe reading",
+    )?
+    .into_iter()
+    .map(|v| (v[0], v[1]))
+    .collect())
+}
+
+impl MultiStep {
+    fn run(self) -> Result<()> {
+        crate::input::refuse_overwrite(&[("the scan", &self.scan)], &[("-o", &self.output)])?;
+        let name = self.scan.display().to_string();
+        let (angles, runs) = read_multi_step(&self.scan, self.session)?;
         let r = separate::multi_step(&runs).with_context(|| format!("{name}: cannot separate"))?;
         let mut csv = String::from("angle_deg,part_um,spindle_um\n");
         for (i, a) in angles.iter().enumerate() {
@@ -354,8 +395,10 @@ impl MultiStep {
 pub struct Reversal {
     /// The run with the part at 0°: `<axis>_mm,d_um` (probe reading, µm).
     pub run0: PathBuf,
-    /// The run with the part turned 180° and the probe reversed.
-    pub run180: PathBuf,
+    /// The run with the part turned 180° and the probe reversed (left out
+    /// when RUN0 is a measurement CSV whose session holds both
+    /// orientations, `orientation_deg` 0 and 180).
+    pub run180: Option<PathBuf>,
     /// The travel axis [default: x].
     #[arg(long, default_value = "x", value_parser = ["x", "y", "z"])]
     pub axis: String,
@@ -365,6 +408,10 @@ pub struct Reversal {
     /// Write an HTML page (verdict, plots) into this directory.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// A measurement CSV with probe columns: the session to read
+    /// (docs/cli.md § Measurement CSV, probe data).
+    #[arg(long)]
+    pub session: Option<i64>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -372,30 +419,34 @@ pub struct Reversal {
 
 impl Reversal {
     fn run(self) -> Result<()> {
+        let run180 = match &self.run180 {
+            Some(p) => p.clone(),
+            None => {
+                // Reading one small file as both runs would separate
+                // nothing and say the slide is straight: refused.
+                let text = std::fs::read_to_string(&self.run0)
+                    .with_context(|| format!("cannot read {}", self.run0.display()))?;
+                if !import::probe_csv::is_probe_csv(&text) {
+                    bail!(
+                        "{}: give the 180° run as RUN180.csv (or a measurement CSV whose session holds both orientations)",
+                        self.run0.display()
+                    );
+                }
+                self.run0.clone()
+            }
+        };
         crate::input::refuse_overwrite(
-            &[("run 0°", &self.run0), ("run 180°", &self.run180)],
+            &[("run 0°", &self.run0), ("run 180°", &run180)],
             &[("-o", &self.output)],
         )?;
         let pos = format!("{}_mm", self.axis);
-        let read = |p: &PathBuf| -> Result<Vec<(f64, f64)>> {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read {}", p.display()))?;
-            Ok(import::read_columns(
-                &text,
-                &p.display().to_string(),
-                [&pos, "d_um"],
-                "the position and the probe reading",
-            )?
-            .into_iter()
-            .map(|v| (v[0], v[1]))
-            .collect())
-        };
+        let read = |p: &PathBuf, o: u16| read_run(p, &self.axis, self.session, o);
         let r =
-            separate::reversal(&read(&self.run0)?, &read(&self.run180)?).with_context(|| {
+            separate::reversal(&read(&self.run0, 0)?, &read(&run180, 180)?).with_context(|| {
                 format!(
                     "{} and {}: cannot separate",
                     self.run0.display(),
-                    self.run180.display()
+                    run180.display()
                 )
             })?;
         let mut csv = format!("{pos},part_um,slide_um\n");
@@ -413,7 +464,7 @@ impl Reversal {
                 "warning: {} readings of {} lie outside the travel of {}: left out",
                 r.left_out,
                 self.run0.display(),
-                self.run180.display()
+                run180.display()
             );
         }
         let report = self

@@ -49,6 +49,10 @@ pub struct Args {
     /// The part's history (appended: one entry per measured pass).
     #[arg(long)]
     pub history: Option<PathBuf>,
+    /// A measurement CSV with probe columns: the session to read
+    /// (docs/cli.md § Measurement CSV, probe data).
+    #[arg(long)]
+    pub session: Option<i64>,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -73,8 +77,11 @@ impl Args {
         if self.gcode.is_some() && self.nominal_diameter_mm.is_none() {
             bail!("--gcode needs --nominal-diameter-mm (X is programmed in diameter)");
         }
-        let text = std::fs::read_to_string(&self.scan)
-            .with_context(|| format!("cannot read {}", self.scan.display()))?;
+        let text = crate::input::scan_text(
+            &self.scan,
+            self.session,
+            trueaxis_engine::import::probe_csv::Small::Workpiece,
+        )?;
         let rows = import::read_table(
             &text,
             &self.scan.display().to_string(),

@@ -1,4 +1,5 @@
-//! The on-machine pages (docs/on-machine.md, "Reports"): `probe calibrate`,
+//! The on-machine pages (docs/on-machine.md, "Reports"): `probe calibrate`
+//! (2-D and 3-D),
 //! `separate reversal|three-probe|multi-step` and `workpiece` with
 //! `--report DIR`. Each opens with a verdict card; roundness is drawn as a
 //! polar plot (the profile around a base circle, deviations magnified),
@@ -9,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 
-use super::plot::{Series, XyPlot};
+use super::plot::{heat_map_pair, HeatMap, Series, XyPlot};
 use super::{esc, Page, Tone, Verdict};
 
 /// Colours of the polar plot's profiles (the pages' palette order).
@@ -295,6 +296,244 @@ pub fn probe_page(p: &ProbePage, dir: &Path) -> Result<PathBuf> {
         "the form error against contact angle, and what is left on the ball",
         plot.to_svg()?,
     );
+    write(&page, dir)
+}
+
+/// The 3-D probe calibration page: the form over the calibrated cone of
+/// directions as a map (azimuth round the cone's axis × angle from it),
+/// beside the ball's residual with the form on the same colour scale.
+#[derive(Debug)]
+pub struct Probe3dPage<'a> {
+    /// The probe file.
+    pub probe: &'a trueaxis_engine::probe::sphere::Probe3d,
+    /// The probe-centre positions of the scan, mm.
+    pub points: &'a [[f64; 3]],
+    /// Residual per point with the form, nm.
+    pub residual_nm: &'a [f64],
+    /// The ball's PV with the radius only and with the form, nm.
+    pub ball_pv_nm: [f64; 2],
+    /// Warnings.
+    pub warnings: &'a [String],
+    /// The command to run next.
+    pub next: String,
+}
+
+/// An orthonormal pair perpendicular to the unit vector `a` (the first
+/// along x's projection, or y's when `a` is near x), so that a direction
+/// is `cos ψ·a + sin ψ (cos φ·u + sin φ·v)`; for `a = +z` φ is the usual
+/// azimuth from +x.
+fn cone_frame(a: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+    let e = if a[0].abs() > 0.9 {
+        [0.0, 1.0, 0.0]
+    } else {
+        [1.0, 0.0, 0.0]
+    };
+    let d = e[0] * a[0] + e[1] * a[1] + e[2] * a[2];
+    let u = [e[0] - d * a[0], e[1] - d * a[1], e[2] - d * a[2]];
+    let l = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
+    let u = [u[0] / l, u[1] / l, u[2] / l];
+    let v = [
+        a[1] * u[2] - a[2] * u[1],
+        a[2] * u[0] - a[0] * u[2],
+        a[0] * u[1] - a[1] * u[0],
+    ];
+    (u, v)
+}
+
+/// Writes the 3-D probe calibration page into `dir`.
+pub fn probe3d_page(p: &Probe3dPage, dir: &Path) -> Result<PathBuf> {
+    let pr = p.probe;
+    let a = pr.cone_axis;
+    let (u, v) = cone_frame(a);
+    let half = pr.cone_half_angle_deg;
+    let mut page = Page::new("Probe calibration on the master ball (3-D)");
+    page.verdict(Verdict {
+        headline: format!(
+            "Probe radius {:.6} mm ± {:.1} nm (95 %); form error {:.0} nm PV over a cone of {:.1}° round ({:.3}, {:.3}, {:.3}).",
+            pr.probe_radius_mm,
+            pr.probe_radius_ci95_mm * 1e6,
+            pr.form_pv_nm,
+            half,
+            a[0] + 0.0,
+            a[1] + 0.0,
+            a[2] + 0.0
+        )
+        .replace("-0.000", "0.000"),
+        details: vec![
+            format!(
+                "on the ball: {:.0} nm PV with the radius only → {:.0} nm PV with the form (degree {}, chosen by held-out RMS)",
+                p.ball_pv_nm[0], p.ball_pv_nm[1], pr.degree
+            ),
+            format!(
+                "cannot know: the form in directions more than {half:.1}° from the cone's axis (the grey band of the map) — contacts there are corrected with the radius only, never an extrapolated polynomial; to know them, scan the ball over those directions"
+            ),
+        ],
+        warnings: p.warnings.to_vec(),
+        next: Some(p.next.clone()),
+        tone: if p.warnings.is_empty() { Tone::Good } else { Tone::Unknown },
+    });
+    // The map: every 10° of azimuth, every ~5° from the axis out to 20°
+    // past the cone (those cells empty: not calibrated).
+    let outer = (half + 20.0).min(180.0);
+    let rows = ((outer / 5.0).ceil() as usize).max(2);
+    let ys: Vec<f64> = (0..=rows).map(|i| outer * i as f64 / rows as f64).collect();
+    let xs: Vec<f64> = (0..36).map(|i| 10.0 * i as f64).collect();
+    let dir_at = |phi: f64, psi: f64| {
+        let (sp, cp) = psi.to_radians().sin_cos();
+        let (sf, cf) = phi.to_radians().sin_cos();
+        [0, 1, 2].map(|k| cp * a[k] + sp * (cf * u[k] + sf * v[k]))
+    };
+    let mut values = Vec::with_capacity(xs.len() * ys.len());
+    for &psi in &ys {
+        for &phi in &xs {
+            values.push((psi <= half + 1e-9).then(|| pr.form_nm_at(dir_at(phi, psi))));
+        }
+    }
+    let mut form = HeatMap::from_points(
+        "fitted form error",
+        "azimuth round the axis (°)",
+        "angle from the axis (°)",
+        "nm",
+        &[],
+        1.0,
+    );
+    form.x = xs;
+    form.y = ys;
+    form.values = values;
+    // The ball's residual at each contact, in the same coordinates.
+    let c = pr.centre_mm;
+    let pts: Vec<(f64, f64, f64)> = p
+        .points
+        .iter()
+        .zip(p.residual_nm)
+        .map(|(q, r)| {
+            let d = [q[0] - c[0], q[1] - c[1], q[2] - c[2]];
+            let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let n = [d[0] / l, d[1] / l, d[2] / l];
+            let dot = |w: [f64; 3]| n[0] * w[0] + n[1] * w[1] + n[2] * w[2];
+            let psi = dot(a).clamp(-1.0, 1.0).acos().to_degrees();
+            // To 0.01° (rings of a scan land on one row, 360° on 0°).
+            let round = |x: f64| (x * 100.0).round() / 100.0;
+            let phi = round(dot(v).atan2(dot(u)).to_degrees()).rem_euclid(360.0);
+            // Near the axis the azimuth means nothing (and a pole contact
+            // a hair off it would make a column of its own): put it at 0.
+            (if psi < 1.0 { 0.0 } else { phi }, round(psi), *r)
+        })
+        .collect();
+    let resid = HeatMap::from_points(
+        "residual on the ball with it",
+        "azimuth round the axis (°)",
+        "angle from the axis (°)",
+        "nm",
+        &pts,
+        2.0,
+    );
+    page.figure(
+        "form-map",
+        "the probe's form error over the calibrated directions (left; grey: outside the cone, not calibrated) and what is left on the ball with it (right), on one colour scale",
+        heat_map_pair(&form, &resid)?,
+    );
+    write(&page, dir)
+}
+
+/// The `diagnose-part` page: the verdict (what is identified, what these
+/// data cannot know and the sums they read), one row per source with its
+/// size or the measurement that would tell it, and the scan's profile.
+pub fn part_diagnosis_page(
+    d: &trueaxis_engine::part_diagnosis::PartDiagnosis,
+    verdict: &str,
+    dir: &Path,
+) -> Result<PathBuf> {
+    use trueaxis_engine::part_diagnosis::Status;
+    let mut page = Page::new("Which error is in this part scan");
+    // Every measurement that would tell more: for what cannot be known,
+    // and for what an estimate leaves out (a multi-step's inseparable
+    // harmonics, the slides in a corrected arc).
+    let measures: Vec<String> = d
+        .findings
+        .iter()
+        .filter_map(|f| {
+            let m = f.measure.as_ref()?;
+            Some(match f.status {
+                Status::CannotKnow => {
+                    format!("cannot know from these data — {}: {m}", f.source.label())
+                }
+                _ => format!("not in the estimate of the {} — {m}", f.source.label()),
+            })
+        })
+        .collect();
+    let unknown = !measures.is_empty();
+    let mut details = vec![format!(
+        "a {} scan, {} points{}",
+        d.kind,
+        d.points,
+        d.noise_um
+            .map(|n| format!(", reading noise {n:.3} µm"))
+            .unwrap_or_default()
+    )];
+    details.extend(measures);
+    page.verdict(Verdict {
+        headline: {
+            let mut c = verdict.chars();
+            c.next()
+                .map(|f| format!("{}{}.", f.to_uppercase(), c.as_str()))
+                .unwrap_or_default()
+        },
+        details,
+        warnings: Vec::new(),
+        next: None,
+        tone: if unknown { Tone::Unknown } else { Tone::Good },
+    });
+    let rows = d
+        .findings
+        .iter()
+        .map(|f| {
+            let size = match (f.value, f.ci95) {
+                (Some(v), Some([lo, hi])) => {
+                    let p = if f.unit == "mm" { 6 } else { 3 };
+                    format!("{v:.p$} {u} (95 %: {lo:.p$} … {hi:.p$})", u = f.unit)
+                }
+                _ => "—".into(),
+            };
+            let status = match f.status {
+                Status::Estimated => "estimated",
+                Status::NotInScan => "not in this scan",
+                Status::CannotKnow => "cannot know from these data",
+            };
+            vec![
+                f.source.label().to_string(),
+                status.to_string(),
+                size,
+                f.what.clone(),
+                f.measure.clone().unwrap_or_default(),
+            ]
+        })
+        .collect();
+    page.table(&["source", "status", "size", "what", "measure"], rows);
+    if !d.profile.is_empty() {
+        let (x, what) = match d.kind {
+            "straightness" => ("position (mm)", "the readings, line removed"),
+            "roundness" => (
+                "rotation angle (°)",
+                "the readings round the turn, harmonics 0 and 1 removed",
+            ),
+            _ => (
+                "contact angle (°)",
+                "the centre path against its least-squares circle",
+            ),
+        };
+        let plot = XyPlot::new(
+            "what the scan reads",
+            x,
+            format!("deviation ({})", d.profile_unit),
+        )
+        .with(Series::points("scan", d.profile.clone()));
+        page.figure(
+            "scan",
+            format!("{what}: every source it holds, summed (a drift found is removed)"),
+            plot.to_svg()?,
+        );
+    }
     write(&page, dir)
 }
 

@@ -12,6 +12,7 @@ mod bedmesh;
 mod csv_io;
 mod dialect;
 mod ecmc;
+pub mod probe_csv;
 mod rtl;
 
 use std::fmt;
@@ -157,7 +158,8 @@ pub fn read_columns(
 /// lines, other columns ignored): probe scans, reversal runs, workpiece
 /// scans (docs/on-machine.md). A `*_mm` value must lie within ±10 000 mm, a
 /// `*_um` value within ±10 000 µm (the measurement CSV's plausibility
-/// limits), a `*_deg` value within ±3600°; `what` says what the columns
+/// limits), a `*_deg` value within ±3600°, a `*_s` time stamp within
+/// ±3.2·10⁷ s; `what` says what the columns
 /// are in the message for a header without them. Returns one row per line
 /// with the values in the order of `columns` and, last, the line number.
 /// Errors name the file, line and column.
@@ -201,6 +203,9 @@ pub fn read_table(
                 (crate::data::ERR_PLAUSIBLE_UM, "µm")
             } else if columns[k].ends_with("_deg") {
                 (3600.0, "°")
+            } else if columns[k].ends_with("_s") {
+                // Time stamps: up to a year of seconds.
+                (3.2e7, "s")
             } else {
                 (crate::data::POS_PLAUSIBLE_MM, "mm")
             };

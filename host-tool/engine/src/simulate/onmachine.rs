@@ -22,7 +22,7 @@ use super::normal;
 pub const ON_MACHINE: &str = "on-machine";
 
 /// The files of the campaign, in the order they are written.
-pub const FILES: [&str; 9] = [
+pub const FILES: [&str; 10] = [
     "ball.csv",
     "ball3d.csv",
     "part.csv",
@@ -31,6 +31,7 @@ pub const FILES: [&str; 9] = [
     "three-probe.csv",
     "multi-step.csv",
     "grinder.csv",
+    "roundness.csv",
     "truth.json",
 ];
 
@@ -56,6 +57,10 @@ pub const Z_POINTS: usize = 41;
 pub const LENGTH_MM: f64 = 120.0;
 /// Dial-gauge noise of the µm-scale runs (reversal, roundness, grinder), µm.
 pub const GAUGE_NOISE_UM: f64 = 0.05;
+/// Thermal drift of the reading during the timed roundness scan, µm/min.
+pub const THERMAL_DRIFT_UM_PER_MIN: f64 = 0.05;
+/// Seconds per degree of the timed roundness scan (one turn: 12 min).
+pub const ROUNDNESS_S_PER_DEG: f64 = 2.0;
 
 /// The probe's form error in contact direction `n` (unit vector), nm:
 /// three lobes round the stylus growing toward the equator and a term in
@@ -140,6 +145,8 @@ pub struct Truth {
     /// Peak to valley of the ground part's form over the measured length,
     /// µm (mean radius removed).
     pub grinder_form_pv_um: f64,
+    /// Thermal drift of the reading during `roundness.csv`, µm/min.
+    pub thermal_drift_um_per_min: f64,
 }
 
 fn pv(v: impl Iterator<Item = f64>) -> f64 {
@@ -286,6 +293,22 @@ pub fn campaign(seed: u64) -> Vec<(&'static str, String)> {
         }
     }
     let grinder = grinder_csv(grinder_form_um, &mut rng, "ground part before a pass");
+    // One probe round the part as mounted in the multi-step's first step,
+    // timed and closing the turn (0…360°), while the reading drifts.
+    let mut round = head(
+        "one probe round a turning part, timed, closing the turn; the reading drifts",
+        "c_deg,p_um,t_s",
+    );
+    for i in 0..=360 {
+        let t = (i as f64).to_radians();
+        let t_s = ROUNDNESS_S_PER_DEG * i as f64;
+        let v = roundness_um(t)
+            + spindle_xy_um(t)[0]
+            + 0.8 * (t + 0.5).cos()
+            + THERMAL_DRIFT_UM_PER_MIN * t_s / 60.0
+            + GAUGE_NOISE_UM * normal(&mut rng);
+        round.push_str(&format!("{i},{v:.4},{t_s}\n"));
+    }
     let truth = truth(seed);
     vec![
         ("ball.csv", ball),
@@ -296,6 +319,7 @@ pub fn campaign(seed: u64) -> Vec<(&'static str, String)> {
         ("three-probe.csv", three),
         ("multi-step.csv", multi),
         ("grinder.csv", grinder),
+        ("roundness.csv", round),
         (
             "truth.json",
             serde_json::to_string_pretty(&truth).expect("plain data") + "\n",
@@ -326,6 +350,7 @@ pub fn truth(seed: u64) -> Truth {
         multi_step_steps: STEPS,
         removal_efficiency: REMOVAL_EFFICIENCY,
         grinder_form_pv_um: pv(g.iter().map(|q| grinder_form_um(q[0], q[1]) - mean)),
+        thermal_drift_um_per_min: THERMAL_DRIFT_UM_PER_MIN,
     }
 }
 

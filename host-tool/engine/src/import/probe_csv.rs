@@ -1,0 +1,447 @@
+//! The measurement CSV's probe columns (docs/cli.md § Measurement CSV,
+//! "Probe data"): a whole on-machine campaign in ONE file — every scan's
+//! rows tagged with `session_id`, the probe reading in `d_um`, and the
+//! columns that say how each reading was taken: `c_deg` (rotation angle of
+//! a turned part), `orientation_deg` (0 or 180 for a reversal run),
+//! `step_deg` (a multi-step position), `probe_no` (multi-probe runs),
+//! `probe_id`, the surface normal `normal_x/y/z` and `contact_deg`. The
+//! on-machine commands read one session of it as the small scan file they
+//! read otherwise ([`ProbeTable::small`] writes that file's text), so both
+//! ways give the same numbers. Values are checked here, where the line and
+//! column are known.
+
+use anyhow::{bail, Result};
+
+/// The columns this reader knows (other columns are ignored).
+pub const COLUMNS: [&str; 15] = [
+    "session_id",
+    "x_mm",
+    "y_mm",
+    "z_mm",
+    "t_s",
+    "d_um",
+    "c_deg",
+    "step_deg",
+    "orientation_deg",
+    "probe_no",
+    "probe_id",
+    "normal_x",
+    "normal_y",
+    "normal_z",
+    "contact_deg",
+];
+
+/// Whether `text` is a measurement CSV with probe data: its header names
+/// `session_id` and `d_um` (the small scan files have neither).
+pub fn is_probe_csv(text: &str) -> bool {
+    let head: Vec<&str> = text
+        .trim_start_matches('\u{feff}')
+        .lines()
+        .find(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#'))
+        .map(|l| l.split(',').map(str::trim).collect())
+        .unwrap_or_default();
+    head.contains(&"session_id") && head.contains(&"d_um")
+}
+
+/// One row: the value of each of [`COLUMNS`] (`None`: no such column or an
+/// empty cell), `probe_id` as text, and the row's line.
+#[derive(Clone, Debug)]
+pub struct ProbeRow {
+    /// 1-based line in the file.
+    pub line: usize,
+    /// Values in the order of [`COLUMNS`] (`probe_id` is `None` here).
+    pub v: [Option<f64>; 15],
+    /// The probe's id, if given.
+    pub probe_id: Option<String>,
+}
+
+impl ProbeRow {
+    /// The value of column `c` (one of [`COLUMNS`]).
+    pub fn get(&self, c: &str) -> Option<f64> {
+        self.v[COLUMNS
+            .iter()
+            .position(|k| *k == c)
+            .expect("a known column")]
+    }
+}
+
+/// A probe measurement CSV, read and checked.
+#[derive(Clone, Debug)]
+pub struct ProbeTable {
+    /// The file's name in messages.
+    pub name: String,
+    /// Its rows.
+    pub rows: Vec<ProbeRow>,
+}
+
+/// The limit and unit of a column's values.
+fn limit(c: &str) -> (f64, &'static str) {
+    if c.ends_with("_mm") {
+        (crate::data::POS_PLAUSIBLE_MM, "mm")
+    } else if c.ends_with("_um") {
+        (crate::data::ERR_PLAUSIBLE_UM, "µm")
+    } else if c.ends_with("_deg") {
+        (3600.0, "°")
+    } else if c == "t_s" {
+        (3.2e7, "s")
+    } else {
+        (1.0 + 1e-9, "")
+    }
+}
+
+/// Reads a probe measurement CSV: a header, `#` comment lines, one reading
+/// per row. Errors name the file, line and column.
+pub fn read(text: &str, name: &str) -> Result<ProbeTable> {
+    let mut cols: Option<Vec<Option<usize>>> = None;
+    let mut rows = Vec::new();
+    for (i, raw) in text.trim_start_matches('\u{feff}').lines().enumerate() {
+        let ln = i + 1;
+        let line = raw.trim_end_matches('\r');
+        if line.trim().is_empty() || line.trim_start().starts_with('#') {
+            continue;
+        }
+        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+        let Some(c) = &cols else {
+            let mut map = vec![None; COLUMNS.len()];
+            for (j, cell) in cells.iter().enumerate() {
+                if let Some(k) = COLUMNS.iter().position(|c| c == cell) {
+                    if map[k].is_some() {
+                        bail!("{name}:{ln}:{}: duplicate column `{cell}`", j + 1);
+                    }
+                    map[k] = Some(j);
+                }
+            }
+            cols = Some(map);
+            continue;
+        };
+        let mut v = [None; 15];
+        let mut probe_id = None;
+        for (k, col) in COLUMNS.iter().enumerate() {
+            let Some(j) = c[k] else { continue };
+            let cell = cells.get(j).copied().unwrap_or("");
+            if cell.is_empty() {
+                continue;
+            }
+            let at = |msg: String| {
+                anyhow::anyhow!("{name}:{ln}:{}: `{col}`: {msg}, found `{cell}`", j + 1)
+            };
+            if *col == "probe_id" {
+                probe_id = Some(cell.to_string());
+                continue;
+            }
+            let x: f64 = cell
+                .parse()
+                .ok()
+                .filter(|x: &f64| x.is_finite())
+                .ok_or_else(|| at("expected a finite number".into()))?;
+            match *col {
+                "session_id" | "probe_no" => {
+                    if x.fract() != 0.0 || x.abs() > 1e9 || (*col == "probe_no" && x < 1.0) {
+                        return Err(at(if *col == "probe_no" {
+                            "expected a probe number 1, 2, 3, …".into()
+                        } else {
+                            "expected an integer".into()
+                        }));
+                    }
+                }
+                "orientation_deg" => {
+                    let o = x.rem_euclid(360.0);
+                    if o.abs() > 1e-6 && (o - 180.0).abs() > 1e-6 {
+                        return Err(at(
+                            "expected 0 or 180 (the part's orientation in a reversal run)".into(),
+                        ));
+                    }
+                }
+                _ => {
+                    let (lim, unit) = limit(col);
+                    if x.abs() > lim {
+                        return Err(at(if unit.is_empty() {
+                            "expected a unit vector's component, within ±1".into()
+                        } else {
+                            format!("expected a finite number within ±{lim} {unit}")
+                        }));
+                    }
+                }
+            }
+            v[k] = Some(x);
+        }
+        // A normal is a unit vector (its three components together).
+        if let (Some(a), Some(b), Some(d)) = (v[11], v[12], v[13]) {
+            let l = (a * a + b * b + d * d).sqrt();
+            if (l - 1.0).abs() > 1e-3 {
+                bail!(
+                    "{name}:{ln}:{}: `normal_x`…`normal_z`: expected a unit vector, found length {l:.4}",
+                    c[11].unwrap_or(0) + 1
+                );
+            }
+        }
+        rows.push(ProbeRow {
+            line: ln,
+            v,
+            probe_id,
+        });
+    }
+    if cols.is_none() {
+        bail!("{name}: no header line");
+    }
+    Ok(ProbeTable {
+        name: name.to_string(),
+        rows,
+    })
+}
+
+/// Which small scan file a session is read as.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Small {
+    /// Probe-centre positions: the position columns given (`x_mm`, …),
+    /// and `t_s` when every row has it (ball and part scans).
+    Positions,
+    /// A straightness run: `<axis>_mm,d_um[,t_s]`, the rows of one
+    /// orientation (0 or 180; all rows for 0 without the column).
+    Straightness(char, u16),
+    /// Three probes: `c_deg,p1_um,p2_um,p3_um`, each probe's rows in
+    /// order (`probe_no` 1, 2, 3) side by side.
+    ThreeProbe,
+    /// A multi-step set: `c_deg,step_deg,p_um`.
+    MultiStep,
+    /// One probe round a turning part: `c_deg,p_um[,t_s]`.
+    Roundness,
+    /// A turned part's generatrices: `c_deg,z_mm,dev_um`.
+    Workpiece,
+}
+
+fn num(x: f64) -> String {
+    format!("{x}")
+}
+
+impl ProbeTable {
+    /// The sessions in the file, in order of appearance.
+    pub fn sessions(&self) -> Vec<i64> {
+        let mut s: Vec<i64> = Vec::new();
+        for r in &self.rows {
+            if let Some(v) = r.get("session_id") {
+                if !s.contains(&(v as i64)) {
+                    s.push(v as i64);
+                }
+            }
+        }
+        s
+    }
+
+    /// The rows of `session`; `None` when the file holds one session.
+    pub fn select(&self, session: Option<i64>) -> Result<Vec<&ProbeRow>> {
+        let all = self.sessions();
+        let s = match session {
+            Some(s) if all.contains(&s) => s,
+            Some(s) => bail!(
+                "{}: no session {s} (sessions: {})",
+                self.name,
+                all.iter()
+                    .map(|v| v.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            None if all.len() == 1 => all[0],
+            None => bail!(
+                "{}: {} sessions ({}): say which with --session",
+                self.name,
+                all.len(),
+                all.iter()
+                    .map(|v| v.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        };
+        Ok(self
+            .rows
+            .iter()
+            .filter(|r| r.get("session_id").map(|v| v as i64) == Some(s))
+            .collect())
+    }
+
+    /// The text of the small scan file `kind` holding `session`'s rows
+    /// (numbers written back exactly: the same values either way). A row
+    /// without a value the kind needs is named by its line.
+    pub fn small(&self, session: Option<i64>, kind: Small) -> Result<String> {
+        let rows = self.select(session)?;
+        let need = |r: &ProbeRow, c: &str| -> Result<f64> {
+            r.get(c).ok_or_else(|| {
+                anyhow::anyhow!(
+                    "{}:{}: no `{c}` value on this row (needed for this scan)",
+                    self.name,
+                    r.line
+                )
+            })
+        };
+        let timed = !rows.is_empty() && rows.iter().all(|r| r.get("t_s").is_some());
+        let mut out = String::new();
+        match kind {
+            Small::Positions => {
+                let pos: Vec<&str> = ["x_mm", "y_mm", "z_mm"]
+                    .into_iter()
+                    .filter(|c| rows.iter().any(|r| r.get(c).is_some()))
+                    .collect();
+                let mut head = pos.join(",");
+                if timed {
+                    head.push_str(",t_s");
+                }
+                out.push_str(&head);
+                out.push('\n');
+                for r in &rows {
+                    let mut cells = Vec::new();
+                    for c in &pos {
+                        cells.push(num(need(r, c)?));
+                    }
+                    if timed {
+                        cells.push(num(need(r, "t_s")?));
+                    }
+                    out.push_str(&cells.join(","));
+                    out.push('\n');
+                }
+            }
+            Small::Straightness(axis, o) => {
+                let pos = format!("{axis}_mm");
+                out.push_str(&format!("{pos},d_um{}\n", if timed { ",t_s" } else { "" }));
+                for r in &rows {
+                    let ori = r
+                        .get("orientation_deg")
+                        .map_or(0, |v| v.rem_euclid(360.0).round() as u16);
+                    if ori != o {
+                        continue;
+                    }
+                    out.push_str(&format!(
+                        "{},{}",
+                        num(need(r, &pos)?),
+                        num(need(r, "d_um")?)
+                    ));
+                    if timed {
+                        out.push_str(&format!(",{}", num(need(r, "t_s")?)));
+                    }
+                    out.push('\n');
+                }
+            }
+            Small::ThreeProbe => {
+                let mut per: [Vec<(f64, f64)>; 3] = Default::default();
+                for r in &rows {
+                    let k = need(r, "probe_no")? as usize;
+                    if !(1..=3).contains(&k) {
+                        bail!(
+                            "{}:{}: probe {k}: a three-probe run has probes 1, 2 and 3",
+                            self.name,
+                            r.line
+                        );
+                    }
+                    per[k - 1].push((need(r, "c_deg")?, need(r, "d_um")?));
+                }
+                if per[1].len() != per[0].len() || per[2].len() != per[0].len() {
+                    bail!(
+                        "{}: probes 1, 2, 3 have {}, {} and {} readings: each must read the same angles",
+                        self.name,
+                        per[0].len(),
+                        per[1].len(),
+                        per[2].len()
+                    );
+                }
+                out.push_str("c_deg,p1_um,p2_um,p3_um\n");
+                for (i, ((a, b), d)) in per[0].iter().zip(&per[1]).zip(&per[2]).enumerate() {
+                    if b.0 != a.0 || d.0 != a.0 {
+                        bail!(
+                            "{}: reading {} of probes 1, 2, 3 is at different angles ({}, {}, {}°)",
+                            self.name,
+                            i + 1,
+                            a.0,
+                            b.0,
+                            d.0
+                        );
+                    }
+                    out.push_str(&format!(
+                        "{},{},{},{}\n",
+                        num(a.0),
+                        num(a.1),
+                        num(b.1),
+                        num(d.1)
+                    ));
+                }
+            }
+            Small::MultiStep => {
+                out.push_str("c_deg,step_deg,p_um\n");
+                for r in &rows {
+                    out.push_str(&format!(
+                        "{},{},{}\n",
+                        num(need(r, "c_deg")?),
+                        num(need(r, "step_deg")?),
+                        num(need(r, "d_um")?)
+                    ));
+                }
+            }
+            Small::Roundness => {
+                out.push_str(&format!("c_deg,p_um{}\n", if timed { ",t_s" } else { "" }));
+                for r in &rows {
+                    out.push_str(&format!(
+                        "{},{}",
+                        num(need(r, "c_deg")?),
+                        num(need(r, "d_um")?)
+                    ));
+                    if timed {
+                        out.push_str(&format!(",{}", num(need(r, "t_s")?)));
+                    }
+                    out.push('\n');
+                }
+            }
+            Small::Workpiece => {
+                out.push_str("c_deg,z_mm,dev_um\n");
+                for r in &rows {
+                    out.push_str(&format!(
+                        "{},{},{}\n",
+                        num(need(r, "c_deg")?),
+                        num(need(r, "z_mm")?),
+                        num(need(r, "d_um")?)
+                    ));
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_session_is_read_as_its_small_file_and_bad_values_are_placed() {
+        let text = "# campaign\nsession_id,x_mm,z_mm,d_um,orientation_deg,probe_id\n\
+                    1,0,,0.5,0,A\n1,10,,0.25,0,A\n1,0,,-0.5,180,A\n2,1.5,2.5,,,B\n";
+        assert!(is_probe_csv(text));
+        assert!(!is_probe_csv("x_mm,d_um\n0,1\n"));
+        let t = read(text, "c.csv").unwrap();
+        assert_eq!(t.sessions(), vec![1, 2]);
+        assert_eq!(
+            t.small(Some(1), Small::Straightness('x', 0)).unwrap(),
+            "x_mm,d_um\n0,0.5\n10,0.25\n"
+        );
+        assert_eq!(
+            t.small(Some(1), Small::Straightness('x', 180)).unwrap(),
+            "x_mm,d_um\n0,-0.5\n"
+        );
+        assert_eq!(
+            t.small(Some(2), Small::Positions).unwrap(),
+            "x_mm,z_mm\n1.5,2.5\n"
+        );
+        assert!(t
+            .small(None, Small::Positions)
+            .unwrap_err()
+            .to_string()
+            .contains("--session"));
+        // Session 1 has no z: named by its line.
+        let e = t.small(Some(1), Small::Workpiece).unwrap_err().to_string();
+        assert!(e.contains("c.csv:3: no `c_deg`"), "{e}");
+        // A bad value: file, line, column.
+        let bad = text.replace("1,10,,0.25,0,A", "1,10,,0.25,90,A");
+        let e = read(&bad, "c.csv").unwrap_err().to_string();
+        assert!(
+            e.starts_with("c.csv:4:5: `orientation_deg`: expected 0 or 180"),
+            "{e}"
+        );
+    }
+}
