@@ -236,7 +236,8 @@ pub struct Engine<'m> {
     model_flags: u16,
     /// Output correction, milli-nm (exact slew arithmetic: nm/ms × µs).
     out_mnm: [i64; 3],
-    steps: [i64; 3],
+    /// Net pulses emitted per axis (|steps| ≤ 2^22, see [`slew_axis`]).
+    steps: [i32; 3],
 
     live: Faults,
     sticky: Faults,
@@ -471,7 +472,7 @@ impl<'m> Engine<'m> {
 
     /// The output correction now, nm.
     pub fn corr_nm(&self) -> [i32; 3] {
-        self.out_mnm.map(|m| round_div(m, 1000) as i32)
+        self.out_mnm.map(round_mnm)
     }
 
     /// What [`Request::ReadCorrection`](trueaxis_protocol::Request) answers.
@@ -487,7 +488,7 @@ impl<'m> Engine<'m> {
 
     /// Net pulses emitted per axis since boot.
     pub fn steps(&self) -> [i64; 3] {
-        self.steps
+        self.steps.map(i64::from)
     }
 
     /// Telemetry (the link server adds its own counters).
@@ -503,7 +504,7 @@ impl<'m> Engine<'m> {
             temp_mc: self.temp_mc,
             model_corr_nm: self.model_corr_nm,
             corr_nm: self.corr_nm(),
-            steps: self.steps,
+            steps: self.steps(),
             model_flags: self.model_flags,
             faults: self.faults(),
             faults_latched: self.latched,
@@ -698,18 +699,16 @@ impl<'m> Engine<'m> {
             faults,
         };
         for (axis, &target) in target_nm.iter().enumerate() {
-            let target_mnm = target as i64 * 1000;
-            let d = (target_mnm - self.out_mnm[axis]).clamp(-max_d_mnm, max_d_mnm);
-            self.out_mnm[axis] += d;
-
-            // Pulses: absolute, so they can never drift from the output.
-            let corr_nm = round_div(self.out_mnm[axis], 1000);
-            let want = round_div(corr_nm, self.cfg.axes[axis].pulse_nm as i64);
-            let lim = self.cfg.max_steps_per_tick as i64;
-            let n = (want - self.steps[axis]).clamp(-lim, lim) as i32;
+            let n = slew_axis(
+                &mut self.out_mnm[axis],
+                &mut self.steps[axis],
+                target,
+                max_d_mnm,
+                self.cfg.axes[axis].pulse_nm,
+                self.cfg.max_steps_per_tick,
+            );
             if n != 0 {
                 out.pulses(axis, n);
-                self.steps[axis] += n as i64;
             }
             report.steps[axis] = n;
         }
@@ -745,6 +744,65 @@ fn jump_threshold_counts(threshold_pm: i64, pm_per_count: i64) -> u64 {
     }
 }
 
+/// The largest |target| the output follows, nm: 2^22 − 1, above any
+/// table's max |correction| (`model_core::table::MAX_CORR_LIMIT_NM` = 4·10^6, so
+/// holding the target here never changes it — one SSAT on the M4). It
+/// bounds the output: |out_mnm| ≤ (2^22 − 1)·1000 < 2^32 − 500, and the
+/// pulses: |steps| ≤ 2^22.
+const TARGET_LIMIT_NM: i32 = (1 << 22) - 1;
+
+/// One axis of the slew-limited output and its pulses: the output
+/// `out_mnm` moves towards `target_nm`·1000 by at most `max_d_mnm`, and
+/// `steps` (pulses emitted) towards round(round(out / 1000) / pulse) by at
+/// most `lim`; returns the pulses to emit. Only the slew step is in i64
+/// (the output in mnm reaches ±4.2·10^9); the roundings and the pulses are
+/// 32-bit (UDIV) — exactly the i64 arithmetic the tick had before
+/// (`slew_axis_is_the_i64_loop`), for `pulse_nm`, `lim` > 0 (checked by
+/// `EngineConfig::check`) and every state the loop reaches.
+#[inline(always)]
+fn slew_axis(
+    out_mnm: &mut i64,
+    steps: &mut i32,
+    target_nm: i32,
+    max_d_mnm: i64,
+    pulse_nm: i32,
+    lim: i32,
+) -> i32 {
+    let target = target_nm.clamp(-TARGET_LIMIT_NM - 1, TARGET_LIMIT_NM);
+    let d = (target as i64 * 1000 - *out_mnm).clamp(-max_d_mnm, max_d_mnm);
+    *out_mnm += d;
+    // Pulses: absolute, so they can never drift from the output.
+    let corr_nm = round_mnm(*out_mnm);
+    let want = round_div_i32(corr_nm, pulse_nm);
+    let n = want.wrapping_sub(*steps).clamp(-lim, lim);
+    *steps = steps.wrapping_add(n);
+    n
+}
+
+/// round(out / 1000), halves away from zero, for |out| ≤ 2^32 − 1 − 500
+/// (the output's range, [`TARGET_LIMIT_NM`]): one UDIV on the magnitude.
+#[inline(always)]
+fn round_mnm(out_mnm: i64) -> i32 {
+    let q = ((out_mnm.unsigned_abs() as u32).wrapping_add(500) / 1000) as i32;
+    if out_mnm < 0 {
+        -q
+    } else {
+        q
+    }
+}
+
+/// round(a / b), halves away from zero, for b > 0 and |a| + b/2 < 2^32
+/// (|a| ≤ 2^22, any positive i32 b): one UDIV on the magnitude.
+#[inline(always)]
+fn round_div_i32(a: i32, b: i32) -> i32 {
+    let q = (a.unsigned_abs().wrapping_add(b as u32 / 2) / b as u32) as i32;
+    if a < 0 {
+        -q
+    } else {
+        q
+    }
+}
+
 fn inputs_of(inj: &Injection) -> ModelInputs {
     ModelInputs {
         pos_nm: inj.pos_nm,
@@ -775,7 +833,9 @@ pub fn round_div(a: i64, b: i64) -> i64 {
 
 #[cfg(test)]
 mod tests {
-    use super::{jump_threshold_counts, round_div};
+    use super::{
+        jump_threshold_counts, round_div, round_div_i32, round_mnm, slew_axis, TARGET_LIMIT_NM,
+    };
 
     #[test]
     fn jump_threshold_in_counts_is_the_saturating_product_test() {
@@ -844,6 +904,184 @@ mod tests {
             let a = (next() as i64) >> (i % 40);
             let b = (next() % 5000) as i64 + 1;
             assert_eq!(round_div(a, b), reference(a, b), "{a} / {b}");
+        }
+    }
+
+    /// The slew/pulse step of one axis as the tick computed it in i64
+    /// before [`slew_axis`] (the output, the pulses and the pulses to emit).
+    fn reference_step(
+        out_mnm: &mut i64,
+        steps: &mut i64,
+        target: i32,
+        max_d_mnm: i64,
+        pulse_nm: i32,
+        lim: i32,
+    ) -> i32 {
+        let d = (target as i64 * 1000 - *out_mnm).clamp(-max_d_mnm, max_d_mnm);
+        *out_mnm += d;
+        let corr_nm = round_div(*out_mnm, 1000);
+        let want = round_div(corr_nm, pulse_nm as i64);
+        let n = (want - *steps).clamp(-(lim as i64), lim as i64) as i32;
+        *steps += n as i64;
+        n
+    }
+
+    /// The i32 slew/pulse step gives the i64 loop's output, pulses and
+    /// emitted counts on every tick: seeded runs of targets up to the
+    /// tables' limit (±`MAX_CORR_LIMIT_NM`, and up to the hold at
+    /// ±2^22), jumps between the extremes, pulses from 1 nm to
+    /// `i32::MAX`, per-tick limits from 1 to `i32::MAX` and slews from
+    /// 1 mnm to beyond any distance (`i64::MAX`).
+    #[test]
+    fn slew_axis_is_the_i64_loop() {
+        let max_corr = model_core::table::MAX_CORR_LIMIT_NM;
+        assert!(
+            max_corr <= TARGET_LIMIT_NM,
+            "the hold must never change a target"
+        );
+        let mut rng = trueaxis_test_support::XorShift64(0x0dd_ba11_cafe_f00du64);
+        let mut next = || rng.next_u64();
+        let mut emitted_lim = 0;
+        for run in 0..3_000 {
+            let pulse_nm = match run % 4 {
+                0 => 1,
+                1 => i32::MAX,
+                _ => (next() % 5_000) as i32 + 1,
+            };
+            let lim = match run % 5 {
+                0 => 1,
+                1 => i32::MAX,
+                _ => (next() % 50) as i32 + 1,
+            };
+            let max_d = match run % 6 {
+                0 => 1,
+                1 => i64::MAX,
+                2 => 2 * (TARGET_LIMIT_NM as i64 + 1) * 1000,
+                _ => (next() % 10_000_000) as i64 + 1,
+            };
+            let (mut out, mut steps) = (0i64, 0i32);
+            let (mut out_ref, mut steps_ref) = (0i64, 0i64);
+            for tick in 0..300 {
+                let target = match (next() % 8, tick % 40) {
+                    (_, 0) => [max_corr, -max_corr, TARGET_LIMIT_NM, -TARGET_LIMIT_NM - 1]
+                        [(next() % 4) as usize],
+                    (0, _) => 0,
+                    (1, _) => max_corr,
+                    (2, _) => -max_corr,
+                    _ => (next() % (2 * max_corr as u64 + 1)) as i32 - max_corr,
+                };
+                let n = slew_axis(&mut out, &mut steps, target, max_d, pulse_nm, lim);
+                let n_ref =
+                    reference_step(&mut out_ref, &mut steps_ref, target, max_d, pulse_nm, lim);
+                assert_eq!(
+                    (n, out, steps as i64),
+                    (n_ref, out_ref, steps_ref),
+                    "run {run} tick {tick} target {target} max_d {max_d} pulse {pulse_nm} lim {lim}"
+                );
+                emitted_lim += (n.abs() == lim) as u32;
+            }
+        }
+        assert!(
+            emitted_lim > 10_000,
+            "the pulse limit bound {emitted_lim} times"
+        );
+        // One past the hold the target is held (the i64 loop would follow it).
+        let (mut out, mut steps) = (0i64, 0i32);
+        slew_axis(
+            &mut out,
+            &mut steps,
+            TARGET_LIMIT_NM + 1,
+            i64::MAX,
+            1,
+            i32::MAX,
+        );
+        assert_eq!(
+            (out, steps),
+            (TARGET_LIMIT_NM as i64 * 1000, TARGET_LIMIT_NM)
+        );
+        slew_axis(&mut out, &mut steps, i32::MIN, i64::MAX, 1, i32::MAX);
+        assert_eq!(
+            (out, steps),
+            (-(TARGET_LIMIT_NM as i64 + 1) * 1000, -TARGET_LIMIT_NM - 1)
+        );
+    }
+
+    /// The 32-bit roundings against `round_div` at the ends of their
+    /// ranges and one past: `round_mnm` up to |out| = 2^32 − 1 − 500 (the
+    /// output reaches 2^22·1000), `round_div_i32` for |a| ≤ 2^22 and every
+    /// positive i32 divisor.
+    #[test]
+    fn round_mnm_and_round_div_i32_are_round_div_within_their_ranges() {
+        let top = u32::MAX as i64 - 500;
+        for e in [
+            0i64,
+            1,
+            499,
+            500,
+            501,
+            999,
+            1000,
+            1500,
+            4_194_304_000,
+            top - 1,
+            top,
+        ] {
+            for a in [e, -e] {
+                assert_eq!(round_mnm(a) as i64, round_div(a, 1000), "{a}");
+            }
+        }
+        // One past the range the u32 sum wraps: outside the contract.
+        assert_ne!(round_mnm(top + 1) as i64, round_div(top + 1, 1000));
+        let mut rng = trueaxis_test_support::XorShift64(0x5eed_1234_5678_9abcu64);
+        let mut next = || rng.next_u64();
+        for i in 0..200_000 {
+            let a = (next() % (2 * top as u64 + 1)) as i64 - top;
+            let a = a >> (i % 33);
+            assert_eq!(round_mnm(a) as i64, round_div(a, 1000), "{a}");
+        }
+        let lim = 1i32 << 22;
+        for b in [
+            1,
+            2,
+            3,
+            999,
+            1000,
+            1001,
+            lim - 1,
+            lim,
+            i32::MAX - 1,
+            i32::MAX,
+        ] {
+            for a in [
+                0,
+                1,
+                -1,
+                b / 2,
+                -(b / 2),
+                b / 2 + 1,
+                lim - 1,
+                lim,
+                -lim,
+                1 - lim,
+            ] {
+                assert_eq!(
+                    round_div_i32(a, b) as i64,
+                    round_div(a as i64, b as i64),
+                    "{a} / {b}"
+                );
+            }
+        }
+        for i in 0..200_000 {
+            let a = (next() % (2 * lim as u64 + 1)) as i32 - lim;
+            let b = match i % 3 {
+                0 => (next() % 10_000) as i32 + 1,
+                _ => (next() % i32::MAX as u64) as i32 + 1,
+            };
+            assert_eq!(
+                round_div_i32(a, b) as i64,
+                round_div(a as i64, b as i64),
+                "{a} / {b}"
+            );
         }
     }
 }

@@ -42,15 +42,24 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         self.poly_f32::<D>(pos, flags)
     }
 
+    /// The polynomial in w = p − centre, nm: its coefficients are stored
+    /// divided by the half spans' powers (load), so no normalisation here.
     #[inline(always)]
     fn poly_f32<const D: u8>(&self, pos: [i32; 3], flags: Flags) -> Outputs {
-        let u = self.u_f32(&pos);
+        let w = self.w_f32(&pos);
         let out = if D == 1 {
-            self.poly1_f32(u)
+            self.poly1_f32(w)
         } else {
-            self.poly3_f32(u)
+            self.poly3_f32(w)
         };
         self.finish_f32(out, flags)
+    }
+
+    /// p − centre in f32, nm (|p − c| ≤ half-span < 2^31, validated, so the
+    /// wrapping i32 difference is exact).
+    #[inline(always)]
+    fn w_f32(&self, pos: &[i32; 3]) -> [f32; 3] {
+        core::array::from_fn(|a| pos[a].wrapping_sub(self.centre_nm[a]) as f32)
     }
 
     /// Every other table: the monomial vector, the block and the terms.
@@ -122,7 +131,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         (((c + ROUND_MAGIC) - ROUND_MAGIC) as i32, f)
     }
 
-    /// c₀ + c₁x + c₂y + c₃z per output.
+    /// c₀ + c₁x + c₂y + c₃z per output (x, y, z: `w_f32`).
     #[inline(always)]
     fn poly1_f32(&self, u: [f32; 3]) -> [f32; 3] {
         let [x, y, z] = u;
@@ -139,7 +148,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
 
     /// A polynomial of degree ≤ 3 per output by the Horner scheme of
     /// `kernels::HORNER20`: 19 multiply-adds per output and no monomial products,
-    /// the coefficients read in memory order.
+    /// the coefficients read in memory order (x, y, z: `w_f32`).
     #[inline(always)]
     fn poly3_f32(&self, u: [f32; 3]) -> [f32; 3] {
         let [x, y, z] = u;

@@ -12,7 +12,7 @@ use core::num::NonZeroU32;
 use heapless::Vec;
 
 use super::kernels::{
-    choose_q, mono_index, pow2, round_i64, to_q, Mul32, Turns, HORNER20, MONOS_UP_TO,
+    choose_q, mono_index, pow2, round_i64, to_q, Mul32, Turns, HORNER20, MONOS_UP_TO, MONO_EXPS,
 };
 use super::{
     poly_fixed_shift_ok, Factor, FactoredF32, GridAxis, LoadError, MlpInput, ModelCap, PeriodicF32,
@@ -245,6 +245,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                 count: table.term_count() as u32,
             });
         }
+        self.half_nm = sc.half_span_nm;
         for a in 0..3 {
             let h = sc.half_span_nm[a] as f64;
             self.inv_half_f32[a] = (1.0 / h) as f32;
@@ -282,6 +283,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         if any_poly {
             self.n_monos = MONOS_UP_TO[max_deg.min(5)] as u8;
         }
+        let half = self.half_nm;
         for o in 0..3 {
             let sum: f64 = block.iter().map(|r| r[o].abs()).sum();
             let q = choose_q(sum, 0).ok_or(LoadError::CoefficientRange { term: 0 })?;
@@ -293,8 +295,15 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             for i in 0..20 {
                 self.poly_q[o][i] = self.block_q[i][o];
             }
+            // (half spans ≥ 1 nm, validated.)
+            // In the units of w = p − centre (nm): c / (h_x^a·h_y^b·h_z^c),
+            // so the kernels read w without normalising it (u = w / h).
             for (h, &i) in self.horner_f32[o].iter_mut().zip(HORNER20.iter()) {
-                *h = block[i as usize][o] as f32;
+                let e = MONO_EXPS[i as usize];
+                let scale: f64 = (0..3)
+                    .flat_map(|a| (0..e[a]).map(move |_| half[a] as f64))
+                    .product();
+                *h = (block[i as usize][o] / scale) as f32;
             }
         }
         Ok(())

@@ -456,7 +456,8 @@ pub struct ModelCap<const P: usize, const G: usize> {
     round_win: [u32; 3],
     /// f32 fast path of a table that is only a polynomial block
     /// ([`PolyKind`]), and its coefficients in the order the Horner scheme
-    /// of [`ModelCap::poly3_f32`] reads them, per output.
+    /// of [`ModelCap::poly3_f32`] reads them, per output, each divided by
+    /// the half spans' powers of its monomial (the kernels read p − centre).
     poly: PolyKind,
     horner_f32: [[f32; 20]; 3],
     /// Fixed-point fast path of a polynomial-only table (`PolyKind::None`
@@ -503,6 +504,9 @@ pub struct ModelCap<const P: usize, const G: usize> {
     has_rev: bool,
     per_f32: Vec<PeriodicF32, MAX_TERMS>,
     fac_f32: Vec<FactoredF32, MAX_TERMS>,
+    /// The half span of the travel per axis, nm (the input scaling; read at
+    /// load only, so last).
+    half_nm: [i32; 3],
 }
 
 impl<const P: usize, const G: usize> ModelCap<P, G> {
@@ -554,6 +558,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             has_rev: false,
             per_f32: Vec::new(),
             fac_f32: Vec::new(),
+            half_nm: [0; 3],
         }
     }
 

@@ -15,13 +15,16 @@ use crate::Result;
 /// instructions each may take.
 /// `cargo xtask bench-mcu` prints them beside the counts; `cargo xtask
 /// test` fails when a bench is missing or its worst call exceeds its budget.
+/// Round 3 (branch `mcu3`): the measured counts plus 3 — the harness's
+/// calibration of its own overhead has moved every count by 2–3 when
+/// unrelated code moved (BENCHMARKS.md).
 pub const BUDGETS: [(&str, u64); 6] = [
-    ("cubic19_f32", 215),
-    ("cubic19_fixed", 440),
-    ("poly_deg1_f32", 115),
-    ("poly_deg1_fixed", 155),
-    ("full_f32", 490),
-    ("nn_3x16x3_f32", 865),
+    ("cubic19_f32", 206),
+    ("cubic19_fixed", 437),
+    ("poly_deg1_f32", 109),
+    ("poly_deg1_fixed", 151),
+    ("full_f32", 487),
+    ("nn_3x16x3_f32", 856),
 ];
 
 /// Builds and runs the bench image (firmware release profile, `-icount
@@ -517,7 +520,7 @@ mod tests {
         let mut over = all.clone();
         over[4].max = BUDGETS[4].1 + 1;
         let e = check_budgets(&over).unwrap_err();
-        assert!(e.contains("full_f32") && e.contains("budget 490"), "{e}");
+        assert!(e.contains("full_f32") && e.contains("budget 487"), "{e}");
         let e = check_budgets(&all[1..]).unwrap_err();
         assert!(e.contains("cubic19_f32: not measured"), "{e}");
     }
