@@ -71,7 +71,7 @@ use candidates::propose;
 use noise::{noise_floor, NoiseMethod};
 use periodogram::Periodogram;
 use target::{fwl, hold_out_blocks, State, TargetData};
-use warnings::{above_noise_warning, dedup_warnings, design_warnings};
+use warnings::{above_noise_warning, dedup_warnings, design_warnings, region_above_noise_warning};
 
 /// ΔBIC a candidate must beat to count (Kass & Raftery: "very strong").
 pub const DBIC_SIGNIFICANT: f64 = -10.0;
@@ -100,6 +100,18 @@ pub const MAX_PATH_STEPS: usize = 6;
 /// Residual RMS over the noise floor from which a target is reported as
 /// above it (`above_noise_floor`): the ≤ 1.3× goal of the diagnosis loop.
 pub const ABOVE_NOISE_RATIO: f64 = 1.3;
+
+/// A cell of the working volume ([`crate::regions::worst_cells`]) whose
+/// residual RMS is more than this many times the noise floor makes its
+/// target `unexplained` even when the target's overall RMS is within
+/// [`ABOVE_NOISE_RATIO`]: with [`REGION_MIN_POINTS`] readings, noise alone
+/// reaches 3× its σ with a probability below 10⁻³⁰, and one reading a user
+/// might call a spike (6.5 σ, under the outlier screen's 7) lifts 20
+/// readings at the noise only to 1.75 σ.
+pub const REGION_ABOVE_NOISE_RATIO: f64 = 3.0;
+
+/// Readings a cell needs for [`REGION_ABOVE_NOISE_RATIO`] to apply.
+pub const REGION_MIN_POINTS: usize = 20;
 
 /// What to diagnose.
 #[derive(Clone, Debug)]
@@ -163,8 +175,14 @@ pub struct Unexplained {
     pub rms_um: f64,
     /// Its noise floor, µm.
     pub noise_floor_um: f64,
-    /// RMS over the floor (> [`ABOVE_NOISE_RATIO`]).
+    /// RMS over the floor (> [`ABOVE_NOISE_RATIO`], or any value when a
+    /// region is far above it: `region_ratio`).
     pub ratio: f64,
+    /// When a region is more than [`REGION_ABOVE_NOISE_RATIO`]× the floor:
+    /// that region's RMS over the floor (the region is `region`). None when
+    /// only the overall RMS is above.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub region_ratio: Option<f64>,
     /// The cell where that residual is worst (diagnose's 4×4×4 cells), if
     /// one has enough points.
     pub region: Option<Region>,
@@ -173,6 +191,20 @@ pub struct Unexplained {
 impl Unexplained {
     /// `ex 2.4× its noise floor (0.480 µm RMS against 0.200), worst in x 600…800, y 150…350 (0.900 µm)`.
     pub fn text(&self) -> String {
+        if let (Some(rr), Some(r)) = (self.region_ratio, &self.region) {
+            if self.ratio <= ABOVE_NOISE_RATIO {
+                return format!(
+                    "{} {:.1}× its noise floor overall ({:.3} µm RMS against {:.3}), but {rr:.1}× in {} ({:.3} µm over {} readings; the overall RMS is set by where most readings are)",
+                    self.target,
+                    self.ratio,
+                    self.rms_um,
+                    self.noise_floor_um,
+                    crate::regions::bbox_text(&r.bbox_mm),
+                    r.rms_um,
+                    r.points
+                );
+            }
+        }
         let mut s = format!(
             "{} {:.1}× its noise floor ({:.3} µm RMS against {:.3})",
             self.target, self.ratio, self.rms_um, self.noise_floor_um
@@ -503,15 +535,32 @@ fn one_target(
     let mut unexplained = Vec::new();
     if let Some(nf) = &nf {
         warnings.extend(above_noise_warning(&tn, st.rms(), nf, !first));
-        if let Some(ratio) = above_noise(st.rms(), nf.sigma_um) {
+        let cells = crate::regions::worst_cells(data, &td.norm, t, &td.rows, &st.resid);
+        let global = above_noise(st.rms(), nf.sigma_um);
+        // The RMS over all rows is set by where the rows are: 10⁶ rows of
+        // dense lines at the noise hide a grid's 2 000 points at 20× it. A
+        // region of the working volume far above the floor is named
+        // whatever the overall RMS says.
+        let region = cells.into_iter().find(|c| {
+            c.points >= REGION_MIN_POINTS && c.rms_um > REGION_ABOVE_NOISE_RATIO * nf.sigma_um
+        });
+        if global.is_some() || region.is_some() {
+            if global.is_none() {
+                if let Some(r) = &region {
+                    warnings.push(region_above_noise_warning(&tn, st.rms(), r, nf));
+                }
+            }
             unexplained.push(Unexplained {
                 target: tn.clone(),
                 rms_um: st.rms(),
                 noise_floor_um: nf.sigma_um,
-                ratio,
-                region: crate::regions::worst_cells(data, &td.norm, t, &td.rows, &st.resid)
-                    .into_iter()
-                    .next(),
+                ratio: st.rms() / nf.sigma_um,
+                region_ratio: region.as_ref().map(|r| r.rms_um / nf.sigma_um),
+                region: region.or_else(|| {
+                    crate::regions::worst_cells(data, &td.norm, t, &td.rows, &st.resid)
+                        .into_iter()
+                        .next()
+                }),
             });
         }
     }

@@ -65,6 +65,28 @@ pub(super) fn above_noise_warning(
     })
 }
 
+/// `above_noise_floor` for a region far above the floor while the overall
+/// RMS is within [`ABOVE_NOISE_RATIO`] of it.
+pub(super) fn region_above_noise_warning(
+    target: &str,
+    rms: f64,
+    region: &crate::regions::Region,
+    nf: &NoiseFloor,
+) -> Warning {
+    Warning {
+        code: "above_noise_floor".into(),
+        detail: format!(
+            "{target}: the residual is {rms:.3} µm RMS overall, within {ABOVE_NOISE_RATIO}× the noise floor {:.3} µm (from {}), but {:.3} µm ({:.1}×) over the {} readings in {}: the overall RMS is set by where most readings are (dense lines), and systematic error is left there that no candidate explains significantly — look at that region (a thermal growth measured on the grid only, a guide's shape) before calling the model done",
+            nf.sigma_um,
+            nf.method.describe(),
+            region.rms_um,
+            region.rms_um / nf.sigma_um,
+            region.points,
+            crate::regions::bbox_text(&region.bbox_mm)
+        ),
+    }
+}
+
 /// The residual RMS as a multiple of the noise floor, when it is above
 /// `ABOVE_NOISE_RATIO` (the `above_noise_floor` rule, for the warning and
 /// for `improve`).
