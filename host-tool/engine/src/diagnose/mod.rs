@@ -288,8 +288,9 @@ pub struct Candidate {
     #[serde(flatten, serialize_with = "ser_step")]
     pub step: Option<usize>,
     /// Why a `periodic` or `higher_order` candidate may be the alias of a
-    /// lead its axis is sampled too coarsely to see (`aliasing::check`):
-    /// such a candidate is never significant and never added. The JSON has
+    /// lead its axis is sampled too coarsely to see (`aliasing::check`,
+    /// asked of the contenders, ΔBIC < 0): such a candidate is never
+    /// significant and never added. The JSON has
     /// `aliasing_suspect` (bool), `alias_periods_mm` (every period of 2–40
     /// mm that would look the same, [] when not suspect) and `aliasing`
     /// (axis, sampling, seen period, the line to measure, the words; null).
