@@ -10,14 +10,16 @@ use common::{run, s, tmp_dir};
 fn a_step_that_adds_two_effects_explains_both() {
     let dir = tmp_dir("improve_text", "two");
     let data = dir.join("d.csv");
+    // Lines every 1 mm: on 2 mm steps the 25 mm wave could be a 2.17 mm
+    // lead's alias, and is held back (tests/aliasing.rs).
     let o = run(&[
         "simulate",
         "--plan",
         "grid:100",
         "--plan",
-        "line:x:2,bidir",
+        "line:x:1,bidir",
         "--plan",
-        "line:y:2,bidir",
+        "line:y:1,bidir",
         "--effect",
         "periodic:axis=x,target=ex,period_mm=25,amp_um=3",
         "--effect",

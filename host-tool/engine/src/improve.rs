@@ -65,6 +65,30 @@ pub struct ImproveStep {
     /// line (the JSON has the ratios above).
     #[serde(skip)]
     pub unexplained: Vec<diagnose::Unexplained>,
+    /// Candidates the diagnosis of this fit held back as aliasing-suspect
+    /// (`diagnose`'s `held_back`): not added, with why and what to measure.
+    pub held_back: Vec<HeldBack>,
+}
+
+/// A candidate the loop did not add because the sampling along its axis
+/// cannot tell it from a lead's alias.
+#[derive(Clone, Debug, Serialize)]
+pub struct HeldBack {
+    /// Target.
+    pub target: String,
+    /// The `fit --add` string it would have added.
+    pub add: String,
+    /// Why, in words, with the periods that would look the same.
+    pub why: String,
+    /// The dense line to measure.
+    pub measure: String,
+}
+
+impl HeldBack {
+    /// `not added: \`higher_order:…\` — ey varies along y like …`.
+    pub fn text(&self) -> String {
+        format!("not added: `{}` — {}", self.add, self.why)
+    }
 }
 
 /// `"added"`, `"evidence"` (the best effect's, or null) and
@@ -93,9 +117,13 @@ impl ImproveStep {
     /// "at the noise floor" only when the diagnosis says so — every target
     /// within `ABOVE_NOISE_RATIO`× its floor.
     pub fn outcome(&self) -> String {
-        match self.verdict {
-            Verdict::MissingEffect => "stopped after the step limit".into(),
+        let mut s = match self.verdict {
+            Verdict::MissingEffect => "stopped after the step limit".to_string(),
             Verdict::AtNoiseFloor => "at the noise floor".into(),
+            Verdict::AboveNoiseFloor if self.unexplained.is_empty() => {
+                "no significant candidate left, but one the sampling cannot support is held back"
+                    .into()
+            }
             Verdict::AboveNoiseFloor => format!(
                 "no significant candidate left, but above the noise floor: {}",
                 self.unexplained
@@ -104,7 +132,13 @@ impl ImproveStep {
                     .collect::<Vec<_>>()
                     .join("; ")
             ),
+        };
+        // Why it stopped short of the wave the data seem to show, and the
+        // measurement that settles it.
+        for h in &self.held_back {
+            s.push_str(&format!("; {}", h.text()));
         }
+        s
     }
 }
 
@@ -125,6 +159,10 @@ pub struct Improvement {
     /// Readings left out of every fit as outliers, found with the final
     /// model (empty with `keep_outliers`).
     pub outliers: Vec<Outlier>,
+    /// What the last diagnosis held back as aliasing-suspect (the last
+    /// step's `held_back`): why the loop stopped short of it and the dense
+    /// line to measure.
+    pub held_back: Vec<HeldBack>,
 }
 
 /// Runs the loop on `data`, writing each fit to `out` (and its history);
@@ -202,6 +240,15 @@ pub fn improve_with(
             verdict: d.verdict,
             above_noise_floor,
             unexplained: d.unexplained.clone(),
+            held_back: d
+                .held_back()
+                .map(|(c, a)| HeldBack {
+                    target: c.target.clone(),
+                    add: c.add.clone(),
+                    why: a.text.clone(),
+                    measure: a.measure.clone(),
+                })
+                .collect(),
         };
         on_step(&step);
         steps.push(step);
@@ -225,7 +272,9 @@ pub fn improve_with(
             }
         }
         if added.is_empty() {
+            let held_back = steps.last().map_or(Vec::new(), |s| s.held_back.clone());
             return Ok(Improvement {
+                held_back,
                 model: model.spec(),
                 model_file: out.display().to_string(),
                 steps,

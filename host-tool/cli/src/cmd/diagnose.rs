@@ -184,6 +184,14 @@ pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path, verbose: bool) ->
     for u in &d.unexplained {
         s.push_str(&format!("  {}\n", u.text()));
     }
+    // What the data seem to show and the sampling cannot support: named
+    // with the verdict, not only among the warnings.
+    for (c, a) in d.held_back() {
+        s.push_str(&format!(
+            "  held back (aliasing-suspect, not added): `{}` — {}\n",
+            c.add, a.text
+        ));
+    }
     s.push_str("candidates (best first):\n");
     for (i, c) in d
         .candidates
@@ -206,6 +214,9 @@ pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path, verbose: bool) ->
             },
             c.evidence
         ));
+        if let Some(a) = &c.aliasing {
+            s.push_str(&format!("     aliasing: {}\n", a.text));
+        }
     }
     if !d.path.is_empty() {
         s.push_str("path (BIC-ordered, until the held-out RMS stops improving):\n");
@@ -273,6 +284,12 @@ pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path, verbose: bool) ->
     }
     if let Some(cmd) = next_command(d, data_path, model_out) {
         s.push_str(&format!("next: {cmd}\n"));
+    }
+    let mut lines: Vec<&str> = d.held_back().map(|(_, a)| a.measure.as_str()).collect();
+    lines.sort_unstable();
+    lines.dedup();
+    for m in lines {
+        s.push_str(&format!("measure first: a dense line: {m}\n"));
     }
     s
 }

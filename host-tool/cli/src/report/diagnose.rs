@@ -217,6 +217,16 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
             )
         })
         .collect();
+    // Candidates held back as aliasing-suspect: beside the verdict, each
+    // with why and the line to measure.
+    let held: Vec<String> = d
+        .held_back()
+        .map(|(c, a)| format!("Not added: {} ({}) — {}.", effect_words(c), c.add, a.text))
+        .collect();
+    let measure_first = d
+        .held_back()
+        .next()
+        .map(|(_, a)| format!("measure first: a dense line: {}", a.measure));
     let (headline, tone, next) = match d.verdict {
         DVerdict::MissingEffect if !path_cands.is_empty() => {
             let names: Vec<String> = path_cands.iter().map(|c| effect_words(c)).collect();
@@ -248,10 +258,35 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
                     left_words.join("; ")
                 )
             });
+            details.extend(held);
             (
                 format!("Missing: {}.", names.join("; and ")),
                 Tone::Action,
                 fit_command(d, data_path, model_out),
+            )
+        }
+        _ if !held.is_empty() => {
+            let (c, a) = d.held_back().next().expect("held is not empty");
+            let seen = match c.effect {
+                Family::Periodic => {
+                    format!("with a period of {} mm", format_value(a.seen_period_mm))
+                }
+                _ => format!("like a {} mm wave", format_value(a.seen_period_mm)),
+            };
+            details.extend(held);
+            if !left.is_empty() {
+                details.push(format!("Left above the noise: {}.", left_words.join("; ")));
+            }
+            (
+                format!(
+                    "Not claimed: {} varies along {} {seen}, but {} is sampled every {} mm — a lead's alias would look the same. Measure a dense line first.",
+                    c.target,
+                    a.axis,
+                    a.axis,
+                    trueaxis_engine::lines::plot_num(a.sampling_mm)
+                ),
+                Tone::Action,
+                measure_first,
             )
         }
         _ if left.is_empty() && unknown_noise.is_empty() => {
@@ -820,9 +855,13 @@ pub fn write_for(
                 match c.step {
                     Some(k) => format!("yes (path step {k})"),
                     None if c.significant => "yes".into(),
+                    None if c.held_back => "no (held back: aliasing-suspect)".into(),
                     None => "no".into(),
                 },
-                c.evidence.clone(),
+                match &c.aliasing {
+                    Some(a) => format!("{}; aliasing: {}", c.evidence, a.text),
+                    None => c.evidence.clone(),
+                },
             ]
         })
         .collect();
@@ -1183,6 +1222,7 @@ mod tests {
             hold_out: "spatial cells".into(),
             evidence: Evidence::default(),
             unexplained: Vec::new(),
+            held_back: Vec::new(),
             outliers: Vec::new(),
         }
     }
@@ -1241,6 +1281,67 @@ mod tests {
         assert!(v.headline.contains("cannot be estimated"), "{}", v.headline);
     }
 
+    /// Issue 12: a wave the grid cannot attribute is not "nothing is
+    /// missing" although the residual is at the noise elsewhere: the card
+    /// names the held-back candidate, why, and the line to measure next.
+    #[test]
+    fn a_held_back_alias_is_named_on_the_card_with_the_line_to_measure() {
+        let mut d = diagnosis(0.2, Some(0.2));
+        d.verdict = DVerdict::AboveNoiseFloor;
+        let add = "higher_order:target=ey,axis=y,degree=5";
+        let measure = "y from 0 to 480 mm every 0.5 mm at x=400, z=240, forward and backward";
+        d.held_back = vec![add.into()];
+        d.candidates = vec![Candidate {
+            effect: Family::HigherOrder,
+            target: "ey".into(),
+            axis: Some("y".into()),
+            channel: None,
+            params: [("degree".to_string(), 5.0)].into(),
+            add: add.into(),
+            held_out_rms_um_after: Some(0.45),
+            held_out_rms_um_before: Some(1.7),
+            hold_out: trueaxis_engine::diagnose::HoldOutKind::Blocks,
+            gain: Some(0.74),
+            identifiable: true,
+            evidence: String::new(),
+            delta_bic: Some(-17041.0),
+            rms_um_after: Some(0.44),
+            out_of_span_share: 0.01,
+            significant: false,
+            physical: None,
+            confounded_with: Vec::new(),
+            replaces: None,
+            step: None,
+            aliasing: Some(trueaxis_engine::diagnose::aliasing::Aliasing {
+                axis: "y".into(),
+                sampling_mm: 40.0,
+                seen_period_mm: 317.0,
+                alias_periods_mm: vec![5.08],
+                measure: measure.into(),
+                text: "ey varies along y like a 317 mm wave, but y is sampled every 40 mm: …"
+                    .into(),
+            }),
+            held_back: true,
+        }];
+        let v = verdict(&d, "d.csv", "m.json");
+        assert_eq!(v.tone, Tone::Action);
+        assert_eq!(
+            v.headline,
+            "Not claimed: ey varies along y like a 317 mm wave, but y is sampled every 40 mm — a lead's alias would look the same. Measure a dense line first."
+        );
+        assert!(
+            v.details[0].starts_with("Not added: a smooth shape of ey along y")
+                && v.details[0].contains(add)
+                && v.details[0].contains("but y is sampled every 40 mm"),
+            "{:?}",
+            v.details
+        );
+        assert_eq!(
+            v.next.as_deref(),
+            Some(format!("measure first: a dense line: {measure}").as_str())
+        );
+    }
+
     #[test]
     fn a_missing_effect_is_named_with_its_value_and_how_sure() {
         let mut d = diagnosis(2.0, Some(0.2));
@@ -1282,6 +1383,8 @@ mod tests {
             confounded_with: Vec::new(),
             replaces: None,
             step: Some(1),
+            aliasing: None,
+            held_back: false,
         }];
         let v = verdict(&d, "d.csv", "m.json");
         assert_eq!(v.tone, Tone::Action);
@@ -1493,6 +1596,8 @@ mod tests {
             confounded_with: Vec::new(),
             replaces: None,
             step: Some(1),
+            aliasing: None,
+            held_back: false,
         }
     }
 

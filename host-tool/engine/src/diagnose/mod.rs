@@ -18,7 +18,12 @@
 //! neighbours (beam breaks) are found first and left out of all of it
 //! (`outliers`; `keep_outliers` keeps them). A candidate is significant only with ΔBIC < −10, a
 //! held-out gain ≥ 10 % and a ΔBIC at least 10 better than the best
-//! competing (overlapping) candidate. Without one the verdict is
+//! competing (overlapping) candidate. A `periodic` or `higher_order`
+//! candidate along an axis sampled too coarsely to tell its wave from a
+//! lead's alias is *aliasing-suspect* (`aliasing`): never significant, and
+//! when it would otherwise pass it is *held back* — named with the periods
+//! that would look the same and the dense line to measure, and the verdict
+//! is not `at_noise_floor`. Without a significant candidate the verdict is
 //! `at_noise_floor` only when every target's residual is within 1.3× its
 //! noise floor, else `above_noise_floor`, with what is left and where
 //! (`unexplained`). An implausible parameter does not block acceptance
@@ -34,11 +39,13 @@
 //! live in its submodules: `target` (one target's data, its fitted model
 //! and a candidate's FWL fit), `candidates` (the library proposed at a
 //! model), `score` and `physical` (ΔBIC, held-out gain, the physical
-//! parameter), `path` (the ranking and the BIC-ordered path), `warnings`
+//! parameter), `aliasing` (whether the sampling can support a wave),
+//! `path` (the ranking and the BIC-ordered path), `warnings`
 //! (design, plausibility, noise floor) and `swap` (an effect put into a
 //! model's list in place of the same effect; sameness is
 //! `effect::same_effect`). Worst regions are [`crate::regions::worst_cells`].
 
+pub mod aliasing;
 mod candidates;
 pub mod linalg;
 pub mod noise;
@@ -150,8 +157,10 @@ pub enum Verdict {
     /// [`ABOVE_NOISE_RATIO`]× its noise floor.
     AtNoiseFloor,
     /// No candidate is significant, but a target's residual is more than
-    /// [`ABOVE_NOISE_RATIO`]× its noise floor: something systematic is left
-    /// that no candidate explains (`unexplained` says what and where).
+    /// [`ABOVE_NOISE_RATIO`]× its noise floor, or a candidate is held back
+    /// as aliasing-suspect: something systematic is left that no candidate
+    /// explains (`unexplained` says what and where, `held_back` which
+    /// candidate the sampling cannot support and what to measure).
     AboveNoiseFloor,
 }
 
@@ -310,6 +319,40 @@ pub struct Candidate {
     /// JSON has it as `step` and, for readers, `on_path` (step ≠ null).
     #[serde(flatten, serialize_with = "ser_step")]
     pub step: Option<usize>,
+    /// Why a `periodic` or `higher_order` candidate may be the alias of a
+    /// lead its axis is sampled too coarsely to see (`aliasing::check`,
+    /// asked of the contenders, ΔBIC < 0): such a candidate is never
+    /// significant and never added. The JSON has
+    /// `aliasing_suspect` (bool), `alias_periods_mm` (every period of 2–40
+    /// mm that would look the same, [] when not suspect) and `aliasing`
+    /// (axis, sampling, seen period, the line to measure, the words; null).
+    #[serde(flatten, serialize_with = "ser_aliasing")]
+    pub aliasing: Option<aliasing::Aliasing>,
+    /// Aliasing-suspect, and it passes the ΔBIC and held-out rules as the
+    /// best suspect of its target: what would have been claimed (and added)
+    /// without the aliasing check. Not added; the verdict is not
+    /// `at_noise_floor` while one is held back.
+    pub held_back: bool,
+}
+
+/// `"aliasing_suspect"`, `"alias_periods_mm"` and `"aliasing"` from one
+/// field, so that they cannot disagree.
+fn ser_aliasing<S: serde::Serializer>(
+    a: &Option<aliasing::Aliasing>,
+    ser: S,
+) -> std::result::Result<S::Ok, S::Error> {
+    #[derive(Serialize)]
+    struct Flat<'a> {
+        aliasing_suspect: bool,
+        alias_periods_mm: &'a [f64],
+        aliasing: Option<&'a aliasing::Aliasing>,
+    }
+    Flat {
+        aliasing_suspect: a.is_some(),
+        alias_periods_mm: a.as_ref().map_or(&[], |a| a.alias_periods_mm.as_slice()),
+        aliasing: a.as_ref(),
+    }
+    .serialize(ser)
 }
 
 impl Candidate {
@@ -447,6 +490,12 @@ pub struct Diagnosis {
     /// what `above_noise_floor` (or a `missing_effect` path that stops
     /// short of the noise) leaves.
     pub unexplained: Vec<Unexplained>,
+    /// `add` strings of the candidates held back as aliasing-suspect
+    /// (`Candidate::held_back`): what the data seem to show and the
+    /// sampling cannot support; each candidate's `aliasing` says what to
+    /// measure. Non-empty makes a verdict without a significant candidate
+    /// `above_noise_floor`.
+    pub held_back: Vec<String>,
     /// Candidates, best first.
     pub candidates: Vec<Candidate>,
     /// The BIC-ordered path of effects that pass, per target in order.
@@ -469,6 +518,14 @@ impl Diagnosis {
     /// The best significant candidate, if any.
     pub fn best(&self) -> Option<&Candidate> {
         self.candidates.iter().find(|c| c.significant)
+    }
+
+    /// The candidates held back as aliasing-suspect, with their aliasing.
+    pub fn held_back(&self) -> impl Iterator<Item = (&Candidate, &aliasing::Aliasing)> {
+        self.candidates
+            .iter()
+            .filter(|c| c.held_back)
+            .filter_map(|c| c.aliasing.as_ref().map(|a| (c, a)))
     }
 }
 
@@ -672,9 +729,16 @@ pub fn diagnose_with(data: &Dataset, opts: &Options, progress: Progress) -> Resu
     // `at_noise_floor` only when it is true: nothing significant *and*
     // every target within 1.3× its floor (a target without an estimate
     // does not block it).
+    // A held-back candidate is systematic error the data show and the
+    // sampling cannot attribute: not `at_noise_floor` either.
+    let held_back: Vec<String> = candidates
+        .iter()
+        .filter(|c| c.held_back)
+        .map(|c| c.add.clone())
+        .collect();
     let verdict = if candidates.iter().any(|c| c.significant) {
         Verdict::MissingEffect
-    } else if unexplained.is_empty() {
+    } else if unexplained.is_empty() && held_back.is_empty() {
         Verdict::AtNoiseFloor
     } else {
         Verdict::AboveNoiseFloor
@@ -688,6 +752,7 @@ pub fn diagnose_with(data: &Dataset, opts: &Options, progress: Progress) -> Resu
         noise_method,
         verdict,
         unexplained,
+        held_back,
         candidates,
         path,
         worst_regions: regions,
@@ -796,6 +861,8 @@ mod tests {
             confounded_with: Vec::new(),
             replaces: None,
             step: Some(2),
+            aliasing: None,
+            held_back: false,
         };
         let v = serde_json::to_value(&c).unwrap();
         assert_eq!(

@@ -7,6 +7,7 @@ use anyhow::Result;
 use crate::data::{AXES, TARGETS};
 use crate::effect::{Effect, EffectSpec, Family, Target};
 
+use super::aliasing;
 use super::candidates::{propose, Proposal};
 use super::linalg::small_fit;
 use super::linalg::Basis;
@@ -19,6 +20,9 @@ use super::{
     COMPETING_OVERLAP, CONFOUNDED_OVERLAP, DBIC_SIGNIFICANT, MAX_PATH_STEPS, MIN_GAP_DBIC,
     MIN_HELD_OUT_GAIN,
 };
+
+/// The evidence's ending of a held-back candidate.
+const HELD_BACK: &str = " — held back, not added: aliasing-suspect (see aliasing: the sampling along its axis cannot tell it from a lead's alias)";
 
 /// Scores one target at one model state; marks confounding and the best
 /// candidate's significance. Returns the scored list sorted best first.
@@ -107,11 +111,21 @@ pub(super) fn rank_target(
         ka.total_cmp(&kb)
     });
     let n = td.rows.len();
-    // Overlaps among the plausible contenders (ΔBIC < 0), best first.
-    let top: Vec<usize> = (0..sc.len())
+    // A periodic or higher_order term along an axis sampled too coarsely to
+    // tell its wave from a lead's alias is never the best: adding the alias
+    // makes the model worse between the measured points (issue 12).
+    for s in sc.iter_mut() {
+        s.cand.aliasing = aliasing::check(td, st, &s.cand);
+    }
+    // Overlaps among the plausible contenders (ΔBIC < 0), best first —
+    // the aliasing-suspect ones after the rest: they still compete with
+    // the best (a candidate that explains what a suspect wave does is no
+    // clearer than it), but cannot be it.
+    let mut top: Vec<usize> = (0..sc.len())
         .filter(|&i| sc[i].cand.identifiable && sc[i].cand.delta_bic.is_some_and(|d| d < 0.0))
         .take(12)
         .collect();
+    top.sort_by_key(|&i| sc[i].cand.aliasing.is_some());
     // How much two candidates' (partialled) column spaces share: the mean
     // squared cosine of their principal angles over the smaller span
     // (`Basis::overlap`). The largest share of any single column, used
@@ -119,7 +133,6 @@ pub(super) fn rank_target(
     // `drift:order=3` because its plain ΔT column is — though its ΔT·z
     // column is not, and the data told the two apart. One basis per
     // contender, not one per pair.
-    let mut top = top;
     let mut spans: Vec<Basis> = top
         .iter()
         .map(|&i| Basis::new(&sc[i].partialled, n))
@@ -158,6 +171,7 @@ pub(super) fn rank_target(
         }
     }
     let mut competing_best: Option<f64> = None;
+    let mut competing_suspect = false;
     for (ii, &i) in top.iter().enumerate() {
         for (jj, &j) in top.iter().enumerate().skip(ii + 1) {
             let ov = spans[ii].overlap(&spans[jj]);
@@ -176,8 +190,13 @@ pub(super) fn rank_target(
                         d.gain
                             .map_or("n/a".into(), |g| format!("{:.0} %", 100.0 * g))
                     ));
-                } else if competing_best.is_none() {
-                    competing_best = sc[j].cand.delta_bic;
+                } else if let Some(dj) = sc[j].cand.delta_bic {
+                    // The strongest competitor (suspects come after the
+                    // rest in `top`, so not necessarily the first).
+                    if competing_best.is_none_or(|c| dj < c) {
+                        competing_best = Some(dj);
+                        competing_suspect = sc[j].cand.aliasing.is_some();
+                    }
                 }
             }
             let strong = |k: usize| sc[k].cand.delta_bic.is_some_and(|d| d < DBIC_SIGNIFICANT);
@@ -214,7 +233,25 @@ pub(super) fn rank_target(
             }
         }
     }
-    if let Some(&b) = top.first() {
+    // What the aliasing check holds back: the best suspect, when it passes
+    // the ΔBIC and held-out rules — the claim the data seem to make and
+    // cannot support.
+    let held = top
+        .iter()
+        .copied()
+        .find(|&i| sc[i].cand.aliasing.is_some())
+        .filter(|&h| passes(&sc[h].cand));
+    if let Some(h) = held {
+        sc[h].cand.held_back = true;
+        sc[h].cand.evidence.push_str(HELD_BACK);
+    }
+    // While a held-back wave is the strongest signal of the target, nothing
+    // weaker is claimed for it, overlapping or not: the unattributed alias
+    // is structure every other candidate can fit a little of (a grid's
+    // serpentine makes `dir_z` follow it: a 2.8 µm "backlash" of ey along
+    // z was added in its place, issue 12). The dense line settles both.
+    let held_dbic = held.and_then(|h| sc[h].cand.delta_bic.map(|d| (d, sc[h].cand.add.clone())));
+    if let Some(&b) = top.first().filter(|&&b| sc[b].cand.aliasing.is_none()) {
         let c = &sc[b].cand;
         let dbic = c.delta_bic.unwrap_or(f64::INFINITY);
         let gain = c.gain.unwrap_or(0.0);
@@ -224,7 +261,9 @@ pub(super) fn rank_target(
         // still the effect that explains the error, and declaring the data
         // at its noise floor would hide it. The value is flagged instead
         // (`implausible_parameter`, see `plausibility_warning`).
-        let ok = dbic < DBIC_SIGNIFICANT && gain >= MIN_HELD_OUT_GAIN && gap_ok;
+        let under_alias = held_dbic.as_ref().filter(|(d, _)| *d < dbic);
+        let ok =
+            dbic < DBIC_SIGNIFICANT && gain >= MIN_HELD_OUT_GAIN && gap_ok && under_alias.is_none();
         let why = if ok {
             if c.physical.as_ref().is_some_and(|p| !p.plausible) {
                 "significant, but its physical parameter is implausible (check the sensor or channel it follows)".to_string()
@@ -245,8 +284,19 @@ pub(super) fn rank_target(
             }
             if !gap_ok {
                 r.push(format!(
-                    "no clear gap to the competing candidate (ΔBIC {:.0})",
-                    competing_best.unwrap_or(0.0)
+                    "no clear gap to the competing candidate (ΔBIC {:.0}{})",
+                    competing_best.unwrap_or(0.0),
+                    if competing_suspect {
+                        ", an aliasing-suspect wave that explains the same residual"
+                    } else {
+                        ""
+                    }
+                ));
+            }
+            if let Some((d, add)) = under_alias {
+                r.push(format!(
+                    "the held-back aliasing-suspect `{add}` (ΔBIC {d:.0}) explains more of this residual: nothing weaker is claimed for {} until the dense line is measured",
+                    c.target
                 ));
             }
             format!("not significant: {}", r.join(", "))
@@ -366,6 +416,34 @@ pub(super) fn follow(
                         .filter(|p| Some(p.axis) == axis)
                         .map(|p| PeriodogramEvidence { step: k + 1, ..p }),
                 );
+            }
+        }
+    }
+    // What is held back is what the final model's ranking holds back (the
+    // list is the starting model's): stale flags are cleared, the final
+    // ones take the place of their stale entries.
+    if let Some(l) = list.as_mut() {
+        for c in l.iter_mut().filter(|c| !c.on_path() && c.held_back) {
+            match cur.iter().find(|s| s.cand.add == c.add) {
+                Some(f) => *c = f.cand.clone(),
+                None => {
+                    c.held_back = false;
+                    c.evidence = c.evidence.replace(HELD_BACK, "");
+                }
+            }
+        }
+        for f in cur.iter().filter(|s| s.cand.held_back) {
+            let key = f.cand.add.parse::<EffectSpec>().ok();
+            let stale = l.iter().position(|c| {
+                !c.on_path()
+                    && key
+                        .as_ref()
+                        .zip(c.add.parse::<EffectSpec>().ok())
+                        .is_some_and(|(a, b)| a.same_effect(&b))
+            });
+            match stale {
+                Some(i) => l[i] = f.cand.clone(),
+                None => l.push(f.cand.clone()),
             }
         }
     }

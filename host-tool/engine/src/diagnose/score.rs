@@ -97,6 +97,8 @@ pub(super) fn score(
             confounded_with: Vec::new(),
             replaces: repl.map(|r| r.old.clone()),
             step: None,
+            aliasing: None,
+            held_back: false,
         };
         if ff.share < IN_SPAN_SHARE || ff.fit.rank == 0 {
             if repl.is_some() {

@@ -95,33 +95,50 @@ pub fn above_noise(rms_um: f64, noise_um: f64) -> Option<f64> {
     (ratio > ABOVE_NOISE_RATIO).then_some(ratio)
 }
 
+/// The dense line that shows short periods along axis `a`: "y from 0 to
+/// 500 mm every 0.5 mm at x=400, z=250, forward and backward" (through the
+/// middle of the other axes' travel) — the `aliasing` warning's and an
+/// aliasing-suspect candidate's measurement.
+pub(super) fn dense_line_text(data: &Dataset, a: usize) -> String {
+    let norm = Norm::from_data(data);
+    let lo = norm.centre_mm[a] - norm.half_span_mm[a];
+    let hi = norm.centre_mm[a] + norm.half_span_mm[a];
+    let at: Vec<String> = data
+        .axes()
+        .iter()
+        .filter(|&&o| o != a)
+        .map(|&o| format!("{}={}", AXES[o], fmt_num(norm.centre_mm[o], 1)))
+        .collect();
+    format!(
+        "{ax} from {lo} to {hi} mm every 0.5 mm{at}, forward and backward",
+        ax = AXES[a],
+        lo = fmt_num(lo, 1),
+        hi = fmt_num(hi, 1),
+        at = if at.is_empty() {
+            String::new()
+        } else {
+            format!(" at {}", at.join(", "))
+        }
+    )
+}
+
 pub(super) fn design_warnings(data: &Dataset) -> Vec<Warning> {
     let mut w = Vec::new();
     let all: Vec<usize> = (0..data.len()).collect();
-    let norm = Norm::from_data(data);
     let axes = data.axes();
     for &a in &axes {
         let Some(dl) = densest_lines(data, a, &all) else {
             continue;
         };
         if dl.spacing_mm > ALIASING_SPACING_MM {
-            let lo = norm.centre_mm[a] - norm.half_span_mm[a];
-            let hi = norm.centre_mm[a] + norm.half_span_mm[a];
-            let at: Vec<String> = axes
-                .iter()
-                .filter(|&&o| o != a)
-                .map(|&o| format!("{}={}", AXES[o], fmt_num(norm.centre_mm[o], 1)))
-                .collect();
             w.push(Warning {
                 code: "aliasing".into(),
                 detail: format!(
-                    "the densest sampling along {ax} is every {sp} mm, so periods below {p2} mm (ball-screw leads are 2–40 mm) are invisible or aliased; add a dense line along {ax}: {ax} from {lo} to {hi} mm every 0.5 mm{at}, forward and backward",
+                    "the densest sampling along {ax} is every {sp} mm, so periods below {p2} mm (ball-screw leads are 2–40 mm) are invisible or aliased; add a dense line along {ax}: {line}",
                     ax = AXES[a],
                     sp = fmt_num(dl.spacing_mm, 3),
                     p2 = fmt_num(2.0 * dl.spacing_mm, 3),
-                    lo = fmt_num(lo, 1),
-                    hi = fmt_num(hi, 1),
-                    at = if at.is_empty() { String::new() } else { format!(" at {}", at.join(", ")) }
+                    line = dense_line_text(data, a),
                 ),
             });
         }
