@@ -481,6 +481,13 @@ pub fn correct_with(
     r: f64,
     form: impl Fn(f64) -> Option<f64>,
 ) -> Result<Vec<Contact>> {
+    contacts_along(p, &path_normals(p, side)?, r, form)
+}
+
+/// The outward normals of the probe-centre path `p` (the tangency
+/// relation: the part's normal at the contact is the centre path's),
+/// oriented towards `side`, from each point's neighbours.
+pub fn path_normals(p: &[[f64; 2]], side: [f64; 2]) -> Result<Vec<[f64; 2]>> {
     if p.len() < 3 {
         bail!(
             "{} points; a scan needs at least 3 to take normals from",
@@ -503,13 +510,33 @@ pub fn correct_with(
         if n[0] * side[0] + n[1] * side[1] < 0.0 {
             n = [-n[0], -n[1]];
         }
+        out.push(n);
+    }
+    Ok(out)
+}
+
+/// The contacts of probe-centre positions `p` along the outward unit
+/// normals `normals` (one per point: the centre path's, or the nominal
+/// surface's when the scan gives them — exact where the path's are only
+/// a chord's, at the ends of a coarse scan): contact = centre − (r + f(θ))·n.
+pub fn contacts_along(
+    p: &[[f64; 2]],
+    normals: &[[f64; 2]],
+    r: f64,
+    form: impl Fn(f64) -> Option<f64>,
+) -> Result<Vec<Contact>> {
+    if normals.len() != p.len() {
+        bail!("{} points but {} normals", p.len(), normals.len());
+    }
+    let mut out = Vec::with_capacity(p.len());
+    for (c, n) in p.iter().zip(normals) {
         let theta = n[1].atan2(n[0]);
         let known = form(theta);
         let calibrated = known.is_some();
         let form_nm = known.unwrap_or(0.0);
         let d = r + form_nm * 1e-6;
         out.push(Contact {
-            surface_mm: [p[i][0] - d * n[0], p[i][1] - d * n[1]],
+            surface_mm: [c[0] - d * n[0], c[1] - d * n[1]],
             theta_deg: theta.to_degrees(),
             form_nm,
             calibrated,
@@ -561,6 +588,35 @@ pub fn read_scan(text: &str, name: &str, plane: [&str; 2]) -> Result<Vec<[f64; 2
 
 #[cfg(test)]
 mod tests {
+    /// Issue 16: the nominal surface's normals, when the scan gives them,
+    /// place the contacts exactly where the centre path's chord normals
+    /// cannot: 7 contacts 30° apart on a 2 mm part (probe 0.5 mm) — the end
+    /// points' one-sided chords tilt their normals by 15°, 17 µm off the
+    /// part; along the nominal normals every contact is on it (< 1 nm).
+    #[test]
+    fn nominal_normals_place_a_coarse_scans_contacts_exactly() {
+        let (rp, rb) = (2.0, 0.5);
+        let angles: Vec<f64> = (0..7).map(|k| (30.0 * k as f64).to_radians()).collect();
+        let centres: Vec<[f64; 2]> = angles
+            .iter()
+            .map(|t| [(rp + rb) * t.cos(), (rp + rb) * t.sin()])
+            .collect();
+        let nominal: Vec<[f64; 2]> = angles.iter().map(|t| [t.cos(), t.sin()]).collect();
+        let off = |c: &[Contact]| {
+            c.iter()
+                .map(|c| ((c.surface_mm[0].hypot(c.surface_mm[1]) - rp) * 1e6).abs())
+                .fold(0.0, f64::max)
+        };
+        let exact = contacts_along(&centres, &nominal, rb, |_| Some(0.0)).unwrap();
+        assert!(off(&exact) < 1.0, "{} nm", off(&exact));
+        let chord = correct_with(&centres, [0.0, 1.0], rb, |_| Some(0.0)).unwrap();
+        assert!(off(&chord) > 10_000.0, "{} nm", off(&chord));
+        // Fewer than three points: only given normals can place them.
+        assert!(contacts_along(&centres[..2], &nominal[..2], rb, |_| None).is_ok());
+        assert!(correct_with(&centres[..2], [0.0, 1.0], rb, |_| None).is_err());
+        assert!(contacts_along(&centres, &nominal[..2], rb, |_| None).is_err());
+    }
+
     use super::*;
     use trueaxis_test_support::SplitMix64;
 

@@ -45,6 +45,23 @@ fn read(path: &std::path::Path, pl: [&str; 2], session: Option<i64>) -> Result<V
     probe::read_scan(&text, &path.display().to_string(), pl)
 }
 
+/// The nominal surface's outward normals in the scan's plane (`plane`:
+/// axis indices) when the scan is a probe measurement CSV whose rows give
+/// `normal_*`; None otherwise.
+fn nominal_normals(
+    path: &std::path::Path,
+    session: Option<i64>,
+    plane: [usize; 2],
+) -> Result<Option<Vec<[f64; 2]>>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    if !trueaxis_engine::import::probe_csv::is_probe_csv(&text) {
+        return Ok(None);
+    }
+    trueaxis_engine::import::probe_csv::read(&text, &path.display().to_string())?
+        .normals(session, plane)
+}
+
 /// `trueaxis probe calibrate SCAN.csv --ball-diameter-mm D -o PROBE.json`.
 #[derive(clap::Args, Debug)]
 pub struct Calibrate {
@@ -350,16 +367,26 @@ impl Correct {
             "y" => 1,
             _ => 2,
         };
+        // The nominal surface's normals when the scan gives them (a probe
+        // measurement CSV with `normal_*`), else the centre path's.
+        let nominal = nominal_normals(&self.scan, self.session, [axis(pl[0]), axis(pl[1])])?;
+        let from_nominal = nominal.is_some();
+        let normals = match nominal {
+            Some(n) => n,
+            None => probe::path_normals(&p, side)?,
+        };
         let (contacts, calibrated) = match &pr {
             AnyProbe::Plane(pr) => (
-                probe::correct(pr, &p, side)?,
+                probe::contacts_along(&p, &normals, pr.probe_radius_mm, |t| {
+                    pr.covers(t).then(|| pr.form_nm_at(t))
+                })?,
                 format!(
                     "{:.1}°…{:.1}°",
                     pr.theta_range_deg[0], pr.theta_range_deg[1]
                 ),
             ),
             AnyProbe::Sphere(pr) => (
-                probe::correct_with(&p, side, pr.probe_radius_mm, |t| {
+                probe::contacts_along(&p, &normals, pr.probe_radius_mm, |t| {
                     pr.in_plane([axis(pl[0]), axis(pl[1])], t)
                 })?,
                 format!(
@@ -367,6 +394,11 @@ impl Correct {
                     pr.cone_half_angle_deg
                 ),
             ),
+        };
+        let normals_from = if from_nominal {
+            "nominal"
+        } else {
+            "centre_path"
         };
         let outside = contacts.iter().filter(|c| !c.calibrated).count();
         let surf: Vec<[f64; 2]> = contacts.iter().map(|c| c.surface_mm).collect();
@@ -413,6 +445,7 @@ impl Correct {
                 "output": self.output.display().to_string(),
                 "points": contacts.len(),
                 "nominal": self.nominal,
+                "normals": normals_from,
                 "form_pv_nm": probe::pv(&dev),
                 "form_pv_radius_only_nm": probe::pv(&dev0),
                 "outside_calibration": outside,
@@ -421,9 +454,14 @@ impl Correct {
             out::json_pretty(&doc)?;
         } else {
             outln!(
-                "{}: {} contacts; part form vs a least-squares {}: {:.1} nm PV ({:.1} nm PV with the probe radius only); written to {}",
+                "{}: {} contacts along the {} normals; part form vs a least-squares {}: {:.1} nm PV ({:.1} nm PV with the probe radius only); written to {}",
                 self.scan.display(),
                 contacts.len(),
+                if from_nominal {
+                    "nominal surface's"
+                } else {
+                    "centre path's"
+                },
                 self.nominal,
                 probe::pv(&dev),
                 probe::pv(&dev0),

@@ -259,6 +259,52 @@ impl ProbeTable {
             .collect())
     }
 
+    /// The nominal surface's outward normals of `session`'s rows in the
+    /// scan plane `plane` (axis indices, 0 = x): `normal_<a>` and
+    /// `normal_<b>` of each row, renormalised in the plane. None when no
+    /// row gives a normal; an error names the line of a row without one
+    /// when others have them, or of a normal nearly perpendicular to the
+    /// plane (less than half of it in the plane: the scan does not lie in
+    /// that surface's plane).
+    pub fn normals(
+        &self,
+        session: Option<i64>,
+        plane: [usize; 2],
+    ) -> Result<Option<Vec<[f64; 2]>>> {
+        let rows = self.select(session)?;
+        let has = |r: &ProbeRow| {
+            ["normal_x", "normal_y", "normal_z"]
+                .iter()
+                .any(|c| r.get(c).is_some())
+        };
+        if !rows.iter().any(|r| has(r)) {
+            return Ok(None);
+        }
+        let names = ["normal_x", "normal_y", "normal_z"];
+        let mut out = Vec::with_capacity(rows.len());
+        for r in &rows {
+            if !has(r) {
+                bail!(
+                    "{}:{}: no normal on this row, though other rows of the scan give one (give `normal_x`…`normal_z` on every row, or on none)",
+                    self.name,
+                    r.line
+                );
+            }
+            let v = plane.map(|a| r.get(names[a]).unwrap_or(0.0));
+            let len = (v[0] * v[0] + v[1] * v[1]).sqrt();
+            if !(len >= 0.5) {
+                bail!(
+                    "{}:{}: the normal has only {:.0} % of its length in the scan's plane: the scan does not cross that surface in this plane",
+                    self.name,
+                    r.line,
+                    100.0 * len
+                );
+            }
+            out.push([v[0] / len, v[1] / len]);
+        }
+        Ok(Some(out))
+    }
+
     /// The text of the small scan file `kind` holding `session`'s rows
     /// (numbers written back exactly: the same values either way). A row
     /// without a value the kind needs is named by its line.
