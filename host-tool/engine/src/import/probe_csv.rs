@@ -292,7 +292,7 @@ impl ProbeTable {
             }
             let v = plane.map(|a| r.get(names[a]).unwrap_or(0.0));
             let len = (v[0] * v[0] + v[1] * v[1]).sqrt();
-            if !(len >= 0.5) {
+            if len.is_nan() || len < 0.5 {
                 bail!(
                     "{}:{}: the normal has only {:.0} % of its length in the scan's plane: the scan does not cross that surface in this plane",
                     self.name,
