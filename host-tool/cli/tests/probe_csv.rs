@@ -406,8 +406,8 @@ fn a_bad_probe_value_is_placed_and_a_session_must_be_named() {
     let k = lines.iter().position(|l| l.starts_with("3,")).unwrap();
     let mut part: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
     let mut c: Vec<String> = part[k].split(',').map(str::to_string).collect();
-    for i in 11..=13 {
-        c[i].clear();
+    for cell in &mut c[11..=13] {
+        cell.clear();
     }
     part[k] = c.join(",");
     let partf = dir.join("normals.csv");
