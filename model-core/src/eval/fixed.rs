@@ -7,7 +7,7 @@
 
 use super::kernels::{grid_cell, mlp_source, mono20_q30, mono56_q30, phase_turns, rshr};
 use super::{Factor, Flags, GridAxis, Inputs, ModelCap, Outputs, PolyKind, Term, MAX_TEMPS};
-use crate::limits::{MAX_HIDDEN_UNITS, MAX_MLP_INPUTS, MAX_MONOMIALS};
+use crate::limits::{MAX_HIDDEN_UNITS, MAX_MLP_INPUTS};
 use crate::math::{sincos_q30, tanh_q30, ONE_Q30, TANH_IN_FRAC};
 
 impl<const P: usize, const G: usize> ModelCap<P, G> {
@@ -204,19 +204,18 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         if !self.has_block {
             return [0; 3];
         }
-        // Σ|c_q| ≤ 2^31 and |m| ≤ 2^30: each sum stays below 2^61.
-        let (mut a0, mut a1, mut a2) = (0i64, 0i64, 0i64);
-        for i in 0..N.min(MAX_MONOMIALS) {
-            let (m, c) = (mv[i] as i64, self.block_q[i]);
-            a0 += c[0] as i64 * m;
-            a1 += c[1] as i64 * m;
-            a2 += c[2] as i64 * m;
-        }
-        [
-            rshr(a0, self.block_shift[0]),
-            rshr(a1, self.block_shift[1]),
-            rshr(a2, self.block_shift[2]),
-        ]
+        // Σ|c_q| ≤ 2^31 and |m| ≤ 2^30: each sum stays below 2^61 (exact,
+        // so the order of the sum does not change it). One output at a time
+        // over its coefficient row, the monomials read back from memory as
+        // i32 (black_box, as in `poly_fixed`): one SMLAL per product.
+        let mv = core::hint::black_box(mv);
+        core::array::from_fn(|o| {
+            let mut a = 0i64;
+            for (&c, &m) in self.block_q[o].iter().zip(mv.iter()) {
+                a += c as i64 * m as i64;
+            }
+            rshr(a, self.block_shift[o])
+        })
     }
 
     #[inline(never)]
