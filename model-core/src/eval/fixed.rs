@@ -210,11 +210,12 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         // i32 (black_box, as in `poly_fixed`): one SMLAL per product.
         let mv = core::hint::black_box(mv);
         core::array::from_fn(|o| {
-            let mut a = 0i64;
+            // rshr(Σ, s) with its rounding term as the sum's start.
+            let mut a = self.block_round[o];
             for (&c, &m) in self.block_q[o].iter().zip(mv.iter()) {
                 a += c as i64 * m as i64;
             }
-            rshr(a, self.block_shift[o])
+            a >> (self.block_shift[o] & 63)
         })
     }
 

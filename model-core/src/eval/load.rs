@@ -288,6 +288,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             let sum: f64 = block.iter().map(|r| r[o].abs()).sum();
             let q = choose_q(sum, 0).ok_or(LoadError::CoefficientRange { term: 0 })?;
             self.block_shift[o] = (q + 14) as u32;
+            self.block_round[o] = 1i64 << (q + 13);
             for i in 0..MAX_MONOMIALS {
                 self.block_f32[i][o] = block[i][o] as f32;
                 self.block_q[o][i] = to_q(block[i][o], q);

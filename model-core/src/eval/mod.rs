@@ -445,6 +445,9 @@ enum PolyKind {
 #[derive(Clone, Debug)]
 #[repr(C)]
 pub struct ModelCap<const P: usize, const G: usize> {
+    /// 2^(block_shift − 1): the block's rounding, made at load (the shift is
+    /// ≥ 14, so no zero case), so the kernel has one variable shift, not two.
+    block_round: [i64; 3],
     /// The travel per axis as (minimum, span): a position p is inside when
     /// `(p − min) as u32 ≤ span` — one subtraction and one unsigned compare
     /// per axis per update (precomputed at load, [`ModelCap::hold_pos_fast`]).
@@ -537,6 +540,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             block_q: [[0; MAX_MONOMIALS]; 3],
             poly_q: [[0; 20]; 3],
             block_shift: [0; 3],
+            block_round: [0; 3],
             has_block: false,
             reads_temp: false,
             reads_tool: false,
