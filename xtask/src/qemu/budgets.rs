@@ -521,7 +521,8 @@ mod tests {
         let mut over = all.clone();
         over[4].max = BUDGETS[4].1 + 1;
         let e = check_budgets(&over).unwrap_err();
-        assert!(e.contains("full_f32") && e.contains("budget 487"), "{e}");
+        let budget = format!("budget {}", BUDGETS[4].1);
+        assert!(e.contains("full_f32") && e.contains(&budget), "{e}");
         let e = check_budgets(&all[1..]).unwrap_err();
         assert!(e.contains("cubic19_f32: not measured"), "{e}");
     }
