@@ -95,12 +95,15 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         if ok(0) && ok(1) && ok(2) {
             Outputs { corr_nm: n, flags }
         } else {
-            self.finish_exact_f32(out, flags)
+            self.finish_exact_f32(out[0], out[1], out[2], flags)
         }
     }
 
+    /// The three outputs as separate arguments: they stay in FPU registers
+    /// (an array would be stored to the stack and passed by reference).
     #[inline(never)]
-    fn finish_exact_f32(&self, out: [f32; 3], mut flags: Flags) -> Outputs {
+    fn finish_exact_f32(&self, o0: f32, o1: f32, o2: f32, mut flags: Flags) -> Outputs {
+        let out = [o0, o1, o2];
         let mut corr = [0i32; 3];
         for o in 0..3 {
             let (c, f) = self.clamp_round_f32(out[o], o);

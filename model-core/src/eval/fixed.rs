@@ -7,7 +7,7 @@
 
 use super::kernels::{grid_cell, mlp_source, mono20_q30, mono56_q30, phase_turns, rshr};
 use super::{Factor, Flags, GridAxis, Inputs, ModelCap, Outputs, PolyKind, Term, MAX_TEMPS};
-use crate::limits::{MAX_HIDDEN_UNITS, MAX_MLP_INPUTS, MAX_MONOMIALS};
+use crate::limits::{MAX_HIDDEN_UNITS, MAX_MLP_INPUTS};
 use crate::math::{sincos_q30, tanh_q30, ONE_Q30, TANH_IN_FRAC};
 
 impl<const P: usize, const G: usize> ModelCap<P, G> {
@@ -204,19 +204,21 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         if !self.has_block {
             return [0; 3];
         }
-        // Σ|c_q| ≤ 2^31 and |m| ≤ 2^30: each sum stays below 2^61.
-        let (mut a0, mut a1, mut a2) = (0i64, 0i64, 0i64);
-        for i in 0..N.min(MAX_MONOMIALS) {
-            let (m, c) = (mv[i] as i64, self.block_q[i]);
-            a0 += c[0] as i64 * m;
-            a1 += c[1] as i64 * m;
-            a2 += c[2] as i64 * m;
-        }
-        [
-            rshr(a0, self.block_shift[0]),
-            rshr(a1, self.block_shift[1]),
-            rshr(a2, self.block_shift[2]),
-        ]
+        // Σ|c_q| ≤ 2^31 − 1 and |m| ≤ 2^30 + 1: each sum stays below
+        // 2^61 + 2^31, with the rounding term (≤ 2^61) below 2^63 (exact, so
+        // the order of the sum does not change it; test
+        // `block_is_the_rounded_exact_sum_at_the_limits`). One output at a time
+        // over its coefficient row, the monomials read back from memory as
+        // i32 (black_box, as in `poly_fixed`): one SMLAL per product.
+        let mv = core::hint::black_box(mv);
+        core::array::from_fn(|o| {
+            // rshr(Σ, s) with its rounding term as the sum's start.
+            let mut a = self.block_round[o];
+            for (&c, &m) in self.block_q[o].iter().zip(mv.iter()) {
+                a += c as i64 * m as i64;
+            }
+            a >> (self.block_shift[o] & 63)
+        })
     }
 
     #[inline(never)]
@@ -477,4 +479,72 @@ fn dot_q(row: &[i32], x: &[i32]) -> i64 {
 fn tanh_q26_of(z: i64, frac: u32) -> i32 {
     let z26 = rshr(z, frac - TANH_IN_FRAC);
     tanh_q30(z26.clamp(-(16 << TANH_IN_FRAC), 16 << TANH_IN_FRAC) as i32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::Model;
+    use crate::limits::MAX_MONOMIALS;
+
+    /// The block kernel against the exact sum (i128) rounded by `rshr`'s
+    /// rule, floor((Σ + 2^(s−1)) / 2^s), at the ends of its ranges: Σ|c| =
+    /// 2^31 − 1 per output, monomials at ±(2^30 + 1) and seeded values
+    /// between, shifts 14 (the smallest load gives) … 62 (the largest).
+    /// Fails if the rounding term or the rows were wrong, or if a sum
+    /// wrapped. Also checks the loader's rounding term on a real table.
+    #[test]
+    fn block_is_the_rounded_exact_sum_at_the_limits() {
+        let table = crate::parse(include_bytes!("../../tests/golden/cubic19.bin")).unwrap();
+        let mut m = Model::load(&table).unwrap();
+        for o in 0..3 {
+            assert_eq!(m.block_round[o], 1i64 << (m.block_shift[o] - 1));
+        }
+        let mut rng = trueaxis_test_support::XorShift64(0x6a09_e667_f3bc_c909u64);
+        let lim = (1i64 << 30) + 1;
+        for run in 0..400 {
+            let mut mv = [0i32; MAX_MONOMIALS];
+            for v in mv.iter_mut() {
+                *v = match rng.range(0, 3) {
+                    0 => lim as i32,
+                    1 => -lim as i32,
+                    _ => rng.range(-lim, lim) as i32,
+                };
+            }
+            for o in 0..3 {
+                // A row whose Σ|c| is exactly 2^31 − 1, signs at random:
+                // all on one coefficient, or spread over the row.
+                let mut left = i32::MAX as i64;
+                let row = &mut m.block_q[o];
+                row.fill(0);
+                let spread = run % 4 != 0;
+                for (i, c) in row.iter_mut().enumerate() {
+                    let take = if !spread || i == MAX_MONOMIALS - 1 {
+                        left
+                    } else {
+                        rng.range(0, left + 1) / 4
+                    };
+                    left -= take;
+                    *c = if rng.range(0, 2) == 0 { take } else { -take } as i32;
+                    if left == 0 {
+                        break;
+                    }
+                }
+                let s = [14u32, 62, 14 + (run % 49) as u32][o];
+                m.block_shift[o] = s;
+                m.block_round[o] = 1i64 << (s - 1);
+            }
+            m.has_block = true;
+            let mv20: [i32; 20] = core::array::from_fn(|i| mv[i]);
+            for (n, got) in [(20, m.block_fixed(&mv20)), (56, m.block_fixed(&mv))] {
+                for o in 0..3 {
+                    let exact: i128 = (0..n)
+                        .map(|i| m.block_q[o][i] as i128 * mv[i] as i128)
+                        .sum();
+                    let s = m.block_shift[o];
+                    let want = (exact + (1i128 << (s - 1))) >> s;
+                    assert_eq!(got[o] as i128, want, "run {run} n {n} output {o}");
+                }
+            }
+        }
+    }
 }

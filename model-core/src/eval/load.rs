@@ -201,7 +201,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         // needs Σ|c| ≥ 2^29 nm, s > 46 a block of almost nothing.)
         // An output without coefficients (an absent one) is 0 whatever its
         // scale (its Σ|c| = 0 gives the largest q): bias and shift 0.
-        let zero: [bool; 3] = core::array::from_fn(|o| self.block_q.iter().all(|c| c[o] == 0));
+        let zero: [bool; 3] = core::array::from_fn(|o| self.block_q[o].iter().all(|&c| c == 0));
         let shifts_ok = (0..3).all(|o| zero[o] || poly_fixed_shift_ok(self.block_shift[o]));
         self.poly_fixed = if shifts_ok { self.poly } else { PolyKind::None };
         for o in 0..3 {
@@ -209,7 +209,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             (self.poly_shift[o], self.poly_bias_q[o]) = if shifts_ok && !zero[o] {
                 (
                     s - 16,
-                    (1i64 << (s - 1)) + (1i64 << (s + 15)) + ((self.block_q[0][o] as i64) << 30),
+                    (1i64 << (s - 1)) + (1i64 << (s + 15)) + ((self.block_q[o][0] as i64) << 30),
                 )
             } else {
                 (0, 0)
@@ -288,13 +288,12 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             let sum: f64 = block.iter().map(|r| r[o].abs()).sum();
             let q = choose_q(sum, 0).ok_or(LoadError::CoefficientRange { term: 0 })?;
             self.block_shift[o] = (q + 14) as u32;
+            self.block_round[o] = 1i64 << (q + 13);
             for i in 0..MAX_MONOMIALS {
                 self.block_f32[i][o] = block[i][o] as f32;
-                self.block_q[i][o] = to_q(block[i][o], q);
+                self.block_q[o][i] = to_q(block[i][o], q);
             }
-            for i in 0..20 {
-                self.poly_q[o][i] = self.block_q[i][o];
-            }
+            self.poly_q[o].copy_from_slice(&self.block_q[o][..20]);
             // (half spans ≥ 1 nm, validated.)
             // In the units of w = p − centre (nm): c / (h_x^a·h_y^b·h_z^c),
             // so the kernels read w without normalising it (u = w / h).

@@ -445,6 +445,9 @@ enum PolyKind {
 #[derive(Clone, Debug)]
 #[repr(C)]
 pub struct ModelCap<const P: usize, const G: usize> {
+    /// 2^(block_shift − 1): the block's rounding, made at load (the shift is
+    /// ≥ 14, so no zero case), so the kernel has one variable shift, not two.
+    block_round: [i64; 3],
     /// The travel per axis as (minimum, span): a position p is inside when
     /// `(p − min) as u32 ≤ span` — one subtraction and one unsigned compare
     /// per axis per update (precomputed at load, [`ModelCap::hold_pos_fast`]).
@@ -468,7 +471,8 @@ pub struct ModelCap<const P: usize, const G: usize> {
     poly_fixed: PolyKind,
     poly_bias_q: [i64; 3],
     poly_shift: [u32; 3],
-    /// The block's fixed-point coefficients of degree ≤ 3 per output, graded order.
+    /// The block's fixed-point coefficients of degree ≤ 3 per output, graded order
+    /// (a copy of `block_q`'s: `poly_fixed` is faster reading its own rows).
     poly_q: [[i32; 20]; 3],
     centre_nm: [i32; 3],
     inv_half_f32: [f32; 3],
@@ -479,7 +483,9 @@ pub struct ModelCap<const P: usize, const G: usize> {
     /// Number of graded monomials needed (0 = no polynomial at all).
     n_monos: u8,
     block_f32: [[f32; 3]; MAX_MONOMIALS],
-    block_q: [[i32; 3]; MAX_MONOMIALS],
+    /// The block's fixed-point coefficients per output (one row each, graded
+    /// order): the kernels run one output at a time over its row.
+    block_q: [[i32; MAX_MONOMIALS]; 3],
     block_shift: [u32; 3],
     has_block: bool,
     /// Some term reads temperatures / the tool arm (so they are held and flagged).
@@ -531,8 +537,10 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             u_scale: [Mul32 { k: 0 }; 3],
             n_monos: 0,
             block_f32: [[0.0; 3]; MAX_MONOMIALS],
-            block_q: [[0; 3]; MAX_MONOMIALS],
+            block_q: [[0; MAX_MONOMIALS]; 3],
+            poly_q: [[0; 20]; 3],
             block_shift: [0; 3],
+            block_round: [0; 3],
             has_block: false,
             reads_temp: false,
             reads_tool: false,
@@ -546,7 +554,6 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             poly_fixed: PolyKind::None,
             poly_bias_q: [0; 3],
             poly_shift: [0; 3],
-            poly_q: [[0; 20]; 3],
             terms: Vec::new(),
             pf: Vec::new(),
             pq: Vec::new(),
@@ -776,9 +783,9 @@ mod tests {
         let mut linear = cubic.clone();
         for i in 4..MAX_MONOMIALS {
             linear.block_f32[i] = [0.0; 3];
-            linear.block_q[i] = [0; 3];
         }
         for o in 0..3 {
+            linear.block_q[o][4..].fill(0);
             linear.poly_q[o][4..].fill(0);
             for (h, &i) in linear.horner_f32[o]
                 .iter_mut()

@@ -17,14 +17,15 @@ use crate::Result;
 /// test` fails when a bench is missing or its worst call exceeds its budget.
 /// Round 3 (branch `mcu3`): the measured counts plus 3 — the harness's
 /// calibration of its own overhead has moved every count by 2–3 when
-/// unrelated code moved (BENCHMARKS.md).
+/// unrelated code moved (BENCHMARKS.md). Round 4 (branch `mcu4`): the
+/// same rule on its counts.
 pub const BUDGETS: [(&str, u64); 6] = [
-    ("cubic19_f32", 206),
+    ("cubic19_f32", 201),
     ("cubic19_fixed", 437),
-    ("poly_deg1_f32", 109),
+    ("poly_deg1_f32", 104),
     ("poly_deg1_fixed", 151),
-    ("full_f32", 487),
-    ("nn_3x16x3_f32", 856),
+    ("full_f32", 485),
+    ("nn_3x16x3_f32", 847),
 ];
 
 /// Builds and runs the bench image (firmware release profile, `-icount
@@ -520,7 +521,8 @@ mod tests {
         let mut over = all.clone();
         over[4].max = BUDGETS[4].1 + 1;
         let e = check_budgets(&over).unwrap_err();
-        assert!(e.contains("full_f32") && e.contains("budget 487"), "{e}");
+        let budget = format!("budget {}", BUDGETS[4].1);
+        assert!(e.contains("full_f32") && e.contains(&budget), "{e}");
         let e = check_budgets(&all[1..]).unwrap_err();
         assert!(e.contains("cubic19_f32: not measured"), "{e}");
     }
