@@ -65,6 +65,10 @@ pub struct ImproveStep {
     /// line (the JSON has the ratios above).
     #[serde(skip)]
     pub unexplained: Vec<diagnose::Unexplained>,
+    /// Pairs of candidates that each pass on their own but that the data
+    /// cannot tell apart (the diagnosis' `unresolved`), with the
+    /// measurement that separates them.
+    pub unresolved: Vec<diagnose::Unresolved>,
 }
 
 /// `"added"`, `"evidence"` (the best effect's, or null) and
@@ -97,10 +101,15 @@ impl ImproveStep {
             Verdict::MissingEffect => "stopped after the step limit".into(),
             Verdict::AtNoiseFloor => "at the noise floor".into(),
             Verdict::AboveNoiseFloor => format!(
-                "no significant candidate left, but above the noise floor: {}",
+                "no significant candidate left, but {}",
                 self.unexplained
                     .iter()
-                    .map(diagnose::Unexplained::text)
+                    .map(|u| format!("above the noise floor: {}", u.text()))
+                    .chain(
+                        self.unresolved
+                            .iter()
+                            .map(|u| format!("not attributable: {}", u.text()))
+                    )
                     .collect::<Vec<_>>()
                     .join("; ")
             ),
@@ -202,6 +211,7 @@ pub fn improve_with(
             verdict: d.verdict,
             above_noise_floor,
             unexplained: d.unexplained.clone(),
+            unresolved: d.unresolved.clone(),
         };
         on_step(&step);
         steps.push(step);

@@ -1163,6 +1163,7 @@ mod tests {
             hold_out: "spatial cells".into(),
             evidence: Evidence::default(),
             unexplained: Vec::new(),
+            unresolved: Vec::new(),
             outliers: Vec::new(),
         }
     }
