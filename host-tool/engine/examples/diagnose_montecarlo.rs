@@ -161,9 +161,14 @@ fn main() -> Result<()> {
     let threads: usize = arg("--threads")
         .map_or(Ok(2), |v| v.parse())
         .context("--threads N")?;
-    // For iterating on one cell: `--only control|abbe|…` and `--misfit
-    // 0.5` keep those scenarios; ids and seeds stay those of the full run.
+    // For iterating on one cell: `--only control|abbe|…`, `--misfit 0.5`
+    // and `--amplitude 1` (hidden effects only) keep those scenarios; ids
+    // and seeds stay those of the full run.
     let only = arg("--only");
+    let amplitude: Option<f64> = arg("--amplitude")
+        .map(|v| v.parse())
+        .transpose()
+        .context("--amplitude A")?;
     let misfit: Option<f64> = arg("--misfit")
         .map(|v| v.parse())
         .transpose()
@@ -178,6 +183,7 @@ fn main() -> Result<()> {
             only.as_deref()
                 .is_none_or(|o| o == s.hidden.map_or("control", |h| h.name()))
                 && misfit.is_none_or(|m| (m - s.misfit_um).abs() < 1e-9)
+                && amplitude.is_none_or(|a| s.hidden.is_some() && (a - s.amplitude).abs() < 1e-9)
         })
         .collect();
     let next = AtomicUsize::new(0);
