@@ -161,10 +161,30 @@ fn main() -> Result<()> {
     let threads: usize = arg("--threads")
         .map_or(Ok(2), |v| v.parse())
         .context("--threads N")?;
+    // For iterating on one cell: `--only control|abbe|…`, `--misfit 0.5`
+    // and `--amplitude 1` (hidden effects only) keep those scenarios; ids
+    // and seeds stay those of the full run.
+    let only = arg("--only");
+    let amplitude: Option<f64> = arg("--amplitude")
+        .map(|v| v.parse())
+        .transpose()
+        .context("--amplitude A")?;
+    let misfit: Option<f64> = arg("--misfit")
+        .map(|v| v.parse())
+        .transpose()
+        .context("--misfit UM")?;
     std::fs::create_dir_all(&out)?;
-    let jobs: Vec<(Scenario, usize)> = scenarios()
+    let jobs: Vec<(usize, Scenario, usize)> = scenarios()
         .into_iter()
         .flat_map(|s| (0..trials).map(move |t| (s, t)))
+        .enumerate()
+        .map(|(i, (s, t))| (i, s, t))
+        .filter(|(_, s, _)| {
+            only.as_deref()
+                .is_none_or(|o| o == s.hidden.map_or("control", |h| h.name()))
+                && misfit.is_none_or(|m| (m - s.misfit_um).abs() < 1e-9)
+                && amplitude.is_none_or(|a| s.hidden.is_some() && (a - s.amplitude).abs() < 1e-9)
+        })
         .collect();
     let next = AtomicUsize::new(0);
     let t0 = std::time::Instant::now();
@@ -174,10 +194,10 @@ fn main() -> Result<()> {
                 scope.spawn(|| -> Result<()> {
                     loop {
                         let i = next.fetch_add(1, Ordering::Relaxed);
-                        let Some(&(sc, t)) = jobs.get(i) else {
+                        let Some(&(id, sc, t)) = jobs.get(i) else {
                             return Ok(());
                         };
-                        let line = run_trial(i, sc, t, &out)?;
+                        let line = run_trial(id, sc, t, &out)?;
                         eprintln!("{line}");
                     }
                 })

@@ -68,6 +68,10 @@ pub struct ImproveStep {
     /// Candidates the diagnosis of this fit held back as aliasing-suspect
     /// (`diagnose`'s `held_back`): not added, with why and what to measure.
     pub held_back: Vec<HeldBack>,
+    /// Pairs of candidates that each pass on their own but that the data
+    /// cannot tell apart (the diagnosis' `unresolved`), with the
+    /// measurement that separates them.
+    pub unresolved: Vec<diagnose::Unresolved>,
 }
 
 /// A candidate the loop did not add because the sampling along its axis
@@ -120,15 +124,22 @@ impl ImproveStep {
         let mut s = match self.verdict {
             Verdict::MissingEffect => "stopped after the step limit".to_string(),
             Verdict::AtNoiseFloor => "at the noise floor".into(),
-            Verdict::AboveNoiseFloor if self.unexplained.is_empty() => {
+            Verdict::AboveNoiseFloor
+                if self.unexplained.is_empty() && self.unresolved.is_empty() =>
+            {
                 "no significant candidate left, but one the sampling cannot support is held back"
                     .into()
             }
             Verdict::AboveNoiseFloor => format!(
-                "no significant candidate left, but above the noise floor: {}",
+                "no significant candidate left, but {}",
                 self.unexplained
                     .iter()
-                    .map(diagnose::Unexplained::text)
+                    .map(|u| format!("above the noise floor: {}", u.text()))
+                    .chain(
+                        self.unresolved
+                            .iter()
+                            .map(|u| format!("not attributable: {}", u.text()))
+                    )
                     .collect::<Vec<_>>()
                     .join("; ")
             ),
@@ -249,6 +260,7 @@ pub fn improve_with(
                     measure: a.measure.clone(),
                 })
                 .collect(),
+            unresolved: d.unresolved.clone(),
         };
         on_step(&step);
         steps.push(step);

@@ -192,6 +192,14 @@ pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path, verbose: bool) ->
             c.add, a.text
         ));
     }
+    if !d.unresolved.is_empty() {
+        s.push_str(
+            "confounded, not attributed (each passes on its own; measure to separate them):\n",
+        );
+        for u in &d.unresolved {
+            s.push_str(&format!("  {}\n", u.text()));
+        }
+    }
     s.push_str("candidates (best first):\n");
     for (i, c) in d
         .candidates

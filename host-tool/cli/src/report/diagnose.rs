@@ -1223,6 +1223,7 @@ mod tests {
             evidence: Evidence::default(),
             unexplained: Vec::new(),
             held_back: Vec::new(),
+            unresolved: Vec::new(),
             outliers: Vec::new(),
         }
     }

@@ -54,6 +54,7 @@ mod path;
 pub mod periodogram;
 mod physical;
 mod score;
+mod smooth;
 mod swap;
 pub mod synth;
 mod target;
@@ -158,9 +159,11 @@ pub enum Verdict {
     AtNoiseFloor,
     /// No candidate is significant, but a target's residual is more than
     /// [`ABOVE_NOISE_RATIO`]× its noise floor, or a candidate is held back
-    /// as aliasing-suspect: something systematic is left that no candidate
+    /// as aliasing-suspect, or two candidates that each pass on their own
+    /// cannot be told apart: something systematic is left that no candidate
     /// explains (`unexplained` says what and where, `held_back` which
-    /// candidate the sampling cannot support and what to measure).
+    /// candidate the sampling cannot support and what to measure,
+    /// `unresolved` the pair and the measurement that separates them).
     AboveNoiseFloor,
 }
 
@@ -226,6 +229,41 @@ impl Unexplained {
             ));
         }
         s
+    }
+}
+
+/// Two candidates that each pass on their own (ΔBIC, held-out gain) but
+/// that the data cannot tell apart (their new directions overlap at least
+/// [`COMPETING_OVERLAP`], ΔBIC within [`MIN_GAP_DBIC`]), so neither is
+/// added: the path could not attribute that part of the error.
+#[derive(Clone, Debug, Serialize)]
+pub struct Unresolved {
+    /// `ex`, `ey` or `ez`.
+    pub target: String,
+    /// The two `add` strings, the better ΔBIC first.
+    pub adds: [String; 2],
+    /// Their ΔBICs against the model where the path ended.
+    pub delta_bic: [f64; 2],
+    /// How much their new directions share (mean squared cosine of the
+    /// principal angles).
+    pub overlap: f64,
+    /// The measurement that separates them.
+    pub measure: String,
+}
+
+impl Unresolved {
+    /// One line for the summary.
+    pub fn text(&self) -> String {
+        format!(
+            "{}: `{}` or `{}` (ΔBIC {:.0} vs {:.0}, overlap {:.0} %) — the data cannot tell which; {}",
+            self.target,
+            self.adds[0],
+            self.adds[1],
+            self.delta_bic[0],
+            self.delta_bic[1],
+            100.0 * self.overlap,
+            self.measure
+        )
     }
 }
 
@@ -496,6 +534,10 @@ pub struct Diagnosis {
     /// measure. Non-empty makes a verdict without a significant candidate
     /// `above_noise_floor`.
     pub held_back: Vec<String>,
+    /// Pairs of candidates that each pass on their own but cannot be told
+    /// apart, where the path of their target ended, with the measurement
+    /// that separates them. Never `at_noise_floor` while one is left.
+    pub unresolved: Vec<Unresolved>,
     /// Candidates, best first.
     pub candidates: Vec<Candidate>,
     /// The BIC-ordered path of effects that pass, per target in order.
@@ -545,6 +587,7 @@ struct TargetOut {
     path: Vec<PathStep>,
     candidates: Vec<Candidate>,
     unexplained: Vec<Unexplained>,
+    unresolved: Vec<Unresolved>,
     noise_floor_um: Option<f64>,
     noise_method: Option<NoiseMethod>,
     ev: Evidence,
@@ -587,7 +630,16 @@ fn one_target(
     let regions = crate::regions::worst_cells(data, &td.norm, t, &td.rows, &st0.resid);
     ev.resid_before
         .push((t, td.rows.clone(), st0.resid.clone()));
-    let (candidates, st, first) = path::follow(&td, st0, opts, &mut warnings, &mut ev, &mut path)?;
+    let mut unresolved = Vec::new();
+    let (candidates, st, first) = path::follow(
+        &td,
+        st0,
+        opts,
+        &mut warnings,
+        &mut ev,
+        &mut path,
+        &mut unresolved,
+    )?;
     let nf = noise_floor(data, &td.rows, &st.resid);
     let mut unexplained = Vec::new();
     if let Some(nf) = &nf {
@@ -633,6 +685,7 @@ fn one_target(
         path,
         candidates,
         unexplained,
+        unresolved,
         noise_floor_um: nf.as_ref().map(|n| n.sigma_um),
         noise_method: nf.map(|n| n.method),
         ev,
@@ -681,6 +734,7 @@ pub fn diagnose_with(data: &Dataset, opts: &Options, progress: Progress) -> Resu
     let mut regions = Vec::new();
     let mut hold_out = String::new();
     let mut unexplained = Vec::new();
+    let mut unresolved = Vec::new();
     // The targets are independent: searched and scored in parallel, each
     // into its own lists, joined in target order (the same result as one
     // after the other).
@@ -702,6 +756,7 @@ pub fn diagnose_with(data: &Dataset, opts: &Options, progress: Progress) -> Resu
         path.extend(o.path);
         candidates.extend(o.candidates);
         unexplained.extend(o.unexplained);
+        unresolved.extend(o.unresolved);
         noise_floor_um.insert(tn.clone(), o.noise_floor_um);
         noise_method.insert(tn, o.noise_method);
         ev.periodograms.extend(o.ev.periodograms);
@@ -726,11 +781,12 @@ pub fn diagnose_with(data: &Dataset, opts: &Options, progress: Progress) -> Resu
                     .total_cmp(&b.delta_bic.unwrap_or(f64::INFINITY)),
             )
     });
-    // `at_noise_floor` only when it is true: nothing significant *and*
-    // every target within 1.3× its floor (a target without an estimate
-    // does not block it).
-    // A held-back candidate is systematic error the data show and the
-    // sampling cannot attribute: not `at_noise_floor` either.
+    // `at_noise_floor` only when it is true: nothing significant, no
+    // confounded pair that passes on its own (an error the data cannot
+    // attribute is not noise, whatever the floor says), no candidate held
+    // back as aliasing-suspect (systematic error the data show and the
+    // sampling cannot attribute) *and* every target within 1.3× its floor
+    // (a target without an estimate does not block it).
     let held_back: Vec<String> = candidates
         .iter()
         .filter(|c| c.held_back)
@@ -738,7 +794,7 @@ pub fn diagnose_with(data: &Dataset, opts: &Options, progress: Progress) -> Resu
         .collect();
     let verdict = if candidates.iter().any(|c| c.significant) {
         Verdict::MissingEffect
-    } else if unexplained.is_empty() && held_back.is_empty() {
+    } else if unexplained.is_empty() && unresolved.is_empty() && held_back.is_empty() {
         Verdict::AtNoiseFloor
     } else {
         Verdict::AboveNoiseFloor
@@ -753,6 +809,7 @@ pub fn diagnose_with(data: &Dataset, opts: &Options, progress: Progress) -> Resu
         verdict,
         unexplained,
         held_back,
+        unresolved,
         candidates,
         path,
         worst_regions: regions,

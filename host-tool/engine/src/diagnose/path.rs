@@ -5,34 +5,81 @@
 use anyhow::Result;
 
 use crate::data::{AXES, TARGETS};
-use crate::effect::{Effect, EffectSpec, Family, Target};
+use crate::effect::{same_effect, Effect, EffectSpec, Family, Target};
 
 use super::aliasing;
 use super::candidates::{propose, Proposal};
 use super::linalg::small_fit;
 use super::linalg::Basis;
 use super::score::{score, Replacing, Scored};
+use super::smooth;
 use super::swap::swap_in;
 use super::target::{State, TargetData};
 use super::warnings::plausibility_warning;
 use super::{
-    Candidate, ComponentEvidence, Evidence, Options, PathStep, PeriodogramEvidence, Warning,
-    COMPETING_OVERLAP, CONFOUNDED_OVERLAP, DBIC_SIGNIFICANT, MAX_PATH_STEPS, MIN_GAP_DBIC,
+    Candidate, ComponentEvidence, Evidence, Options, PathStep, PeriodogramEvidence, Unresolved,
+    Warning, COMPETING_OVERLAP, CONFOUNDED_OVERLAP, DBIC_SIGNIFICANT, MAX_PATH_STEPS, MIN_GAP_DBIC,
     MIN_HELD_OUT_GAIN,
 };
 
 /// The evidence's ending of a held-back candidate.
 const HELD_BACK: &str = " — held back, not added: aliasing-suspect (see aliasing: the sampling along its axis cannot tell it from a lead's alias)";
+/// A best candidate that passes on its own (ΔBIC, held-out gain) but is
+/// held back by the gap rule: a competitor explains the same residual about
+/// as well, so the data cannot say which of them it is.
+pub(super) struct Blocked {
+    /// The blocked best (`add` string).
+    best: String,
+    /// The best with each competitor inside the gap rule's margin.
+    pairs: Vec<Unresolved>,
+    /// Candidates independent of the best and of every candidate competing
+    /// with it (overlap below [`COMPETING_OVERLAP`] with each): what the
+    /// path can still try.
+    independent: Vec<EffectSpec>,
+}
+
+/// The measurement that separates two confounded candidates: what makes
+/// their columns go together in these data, undone.
+fn separating_measurement(a: &Candidate, b: &Candidate) -> String {
+    let fams = [a.effect, b.effect];
+    let has = |f: Family| fams.contains(&f);
+    if has(Family::Drift) && has(Family::Thermal) {
+        "measure with temperature varying independently of time (a cool-down as well as a warm-up, or a second session)".into()
+    } else if has(Family::Abbe) && (has(Family::Drift) || has(Family::Thermal)) {
+        "measure the tool lengths interleaved in time (change the tool length every pass, or repeat the first tool length at the end of the run), so that tool length no longer goes with time and temperature".into()
+    } else if has(Family::Reversal) && (has(Family::Drift) || has(Family::Thermal)) {
+        "approach in both directions alternately (forward and backward passes interleaved in time), so that the approach direction no longer goes with time".into()
+    } else if has(Family::Reversal) {
+        "measure each line forward and backward over the same positions, so that the approach direction no longer goes with position".into()
+    } else if has(Family::Abbe) {
+        "measure every tool length at the same positions, so that tool length no longer goes with position".into()
+    } else {
+        let what = |c: &Candidate| {
+            c.channel
+                .clone()
+                .or_else(|| c.axis.clone())
+                .unwrap_or_else(|| c.effect.as_str().to_string())
+        };
+        format!(
+            "vary {} and {} independently in the next measurement",
+            what(a),
+            what(b)
+        )
+    }
+}
 
 /// Scores one target at one model state; marks confounding and the best
-/// candidate's significance. Returns the scored list sorted best first.
+/// candidate's significance. Returns the scored list sorted best first and,
+/// when the best passes on its own but a competitor blocks it, what blocks
+/// it. `only` restricts the candidates to those effects (no replacements).
 pub(super) fn rank_target(
     td: &TargetData,
     st: &State,
     seed_name: &str,
     warnings: &mut Vec<Warning>,
     ev: &mut Evidence,
-) -> Vec<Scored> {
+    only: Option<&[EffectSpec]>,
+) -> (Vec<Scored>, Option<Blocked>) {
     // Effects already in the model for this target: a candidate that is
     // one of them again (the same family, axis, channel, times) is not a
     // second effect — it replaces the old one, with its nonlinear parameter
@@ -56,9 +103,10 @@ pub(super) fn rank_target(
     let props: Vec<Proposal> = propose(td, st, ev, None)
         .into_iter()
         .filter(|p| {
-            p.spec
-                .parse::<EffectSpec>()
-                .map_or(true, |k| !own.iter().any(|(_, o)| o.same_effect(&k)))
+            let k = p.spec.parse::<EffectSpec>();
+            k.as_ref()
+                .map_or(true, |k| !own.iter().any(|(_, o)| o.same_effect(k)))
+                && only.is_none_or(|o| k.is_ok_and(|k| o.iter().any(|x| x.same_effect(&k))))
         })
         .collect();
     (td.progress)(&format!(
@@ -66,7 +114,7 @@ pub(super) fn rank_target(
         props.len()
     ));
     let mut sc = score(td, st, props, seed_name, warnings, None);
-    for (old, key) in &own {
+    for (old, key) in own.iter().filter(|_| only.is_none()) {
         let searchable = match key.family {
             Family::Periodic | Family::Drift | Family::HigherOrder => true,
             Family::Thermal => td.data.t_s.is_some(),
@@ -215,16 +263,11 @@ pub(super) fn rank_target(
                 let (ai, aj) = (sc[i].cand.add.clone(), sc[j].cand.add.clone());
                 sc[i].cand.confounded_with.push(aj.clone());
                 sc[j].cand.confounded_with.push(ai.clone());
-                let fams = [sc[i].cand.effect, sc[j].cand.effect];
-                let fix = if fams.contains(&Family::Drift) && fams.contains(&Family::Thermal) {
-                    "; measure with temperature varying independently of time (a cool-down as well as a warm-up, or a second session)"
-                } else {
-                    "; vary the two channels independently in the next measurement"
-                };
+                let fix = separating_measurement(&sc[i].cand, &sc[j].cand);
                 warnings.push(Warning {
                     code: "confounded".into(),
                     detail: format!(
-                        "`{ai}` and `{aj}` cannot be told apart on these data (their new directions overlap {:.0} %: mean squared cosine of the principal angles; ΔBIC {:.0} vs {:.0}){fix}",
+                        "`{ai}` and `{aj}` cannot be told apart on these data (their new directions overlap {:.0} %: mean squared cosine of the principal angles; ΔBIC {:.0} vs {:.0}); {fix}",
                         100.0 * ov,
                         di,
                         dj
@@ -251,25 +294,66 @@ pub(super) fn rank_target(
     // serpentine makes `dir_z` follow it: a 2.8 µm "backlash" of ey along
     // z was added in its place, issue 12). The dense line settles both.
     let held_dbic = held.and_then(|h| sc[h].cand.delta_bic.map(|d| (d, sc[h].cand.add.clone())));
+    let mut blocked = None;
     if let Some(&b) = top.first().filter(|&&b| sc[b].cand.aliasing.is_none()) {
         let c = &sc[b].cand;
         let dbic = c.delta_bic.unwrap_or(f64::INFINITY);
         let gain = c.gain.unwrap_or(0.0);
         let gap_ok = competing_best.is_none_or(|r| dbic <= r - MIN_GAP_DBIC);
+        // To be named as a physical effect it must also beat a generic
+        // smooth shape with as many columns (`smooth`): a misfit the seed
+        // cannot fit otherwise passes as whichever named candidate happens
+        // to correlate with it.
+        let passes_alone = dbic < DBIC_SIGNIFICANT && gain >= MIN_HELD_OUT_GAIN;
+        let smooth = (passes_alone && gap_ok && c.replaces.is_none())
+            .then(|| smooth::alternative(td, st, &c.add, sc[b].partialled.len()))
+            .flatten();
+        let smooth_ok = smooth
+            .as_ref()
+            .is_none_or(|a| dbic <= a.dbic - MIN_GAP_DBIC);
+        // Under a held-back alias nothing weaker is claimed for the target,
+        // and the path does not go past it either: the dense line settles it.
+        let under_alias = held_dbic.as_ref().filter(|(d, _)| *d < dbic);
+        if passes_alone && under_alias.is_none() && (!gap_ok || !smooth_ok) {
+            blocked = Some(blocking(&sc, &top, &spans, n));
+        }
+        if let Some(a) = smooth.as_ref().filter(|_| !smooth_ok) {
+            warnings.push(Warning {
+                code: "smooth_misfit".into(),
+                detail: format!(
+                    "{}: smooth error is left that no named effect explains better than a generic shape — `{}` (ΔBIC {dbic:.0}) does no better than {} polynomial term(s) of degree 4–5 ({}: ΔBIC {:.0}); a seed of higher degree or `higher_order` absorbs it but names no cause",
+                    c.target,
+                    c.add,
+                    a.terms.len(),
+                    a.terms.join(", "),
+                    a.dbic
+                ),
+            });
+        }
         // Plausibility is not part of the rule: an apparent CTE of 60
         // µm/m/K (a sensor that sees a fifth of the structure's rise) is
         // still the effect that explains the error, and declaring the data
         // at its noise floor would hide it. The value is flagged instead
         // (`implausible_parameter`, see `plausibility_warning`).
-        let under_alias = held_dbic.as_ref().filter(|(d, _)| *d < dbic);
-        let ok =
-            dbic < DBIC_SIGNIFICANT && gain >= MIN_HELD_OUT_GAIN && gap_ok && under_alias.is_none();
+        let ok = passes_alone && gap_ok && smooth_ok && under_alias.is_none();
         let why = if ok {
             if c.physical.as_ref().is_some_and(|p| !p.plausible) {
                 "significant, but its physical parameter is implausible (check the sensor or channel it follows)".to_string()
             } else {
                 "significant".to_string()
             }
+        } else if let Some(a) = smooth.as_ref().filter(|_| !smooth_ok) {
+            format!(
+                "not significant: a generic smooth shape does as well ({} polynomial term(s) of degree 4–5, {}: ΔBIC {:.0}, not {MIN_GAP_DBIC} worse) — smooth error left, no named effect explains it",
+                a.terms.len(),
+                a.terms.join(", "),
+                a.dbic
+            )
+        } else if blocked.is_some() {
+            format!(
+                "not significant: no clear gap to the competing candidate (ΔBIC {:.0}) — it passes on its own, but the data cannot tell it from its competitor (see `unresolved`)",
+                competing_best.unwrap_or(0.0)
+            )
         } else {
             let mut r = Vec::new();
             if dbic >= DBIC_SIGNIFICANT {
@@ -310,7 +394,52 @@ pub(super) fn rank_target(
             ));
         }
     }
-    sc
+    (sc, blocked)
+}
+
+/// What blocks the best of `top` (indices into `sc`; `spans` their bases):
+/// the competitors within the gap rule's margin, and the candidates
+/// independent of the best and of everything that competes with it.
+fn blocking(sc: &[Scored], top: &[usize], spans: &[Basis], n: usize) -> Blocked {
+    let b = &sc[top[0]].cand;
+    let dbic = b.delta_bic.unwrap_or(f64::INFINITY);
+    // The group: the best and every contender sharing its signal.
+    let group: Vec<usize> = (0..top.len())
+        .filter(|&jj| jj == 0 || spans[0].overlap(&spans[jj]) >= COMPETING_OVERLAP)
+        .collect();
+    let pairs = group
+        .iter()
+        .skip(1)
+        .map(|&jj| (jj, &sc[top[jj]].cand))
+        .filter(|(_, c)| c.delta_bic.unwrap_or(f64::INFINITY) < dbic + MIN_GAP_DBIC)
+        .map(|(jj, c)| Unresolved {
+            target: b.target.clone(),
+            adds: [b.add.clone(), c.add.clone()],
+            delta_bic: [dbic, c.delta_bic.unwrap_or(f64::NAN)],
+            overlap: spans[0].overlap(&spans[jj]),
+            measure: separating_measurement(b, c),
+        })
+        .collect();
+    // Every other identifiable new effect (not a replacement), judged by
+    // its overlap with each member of the group — not only the contenders
+    // with ΔBIC < 0: with the group's signal left in the residual, an
+    // independent effect's ΔBIC is diluted.
+    let in_group = |i: usize| group.iter().any(|&jj| top[jj] == i);
+    let independent = (0..sc.len())
+        .filter(|&i| !in_group(i) && sc[i].cand.identifiable && sc[i].cand.replaces.is_none())
+        .filter(|&i| {
+            let bi = Basis::new(&sc[i].partialled, n);
+            group
+                .iter()
+                .all(|&jj| spans[jj].overlap(&bi) < COMPETING_OVERLAP)
+        })
+        .filter_map(|i| sc[i].cand.add.parse::<EffectSpec>().ok())
+        .collect();
+    Blocked {
+        best: b.add.clone(),
+        pairs,
+        independent,
+    }
 }
 
 /// The path of one target from its starting model `st0`: add the
@@ -319,7 +448,9 @@ pub(super) fn rank_target(
 /// accepted effects' warnings to `warnings` and their periodograms and
 /// fitted components to `ev`. Returns the target's candidates (those on the
 /// path with the scores of the step that added them), the model it ends
-/// at, and whether the path stayed empty.
+/// at, and whether the path stayed empty. A pair of candidates that blocks
+/// the path where it ends (each passes on its own, the data cannot tell
+/// them apart) goes to `unresolved`.
 pub(super) fn follow(
     td: &TargetData,
     st0: State,
@@ -327,10 +458,11 @@ pub(super) fn follow(
     warnings: &mut Vec<Warning>,
     ev: &mut Evidence,
     path: &mut Vec<PathStep>,
+    unresolved: &mut Vec<Unresolved>,
 ) -> Result<(Vec<Candidate>, State, bool)> {
     let t = td.t;
     let tn = TARGETS[t].to_string();
-    let mut cur = rank_target(td, &st0, &opts.seed, warnings, ev);
+    let (mut cur, mut blocked) = rank_target(td, &st0, &opts.seed, warnings, ev, None);
     // The path: add the significant best and look again. The candidate
     // list is the starting model's ranking; each effect added at a later
     // step takes the place of its stale first-step entry (the same
@@ -339,6 +471,20 @@ pub(super) fn follow(
     let mut list: Option<Vec<Candidate>> = None;
     let mut on_path: Vec<(usize, String)> = Vec::new();
     for k in 1..=MAX_PATH_STEPS {
+        if !cur.iter().any(|s| s.cand.significant) {
+            // A confounded best does not end the path: an effect
+            // independent of the pair is still tried.
+            match blocked
+                .as_ref()
+                .and_then(|b| past_confounded(td, &st, &opts.seed, b))
+            {
+                Some(alt) => {
+                    cur.retain(|s| !same_effect(&s.cand.add, &alt.cand.add));
+                    cur.insert(0, alt);
+                }
+                None => break,
+            }
+        }
         let Some(bi) = cur.iter().position(|s| s.cand.significant) else {
             break;
         };
@@ -400,7 +546,7 @@ pub(super) fn follow(
             break;
         }
         let mut step_ev = Evidence::default();
-        cur = rank_target(td, &st, &opts.seed, &mut Vec::new(), &mut step_ev);
+        (cur, blocked) = rank_target(td, &st, &opts.seed, &mut Vec::new(), &mut step_ev, None);
         // The periodogram that finds a periodic effect at the next step.
         if let Some(b) = cur.iter().find(|s| s.cand.significant) {
             if b.cand.effect == Family::Periodic {
@@ -447,6 +593,11 @@ pub(super) fn follow(
             }
         }
     }
+    // What the path could not attribute: the pair blocking it where it
+    // ended (an earlier block that a later step resolved is gone).
+    if let Some(b) = blocked {
+        unresolved.extend(b.pairs);
+    }
     let first = list.is_none();
     let candidates = list.unwrap_or_else(|| cur.into_iter().map(|s| s.cand).collect());
     let fit = (!on_path.is_empty()).then(|| small_fit(&st.cols, &td.y));
@@ -461,4 +612,35 @@ pub(super) fn follow(
         }
     }
     Ok((candidates, st, first))
+}
+
+/// The path past a blocked best: the candidates independent of it and of
+/// its competitors, scored with the best standing in for the group (the
+/// group shares one signal, whichever of them it is; left in the residual it
+/// would dilute every other effect's ΔBIC and gain). Returns the significant
+/// best of them, if any — to be added to the model *without* the stand-in.
+fn past_confounded(td: &TargetData, st: &State, seed: &str, b: &Blocked) -> Option<Scored> {
+    if b.independent.is_empty() {
+        return None;
+    }
+    let mut adds = st.adds.clone();
+    adds.push(b.best.clone());
+    let proxy = State::new(td, seed, &adds).ok()?;
+    let (sc, _) = rank_target(
+        td,
+        &proxy,
+        seed,
+        &mut Vec::new(),
+        &mut Evidence::default(),
+        Some(&b.independent),
+    );
+    let mut alt = sc.into_iter().find(|s| s.cand.significant)?;
+    let others: Vec<String> = b.pairs.iter().map(|p| format!("`{}`", p.adds[1])).collect();
+    alt.cand.evidence.push_str(&format!(
+        "; tried past the confounded `{}` / {} (scored with `{}` standing in for them, which it does not overlap)",
+        b.best,
+        others.join(" / "),
+        b.best
+    ));
+    Some(alt)
 }

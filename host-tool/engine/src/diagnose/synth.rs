@@ -41,6 +41,10 @@ pub enum Hidden {
     /// ex += 2 µm · sin(2π·x/5 mm + 0.3): a 5 mm lead on x (not in `ALL`:
     /// for tests with several effects on one target).
     PeriodicX,
+    /// ex += 0.05 µrad/mm · x · tool_mm: a pitch growing along x (40 µrad
+    /// at x = 800 mm) times the Abbe arm (not in `ALL`: for tests with
+    /// several effects on one target).
+    AbbeX,
 }
 
 impl Hidden {
@@ -66,6 +70,7 @@ impl Hidden {
             Hidden::Squareness => ("squareness", "ey", Some("x")),
             Hidden::HigherOrder => ("higher_order", "ez", Some("z")),
             Hidden::PeriodicX => ("periodic", "ex", Some("x")),
+            Hidden::AbbeX => ("abbe", "ex", Some("x")),
         }
     }
 
@@ -112,6 +117,11 @@ pub struct SynthConfig {
     pub bidirectional: bool,
     /// Lag of the structure behind the bed sensor in `Hidden::Thermal`, s.
     pub thermal_lag_s: f64,
+    /// The whole plan measured once per tool length (0, 75, 150 mm), one
+    /// after the other — tool length then goes with time, as when a user
+    /// measures tool length by tool length; false = the tool length
+    /// changes by pass.
+    pub tools_in_turn: bool,
 }
 
 impl Default for SynthConfig {
@@ -125,6 +135,7 @@ impl Default for SynthConfig {
             plan: Plan::GridAndLines,
             bidirectional: true,
             thermal_lag_s: 600.0,
+            tools_in_turn: false,
         }
     }
 }
@@ -179,6 +190,17 @@ pub fn generate(cfg: &SynthConfig) -> Dataset {
             line(&mut pts, axis, centre, 1.0, true);
         }
     }
+    const TOOLS_MM: [f64; 3] = [0.0, 75.0, 150.0];
+    let tool_of: Vec<f64> = if cfg.tools_in_turn {
+        let one = pts.clone();
+        pts.clear();
+        for k in 0..TOOLS_MM.len() as i64 {
+            pts.extend(one.iter().map(|p| (p.0, p.1, p.2 + k * pass)));
+        }
+        (0..pts.len()).map(|i| TOOLS_MM[i / one.len()]).collect()
+    } else {
+        pts.iter().map(|p| TOOLS_MM[(p.2 % 3) as usize]).collect()
+    };
     let n = pts.len();
     let t_s: Vec<f64> = (0..n).map(|i| 2.0 * i as f64).collect();
     let t_bed: Vec<f64> = t_s
@@ -189,10 +211,7 @@ pub fn generate(cfg: &SynthConfig) -> Dataset {
         .iter()
         .map(|t| 20.5 + 0.6 * (TAU * t / 4000.0 + 1.0).sin())
         .collect();
-    let tool: Vec<f64> = pts
-        .iter()
-        .map(|p| [0.0, 75.0, 150.0][(p.2 % 3) as usize])
-        .collect();
+    let tool = tool_of;
     let mut d = Dataset {
         source: format!("synth:seed={}", cfg.seed),
         pos_mm: [0, 1, 2].map(|a| Some(pts.iter().map(|p| p.0[a]).collect())),
@@ -238,6 +257,7 @@ pub fn generate(cfg: &SynthConfig) -> Dataset {
                 Hidden::Thermal => err[0][r] += a * 11.5e-3 * p[0] * (lag_bed[r] - 20.0),
                 Hidden::Reversal => err[0][r] += a * 4.0 * f64::from(pts[r].1[0]),
                 Hidden::Abbe => err[0][r] += a * 40e-3 * tool[r],
+                Hidden::AbbeX => err[0][r] += a * 0.05e-3 * p[0] * tool[r],
                 Hidden::Drift => err[2][r] += a * 2.0 * t_s[r] / 3600.0,
                 Hidden::Squareness => err[1][r] += a * 30e-3 * p[0],
                 Hidden::HigherOrder => {
