@@ -23,7 +23,7 @@ use crate::report::{Figure, Page, Tone, Verdict};
 
 /// Warning codes that undermine a verdict (shown on the card); the rest
 /// (`in_model_span`, `aux_columns`, …) stay in the Warnings section.
-pub const UNDERMINING: [&str; 7] = [
+pub const UNDERMINING: [&str; 8] = [
     "aliasing",
     "one_direction",
     "constant_temperature",
@@ -31,6 +31,7 @@ pub const UNDERMINING: [&str; 7] = [
     "confounded",
     "implausible_parameter",
     "aux_misspelled",
+    "noise_floor_upper_bound",
 ];
 
 /// The `fit` command that adds every effect the path found (one that
@@ -216,6 +217,15 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
             )
         })
         .collect();
+    // Targets whose floor is only an upper bound (`sparse_differences`).
+    let upper_bound: Vec<&str> = d
+        .noise_method
+        .iter()
+        .filter(|(_, m)| {
+            **m == Some(trueaxis_engine::diagnose::noise::NoiseMethod::SparseDifferences)
+        })
+        .map(|(t, _)| t.as_str())
+        .collect();
     let (headline, tone, next) = match d.verdict {
         DVerdict::MissingEffect if !path_cands.is_empty() => {
             let names: Vec<String> = path_cands.iter().map(|c| effect_words(c)).collect();
@@ -251,6 +261,17 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
                 format!("Missing: {}.", names.join("; and ")),
                 Tone::Action,
                 fit_command(d, data_path, model_out),
+            )
+        }
+        _ if left.is_empty() && unknown_noise.is_empty() && !upper_bound.is_empty() => {
+            details.push(format!("Residual: {}.", noise_words.join(", ")));
+            (
+                format!(
+                    "Nothing named is missing, but the noise floor of {} is an upper bound: re-probe points (repeat the map / these points) to measure repeatability.",
+                    upper_bound.join(", ")
+                ),
+                Tone::Unknown,
+                Some("re-probe the points the warning names (or repeat the whole measurement) within 15 min, then run diagnose again on both together".into()),
             )
         }
         _ if left.is_empty() && unknown_noise.is_empty() => {
