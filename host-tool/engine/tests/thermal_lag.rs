@@ -22,6 +22,8 @@ fn sim(plans: &[&str], effects: &[&str], dwell_s: f64, feed_mm_s: f64, seed: u64
         .map(|e| e.parse::<Effect>().unwrap())
         .collect();
     cfg.timing = Timing { feed_mm_s, dwell_s };
+    // `simulate`'s default noise (the preset's is none).
+    cfg.noise_um = 0.2;
     cfg.seed = seed;
     cfg.check().unwrap();
     simulate(&cfg)

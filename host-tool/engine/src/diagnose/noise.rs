@@ -402,9 +402,10 @@ pub(super) fn upper_bound_warning(
     Some(super::Warning {
         code: "noise_floor_upper_bound".into(),
         detail: format!(
-            "{target}: the noise floor is an upper bound ({:.3} µm from {}: differences of higher order on the same points disagree, so the measured shape is not smooth over the spacing and is counted in it); {what}, each within {} min of its first reading, to measure repeatability",
+            "{target}: the noise floor is an upper bound ({:.3} µm from {}: the points are more than {} mm apart, or differences of higher order on them disagree, so shape on the scale of the spacing is counted in it); {what}, each within {} min of its first reading, to measure repeatability",
             nf.sigma_um,
             nf.method.describe(),
+            CLOSE_SPACING_MM,
             (MAX_REPEAT_GAP_S / 60.0).round()
         ),
     })
@@ -455,6 +456,33 @@ mod tests {
         assert_eq!(nf.method, NoiseMethod::Differences);
         let sigma = (1.0f64 / 3.0).sqrt();
         assert!((nf.sigma_um / sigma - 1.0).abs() < 0.15, "{}", nf.sigma_um);
+    }
+
+    /// A 5 mm line over a 30 mm waviness of 2 µm (a scraped way): third
+    /// differences keep (2 sin(π/6))³/√20 = 22 % of it, ~0.3 µm RMS against
+    /// 0.06 µm of noise, fifth differences 6 % — they disagree, so the floor
+    /// is an upper bound (main called the shape noise: `differences`).
+    #[test]
+    fn a_dense_line_whose_fifth_differences_disagree_is_an_upper_bound() {
+        let n = 400;
+        let d = Dataset {
+            pos_mm: [Some((0..n).map(|i| i as f64 * 5.0).collect()), None, None],
+            ..Dataset::default()
+        };
+        let rows: Vec<usize> = (0..n).collect();
+        let resid: Vec<f64> = (0..n)
+            .map(|i| {
+                2.0 * (std::f64::consts::TAU * i as f64 * 5.0 / 30.0).sin() + 0.1 * pseudo_noise(i)
+            })
+            .collect();
+        let nf = noise_floor(&d, &rows, &resid).unwrap();
+        assert_eq!(nf.method, NoiseMethod::SparseDifferences, "{nf:?}");
+        // Without the wave the same line measures the noise.
+        let clean: Vec<f64> = (0..n).map(|i| 0.1 * pseudo_noise(i)).collect();
+        let nf = noise_floor(&d, &rows, &clean).unwrap();
+        assert_eq!(nf.method, NoiseMethod::Differences);
+        let ratio = nf.sigma_um / (0.1 * uniform_sigma());
+        assert!((0.85..1.15).contains(&ratio), "{ratio}");
     }
 
     #[test]
