@@ -12,6 +12,7 @@ use anyhow::Result;
 use serde::Serialize;
 
 use crate::data::Dataset;
+use crate::diagnose::noise::NoiseMethod;
 use crate::diagnose::outliers::{self, Outlier};
 use crate::diagnose::{self, Options, Verdict};
 use crate::effect::Effect;
@@ -56,6 +57,8 @@ pub struct ImproveStep {
     pub fit_held_out_rms_um: BTreeMap<String, f64>,
     /// Noise floor per target from the diagnosis of this fit, µm.
     pub noise_floor_um: BTreeMap<String, Option<f64>>,
+    /// How each floor was estimated (`sparse_differences`: an upper bound).
+    pub noise_method: BTreeMap<String, Option<NoiseMethod>>,
     /// The diagnosis of this fit.
     pub verdict: Verdict,
     /// Targets whose RMS is still more than `ABOVE_NOISE_RATIO` × their noise
@@ -72,6 +75,10 @@ pub struct ImproveStep {
     /// cannot tell apart (the diagnosis' `unresolved`), with the
     /// measurement that separates them.
     pub unresolved: Vec<diagnose::Unresolved>,
+    /// The diagnosis' `rejected_candidate` warnings (a candidate ΔBIC
+    /// alone would take, refused by the other rules), for the closing line.
+    #[serde(skip)]
+    pub rejected: Vec<String>,
 }
 
 /// A candidate the loop did not add because the sampling along its axis
@@ -121,9 +128,39 @@ impl ImproveStep {
     /// "at the noise floor" only when the diagnosis says so — every target
     /// within `ABOVE_NOISE_RATIO`× its floor.
     pub fn outcome(&self) -> String {
-        let mut s = match self.verdict {
-            Verdict::MissingEffect => "stopped after the step limit".to_string(),
-            Verdict::AtNoiseFloor => "at the noise floor".into(),
+        let mut s = self.verdict_words();
+        if self.verdict != Verdict::MissingEffect && !self.rejected.is_empty() {
+            s.push_str(&format!("; not accepted: {}", self.rejected.join("; ")));
+        }
+        // Why it stopped short of the wave the data seem to show, and the
+        // measurement that settles it.
+        for h in &self.held_back {
+            s.push_str(&format!("; {}", h.text()));
+        }
+        s
+    }
+
+    fn verdict_words(&self) -> String {
+        match self.verdict {
+            Verdict::MissingEffect => "stopped after the step limit".into(),
+            Verdict::AtNoiseFloor => {
+                // Against an upper bound of the noise, "at the floor" says
+                // less than it seems: say so, and what to measure.
+                let bound: Vec<&str> = self
+                    .noise_method
+                    .iter()
+                    .filter(|(_, m)| **m == Some(NoiseMethod::SparseDifferences))
+                    .map(|(t, _)| t.as_str())
+                    .collect();
+                if bound.is_empty() {
+                    "at the noise floor".into()
+                } else {
+                    format!(
+                        "at the noise floor, but the noise floor of {} is an upper bound: re-probe points (repeat the map / these points) to measure repeatability",
+                        bound.join(", ")
+                    )
+                }
+            }
             Verdict::AboveNoiseFloor
                 if self.unexplained.is_empty() && self.unresolved.is_empty() =>
             {
@@ -143,13 +180,7 @@ impl ImproveStep {
                     .collect::<Vec<_>>()
                     .join("; ")
             ),
-        };
-        // Why it stopped short of the wave the data seem to show, and the
-        // measurement that settles it.
-        for h in &self.held_back {
-            s.push_str(&format!("; {}", h.text()));
         }
-        s
     }
 }
 
@@ -248,6 +279,7 @@ pub fn improve_with(
             held_out_rms_um: d.held_out_rms_um.clone(),
             fit_held_out_rms_um: model.stats.held_out_rms_um.clone(),
             noise_floor_um: d.noise_floor_um.clone(),
+            noise_method: d.noise_method.clone(),
             verdict: d.verdict,
             above_noise_floor,
             unexplained: d.unexplained.clone(),
@@ -261,6 +293,12 @@ pub fn improve_with(
                 })
                 .collect(),
             unresolved: d.unresolved.clone(),
+            rejected: d
+                .warnings
+                .iter()
+                .filter(|w| w.code == "rejected_candidate")
+                .map(|w| w.detail.clone())
+                .collect(),
         };
         on_step(&step);
         steps.push(step);

@@ -171,9 +171,14 @@ pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path, verbose: bool) ->
     }
     match d.verdict {
         Verdict::MissingEffect => s.push_str("verdict: missing_effect\n"),
-        Verdict::AtNoiseFloor => s.push_str(
-            "verdict: at_noise_floor — no candidate is significant and every target is within 1.3× its noise floor\n",
-        ),
+        Verdict::AtNoiseFloor => {
+            s.push_str(
+                "verdict: at_noise_floor — no candidate is significant and every target is within 1.3× its noise floor\n",
+            );
+            for w in d.warnings.iter().filter(|w| w.code == "noise_floor_upper_bound") {
+                s.push_str(&format!("  but {}\n", w.detail));
+            }
+        }
         Verdict::AboveNoiseFloor => {
             s.push_str("verdict: above_noise_floor — no candidate is significant, but systematic error is left:\n")
         }

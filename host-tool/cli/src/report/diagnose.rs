@@ -24,7 +24,7 @@ use crate::report::{Figure, Page, Tone, Verdict};
 
 /// Warning codes that undermine a verdict (shown on the card); the rest
 /// (`in_model_span`, `aux_columns`, …) stay in the Warnings section.
-pub const UNDERMINING: [&str; 7] = [
+pub const UNDERMINING: [&str; 8] = [
     "aliasing",
     "one_direction",
     "constant_temperature",
@@ -32,6 +32,7 @@ pub const UNDERMINING: [&str; 7] = [
     "confounded",
     "implausible_parameter",
     "aux_misspelled",
+    "noise_floor_upper_bound",
 ];
 
 /// The `fit` command that adds every effect the path found (one that
@@ -193,7 +194,7 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
             .max_by(|a, b| a.rms_um.total_cmp(&b.rms_um))
             .map(|r| trueaxis_engine::regions::bbox_text(&r.bbox_mm))
     };
-    let left_words: Vec<String> = left
+    let mut left_words: Vec<String> = left
         .iter()
         .map(|(t, r, nf)| {
             format!(
@@ -205,6 +206,16 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
             )
         })
         .collect();
+    // A target within 1.3× overall but far above its floor in a region of
+    // the working volume (`region_ratio`): left above the noise there.
+    for u in &d.unexplained {
+        if let (Some(_), Some(_)) = (u.region_ratio, &u.region) {
+            if !left.iter().any(|(t, _, _)| *t == u.target) {
+                left.push((u.target.clone(), u.rms_um, u.noise_floor_um));
+                left_words.push(u.text());
+            }
+        }
+    }
     let noise_words: Vec<String> = d
         .rms_um
         .keys()
@@ -227,6 +238,15 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
         .held_back()
         .next()
         .map(|(_, a)| format!("measure first: a dense line: {}", a.measure));
+    // Targets whose floor is only an upper bound (`sparse_differences`).
+    let upper_bound: Vec<&str> = d
+        .noise_method
+        .iter()
+        .filter(|(_, m)| {
+            **m == Some(trueaxis_engine::diagnose::noise::NoiseMethod::SparseDifferences)
+        })
+        .map(|(t, _)| t.as_str())
+        .collect();
     let (headline, tone, next) = match d.verdict {
         DVerdict::MissingEffect if !path_cands.is_empty() => {
             let names: Vec<String> = path_cands.iter().map(|c| effect_words(c)).collect();
@@ -287,6 +307,17 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
                 ),
                 Tone::Action,
                 measure_first,
+            )
+        }
+        _ if left.is_empty() && unknown_noise.is_empty() && !upper_bound.is_empty() => {
+            details.push(format!("Residual: {}.", noise_words.join(", ")));
+            (
+                format!(
+                    "Nothing named is missing, but the noise floor of {} is an upper bound: re-probe points (repeat the map / these points) to measure repeatability.",
+                    upper_bound.join(", ")
+                ),
+                Tone::Unknown,
+                Some("re-probe the points the warning names (or repeat the whole measurement) within 15 min, then run diagnose again on both together".into()),
             )
         }
         _ if left.is_empty() && unknown_noise.is_empty() => {

@@ -76,6 +76,24 @@ pub(super) fn golden_min(f: impl Fn(f64) -> f64, lo: f64, hi: f64, tol: f64) -> 
 const LAGS_S: [f64; 11] = [
     0.0, 120.0, 300.0, 600.0, 900.0, 1200.0, 1800.0, 2400.0, 3600.0, 5400.0, 7200.0,
 ];
+/// Beyond the grid's longest lag, each further lag is this much longer.
+const LAG_EXTEND: f64 = 1.5;
+
+/// Time the readings of `td` span, s: each session's first to last reading,
+/// summed over the sessions (0 without `t_s`).
+fn duration_s(td: &TargetData) -> f64 {
+    let Some(t_s) = &td.data.t_s else {
+        return 0.0;
+    };
+    let mut span: std::collections::BTreeMap<i64, (f64, f64)> = Default::default();
+    for &r in &td.rows {
+        let s = td.data.session_id.as_ref().map_or(0, |v| v[r]);
+        let e = span.entry(s).or_insert((f64::INFINITY, f64::NEG_INFINITY));
+        e.0 = e.0.min(t_s[r]);
+        e.1 = e.1.max(t_s[r]);
+    }
+    span.values().map(|(lo, hi)| hi - lo).sum()
+}
 
 /// Builds the candidate library for one target at the current model; with
 /// `only`, just the candidates that could be that effect (the re-search of
@@ -208,6 +226,7 @@ pub(super) fn propose(
         });
     }
     // thermal: per channel that varies, alone or times each axis; lag searched.
+    let duration = duration_s(td);
     for ch in &data.temps {
         let lo = ch.temp_c.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = ch.temp_c.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -240,25 +259,37 @@ pub(super) fn propose(
                     }
                     s
                 };
-                let lags: &[f64] = if data.t_s.is_some() {
-                    &LAGS_S
-                } else {
-                    &LAGS_S[..1]
-                };
                 let rss_at =
                     |lag: f64| fwl(td, st, &spec_at(lag), 0).map_or(f64::INFINITY, |ff| ff.fit.rss);
-                let mut best = (f64::INFINITY, 0.0);
-                let mut best_i = 0;
-                let grid: Vec<f64> = lags.par_iter().map(|&lag| rss_at(lag)).collect();
-                for (i, (&lag, &rss)) in lags.iter().zip(&grid).enumerate() {
-                    if rss < best.0 {
-                        best = (rss, lag);
-                        best_i = i;
+                let mut lags: Vec<f64> = if data.t_s.is_some() {
+                    LAGS_S.to_vec()
+                } else {
+                    vec![0.0]
+                };
+                let mut grid: Vec<f64> = lags.par_iter().map(|&lag| rss_at(lag)).collect();
+                let argmin = |g: &[f64]| {
+                    g.iter()
+                        .enumerate()
+                        .fold((0, f64::INFINITY), |b, (i, &r)| if r < b.1 { (i, r) } else { b })
+                };
+                // A best lag at the grid's longest: search further out, by
+                // half again each time, up to half the test's duration (a
+                // longer lag is a slope the test cannot tell from a smaller
+                // growth: the test is shorter than the time constant).
+                while lags.len() > 1 && argmin(&grid).0 == lags.len() - 1 {
+                    let next = lags[lags.len() - 1] * LAG_EXTEND;
+                    if next > 0.5 * duration {
+                        break;
                     }
+                    lags.push(next);
+                    grid.push(rss_at(next));
                 }
-                if !best.0.is_finite() {
+                let (best_i, best_rss) = argmin(&grid);
+                if !best_rss.is_finite() {
                     return None;
                 }
+                let mut best = (best_rss, lags[best_i]);
+                let unidentified = lags.len() > 1 && best_i == lags.len() - 1;
                 // The grid only brackets the lag (a true 1000 s was reported as
                 // 900 s, and the CTE's interval, which takes the lag as known,
                 // then missed the truth): refine between the grid neighbours of
@@ -271,9 +302,18 @@ pub(super) fn propose(
                         best = (rss, lag.round());
                     }
                 }
+                let flag = if unidentified {
+                    format!(
+                        "; lag not identified: the best is the longest lag tried ({} s, half the {:.1} h the readings span) — the test is shorter than the time constant; measure at least 3× as long to identify it",
+                        fmt_num(lags[lags.len() - 1], 0),
+                        duration / 3600.0
+                    )
+                } else {
+                    String::new()
+                };
                 let note = if data.t_s.is_some() {
                     format!(
-                        "the {tn} residual follows T_{}_C{} (range {:.2} K), lag {} s found by search",
+                        "the {tn} residual follows T_{}_C{} (range {:.2} K), lag {} s found by search{flag}",
                         ch.name,
                         tm.map_or(String::new(), |a| format!(" × {}", AXES[a])),
                         hi - lo,

@@ -643,6 +643,7 @@ fn one_target(
     let nf = noise_floor(data, &td.rows, &st.resid);
     let mut unexplained = Vec::new();
     if let Some(nf) = &nf {
+        warnings.extend(noise::upper_bound_warning(&tn, nf, data, &td.rows));
         warnings.extend(above_noise_warning(&tn, st.rms(), nf, !first));
         let cells = crate::regions::worst_cells(data, &td.norm, t, &td.rows, &st.resid);
         let global = above_noise(st.rms(), nf.sigma_um);
@@ -799,6 +800,9 @@ pub fn diagnose_with(data: &Dataset, opts: &Options, progress: Progress) -> Resu
     } else {
         Verdict::AboveNoiseFloor
     };
+    if verdict != Verdict::MissingEffect {
+        warnings.extend(rejected_warnings(&candidates, &rms_um, &noise_floor_um));
+    }
     dedup_warnings(&mut warnings);
     Ok(Diagnosis {
         model,
@@ -818,6 +822,68 @@ pub fn diagnose_with(data: &Dataset, opts: &Options, progress: Progress) -> Resu
         hold_out,
         evidence: ev,
     })
+}
+
+/// `rejected_candidate` warnings: with nothing significant, the best
+/// candidate of each target that ΔBIC alone would take (< −10) but the
+/// other rules refused — so that "at the noise floor" at 1.15× is not said
+/// silently while a named effect explains part of the residual at ΔBIC
+/// −49 300 (the scale benchmark before the forward hold-out's equal-time
+/// blocks). The warning names the candidate, why it was refused (its
+/// evidence's reason and hold-out) and the target's ratio to its floor.
+fn rejected_warnings(
+    candidates: &[Candidate],
+    rms_um: &BTreeMap<String, f64>,
+    floors: &BTreeMap<String, Option<f64>>,
+) -> Vec<Warning> {
+    let mut out = Vec::new();
+    let mut seen = std::collections::BTreeSet::new();
+    for c in candidates {
+        if c.significant || !c.identifiable || !seen.insert(c.target.clone()) {
+            continue;
+        }
+        let Some(dbic) = c.delta_bic.filter(|d| *d < DBIC_SIGNIFICANT) else {
+            continue;
+        };
+        let why = c
+            .evidence
+            .split(" — not significant: ")
+            .nth(1)
+            .map_or("refused by the acceptance rule", |r| {
+                r.split(';').next().unwrap_or(r)
+            });
+        let held = match (c.held_out_rms_um_before, c.held_out_rms_um_after) {
+            (Some(b), Some(a)) => format!(
+                " ({} RMS {b:.3} → {a:.3} µm)",
+                match c.hold_out {
+                    HoldOutKind::Forward => "forward-chained",
+                    HoldOutKind::Blocks => "block-held-out",
+                }
+            ),
+            _ => String::new(),
+        };
+        let ratio = match (
+            rms_um.get(&c.target),
+            floors.get(&c.target).copied().flatten(),
+        ) {
+            (Some(r), Some(f)) if f > 0.0 => {
+                format!(
+                    "; {} is {:.2}× its noise floor ({r:.3} µm RMS against {f:.3})",
+                    c.target,
+                    r / f
+                )
+            }
+            _ => String::new(),
+        };
+        out.push(Warning {
+            code: "rejected_candidate".into(),
+            detail: format!(
+                "{}: `{}` explains part of the residual (ΔBIC {dbic:.0}) but was not accepted: {why}{held}{ratio}",
+                c.target, c.add
+            ),
+        });
+    }
+    out
 }
 
 /// One candidate effect's columns with the model partialled out.
@@ -930,5 +996,60 @@ mod tests {
         let v = serde_json::to_value(&Candidate { step: None, ..c }).unwrap();
         assert_eq!(v["on_path"], false);
         assert!(v["step"].is_null());
+    }
+
+    /// A candidate ΔBIC alone would take but the forward hold-out refused
+    /// is named with its reason when nothing is significant; one ΔBIC
+    /// refuses too, and significant ones, are not.
+    #[test]
+    fn a_refused_candidate_is_named_with_why() {
+        let c = Candidate {
+            effect: Family::Thermal,
+            target: "ex".into(),
+            axis: Some("x".into()),
+            channel: Some("T_bed_C".into()),
+            params: BTreeMap::new(),
+            add: "thermal:target=ex,channel=bed,times=x,offset=1,lag_s=249".into(),
+            held_out_rms_um_after: Some(0.200),
+            held_out_rms_um_before: Some(0.201),
+            hold_out: HoldOutKind::Forward,
+            gain: Some(0.003),
+            identifiable: true,
+            evidence: "the ex residual follows T_bed_C × x; ΔBIC -49300 — not significant: held-out gain 0 % < 10 %; preferred over `drift:target=ex,order=3`".into(),
+            delta_bic: Some(-49300.0),
+            rms_um_after: None,
+            out_of_span_share: 0.0,
+            significant: false,
+            physical: None,
+            confounded_with: Vec::new(),
+            replaces: None,
+            step: None,
+            aliasing: None,
+            held_back: false,
+        };
+        let weak = Candidate {
+            target: "ey".into(),
+            delta_bic: Some(-3.0),
+            ..c.clone()
+        };
+        let rms = BTreeMap::from([("ex".to_string(), 0.229), ("ey".to_string(), 0.2)]);
+        let floors = BTreeMap::from([("ex".to_string(), Some(0.2)), ("ey".to_string(), Some(0.2))]);
+        let w = rejected_warnings(&[c.clone(), weak], &rms, &floors);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert_eq!(w[0].code, "rejected_candidate");
+        let d = &w[0].detail;
+        for part in [
+            "ex: `thermal:target=ex,channel=bed,times=x,offset=1,lag_s=249` explains part",
+            "(ΔBIC -49300)",
+            "not accepted: held-out gain 0 % < 10 % (forward-chained RMS 0.201 → 0.200 µm)",
+            "ex is 1.15× its noise floor",
+        ] {
+            assert!(d.contains(part), "{part} not in {d}");
+        }
+        let sig = Candidate {
+            significant: true,
+            ..c
+        };
+        assert!(rejected_warnings(&[sig], &rms, &floors).is_empty());
     }
 }

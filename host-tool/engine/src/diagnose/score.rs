@@ -10,7 +10,7 @@ use crate::features::Feature;
 
 use super::candidates::Proposal;
 use super::physical::{lag_aware_xtx_inv, param_key, physical};
-use super::target::{forward_blocks, forward_rms, fwl, State, TargetData};
+use super::target::{block_rms, forward_blocks, forward_rms, fwl, State, TargetData};
 use super::{Candidate, HoldOutKind, Warning, IN_SPAN_SHARE};
 
 /// The scored candidates of one target, with the columns needed for overlaps.
@@ -148,14 +148,7 @@ pub(super) fn score(
                 let (before, after) = forward_rms(blocks, &st.resid, &ff.partialled);
                 let before = match repl {
                     // Against the current model: its own residual, forward.
-                    Some(r) => {
-                        let tail: Vec<f64> = blocks[1..]
-                            .iter()
-                            .flatten()
-                            .map(|&i| r.current.resid[i])
-                            .collect();
-                        crate::holdout::rms(tail.into_iter())
-                    }
+                    Some(r) => block_rms(&blocks[1..], |i| r.current.resid[i]),
                     None => before,
                 };
                 (before, Some(after), HoldOutKind::Forward)

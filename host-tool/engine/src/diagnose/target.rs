@@ -231,10 +231,19 @@ pub(super) const FORWARD_BLOCKS: usize = 6;
 
 /// The forward-chaining hold-out of one target: its rows (local indices)
 /// in time order (session, then `t_s`), cut into [`FORWARD_BLOCKS`]
-/// contiguous blocks of about equal size. Block i is predicted from blocks
-/// 0..i only — what a user asks of a time-dependent term: does it predict
-/// *later* data from earlier data? None without `t_s`, or with fewer than
-/// two rows per block.
+/// contiguous blocks of equal *time* (the sessions laid end to end). Block
+/// i is predicted from blocks 0..i only — what a user asks of a
+/// time-dependent term: does it predict *later* data from earlier data?
+///
+/// Equal time, not equal row counts: a campaign whose warm-up is sampled
+/// by a 100 mm grid (324 readings over 9 h) and whose last hour is dense
+/// lines (180 000 readings at a steady temperature) put the whole warm-up
+/// into the first of six equal-count blocks, and the thermal growth —
+/// ΔBIC −49 300 — was "predicted" only on later data where the temperature
+/// no longer moved (gain 0 %, rejected). Blocks empty of readings (a pause)
+/// are dropped. Without time spread (every reading at one `t_s` in one
+/// session) the blocks are equal in count. None without `t_s`, or with
+/// fewer than two rows per block.
 pub(super) fn forward_blocks(td: &TargetData) -> Option<Vec<Vec<usize>>> {
     let t_s = td.data.t_s.as_ref()?;
     let n = td.rows.len();
@@ -248,24 +257,58 @@ pub(super) fn forward_blocks(td: &TargetData) -> Option<Vec<Vec<usize>>> {
     let index: std::collections::HashMap<usize, usize> =
         td.rows.iter().enumerate().map(|(i, &r)| (r, i)).collect();
     let ordered = crate::holdout::time_order(td.data, &td.rows);
+    // The clock: time since the first reading, each session starting where
+    // the previous one ended.
+    let session = |r: usize| td.data.session_id.as_ref().map_or(0, |s| s[r]);
+    let mut clock = Vec::with_capacity(n);
+    let mut c = 0.0f64;
+    for (k, &r) in ordered.iter().enumerate() {
+        if k > 0 {
+            let p = ordered[k - 1];
+            if session(p) == session(r) {
+                c += (t_s[r] - t_s[p]).max(0.0);
+            }
+        }
+        clock.push(c);
+    }
+    let total = c;
     let mut blocks = vec![Vec::new(); FORWARD_BLOCKS];
     for (i, r) in ordered.iter().enumerate() {
-        blocks[i * FORWARD_BLOCKS / n].push(index[r]);
+        let b = if total > 0.0 {
+            ((clock[i] / total * FORWARD_BLOCKS as f64) as usize).min(FORWARD_BLOCKS - 1)
+        } else {
+            i * FORWARD_BLOCKS / n
+        };
+        blocks[b].push(index[r]);
     }
-    Some(blocks)
+    blocks.retain(|b| !b.is_empty());
+    (blocks.len() >= 2).then_some(blocks)
+}
+
+/// RMS over `blocks` of `v`, each block weighing the same whatever its
+/// number of readings (an hour sampled 500 times more densely is not 500
+/// times more of a test of what happens later): √(mean over blocks of the
+/// block's mean square).
+pub(super) fn block_rms(blocks: &[Vec<usize>], v: impl Fn(usize) -> f64) -> f64 {
+    let per: Vec<f64> = blocks
+        .iter()
+        .filter(|b| !b.is_empty())
+        .map(|b| b.iter().map(|&i| v(i).powi(2)).sum::<f64>() / b.len() as f64)
+        .collect();
+    (per.iter().sum::<f64>() / per.len().max(1) as f64).sqrt()
 }
 
 /// Forward-chained RMS (µm) over blocks 1.. of `blocks` of the model's
 /// residual `resid` (the model fitted on all rows, as in the ΔBIC) before
 /// and after adding the candidate's columns `partialled` (the model
 /// partialled out), whose coefficients are fitted on the earlier blocks
-/// only: (before, after).
+/// only: (before, after), each block weighing the same ([`block_rms`]).
 pub(super) fn forward_rms(
     blocks: &[Vec<usize>],
     resid: &[f64],
     partialled: &[Vec<f64>],
 ) -> (f64, f64) {
-    let (mut ss0, mut ss1, mut m) = (0.0, 0.0, 0usize);
+    let mut pred = vec![0.0; resid.len()];
     let mut train: Vec<usize> = blocks[0].clone();
     for block in &blocks[1..] {
         let cols: Vec<Vec<f64>> = partialled
@@ -275,15 +318,14 @@ pub(super) fn forward_rms(
         let y: Vec<f64> = train.iter().map(|&i| resid[i]).collect();
         let fit = small_fit(&cols, &y);
         for &i in block {
-            let pred: f64 = fit.beta.iter().zip(partialled).map(|(b, c)| b * c[i]).sum();
-            ss0 += resid[i] * resid[i];
-            ss1 += (resid[i] - pred).powi(2);
-            m += 1;
+            pred[i] = fit.beta.iter().zip(partialled).map(|(b, c)| b * c[i]).sum();
         }
         train.extend_from_slice(block);
     }
-    let m = m.max(1) as f64;
-    ((ss0 / m).sqrt(), (ss1 / m).sqrt())
+    (
+        block_rms(&blocks[1..], |i| resid[i]),
+        block_rms(&blocks[1..], |i| resid[i] - pred[i]),
+    )
 }
 
 #[cfg(test)]

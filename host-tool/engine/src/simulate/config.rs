@@ -87,6 +87,24 @@ pub enum Effect {
         /// Tool lengths, one per pass in turn, mm.
         tools_mm: Vec<f64>,
     },
+    /// A guide bump: a localized straightness error along `axis` (a dent
+    /// or a proud spot of a guide rail, a bad scrape), a Gaussian of full
+    /// width at half maximum `width_mm` centred at `at_mm` on that axis:
+    /// amp_um·exp(−4 ln 2·((q − at_mm)/width_mm)²) added to `target`. No
+    /// polynomial seed follows it, and neighbour differences along a
+    /// 25–50 mm line count it as noise (issue 12).
+    Bump {
+        /// Target index (a straightness: usually not the axis' own).
+        target: usize,
+        /// Axis along which the bump sits.
+        axis: usize,
+        /// Centre of the bump on `axis`, mm.
+        at_mm: f64,
+        /// Full width at half maximum, mm.
+        width_mm: f64,
+        /// Height at the centre, µm.
+        amp_um: f64,
+    },
     /// Slow drift in time not explained by temperature: um_per_h·t_s/3600.
     Drift {
         /// Target index.
@@ -202,6 +220,8 @@ impl Limit {
     pub const BACKLASH_UM: Limit = Limit::closed(-1000.0, 1000.0, "µm");
     /// A tilt (48.5 µrad typical; 10 mrad is a crash).
     pub const ANGLE_URAD: Limit = Limit::closed(-10_000.0, 10_000.0, "µrad");
+    /// A position on an axis (a guide bump's centre).
+    pub const POSITION_MM: Limit = Limit::closed(-10_000.0, 10_000.0, "mm");
     /// Drift rate.
     pub const DRIFT_UM_PER_H: Limit = Limit::closed(-1000.0, 1000.0, "µm/h");
 
@@ -436,10 +456,11 @@ impl SimConfig {
                     swing_period_s,
                     ..
                 } => *tau_s >= 0.0 && *lag_s >= 0.0 && *swing_period_s > 0.0,
+                Effect::Bump { width_mm, .. } => *width_mm > 0.0,
                 Effect::Reversal { .. } | Effect::Drift { .. } => true,
             };
             if !ok {
-                bail!("effect `{e}`: expected tools_mm not empty, period_mm > 0, harmonics ≥ 1, tau_s and lag_s ≥ 0, swing_period_s > 0");
+                bail!("effect `{e}`: expected tools_mm not empty, period_mm > 0, harmonics ≥ 1, tau_s and lag_s ≥ 0, swing_period_s > 0, width_mm > 0");
             }
         }
         Ok(())
@@ -524,6 +545,16 @@ impl SimConfig {
                     for t in tools_mm {
                         Limit::TOOL_MM.check(&what("tools_mm"), *t)?;
                     }
+                }
+                Effect::Bump {
+                    at_mm,
+                    width_mm,
+                    amp_um,
+                    ..
+                } => {
+                    Limit::POSITION_MM.check(&what("at_mm"), *at_mm)?;
+                    Limit::STEP_MM.check(&what("width_mm"), *width_mm)?;
+                    Limit::AMP_UM.check(&what("amp_um"), *amp_um)?;
                 }
                 Effect::Drift { um_per_h, .. } => {
                     Limit::DRIFT_UM_PER_H.check(&what("um_per_h"), *um_per_h)?

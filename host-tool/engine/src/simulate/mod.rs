@@ -299,6 +299,18 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
                     truth[*target][r] += angle_urad * rows_tool[r] * 1e-3;
                 }
             }
+            Effect::Bump {
+                target,
+                axis,
+                at_mm,
+                width_mm,
+                amp_um,
+            } => {
+                for r in 0..n {
+                    let u = (rows_pos[*axis][r] - at_mm) / width_mm;
+                    truth[*target][r] += amp_um * (-4.0 * std::f64::consts::LN_2 * u * u).exp();
+                }
+            }
             Effect::Drift { target, um_per_h } => {
                 for r in 0..n {
                     truth[*target][r] += um_per_h * rows_t[r] / 3600.0;

@@ -409,6 +409,22 @@ fn parse_effect(s: &str) -> Result<Effect> {
             kv.finish("angle_urad, tools_mm, target")?;
             e
         }
+        "bump" => {
+            let axis = kv.axis("axis")?.ok_or_else(|| anyhow!("missing `axis=`"))?;
+            let width_mm = kv.need_f64("width_mm")?;
+            if width_mm <= 0.0 {
+                bail!("`width_mm={width_mm}`: expected a positive width");
+            }
+            let e = Effect::Bump {
+                target: kv.target(axis)?,
+                axis,
+                at_mm: kv.need_f64("at_mm")?,
+                width_mm,
+                amp_um: kv.need_f64("amp_um")?,
+            };
+            kv.finish("axis, at_mm, width_mm, amp_um, target")?;
+            e
+        }
         "drift" => {
             let e = Effect::Drift {
                 target: kv.target(0)?,
@@ -418,7 +434,7 @@ fn parse_effect(s: &str) -> Result<Effect> {
             e
         }
         other => {
-            bail!("unknown effect `{other}` (expected periodic, thermal, reversal, abbe or drift)")
+            bail!("unknown effect `{other}` (expected periodic, thermal, reversal, abbe, bump or drift)")
         }
     };
     Ok(e)
@@ -465,6 +481,17 @@ impl fmt::Display for Effect {
                     TARGETS[*target]
                 )
             }
+            Effect::Bump {
+                target,
+                axis,
+                at_mm,
+                width_mm,
+                amp_um,
+            } => write!(
+                f,
+                "bump:axis={},at_mm={at_mm},width_mm={width_mm},amp_um={amp_um},target={}",
+                AXES[*axis], TARGETS[*target]
+            ),
             Effect::Drift { target, um_per_h } => {
                 write!(f, "drift:um_per_h={um_per_h},target={}", TARGETS[*target])
             }
@@ -503,6 +530,7 @@ mod tests {
             "reversal:axis=x,backlash_um=8",
             "abbe:angle_urad=48.5,tools_mm=0/50/100",
             "drift:um_per_h=0.5,target=ey",
+            "bump:axis=x,at_mm=400,width_mm=40,amp_um=1.5,target=ey",
         ] {
             let e: Effect = s.parse().unwrap();
             assert_eq!(e.to_string().parse::<Effect>().unwrap(), e, "{s}");
@@ -516,6 +544,8 @@ mod tests {
         assert!(msg("periodic:axis=x,amp_um=1").contains("missing `period_mm=`"));
         assert!(msg("drift:um_per_h=1,speed=3").contains("unknown key `speed`"));
         assert!(msg("wobble:x=1").contains("unknown effect"));
+        assert!(msg("bump:axis=x,at_mm=400,amp_um=1").contains("missing `width_mm=`"));
+        assert!(msg("bump:axis=x,at_mm=400,width_mm=0,amp_um=1").contains("positive width"));
         let pmsg = |s: &str| format!("{:#}", s.parse::<Plan>().unwrap_err());
         assert!(pmsg("grid:-5").contains("positive"));
         assert!(pmsg("line:y:1,y=3").contains("moving axis"));
