@@ -839,7 +839,13 @@ fn rejected_warnings(
     let mut out = Vec::new();
     let mut seen = std::collections::BTreeSet::new();
     for c in candidates {
-        if c.significant || !c.identifiable || !seen.insert(c.target.clone()) {
+        // An aliasing-suspect candidate has its own reason and measurement
+        // (`aliasing`, `held_back`): not repeated here.
+        if c.significant
+            || !c.identifiable
+            || c.aliasing.is_some()
+            || !seen.insert(c.target.clone())
+        {
             continue;
         }
         let Some(dbic) = c.delta_bic.filter(|d| *d < DBIC_SIGNIFICANT) else {
@@ -1046,6 +1052,21 @@ mod tests {
         ] {
             assert!(d.contains(part), "{part} not in {d}");
         }
+        // An aliasing-suspect candidate says why itself (its `aliasing`):
+        // not named again here.
+        let suspect = Candidate {
+            aliasing: Some(aliasing::Aliasing {
+                axis: "x".into(),
+                sampling_mm: 10.0,
+                seen_period_mm: 25.0,
+                alias_periods_mm: vec![6.25],
+                measure: "x from 15 to 55 mm every 0.5 mm".into(),
+                text: "ex varies along x like a 25 mm wave".into(),
+            }),
+            held_back: true,
+            ..c.clone()
+        };
+        assert!(rejected_warnings(&[suspect], &rms, &floors).is_empty());
         let sig = Candidate {
             significant: true,
             ..c
