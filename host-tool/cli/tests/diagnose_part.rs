@@ -7,9 +7,7 @@
 
 mod common;
 
-use std::path::Path;
-
-use common::{json, run, s, tmp_dir};
+use common::{json, on_machine_campaign, run, s, tmp_dir};
 use serde_json::Value;
 
 fn pv(v: &[f64]) -> f64 {
@@ -59,25 +57,10 @@ fn diagnose(args: &[&str]) -> Value {
     json(&run(&a))
 }
 
-fn campaign(dir: &Path) -> (std::path::PathBuf, Value) {
-    let camp = dir.join("camp");
-    let doc = json(&run(&[
-        "simulate",
-        "--scenario",
-        "on-machine",
-        "--seed",
-        "7",
-        "-o",
-        s(&camp),
-        "--json",
-    ]));
-    (camp, doc["truth"].clone())
-}
-
 #[test]
 fn a_straightness_run_alone_cannot_split_part_and_slide_and_its_reversal_can() {
     let dir = tmp_dir("diagnose_part", "straightness");
-    let (camp, truth) = campaign(&dir);
+    let (camp, truth) = on_machine_campaign(&dir);
     let run0 = camp.join("run0.csv");
     let one = diagnose(&[s(&run0)]);
     assert_eq!(one["kind"], "straightness");
@@ -136,7 +119,7 @@ fn a_straightness_run_alone_cannot_split_part_and_slide_and_its_reversal_can() {
 #[test]
 fn a_timed_turn_gives_the_drift_and_a_multi_step_set_splits_part_and_spindle() {
     let dir = tmp_dir("diagnose_part", "roundness");
-    let (camp, truth) = campaign(&dir);
+    let (camp, truth) = on_machine_campaign(&dir);
     let scan = camp.join("roundness.csv");
     let one = diagnose(&[s(&scan)]);
     assert_eq!(one["kind"], "roundness");
@@ -204,7 +187,7 @@ fn a_timed_turn_gives_the_drift_and_a_multi_step_set_splits_part_and_spindle() {
 #[test]
 fn an_arc_needs_the_ball_calibration_or_a_known_diameter_for_the_probe() {
     let dir = tmp_dir("diagnose_part", "arc");
-    let (camp, truth) = campaign(&dir);
+    let (camp, truth) = on_machine_campaign(&dir);
     let part = camp.join("part.csv");
     let one = diagnose(&[s(&part)]);
     assert_eq!(one["kind"], "arc");
@@ -334,7 +317,7 @@ fn lsq_rest(theta: &[f64], f: impl Fn(f64) -> f64) -> Vec<f64> {
 #[test]
 fn the_page_opens_with_the_verdict_and_says_what_to_measure() {
     let dir = tmp_dir("diagnose_part", "page");
-    let (camp, _) = campaign(&dir);
+    let (camp, _) = on_machine_campaign(&dir);
     let rep = dir.join("rep");
     let d = diagnose(&[s(&camp.join("run0.csv")), "--report", s(&rep)]);
     assert_eq!(d["report"].as_str().unwrap(), s(&rep.join("index.html")));

@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::{json, run, s, tmp_dir};
+use common::{json, on_machine_campaign, run, s, tmp_dir};
 
 /// Least squares of `y` on the columns `x[i]` (rows of basis values), by
 /// the normal equations (small, well-conditioned here): the coefficients
@@ -74,22 +74,12 @@ fn roundness(t: f64) -> f64 {
 #[test]
 fn the_on_machine_commands_find_the_simulated_answers() {
     let dir = tmp_dir("onmachine", "campaign");
-    let camp = dir.join("camp");
-    let doc = json(&run(&[
-        "simulate",
-        "--scenario",
-        "on-machine",
-        "--seed",
-        "7",
-        "-o",
-        s(&camp),
-        "--json",
-    ]));
-    let truth = &doc["truth"];
+    let (camp, truth) = on_machine_campaign(&dir);
+    let truth = &truth;
     let f = |name: &str| camp.join(name);
     assert!(
         f("truth.json").exists() && f("grinder.csv").exists(),
-        "{doc}"
+        "{truth}"
     );
 
     // Probe on the ball, 2-D: radius within 5 nm, form within 10 nm PV.
@@ -362,17 +352,7 @@ fn the_on_machine_commands_find_the_simulated_answers() {
 #[test]
 fn a_3d_calibration_has_a_page_with_its_cone_and_the_form_over_the_ball() {
     let dir = tmp_dir("onmachine", "probe3d-page");
-    let camp = dir.join("camp");
-    run(&[
-        "simulate",
-        "--scenario",
-        "on-machine",
-        "--seed",
-        "7",
-        "-o",
-        s(&camp),
-        "--json",
-    ]);
+    let (camp, _) = on_machine_campaign(&dir);
     let rep = dir.join("rep");
     let cal = json(&run(&[
         "probe",

@@ -9,7 +9,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{expect_exit, json, run, s, tmp_dir};
+use common::{expect_exit, json, on_machine_campaign, run, s, tmp_dir};
 use serde_json::Value;
 
 const HEAD: &str = "session_id,x_mm,y_mm,z_mm,c_deg,step_deg,orientation_deg,probe_no,d_um,t_s,probe_id,normal_x,normal_y,normal_z,contact_deg";
@@ -137,17 +137,7 @@ fn doc(args: &[&str]) -> Value {
 #[test]
 fn the_campaign_as_one_measurement_csv_gives_the_same_results_as_its_files() {
     let dir = tmp_dir("probe_csv", "same");
-    let camp = dir.join("camp");
-    run(&[
-        "simulate",
-        "--scenario",
-        "on-machine",
-        "--seed",
-        "7",
-        "-o",
-        s(&camp),
-        "--json",
-    ]);
+    let (camp, _) = on_machine_campaign(&dir);
     let one = dir.join("campaign.csv");
     std::fs::write(&one, one_csv(&camp)).unwrap();
     let f = |n: &str| camp.join(n);
@@ -353,17 +343,7 @@ fn the_campaign_as_one_measurement_csv_gives_the_same_results_as_its_files() {
 #[test]
 fn a_bad_probe_value_is_placed_and_a_session_must_be_named() {
     let dir = tmp_dir("probe_csv", "bad");
-    let camp = dir.join("camp");
-    run(&[
-        "simulate",
-        "--scenario",
-        "on-machine",
-        "--seed",
-        "7",
-        "-o",
-        s(&camp),
-        "--json",
-    ]);
+    let (camp, _) = on_machine_campaign(&dir);
     let text = one_csv(&camp);
     let one = dir.join("campaign.csv");
     std::fs::write(&one, &text).unwrap();

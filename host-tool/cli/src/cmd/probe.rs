@@ -45,6 +45,14 @@ fn read(path: &std::path::Path, pl: [&str; 2], session: Option<i64>) -> Result<V
     probe::read_scan(&text, &path.display().to_string(), pl)
 }
 
+/// The page's next step after a calibration written to `probe`.
+fn correct_next(probe: &std::path::Path) -> String {
+    format!(
+        "trueaxis probe correct SCAN.csv --probe {} -o SURFACE.csv",
+        probe.display()
+    )
+}
+
 /// The nominal surface's outward normals in the scan's plane (`plane`:
 /// axis indices) when the scan is a probe measurement CSV whose rows give
 /// `normal_*`; None otherwise.
@@ -126,10 +134,7 @@ impl Calibrate {
                         form_pv_nm: pr.form_pv_nm,
                         ball_pv_nm: [cal.pv_without_form_nm, cal.pv_with_form_nm],
                         warnings: &cal.warnings,
-                        next: format!(
-                            "trueaxis probe correct SCAN.csv --probe {} -o SURFACE.csv",
-                            self.output.display()
-                        ),
+                        next: correct_next(&self.output),
                     },
                     dir,
                 )
@@ -209,10 +214,7 @@ impl Calibrate {
                         residual_nm: &cal.residual_nm,
                         ball_pv_nm: [cal.pv_without_form_nm, cal.pv_with_form_nm],
                         warnings: &cal.warnings,
-                        next: format!(
-                            "trueaxis probe correct SCAN.csv --probe {} -o SURFACE.csv",
-                            self.output.display()
-                        ),
+                        next: correct_next(&self.output),
                     },
                     dir,
                 )

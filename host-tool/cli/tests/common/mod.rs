@@ -229,3 +229,20 @@ pub fn golden(name: &str, actual: &[u8]) {
         );
     }
 }
+
+/// The simulated on-machine campaign (seed 7) in `dir/camp`: its directory
+/// and the hidden answers (`truth.json`'s content).
+pub fn on_machine_campaign(dir: &Path) -> (PathBuf, Value) {
+    let camp = dir.join("camp");
+    let doc = json(&run(&[
+        "simulate",
+        "--scenario",
+        "on-machine",
+        "--seed",
+        "7",
+        "-o",
+        s(&camp),
+        "--json",
+    ]));
+    (camp, doc["truth"].clone())
+}

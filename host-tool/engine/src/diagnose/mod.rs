@@ -651,9 +651,12 @@ fn one_target(
         // dense lines at the noise hide a grid's 2 000 points at 20× it. A
         // region of the working volume far above the floor is named
         // whatever the overall RMS says.
-        let region = cells.into_iter().find(|c| {
-            c.points >= REGION_MIN_POINTS && c.rms_um > REGION_ABOVE_NOISE_RATIO * nf.sigma_um
-        });
+        let region = cells
+            .iter()
+            .find(|c| {
+                c.points >= REGION_MIN_POINTS && c.rms_um > REGION_ABOVE_NOISE_RATIO * nf.sigma_um
+            })
+            .cloned();
         if global.is_some() || region.is_some() {
             if global.is_none() {
                 if let Some(r) = &region {
@@ -666,11 +669,7 @@ fn one_target(
                 noise_floor_um: nf.sigma_um,
                 ratio: st.rms() / nf.sigma_um,
                 region_ratio: region.as_ref().map(|r| r.rms_um / nf.sigma_um),
-                region: region.or_else(|| {
-                    crate::regions::worst_cells(data, &td.norm, t, &td.rows, &st.resid)
-                        .into_iter()
-                        .next()
-                }),
+                region: region.or_else(|| cells.into_iter().next()),
             });
         }
     }
