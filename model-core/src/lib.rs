@@ -30,7 +30,8 @@ pub mod spec;
 pub mod table;
 
 pub use eval::{
-    DirTracker, Flags, Inputs, LargeModel, LoadError, Model, ModelCap, Outputs, MAX_TEMPS,
+    DirTracker, Flags, Inputs, LargeModel, LoadError, Model, ModelCap, Outputs, Transition,
+    MAX_TEMPS,
 };
 #[cfg(feature = "std")]
 pub use spec::{

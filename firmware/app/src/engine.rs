@@ -201,8 +201,15 @@ pub struct Engine<'m> {
     /// a jump: twice the distance at full speed in one period, as margin for
     /// a late tick ([`jump_threshold_counts`]).
     jump_threshold_counts: [u64; 3],
+    /// The plausible temperature range as (minimum, span): t is inside
+    /// when `(t − min) as u32 ≤ span` (one compare per channel); `None`
+    /// when the range is empty (every reading is out of it).
+    temp_window: Option<(i32, u32)>,
     /// Per axis: the scale in whole nm per count, when it is one.
     nm_per_count: [Option<i64>; 3],
+    /// The same when it also fits i32: the tick's positions in 32 bits
+    /// ([`positions_i32`]).
+    nm_per_count_i32: [Option<i32>; 3],
     slew_nm_per_ms: i32,
     model: Option<&'m mut ModelBuf>,
     active: Option<SlotInfo>,
@@ -213,6 +220,8 @@ pub struct Engine<'m> {
     /// Per axis: added to the unreferenced position (counts · scale +
     /// configured origin) once referenced, nm.
     ref_offset_nm: [i64; 3],
+    /// `ref_offset_nm` when it fits i32 (set with it).
+    ref_offset_i32: [Option<i32>; 3],
     /// Bit per axis: referenced since reset, and not lost since. (Bit
     /// masks, so that a tick with nothing to do checks one byte.)
     referenced: u8,
@@ -280,7 +289,14 @@ impl<'m> Engine<'m> {
         Ok(Self {
             cfg,
             jump_threshold_counts,
+            temp_window: (cfg.temp_max_mc >= cfg.temp_min_mc).then(|| {
+                (
+                    cfg.temp_min_mc,
+                    cfg.temp_max_mc.wrapping_sub(cfg.temp_min_mc) as u32,
+                )
+            }),
             nm_per_count,
+            nm_per_count_i32: nm_per_count.map(|k| k.and_then(|k| i32::try_from(k).ok())),
             slew_nm_per_ms: 0,
             model: None,
             active: None,
@@ -288,6 +304,7 @@ impl<'m> Engine<'m> {
             inject: None,
             inject_ticks_left: 0,
             ref_offset_nm: [0; 3],
+            ref_offset_i32: [Some(0); 3],
             referenced: 0,
             needs_ref: (0..3)
                 .filter(|&a| cfg.reference_needed(a))
@@ -564,16 +581,11 @@ impl<'m> Engine<'m> {
             self.last_motion_us = Some(start_us);
         }
         // Unreferenced positions: counts · scale + the configured origin.
-        let raw_nm: [i64; 3] = core::array::from_fn(|i| {
-            let a = &self.cfg.axes[i];
-            // Whole nm per count (the usual scales): a multiply; else the
-            // exact 64-bit division (a library call on the M4).
-            let scaled = match self.nm_per_count[i] {
-                Some(k) => counts[i] as i64 * k,
-                None => counts[i] as i64 * a.pm_per_count / 1000,
-            };
-            scaled + a.origin_nm as i64
-        });
+        let (axes, nm_per_count) = (self.cfg.axes, self.nm_per_count);
+        let raw_nm = |i: usize| {
+            let a = &axes[i];
+            raw_position_nm(counts[i], a.pm_per_count, nm_per_count[i], a.origin_nm)
+        };
         // A reference asked for since the last tick: the counts read now
         // are the position it names.
         // A home switch turning on: its axis is at its configured home.
@@ -592,7 +604,8 @@ impl<'m> Engine<'m> {
             self.ref_pending = false;
             for (i, p) in self.pending_ref.iter_mut().enumerate() {
                 if let Some(pos) = p.take() {
-                    self.ref_offset_nm[i] = pos as i64 - raw_nm[i];
+                    self.ref_offset_nm[i] = pos as i64 - raw_nm(i);
+                    self.ref_offset_i32[i] = i32::try_from(self.ref_offset_nm[i]).ok();
                     self.referenced |= 1 << i;
                 }
             }
@@ -611,21 +624,32 @@ impl<'m> Engine<'m> {
             }
         }
         self.last_counts = Some(counts);
-        let clamp_i32 = |nm: i64| nm.clamp(i32::MIN as i64, i32::MAX as i64) as i32;
-        let enc_pos_nm: [i32; 3] =
-            core::array::from_fn(|i| clamp_i32(raw_nm[i] + self.ref_offset_nm[i]));
+        // Per axis (unreferenced, referenced) position, each held to i32:
+        // in 32 bits when every step fits (the usual case), else in i64.
+        let both: [(i32, i32); 3] = core::array::from_fn(|i| {
+            match positions_i32(
+                counts[i],
+                self.nm_per_count_i32[i],
+                axes[i].origin_nm,
+                self.ref_offset_i32[i],
+            ) {
+                Some(p) => p,
+                None => positions_i64(raw_nm(i), self.ref_offset_nm[i]),
+            }
+        });
+        let enc_pos_nm: [i32; 3] = both.map(|p| p.1);
         // The direction trackers see only differences, so they follow the
         // unreferenced position: a reference shifts the position but is no
         // motion, and keeps the reversal state.
-        let rev_q30 = self.dirs.update(raw_nm.map(clamp_i32));
+        let rev_q30 = self.dirs.update(both.map(|p| p.0));
         if self.needs_ref & !self.referenced != 0 {
             live = live.union(Faults::NOT_REFERENCED);
         }
         // The real temperatures are checked whether or not an injection
         // replaces them: a sensor fault is a fault in test mode too.
-        let out_of_range = |t: &[i32]| {
-            t.iter()
-                .any(|&t| t < self.cfg.temp_min_mc || t > self.cfg.temp_max_mc)
+        let out_of_range = |t: &[i32]| match self.temp_window {
+            Some((lo, span)) => t.iter().any(|&t| t.wrapping_sub(lo) as u32 > span),
+            None => !t.is_empty(),
         };
         if out_of_range(&temps_mc[..self.cfg.temps_used]) {
             live = live.union(Faults::SENSOR_RANGE);
@@ -728,6 +752,48 @@ impl<'m> Engine<'m> {
         }
         report
     }
+}
+
+/// The unreferenced position of an axis, nm: counts · scale + origin, in
+/// i64 (exact for every i32 count and scale).
+#[inline(always)]
+fn raw_position_nm(
+    count: i32,
+    pm_per_count: i64,
+    nm_per_count: Option<i64>,
+    origin_nm: i32,
+) -> i64 {
+    // Whole nm per count (the usual scales): a multiply; else the exact
+    // 64-bit division (a library call on the M4).
+    let scaled = match nm_per_count {
+        Some(k) => count as i64 * k,
+        None => count as i64 * pm_per_count / 1000,
+    };
+    scaled + origin_nm as i64
+}
+
+/// (unreferenced, referenced) position from the i64 unreferenced one and
+/// the reference offset, each held to the i32 range: the definition.
+#[inline(always)]
+fn positions_i64(raw_nm: i64, ref_offset_nm: i64) -> (i32, i32) {
+    let clamp_i32 = |nm: i64| nm.clamp(i32::MIN as i64, i32::MAX as i64) as i32;
+    (clamp_i32(raw_nm), clamp_i32(raw_nm + ref_offset_nm))
+}
+
+/// [`positions_i64`] in 32-bit arithmetic, for a scale in whole nm per
+/// count and a reference offset that fit i32: `None` when a product or a
+/// sum leaves the i32 range (the caller then takes the i64 path) — when
+/// every step fits, no hold could have changed anything, so the result is
+/// the i64 one (test `positions_i32_are_the_i64_positions`).
+#[inline(always)]
+fn positions_i32(
+    count: i32,
+    nm_per_count: Option<i32>,
+    origin_nm: i32,
+    ref_offset_nm: Option<i32>,
+) -> Option<(i32, i32)> {
+    let raw = count.checked_mul(nm_per_count?)?.checked_add(origin_nm)?;
+    Some((raw, raw.checked_add(ref_offset_nm?)?))
 }
 
 /// The encoder-jump threshold in counts: the smallest |Δcounts| with
@@ -834,8 +900,79 @@ pub fn round_div(a: i64, b: i64) -> i64 {
 #[cfg(test)]
 mod tests {
     use super::{
-        jump_threshold_counts, round_div, round_div_i32, round_mnm, slew_axis, TARGET_LIMIT_NM,
+        jump_threshold_counts, positions_i32, positions_i64, raw_position_nm, round_div,
+        round_div_i32, round_mnm, slew_axis, TARGET_LIMIT_NM,
     };
+
+    /// The 32-bit positions equal the i64 ones whenever they are taken, at
+    /// the ends of the i32 range and one past (where they must give way:
+    /// `None`), and on seeded values; the i64 path is the definition.
+    #[test]
+    fn positions_i32_are_the_i64_positions() {
+        let ends = [
+            0,
+            1,
+            -1,
+            i32::MAX,
+            i32::MIN,
+            i32::MAX - 1,
+            i32::MIN + 1,
+            1 << 30,
+            -(1 << 30),
+        ];
+        let mut rng = trueaxis_test_support::XorShift64(0x3c6e_f372_fe94_f82bu64);
+        let (mut fast, mut slow) = (0u32, 0u32);
+        for i in 0..400_000u32 {
+            let pick = |r: &mut trueaxis_test_support::XorShift64, k: u32| -> i32 {
+                match k % 4 {
+                    0 => ends[(r.next_u64() % ends.len() as u64) as usize],
+                    1 => r.next_u64() as i32,
+                    2 => (r.next_u64() % 200_001) as i32 - 100_000,
+                    _ => (r.next_u64() as i32) >> (r.next_u64() % 31),
+                }
+            };
+            let count = pick(&mut rng, i);
+            let k = match i % 5 {
+                0 => 25,
+                1 => -1,
+                _ => pick(&mut rng, i / 5),
+            };
+            let origin = pick(&mut rng, i / 3);
+            let off = pick(&mut rng, i / 7);
+            let raw = raw_position_nm(count, k as i64 * 1000, Some(k as i64), origin);
+            let want = positions_i64(raw, off as i64);
+            match positions_i32(count, Some(k), origin, Some(off)) {
+                Some(got) => {
+                    fast += 1;
+                    assert_eq!(got, want, "count {count} k {k} origin {origin} off {off}");
+                }
+                None => {
+                    slow += 1;
+                    // It gives way only when some step leaves i32.
+                    let p = count as i64 * k as i64;
+                    let r = p + origin as i64;
+                    assert!(
+                        [p, r, r + off as i64]
+                            .iter()
+                            .any(|&v| i32::try_from(v).is_err()),
+                        "count {count} k {k} origin {origin} off {off}"
+                    );
+                }
+            }
+        }
+        assert!(fast > 100_000 && slow > 10_000, "{fast} {slow}");
+        // At the limit and one past.
+        assert_eq!(
+            positions_i32(i32::MAX, Some(1), 0, Some(0)),
+            Some((i32::MAX, i32::MAX))
+        );
+        assert_eq!(positions_i32(i32::MAX, Some(1), 1, Some(0)), None);
+        assert_eq!(positions_i32(i32::MAX, Some(1), 0, Some(1)), None);
+        assert_eq!(positions_i32(i32::MIN, Some(-1), 0, Some(0)), None);
+        assert_eq!(positions_i32(1, None, 0, Some(0)), None);
+        assert_eq!(positions_i32(1, Some(1), 0, None), None);
+        assert_eq!(positions_i64(i32::MAX as i64 + 1, -1), (i32::MAX, i32::MAX));
+    }
 
     #[test]
     fn jump_threshold_in_counts_is_the_saturating_product_test() {

@@ -9,7 +9,7 @@
 //! swaps two references inside it — O(1) in the correction loop's critical
 //! section instead of a 26 KiB copy that would cost a period.
 
-use model_core::{DirTracker, Flags, Inputs, MAX_TEMPS};
+use model_core::{DirTracker, Flags, Inputs, Transition, MAX_TEMPS};
 use trueaxis_protocol::LINK_TEMPS;
 
 pub use model_core::FORMAT_VERSION;
@@ -134,7 +134,9 @@ pub fn slew_nm_per_ms(m: &Model) -> i32 {
 #[derive(Debug, Default, Clone, Copy)]
 pub struct DirTrackers {
     t: [DirTracker; 3],
-    transition_nm: [i32; 3],
+    /// The transition lengths with their swing constants, made when the
+    /// table is activated (not on every tick).
+    transition: [Transition; 3],
 }
 
 impl DirTrackers {
@@ -143,12 +145,15 @@ impl DirTrackers {
     pub fn for_model(m: &Model) -> Self {
         Self {
             t: [DirTracker::new(); 3],
-            transition_nm: core::array::from_fn(|a| m.reversal_transition_nm(a).unwrap_or(0)),
+            transition: core::array::from_fn(|a| {
+                Transition::new(m.reversal_transition_nm(a).unwrap_or(0))
+            }),
         }
     }
 
     /// Feeds the positions of one tick; returns the reversal state per axis.
+    #[inline]
     pub fn update(&mut self, pos_nm: [i32; 3]) -> [i32; 3] {
-        core::array::from_fn(|a| self.t[a].update(pos_nm[a], self.transition_nm[a]))
+        core::array::from_fn(|a| self.t[a].update_with(pos_nm[a], &self.transition[a]))
     }
 }

@@ -760,3 +760,38 @@ fn a_home_switch_references_its_axis_when_it_turns_on() {
     });
     assert_eq!(e.corr_nm(), want.corr_nm);
 }
+
+/// The plausible temperature range at its ends (the tick compares with a
+/// window made in `Engine::new`): the configured minimum and maximum are
+/// plausible, one m°C beyond either is a sensor fault, so are the i32
+/// extremes (the thermistor's rail value is `i32::MIN`); a range whose
+/// maximum is below its minimum refuses every reading, and the channels
+/// beyond `temps_used` are not checked.
+#[test]
+fn temperature_range_holds_at_its_ends_and_one_past() {
+    for (lo, hi) in [(-20_000, 80_000), (i32::MIN, i32::MAX), (5, 5), (0, -1)] {
+        let cfg = EngineConfig {
+            temp_min_mc: lo,
+            temp_max_mc: hi,
+            ..sim_engine_config()
+        };
+        let mut e = Engine::new(cfg).unwrap();
+        let clock = FakeClock(Cell::new(0));
+        let mut io = Fake::new();
+        let mut faulted = |t: i32, ch: usize| {
+            io.temps = [if lo <= hi { lo } else { 0 }; LINK_TEMPS];
+            io.temps[ch] = t;
+            run(&mut e, &clock, &mut io, 1);
+            e.faults().contains(Faults::SENSOR_RANGE)
+        };
+        for t in [lo, hi, ((lo as i64 + hi as i64) / 2) as i32] {
+            assert_eq!(faulted(t, 1), lo > hi, "{t} in [{lo}, {hi}]");
+        }
+        for t in [lo.wrapping_sub(1), hi.wrapping_add(1), i32::MIN, i32::MAX] {
+            let inside = lo <= t && t <= hi;
+            assert_eq!(faulted(t, 0), !inside, "{t} in [{lo}, {hi}]");
+            // Channel 2 is beyond `temps_used` (2): never checked.
+            assert_eq!(faulted(t, 2), lo > hi, "{t} on channel 2");
+        }
+    }
+}

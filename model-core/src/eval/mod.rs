@@ -179,6 +179,17 @@ impl DirTracker {
     /// Feed the new position; returns the reversal state in Q30.
     /// `transition_nm` ≤ 0 means an immediate switch.
     pub fn update(&mut self, pos_nm: i32, transition_nm: i32) -> i32 {
+        self.update_with(pos_nm, &Transition::new(transition_nm))
+    }
+
+    /// [`DirTracker::update`] with the transition's constants made once
+    /// ([`Transition::new`], e.g. when a table is activated) instead of on
+    /// every update: the same states, without the per-update division of
+    /// 2^31 by the transition. A move that continues towards the end the
+    /// state already holds (±1) returns at once — the clamp would give the
+    /// same state — so steady motion in one direction costs no division.
+    #[inline]
+    pub fn update_with(&mut self, pos_nm: i32, tr: &Transition) -> i32 {
         if !self.started {
             self.started = true;
             self.last_pos_nm = pos_nm;
@@ -189,19 +200,16 @@ impl DirTracker {
         // same ±transition.
         let delta = pos_nm.saturating_sub(self.last_pos_nm);
         self.last_pos_nm = pos_nm;
-        if delta == 0 {
+        let end = if delta > 0 { ONE_Q30 } else { -ONE_Q30 };
+        if delta == 0 || self.rev_q30 == end {
             return self.rev_q30;
         }
-        let next = if transition_nm <= 0 {
-            if delta > 0 {
-                ONE_Q30
-            } else {
-                -ONE_Q30
-            }
+        let next = if tr.t <= 0 {
+            end
         } else {
             // A full swing (2.0 = 2^31 in Q30) per transition_nm.
-            let d = delta.clamp(-transition_nm, transition_nm);
-            let next = self.rev_q30 as i64 + swing_step(d as i64, transition_nm);
+            let d = delta.clamp(-tr.t, tr.t);
+            let next = self.rev_q30 as i64 + tr.swing(d as i64);
             next.clamp(-ONE_Q30 as i64, ONE_Q30 as i64) as i32
         };
         self.rev_q30 = next.clamp(-ONE_Q30, ONE_Q30);
@@ -209,28 +217,68 @@ impl DirTracker {
     }
 }
 
-/// d · 2^31 / t truncated toward zero, for 0 < t and |d| ≤ t: the
-/// reversal state's change. Exactly the i64 division it replaces, but
-/// without it in the common case (an i64 division is a library call of
-/// ~60–100 instructions on the M4, once per axis per tick): with
-/// 2^31 = K·t + R (R < t), |d|·2^31 / t = |d|·K + |d|·R / t, and |d|·R
-/// fits u32 — one UDIV — whenever the move per tick or the transition is
-/// short; otherwise the u64 division.
-#[inline]
-pub(crate) fn swing_step(d: i64, transition_nm: i32) -> i64 {
-    let (m, t) = (d.unsigned_abs() as u32, transition_nm as u32);
-    let k = (1u32 << 31) / t;
-    let r = (1u32 << 31) - k * t;
-    // m·k ≤ t·(2^31 / t) ≤ 2^31 fits u32.
-    let q = match m.checked_mul(r) {
-        Some(mr) => (m * k + mr / t) as u64,
-        None => ((m as u64) << 31) / t as u64,
-    };
-    if d < 0 {
-        -(q as i64)
-    } else {
-        q as i64
+/// A reversal transition length with the constants of its swing step
+/// (2^31 = k·t + r, r < t) made once, for [`DirTracker::update_with`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Transition {
+    /// The length, nm (≤ 0: an immediate switch).
+    t: i32,
+    k: u32,
+    r: u32,
+}
+
+impl Transition {
+    /// The constants of `transition_nm` (≤ 0: switch at once).
+    pub const fn new(transition_nm: i32) -> Self {
+        if transition_nm <= 0 {
+            return Transition {
+                t: transition_nm,
+                k: 0,
+                r: 0,
+            };
+        }
+        let t = transition_nm as u32;
+        let k = (1u32 << 31) / t;
+        Transition {
+            t: transition_nm,
+            k,
+            r: (1u32 << 31) - k * t,
+        }
     }
+
+    /// The length, nm.
+    pub const fn nm(&self) -> i32 {
+        self.t
+    }
+
+    /// d · 2^31 / t truncated toward zero, for 0 < t and |d| ≤ t: the
+    /// reversal state's change. Exactly the i64 division it replaces, but
+    /// without it in the common case (an i64 division is a library call of
+    /// ~60–100 instructions on the M4, once per axis per tick): with
+    /// 2^31 = K·t + R (R < t, made in [`Transition::new`]), |d|·2^31 / t =
+    /// |d|·K + |d|·R / t, and |d|·R fits u32 — one UDIV — whenever the move
+    /// per tick or the transition is short; otherwise the u64 division.
+    #[inline]
+    fn swing(&self, d: i64) -> i64 {
+        let (m, t) = (d.unsigned_abs() as u32, self.t as u32);
+        // m·k ≤ t·(2^31 / t) ≤ 2^31 fits u32.
+        let q = match m.checked_mul(self.r) {
+            Some(mr) => (m * self.k + mr / t) as u64,
+            None => ((m as u64) << 31) / t as u64,
+        };
+        if d < 0 {
+            -(q as i64)
+        } else {
+            q as i64
+        }
+    }
+}
+
+/// [`Transition::swing`] of `transition_nm` (tests).
+#[cfg(test)]
+fn swing_step(d: i64, transition_nm: i32) -> i64 {
+    Transition::new(transition_nm).swing(d)
 }
 
 /// Why a valid table cannot become a [`Model`] of this capacity.
@@ -732,6 +780,7 @@ mod tests {
     fn dir_tracker_in_i32_is_the_i64_tracker() {
         let mut rng = trueaxis_test_support::XorShift64(0x0123_4567_89ab_cdefu64);
         let mut next = || rng.next_u64();
+        let mut saturated_on = 0;
         for run in 0..400 {
             let transition = match run % 5 {
                 0 => 0,
@@ -750,6 +799,11 @@ mod tests {
                     (1..=4, _) => pos.saturating_add((next() % 600) as i32),
                     _ => pos.saturating_sub((next() % 600) as i32),
                 };
+                // The early return of `update_with`: at ±1 and moving on
+                // towards it.
+                let (before, last) = (r.1, r.0);
+                saturated_on +=
+                    (pos != last && before == if pos > last { ONE_Q30 } else { -ONE_Q30 }) as u32;
                 assert_eq!(
                     t.update(pos, transition),
                     reference_update(&mut r, pos, transition),
@@ -757,6 +811,7 @@ mod tests {
                 );
             }
         }
+        assert!(saturated_on > 10_000, "{saturated_on}");
     }
 
     /// Sets max |correction| on every field that carries it.
