@@ -533,6 +533,12 @@ impl<'m> Engine<'m> {
         }
     }
 
+    /// The unreferenced position of `axis` at `count`, nm (i64, exact).
+    fn raw_nm(&self, axis: usize, count: i32) -> i64 {
+        let a = &self.cfg.axes[axis];
+        raw_position_nm(count, a.pm_per_count, self.nm_per_count[axis], a.origin_nm)
+    }
+
     /// One period of the correction loop.
     pub fn tick<C, E, T, S>(
         &mut self,
@@ -581,11 +587,6 @@ impl<'m> Engine<'m> {
             self.last_motion_us = Some(start_us);
         }
         // Unreferenced positions: counts · scale + the configured origin.
-        let (axes, nm_per_count) = (self.cfg.axes, self.nm_per_count);
-        let raw_nm = |i: usize| {
-            let a = &axes[i];
-            raw_position_nm(counts[i], a.pm_per_count, nm_per_count[i], a.origin_nm)
-        };
         // A reference asked for since the last tick: the counts read now
         // are the position it names.
         // A home switch turning on: its axis is at its configured home.
@@ -602,9 +603,9 @@ impl<'m> Engine<'m> {
         }
         if self.ref_pending {
             self.ref_pending = false;
-            for (i, p) in self.pending_ref.iter_mut().enumerate() {
-                if let Some(pos) = p.take() {
-                    self.ref_offset_nm[i] = pos as i64 - raw_nm(i);
+            for i in 0..3 {
+                if let Some(pos) = self.pending_ref[i].take() {
+                    self.ref_offset_nm[i] = pos as i64 - self.raw_nm(i, counts[i]);
                     self.ref_offset_i32[i] = i32::try_from(self.ref_offset_nm[i]).ok();
                     self.referenced |= 1 << i;
                 }
@@ -630,11 +631,11 @@ impl<'m> Engine<'m> {
             match positions_i32(
                 counts[i],
                 self.nm_per_count_i32[i],
-                axes[i].origin_nm,
+                self.cfg.axes[i].origin_nm,
                 self.ref_offset_i32[i],
             ) {
                 Some(p) => p,
-                None => positions_i64(raw_nm(i), self.ref_offset_nm[i]),
+                None => positions_i64(self.raw_nm(i, counts[i]), self.ref_offset_nm[i]),
             }
         });
         let enc_pos_nm: [i32; 3] = both.map(|p| p.1);

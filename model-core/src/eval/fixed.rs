@@ -5,8 +5,10 @@
 //! the end; every coefficient set carries the binary scale the loader chose
 //! so the accumulations cannot overflow inside the envelope.
 
-use super::kernels::{grid_cell, mlp_source, mono20_q30, mono56_q30, phase_turns, rshr};
-use super::{Factor, Flags, GridAxis, Inputs, ModelCap, Outputs, PolyKind, Term, MAX_TEMPS};
+use super::kernels::{grid_cell, mlp_source, mono20_q30, mono56_q30, mul_q30, phase_turns, rshr};
+use super::{
+    Factor, Flags, GridAxis, Inputs, ModelCap, Outputs, PolyKind, Term, BLK_CAP, MAX_TEMPS, VP_CAP,
+};
 use crate::limits::{MAX_HIDDEN_UNITS, MAX_MLP_INPUTS};
 use crate::math::{sincos_q30, tanh_q30, ONE_Q30, TANH_IN_FRAC};
 
@@ -140,7 +142,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     #[inline(never)]
     fn eval_general_fixed(&self, inp: &Inputs) -> Outputs {
         let mut flags = Flags::empty();
-        let pos = self.hold_pos(inp.pos_nm, &mut flags);
+        let pos = self.hold_pos_fast(inp.pos_nm, &mut flags);
         // |p − c| ≤ half-span, so |u| ≤ 2^30 (+1 from rounding) fits i32.
         // Computed only when the table has polynomials.
         let u = || {
@@ -150,11 +152,19 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                 self.u_scale[2].apply(pos[2].wrapping_sub(self.centre_nm[2])),
             ]
         };
-        let out = if self.terms.is_empty() {
+        let out = if self.vp_n > 0 {
+            // Few monomials: only those the block reads (and their parents).
+            let v = self.mono_vp_q30(u());
+            let mut out = self.block_vp(&v);
+            if !self.terms.is_empty() {
+                self.terms_fixed(&v, &pos, inp, &mut flags, &mut out);
+            }
+            out
+        } else if self.terms.is_empty() {
             match self.n_monos {
                 0 => [0; 3],
-                1..=20 => self.block_fixed(&mono20_q30(u())),
-                _ => self.block_fixed(&mono56_q30(u())),
+                1..=20 => self.block_any(&mono20_q30(u())),
+                _ => self.block_any(&mono56_q30(u())),
             }
         } else {
             // The monomials are handed to the thermal/Abbe terms.
@@ -166,13 +176,13 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                 }
                 1..=20 => {
                     let mv = mono20_q30(u());
-                    let mut out = self.block_fixed(&mv);
+                    let mut out = self.block_any(&mv);
                     self.terms_fixed(&mv, &pos, inp, &mut flags, &mut out);
                     out
                 }
                 _ => {
                     let mv = mono56_q30(u());
-                    let mut out = self.block_fixed(&mv);
+                    let mut out = self.block_any(&mv);
                     self.terms_fixed(&mv, &pos, inp, &mut flags, &mut out);
                     out
                 }
@@ -180,8 +190,16 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         };
         let mut corr = [0i32; 3];
         for o in 0..3 {
-            let max = self.env.max_corr_nm[o] as i64;
+            let max = self.env.max_corr_nm[o];
             let v = rshr(out[o], 16);
+            // Inside [−max, max] (0 ≤ max < 2^22, validated): v fits i32 and
+            // (v + max) as u32 ≤ 2·max — one window test, else the clamp.
+            let lo = v as i32;
+            if v == lo as i64 && lo.wrapping_add(max) as u32 <= (2 * max) as u32 {
+                corr[o] = lo;
+                continue;
+            }
+            let max = max as i64;
             corr[o] = if v > max {
                 flags.insert(Flags::CLAMPED);
                 max
@@ -196,6 +214,66 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             corr_nm: corr,
             flags,
         }
+    }
+
+    /// The vector v of the few-monomial path (`vp_*`, set at load): 1, x,
+    /// y, z, then each product `mul_q30(v[parent], u[axis])` in the order
+    /// of `vp_step` — the same integers as `mono20_q30`'s entries.
+    #[inline(always)]
+    fn mono_vp_q30(&self, u: [i32; 3]) -> [i32; VP_CAP] {
+        // Straight-line over all VP_CAP entries: an entry beyond `vp_n`
+        // has no coefficient, whatever it holds.
+        let mut v = [ONE_Q30, u[0], u[1], u[2], 0, 0, 0, 0];
+        for k in 4..VP_CAP {
+            // (the parent's position, the axis's: 1 + axis), both in v.
+            let (p, a) = self.vp_step[k];
+            v[k] = mul_q30(v[p as usize & (VP_CAP - 1)], v[a as usize & (VP_CAP - 1)]);
+        }
+        v
+    }
+
+    /// The block over v (rows `vp_q`), Q16 nm: as [`Self::block_fixed`]
+    /// (the same exact sums, without the monomials no output reads).
+    #[inline(always)]
+    fn block_vp(&self, v: &[i32; VP_CAP]) -> [i64; 3] {
+        let v = core::hint::black_box(v);
+        core::array::from_fn(|o| {
+            let mut a = self.block_round[o];
+            for (&c, &m) in self.vp_q[o].iter().zip(v) {
+                a += c as i64 * m as i64;
+            }
+            a >> (self.block_shift[o] & 63)
+        })
+    }
+
+    /// The shared polynomial block, Q16 nm: by monomial when the model
+    /// has it so (`blk_n` > 0), else by output row.
+    #[inline(always)]
+    fn block_any<const N: usize>(&self, mv: &[i32; N]) -> [i64; 3] {
+        if self.blk_n > 0 {
+            self.block_gather_fixed(mv)
+        } else {
+            self.block_fixed(mv)
+        }
+    }
+
+    /// [`Self::block_fixed`] one monomial at a time: each monomial some
+    /// output reads is loaded once and multiplied into the three sums
+    /// (three SMLALs), the others are skipped. The same exact i64 sums
+    /// (the skipped products are 0, and the order of an exact sum does not
+    /// change it), so the same integers.
+    #[inline(always)]
+    fn block_gather_fixed<const N: usize>(&self, mv: &[i32; N]) -> [i64; 3] {
+        let mv = core::hint::black_box(mv);
+        let n = (self.blk_n as usize).min(BLK_CAP);
+        let mut a = self.block_round;
+        for (&i, c) in self.blk_idx[..n].iter().zip(&self.blk_q[..n]) {
+            let m = mv.get(i as usize).copied().unwrap_or(0) as i64;
+            a[0] += c[0] as i64 * m;
+            a[1] += c[1] as i64 * m;
+            a[2] += c[2] as i64 * m;
+        }
+        core::array::from_fn(|o| a[o] >> (self.block_shift[o] & 63))
     }
 
     /// The shared polynomial block, Q16 nm.
@@ -483,8 +561,123 @@ fn tanh_q26_of(z: i64, frac: u32) -> i32 {
 
 #[cfg(test)]
 mod tests {
-    use super::super::Model;
+    use super::super::kernels::MONO_EXPS;
+    use super::super::{Inputs, Model};
     use crate::limits::MAX_MONOMIALS;
+    use crate::spec::{TableSpec, TermSpec};
+    use crate::table::{Envelope, InputScaling};
+
+    /// A seeded table of sparse polynomials (degree ≤ 3, or ≤ 5 on some
+    /// draws) with reversal and thermal/Abbe terms of degree ≤ 1 or ≤ 2,
+    /// like the simulated board's sample table.
+    fn sparse_spec(rng: &mut trueaxis_test_support::XorShift64) -> TableSpec {
+        let mut env = Envelope::default();
+        let mut sc = InputScaling::default();
+        for a in 0..3 {
+            let half = rng.range(50_000_000, 1_000_000_000) as i32;
+            sc.half_span_nm[a] = half;
+            env.travel_min_nm[a] = -half;
+            env.travel_max_nm[a] = half;
+            // Small on some draws, so that the clamp is taken too.
+            env.max_corr_nm[a] = [60_000, 500, 4_000_000][rng.range(0, 2) as usize];
+        }
+        env.max_slew_nm_per_ms = 500;
+        env.temp_max_mc = [50_000, 50_000, 0, 0];
+        env.tool_max_nm = 300_000_000;
+        let top = if rng.range(0, 4) == 0 { 56 } else { 20 };
+        let mut terms = Vec::new();
+        // A few monomials the outputs share (as a fitted table's do), each
+        // output taking some of them.
+        let n = rng.range(1, 7) as usize;
+        let mut pool: Vec<usize> = (0..n).map(|_| rng.range(0, top - 1) as usize).collect();
+        pool.sort_unstable();
+        pool.dedup();
+        for output in 0..3u8 {
+            let mut coefs = Vec::new();
+            for &i in &pool {
+                if rng.range(0, 3) > 0 {
+                    coefs.push((MONO_EXPS[i], (rng.range(-10_000, 10_000) as f64) * 0.7));
+                }
+            }
+            if !coefs.is_empty() {
+                terms.push(TermSpec::Poly { output, coefs });
+            }
+        }
+        let deg = rng.range(1, 2) as usize;
+        let low = |rng: &mut trueaxis_test_support::XorShift64| {
+            let i = rng.range(1, [0, 4, 10][deg] - 1) as usize;
+            vec![(MONO_EXPS[0], 900.0), (MONO_EXPS[i], 400.0)]
+        };
+        terms.push(TermSpec::Reversal {
+            output: 0,
+            axis: 0,
+            transition_nm: 20_000,
+            amplitude_nm: 2500.0,
+        });
+        terms.push(TermSpec::Thermal {
+            output: 1,
+            channel: 0,
+            t_ref_mc: 20_000,
+            coefs_nm_per_k: low(rng),
+        });
+        if rng.range(0, 2) == 0 {
+            terms.push(TermSpec::Abbe {
+                output: 2,
+                coefs: low(rng),
+            });
+        }
+        TableSpec {
+            created_unix_s: 1_700_000_000,
+            source_hash: [0; 32],
+            channels: vec!["bed".into(), "air".into()],
+            envelope: env,
+            scaling: sc,
+            outputs: [true; 3],
+            terms,
+        }
+    }
+
+    /// The few-monomial path (`vp_*`) and the block by monomial (`blk_*`)
+    /// give the dense general path's integers and flags, bit for bit, on
+    /// seeded sparse tables and inputs inside and beyond the envelope
+    /// (positions, temperatures, tool arm), clamped and not. Both paths
+    /// must be taken often (else the test proves nothing).
+    #[test]
+    fn few_monomial_paths_equal_the_dense_general_path() {
+        let mut rng = trueaxis_test_support::XorShift64(0x1f83_d9ab_fb41_bd6bu64);
+        let (mut vp, mut blk, mut clamped) = (0, 0, 0);
+        for _ in 0..300 {
+            let bytes = sparse_spec(&mut rng).encode().unwrap();
+            let m = Model::load(&crate::parse(&bytes).unwrap()).unwrap();
+            let mut dense = m.clone();
+            dense.vp_n = 0;
+            dense.blk_n = 0;
+            vp += (m.vp_n > 0) as u32;
+            blk += (m.vp_n == 0 && m.blk_n > 0) as u32;
+            for _ in 0..50 {
+                let env = m.envelope();
+                let pos_nm = core::array::from_fn(|a| {
+                    let h = env.travel_max_nm[a] as i64;
+                    rng.range(-h - h / 5, h + h / 5) as i32
+                });
+                let inp = Inputs {
+                    pos_nm,
+                    rev_q30: core::array::from_fn(|_| {
+                        rng.range(-(1 << 30) - 5, (1 << 30) + 5) as i32
+                    }),
+                    temp_mc: core::array::from_fn(|_| rng.range(-10_000, 60_000) as i32),
+                    tool_nm: rng.range(-1_000_000, 310_000_000) as i32,
+                };
+                let (a, b) = (m.eval_fixed(&inp), dense.eval_fixed(&inp));
+                assert_eq!(a, b, "{inp:?}");
+                clamped += a.flags.contains(crate::Flags::CLAMPED) as u32;
+            }
+        }
+        assert!(
+            vp > 50 && blk > 50 && clamped > 1000,
+            "{vp} {blk} {clamped}"
+        );
+    }
 
     /// The block kernel against the exact sum (i128) rounded by `rshr`'s
     /// rule, floor((Σ + 2^(s−1)) / 2^s), at the ends of its ranges: Σ|c| =

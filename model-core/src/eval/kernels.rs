@@ -238,6 +238,32 @@ pub(super) fn mul_q30(a: i32, b: i32) -> i32 {
     ((a as i64 * b as i64) >> 30) as i32
 }
 
+/// How [`mono20_q30`] makes each monomial i ≥ 4: (parent, axis), the
+/// monomial being `mul_q30(mv[parent], u[axis])` (entries 0…3 are 1, x, y,
+/// z themselves; test `mono20_from_is_mono20_q30`).
+pub(super) const MONO20_FROM: [(u8, u8); 20] = [
+    (0, 0),
+    (0, 0),
+    (0, 1),
+    (0, 2),
+    (1, 0),
+    (1, 1),
+    (1, 2),
+    (2, 1),
+    (2, 2),
+    (3, 2),
+    (4, 0),
+    (4, 1),
+    (4, 2),
+    (5, 1),
+    (5, 2),
+    (6, 2),
+    (7, 1),
+    (7, 2),
+    (8, 2),
+    (9, 2),
+];
+
 /// The 20 graded monomials of degree ≤ 3, Q30 (same rounding as [`mono56_q30`]).
 #[inline(always)]
 pub(super) fn mono20_q30(u: [i32; 3]) -> [i32; 20] {
@@ -331,6 +357,30 @@ mod tests {
             assert!((MONO_PARENT[i] as usize) < i);
         }
         assert_eq!(MONO_EXPS[55], [0, 0, 5]);
+    }
+
+    /// Every product of `mono20_q30` is the one `MONO20_FROM` names, bit
+    /// for bit (the few-monomial fixed path rebuilds them from it).
+    #[test]
+    fn mono20_from_is_mono20_q30() {
+        let mut rng = trueaxis_test_support::XorShift64(0x510e_527f_ade6_82d1u64);
+        let lim = (1i64 << 30) + 1;
+        for k in 0..20_000 {
+            let u: [i32; 3] = core::array::from_fn(|a| match (k + a) % 5 {
+                0 => lim as i32,
+                1 => -lim as i32,
+                _ => rng.range(-lim, lim + 1) as i32,
+            });
+            let mv = mono20_q30(u);
+            for i in 4..20 {
+                let (p, ax) = MONO20_FROM[i];
+                assert_eq!(mv[i], mul_q30(mv[p as usize], u[ax as usize]), "{u:?} {i}");
+                // The parent is one degree lower along that axis.
+                let mut e = MONO_EXPS[i];
+                e[ax as usize] -= 1;
+                assert_eq!(MONO_EXPS[p as usize], e);
+            }
+        }
     }
 
     #[test]

@@ -12,11 +12,12 @@ use core::num::NonZeroU32;
 use heapless::Vec;
 
 use super::kernels::{
-    choose_q, mono_index, pow2, round_i64, to_q, Mul32, Turns, HORNER20, MONOS_UP_TO, MONO_EXPS,
+    choose_q, mono_index, pow2, round_i64, to_q, Mul32, Turns, HORNER20, MONO20_FROM, MONOS_UP_TO,
+    MONO_EXPS,
 };
 use super::{
     poly_fixed_shift_ok, Factor, FactoredF32, GridAxis, LoadError, MlpInput, ModelCap, PeriodicF32,
-    PolyKind, Term, MAX_MLP_INPUTS_TOTAL, MAX_TERMS,
+    PolyKind, Term, BLK_CAP, MAX_MLP_INPUTS_TOTAL, MAX_TERMS, VP_CAP, VP_STEPS,
 };
 use crate::limits::{MAX_HIDDEN_LAYERS, MAX_MLP_INPUTS, MAX_MONOMIALS};
 use crate::math::TANH_F32_LEAD;
@@ -63,6 +64,8 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     fn clear(&mut self) {
         self.outputs = 0;
         self.n_monos = 0;
+        self.blk_n = 0;
+        self.vp_n = 0;
         self.has_block = false;
         self.reads_temp = false;
         self.reads_tool = false;
@@ -188,6 +191,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             });
         }
         self.prepare_flat();
+        self.prepare_vp();
         self.poly = match (self.terms.is_empty() && self.has_block, self.n_monos) {
             (true, 1..=4) => PolyKind::Linear,
             (true, 5..=20) => PolyKind::Cubic,
@@ -305,7 +309,84 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                 *h = (block[i as usize][o] / scale) as f32;
             }
         }
+        self.prepare_blk();
         Ok(())
+    }
+
+    /// The block by monomial (`blk_*`) from the rows of `block_q`: the
+    /// monomials some output reads, when there are at most [`BLK_CAP`] and
+    /// at most half of the vector's (a dense block is faster by rows).
+    pub(super) fn prepare_blk(&mut self) {
+        self.blk_n = 0;
+        let n = (self.n_monos as usize).min(MAX_MONOMIALS);
+        let used = (0..n).filter(|&i| (0..3).any(|o| self.block_q[o][i] != 0));
+        let count = used.clone().count();
+        if self.has_block && count <= BLK_CAP && 2 * count <= n {
+            for (k, i) in used.enumerate() {
+                self.blk_idx[k] = i as u8;
+                self.blk_q[k] = core::array::from_fn(|o| self.block_q[o][i]);
+                self.blk_n = k as u8 + 1;
+            }
+        }
+    }
+
+    /// The few-monomial fixed path (`vp_*`): when the monomial vector is the
+    /// 20 of degree ≤ 3, every thermal/Abbe term reads only 1, x, y, z,
+    /// and the monomials the block reads need at most [`VP_STEPS`] products
+    /// (with their parents), v holds exactly those. The block's sums over v
+    /// are the dense block's (the monomials left out have no coefficient),
+    /// so the integers are the same.
+    pub(super) fn prepare_vp(&mut self) {
+        self.vp_n = 0;
+        self.vp_step = [(0, 0); VP_CAP];
+        self.vp_q = [[0; VP_CAP]; 3];
+        if !self.has_block || !(1..=20).contains(&self.n_monos) {
+            return;
+        }
+        for t in self.terms.iter() {
+            if let Term::Factored { start, len, .. } = *t {
+                let (s, e) = (start as usize, start as usize + len as usize);
+                if self
+                    .pidx
+                    .get(s..e)
+                    .is_none_or(|ix| ix.iter().any(|&i| i >= 4))
+                {
+                    return;
+                }
+            }
+        }
+        let mut need = [false; 20];
+        for (i, n) in need.iter_mut().enumerate() {
+            *n = i < 4 || (0..3).any(|o| self.block_q[o][i] != 0);
+        }
+        // Parents come before their children: walking down closes the set.
+        for i in (4..20).rev() {
+            if need[i] {
+                need[MONO20_FROM[i].0 as usize] = true;
+            }
+        }
+        let steps = need[4..].iter().filter(|&&n| n).count();
+        if steps > VP_STEPS {
+            return;
+        }
+        // Position of each graded monomial in v.
+        let mut at = [0u8; 20];
+        let mut k = 0;
+        for i in 0..20 {
+            if !need[i] {
+                continue;
+            }
+            at[i] = k as u8;
+            if i >= 4 {
+                let (p, ax) = MONO20_FROM[i];
+                self.vp_step[k] = (at[p as usize], 1 + ax);
+            }
+            for o in 0..3 {
+                self.vp_q[o][k] = self.block_q[o][i];
+            }
+            k += 1;
+        }
+        self.vp_n = k as u8;
     }
 
     /// Pass 2: every term but the plain polynomials, in table order, each by

@@ -561,7 +561,36 @@ pub struct ModelCap<const P: usize, const G: usize> {
     /// The half span of the travel per axis, nm (the input scaling; read at
     /// load only, so last).
     half_nm: [i32; 3],
+    /// The fixed block by monomial (`blk_n` > 0): the monomials some output
+    /// of the block reads (graded indices, < `n_monos`) and their three
+    /// coefficients, so each monomial is loaded once for three SMLALs and
+    /// the ones no output reads are skipped (`block_gather_fixed`). 0 when
+    /// the block has more than [`BLK_CAP`] such monomials (the rows of
+    /// `block_q` then). Last, so the fields above keep their offsets.
+    blk_n: u8,
+    blk_idx: [u8; BLK_CAP],
+    blk_q: [[i32; 3]; BLK_CAP],
+    /// Fixed point with few monomials (`vp_n` > 0, see `prepare_vp`): the
+    /// vector v of the monomials the block reads and their parents — 1, x,
+    /// y, z, then one entry per product — built by `vp_step` (for k ≥ 4,
+    /// (parent, 1 + axis): v[k] = v[parent] · v[1 + axis], the products of
+    /// `mono20_q30`), and the
+    /// block's rows over v. Thermal/Abbe terms read only v[0..4], which are
+    /// the graded monomials 0..4.
+    vp_n: u8,
+    vp_step: [(u8, u8); VP_CAP],
+    vp_q: [[i32; VP_CAP]; 3],
 }
+
+/// Most monomials the fixed block sums by monomial (every block of degree
+/// ≤ 3 has at most 20).
+const BLK_CAP: usize = 24;
+/// Size of the vector v of `vp_*` (1, x, y, z and up to 4 products; a
+/// power of two, so an index is one AND). The kernels run over all of it
+/// in straight-line code (fixed trip counts, no loop overhead).
+const VP_CAP: usize = 8;
+/// Most products `prepare_vp` takes.
+const VP_STEPS: usize = VP_CAP - 4;
 
 impl<const P: usize, const G: usize> ModelCap<P, G> {
     /// An empty model (no outputs: every evaluation returns zeros). `const`,
@@ -614,6 +643,12 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             per_f32: Vec::new(),
             fac_f32: Vec::new(),
             half_nm: [0; 3],
+            blk_n: 0,
+            blk_idx: [0; BLK_CAP],
+            blk_q: [[0; 3]; BLK_CAP],
+            vp_n: 0,
+            vp_step: [(0, 0); VP_CAP],
+            vp_q: [[0; VP_CAP]; 3],
         }
     }
 
