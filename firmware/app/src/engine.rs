@@ -673,25 +673,20 @@ impl<'m> Engine<'m> {
                 self.pos_nm = inj.pos_nm;
                 self.rev_q30 = inj.rev_q30;
                 self.temp_mc = inj.temp_mc;
-                inputs_of(inj)
+                model::inputs(&inputs_of(inj))
             }
             None => {
                 self.pos_nm = enc_pos_nm;
                 self.temp_mc = temps_mc;
                 self.rev_q30 = rev_q30;
-                ModelInputs {
-                    pos_nm: self.pos_nm,
-                    rev_q30: self.rev_q30,
-                    temp_mc: self.temp_mc,
-                    tool_nm: self.cfg.tool_nm,
-                }
+                model::sensor_inputs(enc_pos_nm, rev_q30, &temps_mc, self.cfg.tool_nm)
             }
         };
 
         // The model.
         match self.model.as_deref().and_then(ModelBuf::get) {
             Some(m) => {
-                let r = model::evaluate(m, &inputs);
+                let r = model::evaluate_inputs(m, &inputs);
                 self.model_flags = r.flags;
                 if r.not_finite {
                     events = events.union(Faults::NOT_FINITE);

@@ -115,9 +115,32 @@ pub fn inputs(i: &ModelInputs) -> Inputs {
     }
 }
 
+/// The model-core inputs of the sensors' readings (the tick's common
+/// case: built once, no [`ModelInputs`] in between).
+#[inline(always)]
+pub fn sensor_inputs(
+    pos_nm: [i32; 3],
+    rev_q30: [i32; 3],
+    temp_mc: &[i32; LINK_TEMPS],
+    tool_nm: i32,
+) -> Inputs {
+    Inputs {
+        pos_nm,
+        rev_q30,
+        temp_mc: core::array::from_fn(|c| temp_mc[c]),
+        tool_nm,
+    }
+}
+
 /// Fixed-point evaluation (bit-exact with the host's `eval_fixed`).
 pub fn evaluate(m: &Model, i: &ModelInputs) -> Evaluation {
-    let o = m.eval_fixed(&inputs(i));
+    evaluate_inputs(m, &inputs(i))
+}
+
+/// [`evaluate`] of model-core inputs.
+#[inline(always)]
+pub fn evaluate_inputs(m: &Model, i: &Inputs) -> Evaluation {
+    let o = m.eval_fixed(i);
     Evaluation {
         corr_nm: o.corr_nm,
         flags: o.flags.bits(),

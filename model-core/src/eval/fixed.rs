@@ -5,7 +5,9 @@
 //! the end; every coefficient set carries the binary scale the loader chose
 //! so the accumulations cannot overflow inside the envelope.
 
-use super::kernels::{grid_cell, mlp_source, mono20_q30, mono56_q30, mul_q30, phase_turns, rshr};
+use super::kernels::{
+    grid_cell, mlp_source, mono20_q30, mono56_q30, mul_q30, phase_turns, rshr, rshr_var,
+};
 use super::{
     Factor, Flags, GridAxis, Inputs, ModelCap, Outputs, PolyKind, Term, BLK_CAP, MAX_TEMPS, VP_CAP,
 };
@@ -236,14 +238,17 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     /// (the same exact sums, without the monomials no output reads).
     #[inline(always)]
     fn block_vp(&self, v: &[i32; VP_CAP]) -> [i64; 3] {
+        // By monomial: each entry of v loaded once (read back as i32, so
+        // every product is one SMLAL) for the three sums.
         let v = core::hint::black_box(v);
-        core::array::from_fn(|o| {
-            let mut a = self.block_round[o];
-            for (&c, &m) in self.vp_q[o].iter().zip(v) {
-                a += c as i64 * m as i64;
-            }
-            a >> (self.block_shift[o] & 63)
-        })
+        let mut a = self.block_round;
+        for (&m, c) in v.iter().zip(&self.vp_q) {
+            let m = m as i64;
+            a[0] += c[0] as i64 * m;
+            a[1] += c[1] as i64 * m;
+            a[2] += c[2] as i64 * m;
+        }
+        core::array::from_fn(|o| a[o] >> (self.block_shift[o] & 63))
     }
 
     /// The shared polynomial block, Q16 nm: by monomial when the model
@@ -313,7 +318,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             let (o, v) = match t {
                 Term::Factored { output, .. } => (*output, self.factored_fixed(t, mv, &temp, tool)),
                 Term::Periodic { output, shift, .. } => {
-                    (*output, rshr(self.periodic_fixed(t, pos), *shift))
+                    (*output, rshr_var(self.periodic_fixed(t, pos), *shift))
                 }
                 Term::Reversal {
                     output,
@@ -323,7 +328,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     ..
                 } => {
                     let r = inp.rev_q30[*axis as usize % 3].clamp(-ONE_Q30, ONE_Q30);
-                    (*output, rshr(*amp_q as i64 * r as i64, *shift))
+                    (*output, rshr_var(*amp_q as i64 * r as i64, *shift))
                 }
                 Term::Grid {
                     output,
@@ -364,7 +369,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             Factor::Temp { ch, t_ref_mc } => temp[ch as usize & 3] as i64 - t_ref_mc as i64,
             Factor::Tool => tool as i64,
         };
-        rshr(rshr(v, 30) * f, shift)
+        rshr_var(rshr(v, 30) * f, shift)
     }
 
     /// Σ a_k sin kθ + b_k cos kθ in Q(q+30): the first harmonic from the

@@ -176,6 +176,20 @@ pub(super) fn rshr(x: i64, s: u32) -> i64 {
     }
 }
 
+/// [`rshr`] as ((x >> (s − 1)) + 1) >> 1: the same integer
+/// (floor((floor(x / 2^(s−1)) + 1) / 2) = floor((x + 2^(s−1)) / 2^s)), with
+/// one variable 64-bit shift instead of a variable shift and a variable
+/// power of two (test `rshr_var_is_rshr`). Used where the shift is a
+/// term's (the block's rounding term is made at load instead).
+#[inline(always)]
+pub(super) fn rshr_var(x: i64, s: u32) -> i64 {
+    if s == 0 {
+        x
+    } else {
+        ((x >> (s - 1)) + 1) >> 1
+    }
+}
+
 /// `v` held inside [lo, hi] (lo ≤ hi is validated), raising `f` when it was outside.
 #[inline(always)]
 pub(super) fn hold(v: i32, lo: i32, hi: i32, flags: &mut Flags, f: Flags) -> i32 {
@@ -357,6 +371,42 @@ mod tests {
             assert!((MONO_PARENT[i] as usize) < i);
         }
         assert_eq!(MONO_EXPS[55], [0, 0, 5]);
+    }
+
+    /// `rshr_var` against `rshr` at the ends of the i64 range and the
+    /// shifts 0 … 63, and on seeded values.
+    #[test]
+    fn rshr_var_is_rshr() {
+        let mut rng = trueaxis_test_support::XorShift64(0x9b05_688c_2b3e_6c1fu64);
+        let ends = [
+            0i64,
+            1,
+            -1,
+            2,
+            -2,
+            i64::MAX / 2,
+            i64::MIN / 2,
+            i64::MIN,
+            i64::MAX - (1 << 62),
+        ];
+        for s in 0..64u32 {
+            for &x in &ends {
+                for x in [x, x.wrapping_add(1), x.wrapping_sub(1)] {
+                    // rshr's own sum must not overflow (its contract).
+                    if s > 0 && x.checked_add(1i64 << (s - 1)).is_none() {
+                        continue;
+                    }
+                    assert_eq!(rshr_var(x, s), rshr(x, s), "{x} >> {s}");
+                }
+            }
+            for _ in 0..2000 {
+                let x = (rng.next_u64() as i64) >> rng.range(0, 63);
+                if s > 0 && x.checked_add(1i64 << (s - 1)).is_none() {
+                    continue;
+                }
+                assert_eq!(rshr_var(x, s), rshr(x, s), "{x} >> {s}");
+            }
+        }
     }
 
     /// Every product of `mono20_q30` is the one `MONO20_FROM` names, bit

@@ -339,7 +339,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     pub(super) fn prepare_vp(&mut self) {
         self.vp_n = 0;
         self.vp_step = [(0, 0); VP_CAP];
-        self.vp_q = [[0; VP_CAP]; 3];
+        self.vp_q = [[0; 3]; VP_CAP];
         if !self.has_block || !(1..=20).contains(&self.n_monos) {
             return;
         }
@@ -381,9 +381,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                 let (p, ax) = MONO20_FROM[i];
                 self.vp_step[k] = (at[p as usize], 1 + ax);
             }
-            for o in 0..3 {
-                self.vp_q[o][k] = self.block_q[o][i];
-            }
+            self.vp_q[k] = core::array::from_fn(|o| self.block_q[o][i]);
             k += 1;
         }
         self.vp_n = k as u8;

@@ -575,11 +575,11 @@ pub struct ModelCap<const P: usize, const G: usize> {
     /// y, z, then one entry per product — built by `vp_step` (for k ≥ 4,
     /// (parent, 1 + axis): v[k] = v[parent] · v[1 + axis], the products of
     /// `mono20_q30`), and the
-    /// block's rows over v. Thermal/Abbe terms read only v[0..4], which are
+    /// block's three coefficients of each entry of v. Thermal/Abbe terms read only v[0..4], which are
     /// the graded monomials 0..4.
     vp_n: u8,
     vp_step: [(u8, u8); VP_CAP],
-    vp_q: [[i32; VP_CAP]; 3],
+    vp_q: [[i32; 3]; VP_CAP],
 }
 
 /// Most monomials the fixed block sums by monomial (every block of degree
@@ -648,7 +648,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             blk_q: [[0; 3]; BLK_CAP],
             vp_n: 0,
             vp_step: [(0, 0); VP_CAP],
-            vp_q: [[0; VP_CAP]; 3],
+            vp_q: [[0; 3]; VP_CAP],
         }
     }
 
