@@ -820,7 +820,8 @@ const TARGET_LIMIT_NM: i32 = (1 << 22) - 1;
 /// (the output in mnm reaches ±4.2·10^9); the roundings and the pulses are
 /// 32-bit (UDIV) — exactly the i64 arithmetic the tick had before
 /// (`slew_axis_is_the_i64_loop`), for `pulse_nm`, `lim` > 0 (checked by
-/// `EngineConfig::check`) and every state the loop reaches.
+/// `EngineConfig::check`), `max_d_mnm` ≥ 0 (the rates are ≥ 0) and every
+/// state the loop reaches.
 #[inline(always)]
 fn slew_axis(
     out_mnm: &mut i64,
@@ -831,12 +832,16 @@ fn slew_axis(
     lim: i32,
 ) -> i32 {
     let target = target_nm.clamp(-TARGET_LIMIT_NM - 1, TARGET_LIMIT_NM);
-    let d = (target as i64 * 1000 - *out_mnm).clamp(-max_d_mnm, max_d_mnm);
+    // max then min: the clamp for 0 ≤ max_d and 0 < lim (the engine's
+    // rates and `EngineConfig::check`), without `clamp`'s bounds assertion.
+    let d = (target as i64 * 1000 - *out_mnm)
+        .max(-max_d_mnm)
+        .min(max_d_mnm);
     *out_mnm += d;
     // Pulses: absolute, so they can never drift from the output.
     let corr_nm = round_mnm(*out_mnm);
     let want = round_div_i32(corr_nm, pulse_nm);
-    let n = want.wrapping_sub(*steps).clamp(-lim, lim);
+    let n = want.wrapping_sub(*steps).max(-lim).min(lim);
     *steps = steps.wrapping_add(n);
     n
 }
