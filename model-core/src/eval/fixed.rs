@@ -327,7 +327,9 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     shift,
                     ..
                 } => {
-                    let r = inp.rev_q30[*axis as usize % 3].clamp(-ONE_Q30, ONE_Q30);
+                    // (axis < 3 is validated; `min` keeps the index in
+                    // range in two instructions where `% 3` takes six.)
+                    let r = inp.rev_q30[(*axis as usize).min(2)].clamp(-ONE_Q30, ONE_Q30);
                     (*output, rshr_var(*amp_q as i64 * r as i64, *shift))
                 }
                 Term::Grid {
@@ -340,7 +342,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                     continue;
                 }
             };
-            let o = o as usize % 3;
+            let o = (o as usize).min(2);
             out[o] = out[o].saturating_add(v);
         }
     }
@@ -387,7 +389,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         else {
             return 0;
         };
-        let theta = phase_turns(pos[axis as usize % 3], period_nm, turns);
+        let theta = phase_turns(pos[(axis as usize).min(2)], period_nm, turns);
         let (s1, c1) = sincos_q30(theta);
         let c = &self.pq[start as usize..start as usize + 2 * harmonics as usize];
         let (mut s, mut co) = (s1, c1);
