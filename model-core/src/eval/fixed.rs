@@ -9,7 +9,8 @@ use super::kernels::{
     grid_cell, mlp_source, mono20_q30, mono56_q30, mul_q30, phase_turns, rshr, rshr_var,
 };
 use super::{
-    Factor, Flags, GridAxis, Inputs, ModelCap, Outputs, PolyKind, Term, BLK_CAP, MAX_TEMPS, VP_CAP,
+    Factor, Flags, GridAxis, Inputs, ModelCap, Outputs, PolyKind, Term, BLK_CAP, FQ_CAP, MAX_TEMPS,
+    VP_CAP,
 };
 use crate::limits::{MAX_HIDDEN_UNITS, MAX_MLP_INPUTS};
 use crate::math::{sincos_q30, tanh_q30, ONE_Q30, TANH_IN_FRAC};
@@ -158,7 +159,9 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             // Few monomials: only those the block reads (and their parents).
             let v = self.mono_vp_q30(u());
             let mut out = self.block_vp(&v);
-            if !self.terms.is_empty() {
+            if self.fq_n > 0 {
+                self.terms_flat_fixed(&v, inp, &mut flags, &mut out);
+            } else if !self.terms.is_empty() {
                 self.terms_fixed(&v, &pos, inp, &mut flags, &mut out);
             }
             out
@@ -302,6 +305,41 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             }
             a >> (self.block_shift[o] & 63)
         })
+    }
+
+    /// [`Self::terms_fixed`] over the flat terms (`fq`): the same values
+    /// added in the same order (reversal: amp·rev; thermal/Abbe: the
+    /// factor times the polynomial over v[0..4], whose dense coefficients
+    /// give the pool's exact sum).
+    #[inline(never)]
+    fn terms_flat_fixed(
+        &self,
+        v: &[i32; VP_CAP],
+        inp: &Inputs,
+        flags: &mut Flags,
+        out: &mut [i64; 3],
+    ) {
+        let (temp, tool) = self.hold_aux(inp, flags);
+        let n = (self.fq_n as usize).min(FQ_CAP);
+        for t in &self.fq[..n] {
+            let val = if t.kind == 0 {
+                let r = inp.rev_q30[(t.src as usize).min(2)].clamp(-ONE_Q30, ONE_Q30);
+                rshr_var(t.k as i64 * r as i64, t.shift)
+            } else {
+                let s = t.c[0] as i64 * v[0] as i64
+                    + t.c[1] as i64 * v[1] as i64
+                    + t.c[2] as i64 * v[2] as i64
+                    + t.c[3] as i64 * v[3] as i64;
+                let f = if t.kind == 1 {
+                    temp[t.src as usize & 3] as i64 - t.k as i64
+                } else {
+                    tool as i64
+                };
+                rshr_var(rshr(s, 30) * f, t.shift)
+            };
+            let o = (t.output as usize).min(2);
+            out[o] = out[o].saturating_add(val);
+        }
     }
 
     #[inline(never)]
@@ -644,15 +682,17 @@ mod tests {
         }
     }
 
-    /// The few-monomial path (`vp_*`) and the block by monomial (`blk_*`)
-    /// give the dense general path's integers and flags, bit for bit, on
+    /// The few-monomial path (`vp_*`, with its flat terms `fq` when every
+    /// term is a reversal or a thermal/Abbe term) and the block by monomial
+    /// (`blk_*`) give the dense general path's integers and flags (the term
+    /// loop `terms_fixed`), bit for bit, on
     /// seeded sparse tables and inputs inside and beyond the envelope
     /// (positions, temperatures, tool arm), clamped and not. Both paths
     /// must be taken often (else the test proves nothing).
     #[test]
     fn few_monomial_paths_equal_the_dense_general_path() {
         let mut rng = trueaxis_test_support::XorShift64(0x1f83_d9ab_fb41_bd6bu64);
-        let (mut vp, mut blk, mut clamped) = (0, 0, 0);
+        let (mut vp, mut fq, mut blk, mut clamped) = (0, 0, 0, 0);
         for _ in 0..300 {
             let bytes = sparse_spec(&mut rng).encode().unwrap();
             let m = Model::load(&crate::parse(&bytes).unwrap()).unwrap();
@@ -660,6 +700,7 @@ mod tests {
             dense.vp_n = 0;
             dense.blk_n = 0;
             vp += (m.vp_n > 0) as u32;
+            fq += (m.vp_n > 0 && m.fq_n > 0) as u32;
             blk += (m.vp_n == 0 && m.blk_n > 0) as u32;
             for _ in 0..50 {
                 let env = m.envelope();
@@ -681,8 +722,8 @@ mod tests {
             }
         }
         assert!(
-            vp > 50 && blk > 50 && clamped > 1000,
-            "{vp} {blk} {clamped}"
+            vp > 50 && fq > 50 && blk > 50 && clamped > 1000,
+            "{vp} {fq} {blk} {clamped}"
         );
     }
 

@@ -17,7 +17,7 @@ use super::kernels::{
 };
 use super::{
     poly_fixed_shift_ok, Factor, FactoredF32, GridAxis, LoadError, MlpInput, ModelCap, PeriodicF32,
-    PolyKind, Term, BLK_CAP, MAX_MLP_INPUTS_TOTAL, MAX_TERMS, VP_CAP, VP_STEPS,
+    PolyKind, Term, TermQ, BLK_CAP, FQ_CAP, MAX_MLP_INPUTS_TOTAL, MAX_TERMS, VP_CAP, VP_STEPS,
 };
 use crate::limits::{MAX_HIDDEN_LAYERS, MAX_MLP_INPUTS, MAX_MONOMIALS};
 use crate::math::TANH_F32_LEAD;
@@ -66,6 +66,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         self.n_monos = 0;
         self.blk_n = 0;
         self.vp_n = 0;
+        self.fq_n = 0;
         self.has_block = false;
         self.reads_temp = false;
         self.reads_tool = false;
@@ -385,6 +386,66 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             k += 1;
         }
         self.vp_n = k as u8;
+        self.prepare_fq();
+    }
+
+    /// The flat terms (`fq`) of a few-monomial table: every term a
+    /// reversal or a thermal/Abbe term (whose monomials are among 1, x, y,
+    /// z, checked above), at most [`FQ_CAP`] of them.
+    fn prepare_fq(&mut self) {
+        self.fq_n = 0;
+        if self.terms.len() > FQ_CAP {
+            return;
+        }
+        for (j, t) in self.terms.iter().enumerate() {
+            self.fq[j] = match *t {
+                Term::Reversal {
+                    output,
+                    axis,
+                    amp_q,
+                    shift,
+                    ..
+                } => TermQ {
+                    output,
+                    kind: 0,
+                    src: axis,
+                    shift,
+                    k: amp_q,
+                    c: [0; 4],
+                },
+                Term::Factored {
+                    output,
+                    factor,
+                    start,
+                    len,
+                    shift,
+                } => {
+                    let (s, e) = (start as usize, start as usize + len as usize);
+                    let (Some(pq), Some(ix)) = (self.pq.get(s..e), self.pidx.get(s..e)) else {
+                        return;
+                    };
+                    // Σ|c| < 2^31 (the term's scale), so the sums fit i32.
+                    let mut c = [0i32; 4];
+                    for (&q, &i) in pq.iter().zip(ix) {
+                        c[i as usize & 3] += q;
+                    }
+                    let (kind, src, k) = match factor {
+                        Factor::Temp { ch, t_ref_mc } => (1, ch, t_ref_mc),
+                        Factor::Tool => (2, 0, 0),
+                    };
+                    TermQ {
+                        output,
+                        kind,
+                        src,
+                        shift,
+                        k,
+                        c,
+                    }
+                }
+                _ => return,
+            };
+        }
+        self.fq_n = self.terms.len() as u8;
     }
 
     /// Pass 2: every term but the plain polynomials, in table order, each by

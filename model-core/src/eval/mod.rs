@@ -580,7 +580,32 @@ pub struct ModelCap<const P: usize, const G: usize> {
     vp_n: u8,
     vp_step: [(u8, u8); VP_CAP],
     vp_q: [[i32; 3]; VP_CAP],
+    /// The terms of a few-monomial table laid out flat (`fq_n` > 0, set by
+    /// `prepare_vp` when every term is a reversal or a thermal/Abbe term
+    /// and there are at most [`FQ_CAP`]): no per-term dispatch on [`Term`],
+    /// no pool slices, the polynomial dense over 1, x, y, z.
+    fq_n: u8,
+    fq: [TermQ; FQ_CAP],
 }
+
+/// A reversal or a thermal/Abbe term of degree ≤ 1 for the flat fixed path:
+/// the same integers as `terms_fixed` computes for it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct TermQ {
+    output: u8,
+    /// 0 reversal, 1 thermal, 2 Abbe.
+    kind: u8,
+    /// The reversal's axis or the thermal term's channel.
+    src: u8,
+    shift: u32,
+    /// The reversal's amplitude (Q) or the thermal term's T_ref, m°C.
+    k: i32,
+    /// Coefficients of 1, x, y, z (Q; the pool's, summed per monomial).
+    c: [i32; 4],
+}
+
+/// Most terms the flat fixed path takes.
+const FQ_CAP: usize = 8;
 
 /// Most monomials the fixed block sums by monomial (every block of degree
 /// ≤ 3 has at most 20).
@@ -649,6 +674,15 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             vp_n: 0,
             vp_step: [(0, 0); VP_CAP],
             vp_q: [[0; 3]; VP_CAP],
+            fq_n: 0,
+            fq: [TermQ {
+                output: 0,
+                kind: 0,
+                src: 0,
+                shift: 0,
+                k: 0,
+                c: [0; 4],
+            }; FQ_CAP],
         }
     }
 
