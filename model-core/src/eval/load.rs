@@ -16,8 +16,9 @@ use super::kernels::{
     MONO_EXPS,
 };
 use super::{
-    poly_fixed_shift_ok, Factor, FactoredF32, GridAxis, LoadError, MlpInput, ModelCap, PeriodicF32,
-    PolyKind, Term, TermQ, BLK_CAP, FQ_CAP, MAX_MLP_INPUTS_TOTAL, MAX_TERMS, VP_CAP, VP_STEPS,
+    poly_fixed_shift_ok, vp_products, Factor, FactoredF32, GridAxis, LoadError, MlpInput, ModelCap,
+    PeriodicF32, PolyKind, Term, TermQ, BLK_CAP, FQ_CAP, MAX_MLP_INPUTS_TOTAL, MAX_TERMS, VP_CAP,
+    VP_STEPS,
 };
 use crate::limits::{MAX_HIDDEN_LAYERS, MAX_MLP_INPUTS, MAX_MONOMIALS};
 use crate::math::TANH_F32_LEAD;
@@ -356,18 +357,9 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                 }
             }
         }
-        let mut need = [false; 20];
-        for (i, n) in need.iter_mut().enumerate() {
-            *n = i < 4 || (0..3).any(|o| self.block_q[o][i] != 0);
-        }
-        // Parents come before their children: walking down closes the set.
-        for i in (4..20).rev() {
-            if need[i] {
-                need[MONO20_FROM[i].0 as usize] = true;
-            }
-        }
-        let steps = need[4..].iter().filter(|&&n| n).count();
-        if steps > VP_STEPS {
+        let mut need: [bool; 20] =
+            core::array::from_fn(|i| (0..3).any(|o| self.block_q[o][i] != 0));
+        if vp_products(&mut need) > VP_STEPS {
             return;
         }
         // Position of each graded monomial in v.

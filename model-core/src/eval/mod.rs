@@ -466,6 +466,29 @@ pub(crate) fn poly_fixed_takes(sum_abs: [f64; 3]) -> bool {
     })
 }
 
+/// The few-monomial path's vector for the block monomials marked in `need`
+/// (graded, degree ≤ 3): marks 1, x, y, z and every parent `mono20_q30`
+/// makes a marked monomial from, and returns the number of products (the
+/// marked monomials of degree ≥ 2). The loader takes the path for at most
+/// `VP_STEPS` of them; [`crate::cost`] asks the same.
+pub(crate) fn vp_products(need: &mut [bool; 20]) -> usize {
+    need[..4].fill(true);
+    // Parents come before their children: walking down closes the set.
+    for i in (4..20).rev() {
+        if need[i] {
+            need[kernels::MONO20_FROM[i].0 as usize] = true;
+        }
+    }
+    need[4..].iter().filter(|&&n| n).count()
+}
+
+/// Most products the few-monomial path takes (see [`vp_products`]).
+pub(crate) const VP_MAX_PRODUCTS: usize = VP_STEPS;
+/// Most terms its flat term loop takes.
+pub(crate) const FQ_MAX_TERMS: usize = FQ_CAP;
+/// Most monomials the block by monomial takes.
+pub(crate) const BLK_MAX: usize = BLK_CAP;
+
 /// See [`poly_fixed_takes`].
 const fn poly_fixed_shift_ok(shift: u32) -> bool {
     shift >= 16 && shift <= 46
