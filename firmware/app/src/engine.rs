@@ -603,9 +603,9 @@ impl<'m> Engine<'m> {
         }
         if self.ref_pending {
             self.ref_pending = false;
-            for i in 0..3 {
+            for (i, &count) in counts.iter().enumerate() {
                 if let Some(pos) = self.pending_ref[i].take() {
-                    self.ref_offset_nm[i] = pos as i64 - self.raw_nm(i, counts[i]);
+                    self.ref_offset_nm[i] = pos as i64 - self.raw_nm(i, count);
                     self.ref_offset_i32[i] = i32::try_from(self.ref_offset_nm[i]).ok();
                     self.referenced |= 1 << i;
                 }

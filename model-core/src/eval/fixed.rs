@@ -695,7 +695,14 @@ mod tests {
         let (mut vp, mut fq, mut blk, mut clamped) = (0, 0, 0, 0);
         for _ in 0..300 {
             let bytes = sparse_spec(&mut rng).encode().unwrap();
-            let m = Model::load(&crate::parse(&bytes).unwrap()).unwrap();
+            let table = crate::parse(&bytes).unwrap();
+            let m = Model::load(&table).unwrap();
+            // The cost estimate prices the path the loader chose.
+            let f = crate::cost::Features::of(&table);
+            assert_eq!(
+                (f.vp, f.fq, f.blk),
+                (m.vp_n > 0, m.fq_n > 0, m.vp_n == 0 && m.blk_n > 0)
+            );
             let mut dense = m.clone();
             dense.vp_n = 0;
             dense.blk_n = 0;
