@@ -199,8 +199,10 @@ pub struct Engine<'m> {
     cfg: EngineConfig,
     /// Per axis: an encoder step of at least this many counts in one tick is
     /// a jump: twice the distance at full speed in one period, as margin for
-    /// a late tick ([`jump_threshold_counts`]).
-    jump_threshold_counts: [u64; 3],
+    /// a late tick ([`jump_threshold_counts`]), held at `u32::MAX`: a
+    /// step is at most 2^31 counts, so the held threshold (never reached)
+    /// decides as the u64 one does, in a 32-bit compare.
+    jump_threshold_counts: [u32; 3],
     /// The plausible temperature range as (minimum, span): t is inside
     /// when `(t − min) as u32 ≤ span` (one compare per channel); `None`
     /// when the range is empty (every reading is out of it).
@@ -280,8 +282,9 @@ impl<'m> Engine<'m> {
             let max_nm = 2 * a.max_speed_nm_per_ms as i64 * cfg.period_us as i64 / 1000;
             (max_nm.max(1) + 1) * 1000
         });
-        let jump_threshold_counts: [u64; 3] = core::array::from_fn(|i| {
+        let jump_threshold_counts: [u32; 3] = core::array::from_fn(|i| {
             jump_threshold_counts(jump_threshold_pm[i], cfg.axes[i].pm_per_count)
+                .min(u32::MAX as u64) as u32
         });
         let nm_per_count = cfg
             .axes
@@ -616,7 +619,7 @@ impl<'m> Engine<'m> {
                 // |Δcounts| · |pm/count| ≥ threshold ⇔ the jump exceeds
                 // the limit in whole nm, ⇔ |Δcounts| ≥ the threshold in
                 // counts (precomputed: no 64-bit multiply per tick).
-                let d_counts = counts[i].wrapping_sub(prev[i]).unsigned_abs() as u64;
+                let d_counts = counts[i].wrapping_sub(prev[i]).unsigned_abs();
                 if d_counts >= self.jump_threshold_counts[i] {
                     events = events.union(Faults::ENCODER_JUMP);
                     // Counts were lost or invented: the reference is gone.
@@ -990,6 +993,12 @@ mod tests {
                 _ => (next() % 100_000) as i64,
             };
             let k = jump_threshold_counts(t, p);
+            // The engine holds k at u32::MAX: the same decision for every
+            // step a tick can see (|Δcounts| ≤ 2^31).
+            let held = k.min(u32::MAX as u64) as u32;
+            for d in [0u32, 1 << 31, held.saturating_sub(1), held.min(1 << 31)] {
+                assert_eq!(d as u64 >= k, d >= held, "d {d} k {k}");
+            }
             let d = next() as u32 as i64;
             for d in [
                 d,

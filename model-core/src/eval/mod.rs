@@ -208,7 +208,9 @@ impl DirTracker {
             end
         } else {
             // A full swing (2.0 = 2^31 in Q30) per transition_nm.
-            let d = delta.clamp(-tr.t, tr.t);
+            // (t > 0 here: max then min is the clamp, without its
+            // bounds assertion.)
+            let d = delta.max(-tr.t).min(tr.t);
             let next = self.rev_q30 as i64 + tr.swing(d as i64);
             next.clamp(-ONE_Q30 as i64, ONE_Q30 as i64) as i32
         };
