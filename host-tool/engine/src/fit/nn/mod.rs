@@ -223,11 +223,12 @@ fn prepare(data: &Dataset) -> Result<Prepared> {
 
 fn samples(data: &Dataset, prep: &Prepared, rows: &[usize]) -> Result<Samples> {
     let w = holdout::weights(data, rows)?;
-    let mut x = Vec::with_capacity(rows.len() * prep.inputs.len());
+    let n = rows.len();
+    let mut x = vec![0.0; n * prep.inputs.len()];
     let mut by_out = vec![Vec::new(); prep.outputs.len()];
     for (s, &r) in rows.iter().enumerate() {
         for (k, &a) in prep.inputs.iter().enumerate() {
-            x.push(scale(data.pos(a, r), prep.in_min[k], prep.in_max[k]));
+            x[k * n + s] = scale(data.pos(a, r), prep.in_min[k], prep.in_max[k]);
         }
         for (o, &t) in prep.outputs.iter().enumerate() {
             if let Some(v) = data.err_um[t].as_ref().and_then(|c| c[r]) {
@@ -240,7 +241,7 @@ fn samples(data: &Dataset, prep: &Prepared, rows: &[usize]) -> Result<Samples> {
         }
     }
     Ok(Samples {
-        n: rows.len(),
+        n,
         x,
         by_out,
     })
