@@ -365,13 +365,8 @@ impl Lm {
         for (gi, &(_, c0, c1)) in self.groups.iter().enumerate() {
             // mᵀ read as a strided view of m, no copy.
             let len = c1 - c0;
-            let mt = DMatrixView::from_slice_with_strides(
-                &self.m.as_slice()[c0..],
-                nm2,
-                len,
-                nc,
-                1,
-            );
+            let mt =
+                DMatrixView::from_slice_with_strides(&self.m.as_slice()[c0..], nm2, len, nc, 1);
             let rows = self.m.rows(c0, len);
             // Symmetric: only the blocks on and above the diagonal of a
             // 3 × 3 block partition are multiplied (6 of the 9 blocks: 2/3 of

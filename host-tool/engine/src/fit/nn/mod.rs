@@ -245,11 +245,7 @@ fn samples(data: &Dataset, prep: &Prepared, rows: &[usize]) -> Result<Samples> {
             }
         }
     }
-    Ok(Samples {
-        n,
-        x,
-        by_out,
-    })
+    Ok(Samples { n, x, by_out })
 }
 
 fn to_model(net: &Net, prep: &Prepared, training: NnTraining) -> NnModel {
@@ -809,7 +805,11 @@ mod tests {
         assert!((&l * l.transpose() - &a).amax() < 1e-12 * a.amax());
         let mut x = rhs.clone();
         cholesky_solve(&f, n, &mut x);
-        let want = a.clone().cholesky().unwrap().solve(&nalgebra::DVector::from_vec(rhs));
+        let want = a
+            .clone()
+            .cholesky()
+            .unwrap()
+            .solve(&nalgebra::DVector::from_vec(rhs));
         for k in 0..n {
             assert!((x[k] - want[k]).abs() < 1e-10 * want.amax(), "{k}");
         }
