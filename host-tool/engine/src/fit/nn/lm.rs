@@ -65,7 +65,7 @@ pub(super) fn tanh_fast(x: f64) -> f64 {
 /// are n itself.
 pub(super) fn exp_fast(x: f64) -> f64 {
     const ROUND: f64 = 6_755_399_441_055_744.0; // 1.5 · 2⁵²
-    const LN2_HI: f64 = 6.931_471_803_691_238_2e-1;
+    const LN2_HI: f64 = 6.931_471_803_691_238e-1;
     const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
     let x = x.clamp(-700.0, 700.0);
     let k = x * std::f64::consts::LOG2_E + ROUND;
@@ -444,7 +444,7 @@ pub(super) fn cholesky_in_place(a: &mut [f64], n: usize) -> bool {
         let (left, right) = a.split_at_mut((j + 1) * n);
         let col = &mut left[j * n..];
         let d = col[j];
-        if !(d > 0.0) {
+        if d.is_nan() || d <= 0.0 {
             return false;
         }
         let l = d.sqrt();
