@@ -8,7 +8,7 @@
 // index loops read closer to the formulas than zipped iterators.
 #![allow(clippy::needless_range_loop)]
 
-use nalgebra::{Cholesky, DMatrix, DMatrixView, DVector};
+use nalgebra::{DMatrix, DMatrixView, DVector};
 use rand_chacha::rand_core::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -49,17 +49,60 @@ impl Net {
 
 /// tanh through one `exp` for training: 1 − 2/(e^{2x} + 1), within a few
 /// 1e-16 of `f64::tanh` in absolute terms (which is all a weight update
-/// needs) and half its cost — glibc's tanh goes through expm1 and was a
-/// quarter of all training instructions. ±∞ and NaN come out as tanh's.
+/// needs). The `exp` is [`exp_fast`], branch-free so that a loop of these
+/// vectorises (glibc's tanh and exp are calls, one value at a time; they
+/// were a fifth of all training time). ±∞ and NaN come out as tanh's.
 /// `predict` (what is exported and compared) keeps `f64::tanh`.
 pub(super) fn tanh_fast(x: f64) -> f64 {
-    1.0 - 2.0 / ((2.0 * x).exp() + 1.0)
+    1.0 - 2.0 / (exp_fast(2.0 * x) + 1.0)
 }
 
-/// Scaled data of one set: inputs n × nin (row-major) and, per output, the
-/// residual entries (sample, scaled target, √weight) in sample order. Kept
-/// output by output so that the Jacobian's output-layer columns of one
-/// output form one contiguous block (see [`Lm::normal_equations`]).
+/// e^x for |x| ≤ 700 (clamped beyond: tanh_fast only needs e^{2x} to be
+/// huge or tiny there), within ~2 ulp: x = n·ln 2 + r with |r| ≤ ln 2 / 2,
+/// e^r by its Taylor series to r¹³ (remainder < 1e-17 relative), 2ⁿ put
+/// into the exponent bits. No branches, no calls, no integer conversions
+/// SSE2 lacks: n is rounded by the 1.5·2⁵² trick, whose low mantissa bits
+/// are n itself.
+pub(super) fn exp_fast(x: f64) -> f64 {
+    const ROUND: f64 = 6_755_399_441_055_744.0; // 1.5 · 2⁵²
+    const LN2_HI: f64 = 6.931_471_803_691_238e-1;
+    const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
+    let x = x.clamp(-700.0, 700.0);
+    let k = x * std::f64::consts::LOG2_E + ROUND;
+    let n = k - ROUND;
+    let r = (x - n * LN2_HI) - n * LN2_LO;
+    // 1/j! for j = 13 … 2, Horner from the top.
+    const C: [f64; 12] = [
+        1.0 / 6_227_020_800.0,
+        1.0 / 479_001_600.0,
+        1.0 / 39_916_800.0,
+        1.0 / 3_628_800.0,
+        1.0 / 362_880.0,
+        1.0 / 40_320.0,
+        1.0 / 5_040.0,
+        1.0 / 720.0,
+        1.0 / 120.0,
+        1.0 / 24.0,
+        1.0 / 6.0,
+        0.5,
+    ];
+    let mut p = C[0];
+    for c in &C[1..] {
+        p = p * r + c;
+    }
+    let p = (p * r + 1.0) * r + 1.0;
+    // The low bits of k's mantissa hold n (two's complement); n + 1023 is
+    // in [13, 2033], so shifting it into the exponent field gives 2ⁿ.
+    let two_n = f64::from_bits((k.to_bits() << 52).wrapping_add(1023 << 52));
+    p * two_n
+}
+
+/// Scaled data of one set: inputs nin × n (input-major: one input of all
+/// samples contiguous, so the training loops run along the samples and
+/// vectorise) and, per output, the residual entries (sample, scaled target,
+/// √weight) in sample order. Kept output by output so that the Jacobian's
+/// output-layer columns of one output form one contiguous block (see
+/// [`Lm::normal_equations`]).
 pub(super) struct Samples {
     pub(super) n: usize,
     pub(super) x: Vec<f64>,
@@ -71,35 +114,47 @@ impl Samples {
         self.by_out.iter().map(Vec::len).sum()
     }
 
-    /// Hidden activations (n × nh) and outputs (n × nout) of every sample.
-    /// The training loop's hot path (one call per μ trial): slices instead
-    /// of indexed parameters, and [`tanh_fast`].
+    /// Hidden activations (nh × n, neuron-major) and outputs (nout × n,
+    /// output-major) of every sample. The training loop's hot path (one
+    /// call per μ trial): each weight is applied along all samples at once
+    /// (the same sums in the same order as one sample at a time, so the
+    /// same bits), and [`tanh_fast`] over whole rows.
     pub(super) fn forward(&self, net: &Net, act: &mut [f64], out: &mut [f64]) {
-        let (nin, nh, nout) = (net.nin, net.nh, net.nout);
+        let (nin, nh, nout, n) = (net.nin, net.nh, net.nout, self.n);
+        if n == 0 {
+            return;
+        }
         let (w1, rest) = net.p.split_at(nh * nin);
         let (b1, rest) = rest.split_at(nh);
         let (w2, b2) = rest.split_at(nout * nh);
-        for ((x, a), y) in self
-            .x
-            .chunks_exact(nin)
-            .zip(act.chunks_exact_mut(nh))
-            .zip(out.chunks_exact_mut(nout))
-        {
-            for ((aj, wj), bj) in a.iter_mut().zip(w1.chunks_exact(nin)).zip(b1) {
-                *aj = tanh_fast(wj.iter().zip(x).fold(*bj, |s, (w, xi)| s + w * xi));
+        for ((a, wj), &bj) in act.chunks_exact_mut(n).zip(w1.chunks_exact(nin)).zip(b1) {
+            a.fill(bj);
+            for (xi, &w) in self.x.chunks_exact(n).zip(wj) {
+                for (av, xv) in a.iter_mut().zip(xi) {
+                    *av += w * xv;
+                }
             }
-            for ((yo, w2o), bo) in y.iter_mut().zip(w2.chunks_exact(nh)).zip(b2) {
-                *yo = w2o.iter().zip(a.iter()).fold(*bo, |s, (w, aj)| s + w * aj);
+            for av in a.iter_mut() {
+                *av = tanh_fast(*av);
+            }
+        }
+        for ((y, w2o), &bo) in out.chunks_exact_mut(n).zip(w2.chunks_exact(nh)).zip(b2) {
+            y.fill(bo);
+            for (a, &w) in act.chunks_exact(n).zip(w2o) {
+                for (yv, av) in y.iter_mut().zip(a) {
+                    *yv += w * av;
+                }
             }
         }
     }
 
     /// Sum of squared weighted residuals from the outputs of `forward`.
-    pub(super) fn sse_of(&self, out: &[f64], nout: usize) -> f64 {
+    pub(super) fn sse_of(&self, out: &[f64]) -> f64 {
         let mut sse = 0.0;
         for (o, es) in self.by_out.iter().enumerate() {
+            let y = &out[o * self.n..(o + 1) * self.n];
             for &(s, t, sw) in es {
-                let e = sw * (out[s * nout + o] - t);
+                let e = sw * (y[s] - t);
                 sse += e * e;
             }
         }
@@ -112,26 +167,26 @@ impl Samples {
     #[cfg(test)]
     pub(super) fn jacobian(&self, net: &Net) -> (DMatrix<f64>, DVector<f64>) {
         let np = net.p.len();
+        let (n, nin) = (self.n, net.nin);
         let m = self.n_entries();
         let mut j = DMatrix::zeros(m, np);
         let mut e = DVector::zeros(m);
-        let mut act = vec![0.0; self.n * net.nh];
-        let mut out = vec![0.0; self.n * net.nout];
+        let mut act = vec![0.0; n * net.nh];
+        let mut out = vec![0.0; n * net.nout];
         self.forward(net, &mut act, &mut out);
-        let (w2o, b2o, b1o) = (net.w2_off(), net.b2_off(), net.nh * net.nin);
+        let (w2o, b2o, b1o) = (net.w2_off(), net.b2_off(), net.nh * nin);
         let mut row = 0;
         for (o, es) in self.by_out.iter().enumerate() {
             for &(s, t, sw) in es {
-                let x = &self.x[s * net.nin..(s + 1) * net.nin];
-                let a = &act[s * net.nh..(s + 1) * net.nh];
-                e[row] = sw * (out[s * net.nout + o] - t);
+                e[row] = sw * (out[o * n + s] - t);
                 for h in 0..net.nh {
-                    let d = sw * net.w2(o, h) * (1.0 - a[h] * a[h]);
-                    for (i, xi) in x.iter().enumerate() {
-                        j[(row, h * net.nin + i)] = d * xi;
+                    let a = act[h * n + s];
+                    let d = sw * net.w2(o, h) * (1.0 - a * a);
+                    for i in 0..nin {
+                        j[(row, h * nin + i)] = d * self.x[i * n + s];
                     }
                     j[(row, b1o + h)] = d;
-                    j[(row, w2o + o * net.nh + h)] = sw * a[h];
+                    j[(row, w2o + o * net.nh + h)] = sw * a;
                 }
                 j[(row, b2o + o)] = sw;
                 row += 1;
@@ -159,41 +214,46 @@ impl Samples {
 /// All three are blocks of one Gram matrix of the per-sample vectors
 /// m_s = √w_s (z_s, ã_s), one per measurement pattern (usually a single
 /// one: every target measured on every row), formed by GEMMs of its upper
-/// block triangle, mirrored. For 3-16-3 on 1581 samples that is at most
-/// 81² × 1581 = 10 M multiply-adds (2/3 of it with the 3 × 3 blocks) where the
+/// block triangle, mirrored. The residuals e_s,o = √w_s (y − t) ride along
+/// as nout more entries of m_s, so the same GEMM gives Jᵀe:
+/// g[k] = Σₒ w2[o,h(k)] · Σ_s √w_s z_s[k] e_s,o and g[output o, r] =
+/// Σ_s √w_s ã_s[r] e_s,o. For 3-16-3 on 1581 samples that is at most
+/// 84² × 1581 = 11 M multiply-adds (2/3 of it with the 3 × 3 blocks) where the
 /// product over the 4 743 rows of J takes 63 M (26 M when only its
-/// hidden/own-output blocks are multiplied), with Jᵀe from the same vectors.
-/// The weight of a sample is the same for all its outputs (u_um is per
-/// row), which is what lets the outputs share one Gram matrix.
+/// hidden/own-output blocks are multiplied). The weight of a sample is the
+/// same for all its outputs (u_um is per row), which is what lets the
+/// outputs share one Gram matrix.
 pub(super) struct Lm {
     /// Hidden neuron of each hidden parameter (weights h·nin + i, then
     /// biases): nz = nh·(nin + 1) entries, the z part of m_s.
     pub(super) hid: Vec<usize>,
     /// Samples grouped by measurement pattern: (bitmask of outputs, first
-    /// column, end column) of `mt`.
+    /// row, end row) of `m`.
     pub(super) groups: Vec<(u32, usize, usize)>,
-    /// Sample index of each column of `mt`.
+    /// Sample index of each row of `m`.
     pub(super) order: Vec<usize>,
-    /// √w of each sample, targets per (sample, output) (NaN: not measured).
-    pub(super) sw: Vec<f64>,
-    pub(super) target: Vec<f64>,
-    /// m_s per column (nm × samples, column-major: each sample contiguous);
-    /// nm = nz + nh + 1 rows, z then ã.
-    pub(super) mt: DMatrix<f64>,
-    /// One Gram matrix (nm × nm) per group.
+    /// Per row of `m`: √w, inputs (nin × rows), targets (nout × rows, NaN:
+    /// not measured) of its sample.
+    sw: Vec<f64>,
+    x: Vec<f64>,
+    target: Vec<f64>,
+    /// m_s of each sample as rows: rows × (nm + nout), column-major, so
+    /// each entry of all samples is contiguous; nm = nz + nh + 1 columns z
+    /// then ã, then the nout residuals.
+    pub(super) m: DMatrix<f64>,
+    /// One Gram matrix mᵀm per group.
     pub(super) gram: Vec<DMatrix<f64>>,
     pub(super) jtj: DMatrix<f64>,
     pub(super) g: DVector<f64>,
-    /// Activations and outputs of the current network on the training set.
+    /// Activations (nh × n) and outputs (nout × n) of the current network
+    /// on the training set, as [`Samples::forward`] leaves them.
     pub(super) act: Vec<f64>,
     pub(super) out: Vec<f64>,
-    /// Per-sample scratch: residuals by output (NaN: not measured) and
-    /// Σₒ w2[o,h]·e_o by hidden neuron.
-    e: Vec<f64>,
-    q: Vec<f64>,
-    /// JᵀJ + μI, factored in place (reused by every μ trial).
-    pub(super) a: DMatrix<f64>,
-    pub(super) delta: DVector<f64>,
+    /// One activation row in the order of `m`'s rows.
+    ap: Vec<f64>,
+    /// JᵀJ + μI (np × np, column-major), factored in place by every μ trial.
+    pub(super) a: Vec<f64>,
+    pub(super) delta: Vec<f64>,
 }
 
 impl Lm {
@@ -202,13 +262,13 @@ impl Lm {
         let nm = nz + nh + 1;
         let n = train.n;
         let mut mask = vec![0u32; n];
-        let mut sw = vec![0.0; n];
-        let mut target = vec![f64::NAN; n * nout];
+        let mut sw_s = vec![0.0; n];
+        let mut target_s = vec![f64::NAN; n * nout];
         for (o, es) in train.by_out.iter().enumerate() {
             for &(s, t, w) in es {
                 mask[s] |= 1 << o;
-                sw[s] = w;
-                target[s * nout + o] = t;
+                sw_s[s] = w;
+                target_s[o * n + s] = t;
             }
         }
         let mut order: Vec<usize> = (0..n).filter(|&s| mask[s] != 0).collect();
@@ -220,135 +280,123 @@ impl Lm {
                 _ => groups.push((mask[s], c, c + 1)),
             }
         }
+        let nc = order.len();
+        let gather = |v: &[f64], rows: usize| -> Vec<f64> {
+            (0..rows)
+                .flat_map(|k| order.iter().map(move |&s| v[k * n + s]))
+                .collect()
+        };
         let np = Net::n_params(nin, nh, nout);
         Lm {
             hid: (0..nz)
                 .map(|k| if k < nh * nin { k / nin } else { k - nh * nin })
                 .collect(),
-            gram: vec![DMatrix::zeros(nm, nm); groups.len()],
-            mt: DMatrix::zeros(nm, order.len()),
+            gram: vec![DMatrix::zeros(nm + nout, nm + nout); groups.len()],
+            m: DMatrix::zeros(nc, nm + nout),
+            sw: gather(&sw_s, 1),
+            x: gather(&train.x, nin),
+            target: gather(&target_s, nout),
             groups,
             order,
-            sw,
-            target,
             jtj: DMatrix::zeros(np, np),
             g: DVector::zeros(np),
             act: vec![0.0; n * nh],
             out: vec![0.0; n * nout],
-            e: vec![0.0; nout],
-            q: vec![0.0; nh],
-            a: DMatrix::zeros(np, np),
-            delta: DVector::zeros(np),
+            ap: vec![0.0; nc],
+            a: vec![0.0; np * np],
+            delta: vec![0.0; np],
         }
     }
 
     /// JᵀJ and g = Jᵀe at `net`, whose activations on `train` are in
     /// `self.act` / `self.out`.
     pub(super) fn normal_equations(&mut self, train: &Samples, net: &Net) {
-        let (nin, nh, nout) = (net.nin, net.nh, net.nout);
-        let (nz, nm) = (self.hid.len(), self.mt.nrows());
+        let (nin, nh, nout, n) = (net.nin, net.nh, net.nout, train.n);
+        let nz = self.hid.len();
+        let nm = nz + nh + 1;
+        let nc = self.order.len();
         let (w2o, b2o) = (net.w2_off(), net.b2_off());
         let w2 = &net.p[w2o..b2o];
         let hid = &self.hid;
         let pidx = |o: usize, r: usize| if r < nh { w2o + o * nh + r } else { b2o + o };
-        self.g.fill(0.0);
         {
-            // Slices split once per sample instead of indexed (bounds-checked)
-            // accesses: this loop touches every sample and every parameter.
-            // The sums run in the same order as the indexed form did.
-            let mt = self.mt.as_mut_slice();
-            let (g_hid, g_out) = self.g.as_mut_slice().split_at_mut(nz);
-            let (g_w1, g_b1) = g_hid.split_at_mut(nh * nin);
-            let (g_w2, g_b2) = g_out.split_at_mut(nout * nh);
-            let q = &mut self.q;
-            let e = &mut self.e;
-            for (c, &s) in self.order.iter().enumerate() {
-                let x = &train.x[s * nin..(s + 1) * nin];
-                let a = &self.act[s * nh..(s + 1) * nh];
-                let sw = self.sw[s];
-                let col = &mut mt[c * nm..(c + 1) * nm];
-                let (z, at) = col.split_at_mut(nz);
-                let (zw, zb) = z.split_at_mut(nh * nin);
-                // Jᵀe: e_{s,o} = √w (y − t) on the measured outputs.
-                let targets = &self.target[s * nout..(s + 1) * nout];
-                let outs = &self.out[s * nout..(s + 1) * nout];
-                for o in 0..nout {
-                    e[o] = if targets[o].is_nan() {
-                        f64::NAN
+            // The rows of m, one entry of all samples at a time (loops along
+            // the samples, which vectorise).
+            let (mz, rest) = self.m.as_mut_slice().split_at_mut(nz * nc);
+            let (ma, me) = rest.split_at_mut((nh + 1) * nc);
+            let (mzw, mzb) = mz.split_at_mut(nh * nin * nc);
+            let sw = &self.sw;
+            for h in 0..nh {
+                let act = &self.act[h * n..(h + 1) * n];
+                for (ac, &s) in self.ap.iter_mut().zip(&self.order) {
+                    *ac = act[s];
+                }
+                let zb = &mut mzb[h * nc..(h + 1) * nc];
+                let at = &mut ma[h * nc..(h + 1) * nc];
+                for c in 0..nc {
+                    let a = self.ap[c];
+                    zb[c] = sw[c] * (1.0 - a * a);
+                    at[c] = sw[c] * a;
+                }
+                for i in 0..nin {
+                    let z = &mut mzw[(h * nin + i) * nc..(h * nin + i + 1) * nc];
+                    let x = &self.x[i * nc..(i + 1) * nc];
+                    for c in 0..nc {
+                        z[c] = zb[c] * x[c];
+                    }
+                }
+            }
+            ma[nh * nc..].copy_from_slice(sw);
+            for o in 0..nout {
+                let e = &mut me[o * nc..(o + 1) * nc];
+                let t = &self.target[o * nc..(o + 1) * nc];
+                let y = &self.out[o * n..(o + 1) * n];
+                for c in 0..nc {
+                    // Not measured: 0 (and its group leaves output o out).
+                    e[c] = if t[c].is_nan() {
+                        0.0
                     } else {
-                        sw * (outs[o] - targets[o])
+                        sw[c] * (y[self.order[c]] - t[c])
                     };
-                }
-                q.fill(0.0);
-                for o in 0..nout {
-                    let eo = e[o];
-                    if eo.is_nan() {
-                        continue;
-                    }
-                    for (qh, w) in q.iter_mut().zip(&w2[o * nh..(o + 1) * nh]) {
-                        *qh += w * eo;
-                    }
-                }
-                for (h, ((zwh, zbh), ah)) in zw
-                    .chunks_exact_mut(nin)
-                    .zip(zb.iter_mut())
-                    .zip(a)
-                    .enumerate()
-                {
-                    let d = sw * (1.0 - ah * ah);
-                    for (zi, xi) in zwh.iter_mut().zip(x) {
-                        *zi = d * xi;
-                    }
-                    *zbh = d;
-                    at[h] = sw * ah;
-                }
-                at[nh] = sw;
-                for o in 0..nout {
-                    let eo = e[o];
-                    if eo.is_nan() {
-                        continue;
-                    }
-                    for (gk, ak) in g_w2[o * nh..(o + 1) * nh].iter_mut().zip(&at[..nh]) {
-                        *gk += ak * eo;
-                    }
-                    g_b2[o] += at[nh] * eo;
-                }
-                for ((gk, zk), qh) in g_w1
-                    .chunks_exact_mut(nin)
-                    .zip(zw.chunks_exact(nin))
-                    .zip(q.iter())
-                {
-                    for (gi, zi) in gk.iter_mut().zip(zk) {
-                        *gi += zi * qh;
-                    }
-                }
-                for ((gk, zk), qh) in g_b1.iter_mut().zip(zb.iter()).zip(q.iter()) {
-                    *gk += zk * qh;
                 }
             }
         }
+        let nm2 = nm + nout;
         for (gi, &(_, c0, c1)) in self.groups.iter().enumerate() {
-            // mtᵀ read as its transpose (a strided view, no copy).
-            let cols = &self.mt.as_slice()[c0 * nm..c1 * nm];
+            // mᵀ read as a strided view of m, no copy.
             let len = c1 - c0;
-            let tview = DMatrixView::from_slice_with_strides(cols, len, nm, nm, 1);
+            let mt =
+                DMatrixView::from_slice_with_strides(&self.m.as_slice()[c0..], nm2, len, nc, 1);
+            let rows = self.m.rows(c0, len);
             // Symmetric: only the blocks on and above the diagonal of a
             // 3 × 3 block partition are multiplied (6 of the 9 blocks: 2/3 of
             // the products), the rest mirrored.
             let gram = &mut self.gram[gi];
-            let cuts = [0, nm / 3, 2 * nm / 3, nm];
-            for b in 0..3 {
-                let (r0, r1) = (cuts[b], cuts[b + 1]);
-                gram.view_mut((r0, r0), (r1 - r0, nm - r0)).gemm(
-                    1.0,
-                    &self.mt.view((r0, c0), (r1 - r0, len)),
-                    &tview.columns(r0, nm - r0),
-                    0.0,
-                );
+            let cuts = [0, nm2 / 3, 2 * nm2 / 3, nm2];
+            if nm2 / 3 > 5 && len > 5 {
+                for b in 0..3 {
+                    let (r0, r1) = (cuts[b], cuts[b + 1]);
+                    gram.view_mut((r0, r0), (r1 - r0, nm2 - r0)).gemm(
+                        1.0,
+                        &mt.rows(r0, r1 - r0),
+                        &rows.columns(r0, nm2 - r0),
+                        0.0,
+                    );
+                }
+            } else {
+                // nalgebra's gemm multiplies a product with a side of 5 or
+                // less itself, and reads a strided mᵀ past its rows there:
+                // a tiny network's few entries are summed here instead.
+                for k2 in 0..nm2 {
+                    for k in 0..=k2 {
+                        gram[(k, k2)] = rows.column(k).dot(&rows.column(k2));
+                    }
+                }
             }
             gram.fill_lower_triangle_with_upper_triangle();
         }
         self.jtj.fill(0.0);
+        self.g.fill(0.0);
         let mut wp = vec![0.0; nh * nh];
         for (gi, &(mask, _, _)) in self.groups.iter().enumerate() {
             let gram = &self.gram[gi];
@@ -360,8 +408,13 @@ impl Lm {
                         wp[h * nh + h2] += w2o[h] * w2o[h2];
                     }
                 }
+                let ce = nm + o;
+                for k in 0..nz {
+                    self.g[k] += w2o[hid[k]] * gram[(k, ce)];
+                }
                 for r in 0..=nh {
                     let pr = pidx(o, r);
+                    self.g[pr] += gram[(nz + r, ce)];
                     for k in 0..nz {
                         let v = w2o[hid[k]] * gram[(k, nz + r)];
                         self.jtj[(k, pr)] += v;
@@ -378,6 +431,56 @@ impl Lm {
                 }
             }
         }
+    }
+}
+
+/// Cholesky factor L (LLᵀ = A) of the symmetric n × n matrix `a`
+/// (column-major; the lower triangle is read and overwritten by L, the
+/// upper one is left as it was). False when A is not positive definite
+/// (a pivot ≤ 0 or NaN). Right-looking: each column's update of the
+/// columns after it runs down contiguous memory.
+pub(super) fn cholesky_in_place(a: &mut [f64], n: usize) -> bool {
+    for j in 0..n {
+        let (left, right) = a.split_at_mut((j + 1) * n);
+        let col = &mut left[j * n..];
+        let d = col[j];
+        if d.is_nan() || d <= 0.0 {
+            return false;
+        }
+        let l = d.sqrt();
+        col[j] = l;
+        for v in &mut col[j + 1..] {
+            *v /= l;
+        }
+        for (k, ck) in right.chunks_exact_mut(n).enumerate() {
+            let k = j + 1 + k;
+            let f = col[k];
+            for (t, &v) in ck[k..].iter_mut().zip(&col[k..]) {
+                *t -= f * v;
+            }
+        }
+    }
+    true
+}
+
+/// Solves LLᵀx = b in place (`b` becomes x) with the factor of
+/// [`cholesky_in_place`].
+pub(super) fn cholesky_solve(l: &[f64], n: usize, b: &mut [f64]) {
+    for j in 0..n {
+        let col = &l[j * n..(j + 1) * n];
+        b[j] /= col[j];
+        let bj = b[j];
+        for (bi, &v) in b[j + 1..].iter_mut().zip(&col[j + 1..]) {
+            *bi -= v * bj;
+        }
+    }
+    for j in (0..n).rev() {
+        let col = &l[j * n..(j + 1) * n];
+        let s = col[j + 1..]
+            .iter()
+            .zip(&b[j + 1..])
+            .fold(b[j], |s, (v, x)| s - v * x);
+        b[j] = s / col[j];
     }
 }
 
@@ -416,10 +519,10 @@ pub(super) fn run_lm(
     let has_val = n_val > 0;
     let mut val_sse = |net: &Net| {
         val.forward(net, &mut v_act, &mut v_out);
-        val.sse_of(&v_out, nout)
+        val.sse_of(&v_out)
     };
     train.forward(&net, &mut lm.act, &mut lm.out);
-    let mut sse = train.sse_of(&lm.out, nout);
+    let mut sse = train.sse_of(&lm.out);
     let mut mu = opts.mu;
     let mut best_val = if has_val {
         val_sse(&net)
@@ -443,24 +546,21 @@ pub(super) fn run_lm(
         let sse_before = sse;
         while mu <= opts.mu_max {
             // The factor overwrites `lm.a` in place: no allocation per trial.
-            let mut a = std::mem::replace(&mut lm.a, DMatrix::zeros(0, 0));
-            a.copy_from(&lm.jtj);
+            lm.a.copy_from_slice(lm.jtj.as_slice());
             for k in 0..np {
-                a[(k, k)] += mu;
+                lm.a[k * np + k] += mu;
             }
-            let factored = Cholesky::new(a);
-            let ok = factored.is_some();
-            if let Some(ch) = &factored {
-                lm.delta.copy_from(&lm.g);
-                ch.solve_mut(&mut lm.delta);
+            let ok = cholesky_in_place(&mut lm.a, np);
+            if ok {
+                lm.delta.copy_from_slice(lm.g.as_slice());
+                cholesky_solve(&lm.a, np, &mut lm.delta);
                 for k in 0..np {
                     trial.p[k] = net.p[k] - lm.delta[k];
                 }
             }
-            lm.a = factored.map_or_else(|| DMatrix::zeros(np, np), Cholesky::unpack_dirty);
             if ok {
                 train.forward(&trial, &mut t_act, &mut t_out);
-                let s_new = train.sse_of(&t_out, nout);
+                let s_new = train.sse_of(&t_out);
                 if s_new.is_finite() && s_new < sse {
                     // Accept: the trial's activations are the next epoch's.
                     std::mem::swap(&mut net, &mut trial);

@@ -55,8 +55,13 @@ use crate::holdout;
 use crate::model::nn::{predict, scale, Net};
 use crate::model::{FitStats, FittedModel, NnModel, NnTraining};
 
-/// Default number of restarts (see [`NnOptions::restarts`]).
-pub const RESTARTS: usize = 5;
+/// Default number of restarts (see [`NnOptions::restarts`]). Three, not
+/// five: which restart wins is decided by differences of ~0.1 % in
+/// validation error, below what the held-out error resolves; on the
+/// benchmark's seeds 1–6 (BENCHMARKS.md, "LM vs scikit-learn") the best of
+/// three has the same held-out RMS as the best of five or a lower one,
+/// for 60 % of the epochs.
+pub const RESTARTS: usize = 3;
 
 /// Training options (defaults are trainlm's, plus the restarts).
 #[derive(Clone, Debug, PartialEq)]
@@ -223,11 +228,12 @@ fn prepare(data: &Dataset) -> Result<Prepared> {
 
 fn samples(data: &Dataset, prep: &Prepared, rows: &[usize]) -> Result<Samples> {
     let w = holdout::weights(data, rows)?;
-    let mut x = Vec::with_capacity(rows.len() * prep.inputs.len());
+    let n = rows.len();
+    let mut x = vec![0.0; n * prep.inputs.len()];
     let mut by_out = vec![Vec::new(); prep.outputs.len()];
     for (s, &r) in rows.iter().enumerate() {
         for (k, &a) in prep.inputs.iter().enumerate() {
-            x.push(scale(data.pos(a, r), prep.in_min[k], prep.in_max[k]));
+            x[k * n + s] = scale(data.pos(a, r), prep.in_min[k], prep.in_max[k]);
         }
         for (o, &t) in prep.outputs.iter().enumerate() {
             if let Some(v) = data.err_um[t].as_ref().and_then(|c| c[r]) {
@@ -239,11 +245,7 @@ fn samples(data: &Dataset, prep: &Prepared, rows: &[usize]) -> Result<Samples> {
             }
         }
     }
-    Ok(Samples {
-        n: rows.len(),
-        x,
-        by_out,
-    })
+    Ok(Samples { n, x, by_out })
 }
 
 fn to_model(net: &Net, prep: &Prepared, training: NnTraining) -> NnModel {
@@ -481,7 +483,7 @@ pub fn fit(
 
 #[cfg(test)]
 mod tests {
-    use super::lm::tanh_fast;
+    use super::lm::{cholesky_in_place, cholesky_solve, exp_fast, tanh_fast};
     use super::*;
 
     fn sine_line(n: usize) -> Dataset {
@@ -632,12 +634,14 @@ mod tests {
 
     #[test]
     fn losing_restarts_are_abandoned_without_changing_the_kept_network() {
-        // The benchmark's set-up (bench/nn_vs_sklearn): 3-16-3 on the lathe.
+        // The benchmark's set-up (bench/nn_vs_sklearn): 3-16-3 on the lathe,
+        // five restarts (more losers to abandon than the default three).
         let d = crate::fit::bench_data::lathe_plane(1);
         let sp = split(&d, 5);
         let run = |abandon: bool| {
             let opts = NnOptions {
                 abandon,
+                restarts: 5,
                 ..Default::default()
             };
             let mut epochs = vec![0; opts.restarts];
@@ -766,6 +770,56 @@ mod tests {
         assert_eq!(tanh_fast(-800.0), -1.0);
         assert_eq!(tanh_fast(f64::INFINITY), 1.0);
         assert!(tanh_fast(f64::NAN).is_nan());
+    }
+
+    #[test]
+    fn exp_fast_is_exp() {
+        // Within 4 ulp of libm's exp over the whole clamped range, exact at
+        // 0, and clamped beyond ±700 (tanh_fast's ±1 and NaN come from it).
+        let mut worst: f64 = 0.0;
+        for k in -700_000..=700_000 {
+            let x = k as f64 * 1e-3 + 1e-4 * (k % 7) as f64;
+            worst = worst.max(((exp_fast(x) - x.exp()) / x.exp()).abs());
+        }
+        assert!(worst < 4.0 * f64::EPSILON, "{worst}");
+        assert_eq!(exp_fast(0.0), 1.0);
+        assert_eq!(exp_fast(1e-300), 1.0);
+        assert_eq!(exp_fast(900.0), exp_fast(700.0));
+        assert_eq!(exp_fast(-900.0), exp_fast(-700.0));
+        assert!(exp_fast(-700.0) > 0.0 && exp_fast(700.0).is_finite());
+        assert!(exp_fast(f64::NAN).is_nan());
+    }
+
+    #[test]
+    fn cholesky_solves_and_refuses_what_is_not_positive_definite() {
+        // A = BᵀB + I from seeded entries (115 = the benchmark's 3-16-3
+        // parameter count): L·Lᵀ = A and the solve against nalgebra's.
+        let n = 115;
+        let mut rng = trueaxis_test_support::SplitMix64::new(7);
+        let b = nalgebra::DMatrix::from_fn(n + 20, n, |_, _| rng.signed_unit());
+        let a = b.transpose() * &b + nalgebra::DMatrix::identity(n, n);
+        let rhs: Vec<f64> = (0..n).map(|k| (k as f64 * 0.37).sin()).collect();
+        let mut f = a.as_slice().to_vec();
+        assert!(cholesky_in_place(&mut f, n));
+        let l = nalgebra::DMatrix::from_fn(n, n, |i, j| if i >= j { f[j * n + i] } else { 0.0 });
+        assert!((&l * l.transpose() - &a).amax() < 1e-12 * a.amax());
+        let mut x = rhs.clone();
+        cholesky_solve(&f, n, &mut x);
+        let want = a
+            .clone()
+            .cholesky()
+            .unwrap()
+            .solve(&nalgebra::DVector::from_vec(rhs));
+        for k in 0..n {
+            assert!((x[k] - want[k]).abs() < 1e-10 * want.amax(), "{k}");
+        }
+        // Indefinite (a negative eigenvalue) and NaN: refused, no panic.
+        let mut bad = a.clone();
+        bad[(n - 1, n - 1)] = -1.0;
+        assert!(!cholesky_in_place(&mut bad.as_mut_slice().to_vec(), n));
+        let mut nan = a.as_slice().to_vec();
+        nan[0] = f64::NAN;
+        assert!(!cholesky_in_place(&mut nan, n));
     }
 
     #[test]
