@@ -151,10 +151,26 @@ pub fn design_matrix(
 /// in the model's own coordinates. Fewer than the column count means the
 /// model cannot be determined whatever the solver does (docs/cli.md § Measurement CSV).
 pub fn distinct_rows(a: &DMatrix<f64>) -> usize {
-    let mut seen: HashSet<Vec<u64>> = HashSet::with_capacity(a.nrows());
+    distinct_rows_up_to(a, usize::MAX)
+}
+
+/// [`distinct_rows`], counting no further than `cap`: whether a model of
+/// `cap` terms has enough points is known once `cap` distinct rows are
+/// seen (a few dozen rows of a million-row capture), and a count below
+/// `cap` is exact.
+pub fn distinct_rows_up_to(a: &DMatrix<f64>, cap: usize) -> usize {
+    let mut seen: HashSet<Vec<u64>> = HashSet::new();
+    let mut row = Vec::with_capacity(a.ncols());
     for i in 0..a.nrows() {
+        if seen.len() >= cap {
+            break;
+        }
         // +0.0 so that −0.0 and 0.0 count as the same point.
-        seen.insert(a.row(i).iter().map(|v| (v + 0.0).to_bits()).collect());
+        row.clear();
+        row.extend(a.row(i).iter().map(|v| (v + 0.0).to_bits()));
+        if !seen.contains(row.as_slice()) {
+            seen.insert(row.clone());
+        }
     }
     seen.len()
 }
@@ -346,6 +362,247 @@ fn solve_inner(
             }
         })
         .collect())
+}
+
+/// The condition number of a column-scaled Gram matrix (= the square of
+/// the design's) below which the normal equations are solved instead of a
+/// QR of the rows: up to it they lose at most ~ε·10⁸ ≈ 10⁻⁸ relative
+/// accuracy before refinement (far below any coefficient's standard
+/// deviation); above it, or with a zero column, the caller takes the QR
+/// path, whose SVD also makes the rank decision and names collinear
+/// columns. Shared by the fit, its block hold-out and the outlier screen.
+pub const GRAM_MAX_CONDITION: f64 = 1e8;
+
+/// Rows gathered per chunk of the Gram sums: a chunk of a 25-column design
+/// (512 × 25 × 8 B = 100 kB) stays in cache while its p(p+1)/2 column
+/// products are summed, and the chunk sums added to the total keep the
+/// summation error of n-row sums low.
+const GRAM_CHUNK: usize = 512;
+
+/// Weighted Gram sums of a least-squares problem over some of its rows:
+/// `g` = AᵀWA (p × p, symmetric) and `r` = AᵀWB (p × right-hand sides),
+/// for chosen columns of A and B. Sums over disjoint row sets add, so a
+/// fit's Gram is the sum of its hold-out blocks' and a block's training
+/// system is the total minus the block.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Gram {
+    /// AᵀWA.
+    pub g: DMatrix<f64>,
+    /// AᵀWB.
+    pub r: DMatrix<f64>,
+}
+
+impl Gram {
+    /// The sums over `rows` (indices into the rows of `a`, `b` and `w`) of
+    /// the columns `cols` of `a` and `bcols` of `b`, each row weighted by
+    /// `w` (None: 1).
+    pub fn over(
+        a: &DMatrix<f64>,
+        cols: &[usize],
+        b: &DMatrix<f64>,
+        bcols: &[usize],
+        w: Option<&DVector<f64>>,
+        rows: &[usize],
+    ) -> Gram {
+        let mut s = Gram {
+            g: DMatrix::zeros(cols.len(), cols.len()),
+            r: DMatrix::zeros(cols.len(), bcols.len()),
+        };
+        s.add_rows(a, cols, b, bcols, w, rows, 1.0);
+        s
+    }
+
+    /// The sums of disjoint row sets added up: the Gram of their union
+    /// (None for none).
+    pub fn total(parts: &[Gram]) -> Option<Gram> {
+        let mut t = parts.first()?.clone();
+        for part in &parts[1..] {
+            t.g += &part.g;
+            t.r += &part.r;
+        }
+        Some(t)
+    }
+
+    /// Adds `sign` × the sums over `rows` (see [`Gram::over`]): −1 takes
+    /// rows out (the outlier screen's flagged readings).
+    #[allow(clippy::too_many_arguments)]
+    pub fn add_rows(
+        &mut self,
+        a: &DMatrix<f64>,
+        cols: &[usize],
+        b: &DMatrix<f64>,
+        bcols: &[usize],
+        w: Option<&DVector<f64>>,
+        rows: &[usize],
+        sign: f64,
+    ) {
+        self.accumulate(a, cols, b, bcols, w, rows, sign, true);
+    }
+
+    /// AᵀWB alone over `rows` (the `r` of [`Gram::over`] without the p²
+    /// products of `g`): a refinement step's AᵀW·residual.
+    pub fn rhs_over(
+        a: &DMatrix<f64>,
+        cols: &[usize],
+        b: &DMatrix<f64>,
+        bcols: &[usize],
+        w: Option<&DVector<f64>>,
+        rows: &[usize],
+    ) -> DMatrix<f64> {
+        let mut s = Gram {
+            g: DMatrix::zeros(cols.len(), cols.len()),
+            r: DMatrix::zeros(cols.len(), bcols.len()),
+        };
+        s.accumulate(a, cols, b, bcols, w, rows, 1.0, false);
+        s.r
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn accumulate(
+        &mut self,
+        a: &DMatrix<f64>,
+        cols: &[usize],
+        b: &DMatrix<f64>,
+        bcols: &[usize],
+        w: Option<&DVector<f64>>,
+        rows: &[usize],
+        sign: f64,
+        with_g: bool,
+    ) {
+        let (p, q) = (cols.len(), bcols.len());
+        let width = p + q;
+        // Column-major chunk: the p design columns, then the q values, each
+        // row scaled by √w (as the QR path weights rows).
+        let mut buf = vec![0.0; GRAM_CHUNK * width];
+        for chunk in rows.chunks(GRAM_CHUNK) {
+            let m = chunk.len();
+            let sources = cols
+                .iter()
+                .map(|&c| a.column(c))
+                .chain(bcols.iter().map(|&c| b.column(c)));
+            for (j, src) in sources.enumerate() {
+                let dst = &mut buf[j * m..(j + 1) * m];
+                for (d, &i) in dst.iter_mut().zip(chunk) {
+                    *d = src[i];
+                }
+                if let Some(w) = w {
+                    for (d, &i) in dst.iter_mut().zip(chunk) {
+                        *d *= w[i].sqrt();
+                    }
+                }
+            }
+            let col = |j: usize| &buf[j * m..(j + 1) * m];
+            for j in 0..p {
+                if with_g {
+                    for k in j..p {
+                        self.g[(j, k)] += sign * dot(col(j), col(k));
+                    }
+                }
+                for k in 0..q {
+                    self.r[(j, k)] += sign * dot(col(j), col(p + k));
+                }
+            }
+        }
+        for j in 0..p {
+            for k in 0..j {
+                self.g[(j, k)] = self.g[(k, j)];
+            }
+        }
+    }
+}
+
+/// Σ xᵢyᵢ with four running sums (so the compiler can use SIMD lanes).
+fn dot(x: &[f64], y: &[f64]) -> f64 {
+    let mut acc = [0.0; 4];
+    let (xc, yc) = (x.chunks_exact(4), y.chunks_exact(4));
+    let tail: f64 = xc
+        .remainder()
+        .iter()
+        .zip(yc.remainder())
+        .map(|(a, b)| a * b)
+        .sum();
+    for (a, b) in xc.zip(yc) {
+        for l in 0..4 {
+            acc[l] += a[l] * b[l];
+        }
+    }
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+}
+
+/// The solution of the normal equations (AᵀWA) x = AᵀWB from a [`Gram`]:
+/// the column-scaled Gram's eigen-decomposition, kept so that a
+/// refinement step ([`GramSolution::apply`]) costs no second one.
+#[derive(Clone, Debug)]
+pub struct GramSolution {
+    /// Coefficients, p × right-hand sides.
+    pub coef: DMatrix<f64>,
+    /// [(AᵀWA)⁻¹]ⱼⱼ: times σ̂², the variance of coefficient j.
+    pub inv_diag: DVector<f64>,
+    /// σ_max/σ_min of the weighted, column-scaled design (the square root
+    /// of the scaled Gram's eigenvalue ratio): what the QR path reports.
+    pub condition_number: f64,
+    /// Column scales √Gⱼⱼ.
+    d: DVector<f64>,
+    eig: nalgebra::SymmetricEigen<f64, nalgebra::Dyn>,
+}
+
+impl GramSolution {
+    /// (AᵀWA)⁻¹ `rhs` (p × any) with the decomposition already made.
+    pub fn apply(&self, rhs: &DMatrix<f64>) -> DMatrix<f64> {
+        let v = &self.eig.eigenvectors;
+        let mut z = rhs.clone();
+        for (j, mut row) in z.row_iter_mut().enumerate() {
+            row /= self.d[j];
+        }
+        let mut z = v.tr_mul(&z);
+        for (k, mut row) in z.row_iter_mut().enumerate() {
+            row /= self.eig.eigenvalues[k];
+        }
+        let mut x = v * z;
+        for (j, mut row) in x.row_iter_mut().enumerate() {
+            row /= self.d[j];
+        }
+        x
+    }
+}
+
+/// Solves the normal equations of `gram`; None when they are not to be
+/// trusted — a zero column (relative to the largest, as the QR path
+/// decides), a non-finite sum, or a column-scaled condition number of
+/// [`GRAM_MAX_CONDITION`] or more — and the caller takes the QR path.
+pub fn solve_gram(gram: &Gram) -> Option<GramSolution> {
+    let g = &gram.g;
+    let p = g.nrows();
+    if p == 0 || g.iter().chain(gram.r.iter()).any(|v| !v.is_finite()) {
+        return None;
+    }
+    let d = DVector::from_fn(p, |j, _| g[(j, j)].max(0.0).sqrt());
+    let largest = d.max();
+    if d.iter().any(|&v| !(v > 1e-12 * largest)) {
+        return None;
+    }
+    let scaled = DMatrix::from_fn(p, p, |i, j| g[(i, j)] / (d[i] * d[j]));
+    let eig = nalgebra::SymmetricEigen::new(scaled);
+    let lmax = eig.eigenvalues.max();
+    let lmin = eig.eigenvalues.min();
+    if !(lmin > 0.0 && lmax / lmin < GRAM_MAX_CONDITION) {
+        return None;
+    }
+    let inv_diag = DVector::from_fn(p, |j, _| {
+        (0..p)
+            .map(|k| eig.eigenvectors[(j, k)].powi(2) / eig.eigenvalues[k])
+            .sum::<f64>()
+            / (d[j] * d[j])
+    });
+    let mut sol = GramSolution {
+        coef: DMatrix::zeros(p, gram.r.ncols()),
+        inv_diag,
+        condition_number: (lmax / lmin).sqrt(),
+        d,
+        eig,
+    };
+    sol.coef = sol.apply(&gram.r);
+    Some(sol)
 }
 
 /// √W·A·x without forming √W·A again.

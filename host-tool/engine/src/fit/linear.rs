@@ -9,13 +9,13 @@
 #![allow(clippy::needless_range_loop)]
 
 use anyhow::{bail, Result};
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 
 use crate::data::{Dataset, AXES, TARGETS};
 use crate::effect::Effect;
 use crate::features::{feature_uses_axis, seed_monomials, Feature, Norm};
 use crate::holdout;
-use crate::lsq::{self, LsqError, ILL_CONDITIONED};
+use crate::lsq::{self, Gram, LsqError, LsqSolution, ILL_CONDITIONED};
 use crate::model::{FitStats, FittedModel, LinearModel, LinearOutput};
 
 /// The features of `seed` (+ the effects for `target`) for target `target`
@@ -47,6 +47,8 @@ pub struct TargetFit {
     pub residual_um: Vec<f64>,
     /// Condition number of the weighted, column-scaled design.
     pub condition_number: f64,
+    /// Solved by the normal equations from Gram sums (false: by QR).
+    pub by_gram: bool,
 }
 
 /// Fits `features` to target `target` on the rows of `rows` where it is
@@ -78,7 +80,7 @@ fn fit_targets(
     label: &str,
 ) -> Result<Vec<TargetFit>> {
     let a = lsq::design_matrix(data, norm, features, rows)?;
-    let distinct = lsq::distinct_rows(&a);
+    let distinct = lsq::distinct_rows_up_to(&a, features.len());
     if distinct < features.len() {
         bail!(
             "{label}: {distinct} distinct points but the model has {} terms — measure more points or choose a smaller model",
@@ -148,9 +150,321 @@ fn fit_targets(
                 rows: rows.to_vec(),
                 residual_um: (0..rows.len()).map(|i| b[(i, c)] - pred[i]).collect(),
                 condition_number: sol.condition_number,
+                by_gram: false,
             }
         })
         .collect())
+}
+
+/// The design of a linear fit, built once: the columns of every target's
+/// features (their union — the seed's monomials once, each target's
+/// `--add` columns after) over the rows where any target is measured, the
+/// rows' weights and the targets' values. The fit, its block hold-out and
+/// the outlier screen's rounds all read it and none copies it: each target
+/// is a set of its columns and of its rows. Only the QR fallback (an
+/// ill-conditioned or rank-deficient design) builds its own matrix.
+#[derive(Debug)]
+pub struct Design {
+    /// The union of the targets' features, in the order first met.
+    pub features: Vec<Feature>,
+    /// Data rows where any target is measured, ascending.
+    pub rows: Vec<usize>,
+    /// |rows| × |features|, in the units [`Feature::column`] gives.
+    pub a: DMatrix<f64>,
+    /// Weights 1/u² per entry of `rows` (None without `u_um`).
+    pub w: Option<DVector<f64>>,
+    /// Measured values (µm), one column per entry of `targets`; 0 on a row
+    /// where that target is not measured (never read there).
+    pub b: DMatrix<f64>,
+    /// The targets with values, in target order.
+    pub targets: Vec<DesignTarget>,
+}
+
+/// One target of a [`Design`].
+#[derive(Debug)]
+pub struct DesignTarget {
+    /// Target index (0 = ex).
+    pub target: usize,
+    /// Its features (`seed` + its `--add` effects), in model order.
+    pub features: Vec<Feature>,
+    /// The columns of [`Design::a`] holding them, in the same order.
+    pub cols: Vec<usize>,
+    /// Indices into [`Design::rows`] where the target is measured, ascending.
+    pub local: Vec<usize>,
+}
+
+impl Design {
+    /// The design of `seed` + `adds` for every target of `data` with at
+    /// least one value, on `data`'s own moving axes (as [`fit`] chooses).
+    pub fn new(data: &Dataset, norm: &Norm, seed: &str, adds: &[Effect]) -> Result<Design> {
+        let axes = data.varying_axes();
+        let mut features: Vec<Feature> = Vec::new();
+        let mut targets = Vec::new();
+        let mut measured = vec![false; data.len()];
+        for t in data.targets() {
+            let mut any = false;
+            for (r, _) in data.measured(t) {
+                measured[r] = true;
+                any = true;
+            }
+            if !any {
+                continue;
+            }
+            let f = features_for(seed, adds, t, &axes)?;
+            let cols = f
+                .iter()
+                .map(|x| match features.iter().position(|y| y == x) {
+                    Some(j) => j,
+                    None => {
+                        features.push(x.clone());
+                        features.len() - 1
+                    }
+                })
+                .collect();
+            targets.push(DesignTarget {
+                target: t,
+                features: f,
+                cols,
+                local: Vec::new(),
+            });
+        }
+        let rows: Vec<usize> = (0..data.len()).filter(|&r| measured[r]).collect();
+        drop(measured);
+        for tg in &mut targets {
+            tg.local = data
+                .measured(tg.target)
+                .map(|(r, _)| rows.binary_search(&r).expect("a measured row is in rows"))
+                .collect();
+        }
+        let a = lsq::design_matrix(data, norm, &features, &rows)?;
+        let w = holdout::weights(data, &rows)?;
+        let b = DMatrix::from_fn(rows.len(), targets.len(), |i, k| {
+            data.err_um[targets[k].target]
+                .as_ref()
+                .and_then(|col| col[rows[i]])
+                .unwrap_or(0.0)
+        });
+        Ok(Design {
+            features,
+            rows,
+            a,
+            w,
+            b,
+            targets,
+        })
+    }
+
+    /// The index into [`Design::rows`] of data row `r` (which must be one).
+    pub fn local_of(&self, r: usize) -> usize {
+        self.rows
+            .binary_search(&r)
+            .expect("the row is in the design")
+    }
+
+    /// The Gram sums of columns `cols` and the values of targets `ks`
+    /// (indices into [`Design::targets`]) over `local`.
+    pub fn gram(&self, cols: &[usize], ks: &[usize], local: &[usize]) -> Gram {
+        Gram::over(&self.a, cols, &self.b, ks, self.w.as_ref(), local)
+    }
+
+    /// The model Σⱼ coefⱼ·a[i, colsⱼ] at each of `local`, summed in
+    /// feature order as [`LinearOutput::predict`] sums.
+    pub fn predict(&self, cols: &[usize], coef: &[f64], local: &[usize]) -> Vec<f64> {
+        let mut out = vec![0.0; local.len()];
+        for (&j, &c) in cols.iter().zip(coef) {
+            let col = self.a.column(j);
+            for (o, &i) in out.iter_mut().zip(local) {
+                *o += c * col[i];
+            }
+        }
+        out
+    }
+
+    /// The weighted least-squares solutions of the targets `ks` on the
+    /// columns `cols` and the rows `local`, from their Gram sums `gram`
+    /// by the normal equations and one step of iterative refinement
+    /// (x += G⁻¹·AᵀW(b − Ax), which brings them to a QR solution's at
+    /// round-off, even near [`lsq::GRAM_MAX_CONDITION`]). None when the
+    /// normal equations are not to be trusted ([`lsq::solve_gram`]) or
+    /// leave no degree of freedom: the caller takes the QR path.
+    pub fn solve(
+        &self,
+        cols: &[usize],
+        ks: &[usize],
+        local: &[usize],
+        gram: &Gram,
+    ) -> Option<Vec<LsqSolution>> {
+        let (m, p) = (local.len(), cols.len());
+        if m <= p {
+            return None;
+        }
+        let sol = lsq::solve_gram(gram)?;
+        // Residuals on all of `rows` (0 off `local`) so that AᵀWr is one
+        // more chunked pass over the same rows.
+        let residuals = |coef: &DMatrix<f64>| -> DMatrix<f64> {
+            let mut r = DMatrix::zeros(self.rows.len(), ks.len());
+            for (c, &k) in ks.iter().enumerate() {
+                let pred = self.predict(cols, coef.column(c).as_slice(), local);
+                for (&i, pv) in local.iter().zip(pred) {
+                    r[(i, c)] = self.b[(i, k)] - pv;
+                }
+            }
+            r
+        };
+        let r0 = residuals(&sol.coef);
+        let all: Vec<usize> = (0..ks.len()).collect();
+        let atr = Gram::rhs_over(&self.a, cols, &r0, &all, self.w.as_ref(), local);
+        drop(r0);
+        let coef = &sol.coef + sol.apply(&atr);
+        let r = residuals(&coef);
+        let dof = m - p;
+        Some(
+            (0..ks.len())
+                .map(|c| {
+                    let rss: f64 = local
+                        .iter()
+                        .map(|&i| self.w.as_ref().map_or(1.0, |w| w[i]) * r[(i, c)].powi(2))
+                        .sum();
+                    let sigma2 = rss / dof as f64;
+                    LsqSolution {
+                        coef: coef.column(c).into_owned(),
+                        coef_sd: sol.inv_diag.map(|v| (sigma2 * v).sqrt()),
+                        rss,
+                        dof,
+                        rank: p,
+                        condition_number: sol.condition_number,
+                    }
+                })
+                .collect(),
+        )
+    }
+}
+
+/// One group's fits with their held-out RMS and hold-out description.
+struct GroupFit {
+    fits: Vec<(TargetFit, Option<Result<f64>>)>,
+    holdout: String,
+}
+
+/// Fits the targets `ks` of `design` (same columns, same rows) from one
+/// Gram — the sum of their hold-out blocks' when `blocks` > 0, so that the
+/// fit and its k refits take one pass over the rows — or, when the normal
+/// equations are not to be trusted, by QR ([`fit_targets`]) as before.
+fn fit_group(
+    data: &Dataset,
+    norm: &Norm,
+    design: &Design,
+    ks: &[usize],
+    blocks: usize,
+) -> Result<GroupFit> {
+    let first = &design.targets[ks[0]];
+    let (cols, local) = (&first.cols, &first.local);
+    let rows: Vec<usize> = local.iter().map(|&i| design.rows[i]).collect();
+    let bl = if blocks > 0 {
+        holdout::blocks(data, &rows, blocks)
+    } else {
+        Vec::new()
+    };
+    let holdout_text = if blocks > 0 {
+        holdout::describe_blocks(data, &rows, &bl)
+    } else {
+        String::new()
+    };
+    let grams: Vec<Gram> = if bl.len() >= 2 {
+        bl.iter()
+            .map(|b| {
+                let lb: Vec<usize> = b.iter().map(|&r| design.local_of(r)).collect();
+                design.gram(cols, ks, &lb)
+            })
+            .collect()
+    } else {
+        vec![design.gram(cols, ks, local)]
+    };
+    let total = Gram::total(&grams).expect("at least one Gram");
+    // A held-out RMS the Gram path cannot give is asked of the QR path
+    // (which also words the errors: one block, a rank-deficient refit).
+    let qr_held_out =
+        |t: usize, f: &[Feature]| holdout::held_out_rms_k(data, &rows, f, t, norm, blocks);
+    let Some(sols) = design.solve(cols, ks, local, &total) else {
+        let targets: Vec<usize> = ks.iter().map(|&k| design.targets[k].target).collect();
+        let label: Vec<&str> = targets.iter().map(|&t| TARGETS[t]).collect();
+        let tfs = match fit_targets(
+            data,
+            norm,
+            &first.features,
+            &targets,
+            &rows,
+            &label.join(", "),
+        ) {
+            Ok(tfs) => tfs,
+            // Name the first target that fails on its own, as a lone fit would.
+            Err(_) if targets.len() > 1 => targets
+                .iter()
+                .map(|&t| fit_target(data, norm, &first.features, t, &rows, TARGETS[t]))
+                .collect::<Result<_>>()?,
+            Err(e) => return Err(e),
+        };
+        return Ok(GroupFit {
+            fits: tfs
+                .into_iter()
+                .map(|tf| {
+                    let h = (blocks > 0).then(|| qr_held_out(tf.output.target, &first.features));
+                    (tf, h)
+                })
+                .collect(),
+            holdout: holdout_text,
+        });
+    };
+    let refits = if bl.len() >= 2 {
+        holdout::block_refits(&grams)
+    } else {
+        None
+    };
+    let mut fits = Vec::new();
+    for (c, (&k, sol)) in ks.iter().zip(sols).enumerate() {
+        let tg = &design.targets[k];
+        let pred = design.predict(cols, sol.coef.as_slice(), local);
+        let residual_um = local
+            .iter()
+            .zip(&pred)
+            .map(|(&i, p)| design.b[(i, k)] - p)
+            .collect();
+        let held = match &refits {
+            Some(coefs) => {
+                let mut ss = 0.0;
+                for (b, coef) in bl.iter().zip(coefs) {
+                    let lb: Vec<usize> = b.iter().map(|&r| design.local_of(r)).collect();
+                    let pred = design.predict(cols, coef.column(c).as_slice(), &lb);
+                    ss += lb
+                        .iter()
+                        .zip(pred)
+                        .map(|(&i, p)| (design.b[(i, k)] - p).powi(2))
+                        .sum::<f64>();
+                }
+                Some(Ok((ss / local.len() as f64).sqrt()))
+            }
+            None => (blocks > 0).then(|| qr_held_out(tg.target, &tg.features)),
+        };
+        fits.push((
+            TargetFit {
+                output: LinearOutput {
+                    target: tg.target,
+                    features: tg.features.clone(),
+                    coef_um: sol.coef.iter().copied().collect(),
+                    coef_sd_um: sol.coef_sd.iter().copied().collect(),
+                },
+                rows: rows.clone(),
+                residual_um,
+                condition_number: sol.condition_number,
+                by_gram: true,
+            },
+            held,
+        ));
+    }
+    Ok(GroupFit {
+        fits,
+        holdout: holdout_text,
+    })
 }
 
 /// Fits the linear model `seed` + `adds` to every target present, with the
@@ -176,58 +490,37 @@ pub fn fit(
             data.source
         ));
     }
-    let mut outputs = Vec::new();
-    // Targets with the same features measured on the same rows (a seed
-    // model on a full grid) share one solve; the rest are fitted alone.
-    struct Job {
-        targets: Vec<usize>,
-        features: Vec<Feature>,
-        rows: Vec<usize>,
-    }
-    let mut jobs: Vec<Job> = Vec::new();
     for t in data.targets() {
-        let rows: Vec<usize> = data.measured(t).map(|(r, _)| r).collect();
-        if rows.is_empty() {
+        if data.measured(t).next().is_none() {
             stats.warnings.push(format!(
                 "{}: the column has no values; not modelled",
                 TARGETS[t]
             ));
-            continue;
-        }
-        let features = features_for(seed, adds, t, &axes)?;
-        match jobs
-            .iter_mut()
-            .find(|j| j.features == features && j.rows == rows)
-        {
-            Some(job) => job.targets.push(t),
-            None => jobs.push(Job {
-                targets: vec![t],
-                features,
-                rows,
-            }),
         }
     }
-    let mut fits: Vec<TargetFit> = Vec::new();
-    for Job {
-        targets,
-        features,
-        rows,
-    } in jobs
-    {
-        let label: Vec<&str> = targets.iter().map(|&t| TARGETS[t]).collect();
-        match fit_targets(data, &norm, &features, &targets, &rows, &label.join(", ")) {
-            Ok(tfs) => fits.extend(tfs),
-            // Name the first target that fails on its own, as a lone fit would.
-            Err(_) if targets.len() > 1 => {
-                for &t in &targets {
-                    fits.push(fit_target(data, &norm, &features, t, &rows, TARGETS[t])?);
-                }
-            }
-            Err(e) => return Err(e),
+    let design = Design::new(data, &norm, seed, adds)?;
+    // Targets with the same features measured on the same rows (a seed
+    // model on a full grid) share one Gram and one solve; the rest are
+    // fitted alone — all from the one design matrix.
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for (k, tg) in design.targets.iter().enumerate() {
+        match groups.iter_mut().find(|g| {
+            let other = &design.targets[g[0]];
+            other.cols == tg.cols && other.local == tg.local
+        }) {
+            Some(g) => g.push(k),
+            None => groups.push(vec![k]),
         }
     }
-    fits.sort_by_key(|tf| tf.output.target);
-    for tf in fits {
+    let mut fits: Vec<(TargetFit, Option<Result<f64>>, String)> = Vec::new();
+    for ks in &groups {
+        let g = fit_group(data, &norm, &design, ks, blocks)?;
+        fits.extend(g.fits.into_iter().map(|(tf, h)| (tf, h, g.holdout.clone())));
+    }
+    drop(design);
+    fits.sort_by_key(|(tf, _, _)| tf.output.target);
+    let mut outputs = Vec::new();
+    for (tf, held, holdout_text) in fits {
         let (t, features) = (tf.output.target, &tf.output.features);
         let name = TARGETS[t].to_string();
         stats.terms = stats.terms.max(features.len());
@@ -251,22 +544,18 @@ pub fn fit(
                 tf.condition_number
             ));
         }
-        // blocks = 0: the caller wants the fit only (the outlier screen's
-        // rounds), not its held-out RMS.
-        if blocks == 0 {
-            outputs.push(tf.output);
-            continue;
-        }
-        match holdout::held_out_rms_k(data, &tf.rows, features, t, &norm, blocks) {
-            Ok(h) => {
+        // blocks = 0: the caller wants the fit only, not its held-out RMS.
+        match held {
+            None => {}
+            Some(Ok(h)) => {
                 stats.held_out_rms_um.insert(name.clone(), h);
             }
-            Err(e) => stats
+            Some(Err(e)) => stats
                 .warnings
                 .push(format!("{name}: no held-out RMS: {e:#}")),
         }
-        if stats.holdout.is_empty() {
-            stats.holdout = holdout::describe(data, &tf.rows, blocks);
+        if blocks > 0 && stats.holdout.is_empty() {
+            stats.holdout = holdout_text;
         }
         outputs.push(tf.output);
     }
