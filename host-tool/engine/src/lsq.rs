@@ -374,10 +374,9 @@ fn solve_inner(
 pub const GRAM_MAX_CONDITION: f64 = 1e8;
 
 /// Rows gathered per chunk of the Gram sums: a chunk of a 25-column design
-/// (512 × 25 × 8 B = 100 kB) stays in cache while its p(p+1)/2 column
-/// products are summed, and the chunk sums added to the total keep the
-/// summation error of n-row sums low.
-const GRAM_CHUNK: usize = 512;
+/// (1024 × 25 × 8 B = 200 kB) stays in cache while its column products
+/// are formed.
+const GRAM_CHUNK: usize = 1024;
 
 /// Weighted Gram sums of a least-squares problem over some of its rows:
 /// `g` = AᵀWA (p × p, symmetric) and `r` = AᵀWB (p × right-hand sides),
@@ -471,19 +470,35 @@ impl Gram {
     ) {
         let (p, q) = (cols.len(), bcols.len());
         let width = p + q;
-        // Column-major chunk: the p design columns, then the q values, each
-        // row scaled by √w (as the QR path weights rows).
-        let mut buf = vec![0.0; GRAM_CHUNK * width];
+        // The products computed: [A B] with g, B alone without.
+        let start = if with_g { 0 } else { p };
+        let mut acc = DMatrix::zeros(p, width - start);
+        // The chunk twice: `c` (rows × columns) and its transpose `ct`, the
+        // p design columns then the q values, each row scaled by √w (as
+        // the QR path weights rows). Two plain column-major matrices, so
+        // that nalgebra hands their product to matrixmultiply's dgemm (SIMD
+        // kernels chosen at run time).
+        let mut c = DMatrix::<f64>::zeros(GRAM_CHUNK, width);
+        let mut ct = DMatrix::<f64>::zeros(width, GRAM_CHUNK);
+        let w = w.map(|w| w.as_slice());
         for chunk in rows.chunks(GRAM_CHUNK) {
             let m = chunk.len();
-            let sources = cols
-                .iter()
-                .map(|&c| a.column(c))
-                .chain(bcols.iter().map(|&c| b.column(c)));
-            for (j, src) in sources.enumerate() {
-                let dst = &mut buf[j * m..(j + 1) * m];
-                for (d, &i) in dst.iter_mut().zip(chunk) {
-                    *d = src[i];
+            let sources = (cols.iter().map(|&k| (a, k))).chain(bcols.iter().map(|&k| (b, k)));
+            // Consecutive rows (the usual case: a target measured on
+            // every row but a few outliers) are copied as slices.
+            let (first, last) = (chunk[0], chunk[m - 1]);
+            let consecutive = last - first + 1 == m;
+            let cs = c.as_mut_slice();
+            for (j, (mat, k)) in sources.enumerate() {
+                let n = mat.nrows();
+                let src = &mat.as_slice()[k * n..(k + 1) * n];
+                let dst = &mut cs[j * GRAM_CHUNK..j * GRAM_CHUNK + m];
+                if consecutive {
+                    dst.copy_from_slice(&src[first..=last]);
+                } else {
+                    for (d, &i) in dst.iter_mut().zip(chunk) {
+                        *d = src[i];
+                    }
                 }
                 if let Some(w) = w {
                     for (d, &i) in dst.iter_mut().zip(chunk) {
@@ -491,42 +506,42 @@ impl Gram {
                     }
                 }
             }
-            let col = |j: usize| &buf[j * m..(j + 1) * m];
-            for j in 0..p {
-                if with_g {
-                    for k in j..p {
-                        self.g[(j, k)] += sign * dot(col(j), col(k));
-                    }
+            // The transpose written row by row (contiguous stores; the
+            // `width` columns are read as that many sequential streams).
+            let cs = c.as_slice();
+            for (l, out) in ct
+                .as_mut_slice()
+                .chunks_exact_mut(width)
+                .take(m)
+                .enumerate()
+            {
+                for (o, col) in out.iter_mut().zip(cs.chunks_exact(GRAM_CHUNK)) {
+                    *o = col[l];
                 }
-                for k in 0..q {
-                    self.r[(j, k)] += sign * dot(col(j), col(p + k));
+            }
+            acc.gemm(
+                sign,
+                &ct.view((0, 0), (p, m)),
+                &c.view((0, start), (m, width - start)),
+                1.0,
+            );
+        }
+        // g from the upper triangle (the product's two halves may differ
+        // in the last bit), r from the value columns.
+        if with_g {
+            for j in 0..p {
+                for k in j..p {
+                    self.g[(j, k)] += acc[(j, k)];
+                    self.g[(k, j)] = self.g[(j, k)];
                 }
             }
         }
         for j in 0..p {
-            for k in 0..j {
-                self.g[(j, k)] = self.g[(k, j)];
+            for k in 0..q {
+                self.r[(j, k)] += acc[(j, p - start + k)];
             }
         }
     }
-}
-
-/// Σ xᵢyᵢ with four running sums (so the compiler can use SIMD lanes).
-fn dot(x: &[f64], y: &[f64]) -> f64 {
-    let mut acc = [0.0; 4];
-    let (xc, yc) = (x.chunks_exact(4), y.chunks_exact(4));
-    let tail: f64 = xc
-        .remainder()
-        .iter()
-        .zip(yc.remainder())
-        .map(|(a, b)| a * b)
-        .sum();
-    for (a, b) in xc.zip(yc) {
-        for l in 0..4 {
-            acc[l] += a[l] * b[l];
-        }
-    }
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// The solution of the normal equations (AᵀWA) x = AᵀWB from a [`Gram`]:

@@ -187,14 +187,21 @@ pub fn find(data: &Dataset, seed: &str, adds: &[Effect]) -> Result<Vec<Outlier>>
         s @ (Seed::Cubic19 | Seed::Kinematic) => s.to_string(),
         _ => "cubic19".to_string(),
     };
-    if let Some(found) = find_by_gram(data, &seed, adds) {
-        return Ok(found);
+    match find_by_gram(data, &seed, adds) {
+        Some(found) => Ok(found),
+        None => find_by_refits(data, &seed, adds),
     }
+}
+
+/// [`find`]'s rounds by refitting the data set less the flagged readings
+/// (QR) each round — the screen where the normal equations are not to be
+/// trusted, and the words of its errors.
+fn find_by_refits(data: &Dataset, seed: &str, adds: &[Effect]) -> Result<Vec<Outlier>> {
     let mut found: Vec<Outlier> = Vec::new();
     for _ in 0..MAX_ROUNDS {
         let clean = without(data, &found);
         // The screen needs the model only, not its held-out RMS (blocks 0).
-        let (model, _) = crate::fit::linear::fit(&clean, &seed, adds, 0)?;
+        let (model, _) = crate::fit::linear::fit(&clean, seed, adds, 0)?;
         let pred = model.predict(data)?;
         let mut next = Vec::new();
         for t in data.targets() {
@@ -248,8 +255,8 @@ fn find_by_gram(data: &Dataset, seed: &str, adds: &[Effect]) -> Option<Vec<Outli
                 };
                 (Cow::Owned(kept), Cow::Owned(gram))
             };
-            let sol = design.solve(&tg.cols, &[k], &kept, &gram)?.remove(0);
-            let pred = design.predict(&tg.cols, sol.coef.as_slice(), &tg.local);
+            let (_, coef) = design.coefficients(&tg.cols, &[k], &kept, &gram)?;
+            let pred = design.predict(&tg.cols, coef.as_slice(), &tg.local);
             let resid: Vec<(usize, f64, f64)> = (tg.local.iter().zip(pred))
                 .map(|(&i, p)| {
                     let v = design.b[(i, k)];

@@ -270,74 +270,127 @@ impl Design {
     /// The model Σⱼ coefⱼ·a[i, colsⱼ] at each of `local`, summed in
     /// feature order as [`LinearOutput::predict`] sums.
     pub fn predict(&self, cols: &[usize], coef: &[f64], local: &[usize]) -> Vec<f64> {
+        let n = self.a.nrows();
+        let a = self.a.as_slice();
         let mut out = vec![0.0; local.len()];
-        for (&j, &c) in cols.iter().zip(coef) {
-            let col = self.a.column(j);
-            for (o, &i) in out.iter_mut().zip(local) {
-                *o += c * col[i];
+        // A chunk of rows at a time, so that the partial sums stay in cache
+        // while every column is added to them; a chunk of consecutive rows
+        // (most of them: a target measured on every row but a few
+        // outliers) reads the columns as slices, without the gather.
+        for (oc, lc) in out.chunks_mut(1024).zip(local.chunks(1024)) {
+            let (first, last) = (lc[0], lc[lc.len() - 1]);
+            let consecutive = last - first + 1 == lc.len();
+            for (&j, &c) in cols.iter().zip(coef) {
+                let col = &a[j * n..(j + 1) * n];
+                if consecutive {
+                    for (o, v) in oc.iter_mut().zip(&col[first..=last]) {
+                        *o += c * v;
+                    }
+                } else {
+                    for (o, &i) in oc.iter_mut().zip(lc) {
+                        *o += c * col[i];
+                    }
+                }
             }
         }
         out
     }
 
+    /// The coefficients (p × targets) of the targets `ks` on the columns
+    /// `cols` and the rows `local`, from their Gram sums `gram` by the
+    /// normal equations, with the decomposition they came from. When the
+    /// Gram's condition number is [`REFINE_ABOVE`] or more, one step of
+    /// iterative refinement (x += G⁻¹·AᵀW(b − Ax)) brings them to a QR
+    /// solution's at round-off. None when the normal equations are not to
+    /// be trusted ([`lsq::solve_gram`]) or leave no degree of freedom: the
+    /// caller takes the QR path.
+    pub fn coefficients(
+        &self,
+        cols: &[usize],
+        ks: &[usize],
+        local: &[usize],
+        gram: &Gram,
+    ) -> Option<(lsq::GramSolution, DMatrix<f64>)> {
+        if local.len() <= cols.len() {
+            return None;
+        }
+        let sol = lsq::solve_gram(gram)?;
+        if sol.condition_number.powi(2) < REFINE_ABOVE {
+            let coef = sol.coef.clone();
+            return Some((sol, coef));
+        }
+        // Residuals on all of `rows` (0 off `local`) so that AᵀWr is one
+        // more chunked pass over the same rows.
+        let mut r = DMatrix::zeros(self.rows.len(), ks.len());
+        for (c, &k) in ks.iter().enumerate() {
+            let pred = self.predict(cols, sol.coef.column(c).as_slice(), local);
+            for (&i, pv) in local.iter().zip(pred) {
+                r[(i, c)] = self.b[(i, k)] - pv;
+            }
+        }
+        let all: Vec<usize> = (0..ks.len()).collect();
+        let atr = Gram::rhs_over(&self.a, cols, &r, &all, self.w.as_ref(), local);
+        let coef = &sol.coef + sol.apply(&atr);
+        Some((sol, coef))
+    }
+
     /// The weighted least-squares solutions of the targets `ks` on the
-    /// columns `cols` and the rows `local`, from their Gram sums `gram`
-    /// by the normal equations and one step of iterative refinement
-    /// (x += G⁻¹·AᵀW(b − Ax), which brings them to a QR solution's at
-    /// round-off, even near [`lsq::GRAM_MAX_CONDITION`]). None when the
-    /// normal equations are not to be trusted ([`lsq::solve_gram`]) or
-    /// leave no degree of freedom: the caller takes the QR path.
+    /// columns `cols` and the rows `local` from their Gram sums
+    /// ([`Design::coefficients`]), with their residuals and statistics as
+    /// the QR path gives them.
     pub fn solve(
         &self,
         cols: &[usize],
         ks: &[usize],
         local: &[usize],
         gram: &Gram,
-    ) -> Option<Vec<LsqSolution>> {
-        let (m, p) = (local.len(), cols.len());
-        if m <= p {
-            return None;
-        }
-        let sol = lsq::solve_gram(gram)?;
-        // Residuals on all of `rows` (0 off `local`) so that AᵀWr is one
-        // more chunked pass over the same rows.
-        let residuals = |coef: &DMatrix<f64>| -> DMatrix<f64> {
-            let mut r = DMatrix::zeros(self.rows.len(), ks.len());
-            for (c, &k) in ks.iter().enumerate() {
-                let pred = self.predict(cols, coef.column(c).as_slice(), local);
-                for (&i, pv) in local.iter().zip(pred) {
-                    r[(i, c)] = self.b[(i, k)] - pv;
-                }
-            }
-            r
-        };
-        let r0 = residuals(&sol.coef);
-        let all: Vec<usize> = (0..ks.len()).collect();
-        let atr = Gram::rhs_over(&self.a, cols, &r0, &all, self.w.as_ref(), local);
-        drop(r0);
-        let coef = &sol.coef + sol.apply(&atr);
-        let r = residuals(&coef);
-        let dof = m - p;
+    ) -> Option<Vec<DesignFit>> {
+        let (sol, coef) = self.coefficients(cols, ks, local, gram)?;
+        let dof = local.len() - cols.len();
         Some(
-            (0..ks.len())
-                .map(|c| {
-                    let rss: f64 = local
-                        .iter()
-                        .map(|&i| self.w.as_ref().map_or(1.0, |w| w[i]) * r[(i, c)].powi(2))
+            ks.iter()
+                .enumerate()
+                .map(|(c, &k)| {
+                    let pred = self.predict(cols, coef.column(c).as_slice(), local);
+                    let residual_um: Vec<f64> = (local.iter().zip(pred))
+                        .map(|(&i, p)| self.b[(i, k)] - p)
+                        .collect();
+                    let rss: f64 = (local.iter().zip(&residual_um))
+                        .map(|(&i, e)| self.w.as_ref().map_or(1.0, |w| w[i]) * e * e)
                         .sum();
                     let sigma2 = rss / dof as f64;
-                    LsqSolution {
-                        coef: coef.column(c).into_owned(),
-                        coef_sd: sol.inv_diag.map(|v| (sigma2 * v).sqrt()),
-                        rss,
-                        dof,
-                        rank: p,
-                        condition_number: sol.condition_number,
+                    DesignFit {
+                        sol: LsqSolution {
+                            coef: coef.column(c).into_owned(),
+                            coef_sd: sol.inv_diag.map(|v| (sigma2 * v).sqrt()),
+                            rss,
+                            dof,
+                            rank: cols.len(),
+                            condition_number: sol.condition_number,
+                        },
+                        residual_um,
                     }
                 })
                 .collect(),
         )
     }
+}
+
+/// The condition number of the column-scaled Gram from which
+/// [`Design::coefficients`] refines its solution once: below it the
+/// normal equations' error (~ε·condition ≤ 10⁻¹² relative) is already at
+/// the level by which two QR implementations differ (nalgebra's and
+/// LAPACK's, 7·10⁻¹² on the 180k-row benchmark), and the refinement's two
+/// passes over the rows would buy nothing.
+pub const REFINE_ABOVE: f64 = 1e4;
+
+/// One target's solution from a [`Design`] with its residuals.
+#[derive(Debug)]
+pub struct DesignFit {
+    /// The least-squares solution.
+    pub sol: LsqSolution,
+    /// Measured − model (µm, unweighted) at each of the rows solved on.
+    pub residual_um: Vec<f64>,
 }
 
 /// One group's fits with their held-out RMS and hold-out description.
@@ -421,14 +474,8 @@ fn fit_group(
         None
     };
     let mut fits = Vec::new();
-    for (c, (&k, sol)) in ks.iter().zip(sols).enumerate() {
+    for (c, (&k, DesignFit { sol, residual_um })) in ks.iter().zip(sols).enumerate() {
         let tg = &design.targets[k];
-        let pred = design.predict(cols, sol.coef.as_slice(), local);
-        let residual_um = local
-            .iter()
-            .zip(&pred)
-            .map(|(&i, p)| design.b[(i, k)] - p)
-            .collect();
         let held = match &refits {
             Some(coefs) => {
                 let mut ss = 0.0;
