@@ -808,6 +808,57 @@ mod tests {
         }
     }
 
+    /// Issue 15: the chunked Gram sums equal the explicit products AᵀWA
+    /// and AᵀWB over a row subset — more rows than a chunk, scattered and
+    /// consecutive rows, wide (the dgemm path) and narrow (nalgebra's own
+    /// loop) — taking rows out equals summing the rest, and the normal
+    /// equations give [`solve`]'s coefficients and standard deviations.
+    #[test]
+    fn gram_sums_equal_the_explicit_products() {
+        let mut rng = trueaxis_test_support::SplitMix64::new(3);
+        let n = 2 * GRAM_CHUNK + 77;
+        for p in [3, 9] {
+            let a = DMatrix::from_fn(n, p, |_, _| rng.signed_unit());
+            let b = DMatrix::from_fn(n, 2, |_, _| rng.signed_unit());
+            let w = DVector::from_fn(n, |_, _| 0.5 + rng.unit());
+            // Scattered rows, then a consecutive run.
+            let rows: Vec<usize> = (0..n).filter(|i| i % 3 != 1).chain(n..n).collect();
+            let cols: Vec<usize> = (0..p).rev().collect();
+            let got = Gram::over(&a, &cols, &b, &[1, 0], Some(&w), &rows);
+            let sub = DMatrix::from_fn(rows.len(), p, |i, j| {
+                a[(rows[i], cols[j])] * w[rows[i]].sqrt()
+            });
+            let bs = DMatrix::from_fn(rows.len(), 2, |i, k| {
+                b[(rows[i], 1 - k)] * w[rows[i]].sqrt()
+            });
+            let (g, r) = (sub.tr_mul(&sub), sub.tr_mul(&bs));
+            assert!((&got.g - &g).amax() < 1e-12 * g.amax(), "p {p}");
+            assert!((&got.r - &r).amax() < 1e-12 * r.amax(), "p {p}");
+            assert_eq!(got.g, got.g.transpose());
+            let rhs = Gram::rhs_over(&a, &cols, &b, &[1, 0], Some(&w), &rows);
+            assert!((&rhs - &r).amax() < 1e-12 * r.amax());
+            // Take the first 100 rows out again: the sums of the others.
+            let mut down = got.clone();
+            down.add_rows(&a, &cols, &b, &[1, 0], Some(&w), &rows[..100], -1.0);
+            let rest = Gram::over(&a, &cols, &b, &[1, 0], Some(&w), &rows[100..]);
+            assert!((&down.g - &rest.g).amax() < 1e-12 * g.amax());
+            // The normal equations against the QR path.
+            let sol = solve_gram(&got).unwrap();
+            let qr = solve(&sub.map(|v| v), &bs.column(0).into_owned(), None).unwrap();
+            assert!((sol.coef.column(0) - &qr.coef).amax() < 1e-12 * qr.coef.amax());
+            let sd = sol.inv_diag.map(|v| (qr.rss / qr.dof as f64 * v).sqrt());
+            assert!((sd - &qr.coef_sd).amax() < 1e-12 * qr.coef_sd.amax());
+            assert!((sol.condition_number / qr.condition_number - 1.0).abs() < 1e-12);
+        }
+        // A zero column or a rank-deficient pair: no Gram solution.
+        let a = DMatrix::from_fn(20, 3, |i, j| [1.0, i as f64, 0.0][j]);
+        let b = DMatrix::from_element(20, 1, 1.0);
+        let all: Vec<usize> = (0..20).collect();
+        assert!(solve_gram(&Gram::over(&a, &[0, 1, 2], &b, &[0], None, &all)).is_none());
+        let a = DMatrix::from_fn(20, 2, |i, _| i as f64);
+        assert!(solve_gram(&Gram::over(&a, &[0, 1], &b, &[0], None, &all)).is_none());
+    }
+
     #[test]
     fn distinct_rows_counts_points() {
         let a = DMatrix::from_row_slice(4, 2, &[1.0, 0.0, 1.0, -0.0, 1.0, 2.0, 1.0, 2.0]);

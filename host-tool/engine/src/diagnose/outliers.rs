@@ -342,6 +342,71 @@ fn flag(data: &Dataset, t: usize, resid: &[(usize, f64, f64)], found: &[Outlier]
 mod tests {
     use super::*;
 
+    /// Issue 15: the screen's rounds from Gram sums flag exactly what the
+    /// rounds of refits flag (same rows, targets, residuals at round-off)
+    /// on a 3-D grid with three targets, an `--add` effect on one, u_um
+    /// weights and four spikes on two targets (a 3 µm one next to a 30 µm
+    /// one), so that the second round takes flagged readings out of the
+    /// Gram sums.
+    #[test]
+    fn the_gram_screen_flags_what_the_refits_flag() {
+        let [x, y, z] = crate::data::grid_positions([17, 11, 11], [50.0; 3]);
+        let n = x.len();
+        let mut rng = trueaxis_test_support::SplitMix64::new(11);
+        let mut err: [Vec<Option<f64>>; 3] = Default::default();
+        for (t, e) in err.iter_mut().enumerate() {
+            *e = (0..n)
+                .map(|r| {
+                    let u = [x[r] / 400.0 - 1.0, y[r] / 250.0 - 1.0, z[r] / 250.0 - 1.0];
+                    Some(
+                        2.0 * u[0] - u[1] * u[2]
+                            + 0.5 * u[t].powi(3)
+                            + if t == 1 {
+                                0.8 * (y[r] / 30.0 * std::f64::consts::TAU).sin()
+                            } else {
+                                0.0
+                            }
+                            + 0.1 * rng.normal(),
+                    )
+                })
+                .collect();
+        }
+        let spikes = [
+            (0, 100, 40.0),
+            (0, 1500, -25.0),
+            (1, 700, 30.0),
+            (1, 701, 3.0),
+        ];
+        for &(t, r, v) in &spikes {
+            err[t][r] = err[t][r].map(|e| e + v);
+        }
+        let d = Dataset {
+            source: "grid.csv".into(),
+            pos_mm: [Some(x), Some(y), Some(z)],
+            err_um: err.map(Some),
+            u_um: Some((0..n).map(|r| 0.1 + 0.02 * (r % 3) as f64).collect()),
+            line: (0..n).map(|r| r + 2).collect(),
+            ..Dataset::default()
+        };
+        let adds = [Effect::parse("periodic:target=ey,axis=y,period_mm=30").unwrap()];
+        let gram = find_by_gram(&d, "cubic19", &adds).expect("well conditioned");
+        let refits = find_by_refits(&d, "cubic19", &adds).unwrap();
+        let key = |o: &Outlier| (o.target.clone(), o.row);
+        assert_eq!(
+            gram.iter().map(key).collect::<Vec<_>>(),
+            refits.iter().map(key).collect::<Vec<_>>()
+        );
+        for (a, b) in gram.iter().zip(&refits) {
+            assert!((a.resid_um - b.resid_um).abs() < 1e-9, "{a:?} {b:?}");
+            assert!((a.scale_um - b.scale_um).abs() < 1e-9, "{a:?} {b:?}");
+        }
+        let rows: Vec<(String, usize)> = gram.iter().map(key).collect();
+        for (t, r, _) in spikes {
+            assert!(rows.contains(&(TARGETS[t].to_string(), r)), "{rows:?}");
+        }
+        assert_eq!(find(&d, "cubic19", &adds).unwrap(), gram);
+    }
+
     #[test]
     fn a_spike_is_found_on_its_line_and_left_out() {
         // 200 points of a cubic along x with ±0.1 µm of pattern "noise" and

@@ -888,6 +888,125 @@ mod tests {
         assert!(e.contains("{y, y} are collinear"), "{e}");
     }
 
+    /// The mill grid with three targets from a fixed seed: a smooth error,
+    /// noise, a periodic term along x of `period_mm` on ex (its `--add`)
+    /// and, with `gaps`, ez missing on every 7th row (its own rows, so its
+    /// own group), with per-row uncertainties (weights).
+    fn noisy_grid(period_mm: f64, gaps: bool) -> (Dataset, Vec<Effect>) {
+        let mut d = mill_grid();
+        let mut rng = trueaxis_test_support::SplitMix64::new(15);
+        let x = d.pos_mm[0].clone().unwrap();
+        let noise: Vec<[f64; 3]> = (0..d.len())
+            .map(|_| [rng.normal(), rng.normal(), rng.normal()])
+            .collect();
+        for t in 0..3 {
+            let (x, noise) = (x.clone(), noise.clone());
+            set_target(&mut d, t, move |r, u| {
+                2.0 * u[0] - u[1] * u[2]
+                    + 0.7 * u[t].powi(3)
+                    + 0.4 * (std::f64::consts::TAU * x[r] / period_mm).sin()
+                    + 0.05 * noise[r][t]
+            });
+        }
+        if gaps {
+            if let Some(c) = d.err_um[2].as_mut() {
+                c.iter_mut().step_by(7).for_each(|v| *v = None);
+            }
+        }
+        d.u_um = Some((0..d.len()).map(|r| 0.05 + 0.01 * (r % 5) as f64).collect());
+        let adds = vec![
+            Effect::parse(&format!("periodic:target=ex,axis=x,period_mm={period_mm}")).unwrap(),
+        ];
+        (d, adds)
+    }
+
+    /// Every target of `d` fitted by [`fit_group`] (one group per target,
+    /// as after an outlier screen) and by the QR path [`fit_targets`].
+    fn gram_and_qr(d: &Dataset, adds: &[Effect]) -> Vec<(TargetFit, Option<f64>, TargetFit, f64)> {
+        let norm = Norm::from_data(d);
+        let design = Design::new(d, &norm, "cubic19", adds).unwrap();
+        (0..design.targets.len())
+            .map(|k| {
+                let tg = &design.targets[k];
+                let g = fit_group(d, &norm, &design, &[k], 5).unwrap();
+                let (tf, held) = g.fits.into_iter().next().unwrap();
+                let rows: Vec<usize> = tg.local.iter().map(|&i| design.rows[i]).collect();
+                let qr = fit_targets(d, &norm, &tg.features, &[tg.target], &rows, "t")
+                    .unwrap()
+                    .remove(0);
+                assert!(!qr.by_gram);
+                let qr_held =
+                    holdout::held_out_rms_k(d, &rows, &tg.features, tg.target, &norm, 5).unwrap();
+                (tf, held.map(|h| h.unwrap()), qr, qr_held)
+            })
+            .collect()
+    }
+
+    fn max_rel(a: &[f64], b: &[f64]) -> f64 {
+        let scale = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        a.iter()
+            .zip(b)
+            .fold(0.0, |m, (x, y)| m.max((x - y).abs() / scale))
+    }
+
+    /// Issue 15: the fit from Gram sums (normal equations) gives the QR
+    /// path's coefficients, standard deviations, residuals, condition
+    /// number and held-out RMS at round-off — with weights, `--add`
+    /// columns on one target and a target measured on fewer rows (three
+    /// groups, one design matrix).
+    #[test]
+    fn the_gram_fit_equals_the_qr_fit() {
+        let (d, adds) = noisy_grid(130.0, true);
+        let fits = gram_and_qr(&d, &adds);
+        assert_eq!(fits.len(), 3);
+        for (tf, held, qr, qr_held) in &fits {
+            assert!(tf.by_gram, "{}", tf.output.target);
+            assert_eq!(tf.output.features, qr.output.features);
+            assert_eq!(tf.rows, qr.rows);
+            // 7·10⁻¹³ of the largest coefficient at most here: QR's own
+            // rounding (the refined normal equations move by less).
+            assert!(max_rel(&tf.output.coef_um, &qr.output.coef_um) < 1e-11);
+            assert!(max_rel(&tf.output.coef_sd_um, &qr.output.coef_sd_um) < 1e-12);
+            let worst = (tf.residual_um.iter().zip(&qr.residual_um))
+                .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+            assert!(worst < 1e-10, "{worst:e} µm");
+            assert!((tf.condition_number / qr.condition_number - 1.0).abs() < 1e-12);
+            assert!((held.unwrap() / qr_held - 1.0).abs() < 1e-10);
+        }
+        assert_eq!(fits[0].0.output.features.len(), 21);
+        assert_eq!(fits[2].0.rows.len(), d.len() - d.len().div_ceil(7));
+    }
+
+    /// A design whose Gram is too ill-conditioned for the normal equations
+    /// (a 5 m period on 800 mm of x is nearly a cubic in x: κ(A) ≈ 10⁵,
+    /// κ(G) ≈ 10¹⁰ > GRAM_MAX_CONDITION) takes the QR path and gives its
+    /// coefficients; one between REFINE_ABOVE and GRAM_MAX_CONDITION (a 2 m
+    /// period, κ(G) ≈ 3·10⁶) is solved from the Gram with a refinement
+    /// step and agrees with QR to 10⁻¹² (2.4·10⁻¹⁰ without the step).
+    #[test]
+    fn an_ill_conditioned_design_takes_the_qr_path() {
+        let (d, adds) = noisy_grid(5_000.0, false);
+        let fits = gram_and_qr(&d, &adds);
+        let (tf, held, qr, qr_held) = &fits[0];
+        assert!(
+            tf.condition_number.powi(2) > lsq::GRAM_MAX_CONDITION,
+            "{}",
+            tf.condition_number
+        );
+        assert!(!tf.by_gram);
+        assert_eq!(tf.output.coef_um, qr.output.coef_um);
+        assert_eq!(held.unwrap(), *qr_held);
+        // The other targets (cubic19 alone) are well conditioned.
+        assert!(fits[1].0.by_gram && fits[2].0.by_gram);
+        let (d, adds) = noisy_grid(2_000.0, false);
+        let (tf, _, qr, _) = &gram_and_qr(&d, &adds)[0];
+        let k2 = tf.condition_number.powi(2);
+        assert!(k2 > REFINE_ABOVE && k2 < lsq::GRAM_MAX_CONDITION, "{k2:e}");
+        assert!(tf.by_gram);
+        let rel = max_rel(&tf.output.coef_um, &qr.output.coef_um);
+        assert!(rel < 1e-12, "{rel:e}");
+    }
+
     #[test]
     fn effect_on_missing_target_is_an_error() {
         let mut d = mill_grid();
