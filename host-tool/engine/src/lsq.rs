@@ -486,15 +486,15 @@ impl Gram {
             let sources = (cols.iter().map(|&k| (a, k))).chain(bcols.iter().map(|&k| (b, k)));
             // Consecutive rows (the usual case: a target measured on
             // every row but a few outliers) are copied as slices.
-            let (first, last) = (chunk[0], chunk[m - 1]);
-            let consecutive = last - first + 1 == m;
+            let first = chunk[0];
+            let consecutive = consecutive(chunk);
             let cs = c.as_mut_slice();
             for (j, (mat, k)) in sources.enumerate() {
                 let n = mat.nrows();
                 let src = &mat.as_slice()[k * n..(k + 1) * n];
                 let dst = &mut cs[j * GRAM_CHUNK..j * GRAM_CHUNK + m];
                 if consecutive {
-                    dst.copy_from_slice(&src[first..=last]);
+                    dst.copy_from_slice(&src[first..first + m]);
                 } else {
                     for (d, &i) in dst.iter_mut().zip(chunk) {
                         *d = src[i];
@@ -542,6 +542,12 @@ impl Gram {
             }
         }
     }
+}
+
+/// Whether `rows` are consecutive ascending indices (k, k+1, k+2, …): then
+/// a slice of a column is read in place of a gather.
+pub fn consecutive(rows: &[usize]) -> bool {
+    rows.windows(2).all(|w| w[1] == w[0] + 1)
 }
 
 /// The solution of the normal equations (AᵀWA) x = AᵀWB from a [`Gram`]:
@@ -821,8 +827,18 @@ mod tests {
             let a = DMatrix::from_fn(n, p, |_, _| rng.signed_unit());
             let b = DMatrix::from_fn(n, 2, |_, _| rng.signed_unit());
             let w = DVector::from_fn(n, |_, _| 0.5 + rng.unit());
-            // Scattered rows, then a consecutive run.
-            let rows: Vec<usize> = (0..n).filter(|i| i % 3 != 1).chain(n..n).collect();
+            // Scattered rows, a consecutive run, a shuffled run that spans
+            // as many indices as it has rows, and one row twice.
+            let rows: Vec<usize> = (0..GRAM_CHUNK)
+                .filter(|i| i % 3 != 1)
+                .chain(GRAM_CHUNK..2 * GRAM_CHUNK)
+                .chain([
+                    2 * GRAM_CHUNK + 1,
+                    2 * GRAM_CHUNK,
+                    2 * GRAM_CHUNK + 3,
+                    2 * GRAM_CHUNK + 3,
+                ])
+                .collect();
             let cols: Vec<usize> = (0..p).rev().collect();
             let got = Gram::over(&a, &cols, &b, &[1, 0], Some(&w), &rows);
             let sub = DMatrix::from_fn(rows.len(), p, |i, j| {
@@ -837,6 +853,13 @@ mod tests {
             assert_eq!(got.g, got.g.transpose());
             let rhs = Gram::rhs_over(&a, &cols, &b, &[1, 0], Some(&w), &rows);
             assert!((&rhs - &r).amax() < 1e-12 * r.amax());
+            // Short lists that span as many indices as they hold rows but
+            // are not consecutive (a row twice; descending).
+            for odd in [[5, 5, 7], [7, 5, 6]] {
+                let got = Gram::over(&a, &cols, &b, &[0], None, &odd);
+                let sub = DMatrix::from_fn(3, p, |i, j| a[(odd[i], cols[j])]);
+                assert!((got.g - sub.tr_mul(&sub)).amax() < 1e-12, "{odd:?}");
+            }
             // Take the first 100 rows out again: the sums of the others.
             let mut down = got.clone();
             down.add_rows(&a, &cols, &b, &[1, 0], Some(&w), &rows[..100], -1.0);
