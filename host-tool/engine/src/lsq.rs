@@ -599,7 +599,7 @@ pub fn solve_gram(gram: &Gram) -> Option<GramSolution> {
     }
     let d = DVector::from_fn(p, |j, _| g[(j, j)].max(0.0).sqrt());
     let largest = d.max();
-    if d.iter().any(|&v| !(v > 1e-12 * largest)) {
+    if d.iter().any(|&v| v <= 1e-12 * largest) {
         return None;
     }
     let scaled = DMatrix::from_fn(p, p, |i, j| g[(i, j)] / (d[i] * d[j]));
