@@ -62,7 +62,11 @@ pub fn pass_segments(data: &Dataset, rows: &[usize]) -> Option<Vec<(i64, usize)>
 
 /// How the rows were split, for reports (`"5 blocks of whole passes"`).
 pub fn describe(data: &Dataset, rows: &[usize], k: usize) -> String {
-    let b = blocks(data, rows, k);
+    describe_blocks(data, rows, &blocks(data, rows, k))
+}
+
+/// [`describe`] of the blocks `b` that [`blocks`] made of `rows`.
+pub fn describe_blocks(data: &Dataset, rows: &[usize], b: &[Vec<usize>]) -> String {
     match block_kind(data, rows) {
         BlockKind::Passes => format!(
             "{} blocks of whole passes (pass_id; passes longer than {PASS_SEGMENT} points cut into segments)",
@@ -273,80 +277,49 @@ pub fn held_out_residuals(
     Ok(out)
 }
 
-/// The condition number (largest over smallest eigenvalue of the
-/// column-scaled Gram matrix, = the square of the design's) up to which
-/// the hold-out refits are solved from Gram sums: below it the normal
-/// equations lose at most ~1e-8 relative accuracy (ε · 10⁸), far below
-/// anything the held-out RMS is read to; above it (or rank-deficient:
-/// the minimum-norm solution needs the SVD's rank decision) each refit
-/// takes the QR/SVD path on the rows themselves.
-const GRAM_MAX_CONDITION: f64 = 1e8;
+/// The coefficients of each hold-out block's training fit, solved from
+/// per-block Gram sums (`grams[i]` over block i's rows): the training
+/// system of block i is (G − Gᵢ) x = r − rᵢ with G = Σ Gᵢ, so k refits cost
+/// one pass over the rows instead of k QR factorisations of (k−1)/k of
+/// them. One p × right-hand-sides matrix per block; None when a training
+/// system is not well conditioned enough for the normal equations
+/// ([`lsq::GRAM_MAX_CONDITION`], or a column that is zero once its block
+/// is left out): the caller then refits each block by QR.
+pub fn block_refits(grams: &[lsq::Gram]) -> Option<Vec<nalgebra::DMatrix<f64>>> {
+    let total = lsq::Gram::total(grams)?;
+    grams
+        .iter()
+        .map(|gb| {
+            let train = lsq::Gram {
+                g: &total.g - &gb.g,
+                r: &total.r - &gb.r,
+            };
+            lsq::solve_gram(&train).map(|s| s.coef)
+        })
+        .collect()
+}
 
 /// The held-out prediction of every row (indexed like `a`'s rows): each of
 /// `blocks` (row indices into `a`) predicted by the weighted least-squares
-/// fit on the other blocks, solved from per-block Gram sums — Gᵦ = AᵦᵀWAᵦ
-/// and rᵦ = AᵦᵀWbᵦ are formed once, the training system of a block is
-/// (G − Gᵦ) x = r − rᵦ — so k refits cost one pass over the rows instead of
-/// k QR factorisations of (k−1)/k of them. None when a training system is
-/// not well conditioned enough for the normal equations
-/// ([`GRAM_MAX_CONDITION`]); the caller then refits each block by QR.
+/// fit on the other blocks ([`block_refits`]); None when the caller must
+/// refit each block by QR.
 fn gram_predictions(
     a: &nalgebra::DMatrix<f64>,
     b: &DVector<f64>,
     w: Option<&DVector<f64>>,
     blocks: &[Vec<usize>],
 ) -> Option<Vec<f64>> {
-    use nalgebra::{DMatrix, SymmetricEigen};
-    let p = a.ncols();
-    if p == 0 || a.iter().chain(b.iter()).any(|v| !v.is_finite()) {
-        return None;
-    }
-    let mut grams = Vec::with_capacity(blocks.len());
-    let (mut g, mut r) = (DMatrix::<f64>::zeros(p, p), DVector::<f64>::zeros(p));
-    for block in blocks {
-        let mut ab = a.select_rows(block.iter());
-        let mut bb = b.select_rows(block.iter());
-        if let Some(w) = w {
-            for (i, &row) in block.iter().enumerate() {
-                let s = w[row].sqrt();
-                ab.row_mut(i).scale_mut(s);
-                bb[i] *= s;
-            }
-        }
-        let gb = ab.tr_mul(&ab);
-        let rb = ab.tr_mul(&bb);
-        g += &gb;
-        r += &rb;
-        grams.push((gb, rb));
-    }
+    let cols: Vec<usize> = (0..a.ncols()).collect();
+    let b = nalgebra::DMatrix::from_column_slice(b.len(), 1, b.as_slice());
+    let grams: Vec<lsq::Gram> = blocks
+        .iter()
+        .map(|block| lsq::Gram::over(a, &cols, &b, &[0], w, block))
+        .collect();
+    let coefs = block_refits(&grams)?;
     let mut pred = vec![0.0; a.nrows()];
-    for (block, (gb, rb)) in blocks.iter().zip(&grams) {
-        let gt = &g - gb;
-        let rt = &r - rb;
-        // Column scaling (as the QR path scales columns to unit norm).
-        let d: Vec<f64> = (0..p).map(|j| gt[(j, j)].max(0.0).sqrt()).collect();
-        if d.iter().any(|&v| v <= 0.0) {
-            return None;
-        }
-        let scaled = DMatrix::from_fn(p, p, |i, j| gt[(i, j)] / (d[i] * d[j]));
-        let eig = SymmetricEigen::new(scaled);
-        let lmax = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
-        let lmin = eig
-            .eigenvalues
-            .iter()
-            .copied()
-            .fold(f64::INFINITY, f64::min);
-        if !(lmin > 0.0 && lmax / lmin < GRAM_MAX_CONDITION) {
-            return None;
-        }
-        // x = D⁻¹ V Λ⁻¹ Vᵀ D⁻¹ r
-        let rs = DVector::from_fn(p, |j, _| rt[j] / d[j]);
-        let vtr = eig.eigenvectors.tr_mul(&rs);
-        let z = DVector::from_fn(p, |k, _| vtr[k] / eig.eigenvalues[k]);
-        let xs = &eig.eigenvectors * z;
-        let coef = DVector::from_fn(p, |j, _| xs[j] / d[j]);
+    for (block, coef) in blocks.iter().zip(&coefs) {
         for &i in block {
-            pred[i] = a.row(i).transpose().dot(&coef);
+            pred[i] = a.row(i).transpose().dot(&coef.column(0));
         }
     }
     Some(pred)

@@ -234,6 +234,10 @@ pub fn improve_with(
     let mut adds: Vec<String> = Vec::new();
     let mut steps = Vec::new();
     let mut added: Vec<AddedEffect> = Vec::new();
+    // Every step's model was fitted to the measurement file, whichever
+    // readings the screen left out at that step: the history follows the
+    // file, whose hash is the same at every step.
+    let sha256 = crate::import::content_hash(data);
     loop {
         let effects = adds
             .iter()
@@ -251,10 +255,9 @@ pub fn improve_with(
             outliers::find(data, seed, &effects)?
         };
         let clean = outliers::without(data, &found);
-        let mut model = fit::fit(&clean, seed, &effects, &FitOptions::default())?;
-        // The model was fitted to the measurement file, whichever readings
-        // the screen left out at this step: the history follows the file.
-        model.data.sha256 = crate::import::content_hash(data);
+        let model = fit::fit_recorded(&clean, seed, &effects, &FitOptions::default(), || {
+            sha256.clone()
+        })?;
         history::save_with_model(out, &model)?;
         progress(&format!("improve: step {k}: diagnosing"));
         let d = diagnose::diagnose_with(

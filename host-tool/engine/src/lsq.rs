@@ -151,10 +151,26 @@ pub fn design_matrix(
 /// in the model's own coordinates. Fewer than the column count means the
 /// model cannot be determined whatever the solver does (docs/cli.md § Measurement CSV).
 pub fn distinct_rows(a: &DMatrix<f64>) -> usize {
-    let mut seen: HashSet<Vec<u64>> = HashSet::with_capacity(a.nrows());
+    distinct_rows_up_to(a, usize::MAX)
+}
+
+/// [`distinct_rows`], counting no further than `cap`: whether a model of
+/// `cap` terms has enough points is known once `cap` distinct rows are
+/// seen (a few dozen rows of a million-row capture), and a count below
+/// `cap` is exact.
+pub fn distinct_rows_up_to(a: &DMatrix<f64>, cap: usize) -> usize {
+    let mut seen: HashSet<Vec<u64>> = HashSet::new();
+    let mut row = Vec::with_capacity(a.ncols());
     for i in 0..a.nrows() {
+        if seen.len() >= cap {
+            break;
+        }
         // +0.0 so that −0.0 and 0.0 count as the same point.
-        seen.insert(a.row(i).iter().map(|v| (v + 0.0).to_bits()).collect());
+        row.clear();
+        row.extend(a.row(i).iter().map(|v| (v + 0.0).to_bits()));
+        if !seen.contains(row.as_slice()) {
+            seen.insert(row.clone());
+        }
     }
     seen.len()
 }
@@ -348,6 +364,268 @@ fn solve_inner(
         .collect())
 }
 
+/// The condition number of a column-scaled Gram matrix (= the square of
+/// the design's) below which the normal equations are solved instead of a
+/// QR of the rows: up to it they lose at most ~ε·10⁸ ≈ 10⁻⁸ relative
+/// accuracy before refinement (far below any coefficient's standard
+/// deviation); above it, or with a zero column, the caller takes the QR
+/// path, whose SVD also makes the rank decision and names collinear
+/// columns. Shared by the fit, its block hold-out and the outlier screen.
+pub const GRAM_MAX_CONDITION: f64 = 1e8;
+
+/// Rows gathered per chunk of the Gram sums: a chunk of a 25-column design
+/// (1024 × 25 × 8 B = 200 kB) stays in cache while its column products
+/// are formed.
+const GRAM_CHUNK: usize = 1024;
+
+/// Weighted Gram sums of a least-squares problem over some of its rows:
+/// `g` = AᵀWA (p × p, symmetric) and `r` = AᵀWB (p × right-hand sides),
+/// for chosen columns of A and B. Sums over disjoint row sets add, so a
+/// fit's Gram is the sum of its hold-out blocks' and a block's training
+/// system is the total minus the block.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Gram {
+    /// AᵀWA.
+    pub g: DMatrix<f64>,
+    /// AᵀWB.
+    pub r: DMatrix<f64>,
+}
+
+impl Gram {
+    /// The sums over `rows` (indices into the rows of `a`, `b` and `w`) of
+    /// the columns `cols` of `a` and `bcols` of `b`, each row weighted by
+    /// `w` (None: 1).
+    pub fn over(
+        a: &DMatrix<f64>,
+        cols: &[usize],
+        b: &DMatrix<f64>,
+        bcols: &[usize],
+        w: Option<&DVector<f64>>,
+        rows: &[usize],
+    ) -> Gram {
+        let mut s = Gram {
+            g: DMatrix::zeros(cols.len(), cols.len()),
+            r: DMatrix::zeros(cols.len(), bcols.len()),
+        };
+        s.add_rows(a, cols, b, bcols, w, rows, 1.0);
+        s
+    }
+
+    /// The sums of disjoint row sets added up: the Gram of their union
+    /// (None for none).
+    pub fn total(parts: &[Gram]) -> Option<Gram> {
+        let mut t = parts.first()?.clone();
+        for part in &parts[1..] {
+            t.g += &part.g;
+            t.r += &part.r;
+        }
+        Some(t)
+    }
+
+    /// Adds `sign` × the sums over `rows` (see [`Gram::over`]): −1 takes
+    /// rows out (the outlier screen's flagged readings).
+    #[allow(clippy::too_many_arguments)]
+    pub fn add_rows(
+        &mut self,
+        a: &DMatrix<f64>,
+        cols: &[usize],
+        b: &DMatrix<f64>,
+        bcols: &[usize],
+        w: Option<&DVector<f64>>,
+        rows: &[usize],
+        sign: f64,
+    ) {
+        self.accumulate(a, cols, b, bcols, w, rows, sign, true);
+    }
+
+    /// AᵀWB alone over `rows` (the `r` of [`Gram::over`] without the p²
+    /// products of `g`): a refinement step's AᵀW·residual.
+    pub fn rhs_over(
+        a: &DMatrix<f64>,
+        cols: &[usize],
+        b: &DMatrix<f64>,
+        bcols: &[usize],
+        w: Option<&DVector<f64>>,
+        rows: &[usize],
+    ) -> DMatrix<f64> {
+        let mut s = Gram {
+            g: DMatrix::zeros(cols.len(), cols.len()),
+            r: DMatrix::zeros(cols.len(), bcols.len()),
+        };
+        s.accumulate(a, cols, b, bcols, w, rows, 1.0, false);
+        s.r
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn accumulate(
+        &mut self,
+        a: &DMatrix<f64>,
+        cols: &[usize],
+        b: &DMatrix<f64>,
+        bcols: &[usize],
+        w: Option<&DVector<f64>>,
+        rows: &[usize],
+        sign: f64,
+        with_g: bool,
+    ) {
+        let (p, q) = (cols.len(), bcols.len());
+        let width = p + q;
+        // The products computed: [A B] with g, B alone without.
+        let start = if with_g { 0 } else { p };
+        let mut acc = DMatrix::zeros(p, width - start);
+        // The chunk twice: `c` (rows × columns) and its transpose `ct`, the
+        // p design columns then the q values, each row scaled by √w (as
+        // the QR path weights rows). Two plain column-major matrices, so
+        // that nalgebra hands their product to matrixmultiply's dgemm (SIMD
+        // kernels chosen at run time).
+        let mut c = DMatrix::<f64>::zeros(GRAM_CHUNK, width);
+        let mut ct = DMatrix::<f64>::zeros(width, GRAM_CHUNK);
+        let w = w.map(|w| w.as_slice());
+        for chunk in rows.chunks(GRAM_CHUNK) {
+            let m = chunk.len();
+            let sources = (cols.iter().map(|&k| (a, k))).chain(bcols.iter().map(|&k| (b, k)));
+            // Consecutive rows (the usual case: a target measured on
+            // every row but a few outliers) are copied as slices.
+            let first = chunk[0];
+            let consecutive = consecutive(chunk);
+            let cs = c.as_mut_slice();
+            for (j, (mat, k)) in sources.enumerate() {
+                let n = mat.nrows();
+                let src = &mat.as_slice()[k * n..(k + 1) * n];
+                let dst = &mut cs[j * GRAM_CHUNK..j * GRAM_CHUNK + m];
+                if consecutive {
+                    dst.copy_from_slice(&src[first..first + m]);
+                } else {
+                    for (d, &i) in dst.iter_mut().zip(chunk) {
+                        *d = src[i];
+                    }
+                }
+                if let Some(w) = w {
+                    for (d, &i) in dst.iter_mut().zip(chunk) {
+                        *d *= w[i].sqrt();
+                    }
+                }
+            }
+            // The transpose written row by row (contiguous stores; the
+            // `width` columns are read as that many sequential streams).
+            let cs = c.as_slice();
+            for (l, out) in ct
+                .as_mut_slice()
+                .chunks_exact_mut(width)
+                .take(m)
+                .enumerate()
+            {
+                for (o, col) in out.iter_mut().zip(cs.chunks_exact(GRAM_CHUNK)) {
+                    *o = col[l];
+                }
+            }
+            acc.gemm(
+                sign,
+                &ct.view((0, 0), (p, m)),
+                &c.view((0, start), (m, width - start)),
+                1.0,
+            );
+        }
+        // g from the upper triangle (the product's two halves may differ
+        // in the last bit), r from the value columns.
+        if with_g {
+            for j in 0..p {
+                for k in j..p {
+                    self.g[(j, k)] += acc[(j, k)];
+                    self.g[(k, j)] = self.g[(j, k)];
+                }
+            }
+        }
+        for j in 0..p {
+            for k in 0..q {
+                self.r[(j, k)] += acc[(j, p - start + k)];
+            }
+        }
+    }
+}
+
+/// Whether `rows` are consecutive ascending indices (k, k+1, k+2, …): then
+/// a slice of a column is read in place of a gather.
+pub fn consecutive(rows: &[usize]) -> bool {
+    rows.windows(2).all(|w| w[1] == w[0] + 1)
+}
+
+/// The solution of the normal equations (AᵀWA) x = AᵀWB from a [`Gram`]:
+/// the column-scaled Gram's eigen-decomposition, kept so that a
+/// refinement step ([`GramSolution::apply`]) costs no second one.
+#[derive(Clone, Debug)]
+pub struct GramSolution {
+    /// Coefficients, p × right-hand sides.
+    pub coef: DMatrix<f64>,
+    /// [(AᵀWA)⁻¹]ⱼⱼ: times σ̂², the variance of coefficient j.
+    pub inv_diag: DVector<f64>,
+    /// σ_max/σ_min of the weighted, column-scaled design (the square root
+    /// of the scaled Gram's eigenvalue ratio): what the QR path reports.
+    pub condition_number: f64,
+    /// Column scales √Gⱼⱼ.
+    d: DVector<f64>,
+    eig: nalgebra::SymmetricEigen<f64, nalgebra::Dyn>,
+}
+
+impl GramSolution {
+    /// (AᵀWA)⁻¹ `rhs` (p × any) with the decomposition already made.
+    pub fn apply(&self, rhs: &DMatrix<f64>) -> DMatrix<f64> {
+        let v = &self.eig.eigenvectors;
+        let mut z = rhs.clone();
+        for (j, mut row) in z.row_iter_mut().enumerate() {
+            row /= self.d[j];
+        }
+        let mut z = v.tr_mul(&z);
+        for (k, mut row) in z.row_iter_mut().enumerate() {
+            row /= self.eig.eigenvalues[k];
+        }
+        let mut x = v * z;
+        for (j, mut row) in x.row_iter_mut().enumerate() {
+            row /= self.d[j];
+        }
+        x
+    }
+}
+
+/// Solves the normal equations of `gram`; None when they are not to be
+/// trusted — a zero column (relative to the largest, as the QR path
+/// decides), a non-finite sum, or a column-scaled condition number of
+/// [`GRAM_MAX_CONDITION`] or more — and the caller takes the QR path.
+pub fn solve_gram(gram: &Gram) -> Option<GramSolution> {
+    let g = &gram.g;
+    let p = g.nrows();
+    if p == 0 || g.iter().chain(gram.r.iter()).any(|v| !v.is_finite()) {
+        return None;
+    }
+    let d = DVector::from_fn(p, |j, _| g[(j, j)].max(0.0).sqrt());
+    let largest = d.max();
+    if d.iter().any(|&v| v <= 1e-12 * largest) {
+        return None;
+    }
+    let scaled = DMatrix::from_fn(p, p, |i, j| g[(i, j)] / (d[i] * d[j]));
+    let eig = nalgebra::SymmetricEigen::new(scaled);
+    let lmax = eig.eigenvalues.max();
+    let lmin = eig.eigenvalues.min();
+    if !(lmin > 0.0 && lmax / lmin < GRAM_MAX_CONDITION) {
+        return None;
+    }
+    let inv_diag = DVector::from_fn(p, |j, _| {
+        (0..p)
+            .map(|k| eig.eigenvectors[(j, k)].powi(2) / eig.eigenvalues[k])
+            .sum::<f64>()
+            / (d[j] * d[j])
+    });
+    let mut sol = GramSolution {
+        coef: DMatrix::zeros(p, gram.r.ncols()),
+        inv_diag,
+        condition_number: (lmax / lmin).sqrt(),
+        d,
+        eig,
+    };
+    sol.coef = sol.apply(&gram.r);
+    Some(sol)
+}
+
 /// √W·A·x without forming √W·A again.
 fn a_weighted_times(
     a: &DMatrix<f64>,
@@ -534,6 +812,74 @@ mod tests {
                 assert_eq!(a[(i, j)].to_bits(), col[r].to_bits(), "{f} row {r}");
             }
         }
+    }
+
+    /// Issue 15: the chunked Gram sums equal the explicit products AᵀWA
+    /// and AᵀWB over a row subset — more rows than a chunk, scattered and
+    /// consecutive rows, wide (the dgemm path) and narrow (nalgebra's own
+    /// loop) — taking rows out equals summing the rest, and the normal
+    /// equations give [`solve`]'s coefficients and standard deviations.
+    #[test]
+    fn gram_sums_equal_the_explicit_products() {
+        let mut rng = trueaxis_test_support::SplitMix64::new(3);
+        let n = 2 * GRAM_CHUNK + 77;
+        for p in [3, 9] {
+            let a = DMatrix::from_fn(n, p, |_, _| rng.signed_unit());
+            let b = DMatrix::from_fn(n, 2, |_, _| rng.signed_unit());
+            let w = DVector::from_fn(n, |_, _| 0.5 + rng.unit());
+            // Scattered rows, a consecutive run, a shuffled run that spans
+            // as many indices as it has rows, and one row twice.
+            let rows: Vec<usize> = (0..GRAM_CHUNK)
+                .filter(|i| i % 3 != 1)
+                .chain(GRAM_CHUNK..2 * GRAM_CHUNK)
+                .chain([
+                    2 * GRAM_CHUNK + 1,
+                    2 * GRAM_CHUNK,
+                    2 * GRAM_CHUNK + 3,
+                    2 * GRAM_CHUNK + 3,
+                ])
+                .collect();
+            let cols: Vec<usize> = (0..p).rev().collect();
+            let got = Gram::over(&a, &cols, &b, &[1, 0], Some(&w), &rows);
+            let sub = DMatrix::from_fn(rows.len(), p, |i, j| {
+                a[(rows[i], cols[j])] * w[rows[i]].sqrt()
+            });
+            let bs = DMatrix::from_fn(rows.len(), 2, |i, k| {
+                b[(rows[i], 1 - k)] * w[rows[i]].sqrt()
+            });
+            let (g, r) = (sub.tr_mul(&sub), sub.tr_mul(&bs));
+            assert!((&got.g - &g).amax() < 1e-12 * g.amax(), "p {p}");
+            assert!((&got.r - &r).amax() < 1e-12 * r.amax(), "p {p}");
+            assert_eq!(got.g, got.g.transpose());
+            let rhs = Gram::rhs_over(&a, &cols, &b, &[1, 0], Some(&w), &rows);
+            assert!((&rhs - &r).amax() < 1e-12 * r.amax());
+            // Short lists that span as many indices as they hold rows but
+            // are not consecutive (a row twice; descending).
+            for odd in [[5, 5, 7], [7, 5, 6]] {
+                let got = Gram::over(&a, &cols, &b, &[0], None, &odd);
+                let sub = DMatrix::from_fn(3, p, |i, j| a[(odd[i], cols[j])]);
+                assert!((got.g - sub.tr_mul(&sub)).amax() < 1e-12, "{odd:?}");
+            }
+            // Take the first 100 rows out again: the sums of the others.
+            let mut down = got.clone();
+            down.add_rows(&a, &cols, &b, &[1, 0], Some(&w), &rows[..100], -1.0);
+            let rest = Gram::over(&a, &cols, &b, &[1, 0], Some(&w), &rows[100..]);
+            assert!((&down.g - &rest.g).amax() < 1e-12 * g.amax());
+            // The normal equations against the QR path.
+            let sol = solve_gram(&got).unwrap();
+            let qr = solve(&sub.map(|v| v), &bs.column(0).into_owned(), None).unwrap();
+            assert!((sol.coef.column(0) - &qr.coef).amax() < 1e-12 * qr.coef.amax());
+            let sd = sol.inv_diag.map(|v| (qr.rss / qr.dof as f64 * v).sqrt());
+            assert!((sd - &qr.coef_sd).amax() < 1e-12 * qr.coef_sd.amax());
+            assert!((sol.condition_number / qr.condition_number - 1.0).abs() < 1e-12);
+        }
+        // A zero column or a rank-deficient pair: no Gram solution.
+        let a = DMatrix::from_fn(20, 3, |i, j| [1.0, i as f64, 0.0][j]);
+        let b = DMatrix::from_element(20, 1, 1.0);
+        let all: Vec<usize> = (0..20).collect();
+        assert!(solve_gram(&Gram::over(&a, &[0, 1, 2], &b, &[0], None, &all)).is_none());
+        let a = DMatrix::from_fn(20, 2, |i, _| i as f64);
+        assert!(solve_gram(&Gram::over(&a, &[0, 1], &b, &[0], None, &all)).is_none());
     }
 
     #[test]

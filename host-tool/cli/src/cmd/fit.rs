@@ -90,11 +90,13 @@ impl Args {
         let clean = outliers::without(&data, &found);
         // The fit's own messages name the target (`ex: 3 distinct points
         // but the model has 4 terms`); the file is named here.
-        let mut model = fit::fit(&clean, &self.model, &adds, &opts)
-            .with_context(|| format!("{}: cannot fit {}", self.data.display(), self.model))?;
+        // Fitted to the file (less its outliers): the history follows the
+        // file, so the model records the file's hash (not the cleaned copy's).
+        let mut model = fit::fit_recorded(&clean, &self.model, &adds, &opts, || {
+            trueaxis_engine::import::content_hash(&data)
+        })
+        .with_context(|| format!("{}: cannot fit {}", self.data.display(), self.model))?;
         model.stats.warnings.extend(screen_warning);
-        // Fitted to the file (less its outliers): the history follows the file.
-        model.data.sha256 = trueaxis_engine::import::content_hash(&data);
         // Fit's warnings are strings (MODEL.json `stats.warnings`); the
         // code leads, as `warning (code): …` elsewhere.
         for (code, detail) in input::data_warnings(&data) {

@@ -26,11 +26,16 @@
 //! not caught yet widens it instead of being flagged: only readings far off
 //! everything around them go.
 
+use std::borrow::Cow;
+
 use anyhow::Result;
 use serde::Serialize;
 
 use crate::data::{Dataset, TARGETS};
 use crate::effect::Effect;
+use crate::features::Norm;
+use crate::fit::linear::Design;
+use crate::lsq::Gram;
 use crate::model::Seed;
 
 /// Residuals beyond this many robust σ from the median are outliers
@@ -82,16 +87,21 @@ impl Outlier {
     }
 }
 
+/// The median (0 for none), by selection — O(n), not a sort: the screen
+/// takes a few per target and round of a million readings. `v` is
+/// reordered.
 fn median(v: &mut [f64]) -> f64 {
-    v.sort_unstable_by(f64::total_cmp);
     let n = v.len();
     if n == 0 {
         return 0.0;
     }
+    let (below, &mut mid, _) = v.select_nth_unstable_by(n / 2, f64::total_cmp);
     if n % 2 == 1 {
-        v[n / 2]
+        mid
     } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
+        // The lower middle is the largest of the values below.
+        let lower = below.iter().copied().max_by(f64::total_cmp).unwrap_or(mid);
+        0.5 * (lower + mid)
     }
 }
 
@@ -115,23 +125,34 @@ fn local_deviation(data: &Dataset, resid: &[(usize, f64, f64)]) -> Vec<Option<(f
             data.session_id.as_ref().map(|v| v[row]),
         )
     };
+    // Each reading's inputs once (not once per window it falls in), and
+    // the neighbours in a fixed buffer: no allocation per reading.
+    let keys: Vec<_> = resid.iter().map(|x| inputs(x.0)).collect();
     (0..resid.len())
         .map(|i| {
-            let own = inputs(resid[i].0);
+            let own = &keys[i];
             let lo = i.saturating_sub(NEIGHBOUR_WINDOW);
             let hi = (i + NEIGHBOUR_WINDOW + 1).min(resid.len());
-            let same = |j: &usize| inputs(resid[*j].0) == own;
-            let mut v: Vec<f64> = (lo..i)
+            let same = |j: &usize| keys[*j] == *own;
+            let mut buf = [0.0; 2 * NEIGHBOURS];
+            let mut n = 0;
+            for j in (lo..i)
                 .rev()
                 .filter(same)
                 .take(NEIGHBOURS)
                 .chain((i + 1..hi).filter(same).take(NEIGHBOURS))
-                .map(|j| resid[j].2)
-                .collect();
-            (!v.is_empty()).then(|| {
-                let m = median(&mut v);
-                let mut spread: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
-                (resid[i].2 - m, MAD_TO_SIGMA * median(&mut spread))
+            {
+                buf[n] = resid[j].2;
+                n += 1;
+            }
+            let v = &mut buf[..n];
+            (n > 0).then(|| {
+                let m = median(v);
+                let mut spread = [0.0; 2 * NEIGHBOURS];
+                for (s, x) in spread.iter_mut().zip(v.iter()) {
+                    *s = (x - m).abs();
+                }
+                (resid[i].2 - m, MAD_TO_SIGMA * median(&mut spread[..n]))
             })
         })
         .collect()
@@ -152,80 +173,239 @@ pub fn without(data: &Dataset, outliers: &[Outlier]) -> Dataset {
 
 /// The outliers of `data` under the model `seed` + `adds` (see the module
 /// doc), by target then row.
+///
+/// The rounds are solved from Gram sums over one design matrix
+/// ([`Design`]): each target's Gram over all its readings is formed once
+/// and a round takes its flagged readings out of it, so a round costs a
+/// prediction pass, not a refit of the whole data set. Where the normal
+/// equations are not to be trusted (an ill-conditioned or rank-deficient
+/// design, too few points: [`lsq::solve_gram`](crate::lsq::solve_gram))
+/// the screen refits the data set by QR every round, which also words
+/// the errors.
 pub fn find(data: &Dataset, seed: &str, adds: &[Effect]) -> Result<Vec<Outlier>> {
     let seed = match Seed::parse(seed)? {
         s @ (Seed::Cubic19 | Seed::Kinematic) => s.to_string(),
         _ => "cubic19".to_string(),
     };
+    match find_by_gram(data, &seed, adds) {
+        Some(found) => Ok(found),
+        None => find_by_refits(data, &seed, adds),
+    }
+}
+
+/// [`find`]'s rounds by refitting the data set less the flagged readings
+/// (QR) each round — the screen where the normal equations are not to be
+/// trusted, and the words of its errors.
+fn find_by_refits(data: &Dataset, seed: &str, adds: &[Effect]) -> Result<Vec<Outlier>> {
     let mut found: Vec<Outlier> = Vec::new();
     for _ in 0..MAX_ROUNDS {
         let clean = without(data, &found);
         // The screen needs the model only, not its held-out RMS (blocks 0).
-        let (model, _) = crate::fit::linear::fit(&clean, &seed, adds, 0)?;
+        let (model, _) = crate::fit::linear::fit(&clean, seed, adds, 0)?;
         let pred = model.predict(data)?;
         let mut next = Vec::new();
         for t in data.targets() {
             let Some(p) = &pred[t] else { continue };
             let resid: Vec<(usize, f64, f64)> =
                 data.measured(t).map(|(r, v)| (r, v, v - p[r])).collect();
-            let flagged = |r: usize| found.iter().any(|o| o.row == r && o.target_index() == t);
-            let mut kept: Vec<f64> = resid
-                .iter()
-                .filter(|(r, _, _)| !flagged(*r))
-                .map(|x| x.2)
-                .collect();
-            let med = median(&mut kept);
-            let mut dev: Vec<f64> = kept.iter().map(|v| (v - med).abs()).collect();
-            let scale = MAD_TO_SIGMA * median(&mut dev);
-            if scale <= 0.0 {
-                continue;
-            }
-            // Far off the model *and* off its neighbours, each against its
-            // own robust scale: a run of neighbouring readings off together
-            // is shape the model lacks (a reversal, a bump), and a short
-            // period sampled coarsely varies from reading to reading — the
-            // local scale widens for it — while a beam break is far off both.
-            let local = local_deviation(data, &resid);
-            let mut dev: Vec<f64> = resid
-                .iter()
-                .zip(&local)
-                .filter(|((r, _, _), _)| !flagged(*r))
-                .filter_map(|(_, d)| d.map(|d| d.0.abs()))
-                .collect();
-            let local_scale = MAD_TO_SIGMA * median(&mut dev);
-            for (&(r, v, e), d) in resid.iter().zip(&local) {
-                if (e - med).abs() > OUTLIER_K * scale
-                    && d.is_none_or(|(d, spread)| {
-                        d.abs() > OUTLIER_K * local_scale && d.abs() > OUTLIER_K * spread
-                    })
-                {
-                    next.push(Outlier {
-                        line: data.line.get(r).copied(),
-                        row: r,
-                        target: TARGETS[t].to_string(),
-                        value_um: v,
-                        resid_um: e,
-                        scale_um: scale,
-                    });
-                }
-            }
+            next.extend(flag(data, t, &resid, &found));
         }
-        let same = next.len() == found.len()
-            && next
-                .iter()
-                .zip(&found)
-                .all(|(a, b)| a.row == b.row && a.target == b.target);
-        found = next;
-        if same {
+        if settle(&mut found, next) {
             break;
         }
     }
     Ok(found)
 }
 
+/// [`find`]'s rounds from Gram sums; None when any round's normal
+/// equations are not to be trusted (the caller then refits by QR).
+fn find_by_gram(data: &Dataset, seed: &str, adds: &[Effect]) -> Option<Vec<Outlier>> {
+    let design = Design::new(data, &Norm::from_data(data), seed, adds).ok()?;
+    if design.targets.is_empty() {
+        return None;
+    }
+    let full: Vec<Gram> = (design.targets.iter().enumerate())
+        .map(|(k, tg)| design.gram(&tg.cols, &[k], &tg.local))
+        .collect();
+    let mut found: Vec<Outlier> = Vec::new();
+    for _ in 0..MAX_ROUNDS {
+        let mut next = Vec::new();
+        for (k, tg) in design.targets.iter().enumerate() {
+            // `found` is by target then row, so `out` is ascending.
+            let out: Vec<usize> = (found.iter())
+                .filter(|o| o.target_index() == tg.target)
+                .map(|o| design.local_of(o.row))
+                .collect();
+            let (kept, gram): (Cow<[usize]>, Cow<Gram>) = if out.is_empty() {
+                (Cow::Borrowed(&tg.local), Cow::Borrowed(&full[k]))
+            } else {
+                let kept: Vec<usize> = (tg.local.iter().copied())
+                    .filter(|i| out.binary_search(i).is_err())
+                    .collect();
+                // A few flagged readings are taken out of the full sums;
+                // many (a quarter or more) are summed afresh, so that the
+                // difference never cancels most of the total.
+                let gram = if 4 * out.len() < tg.local.len() {
+                    let mut g = full[k].clone();
+                    let (a, b, w) = (&design.a, &design.b, design.w.as_ref());
+                    g.add_rows(a, &tg.cols, b, &[k], w, &out, -1.0);
+                    g
+                } else {
+                    design.gram(&tg.cols, &[k], &kept)
+                };
+                (Cow::Owned(kept), Cow::Owned(gram))
+            };
+            let (_, coef) = design.coefficients(&tg.cols, &[k], &kept, &gram)?;
+            let pred = design.predict(&tg.cols, coef.as_slice(), &tg.local);
+            let resid: Vec<(usize, f64, f64)> = (tg.local.iter().zip(pred))
+                .map(|(&i, p)| {
+                    let v = design.b[(i, k)];
+                    (design.rows[i], v, v - p)
+                })
+                .collect();
+            next.extend(flag(data, tg.target, &resid, &found));
+        }
+        if settle(&mut found, next) {
+            break;
+        }
+    }
+    Some(found)
+}
+
+/// Takes `next` as the flagged set; true when it is the one `found` held
+/// (the screen has settled).
+fn settle(found: &mut Vec<Outlier>, next: Vec<Outlier>) -> bool {
+    let same = next.len() == found.len()
+        && next
+            .iter()
+            .zip(found.iter())
+            .all(|(a, b)| a.row == b.row && a.target == b.target);
+    *found = next;
+    same
+}
+
+/// The outliers of target `t` given its readings' residuals `resid`
+/// (row, value, residual; rows ascending) and the readings flagged so far
+/// (`found`: left out of the scale estimates).
+fn flag(data: &Dataset, t: usize, resid: &[(usize, f64, f64)], found: &[Outlier]) -> Vec<Outlier> {
+    let mut flagged_rows: Vec<usize> = (found.iter())
+        .filter(|o| o.target_index() == t)
+        .map(|o| o.row)
+        .collect();
+    flagged_rows.sort_unstable();
+    let flagged = |r: usize| flagged_rows.binary_search(&r).is_ok();
+    let mut kept: Vec<f64> = resid
+        .iter()
+        .filter(|(r, _, _)| !flagged(*r))
+        .map(|x| x.2)
+        .collect();
+    let med = median(&mut kept);
+    let mut dev: Vec<f64> = kept.iter().map(|v| (v - med).abs()).collect();
+    let scale = MAD_TO_SIGMA * median(&mut dev);
+    let mut out = Vec::new();
+    if scale <= 0.0 {
+        return out;
+    }
+    // Far off the model *and* off its neighbours, each against its
+    // own robust scale: a run of neighbouring readings off together
+    // is shape the model lacks (a reversal, a bump), and a short
+    // period sampled coarsely varies from reading to reading — the
+    // local scale widens for it — while a beam break is far off both.
+    let local = local_deviation(data, resid);
+    let mut dev: Vec<f64> = resid
+        .iter()
+        .zip(&local)
+        .filter(|((r, _, _), _)| !flagged(*r))
+        .filter_map(|(_, d)| d.map(|d| d.0.abs()))
+        .collect();
+    let local_scale = MAD_TO_SIGMA * median(&mut dev);
+    for (&(r, v, e), d) in resid.iter().zip(&local) {
+        if (e - med).abs() > OUTLIER_K * scale
+            && d.is_none_or(|(d, spread)| {
+                d.abs() > OUTLIER_K * local_scale && d.abs() > OUTLIER_K * spread
+            })
+        {
+            out.push(Outlier {
+                line: data.line.get(r).copied(),
+                row: r,
+                target: TARGETS[t].to_string(),
+                value_um: v,
+                resid_um: e,
+                scale_um: scale,
+            });
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 15: the screen's rounds from Gram sums flag exactly what the
+    /// rounds of refits flag (same rows, targets, residuals at round-off)
+    /// on a 3-D grid with three targets, an `--add` effect on one, u_um
+    /// weights and four spikes on two targets (a 3 µm one next to a 30 µm
+    /// one), so that the second round takes flagged readings out of the
+    /// Gram sums.
+    #[test]
+    fn the_gram_screen_flags_what_the_refits_flag() {
+        let [x, y, z] = crate::data::grid_positions([17, 11, 11], [50.0; 3]);
+        let n = x.len();
+        let mut rng = trueaxis_test_support::SplitMix64::new(11);
+        let mut err: [Vec<Option<f64>>; 3] = Default::default();
+        for (t, e) in err.iter_mut().enumerate() {
+            *e = (0..n)
+                .map(|r| {
+                    let u = [x[r] / 400.0 - 1.0, y[r] / 250.0 - 1.0, z[r] / 250.0 - 1.0];
+                    Some(
+                        2.0 * u[0] - u[1] * u[2]
+                            + 0.5 * u[t].powi(3)
+                            + if t == 1 {
+                                0.8 * (y[r] / 30.0 * std::f64::consts::TAU).sin()
+                            } else {
+                                0.0
+                            }
+                            + 0.1 * rng.normal(),
+                    )
+                })
+                .collect();
+        }
+        let spikes = [
+            (0, 100, 40.0),
+            (0, 1500, -25.0),
+            (1, 700, 30.0),
+            (1, 701, 3.0),
+        ];
+        for &(t, r, v) in &spikes {
+            err[t][r] = err[t][r].map(|e| e + v);
+        }
+        let d = Dataset {
+            source: "grid.csv".into(),
+            pos_mm: [Some(x), Some(y), Some(z)],
+            err_um: err.map(Some),
+            u_um: Some((0..n).map(|r| 0.1 + 0.02 * (r % 3) as f64).collect()),
+            line: (0..n).map(|r| r + 2).collect(),
+            ..Dataset::default()
+        };
+        let adds = [Effect::parse("periodic:target=ey,axis=y,period_mm=30").unwrap()];
+        let gram = find_by_gram(&d, "cubic19", &adds).expect("well conditioned");
+        let refits = find_by_refits(&d, "cubic19", &adds).unwrap();
+        let key = |o: &Outlier| (o.target.clone(), o.row);
+        assert_eq!(
+            gram.iter().map(key).collect::<Vec<_>>(),
+            refits.iter().map(key).collect::<Vec<_>>()
+        );
+        for (a, b) in gram.iter().zip(&refits) {
+            assert!((a.resid_um - b.resid_um).abs() < 1e-9, "{a:?} {b:?}");
+            assert!((a.scale_um - b.scale_um).abs() < 1e-9, "{a:?} {b:?}");
+        }
+        let rows: Vec<(String, usize)> = gram.iter().map(key).collect();
+        for (t, r, _) in spikes {
+            assert!(rows.contains(&(TARGETS[t].to_string(), r)), "{rows:?}");
+        }
+        assert_eq!(find(&d, "cubic19", &adds).unwrap(), gram);
+    }
 
     #[test]
     fn a_spike_is_found_on_its_line_and_left_out() {

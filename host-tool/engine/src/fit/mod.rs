@@ -111,6 +111,22 @@ impl std::fmt::Debug for ProgressSink {
 /// effect on a target or channel the data lacks, fewer distinct points than
 /// terms, collinear columns, u_um ≤ 0) is an error with a message for the user.
 pub fn fit(data: &Dataset, seed: &str, adds: &[Effect], opts: &FitOptions) -> Result<ModelFile> {
+    fit_recorded(data, seed, adds, opts, || crate::import::content_hash(data))
+}
+
+/// [`fit`] of `data` recorded as fitted to the file whose content hash
+/// `sha256` gives: `fit` and `improve` fit the file less its outliers and
+/// record the file (`history` follows the file), so the hash of the
+/// cleaned copy — a canonical CSV of every row, as long to make as the
+/// fit's own solve at a million rows — is never computed, and `improve`
+/// computes the file's once for all its steps.
+pub fn fit_recorded(
+    data: &Dataset,
+    seed: &str,
+    adds: &[Effect],
+    opts: &FitOptions,
+    sha256: impl FnOnce() -> String,
+) -> Result<ModelFile> {
     let parsed = Seed::parse(seed)?;
     if data.is_empty() {
         bail!("{}: no data rows", data.source);
@@ -173,7 +189,7 @@ pub fn fit(data: &Dataset, seed: &str, adds: &[Effect], opts: &FitOptions) -> Re
         adds: adds.iter().map(|e| e.spec.clone()).collect(),
         data: DataRef {
             source: data.source.clone(),
-            sha256: crate::import::content_hash(data),
+            sha256: sha256(),
             rows: data.len(),
             temp_range_c: Some(
                 data.temps
