@@ -186,6 +186,9 @@ fn unweighted_sums(pos_mm: &[f64], f0: f64, df: f64, count: usize) -> Arc<Unweig
     u
 }
 
+/// Taylor terms binned per pass over the samples in [`trig_sums`].
+const TERMS_AT_ONCE: usize = 8;
+
 /// One planner for the process: it keeps the plan (twiddles, algorithm
 /// choice) of each FFT length it has made.
 static PLANNER: Mutex<Option<FftPlanner<f64>>> = Mutex::new(None);
@@ -259,17 +262,31 @@ pub fn trig_sums(
     let fft = inverse_fft(len);
     let mut bins = vec![Complex::new(0.0, 0.0); len];
     let mut scratch = vec![Complex::new(0.0, 0.0); fft.get_inplace_scratch_len()];
-    for m in 0..terms {
-        bins.fill(Complex::new(0.0, 0.0));
+    // The samples' moments Σ w·δ^m per grid cell, TERMS_AT_ONCE terms per
+    // pass over the samples: a cell's terms side by side, so a sample adds
+    // into one short run of memory (samples come in position order, cells
+    // in order too), and one pass serves several FFTs.
+    let mut moments = vec![Complex::new(0.0, 0.0); len * TERMS_AT_ONCE];
+    for m0 in (0..terms).step_by(TERMS_AT_ONCE) {
+        let now = TERMS_AT_ONCE.min(terms - m0);
+        moments.fill(Complex::new(0.0, 0.0));
         for ((&s, wt), &d) in slot.iter().zip(weight.iter_mut()).zip(&offset) {
-            bins[s] += *wt;
-            *wt *= d;
+            let cell = &mut moments[s * TERMS_AT_ONCE..s * TERMS_AT_ONCE + now];
+            for c in cell {
+                *c += *wt;
+                *wt *= d;
+            }
         }
-        fft.process_with_scratch(&mut bins, &mut scratch);
-        let next = 1.0 / (m as f64 + 1.0);
-        for (((c, s), &b), &u) in coef.iter_mut().zip(sum.iter_mut()).zip(&bins).zip(&u) {
-            *s += *c * b;
-            *c *= Complex::new(0.0, u * next);
+        for j in 0..now {
+            for (b, cell) in bins.iter_mut().zip(moments.chunks_exact(TERMS_AT_ONCE)) {
+                *b = cell[j];
+            }
+            fft.process_with_scratch(&mut bins, &mut scratch);
+            let next = 1.0 / ((m0 + j) as f64 + 1.0);
+            for (((c, s), &b), &u) in coef.iter_mut().zip(sum.iter_mut()).zip(&bins).zip(&u) {
+                *s += *c * b;
+                *c *= Complex::new(0.0, u * next);
+            }
         }
     }
     for (i, (o, s)) in out.iter_mut().zip(&sum).enumerate() {
