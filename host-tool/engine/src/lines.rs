@@ -383,7 +383,10 @@ mod tests {
         assert_eq!(l.lines, 2);
         assert_eq!(l.rows.len(), 2 * 1602 + 2);
         assert!(l.rows.windows(2).all(|w| w[0] < w[1]));
-        assert!(l.rows.iter().all(|&r| d.pos(2, r) == 50.0 && d.pos(1, r) != 50.0));
+        assert!(l
+            .rows
+            .iter()
+            .all(|&r| d.pos(2, r) == 50.0 && d.pos(1, r) != 50.0));
         assert!((l.spacing_mm - 0.5).abs() < 1e-9);
         assert!((l.span_mm - 400.0).abs() < 1e-9);
         // Along y: the line at x = 300 alone, with the x lines' two passes

@@ -157,7 +157,10 @@ fn unweighted_sums(pos_mm: &[f64], f0: f64, df: f64, count: usize) -> Arc<Unweig
             && u.f0.to_bits() == f0.to_bits()
             && u.df.to_bits() == df.to_bits()
             && u.pos_mm.len() == pos_mm.len()
-            && u.pos_mm.iter().zip(pos_mm).all(|(a, b)| a.to_bits() == b.to_bits())
+            && u.pos_mm
+                .iter()
+                .zip(pos_mm)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
     };
     {
         let mut kept = UNWEIGHTED.lock().unwrap_or_else(PoisonError::into_inner);
