@@ -235,7 +235,7 @@ pub fn densest_lines(data: &Dataset, axis: usize, rows: &[usize]) -> Option<Dens
     // The rows of each line, keyed by where the other (at most two) axes
     // stand: hash maps of fixed-size keys rather than
     // [`by_fixed_position`]'s ordered map of one `Vec` key per row, which
-    // took 60 ms a call at 180k rows (`diagnose` asks per target, axis and
+    // took ~30 ms of CPU a call at 180k rows (`diagnose` asks per target, axis and
     // step). Counted first: a dense line across the axis is thousands of
     // one- or two-row groups, and a group of fewer than 8 rows cannot have
     // 8 distinct positions, so only the others get a row list. The order
