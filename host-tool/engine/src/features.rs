@@ -133,7 +133,28 @@ fn mono_name(exp: [u8; 3]) -> String {
 }
 
 fn mono(exp: [u8; 3], u: [f64; 3]) -> f64 {
-    (0..3).map(|a| u[a].powi(i32::from(exp[a]))).product()
+    (0..3).map(|a| powi(u[a], exp[a])).product()
+}
+
+/// `x.powi(e)` without the library call for the small exponents of a
+/// model's monomials: the same products in the same order as the
+/// library's square-and-multiply (bit-identical), inline.
+fn powi(x: f64, e: u8) -> f64 {
+    match e {
+        0 => 1.0,
+        1 => x,
+        2 => x * x,
+        3 => x * (x * x),
+        4 => {
+            let a = x * x;
+            a * a
+        }
+        5 => {
+            let a = x * x;
+            x * (a * a)
+        }
+        _ => x.powi(i32::from(e)),
+    }
 }
 
 impl fmt::Display for Feature {
@@ -237,9 +258,14 @@ impl Feature {
                 } else {
                     ch.temp_c.clone()
                 };
-                (0..n)
-                    .map(|r| (temp[r] - t_ref_c) * mono(*exp, u(r)))
-                    .collect()
+                if *exp == [0, 0, 0] {
+                    // × 1.0: the same values without the positions.
+                    temp.iter().map(|t| t - t_ref_c).collect()
+                } else {
+                    (0..n)
+                        .map(|r| (temp[r] - t_ref_c) * mono(*exp, u(r)))
+                        .collect()
+                }
             }
             Feature::Reversal { axis } => {
                 let dir = data.dir[*axis].as_ref().ok_or_else(|| {
@@ -325,6 +351,25 @@ pub fn feature_uses_axis(f: &Feature, axis: usize) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn inline_powers_are_the_library_powers_bit_for_bit() {
+        // Exponents the models use and one past; values across the
+        // normalised range, past it, tiny and huge.
+        let mut x = -3.7f64;
+        while x < 3.7 {
+            for v in [x, x * 1e-150, x * 1e100] {
+                for e in 0..=7u8 {
+                    assert_eq!(
+                        powi(v, e).to_bits(),
+                        v.powi(i32::from(e)).to_bits(),
+                        "{v}^{e}"
+                    );
+                }
+            }
+            x += 0.013_7;
+        }
+    }
 
     #[test]
     fn cubic19_has_19_distinct_terms_and_no_xyz() {
