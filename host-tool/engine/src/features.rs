@@ -132,10 +132,6 @@ fn mono_name(exp: [u8; 3]) -> String {
     }
 }
 
-fn mono(exp: [u8; 3], u: [f64; 3]) -> f64 {
-    (0..3).map(|a| powi(u[a], exp[a])).product()
-}
-
 /// `x.powi(e)` without the library call for the small exponents of a
 /// model's monomials: the same products in the same order as the
 /// library's square-and-multiply (bit-identical), inline.
@@ -209,14 +205,25 @@ impl Feature {
     /// what the feature needs (`dir_y`, `T_bed_C`, `tool_mm`, `t_s`).
     pub fn column(&self, data: &Dataset, norm: &Norm) -> Result<Vec<f64>> {
         let n = data.len();
-        let u = |row: usize| -> [f64; 3] {
-            [0, 1, 2].map(|a| match &data.pos_mm[a] {
-                Some(col) => norm.u(a, col[row]),
-                None => 0.0,
-            })
+        // A monomial over every row: only the axes it has are normalised
+        // and multiplied in (the same products in the same order as
+        // `mono`: the skipped factors are exactly 1.0).
+        let mono_col = |exp: [u8; 3]| -> Vec<f64> {
+            let mut out = vec![1.0; n];
+            for a in (0..3).filter(|&a| exp[a] > 0) {
+                match &data.pos_mm[a] {
+                    Some(col) => {
+                        for (o, &p) in out.iter_mut().zip(col) {
+                            *o *= powi(norm.u(a, p), exp[a]);
+                        }
+                    }
+                    None => out.iter_mut().for_each(|o| *o *= 0.0),
+                }
+            }
+            out
         };
         Ok(match self {
-            Feature::Monomial { exp } => (0..n).map(|r| mono(*exp, u(r))).collect(),
+            Feature::Monomial { exp } => mono_col(*exp),
             Feature::Periodic {
                 axis,
                 period_mm,
@@ -258,14 +265,11 @@ impl Feature {
                 } else {
                     ch.temp_c.clone()
                 };
-                if *exp == [0, 0, 0] {
-                    // × 1.0: the same values without the positions.
-                    temp.iter().map(|t| t - t_ref_c).collect()
-                } else {
-                    (0..n)
-                        .map(|r| (temp[r] - t_ref_c) * mono(*exp, u(r)))
-                        .collect()
-                }
+                let m = mono_col(*exp);
+                temp.iter()
+                    .zip(m)
+                    .map(|(t, m)| (t - t_ref_c) * m)
+                    .collect()
             }
             Feature::Reversal { axis } => {
                 let dir = data.dir[*axis].as_ref().ok_or_else(|| {
@@ -281,7 +285,7 @@ impl Feature {
                     .tool_mm
                     .as_ref()
                     .ok_or_else(|| anyhow!("abbe term: the data has no tool_mm column"))?;
-                (0..n).map(|r| arm[r] * mono(*exp, u(r))).collect()
+                arm.iter().zip(mono_col(*exp)).map(|(a, m)| a * m).collect()
             }
             Feature::Drift { power } => {
                 let t_s = data
