@@ -266,10 +266,7 @@ impl Feature {
                     ch.temp_c.clone()
                 };
                 let m = mono_col(*exp);
-                temp.iter()
-                    .zip(m)
-                    .map(|(t, m)| (t - t_ref_c) * m)
-                    .collect()
+                temp.iter().zip(m).map(|(t, m)| (t - t_ref_c) * m).collect()
             }
             Feature::Reversal { axis } => {
                 let dir = data.dir[*axis].as_ref().ok_or_else(|| {

@@ -306,8 +306,7 @@ pub(super) fn propose(
                     }
                     s
                 };
-                let rss_at =
-                    |lag: f64| fwl(td, st, &spec_at(lag), 0).map_or(f64::INFINITY, |ff| ff.fit.rss);
+                let rss_at = |lag: f64| rss_many(td, st, &[spec_at(lag)])[0];
                 let mut lags: Vec<f64> = if data.t_s.is_some() {
                     LAGS_S.to_vec()
                 } else {

@@ -216,6 +216,56 @@ impl Basis {
         self.residuals(&[v]).pop().unwrap_or_default()
     }
 
+    /// Uᵀv for each of `vs` (all of the basis' length): one pass over the
+    /// basis in blocks of rows.
+    pub fn coefficients(&self, vs: &[&[f64]]) -> Vec<Vec<f64>> {
+        let n = self.u.first().map_or(0, Vec::len);
+        let mut coef = vec![vec![0.0; self.rank()]; vs.len()];
+        let mut start = 0;
+        while start < n {
+            let end = (start + BLOCK).min(n);
+            for (k, u) in self.vectors().enumerate() {
+                let ub = &u[start..end];
+                for (c, v) in coef.iter_mut().zip(vs) {
+                    c[k] += dot(ub, &v[start..end]);
+                }
+            }
+            start = end;
+        }
+        coef
+    }
+
+    /// The residual sum of squares after adding the columns `cs` to the
+    /// model whose residual is `resid` (orthogonal to this basis; its sum of
+    /// squares `rss`), the model partialled out — [`small_fit`]'s `rss` on
+    /// the partialled columns, from sums alone: rss − bᵀS⁺b with b = Cᵀr
+    /// (= (C − UUᵀC)ᵀr, r being orthogonal to U) and S = CᵀC − (UᵀC)ᵀ(UᵀC),
+    /// the partialled columns' Gram matrix. One pass over the basis instead
+    /// of two, and no partialled copy; `coef` is each column's Uᵀc
+    /// ([`Basis::coefficients`]). A column with less than 10⁻¹² of its sum
+    /// of squares outside the span adds nothing (its S would be round-off).
+    pub fn rss_added(cs: &[&[f64]], coef: &[Vec<f64>], resid: &[f64], rss: f64) -> f64 {
+        let keep: Vec<usize> = (0..cs.len())
+            .filter(|&i| {
+                let cc = dot(cs[i], cs[i]);
+                cc > 0.0 && cc - dot(&coef[i], &coef[i]) > 1e-12 * cc
+            })
+            .collect();
+        let k = keep.len();
+        if k == 0 {
+            return rss;
+        }
+        let s = DMatrix::from_fn(k, k, |a, b| {
+            let (i, j) = (keep[a], keep[b]);
+            dot(cs[i], cs[j]) - dot(&coef[i], &coef[j])
+        });
+        let scale: Vec<f64> = (0..k).map(|a| s[(a, a)].sqrt()).collect();
+        let g = DMatrix::from_fn(k, k, |a, b| s[(a, b)] / (scale[a] * scale[b]));
+        let b = DVector::from_fn(k, |a, _| dot(cs[keep[a]], resid) / scale[a]);
+        let (inv, _) = pinv_sym(&g);
+        (rss - b.dot(&(&inv * &b))).max(0.0)
+    }
+
     /// v − P v for each of `vs` (all of the basis' length): the basis is read
     /// twice in all — once for the coefficients Uᵀv of every column, once to
     /// subtract U·(Uᵀv) — in blocks of rows that stay in cache, instead of
@@ -225,18 +275,7 @@ impl Basis {
         let n = self.u.first().map_or(0, Vec::len);
         let basis: Vec<&[f64]> = self.vectors().collect();
         let r = basis.len();
-        let mut coef = vec![0.0; vs.len() * r];
-        let mut start = 0;
-        while start < n {
-            let end = (start + BLOCK).min(n);
-            for (k, u) in basis.iter().enumerate() {
-                let ub = &u[start..end];
-                for (j, v) in vs.iter().enumerate() {
-                    coef[j * r + k] += dot(ub, &v[start..end]);
-                }
-            }
-            start = end;
-        }
+        let coef = self.coefficients(vs).concat();
         let mut out: Vec<Vec<f64>> = vs.iter().map(|v| v.to_vec()).collect();
         let mut start = 0;
         while start < n {
@@ -553,6 +592,52 @@ mod tests {
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max);
         assert!(d < 1e-12, "{d}");
+    }
+
+    #[test]
+    fn rss_from_sums_is_the_partialled_fits_rss() {
+        let n = 2000;
+        let mut rng = trueaxis_test_support::SplitMix64::new(9);
+        let x: Vec<f64> = (0..n).map(|i| i as f64 / n as f64 - 0.5).collect();
+        let model = vec![vec![1.0; n], x.clone(), x.iter().map(|v| v * v).collect()];
+        let b = Basis::new(&model, n);
+        let y: Vec<f64> = x
+            .iter()
+            .map(|v| 2.0 + v + 0.3 * (40.0 * v).sin() + 0.01 * rng.normal())
+            .collect();
+        let resid = b.residual(&y);
+        let rss = dot(&resid, &resid);
+        // Two informative columns, one nearly in the span, one exactly in it
+        // (a multiple of x: adds nothing, as the partialled fit says).
+        let cands: Vec<Vec<f64>> = vec![
+            x.iter().map(|v| (40.0 * v).sin()).collect(),
+            x.iter().map(|v| (40.0 * v).cos()).collect(),
+            x.iter()
+                .map(|v| v * v * v + 1e-4 * (7.0 * v).sin())
+                .collect(),
+            x.iter().map(|v| 3.0 * v).collect(),
+        ];
+        let refs: Vec<&[f64]> = cands.iter().map(Vec::as_slice).collect();
+        let coef = b.coefficients(&refs);
+        // The partialled fit is given the set without the in-span column:
+        // partialled, that column is round-off, which `small_fit` scales up
+        // to unit RMS and fits (a spurious 10⁻⁵ of the rss here); the sums
+        // see that nothing of it lies outside the span.
+        for set in [&[0usize][..], &[0, 1], &[2], &[3], &[0, 3], &[0, 1, 2]] {
+            let cs: Vec<&[f64]> = set.iter().map(|&i| refs[i]).collect();
+            let co: Vec<Vec<f64>> = set.iter().map(|&i| coef[i].clone()).collect();
+            let fast = Basis::rss_added(&cs, &co, &resid, rss);
+            let outside: Vec<&[f64]> = set.iter().filter(|&&i| i != 3).map(|&i| refs[i]).collect();
+            let parts = b.residuals(&outside);
+            let slow = small_fit(&parts, &resid).rss;
+            assert!(
+                (fast - slow).abs() <= 1e-9 * rss,
+                "{set:?}: {fast} vs {slow} (rss {rss})"
+            );
+        }
+        // The sine explains most of the residual: the sums see it.
+        let cs = [refs[0], refs[1]];
+        assert!(Basis::rss_added(&cs, &coef[..2], &resid, rss) < 0.01 * rss);
     }
 
     #[test]
