@@ -128,37 +128,57 @@ pub(super) struct FwlFit {
 }
 
 pub(super) fn fwl(td: &TargetData, st: &State, spec: &str, searched: usize) -> Result<FwlFit> {
-    let e = Effect::parse(spec)?;
-    let cols: Vec<Vec<f64>> = e
-        .features
+    fwl_many(td, st, &[(spec, searched)])
+        .pop()
+        .expect("one result per spec")
+}
+
+/// [`fwl`] of each `(spec, searched)`, all columns projected on the model
+/// together: the basis is read twice in all instead of twice per spec.
+pub(super) fn fwl_many(
+    td: &TargetData,
+    st: &State,
+    specs: &[(&str, usize)],
+) -> Vec<Result<FwlFit>> {
+    let cols: Vec<Result<Vec<Vec<f64>>>> = specs
         .iter()
-        .map(|f| td.col(f))
-        .collect::<Result<_>>()?;
-    let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
-    let partialled = st.basis.residuals(&refs);
-    let share = cols
-        .iter()
-        .zip(&partialled)
-        .map(|(c, p)| {
-            let cc = linalg::dot(c, c);
-            if cc > 0.0 {
-                linalg::dot(p, p) / cc
-            } else {
-                0.0
-            }
+        .map(|(spec, _)| {
+            let e = Effect::parse(spec)?;
+            e.features.iter().map(|f| td.col(f)).collect()
         })
-        .fold(f64::INFINITY, f64::min);
-    let fit = small_fit(&partialled, &st.resid);
+        .collect();
+    let refs: Vec<&[f64]> = cols.iter().flatten().flatten().map(Vec::as_slice).collect();
+    let mut parts = st.basis.residuals(&refs).into_iter();
     let n = td.rows.len() as f64;
-    let k = (fit.rank + searched) as f64;
-    let dbic = n * (fit.rss.max(1e-300) / st.rss.max(1e-300)).ln() + k * n.ln();
-    Ok(FwlFit {
-        cols,
-        partialled,
-        share,
-        fit,
-        dbic,
-    })
+    cols.into_iter()
+        .zip(specs)
+        .map(|(cols, &(_, searched))| {
+            let cols = cols?;
+            let partialled: Vec<Vec<f64>> = parts.by_ref().take(cols.len()).collect();
+            let share = cols
+                .iter()
+                .zip(&partialled)
+                .map(|(c, p)| {
+                    let cc = linalg::dot(c, c);
+                    if cc > 0.0 {
+                        linalg::dot(p, p) / cc
+                    } else {
+                        0.0
+                    }
+                })
+                .fold(f64::INFINITY, f64::min);
+            let fit = small_fit(&partialled, &st.resid);
+            let k = (fit.rank + searched) as f64;
+            let dbic = n * (fit.rss.max(1e-300) / st.rss.max(1e-300)).ln() + k * n.ln();
+            Ok(FwlFit {
+                cols,
+                partialled,
+                share,
+                fit,
+                dbic,
+            })
+        })
+        .collect()
 }
 
 /// Most columns projected together by [`rss_many`]: the basis is read once
