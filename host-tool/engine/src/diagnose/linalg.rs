@@ -330,6 +330,28 @@ fn pinv_sym(g: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
     (inv, rank)
 }
 
+/// The least-squares coefficients from a Gram matrix Σccᵀ and Σcy, as
+/// [`small_fit`] solves them: columns scaled to unit diagonal, the
+/// pseudo-inverse with its rank tolerance (zero for a column with no sum).
+pub fn solve_gram(g: &DMatrix<f64>, cy: &DVector<f64>) -> DVector<f64> {
+    let k = g.nrows();
+    let scale: Vec<f64> = (0..k)
+        .map(|i| {
+            let d = g[(i, i)].sqrt();
+            if d > 0.0 {
+                d
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let gs = DMatrix::from_fn(k, k, |i, j| g[(i, j)] / (scale[i] * scale[j]));
+    let (inv, _) = pinv_sym(&gs);
+    let b = DVector::from_fn(k, |i, _| cy[i] / scale[i]);
+    let beta = inv * b;
+    DVector::from_fn(k, |i, _| beta[i] / scale[i])
+}
+
 /// Least squares of `y` on `cols` (all of length `y.len()`).
 pub fn small_fit(cols: &[Vec<f64>], y: &[f64]) -> SmallFit {
     let k = cols.len();

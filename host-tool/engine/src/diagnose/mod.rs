@@ -623,6 +623,7 @@ fn one_target(
         fold,
         nfolds,
         progress,
+        forward: Default::default(),
     };
     let st0 = State::new(&td, &opts.seed, &opts.adds)?;
     let rms = st0.rms();
@@ -936,6 +937,7 @@ pub fn library(data: &Dataset, opts: &Options) -> Result<Vec<TargetLibrary>> {
             fold,
             nfolds,
             progress: &|_| {},
+            forward: Default::default(),
         };
         let st = State::new(&td, &opts.seed, &opts.adds)?;
         let mut groups = Vec::new();
