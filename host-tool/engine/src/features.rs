@@ -132,8 +132,25 @@ fn mono_name(exp: [u8; 3]) -> String {
     }
 }
 
-fn mono(exp: [u8; 3], u: [f64; 3]) -> f64 {
-    (0..3).map(|a| u[a].powi(i32::from(exp[a]))).product()
+/// `x.powi(e)` without the library call for the small exponents of a
+/// model's monomials: the same products in the same order as the
+/// library's square-and-multiply (bit-identical), inline.
+fn powi(x: f64, e: u8) -> f64 {
+    match e {
+        0 => 1.0,
+        1 => x,
+        2 => x * x,
+        3 => x * (x * x),
+        4 => {
+            let a = x * x;
+            a * a
+        }
+        5 => {
+            let a = x * x;
+            x * (a * a)
+        }
+        _ => x.powi(i32::from(e)),
+    }
 }
 
 impl fmt::Display for Feature {
@@ -188,14 +205,25 @@ impl Feature {
     /// what the feature needs (`dir_y`, `T_bed_C`, `tool_mm`, `t_s`).
     pub fn column(&self, data: &Dataset, norm: &Norm) -> Result<Vec<f64>> {
         let n = data.len();
-        let u = |row: usize| -> [f64; 3] {
-            [0, 1, 2].map(|a| match &data.pos_mm[a] {
-                Some(col) => norm.u(a, col[row]),
-                None => 0.0,
-            })
+        // A monomial over every row: only the axes it has are normalised
+        // and multiplied in (the same products in the same order as
+        // `mono`: the skipped factors are exactly 1.0).
+        let mono_col = |exp: [u8; 3]| -> Vec<f64> {
+            let mut out = vec![1.0; n];
+            for a in (0..3).filter(|&a| exp[a] > 0) {
+                match &data.pos_mm[a] {
+                    Some(col) => {
+                        for (o, &p) in out.iter_mut().zip(col) {
+                            *o *= powi(norm.u(a, p), exp[a]);
+                        }
+                    }
+                    None => out.iter_mut().for_each(|o| *o *= 0.0),
+                }
+            }
+            out
         };
         Ok(match self {
-            Feature::Monomial { exp } => (0..n).map(|r| mono(*exp, u(r))).collect(),
+            Feature::Monomial { exp } => mono_col(*exp),
             Feature::Periodic {
                 axis,
                 period_mm,
@@ -237,9 +265,8 @@ impl Feature {
                 } else {
                     ch.temp_c.clone()
                 };
-                (0..n)
-                    .map(|r| (temp[r] - t_ref_c) * mono(*exp, u(r)))
-                    .collect()
+                let m = mono_col(*exp);
+                temp.iter().zip(m).map(|(t, m)| (t - t_ref_c) * m).collect()
             }
             Feature::Reversal { axis } => {
                 let dir = data.dir[*axis].as_ref().ok_or_else(|| {
@@ -255,7 +282,7 @@ impl Feature {
                     .tool_mm
                     .as_ref()
                     .ok_or_else(|| anyhow!("abbe term: the data has no tool_mm column"))?;
-                (0..n).map(|r| arm[r] * mono(*exp, u(r))).collect()
+                arm.iter().zip(mono_col(*exp)).map(|(a, m)| a * m).collect()
             }
             Feature::Drift { power } => {
                 let t_s = data
@@ -325,6 +352,25 @@ pub fn feature_uses_axis(f: &Feature, axis: usize) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn inline_powers_are_the_library_powers_bit_for_bit() {
+        // Exponents the models use and one past; values across the
+        // normalised range, past it, tiny and huge.
+        let mut x = -3.7f64;
+        while x < 3.7 {
+            for v in [x, x * 1e-150, x * 1e100] {
+                for e in 0..=7u8 {
+                    assert_eq!(
+                        powi(v, e).to_bits(),
+                        v.powi(i32::from(e)).to_bits(),
+                        "{v}^{e}"
+                    );
+                }
+            }
+            x += 0.013_7;
+        }
+    }
 
     #[test]
     fn cubic19_has_19_distinct_terms_and_no_xyz() {

@@ -6,7 +6,7 @@
 //! named candidate effects is built over every axis and channel present:
 //! `periodic` (period from a Lomb–Scargle periodogram of the residuals on
 //! dense lines, harmonics by BIC), `thermal` (per `T_*` channel, alone or
-//! times a position, lag by a grid refined by golden-section search),
+//! times a position, lag by a grid refined by Brent's method),
 //! `reversal` (`dir_*`), `abbe` (`tool_mm` × position), `drift` (`t_s`),
 //! `squareness` (linear cross terms) and `higher_order` (degree 4–5 along
 //! an axis). Each candidate is first checked for identifiability (the share
@@ -623,6 +623,7 @@ fn one_target(
         fold,
         nfolds,
         progress,
+        forward: Default::default(),
     };
     let st0 = State::new(&td, &opts.seed, &opts.adds)?;
     let rms = st0.rms();
@@ -936,6 +937,7 @@ pub fn library(data: &Dataset, opts: &Options) -> Result<Vec<TargetLibrary>> {
             fold,
             nfolds,
             progress: &|_| {},
+            forward: Default::default(),
         };
         let st = State::new(&td, &opts.seed, &opts.adds)?;
         let mut groups = Vec::new();

@@ -10,7 +10,7 @@ use crate::features::Feature;
 
 use super::candidates::Proposal;
 use super::physical::{lag_aware_xtx_inv, param_key, physical};
-use super::target::{block_rms, forward_blocks, forward_rms, fwl, State, TargetData};
+use super::target::{block_rms, forward_blocks, forward_rms, fwl_many, State, TargetData};
 use super::{Candidate, HoldOutKind, Warning, IN_SPAN_SHARE};
 
 /// The scored candidates of one target, with the columns needed for overlaps.
@@ -28,6 +28,10 @@ pub(super) struct Replacing<'a> {
     pub(super) old_rank: usize,
 }
 
+/// Proposals projected on the model together (their columns, raw and
+/// partialled, 8 MB each at a million rows, live while they are scored).
+const SCORE_TOGETHER: usize = 4;
+
 pub(super) fn score(
     td: &TargetData,
     st: &State,
@@ -39,81 +43,95 @@ pub(super) fn score(
     let n = td.rows.len();
     let tn = TARGETS[td.t];
     let mut out = Vec::new();
-    for p in props {
-        let Ok(mut ff) = fwl(td, st, &p.spec, p.searched) else {
-            continue;
-        };
-        // Against the current model: the swap keeps the parameter count
-        // (one lag for another), so only the change in columns is charged.
-        let ref_held = match repl {
-            Some(r) => {
-                let nf = n as f64;
-                ff.dbic = nf * (ff.fit.rss.max(1e-300) / r.current.rss.max(1e-300)).ln()
-                    + (ff.fit.rank as f64 - r.old_rank as f64) * nf.ln();
-                r.current.held_out_rms
-            }
-            None => st.held_out_rms,
-        };
-        let mut params = BTreeMap::new();
-        if let Ok(e) = Effect::parse(&p.spec) {
-            match e.features.first() {
-                Some(Feature::Periodic { period_mm, .. }) => {
-                    params.insert("period_mm".into(), *period_mm);
-                    params.insert("harmonics".into(), (e.features.len() / 2) as f64);
-                }
-                Some(Feature::Thermal { lag_s, .. }) => {
-                    params.insert("lag_s".into(), *lag_s);
-                }
-                Some(Feature::Drift { .. }) => {
-                    params.insert("order".into(), e.features.len() as f64);
-                }
-                Some(Feature::Monomial { exp }) if p.family == Family::HigherOrder => {
-                    params.insert(
-                        "degree".into(),
-                        f64::from(exp.iter().sum::<u8>() + e.features.len() as u8 - 1),
-                    );
-                }
-                _ => {}
-            }
+    // A few proposals at a time projected together (one pass over the
+    // model's basis for all their columns), their columns kept only while
+    // they are scored.
+    let mut props = props.into_iter();
+    loop {
+        let chunk: Vec<Proposal> = props.by_ref().take(SCORE_TOGETHER).collect();
+        if chunk.is_empty() {
+            break;
         }
-        let base = Candidate {
-            effect: p.family,
-            target: tn.to_string(),
-            axis: p.axis.map(|a| AXES[a].to_string()),
-            channel: p.channel.clone(),
-            params,
-            add: p.spec.clone(),
-            held_out_rms_um_after: None,
-            held_out_rms_um_before: None,
-            hold_out: HoldOutKind::Blocks,
-            gain: None,
-            identifiable: false,
-            evidence: String::new(),
-            delta_bic: None,
-            rms_um_after: None,
-            out_of_span_share: ff.share,
-            significant: false,
-            physical: None,
-            confounded_with: Vec::new(),
-            replaces: repl.map(|r| r.old.clone()),
-            step: None,
-            aliasing: None,
-            held_back: false,
-        };
-        if ff.share < IN_SPAN_SHARE || ff.fit.rank == 0 {
-            if repl.is_some() {
+        let specs: Vec<(&str, usize)> = chunk
+            .iter()
+            .map(|p| (p.spec.as_str(), p.searched))
+            .collect();
+        let fits = fwl_many(td, st, &specs);
+        for (p, ff) in chunk.into_iter().zip(fits) {
+            let Ok(mut ff) = ff else {
                 continue;
+            };
+            // Against the current model: the swap keeps the parameter count
+            // (one lag for another), so only the change in columns is charged.
+            let ref_held = match repl {
+                Some(r) => {
+                    let nf = n as f64;
+                    ff.dbic = nf * (ff.fit.rss.max(1e-300) / r.current.rss.max(1e-300)).ln()
+                        + (ff.fit.rank as f64 - r.old_rank as f64) * nf.ln();
+                    r.current.held_out_rms
+                }
+                None => st.held_out_rms,
+            };
+            let mut params = BTreeMap::new();
+            if let Ok(e) = Effect::parse(&p.spec) {
+                match e.features.first() {
+                    Some(Feature::Periodic { period_mm, .. }) => {
+                        params.insert("period_mm".into(), *period_mm);
+                        params.insert("harmonics".into(), (e.features.len() / 2) as f64);
+                    }
+                    Some(Feature::Thermal { lag_s, .. }) => {
+                        params.insert("lag_s".into(), *lag_s);
+                    }
+                    Some(Feature::Drift { .. }) => {
+                        params.insert("order".into(), e.features.len() as f64);
+                    }
+                    Some(Feature::Monomial { exp }) if p.family == Family::HigherOrder => {
+                        params.insert(
+                            "degree".into(),
+                            f64::from(exp.iter().sum::<u8>() + e.features.len() as u8 - 1),
+                        );
+                    }
+                    _ => {}
+                }
             }
-            let cols = Effect::parse(&p.spec)
-                .map(|e| {
-                    e.features
-                        .iter()
-                        .map(ToString::to_string)
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                })
-                .unwrap_or_default();
-            let detail = format!(
+            let base = Candidate {
+                effect: p.family,
+                target: tn.to_string(),
+                axis: p.axis.map(|a| AXES[a].to_string()),
+                channel: p.channel.clone(),
+                params,
+                add: p.spec.clone(),
+                held_out_rms_um_after: None,
+                held_out_rms_um_before: None,
+                hold_out: HoldOutKind::Blocks,
+                gain: None,
+                identifiable: false,
+                evidence: String::new(),
+                delta_bic: None,
+                rms_um_after: None,
+                out_of_span_share: ff.share,
+                significant: false,
+                physical: None,
+                confounded_with: Vec::new(),
+                replaces: repl.map(|r| r.old.clone()),
+                step: None,
+                aliasing: None,
+                held_back: false,
+            };
+            if ff.share < IN_SPAN_SHARE || ff.fit.rank == 0 {
+                if repl.is_some() {
+                    continue;
+                }
+                let cols = Effect::parse(&p.spec)
+                    .map(|e| {
+                        e.features
+                            .iter()
+                            .map(ToString::to_string)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    })
+                    .unwrap_or_default();
+                let detail = format!(
                 "{seed_name} already contains the column(s) {cols} for {tn} (up to a combination of its terms), so `{}` cannot be told from it{}",
                 p.spec,
                 match p.family {
@@ -122,131 +140,132 @@ pub(super) fn score(
                     _ => "",
                 }
             );
-            warnings.push(Warning {
-                code: "in_model_span".into(),
-                detail: detail.clone(),
-            });
+                warnings.push(Warning {
+                    code: "in_model_span".into(),
+                    detail: detail.clone(),
+                });
+                out.push(Scored {
+                    cand: Candidate {
+                        evidence: detail,
+                        ..base
+                    },
+                    partialled: ff.partialled,
+                });
+                continue;
+            }
+            // Time-dependent families are judged by predicting later data from
+            // earlier data (forward chaining): a polynomial in time interpolates
+            // any smooth curve in a block hold-out, but cannot say where a
+            // cool-down or the next day goes; a temperature that causes the
+            // error can. The other families keep the block hold-out.
+            let forward = matches!(p.family, Family::Thermal | Family::Drift)
+                .then(|| forward_blocks(td))
+                .flatten();
+            let (ref_held, held, kind) = match &forward {
+                Some(blocks) => {
+                    let (before, after) = forward_rms(blocks, &st.resid, &ff.partialled);
+                    let before = match repl {
+                        // Against the current model: its own residual, forward.
+                        Some(r) => block_rms(&blocks[1..], |i| r.current.resid[i]),
+                        None => before,
+                    };
+                    (before, Some(after), HoldOutKind::Forward)
+                }
+                None => (ref_held, st.holdout.rms(&ff.cols), HoldOutKind::Blocks),
+            };
+            let gain = held.map(|h| 1.0 - h / ref_held).filter(|g| g.is_finite());
+            let dof = n.saturating_sub(st.basis.rank() + ff.fit.rank).max(1) as f64;
+            let sigma2 = ff.fit.rss / dof;
+            if let Some(inv) = lag_aware_xtx_inv(td, st, &p.spec, &ff) {
+                ff.fit.xtx_inv = inv;
+            }
+            let phys = physical(td, &p, &ff, sigma2);
+            let mut base = base;
+            if let Some(ph) = &phys {
+                base.params.insert(param_key(ph), ph.value);
+            }
+            let rms_after = (ff.fit.rss / n as f64).sqrt();
+            let mut evidence = format!(
+                "{}{}; ΔBIC {:.0}; {} RMS {} → {} µm (gain {})",
+                p.note,
+                repl.map_or(String::new(), |r| format!(
+                    "; replaces `{}` (the same effect, its parameter searched again without it)",
+                    r.old
+                )),
+                ff.dbic,
+                match kind {
+                    HoldOutKind::Forward => "forward-chained (earlier time predicts later)",
+                    HoldOutKind::Blocks => "block-held-out",
+                },
+                if ref_held.is_finite() {
+                    format!("{ref_held:.3}")
+                } else {
+                    "n/a".into()
+                },
+                held.filter(|h| h.is_finite())
+                    .map_or("n/a".into(), |h| format!("{h:.3}")),
+                gain.map_or("n/a: no block could be held out".into(), |g| format!(
+                    "{:.0} %",
+                    100.0 * g
+                ))
+            );
+            if let Some(ph) = &phys {
+                evidence.push_str(&format!(
+                    "; {} {:.3} {} (95 % {:.3} … {:.3}){}",
+                    ph.name,
+                    ph.value,
+                    ph.unit,
+                    ph.ci95[0],
+                    ph.ci95[1],
+                    if ph.plausible {
+                        String::new()
+                    } else {
+                        format!(" — NOT plausible (expected {})", ph.expected)
+                    }
+                ));
+            }
+            // A multi-sensor thermal effect: every sensor's µm/K (the physical
+            // parameter above is the first one's).
+            if let Ok(e) = Effect::parse(&p.spec) {
+                let per: Vec<String> = e
+                    .features
+                    .iter()
+                    .zip(&ff.fit.beta)
+                    .filter_map(|(f, b)| match f {
+                        Feature::Thermal {
+                            channel,
+                            exp: [0, 0, 0],
+                            ..
+                        } => Some(format!("T_{channel}_C {b:.3} µm/K")),
+                        _ => None,
+                    })
+                    .collect();
+                if per.len() > 1 && per.len() == e.features.len() {
+                    evidence.push_str(&format!("; per sensor: {}", per.join(", ")));
+                }
+            }
+            if ff.share < 0.05 {
+                evidence.push_str(&format!(
+                    "; only {:.1} % of it lies outside the model's span",
+                    100.0 * ff.share
+                ));
+            }
             out.push(Scored {
                 cand: Candidate {
-                    evidence: detail,
+                    held_out_rms_um_after: held.filter(|h| h.is_finite()),
+                    held_out_rms_um_before: ref_held.is_finite().then_some(ref_held),
+                    hold_out: kind,
+                    gain,
+                    identifiable: true,
+                    evidence,
+                    delta_bic: Some(ff.dbic),
+                    rms_um_after: Some(rms_after),
+                    physical: phys,
                     ..base
                 },
                 partialled: ff.partialled,
             });
-            continue;
         }
-        // Time-dependent families are judged by predicting later data from
-        // earlier data (forward chaining): a polynomial in time interpolates
-        // any smooth curve in a block hold-out, but cannot say where a
-        // cool-down or the next day goes; a temperature that causes the
-        // error can. The other families keep the block hold-out.
-        let forward = matches!(p.family, Family::Thermal | Family::Drift)
-            .then(|| forward_blocks(td))
-            .flatten();
-        let (ref_held, held, kind) = match &forward {
-            Some(blocks) => {
-                let (before, after) = forward_rms(blocks, &st.resid, &ff.partialled);
-                let before = match repl {
-                    // Against the current model: its own residual, forward.
-                    Some(r) => block_rms(&blocks[1..], |i| r.current.resid[i]),
-                    None => before,
-                };
-                (before, Some(after), HoldOutKind::Forward)
-            }
-            None => (ref_held, st.holdout.rms(&ff.cols), HoldOutKind::Blocks),
-        };
-        let gain = held.map(|h| 1.0 - h / ref_held).filter(|g| g.is_finite());
-        let dof = n.saturating_sub(st.basis.rank() + ff.fit.rank).max(1) as f64;
-        let sigma2 = ff.fit.rss / dof;
-        if let Some(inv) = lag_aware_xtx_inv(td, st, &p.spec, &ff) {
-            ff.fit.xtx_inv = inv;
-        }
-        let phys = physical(td, &p, &ff, sigma2);
-        let mut base = base;
-        if let Some(ph) = &phys {
-            base.params.insert(param_key(ph), ph.value);
-        }
-        let rms_after = (ff.fit.rss / n as f64).sqrt();
-        let mut evidence = format!(
-            "{}{}; ΔBIC {:.0}; {} RMS {} → {} µm (gain {})",
-            p.note,
-            repl.map_or(String::new(), |r| format!(
-                "; replaces `{}` (the same effect, its parameter searched again without it)",
-                r.old
-            )),
-            ff.dbic,
-            match kind {
-                HoldOutKind::Forward => "forward-chained (earlier time predicts later)",
-                HoldOutKind::Blocks => "block-held-out",
-            },
-            if ref_held.is_finite() {
-                format!("{ref_held:.3}")
-            } else {
-                "n/a".into()
-            },
-            held.filter(|h| h.is_finite())
-                .map_or("n/a".into(), |h| format!("{h:.3}")),
-            gain.map_or("n/a: no block could be held out".into(), |g| format!(
-                "{:.0} %",
-                100.0 * g
-            ))
-        );
-        if let Some(ph) = &phys {
-            evidence.push_str(&format!(
-                "; {} {:.3} {} (95 % {:.3} … {:.3}){}",
-                ph.name,
-                ph.value,
-                ph.unit,
-                ph.ci95[0],
-                ph.ci95[1],
-                if ph.plausible {
-                    String::new()
-                } else {
-                    format!(" — NOT plausible (expected {})", ph.expected)
-                }
-            ));
-        }
-        // A multi-sensor thermal effect: every sensor's µm/K (the physical
-        // parameter above is the first one's).
-        if let Ok(e) = Effect::parse(&p.spec) {
-            let per: Vec<String> = e
-                .features
-                .iter()
-                .zip(&ff.fit.beta)
-                .filter_map(|(f, b)| match f {
-                    Feature::Thermal {
-                        channel,
-                        exp: [0, 0, 0],
-                        ..
-                    } => Some(format!("T_{channel}_C {b:.3} µm/K")),
-                    _ => None,
-                })
-                .collect();
-            if per.len() > 1 && per.len() == e.features.len() {
-                evidence.push_str(&format!("; per sensor: {}", per.join(", ")));
-            }
-        }
-        if ff.share < 0.05 {
-            evidence.push_str(&format!(
-                "; only {:.1} % of it lies outside the model's span",
-                100.0 * ff.share
-            ));
-        }
-        out.push(Scored {
-            cand: Candidate {
-                held_out_rms_um_after: held.filter(|h| h.is_finite()),
-                held_out_rms_um_before: ref_held.is_finite().then_some(ref_held),
-                hold_out: kind,
-                gain,
-                identifiable: true,
-                evidence,
-                delta_bic: Some(ff.dbic),
-                rms_um_after: Some(rms_after),
-                physical: phys,
-                ..base
-            },
-            partialled: ff.partialled,
-        });
     }
     out
 }

@@ -5,6 +5,7 @@
 //! candidate search, the scoring and the path work on.
 
 use anyhow::{bail, Result};
+use nalgebra::{DMatrix, DVector};
 
 use crate::data::{Dataset, TARGETS};
 use crate::effect::Effect;
@@ -24,6 +25,8 @@ pub(super) struct TargetData<'a> {
     pub(super) nfolds: usize,
     /// Where progress lines go (`diagnose_with`).
     pub(super) progress: super::Progress<'a>,
+    /// [`forward_blocks`], made once.
+    pub(super) forward: std::sync::OnceLock<Option<Vec<Vec<usize>>>>,
 }
 
 impl TargetData<'_> {
@@ -128,36 +131,103 @@ pub(super) struct FwlFit {
 }
 
 pub(super) fn fwl(td: &TargetData, st: &State, spec: &str, searched: usize) -> Result<FwlFit> {
-    let e = Effect::parse(spec)?;
-    let cols: Vec<Vec<f64>> = e
-        .features
+    fwl_many(td, st, &[(spec, searched)])
+        .pop()
+        .expect("one result per spec")
+}
+
+/// [`fwl`] of each `(spec, searched)`, all columns projected on the model
+/// together: the basis is read twice in all instead of twice per spec.
+pub(super) fn fwl_many(
+    td: &TargetData,
+    st: &State,
+    specs: &[(&str, usize)],
+) -> Vec<Result<FwlFit>> {
+    let cols: Vec<Result<Vec<Vec<f64>>>> = specs
         .iter()
-        .map(|f| td.col(f))
-        .collect::<Result<_>>()?;
-    let partialled: Vec<Vec<f64>> = cols.iter().map(|c| st.basis.residual(c)).collect();
-    let share = cols
-        .iter()
-        .zip(&partialled)
-        .map(|(c, p)| {
-            let cc = linalg::dot(c, c);
-            if cc > 0.0 {
-                linalg::dot(p, p) / cc
-            } else {
-                0.0
-            }
+        .map(|(spec, _)| {
+            let e = Effect::parse(spec)?;
+            e.features.iter().map(|f| td.col(f)).collect()
         })
-        .fold(f64::INFINITY, f64::min);
-    let fit = small_fit(&partialled, &st.resid);
+        .collect();
+    let refs: Vec<&[f64]> = cols.iter().flatten().flatten().map(Vec::as_slice).collect();
+    let mut parts = st.basis.residuals(&refs).into_iter();
     let n = td.rows.len() as f64;
-    let k = (fit.rank + searched) as f64;
-    let dbic = n * (fit.rss.max(1e-300) / st.rss.max(1e-300)).ln() + k * n.ln();
-    Ok(FwlFit {
-        cols,
-        partialled,
-        share,
-        fit,
-        dbic,
-    })
+    cols.into_iter()
+        .zip(specs)
+        .map(|(cols, &(_, searched))| {
+            let cols = cols?;
+            let partialled: Vec<Vec<f64>> = parts.by_ref().take(cols.len()).collect();
+            let share = cols
+                .iter()
+                .zip(&partialled)
+                .map(|(c, p)| {
+                    let cc = linalg::dot(c, c);
+                    if cc > 0.0 {
+                        linalg::dot(p, p) / cc
+                    } else {
+                        0.0
+                    }
+                })
+                .fold(f64::INFINITY, f64::min);
+            let fit = small_fit(&partialled, &st.resid);
+            let k = (fit.rank + searched) as f64;
+            let dbic = n * (fit.rss.max(1e-300) / st.rss.max(1e-300)).ln() + k * n.ln();
+            Ok(FwlFit {
+                cols,
+                partialled,
+                share,
+                fit,
+                dbic,
+            })
+        })
+        .collect()
+}
+
+/// Most columns projected together by [`rss_many`]: the basis is read once
+/// per group, and a group's columns (raw and projected, 16 MB at a million
+/// rows each) stay few.
+const RSS_GROUP_COLS: usize = 6;
+
+/// The in-sample residual sum of squares of the model plus each of `specs`
+/// (as [`fwl`]'s `fit.rss`), their columns projected on the model in
+/// groups — one pass over the basis per group instead of one per spec;
+/// +∞ for a spec whose columns the data cannot give.
+pub(super) fn rss_many(td: &TargetData, st: &State, specs: &[String]) -> Vec<f64> {
+    let mut out = Vec::with_capacity(specs.len());
+    let mut i = 0;
+    while i < specs.len() {
+        let mut group: Vec<Option<Vec<Vec<f64>>>> = Vec::new();
+        let mut ncols = 0;
+        while i < specs.len() && (group.is_empty() || ncols < RSS_GROUP_COLS) {
+            let cols = Effect::parse(&specs[i]).ok().and_then(|e| {
+                e.features
+                    .iter()
+                    .map(|f| td.col(f).ok())
+                    .collect::<Option<Vec<_>>>()
+            });
+            ncols += cols.as_ref().map_or(0, Vec::len);
+            group.push(cols);
+            i += 1;
+        }
+        let refs: Vec<&[f64]> = group
+            .iter()
+            .flatten()
+            .flatten()
+            .map(Vec::as_slice)
+            .collect();
+        let mut parts = st.basis.residuals(&refs).into_iter();
+        for cols in &group {
+            out.push(match cols {
+                Some(c) => {
+                    let p: Vec<Vec<f64>> = parts.by_ref().take(c.len()).collect();
+                    small_fit(&p, &st.resid).rss
+                }
+                None => f64::INFINITY,
+            });
+        }
+    }
+    out
 }
 
 pub(super) fn hold_out_blocks(
@@ -244,7 +314,13 @@ pub(super) const FORWARD_BLOCKS: usize = 6;
 /// are dropped. Without time spread (every reading at one `t_s` in one
 /// session) the blocks are equal in count. None without `t_s`, or with
 /// fewer than two rows per block.
-pub(super) fn forward_blocks(td: &TargetData) -> Option<Vec<Vec<usize>>> {
+pub(super) fn forward_blocks<'a>(td: &'a TargetData) -> Option<&'a [Vec<usize>]> {
+    td.forward
+        .get_or_init(|| make_forward_blocks(td))
+        .as_deref()
+}
+
+fn make_forward_blocks(td: &TargetData) -> Option<Vec<Vec<usize>>> {
     let t_s = td.data.t_s.as_ref()?;
     let n = td.rows.len();
     if n < 2 * FORWARD_BLOCKS {
@@ -308,24 +384,46 @@ pub(super) fn forward_rms(
     resid: &[f64],
     partialled: &[Vec<f64>],
 ) -> (f64, f64) {
-    let mut pred = vec![0.0; resid.len()];
-    let mut train: Vec<usize> = blocks[0].clone();
-    for block in &blocks[1..] {
-        let cols: Vec<Vec<f64>> = partialled
-            .iter()
-            .map(|c| train.iter().map(|&i| c[i]).collect())
-            .collect();
-        let y: Vec<f64> = train.iter().map(|&i| resid[i]).collect();
-        let fit = small_fit(&cols, &y);
-        for &i in block {
-            pred[i] = fit.beta.iter().zip(partialled).map(|(b, c)| b * c[i]).sum();
+    // Per-block sums Σcᵢcⱼ, Σcᵢr, Σr² (one pass over the block's rows):
+    // the fit to blocks 0..b is the running total of their sums, and the
+    // squared error of its prediction of block b is
+    // Σr² − 2βᵀΣcr + βᵀ(Σccᵀ)β over b's rows — no copies of the training
+    // rows per block.
+    let k = partialled.len();
+    let sums: Vec<(DMatrix<f64>, DVector<f64>, f64)> = blocks
+        .iter()
+        .map(|block| {
+            let g = DMatrix::from_fn(k, k, |a, b| {
+                block
+                    .iter()
+                    .map(|&i| partialled[a][i] * partialled[b][i])
+                    .sum()
+            });
+            let cr = DVector::from_fn(k, |a, _| {
+                block.iter().map(|&i| partialled[a][i] * resid[i]).sum()
+            });
+            let rr = block.iter().map(|&i| resid[i] * resid[i]).sum();
+            (g, cr, rr)
+        })
+        .collect();
+    let (mut g, mut cr) = (sums[0].0.clone(), sums[0].1.clone());
+    // Each block weighs the same (as `block_rms`): the mean of the blocks'
+    // mean squares.
+    let (mut before, mut after, mut count) = (0.0, 0.0, 0usize);
+    for (block, (gb, crb, rrb)) in blocks.iter().zip(&sums).skip(1) {
+        if !block.is_empty() {
+            let beta = linalg::solve_gram(&g, &cr);
+            let err = rrb - 2.0 * beta.dot(crb) + beta.dot(&(gb * &beta));
+            let m = block.len() as f64;
+            before += rrb / m;
+            after += err.max(0.0) / m;
+            count += 1;
         }
-        train.extend_from_slice(block);
+        g += gb;
+        cr += crb;
     }
-    (
-        block_rms(&blocks[1..], |i| resid[i]),
-        block_rms(&blocks[1..], |i| resid[i] - pred[i]),
-    )
+    let c = count.max(1) as f64;
+    ((before / c).sqrt(), (after / c).sqrt())
 }
 
 #[cfg(test)]
@@ -359,6 +457,7 @@ mod tests {
             fold,
             nfolds,
             progress: &|_| {},
+            forward: Default::default(),
         };
         let st = State::new(&td, "cubic19", &[]).unwrap();
         assert!(st.held_out_rms.is_finite());
