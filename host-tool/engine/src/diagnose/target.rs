@@ -465,7 +465,7 @@ mod tests {
         let gains = |spec: &str| {
             let ff = fwl(&td, &st, spec, 0).unwrap();
             let block = 1.0 - st.holdout.rms(&ff.cols).unwrap() / st.held_out_rms;
-            let (before, after) = forward_rms(&blocks, &st.resid, &ff.partialled);
+            let (before, after) = forward_rms(blocks, &st.resid, &ff.partialled);
             (block, 1.0 - after / before)
         };
         let (block, forward) = gains("drift:target=ez,order=3");
