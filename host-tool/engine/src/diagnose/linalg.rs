@@ -333,7 +333,10 @@ fn pinv_sym(g: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
 /// The least-squares coefficients from a Gram matrix Σccᵀ and Σcy, as
 /// [`small_fit`] solves them: columns scaled to unit diagonal, the
 /// pseudo-inverse with its rank tolerance (zero for a column with no sum).
-pub fn solve_gram(g: &DMatrix<f64>, cy: &DVector<f64>) -> DVector<f64> {
+/// Never refuses: a candidate's few columns are judged by their rank, not
+/// by a condition number (unlike `fit`'s [`crate::lsq::solve_gram`], which
+/// refuses ill-conditioned sums and falls back to a QR of the rows).
+pub fn pinv_solve(g: &DMatrix<f64>, cy: &DVector<f64>) -> DVector<f64> {
     let k = g.nrows();
     let scale: Vec<f64> = (0..k)
         .map(|i| {

@@ -412,7 +412,7 @@ pub(super) fn forward_rms(
     let (mut before, mut after, mut count) = (0.0, 0.0, 0usize);
     for (block, (gb, crb, rrb)) in blocks.iter().zip(&sums).skip(1) {
         if !block.is_empty() {
-            let beta = linalg::solve_gram(&g, &cr);
+            let beta = linalg::pinv_solve(&g, &cr);
             let err = rrb - 2.0 * beta.dot(crb) + beta.dot(&(gb * &beta));
             let m = block.len() as f64;
             before += rrb / m;
