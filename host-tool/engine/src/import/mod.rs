@@ -154,6 +154,20 @@ pub fn read_columns(
         .collect())
 }
 
+/// The data lines of a comma-separated text: (line number, the line, its
+/// cells trimmed), past a byte-order mark, with blank lines and `#`
+/// comments skipped.
+pub(crate) fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str, Vec<&str>)> {
+    text.trim_start_matches('\u{feff}')
+        .lines()
+        .enumerate()
+        .filter_map(|(i, raw)| {
+            let line = raw.trim_end_matches('\r');
+            (!(line.trim().is_empty() || line.trim_start().starts_with('#')))
+                .then(|| (i + 1, line, line.split(',').map(str::trim).collect()))
+        })
+}
+
 /// Reads named numeric columns of a small CSV (a header line, `#` comment
 /// lines, other columns ignored): probe scans, reversal runs, workpiece
 /// scans (docs/on-machine.md). A `*_mm` value must lie within ±10 000 mm, a
@@ -171,13 +185,7 @@ pub fn read_table(
 ) -> anyhow::Result<Vec<Vec<f64>>> {
     let mut rows = Vec::new();
     let mut cols: Option<Vec<usize>> = None;
-    for (i, raw) in text.trim_start_matches('\u{feff}').lines().enumerate() {
-        let ln = i + 1;
-        let line = raw.trim_end_matches('\r');
-        if line.trim().is_empty() || line.trim_start().starts_with('#') {
-            continue;
-        }
-        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+    for (ln, line, cells) in data_lines(text) {
         let Some(c) = &cols else {
             let found: Option<Vec<usize>> = columns
                 .iter()

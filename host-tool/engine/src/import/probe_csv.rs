@@ -94,13 +94,7 @@ fn limit(c: &str) -> (f64, &'static str) {
 pub fn read(text: &str, name: &str) -> Result<ProbeTable> {
     let mut cols: Option<Vec<Option<usize>>> = None;
     let mut rows = Vec::new();
-    for (i, raw) in text.trim_start_matches('\u{feff}').lines().enumerate() {
-        let ln = i + 1;
-        let line = raw.trim_end_matches('\r');
-        if line.trim().is_empty() || line.trim_start().starts_with('#') {
-            continue;
-        }
-        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+    for (ln, _, cells) in super::data_lines(text) {
         let Some(c) = &cols else {
             let mut map = vec![None; COLUMNS.len()];
             for (j, cell) in cells.iter().enumerate() {
