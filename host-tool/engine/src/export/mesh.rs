@@ -23,7 +23,8 @@ use serde::Serialize;
 
 use super::checks::{check_unclampable, FileError};
 use super::{
-    axis_travel_mm, crc32_hex, fmt_no_neg_zero, predict_points, thermal_channels, Point, Warning,
+    at_reference, axis_travel_mm, crc32_hex, fmt_no_neg_zero, predict_points, thermal_channels,
+    Point, Warning,
 };
 use crate::features::Feature;
 use crate::model::{FittedModel, ModelFile};
@@ -256,19 +257,7 @@ pub fn sample_mesh(file: &ModelFile, counts: [usize; 2]) -> Result<MeshSamples> 
     }
     let chans = thermal_channels(model);
     let names: Vec<String> = chans.iter().map(|c| c.0.clone()).collect();
-    if !chans.is_empty() {
-        warnings.push(Warning::new(
-            "thermal_at_reference",
-            format!(
-                "evaluated at the reference temperature ({}): a bed mesh has no temperature input",
-                chans
-                    .iter()
-                    .map(|(c, t)| format!("T_{c}_C = {t} °C"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
-        ));
-    }
+    warnings.extend(at_reference(&chans, "a bed mesh"));
     let point = |x: f64, y: f64, dir: i8| Point {
         pos_mm: [x, y, z_mm],
         dir: [dir; 3],

@@ -135,6 +135,25 @@ pub fn thermal_channels(model: &FittedModel) -> Vec<(String, f64)> {
     out
 }
 
+/// The warning `thermal_at_reference` of a file evaluated at the reference
+/// temperatures `chans` (from [`thermal_channels`]; `None` without
+/// thermal terms): `holder` (`a bed mesh`) has no temperature input.
+pub(crate) fn at_reference(chans: &[(String, f64)], holder: &str) -> Option<Warning> {
+    (!chans.is_empty()).then(|| {
+        Warning::new(
+            "thermal_at_reference",
+            format!(
+                "evaluated at the reference temperature ({}): {holder} has no temperature input",
+                chans
+                    .iter()
+                    .map(|(c, t)| format!("T_{c}_C = {t} °C"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        )
+    })
+}
+
 /// One state of the machine at which a model is evaluated.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Point {

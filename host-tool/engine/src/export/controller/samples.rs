@@ -9,7 +9,9 @@ use anyhow::{anyhow, bail};
 
 use crate::data::{AXES, TARGETS};
 use crate::export::checks::FileError;
-use crate::export::{axis_travel_mm, predict_points, thermal_channels, Point, Warning};
+use crate::export::{
+    at_reference, axis_travel_mm, predict_points, thermal_channels, Point, Warning,
+};
 use crate::features::Feature;
 use crate::model::{FittedModel, ModelFile};
 
@@ -145,19 +147,7 @@ fn sample_travel(
     }
     let chans = thermal_channels(&model);
     let names: Vec<String> = chans.iter().map(|c| c.0.clone()).collect();
-    if !chans.is_empty() {
-        warnings.push(Warning::new(
-            "thermal_at_reference",
-            format!(
-                "evaluated at the reference temperature ({}): a one-axis controller table has no temperature input",
-                chans
-                    .iter()
-                    .map(|(c, t)| format!("T_{c}_C = {t} °C"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
-        ));
-    }
+    warnings.extend(at_reference(&chans, "a one-axis controller table"));
     // A reference outside the temperatures the data were measured at: the
     // file holds the model extrapolated there.
     if let Some(ranges) = &file.data.temp_range_c {
