@@ -12,7 +12,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("features", 1),
     ("units", 1),
     ("effect", 2),
-    ("lsq", 2),
+    ("linalg", 2),
     ("lines", 2),
     ("regions", 2),
     ("simulate", 3),

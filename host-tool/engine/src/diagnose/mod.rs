@@ -47,7 +47,6 @@
 
 pub mod aliasing;
 mod candidates;
-pub mod linalg;
 pub mod noise;
 pub mod outliers;
 mod path;

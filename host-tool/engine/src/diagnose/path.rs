@@ -9,8 +9,6 @@ use crate::effect::{same_effect, Effect, EffectSpec, Family, Target};
 
 use super::aliasing;
 use super::candidates::{propose, Proposal};
-use super::linalg::small_fit;
-use super::linalg::Basis;
 use super::score::{score, Replacing, Scored};
 use super::smooth;
 use super::swap::swap_in;
@@ -21,6 +19,8 @@ use super::{
     Warning, COMPETING_OVERLAP, CONFOUNDED_OVERLAP, DBIC_SIGNIFICANT, MAX_PATH_STEPS, MIN_GAP_DBIC,
     MIN_HELD_OUT_GAIN,
 };
+use crate::linalg::basis::small_fit;
+use crate::linalg::basis::Basis;
 
 /// The evidence's ending of a held-back candidate.
 const HELD_BACK: &str = " — held back, not added: aliasing-suspect (see aliasing: the sampling along its axis cannot tell it from a lead's alias)";

@@ -15,7 +15,7 @@ use crate::data::{Dataset, AXES, TARGETS};
 use crate::effect::Effect;
 use crate::features::{feature_uses_axis, seed_monomials, Feature, Norm};
 use crate::holdout;
-use crate::lsq::{self, Gram, LsqError, LsqSolution, ILL_CONDITIONED};
+use crate::linalg::lsq::{self, Gram, LsqError, LsqSolution, ILL_CONDITIONED};
 use crate::model::{FitStats, FittedModel, LinearModel, LinearOutput};
 
 /// The features of `seed` (+ the effects for `target`) for target `target`

@@ -206,17 +206,17 @@ pub fn fit(data: &Dataset, blocks: usize) -> Result<(FittedModel, FitStats)> {
                         .collect(),
                     None => data.measured(t).map(|x| x.0).collect(),
                 };
-                let a = crate::lsq::design_matrix(data, &lm.norm, &o.features, &rows)?;
+                let a = crate::linalg::lsq::design_matrix(data, &lm.norm, &o.features, &rows)?;
                 let b = nalgebra::DVector::zeros(rows.len());
                 let w = holdout::weights(data, &rows)?;
-                if let Ok(sol) = crate::lsq::solve(&a, &b, w.as_ref()) {
+                if let Ok(sol) = crate::linalg::lsq::solve(&a, &b, w.as_ref()) {
                     worst = worst.max(sol.condition_number);
                 }
             }
         }
         if worst.is_finite() && worst > 0.0 {
             stats.condition_number.insert(name.clone(), worst);
-            if worst > crate::lsq::ILL_CONDITIONED {
+            if worst > crate::linalg::lsq::ILL_CONDITIONED {
                 stats.warnings.push(format!(
                     "{name}: a local patch is ill-conditioned (condition number {worst:.3e})"
                 ));
