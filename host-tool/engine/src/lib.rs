@@ -54,4 +54,5 @@ pub mod regions;
 pub mod separate;
 pub mod simulate;
 pub mod units;
+pub mod warning;
 pub mod workpiece;

@@ -454,16 +454,11 @@ pub struct PathStep {
 }
 
 /// A measurement-design or identifiability warning, with the measurement
-/// that would fix it.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Warning {
-    /// `aliasing`, `one_direction`, `constant_temperature`, `in_model_span`,
-    /// `confounded`, `implausible_parameter`, `above_noise_floor`,
-    /// `no_temperature`.
-    pub code: String,
-    /// What is wrong and what to measure.
-    pub detail: String,
-}
+/// that would fix it (codes: `aliasing`, `one_direction`,
+/// `constant_temperature`, `in_model_span`, `confounded`,
+/// `implausible_parameter`, `above_noise_floor`, `no_temperature`, …): the
+/// engine's one warning type.
+pub use crate::warning::Warning;
 
 /// One periodogram of the periodic search.
 #[derive(Clone, Debug)]

@@ -37,6 +37,7 @@ use crate::features::{Feature, Norm, CUBIC19};
 use crate::fit::linear;
 use crate::holdout;
 use crate::model::{FitStats, FittedModel, LocalModel, LocalPatch};
+use crate::warning::Warning;
 
 fn distinct_positions(data: &Dataset, axis: usize) -> Vec<f64> {
     let Some(col) = &data.pos_mm[axis] else {
@@ -217,8 +218,11 @@ pub fn fit(data: &Dataset, blocks: usize) -> Result<(FittedModel, FitStats)> {
         if worst.is_finite() && worst > 0.0 {
             stats.condition_number.insert(name.clone(), worst);
             if worst > crate::linalg::lsq::ILL_CONDITIONED {
-                stats.warnings.push(format!(
-                    "{name}: a local patch is ill-conditioned (condition number {worst:.3e})"
+                stats.warnings.push(Warning::new(
+                    "ill_conditioned",
+                    format!(
+                        "{name}: a local patch is ill-conditioned (condition number {worst:.3e})"
+                    ),
                 ));
             }
         }
@@ -226,8 +230,9 @@ pub fn fit(data: &Dataset, blocks: usize) -> Result<(FittedModel, FitStats)> {
         let rows: Vec<usize> = data.measured(t).map(|x| x.0).collect();
         let bl = holdout::blocks(data, &rows, blocks);
         if bl.len() < 2 {
-            stats.warnings.push(format!(
-                "{name}: no held-out RMS: a single position or pass"
+            stats.warnings.push(Warning::new(
+                "no_held_out",
+                format!("{name}: no held-out RMS: a single position or pass"),
             ));
             continue;
         }
@@ -261,8 +266,9 @@ pub fn fit(data: &Dataset, blocks: usize) -> Result<(FittedModel, FitStats)> {
                     .held_out_rms_um
                     .insert(name.clone(), (ss / n.max(1) as f64).sqrt());
             }
-            Some(e) => stats.warnings.push(format!(
-                "{name}: no held-out RMS: the local fit without a block fails: {e:#}"
+            Some(e) => stats.warnings.push(Warning::new(
+                "no_held_out",
+                format!("{name}: no held-out RMS: the local fit without a block fails: {e:#}"),
             )),
         }
         if stats.holdout.is_empty() {

@@ -21,6 +21,7 @@ use crate::data::{Dataset, AXES, TARGETS};
 use crate::effect::Effect;
 use crate::holdout;
 use crate::model::{DataRef, ModelFile, ModelSeed, Seed, MODEL_FORMAT};
+use crate::warning::Warning;
 
 /// Options of a fit beyond the model spec.
 #[derive(Clone, Debug)]
@@ -177,10 +178,10 @@ pub fn fit_recorded(
     // grid nodes or network input along it): say so, with the position.
     for a in data.axes() {
         if let Some(p) = data.constant_position(a) {
-            stats.warnings.push(format!(
+            stats.warnings.push(Warning::new("axis_not_modelled", format!(
                 "{ax}: every measured point is at {ax} = {p} mm; {ax} is not modelled (the correction does not depend on {ax}, as for an axis absent from the data)",
                 ax = AXES[a]
-            ));
+            )));
         }
     }
     Ok(ModelFile {

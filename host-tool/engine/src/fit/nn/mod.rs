@@ -54,6 +54,7 @@ use crate::fit::{Progress, ProgressSink};
 use crate::holdout;
 use crate::model::nn::{predict, scale, Net};
 use crate::model::{FitStats, FittedModel, NnModel, NnTraining};
+use crate::warning::Warning;
 
 /// Default number of restarts (see [`NnOptions::restarts`]). Three, not
 /// five: which restart wins is decided by differences of ~0.1 % in
@@ -454,8 +455,9 @@ pub fn fit(
             .map(|x| x.1)
             .collect();
         if held.is_empty() {
-            stats.warnings.push(format!(
-                "{name}: no held-out RMS: too few blocks for a test set"
+            stats.warnings.push(Warning::new(
+                "no_held_out",
+                format!("{name}: no held-out RMS: too few blocks for a test set"),
             ));
         } else {
             stats
@@ -464,18 +466,19 @@ pub fn fit(
         }
     }
     if sp.val.is_empty() {
-        stats.warnings.push(
-            "nn: no validation block, so no early stopping; trained to the epoch limit".into(),
-        );
+        stats.warnings.push(Warning::new(
+            "no_early_stopping",
+            "nn: no validation block, so no early stopping; trained to the epoch limit",
+        ));
     }
     match nm.training.stop.as_str() {
-        "max_epochs" => stats.warnings.push(format!(
+        "max_epochs" => stats.warnings.push(Warning::new("epoch_limit", format!(
             "nn: training stopped at the epoch limit ({}) before the validation error stopped falling",
             opts.max_epochs
-        )),
+        ))),
         "mu_max" => stats
             .warnings
-            .push("nn: training stopped because no step reduced the error (μ reached its maximum)".into()),
+            .push(Warning::new("no_step_reduces_error", "nn: training stopped because no step reduced the error (μ reached its maximum)")),
         _ => {}
     }
     Ok((model, stats))
