@@ -50,6 +50,7 @@ pub mod lines;
 pub mod model;
 pub mod part_diagnosis;
 pub mod probe;
+pub mod progress;
 pub mod regions;
 pub mod separate;
 pub mod simulate;

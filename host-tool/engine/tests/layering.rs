@@ -8,6 +8,8 @@ use std::path::{Path, PathBuf};
 /// Layer of each top-level engine module, lowest first.
 const LAYERS: &[(&str, u8)] = &[
     ("data", 0),
+    ("warning", 0),
+    ("progress", 0),
     ("import", 1),
     ("features", 1),
     ("units", 1),

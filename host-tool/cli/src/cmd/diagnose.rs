@@ -62,7 +62,7 @@ impl Args {
                 follow_path: true,
                 keep_outliers: self.keep_outliers,
             },
-            &|line: &str| eprintln!("{line}"),
+            &crate::cmd::progress::stderr(self.json),
         )
         .with_context(|| format!("{}: cannot diagnose", self.data.display()))?;
         d.warnings.extend(input::data_warnings(&data));

@@ -74,7 +74,7 @@ impl Args {
                 seed: self.seed,
                 ..NnOptions::default()
             },
-            progress: crate::cmd::progress::bar(!self.json),
+            progress: crate::cmd::progress::stderr(self.json),
         };
         // Outliers: a screen that cannot run (too few points for its
         // linear model) is said, and the fit below then names the problem

@@ -54,7 +54,7 @@ impl Args {
         // and is returned once the loop is done.
         let mut write_err: Option<anyhow::Error> = None;
         // Progress on stderr in both modes (each step's fit and diagnosis).
-        let progress = |line: &str| eprintln!("{line}");
+        let progress = crate::cmd::progress::stderr(json);
         let r = improve_with(
             &data,
             &seed,

@@ -23,8 +23,8 @@ pub(super) struct TargetData<'a> {
     pub(super) y: Vec<f64>,
     pub(super) fold: Vec<usize>,
     pub(super) nfolds: usize,
-    /// Where progress lines go (`diagnose_with`).
-    pub(super) progress: super::Progress<'a>,
+    /// Where progress events go (`diagnose_with`).
+    pub(super) progress: &'a crate::progress::Sink,
     /// [`forward_blocks`], made once.
     pub(super) forward: std::sync::OnceLock<Option<Vec<Vec<usize>>>>,
 }
@@ -456,7 +456,7 @@ mod tests {
             y,
             fold,
             nfolds,
-            progress: &|_| {},
+            progress: &crate::progress::Sink::none(),
             forward: Default::default(),
         };
         let st = State::new(&td, "cubic19", &[]).unwrap();

@@ -21,6 +21,7 @@ use crate::data::{Dataset, AXES, TARGETS};
 use crate::effect::Effect;
 use crate::holdout;
 use crate::model::{DataRef, ModelFile, ModelSeed, Seed, MODEL_FORMAT};
+use crate::progress::Sink;
 use crate::warning::Warning;
 
 /// Options of a fit beyond the model spec.
@@ -33,7 +34,7 @@ pub struct FitOptions {
     /// Neural-network training options.
     pub nn: nn::NnOptions,
     /// Where progress events of long computations (network training) go.
-    pub progress: ProgressSink,
+    pub progress: Sink,
 }
 
 impl Default for FitOptions {
@@ -42,68 +43,8 @@ impl Default for FitOptions {
             blocks: holdout::DEFAULT_BLOCKS,
             local: false,
             nn: nn::NnOptions::default(),
-            progress: ProgressSink::none(),
+            progress: Sink::none(),
         }
-    }
-}
-
-/// A step of a long computation, for a front end to show. The engine never
-/// draws: it emits these and the caller (the CLI's progress bar, a test, a
-/// GUI) renders them however it likes.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Progress {
-    /// Training `nn:<hidden>`: `done` of `total` epochs over all restarts.
-    Training {
-        /// Hidden neurons of the network.
-        hidden: usize,
-        /// The restart running (1-based).
-        restart: usize,
-        /// Restarts in all.
-        restarts: usize,
-        /// Epochs done over all restarts.
-        done: u64,
-        /// Epochs at most over all restarts.
-        total: u64,
-        /// Mean squared training error of the last epoch (scaled units).
-        train_mse: f64,
-    },
-    /// The computation is over.
-    Finished,
-}
-
-/// Where [`Progress`] events go: a front end's callback, or nowhere.
-#[derive(Clone, Default)]
-pub struct ProgressSink(Option<std::sync::Arc<ProgressFn>>);
-
-/// A receiver of [`Progress`] events.
-pub type ProgressFn = dyn Fn(&Progress) + Send + Sync;
-
-impl ProgressSink {
-    /// Events go to `f`.
-    pub fn new(f: impl Fn(&Progress) + Send + Sync + 'static) -> Self {
-        ProgressSink(Some(std::sync::Arc::new(f)))
-    }
-
-    /// Events go nowhere.
-    pub fn none() -> Self {
-        ProgressSink(None)
-    }
-
-    /// Sends `p` to the receiver, if there is one.
-    pub fn emit(&self, p: &Progress) {
-        if let Some(f) = &self.0 {
-            f(p);
-        }
-    }
-}
-
-impl std::fmt::Debug for ProgressSink {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(if self.0.is_some() {
-            "ProgressSink(callback)"
-        } else {
-            "ProgressSink(none)"
-        })
     }
 }
 
