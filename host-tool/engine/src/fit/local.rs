@@ -30,11 +30,11 @@
 
 use std::collections::BTreeMap;
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 
 use crate::data::{Dataset, AXES, TARGETS};
 use crate::features::{Feature, Norm, CUBIC19};
-use crate::fit::linear;
+use crate::fit::{linear, FitError, LocalRefusal};
 use crate::holdout;
 use crate::model::{FitStats, FittedModel, LocalModel, LocalPatch};
 use crate::warning::Warning;
@@ -110,12 +110,12 @@ pub fn fit_model(data: &Dataset) -> Result<LocalModel> {
                 .expect("three axes");
             let planes = distinct_positions(data, s);
             if planes.len() * 4 > data.len() {
-                bail!(
-                    "--local: the data is not on measured planes ({} distinct {} positions for {} points); the cuboid fit needs whole planes of points",
-                    planes.len(),
-                    AXES[s],
-                    data.len()
-                );
+                return Err(FitError::Local(LocalRefusal::NotOnPlanes {
+                    planes: planes.len(),
+                    axis: s,
+                    points: data.len(),
+                })
+                .into());
             }
             let others: Vec<usize> = varying.iter().copied().filter(|&a| a != s).collect();
             let base = cubic_in(&others);
@@ -151,7 +151,13 @@ pub fn fit_model(data: &Dataset) -> Result<LocalModel> {
             let shape = if varying.len() == 2 { "plane" } else { "line" };
             let features = mono(cubic_in(&varying));
             let names: Vec<&str> = varying.iter().map(|&a| AXES[a]).collect();
-            let patch = fit_patch(&features, &all_rows, &format!("{shape} ({})", names.join(", ")), 0.0, 0.0)?;
+            let patch = fit_patch(
+                &features,
+                &all_rows,
+                &format!("{shape} ({})", names.join(", ")),
+                0.0,
+                0.0,
+            )?;
             Ok(LocalModel {
                 shape: shape.into(),
                 norm,
@@ -160,7 +166,7 @@ pub fn fit_model(data: &Dataset) -> Result<LocalModel> {
                 patches: vec![patch],
             })
         }
-        _ => bail!("--local: every measured point lies at one position; a local fit needs travel on some axis"),
+        _ => Err(FitError::Local(LocalRefusal::NoTravel).into()),
     }
 }
 
@@ -372,7 +378,22 @@ mod tests {
                 *v += (i * (a + 1)) as f64 * 0.01;
             }
         }
-        let e = fit(&d, 5).unwrap_err().to_string();
-        assert!(e.contains("not on measured planes"), "{e}");
+        let e = fit(&d, 5).unwrap_err();
+        assert!(
+            matches!(
+                e.downcast_ref::<FitError>(),
+                Some(FitError::Local(LocalRefusal::NotOnPlanes {
+                    points: 64,
+                    ..
+                }))
+            ),
+            "{e}"
+        );
+        // The engine's words name no flag of the command line.
+        assert!(
+            e.to_string()
+                .starts_with("local fit: the data is not on measured planes"),
+            "{e}"
+        );
     }
 }

@@ -48,6 +48,59 @@ impl Default for FitOptions {
     }
 }
 
+/// What a fit refuses to do, in the engine's words; a caller names its
+/// own way of asking (the CLI: `--add`, `--local`, cmd/flags.rs).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum FitError {
+    /// Effects added to a local fit.
+    #[error("a local fit takes no added effects (the local patches use the seed's own terms)")]
+    LocalWithEffects,
+    /// A local fit or added effects asked of a seed that is no polynomial.
+    #[error("local fits and added effects apply to the polynomial seeds (cubic19, kinematic), not to {seed}")]
+    NotPolynomial {
+        /// The seed as given (`nn:8`, `grid:10`).
+        seed: String,
+    },
+    /// Data a local fit cannot be made of.
+    #[error("local fit: {0}")]
+    Local(LocalRefusal),
+}
+
+/// Why data cannot have a local fit.
+#[derive(Clone, Debug, PartialEq)]
+pub enum LocalRefusal {
+    /// The points are not on whole planes (the cuboid fit's stack).
+    NotOnPlanes {
+        /// Distinct positions along the stacking axis.
+        planes: usize,
+        /// The stacking axis (0 = x).
+        axis: usize,
+        /// Points in all.
+        points: usize,
+    },
+    /// Every point at one position: nothing to fit a polynomial along.
+    NoTravel,
+}
+
+impl std::fmt::Display for LocalRefusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LocalRefusal::NotOnPlanes {
+                planes,
+                axis,
+                points,
+            } => write!(
+                f,
+                "the data is not on measured planes ({planes} distinct {} positions for {points} points); the cuboid fit needs whole planes of points",
+                AXES[*axis]
+            ),
+            LocalRefusal::NoTravel => f.write_str(
+                "every measured point lies at one position; a local fit needs travel on some axis",
+            ),
+        }
+    }
+}
+
 /// Fits the model `seed` (+ `adds`) to `data` and returns the complete
 /// MODEL.json content, statistics included. Bad input (unknown seed, an
 /// effect on a target or channel the data lacks, fewer distinct points than
@@ -87,7 +140,7 @@ pub fn fit_recorded(
     let (model, mut stats, seed_name) = match parsed {
         Seed::Cubic19 | Seed::Kinematic if opts.local => {
             if !adds.is_empty() {
-                bail!("--add is not supported with --local (the local patches use the seed's own terms)");
+                return Err(FitError::LocalWithEffects.into());
             }
             let (m, s) = local::fit(data, blocks)?;
             let name = ModelSeed {
@@ -102,14 +155,20 @@ pub fn fit_recorded(
         }
         Seed::Nn { hidden } => {
             if opts.local || !adds.is_empty() {
-                bail!("--local and --add apply to the polynomial seeds (cubic19, kinematic), not to {seed}");
+                return Err(FitError::NotPolynomial {
+                    seed: seed.to_string(),
+                }
+                .into());
             }
             let (m, s) = nn::fit(data, hidden, &opts.nn, &opts.progress, blocks)?;
             (m, s, seed.to_string())
         }
         Seed::Grid { step_mm } => {
             if opts.local || !adds.is_empty() {
-                bail!("--local and --add apply to the polynomial seeds (cubic19, kinematic), not to {seed}");
+                return Err(FitError::NotPolynomial {
+                    seed: seed.to_string(),
+                }
+                .into());
             }
             let (m, s) = grid::fit(data, step_mm, blocks)?;
             (m, s, seed.to_string())
