@@ -136,6 +136,13 @@ pub fn fit_recorded(
             );
         }
     }
+    let polynomial = matches!(parsed, Seed::Cubic19 | Seed::Kinematic);
+    if !polynomial && (opts.local || !adds.is_empty()) {
+        return Err(FitError::NotPolynomial {
+            seed: seed.to_string(),
+        }
+        .into());
+    }
     let blocks = opts.blocks.max(2);
     let (model, mut stats, seed_name) = match parsed {
         Seed::Cubic19 | Seed::Kinematic if opts.local => {
@@ -154,22 +161,10 @@ pub fn fit_recorded(
             (m, s, parsed.to_string())
         }
         Seed::Nn { hidden } => {
-            if opts.local || !adds.is_empty() {
-                return Err(FitError::NotPolynomial {
-                    seed: seed.to_string(),
-                }
-                .into());
-            }
             let (m, s) = nn::fit(data, hidden, &opts.nn, &opts.progress, blocks)?;
             (m, s, seed.to_string())
         }
         Seed::Grid { step_mm } => {
-            if opts.local || !adds.is_empty() {
-                return Err(FitError::NotPolynomial {
-                    seed: seed.to_string(),
-                }
-                .into());
-            }
             let (m, s) = grid::fit(data, step_mm, blocks)?;
             (m, s, seed.to_string())
         }
