@@ -13,11 +13,13 @@ use std::path::{Path, PathBuf};
 /// Layer of each top-level engine module, lowest first.
 const LAYERS: &[(&str, u8)] = &[
     ("data", 0),
+    ("warning", 0),
+    ("progress", 0),
     ("import", 1),
     ("features", 1),
     ("units", 1),
     ("effect", 2),
-    ("lsq", 2),
+    ("linalg", 2),
     ("lines", 2),
     ("regions", 2),
     ("simulate", 3),

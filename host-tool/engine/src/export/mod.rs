@@ -42,31 +42,16 @@ pub mod mesh;
 pub mod table;
 
 use anyhow::{bail, Result};
-use serde::Serialize;
 
 use crate::data::{Dataset, TempChannel, TARGETS};
 pub use crate::features::feature_uses_axis;
 use crate::features::Feature;
 use crate::model::FittedModel;
 
-/// A warning in an export's `--json` output and on stderr.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Warning {
-    /// Stable code: `drift_left_out`, `lag_dropped`, `periodic_left_out`, …
-    pub code: String,
-    /// What happened and what it means for the machine.
-    pub detail: String,
-}
-
-impl Warning {
-    /// A warning with a code and a detail.
-    pub fn new(code: &str, detail: impl Into<String>) -> Warning {
-        Warning {
-            code: code.to_string(),
-            detail: detail.into(),
-        }
-    }
-}
+/// A warning in an export's `--json` output and on stderr (codes:
+/// `drift_left_out`, `lag_dropped`, `periodic_left_out`, …): the engine's
+/// one warning type.
+pub use crate::warning::Warning;
 
 /// The travel of `axis` (0 = x) that the model was fitted on, mm, or `None`
 /// when the model does not use the axis. Linear: the normalisation's span
