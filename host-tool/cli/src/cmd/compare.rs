@@ -8,7 +8,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
-use crate::cmd::out;
+use crate::cmd::out::{self, outln};
 use crate::input;
 use crate::workflow::run_compare;
 use trueaxis_engine::compare::{self, Comparison};
@@ -147,6 +147,16 @@ impl Args {
             out::json(&c)?;
         } else {
             out::print(&text(&c))?;
+            // Which effect is missing: diagnose (issue 28: every command
+            // that writes something says what to run next).
+            outln!(
+                "next: {}",
+                crate::report::compare::diagnose_command(
+                    &self.data,
+                    &self.model,
+                    self.report.as_deref()
+                )
+            )?;
         }
         Ok(())
     }

@@ -295,7 +295,17 @@ pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path, verbose: bool) ->
             s.push_str(&format!("  [{}] {}\n", w.code, w.detail));
         }
     }
-    if let Some(cmd) = next_command(d, data_path, model_out) {
+    // The page's next command (a fit with what is missing; at the noise
+    // floor the refit and its export), printed when it is one to run.
+    if let Some(cmd) = next_command(d, data_path, model_out).or_else(|| {
+        crate::report::diagnose::verdict(
+            d,
+            &data_path.display().to_string(),
+            &model_out.display().to_string(),
+        )
+        .next
+        .filter(|n| n.starts_with("trueaxis "))
+    }) {
         s.push_str(&format!("next: {cmd}\n"));
     }
     let mut lines: Vec<&str> = d.held_back().map(|(_, a)| a.measure.as_str()).collect();

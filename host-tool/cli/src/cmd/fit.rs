@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 
 use crate::cmd::out::{self, outln};
+use crate::report::diagnose::shell_word;
 use crate::input;
 use crate::workflow::model_output;
 use trueaxis_engine::diagnose::outliers;
@@ -162,6 +163,13 @@ impl Args {
             }
         }
         outln!("  model written to {}", out.display())?;
+        // Where the model fails, on a page (issue 28: every command that
+        // writes something says what to run next).
+        outln!(
+            "next: trueaxis compare {} --model {} --report report",
+            shell_word(&self.data.display().to_string()),
+            shell_word(&out.display().to_string())
+        )?;
         Ok(())
     }
 }

@@ -46,9 +46,30 @@ fn read(path: &std::path::Path, pl: [&str; 2], session: Option<i64>) -> Result<V
 }
 
 /// The page's next step after a calibration written to `probe`.
-fn correct_next(probe: &std::path::Path) -> String {
+/// What to run next after a 2-D calibration: a command that runs as
+/// pasted where `calibrate` ran (no `SCAN.csv` placeholder, issue 28) —
+/// the ball's own scan corrected with the calibration, a check that its
+/// form falls to the noise; part scans are corrected the same way.
+fn correct_next(scan: &std::path::Path, probe: &std::path::Path) -> String {
+    use crate::report::diagnose::shell_word;
+    let stem = scan
+        .file_stem()
+        .map_or("scan".into(), |s| s.to_string_lossy().into_owned());
+    let out = scan.with_file_name(format!("{stem}_corrected.csv"));
     format!(
-        "trueaxis probe correct SCAN.csv --probe {} -o SURFACE.csv",
+        "trueaxis probe correct {} --probe {} -o {}",
+        shell_word(&scan.display().to_string()),
+        shell_word(&probe.display().to_string()),
+        shell_word(&out.display().to_string())
+    )
+}
+
+/// What to do next after a 3-D calibration, in words: a 3-D ball scan
+/// corrected as a circle would mean nothing, and the part scans are not
+/// known here.
+fn correct_next_3d(probe: &std::path::Path) -> String {
+    format!(
+        "correct each part scan with this calibration: `trueaxis probe correct` with --probe {} (docs/on-machine.md)",
         probe.display()
     )
 }
@@ -134,7 +155,7 @@ impl Calibrate {
                         form_pv_nm: pr.form_pv_nm,
                         ball_pv_nm: [cal.pv_without_form_nm, cal.pv_with_form_nm],
                         warnings: &cal.warnings,
-                        next: correct_next(&self.output),
+                        next: correct_next(&self.scan, &self.output),
                     },
                     dir,
                 )
@@ -214,7 +235,7 @@ impl Calibrate {
                         residual_nm: &cal.residual_nm,
                         ball_pv_nm: [cal.pv_without_form_nm, cal.pv_with_form_nm],
                         warnings: &cal.warnings,
-                        next: correct_next(&self.output),
+                        next: correct_next_3d(&self.output),
                     },
                     dir,
                 )

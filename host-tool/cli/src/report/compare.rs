@@ -243,12 +243,7 @@ pub fn verdict(c: &Comparison, sources: Option<Sources>, dir: &Path) -> Verdict 
             .into(),
     );
     let next = Some(match sources {
-        Some(s) => format!(
-            "trueaxis diagnose {} --model {} --report {}",
-            s.data.display(),
-            s.model.display(),
-            dir.join("diagnose").display()
-        ),
+        Some(s) => diagnose_command(s.data, s.model, Some(dir)),
         None => format!(
             "trueaxis diagnose {} --model MODEL.json --report {}",
             c.data,
@@ -266,6 +261,18 @@ pub fn verdict(c: &Comparison, sources: Option<Sources>, dir: &Path) -> Verdict 
         next,
         tone: if action { Tone::Action } else { Tone::Unknown },
     }
+}
+
+/// `trueaxis diagnose DATA --model MODEL [--report DIR/diagnose]`, each
+/// path one shell word, as typed (the command runs where compare ran).
+pub fn diagnose_command(data: &Path, model: &Path, report: Option<&Path>) -> String {
+    use crate::report::diagnose::shell_word;
+    let word = |p: &Path| shell_word(&p.display().to_string());
+    let mut cmd = format!("trueaxis diagnose {} --model {}", word(data), word(model));
+    if let Some(dir) = report {
+        cmd.push_str(&format!(" --report {}", word(&dir.join("diagnose"))));
+    }
+    cmd
 }
 
 /// Adds the comparison's sections to `page` (so `demo` and `diagnose` can
@@ -289,6 +296,7 @@ pub fn build_report(
         page.paragraph(format!("Warning ({}): {}", w.code, w.detail));
     }
     page.heading("Summary");
+    page.colour_key();
     let f = |v: f64| format!("{v:.3}");
     let rows = c
         .targets

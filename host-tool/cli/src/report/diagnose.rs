@@ -18,7 +18,8 @@ use trueaxis_engine::features;
 use trueaxis_engine::diagnose::{Verdict as DVerdict, ABOVE_NOISE_RATIO};
 
 use crate::report::plot::{
-    axis_title, format_value, heat_map_pair, HeatMap, Series, Style, Ticks, XyPlot,
+    self, axis_title, darker, format_value, heat_map_pair, target_colour, HeatMap, Series, Style,
+    Ticks, XyPlot, DIRECTION_COLOURS,
 };
 use crate::report::{Figure, Page, Tone, Verdict};
 
@@ -58,6 +59,23 @@ pub fn fit_command(d: &Diagnosis, data_path: &str, model_out: &str) -> Option<St
     // so the command runs as printed and the history continues.
     cmd.push_str(&format!(" -o {}", shell_word(model_out)));
     Some(cmd)
+}
+
+/// The diagnosed model fitted again as it is (its seed and every `--add`),
+/// written to `model_out`: the first half of the command at the noise
+/// floor ("fit, then export").
+pub fn refit_command(d: &Diagnosis, data_path: &str, model_out: &str) -> String {
+    let mut parts = d.model.split(" + ");
+    let mut cmd = format!(
+        "trueaxis fit {} --model {}",
+        shell_word(data_path),
+        parts.next().unwrap_or("cubic19")
+    );
+    for a in parts {
+        cmd.push_str(&format!(" --add {}", shell_word(a)));
+    }
+    cmd.push_str(&format!(" -o {}", shell_word(model_out)));
+    cmd
 }
 
 /// A path as one shell word: as it is when it has only characters no
@@ -334,8 +352,9 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
                     Tone::Unknown
                 },
                 Some(format!(
-                    "trueaxis fit {data_path} --model {} -o model.json && trueaxis export model.json -o table.bin",
-                    d.model.replace(" + ", " --add ")
+                    "{} && trueaxis export {} -o table.bin",
+                    refit_command(d, data_path, model_out),
+                    shell_word(model_out)
                 )),
             )
         }
@@ -362,8 +381,10 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
                 .map(|w| format!("measure first: {}", w.detail))
                 .or_else(|| {
                     Some(format!(
-                        "trueaxis fit {data_path} --model {} -o model.json && trueaxis compare {data_path} --model model.json --report report",
-                        d.model.replace(" + ", " --add ")
+                        "{} && trueaxis compare {} --model {} --report report",
+                        refit_command(d, data_path, model_out),
+                        shell_word(data_path),
+                        shell_word(model_out)
                     ))
                 });
             (
@@ -700,6 +721,8 @@ fn thermal_slope(
         ),
         _ => axis_title(&column),
     };
+    let colour = plot::target_of(&c.target.to_string())
+        .map_or(plot::OTHER_COLOURS[0], target_colour);
     let plot = XyPlot::new(
         format!(
             "Thermal growth of {}{}: the slope",
@@ -709,11 +732,14 @@ fn thermal_slope(
         t_title.clone(),
         y_label,
     )
-    .with(Series::points("component + residual", pts.clone()))
-    .with(Series::line(
-        format!("least squares: {} {unit}", format_value(slope)),
-        vec![(lo, icpt + slope * lo), (hi, icpt + slope * hi)],
-    ));
+    .with(Series::points("component + residual", pts.clone()).coloured(colour))
+    .with(
+        Series::line(
+            format!("least squares: {} {unit}", format_value(slope)),
+            vec![(lo, icpt + slope * lo), (hi, icpt + slope * hi)],
+        )
+        .coloured(darker(colour, 0.45)),
+    );
     let fitted = c.physical.as_ref().map_or(String::new(), |ph| {
         format!(
             "; the model's {} is {} {} (95 %: {} … {})",
@@ -932,6 +958,7 @@ pub fn write_for(
         crate::report::history::add_to_page(&mut page, h, &noise)?;
     }
     page.heading("Evidence");
+    page.colour_key();
     // The x–y evidence side by side, two per row; the maps below full width.
     let mut figs: Vec<Figure> = Vec::new();
     // Periodograms: every target and axis with dense lines at the starting
@@ -956,13 +983,7 @@ pub fn write_for(
             "share of variance",
         )
         .with_x_ticks(Ticks::Period)
-        .with(Series::line("Lomb–Scargle power", pts));
-        if let Some(k) = e.pg.peak() {
-            plot = plot.with_vline(
-                e.pg.freq_per_mm[k],
-                format!("{} mm", format_value(1.0 / e.pg.freq_per_mm[k])),
-            );
-        }
+        .with(Series::line("Lomb–Scargle power", pts).coloured(plot::target_colour(e.target)));
         let rows = d
             .evidence
             .resid_before
@@ -973,11 +994,21 @@ pub fn write_for(
         let sampling = periodogram_sampling(data, e.axis, rows);
         let mut caption =
             format!("Lomb–Scargle periodogram of the {tn} residual along {ax}{at} (dense lines)");
-        if let Some(level) = sampling
+        let level = sampling
             .as_ref()
-            .and_then(|s| false_alarm_level(s.points, e.pg.power.len(), FALSE_ALARM))
-        {
-            plot = plot.with_dashed(level, "1 % false-alarm level", 1);
+            .and_then(|s| false_alarm_level(s.points, e.pg.power.len(), FALSE_ALARM));
+        // The peak is marked red only when it is a finding (above the 1 %
+        // level, or no level known); a peak below it is marked grey.
+        if let Some(k) = e.pg.peak() {
+            let label = format!("{} mm", format_value(1.0 / e.pg.freq_per_mm[k]));
+            plot = if level.is_some_and(|l| e.pg.power[k] < l) {
+                plot.with_vline_coloured(e.pg.freq_per_mm[k], label, plot::NO_FINDING)
+            } else {
+                plot.with_vline(e.pg.freq_per_mm[k], label)
+            };
+        }
+        if let Some(level) = level {
+            plot = plot.with_dashed(level, "1 % false-alarm level", plot::NO_FINDING);
             caption.push_str(&format!(
                 "; dashed: the power noise alone passes somewhere in the band with 1 % probability ({} points, {} independent frequencies) — a peak below it is no finding",
                 sampling.as_ref().map_or(0, |s| s.points),
@@ -1112,16 +1143,22 @@ pub fn write_for(
             format!("dir_{} = −1", AXES[*a]),
             down.clone(),
         ))
-        .with(Series::styled(
-            "forward profile (mean per bin)",
-            binned_mean(&up, PROFILE_BINS),
-            Style::LinePoints,
-        ))
-        .with(Series::styled(
-            "backward profile (mean per bin)",
-            binned_mean(&down, PROFILE_BINS),
-            Style::LinePoints,
-        ));
+        .with(
+            Series::styled(
+                "forward profile (mean per bin)",
+                binned_mean(&up, PROFILE_BINS),
+                Style::LinePoints,
+            )
+            .coloured(darker(DIRECTION_COLOURS[0], 0.35)),
+        )
+        .with(
+            Series::styled(
+                "backward profile (mean per bin)",
+                binned_mean(&down, PROFILE_BINS),
+                Style::LinePoints,
+            )
+            .coloured(darker(DIRECTION_COLOURS[1], 0.35)),
+        );
         figs.push(Figure {
             name: format!("reversal_{}_{}", TARGETS[*t], AXES[*a]),
             caption: format!(
@@ -1162,8 +1199,8 @@ pub fn write_for(
             label,
             format!("{} (µm)", TARGETS[t]),
         )
-        .with(Series::points("component + residual", partial))
-        .with(Series::points("fitted component", fitted));
+        .with(Series::points("component + residual", partial).coloured(target_colour(t)))
+        .with(Series::points("fitted component", fitted).coloured(darker(target_colour(t), 0.5)));
         figs.push(Figure {
             name: format!("component_{}_{}", TARGETS[t], comp.step),
             caption: format!(
@@ -1269,7 +1306,17 @@ mod tests {
             "{}",
             v.headline
         );
-        assert!(v.next.unwrap().contains("trueaxis export model.json"));
+        // The model it diagnosed, refitted and exported: the same path in
+        // both halves (it wrote model.json and exported that).
+        assert_eq!(
+            v.next.unwrap(),
+            "trueaxis fit d.csv --model cubic19 -o m.json && trueaxis export m.json -o table.bin"
+        );
+        let spaced = verdict(&diagnosis(0.2, Some(0.2)), "my data.csv", "a b/m.json");
+        assert_eq!(
+            spaced.next.unwrap(),
+            "trueaxis fit 'my data.csv' --model cubic19 -o 'a b/m.json' && trueaxis export 'a b/m.json' -o table.bin"
+        );
     }
 
     #[test]

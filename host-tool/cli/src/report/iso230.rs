@@ -60,11 +60,7 @@ pub fn verdict(res: &Iso230, data_path: &str) -> Verdict {
         Vec::new()
     };
     let removable = res.e_um > 1.5 * r_uni;
-    let mut next = format!("trueaxis fit {data_path} --model cubic19");
-    if big_reversal {
-        next.push_str(&format!(" --add 'reversal:target=e{ax},axis={ax}'"));
-    }
-    next.push_str(" -o model.json");
+    let next = fit_command(res, data_path, big_reversal);
     Verdict {
         headline: format!(
             "Axis {ax}: accuracy A = {}; compensation can remove most of the systematic E = {}{}, not the repeatability (one direction, up to {}).",
@@ -82,6 +78,42 @@ pub fn verdict(res: &Iso230, data_path: &str) -> Verdict {
         next: Some(next),
         tone: if removable { Tone::Action } else { Tone::Good },
     }
+}
+
+/// The command that fits a model to the run, as it runs when pasted where
+/// `iso230` ran: an ecmc `.dat` (which does not name its axis) imported
+/// first with `--axis`; the cubic seed when the run has the 4 targets a
+/// cubic along one axis needs, else a grid model on the targets' spacing
+/// (a 3-target run cannot fit 4 terms); a reversal term when B is large.
+pub fn fit_command(res: &Iso230, data_path: &str, reversal: bool) -> String {
+    let ax = &res.axis;
+    let data = crate::report::diagnose::shell_word(data_path);
+    let (mut cmd, input) = if data_path.to_ascii_lowercase().ends_with(".dat") {
+        (
+            format!("trueaxis import {data} --axis {ax} -o run.csv && "),
+            "run.csv".to_string(),
+        )
+    } else {
+        (String::new(), data)
+    };
+    let mut pos: Vec<f64> = res.per_target.iter().map(|t| t.pos_mm).collect();
+    pos.sort_by(f64::total_cmp);
+    let step = pos
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| *d > 1e-9)
+        .fold(f64::INFINITY, f64::min);
+    let model = if pos.len() >= 4 || !step.is_finite() {
+        "cubic19".to_string()
+    } else {
+        format!("grid:{}", trueaxis_engine::lines::plot_num(step))
+    };
+    cmd.push_str(&format!("trueaxis fit {input} --model {model}"));
+    if reversal {
+        cmd.push_str(&format!(" --add 'reversal:target=e{ax},axis={ax}'"));
+    }
+    cmd.push_str(" -o model.json");
+    cmd
 }
 
 /// Writes `DIR/index.html` (verdict, plot, per-target table) and
