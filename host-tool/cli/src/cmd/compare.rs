@@ -151,10 +151,12 @@ impl Args {
             // that writes something says what to run next).
             outln!(
                 "next: {}",
-                crate::report::compare::diagnose_command(
+                crate::report::compare::next_command(
+                    &c.model,
                     &self.data,
                     &self.model,
-                    self.report.as_deref()
+                    self.report.as_deref(),
+                    data.is_probed_surface()
                 )
             )?;
         }

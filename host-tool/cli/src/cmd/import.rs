@@ -96,6 +96,7 @@ impl Args {
             }
             if let Some(out) = &self.output {
                 outln!("wrote {}", out.display())?;
+                outln!("next: {}", crate::workflow::next_for_data(&data, out))?;
             }
         }
         Ok(())

@@ -135,7 +135,7 @@ pub fn write_report_from(
     sources: Option<Sources>,
 ) -> Result<PathBuf> {
     let mut page = Page::new(format!("trueaxis compare — {} vs {}", c.data, c.model));
-    page.verdict(verdict(c, sources, dir));
+    page.verdict(verdict_for(c, sources, dir, data.is_probed_surface()));
     build_report(&mut page, data, predicted, c)?;
     page.write(dir)
 }
@@ -143,6 +143,12 @@ pub fn write_report_from(
 /// The compare page's verdict: what is left after compensation, where, and
 /// what it follows — and that `diagnose` names what is missing.
 pub fn verdict(c: &Comparison, sources: Option<Sources>, dir: &Path) -> Verdict {
+    verdict_for(c, sources, dir, false)
+}
+
+/// [`verdict`] for data that may be a probed surface (`bed`: the next
+/// command exports a bed mesh when the model is no linear seed).
+pub fn verdict_for(c: &Comparison, sources: Option<Sources>, dir: &Path, bed: bool) -> Verdict {
     let um = |v: f64| format!("{} µm", format_value(v));
     let worst = c
         .targets
@@ -243,7 +249,7 @@ pub fn verdict(c: &Comparison, sources: Option<Sources>, dir: &Path) -> Verdict 
             .into(),
     );
     let next = Some(match sources {
-        Some(s) => diagnose_command(s.data, s.model, Some(dir)),
+        Some(s) => next_command(&c.model, s.data, s.model, Some(dir), bed),
         None => format!(
             "trueaxis diagnose {} --model MODEL.json --report {}",
             c.data,
@@ -263,11 +269,31 @@ pub fn verdict(c: &Comparison, sources: Option<Sources>, dir: &Path) -> Verdict 
     }
 }
 
-/// `trueaxis diagnose DATA --model MODEL [--report DIR/diagnose]`, each
-/// path one shell word, as typed (the command runs where compare ran).
-pub fn diagnose_command(data: &Path, model: &Path, report: Option<&Path>) -> String {
+/// What to run after a comparison, each path one shell word as typed (the
+/// command runs where compare ran): `trueaxis diagnose DATA --model MODEL
+/// [--report DIR/diagnose]` for a linear seed (`model_spec`: what diagnose
+/// works on); for a grid, local or network model, which diagnose refuses,
+/// the export — a bed mesh for a probed surface, else the firmware table.
+pub fn next_command(
+    model_spec: &str,
+    data: &Path,
+    model: &Path,
+    report: Option<&Path>,
+    bed: bool,
+) -> String {
     use crate::report::diagnose::shell_word;
     let word = |p: &Path| shell_word(&p.display().to_string());
+    let seed = model_spec.split([' ', '+']).next().unwrap_or("");
+    if !matches!(seed, "cubic19" | "kinematic") {
+        return if bed {
+            format!(
+                "trueaxis export {} --format klipper-mesh -o mesh.cfg",
+                word(model)
+            )
+        } else {
+            format!("trueaxis export {} -o table.bin", word(model))
+        };
+    }
     let mut cmd = format!("trueaxis diagnose {} --model {}", word(data), word(model));
     if let Some(dir) = report {
         cmd.push_str(&format!(" --report {}", word(&dir.join("diagnose"))));

@@ -246,3 +246,43 @@ pub fn on_machine_campaign(dir: &Path) -> (PathBuf, Value) {
     ]));
     (camp, doc["truth"].clone())
 }
+
+/// A page's Next (`<pre class="next">`), unescaped, when it is a command
+/// (some pages say in words what to measure first).
+pub fn page_next(page: &Path) -> Option<String> {
+    let html = std::fs::read_to_string(page).unwrap();
+    let start = html.find("<pre class=\"next\">")? + "<pre class=\"next\">".len();
+    let end = start + html[start..].find("</pre>")?;
+    let cmd = html[start..end]
+        .replace("&#39;", "'")
+        .replace("&quot;", "\"")
+        .replace("&lt;", "<")
+        .replace("&gt;", ">")
+        .replace("&amp;", "&");
+    cmd.starts_with("trueaxis ").then_some(cmd)
+}
+
+/// Pastes `cmd` into `sh` in `dir`, as a user would; its stdout, or the
+/// failure in words.
+pub fn paste(dir: &Path, cmd: &str) -> Result<String, String> {
+    let script = format!(
+        "trueaxis() {{ '{}' \"$@\"; }}\n{cmd}\n",
+        env!("CARGO_BIN_EXE_trueaxis")
+    );
+    let out = Command::new("sh")
+        .arg("-c")
+        .arg(&script)
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    if out.status.success() {
+        Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+    } else {
+        Err(format!(
+            "`{cmd}` (in {}) exited {:?}: {}",
+            dir.display(),
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr)
+        ))
+    }
+}

@@ -1287,15 +1287,19 @@ mod tests {
         assert!(texts(&one).contains(&"1".to_string()));
     }
 
-    /// The fill/stroke colours of the circles (dots) in an SVG.
+    /// The fill colours of the circles (dots: legend and data) in an SVG,
+    /// each once, in the order they first appear.
     fn dot_colours(svg: &str) -> Vec<String> {
-        svg.split("<circle")
-            .skip(1)
-            .filter_map(|c| {
-                let c = &c[..c.find("/>").unwrap_or(c.len())];
-                c.split("fill=\"").nth(1).map(|f| f[..7].to_string())
-            })
-            .collect()
+        let mut v: Vec<String> = Vec::new();
+        for c in svg.split("<circle").skip(1) {
+            let c = &c[..c.find("/>").unwrap_or(c.len())];
+            if let Some(f) = c.split("fill=\"").nth(1).map(|f| f[..7].to_string()) {
+                if !v.contains(&f) {
+                    v.push(f);
+                }
+            }
+        }
+        v
     }
 
     fn hex(c: RGBColor) -> String {
