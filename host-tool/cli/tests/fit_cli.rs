@@ -333,3 +333,41 @@ fn bad_input_exits_1_and_usage_exits_2() {
         "blocks",
     );
 }
+
+#[test]
+fn the_text_gives_each_targets_term_count_when_they_differ() {
+    // Issue 28: "21 terms per target" when ey and ez had 19.
+    let dir = common::tmp_dir("fit", "terms");
+    let csv = dir.join("d.csv");
+    common::json(&common::run(&[
+        "simulate",
+        "--plan",
+        "grid:100",
+        "--plan",
+        "line:x:5,bidir",
+        "--seed",
+        "4",
+        "-o",
+        common::s(&csv),
+        "--json",
+    ]));
+    let out = common::run(&[
+        "fit",
+        common::s(&csv),
+        "--model",
+        "cubic19",
+        "--add",
+        "reversal:target=ex,axis=x",
+        "-o",
+        common::s(&dir.join("m.json")),
+    ]);
+    common::assert_success(&out);
+    let text = String::from_utf8_lossy(&out.stdout);
+    let first = text.lines().next().unwrap();
+    assert!(
+        first.contains("terms per target ex 20, ey 19, ez 19"),
+        "{first}"
+    );
+    assert!(first.contains(" rows, "), "{first}");
+    assert!(text.contains("\nnext: trueaxis compare "), "{text}");
+}

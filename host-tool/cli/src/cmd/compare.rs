@@ -34,7 +34,13 @@ pub struct Args {
 pub fn text(c: &Comparison) -> String {
     use std::fmt::Write as _;
     let mut s = String::new();
-    let _ = writeln!(s, "{} vs {} ({} rows)", c.data, c.model, c.rows);
+    let _ = writeln!(
+        s,
+        "{} vs {} ({})",
+        c.data,
+        c.model,
+        crate::report::count(c.rows, "row")
+    );
     let _ = writeln!(
         s,
         "{:<6} {:>7} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",

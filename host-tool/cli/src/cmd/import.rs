@@ -76,9 +76,9 @@ impl Args {
             outln!("{doc}")?;
         } else {
             outln!(
-                "{}: {} rows, columns {}",
+                "{}: {}, columns {}",
                 self.file.display(),
-                data.len(),
+                crate::report::count(data.len(), "row"),
                 columns.join(", ")
             )?;
             for (k, v) in &data.metadata {
@@ -89,7 +89,10 @@ impl Args {
                 outln!("  auxiliary channels kept: {}", names.join(", "))?;
             }
             if !data.skipped.is_empty() {
-                outln!("  {} rows left out:", data.skipped.len())?;
+                outln!(
+                    "  {} left out:",
+                    crate::report::count(data.skipped.len(), "row")
+                )?;
                 for s in &data.skipped {
                     outln!("    line {}: {}", s.line, s.reason)?;
                 }

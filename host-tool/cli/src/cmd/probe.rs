@@ -99,8 +99,7 @@ pub struct Calibrate {
     /// The master ball's calibrated diameter, mm (its certificate).
     #[arg(long)]
     pub ball_diameter_mm: f64,
-    /// The plane of the scan, or `xyz` for a 3-D scan over the ball
-    /// [default: xz].
+    /// The plane of the scan, or `xyz` for a 3-D scan over the ball.
     #[arg(long, default_value = "xz")]
     pub plane: String,
     /// Where to write the probe file.
@@ -347,15 +346,15 @@ pub struct Correct {
     /// The probe file `probe calibrate` wrote.
     #[arg(long)]
     pub probe: PathBuf,
-    /// The plane of the scan [default: xz].
+    /// The plane of the scan.
     #[arg(long, default_value = "xz")]
     pub plane: String,
     /// Which side of the part the probe touches: the outward direction of
-    /// the surface, `+z`, `-z`, `+x`, `-x`, `+y`, `-y` [default: +z].
+    /// the surface, `+z`, `-z`, `+x`, `-x`, `+y`, `-y`.
     #[arg(long, default_value = "+z", allow_hyphen_values = true)]
     pub side: String,
     /// The nominal shape the form error is taken against: `circle` or
-    /// `line` (least squares) [default: circle].
+    /// `line` (least squares).
     #[arg(long, default_value = "circle")]
     pub nominal: String,
     /// Where to write the corrected contact points (CSV).

@@ -399,7 +399,7 @@ pub struct Reversal {
     /// when RUN0 is a measurement CSV whose session holds both
     /// orientations, `orientation_deg` 0 and 180).
     pub run180: Option<PathBuf>,
-    /// The travel axis [default: x].
+    /// The travel axis.
     #[arg(long, default_value = "x", value_parser = ["x", "y", "z"])]
     pub axis: String,
     /// Where to write `<axis>_mm,part_um,slide_um`.

@@ -229,22 +229,34 @@ impl Page {
                 Block::Table { header, rows } => {
                     // A wide table scrolls inside its box; the page never
                     // gets wider than the window.
+                    // Numbers align right (their digits line up), words
+                    // left (a right-aligned sentence is hard to read) — by
+                    // column: a column with any word in it is a text
+                    // column, its header and its one number included
+                    // (issue 28: "5" right-aligned under words).
+                    let numeric: Vec<bool> = (0..header.len())
+                        .map(|k| {
+                            rows.iter()
+                                .filter_map(|r| r.get(k))
+                                .all(|c| is_number_cell(c))
+                        })
+                        .collect();
+                    let class = |k: usize| {
+                        if numeric.get(k).copied().unwrap_or(false) {
+                            ""
+                        } else {
+                            " class=\"t\""
+                        }
+                    };
                     h.push_str("<div class=\"scroll\"><table>\n<thead><tr>");
-                    for c in header {
-                        let _ = write!(h, "<th>{}</th>", esc(c));
+                    for (k, c) in header.iter().enumerate() {
+                        let _ = write!(h, "<th{}>{}</th>", class(k), esc(c));
                     }
                     h.push_str("</tr></thead>\n<tbody>\n");
                     for r in rows {
                         h.push_str("<tr>");
-                        for c in r {
-                            // Numbers align right (their digits line up),
-                            // words left (a right-aligned sentence is hard
-                            // to read).
-                            if is_number_cell(c) {
-                                let _ = write!(h, "<td>{}</td>", esc(c));
-                            } else {
-                                let _ = write!(h, "<td class=\"t\">{}</td>", esc(c));
-                            }
+                        for (k, c) in r.iter().enumerate() {
+                            let _ = write!(h, "<td{}>{}</td>", class(k), esc(c));
                         }
                         h.push_str("</tr>\n");
                     }
@@ -384,6 +396,25 @@ fn svg_width(svg: &str) -> Option<u32> {
     v.get(2)?.parse::<f64>().ok().map(|w| w.round() as u32)
 }
 
+/// `1 row`, `2 rows`, `0 rows`: a count with its noun in the right number
+/// (issue 28: "1 rows").
+pub fn count(n: usize, noun: &str) -> String {
+    if n == 1 {
+        format!("1 {noun}")
+    } else {
+        format!("{n} {noun}s")
+    }
+}
+
+/// `a straightness scan`, `an arc scan`: the article a word takes.
+pub fn a_or_an(word: &str) -> String {
+    let an = word
+        .chars()
+        .next()
+        .is_some_and(|c| "aeiouAEIOU".contains(c));
+    format!("{} {word}", if an { "an" } else { "a" })
+}
+
 /// HTML-escapes text for element content and attribute values.
 pub fn esc(s: &str) -> String {
     let mut out = String::with_capacity(s.len());
@@ -420,7 +451,7 @@ p,li,figcaption,h1,h2,h3{overflow-wrap:break-word}\
 h1{font-size:1.5em}h2{font-size:1.25em;border-bottom:1px solid #ccc;margin-top:1.6em}\
 h3{font-size:1.05em}table{border-collapse:collapse;margin:.6em 0}\
 th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right;font-variant-numeric:tabular-nums}\
-th{background:#f3f3f3}td:first-child,th:first-child,td.t{text-align:left}\
+th{background:#f3f3f3}td.t,th.t{text-align:left}\
 .scroll{max-width:100%;overflow-x:auto}\
 figure{margin:.6em 0}figure svg{display:block;width:100%;height:auto}\
 figcaption{font-size:.9em;color:#555;max-width:720px}pre{background:#f6f6f6;padding:.6em;overflow-x:auto}\
@@ -510,9 +541,36 @@ mod tests {
         );
         let html = p.to_html();
         assert!(html.contains("<td class=\"t\">periodic:target=ex</td><td>-6751</td><td>47 %</td><td class=\"t\">periodogram of the ex residual</td>"), "{html}");
+        assert!(html.contains("<th class=\"t\">add</th><th>ΔBIC</th>"), "{html}");
         assert!(html.contains("<div class=\"grid\">\n<figure id=\"a\""));
         assert!(html.contains("<div class=\"scroll\"><table>"));
         assert_eq!(p.figure_count(), 2);
+    }
+
+    #[test]
+    fn a_column_with_words_is_left_aligned_whole() {
+        // A value column holding "VMC-1", "A. Tester" and "5": the number
+        // aligns with the words, not alone at the right (issue 28).
+        let mut p = Page::new("t");
+        p.table(
+            &["what", "value"],
+            vec![
+                vec!["Machine".into(), "VMC-1".into()],
+                vec!["DEC".into(), "5".into()],
+            ],
+        );
+        let html = p.to_html();
+        assert!(html.contains("<td class=\"t\">DEC</td><td class=\"t\">5</td>"), "{html}");
+        assert!(html.contains("<th class=\"t\">value</th>"), "{html}");
+    }
+
+    #[test]
+    fn counts_and_articles_read_as_english() {
+        assert_eq!(count(1, "row"), "1 row");
+        assert_eq!(count(3, "row"), "3 rows");
+        assert_eq!(count(0, "point"), "0 points");
+        assert_eq!(a_or_an("arc"), "an arc");
+        assert_eq!(a_or_an("straightness"), "a straightness");
     }
 
     #[test]

@@ -464,9 +464,9 @@ pub fn part_diagnosis_page(
         .collect();
     let unknown = !measures.is_empty();
     let mut details = vec![format!(
-        "a {} scan, {} points{}",
-        d.kind,
-        d.points,
+        "{} scan, {}{}",
+        crate::report::a_or_an(&d.kind.to_string()),
+        crate::report::count(d.points, "point"),
         d.noise_um
             .map(|n| format!(", reading noise {n:.3} µm"))
             .unwrap_or_default()

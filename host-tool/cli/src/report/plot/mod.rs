@@ -779,7 +779,7 @@ where
 
 /// How a legend entry is drawn.
 #[derive(Clone, Copy, Debug)]
-enum LegendMark {
+pub(crate) enum LegendMark {
     Line,
     Dot,
     LineDot,
@@ -790,7 +790,7 @@ enum LegendMark {
 
 /// Pixels for a legend strip holding `entries` (the built-in font's
 /// metrics are not known here: ~6.6 px per character at 12 px).
-fn legend_width(entries: &[(String, RGBColor, LegendMark)]) -> u32 {
+pub(crate) fn legend_width(entries: &[(String, RGBColor, LegendMark)]) -> u32 {
     let chars = entries
         .iter()
         .map(|e| e.0.chars().count())
@@ -800,7 +800,7 @@ fn legend_width(entries: &[(String, RGBColor, LegendMark)]) -> u32 {
 }
 
 /// Draws the legend entries top-down in `area` (a strip right of the plot).
-fn draw_legend<DB: DrawingBackend>(
+pub(crate) fn draw_legend<DB: DrawingBackend>(
     area: &DrawingArea<DB, plotters::coord::Shift>,
     entries: &[(String, RGBColor, LegendMark)],
 ) -> Result<()>
