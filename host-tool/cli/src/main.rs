@@ -66,7 +66,23 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let json = std::env::args_os().skip(1).any(|a| a == "--json");
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            // A usage error (exit 2) under --json is a JSON document on
+            // stdout too; help and version print as they always do.
+            let usage = e.use_stderr();
+            if json && usage {
+                let _ = cmd::out::json(&serde_json::json!({
+                    "error": e.kind().to_string(),
+                    "exit_code": 2,
+                    "usage": e.render().to_string(),
+                }));
+            }
+            e.exit();
+        }
+    };
     let result = match cli.command {
         Command::Import(a) => a.run(),
         Command::Simulate(a) => a.run(),
@@ -96,6 +112,10 @@ fn main() -> ExitCode {
         Err(e) if cmd::out::is_stdout_closed(&e) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
+            // Under --json stdout carries one document, an error too.
+            if json {
+                cmd::out::json_error(&e, 1);
+            }
             ExitCode::FAILURE
         }
     }

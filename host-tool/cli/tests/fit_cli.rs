@@ -213,7 +213,7 @@ fn expect_exit(args: &[&str], code: i32, needle: &str) {
         "{args:?}: expected `{needle}` in stderr: {err}"
     );
     if code == 1 {
-        assert!(out.stdout.is_empty(), "no JSON on failure");
+        common::assert_no_document(args, &out);
     }
 }
 
@@ -370,4 +370,24 @@ fn the_text_gives_each_targets_term_count_when_they_differ() {
     );
     assert!(first.contains(" rows, "), "{first}");
     assert!(text.contains("\nnext: trueaxis compare "), "{text}");
+}
+
+#[test]
+fn a_json_error_is_a_json_document_on_stdout() {
+    // Issue 28: `--json` errors wrote nothing to stdout, so a script
+    // reading it got no document at all.
+    for (args, code) in [
+        (&["fit", "no-such.csv", "--model", "cubic19", "--json"][..], 1),
+        (&["fit", "--no-such-flag", "--json"][..], 2),
+    ] {
+        let out = run(args);
+        assert_eq!(out.status.code(), Some(code), "{args:?}");
+        let doc: serde_json::Value = serde_json::from_slice(&out.stdout)
+            .unwrap_or_else(|e| panic!("{args:?}: {e}: {}", String::from_utf8_lossy(&out.stdout)));
+        assert_eq!(doc["exit_code"], code, "{doc}");
+        assert!(doc["error"].as_str().is_some_and(|e| !e.is_empty()), "{doc}");
+    }
+    // Without --json an error stays on stderr only.
+    let out = run(&["fit", "no-such.csv", "--model", "cubic19"]);
+    assert!(out.stdout.is_empty());
 }

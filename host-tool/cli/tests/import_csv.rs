@@ -16,7 +16,7 @@ fn fails_at(file: &str, line: usize, col: Option<usize>, expect: &str) {
     let out = trueaxis(&["import", path.to_str().unwrap(), "--json"]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{file}: stderr {stderr}");
-    assert!(out.stdout.is_empty(), "{file}: no JSON on failure");
+    common::assert_no_document(&["import", path.to_str().unwrap(), "--json"], &out);
     let loc = match col {
         Some(c) => format!("{}:{line}:{c}: ", path.display()),
         None => format!("{}:{line}: ", path.display()),

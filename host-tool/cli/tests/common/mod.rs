@@ -103,8 +103,27 @@ pub fn expect_exit(args: &[&str], code: i32, needles: &[&str]) -> String {
     for n in needles {
         assert!(err.contains(n), "{args:?}: expected `{n}` in stderr: {err}");
     }
-    assert!(out.stdout.is_empty(), "no output on failure: {args:?}");
+    assert_no_document(args, &out);
     err
+}
+
+/// A failed run writes no half document: under `--json` stdout holds only
+/// the error document (`{"error": …, "exit_code": …}`, the message as on
+/// stderr), without it nothing.
+pub fn assert_no_document(args: &[&str], out: &Output) {
+    if args.contains(&"--json") {
+        let doc: Value = serde_json::from_slice(&out.stdout)
+            .unwrap_or_else(|e| panic!("{args:?}: stdout is no one JSON document ({e})"));
+        assert_eq!(doc["exit_code"].as_i64(), out.status.code().map(i64::from), "{doc}");
+        let msg = doc["error"].as_str().unwrap_or_else(|| panic!("{doc}"));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            out.status.code() == Some(2) || err.contains(msg),
+            "{args:?}: the error document says what stderr says: {msg} / {err}"
+        );
+    } else {
+        assert!(out.stdout.is_empty(), "no output on failure: {args:?}");
+    }
 }
 
 /// Copies the CSV `src` to `dst` with one more row whose error cells
