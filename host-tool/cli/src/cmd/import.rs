@@ -52,6 +52,9 @@ impl Args {
                 profile: self.profile.clone(),
             },
         )?;
+        if let Some(note) = crate::input::encoding_note(&data) {
+            eprintln!("{note}");
+        }
         if let Some(out) = &self.output {
             let f = std::fs::File::create(out)
                 .with_context(|| format!("cannot create {}", out.display()))?;
