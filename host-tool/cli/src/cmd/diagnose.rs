@@ -99,7 +99,20 @@ impl Args {
             input::add_skipped_count(&mut doc, &data);
             out::json_pretty(&doc)?;
         } else {
-            crate::cmd::out::print(&text(&d, &self.data, &model_out, self.verbose))?;
+            let mut t = text(&d, &self.data, &model_out, self.verbose);
+            if data.is_probed_surface() {
+                // A bed's next step is its mesh, whatever a cubic lacks.
+                t = t
+                    .lines()
+                    .filter(|l| !l.starts_with("next: ") && !l.starts_with("measure first: "))
+                    .map(|l| format!("{l}\n"))
+                    .collect();
+                t.push_str(&format!(
+                    "next: {}\n",
+                    crate::report::diagnose::bed_next(&data, &self.data.display().to_string())
+                ));
+            }
+            crate::cmd::out::print(&t)?;
         }
         Ok(())
     }

@@ -425,8 +425,33 @@ pub fn build_report(
     // `planes` lists the planes of each orientation together.
     let groups: Vec<&[Plane]> = planes.chunk_by(|a, b| a.normal == b.normal).collect();
     if let Some(first) = groups.first() {
+        // A probed bed is drawn as a bed mesh is (Klipper, Mainsail): its
+        // height, up warm — ez is the tool's error, −height (issue 28: a
+        // high bed showed blue).
+        let bed = data.is_probed_surface();
+        let sign = if bed { -1.0 } else { 1.0 };
+        let what = |t: usize| {
+            if bed {
+                "bed height".to_string()
+            } else {
+                format!("{} residual", TARGETS[t])
+            }
+        };
+        // Where a map lies: a plane of the volume, or the bed (a file with
+        // no z has no plane z = 0 to speak of).
+        let on = |plane: &Plane| {
+            if data.pos_mm[plane.normal].is_none() {
+                format!("over {}–{}", AXES[(plane.normal + 1) % 3], AXES[(plane.normal + 2) % 3])
+            } else {
+                format!("on the plane {} = {} mm", AXES[plane.normal], plot_num(plane.at_mm))
+            }
+        };
         page.heading("Residual maps on measured planes");
-        page.paragraph("Mean residual per grid position (both directions and repeats averaged); grey cells were not measured. Red: the machine is further along the error's axis than the model says.");
+        page.paragraph(if bed {
+            "The bed height the model leaves (−ez: the residual of the tool's error, turned into the bed's height) per probe point. Red: the bed stands higher than the model says, as Klipper and Mainsail colour a mesh."
+        } else {
+            "Mean residual per grid position (both directions and repeats averaged); grey cells were not measured. Red: the machine is further along the error's axis than the model says."
+        });
         if data.axes().len() == 3 {
             for same in &groups {
                 let normal = AXES[same[0].normal];
@@ -462,15 +487,15 @@ pub fn build_report(
                     let plane = &same[i];
                     let title = if data.axes().len() == 3 {
                         format!(
-                            "{} residual at {} = {} mm",
-                            TARGETS[t],
+                            "{} at {} = {} mm",
+                            what(t),
                             AXES[plane.normal],
                             plot_num(plane.at_mm)
                         )
                     } else {
-                        format!("{} residual", TARGETS[t])
+                        what(t)
                     };
-                    let mut m = plane_map(data, plane, title, |r| res[r]);
+                    let mut m = plane_map(data, plane, title, |r| res[r].map(|v| sign * v));
                     m.size = SMALL_MAP;
                     maps.push((
                         format!("map_{}_{}{}", TARGETS[t], AXES[plane.normal], i),
@@ -481,8 +506,8 @@ pub fn build_report(
             }
             let limit = maps.iter().fold(0.0f64, |l, m| l.max(m.2.max_abs()));
             page.subheading(format!(
-                "{} residual on the measured planes — one colour scale, ±{} µm",
-                TARGETS[t],
+                "{} on the measured planes — one colour scale, ±{} µm",
+                what(t),
                 format_value(limit)
             ));
             let mut figs = Vec::with_capacity(maps.len());
@@ -490,12 +515,11 @@ pub fn build_report(
                 m.limit = Some(limit);
                 figs.push(Figure {
                     name,
-                    caption: format!(
-                        "Residual of {} on the plane {} = {} mm.",
-                        TARGETS[t],
-                        AXES[plane.normal],
-                        plot_num(plane.at_mm)
-                    ),
+                    caption: if bed {
+                        format!("The bed height the model leaves, {}.", on(plane))
+                    } else {
+                        format!("Residual of {} {}.", TARGETS[t], on(plane))
+                    },
                     svg: m.to_svg()?,
                 });
             }
@@ -503,25 +527,24 @@ pub fn build_report(
             // Before vs after on the middle plane, one colour scale.
             let plane = &first[first.len() / 2];
             let raw = data.err_um[t].as_ref();
-            let before = plane_map(
-                data,
-                plane,
-                format!("{} before (raw error)", TARGETS[t]),
-                |r| raw.and_then(|c| c[r]),
-            );
-            let after = plane_map(
-                data,
-                plane,
-                format!("{} after (residual)", TARGETS[t]),
-                |r| res[r],
-            );
+            let (b_title, a_title) = if bed {
+                ("bed height before (as probed)".to_string(), "bed height after (residual)".to_string())
+            } else {
+                (
+                    format!("{} before (raw error)", TARGETS[t]),
+                    format!("{} after (residual)", TARGETS[t]),
+                )
+            };
+            let before = plane_map(data, plane, b_title, |r| {
+                raw.and_then(|c| c[r]).map(|v| sign * v)
+            });
+            let after = plane_map(data, plane, a_title, |r| res[r].map(|v| sign * v));
             page.figure(
                 format!("map_before_after_{}", TARGETS[t]),
                 format!(
-                    "{} before and after compensation on the plane {} = {} mm, on one colour scale.",
-                    TARGETS[t],
-                    AXES[plane.normal],
-                    plot_num(plane.at_mm)
+                    "{} before and after compensation {}, on one colour scale.",
+                    if bed { "The bed height" } else { TARGETS[t] },
+                    on(plane)
                 ),
                 heat_map_pair(&before, &after)?,
             );

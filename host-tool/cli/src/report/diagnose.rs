@@ -78,6 +78,16 @@ pub fn refit_command(d: &Diagnosis, data_path: &str, model_out: &str) -> String 
     cmd
 }
 
+/// What to run for a probed bed (issue 28: beds were told to measure
+/// ball-screw leads): fit a grid on the probe spacing and export it as a
+/// Klipper mesh, as it runs when pasted where diagnose ran.
+pub fn bed_next(data: &Dataset, data_path: &str) -> String {
+    format!(
+        "{} && trueaxis export bed.json --format klipper-mesh -o mesh.cfg",
+        crate::workflow::next_for_data(data, std::path::Path::new(data_path))
+    )
+}
+
 /// A path as one shell word: as it is when it has only characters no
 /// shell treats specially, else in single quotes.
 pub fn shell_word(s: &str) -> String {
@@ -502,6 +512,40 @@ fn binned_mean(pts: &[(f64, f64)], bins: usize) -> Vec<(f64, f64)> {
 /// Bins per axis of the working-volume overview at most.
 const OVERVIEW_BINS: usize = 12;
 
+/// The cell centres of an overview axis over the sorted distinct measured
+/// positions: the positions themselves when there are at most `max`, else
+/// the centres of the most even bins (at most `max`) of which none is
+/// empty — a complete grid never shows a hole.
+fn overview_centres(distinct: &[f64], max: usize) -> Vec<f64> {
+    if distinct.len() <= max {
+        return distinct.to_vec();
+    }
+    let (lo, hi) = (distinct[0], distinct[distinct.len() - 1]);
+    for n in (1..=max).rev() {
+        let w = (hi - lo) / n as f64;
+        let mut filled = vec![false; n];
+        for &p in distinct {
+            filled[(((p - lo) / w) as usize).min(n - 1)] = true;
+        }
+        if filled.iter().all(|&f| f) {
+            return (0..n).map(|k| lo + w * (k as f64 + 0.5)).collect();
+        }
+    }
+    vec![0.5 * (lo + hi)]
+}
+
+/// The index of the centre nearest `v` (centres ascending, not empty).
+fn nearest_index(centres: &[f64], v: f64) -> usize {
+    let i = centres.partition_point(|&c| c < v);
+    if i == 0 {
+        0
+    } else if i == centres.len() || v - centres[i - 1] <= centres[i] - v {
+        i - 1
+    } else {
+        i
+    }
+}
+
 /// Where in the working volume the final residual is large, on the first
 /// screen (issue 13): per target, the RMS of the residual after the path in
 /// even bins (≤ 12 per axis) projected on each pair of moving axes — small
@@ -526,26 +570,18 @@ fn volume_overview(page: &mut Page, d: &Diagnosis, data: &Dataset) -> Result<()>
             let (Some(pa), Some(pb)) = (data.pos_mm[a].as_ref(), data.pos_mm[b].as_ref()) else {
                 continue;
             };
+            // Cells on the measured positions (issue 28: 11 grid lines cut
+            // into 12 even bins left a grey "not measured" band on a
+            // complete grid): each distinct position its own cell while
+            // they are few, else even bins, as many as leave none empty.
             let bins = |p: &[f64]| {
-                let (lo, hi) = rows
-                    .iter()
-                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &r| {
-                        (l.min(p[r]), h.max(p[r]))
-                    });
-                let mut distinct: Vec<i64> =
-                    rows.iter().map(|&r| (p[r] * 1e3).round() as i64).collect();
-                distinct.sort_unstable();
-                distinct.dedup();
-                (lo, hi, distinct.len().clamp(1, OVERVIEW_BINS))
+                let mut distinct: Vec<f64> = rows.iter().map(|&r| p[r]).collect();
+                distinct.sort_by(f64::total_cmp);
+                distinct.dedup_by(|a, b| (*a - *b).abs() < 1e-3);
+                overview_centres(&distinct, OVERVIEW_BINS)
             };
-            let ((alo, ahi, na), (blo, bhi, nb)) = (bins(pa), bins(pb));
-            let cell = |v: f64, lo: f64, hi: f64, n: usize| {
-                if hi > lo {
-                    (((v - lo) / (hi - lo) * n as f64) as usize).min(n - 1)
-                } else {
-                    0
-                }
-            };
+            let (ca, cb) = (bins(pa), bins(pb));
+            let (na, nb) = (ca.len(), cb.len());
             let mut ss = vec![0.0; na * nb];
             let mut count = vec![0usize; na * nb];
             let mut worst: Option<(f64, f64, f64)> = None;
@@ -554,18 +590,13 @@ fn volume_overview(page: &mut Page, d: &Diagnosis, data: &Dataset) -> Result<()>
                 if !v.is_finite() {
                     continue;
                 }
-                let k = cell(pb[r], blo, bhi, nb) * na + cell(pa[r], alo, ahi, na);
+                let k = nearest_index(&cb, pb[r]) * na + nearest_index(&ca, pa[r]);
                 ss[k] += v * v;
                 count[k] += 1;
                 if worst.is_none_or(|w| v.abs() > w.2.abs()) {
                     worst = Some((pa[r], pb[r], v));
                 }
             }
-            let centres = |lo: f64, hi: f64, n: usize| -> Vec<f64> {
-                (0..n)
-                    .map(|k| lo + (hi - lo) * (k as f64 + 0.5) / n as f64)
-                    .collect()
-            };
             let values = ss
                 .iter()
                 .zip(&count)
@@ -576,8 +607,8 @@ fn volume_overview(page: &mut Page, d: &Diagnosis, data: &Dataset) -> Result<()>
                 format!("{} (mm)", AXES[a]),
                 format!("{} (mm)", AXES[b]),
                 "µm",
-                centres(alo, ahi, na),
-                centres(blo, bhi, nb),
+                ca,
+                cb,
                 values,
                 worst,
                 rows.len(),
@@ -867,7 +898,15 @@ pub fn write_for(
     history: Option<&trueaxis_engine::history::History>,
 ) -> Result<PathBuf> {
     let mut page = Page::new(format!("trueaxis diagnose — {}", data.source));
-    page.verdict(verdict(d, data_path, model_out));
+    let mut v = verdict(d, data_path, model_out);
+    if data.is_probed_surface() {
+        v.details.insert(
+            0,
+            "A probed bed (ez over x and y only): its model is a grid over the probe points or a smoother mesh, exported as the firmware's bed mesh.".into(),
+        );
+        v.next = Some(bed_next(data, data_path));
+    }
+    page.verdict(v);
     volume_overview(&mut page, d, data)?;
     page.heading("Diagnosis");
     page.paragraph(format!(
@@ -1872,5 +1911,27 @@ mod tests {
             assert_eq!(u.0, d.0);
         }
         assert!(binned_mean(&[], 10).is_empty());
+    }
+
+    #[test]
+    fn a_complete_grid_overview_has_no_empty_cell() {
+        // 11 grid lines 0…500 every 50 mm: 11 cells on the lines, none
+        // empty (12 even bins left one empty).
+        let lines: Vec<f64> = (0..=10).map(|k| 50.0 * f64::from(k)).collect();
+        assert_eq!(overview_centres(&lines, OVERVIEW_BINS), lines);
+        // 17 lines and a dense line every 0.5 mm: even bins, none empty.
+        let mut many: Vec<f64> = (0..=16).map(|k| 50.0 * f64::from(k)).collect();
+        many.extend((0..1600).map(|k| 0.5 * f64::from(k)));
+        many.sort_by(f64::total_cmp);
+        many.dedup();
+        let c = overview_centres(&many, OVERVIEW_BINS);
+        assert!(c.len() <= OVERVIEW_BINS && c.len() >= 6, "{c:?}");
+        let mut hit = vec![false; c.len()];
+        for p in &many {
+            hit[nearest_index(&c, *p)] = true;
+        }
+        assert!(hit.iter().all(|&h| h));
+        assert_eq!(nearest_index(&[0.0, 10.0, 20.0], 14.0), 1);
+        assert_eq!(nearest_index(&[0.0, 10.0, 20.0], 16.0), 2);
     }
 }

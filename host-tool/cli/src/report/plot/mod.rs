@@ -17,7 +17,7 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 pub mod decimate;
-mod heat;
+pub(crate) mod heat;
 
 pub use decimate::Reduction;
 pub use heat::{diverging, heat_map_pair, HeatMap};
@@ -243,6 +243,9 @@ pub struct XyPlot {
     pub x_ticks: Ticks,
     /// The y axis on a log10 scale ([`XyPlot::with_log_y`]).
     pub log_y: bool,
+    /// A fixed y range (small multiples compared by height share one:
+    /// [`XyPlot::with_y_range`]); None: the data's, padded.
+    pub y_range: Option<(f64, f64)>,
     /// Size in pixels.
     pub size: (u32, u32),
 }
@@ -282,8 +285,19 @@ impl XyPlot {
             vmarks: Vec::new(),
             x_ticks: Ticks::Auto,
             log_y: false,
+            y_range: None,
             size: SIZE,
         }
+    }
+
+    /// Draws the y axis from `lo` to `hi` whatever the data (plots compared
+    /// side by side: issue 28's generatrices each had a scale of their own,
+    /// so a 2 µm wave looked as tall as a 20 µm one).
+    pub fn with_y_range(mut self, lo: f64, hi: f64) -> XyPlot {
+        if lo.is_finite() && hi.is_finite() && hi > lo {
+            self.y_range = Some((lo, hi));
+        }
+        self
     }
 
     /// Draws the y axis on a log10 scale, ticked at 1, 2 and 5 × 10ᵏ in the
@@ -423,7 +437,7 @@ impl XyPlot {
             }
             Ticks::Direction => (-1.6, 1.6),
         };
-        (x, padded_range(&ys, 0.08))
+        (x, self.y_range.unwrap_or_else(|| padded_range(&ys, 0.08)))
     }
 
     /// Legend entries: (text, colour, is a band, is points only).
@@ -1216,8 +1230,13 @@ mod tests {
             0.1,
         );
         let pair = heat_map_pair(&m, &m).unwrap();
-        assert!(!root(&pair).contains("width=\"1440\""), "{}", root(&pair));
-        assert!(root(&pair).contains("viewBox=\"0 0 1440 420\""));
+        let (w, h) = m.fitted_size();
+        assert!(!root(&pair).contains(" width="), "{}", root(&pair));
+        assert!(
+            root(&pair).contains(&format!("viewBox=\"0 0 {} {h}\"", 2 * w)),
+            "{}",
+            root(&pair)
+        );
     }
 
     #[test]
@@ -1408,6 +1427,32 @@ mod tests {
                 .len(),
             heat::MAX_CELLS
         );
+    }
+
+    #[test]
+    fn maps_are_drawn_at_the_machines_aspect_ratio_and_ticked_at_their_ends() {
+        // An 800 × 500 mm plane every 100 mm (issue 28: drawn 289 × 262).
+        let mut pts = Vec::new();
+        for iy in 0..6 {
+            for ix in 0..9 {
+                pts.push((100.0 * f64::from(ix), 100.0 * f64::from(iy), 1.0));
+            }
+        }
+        let m = HeatMap::from_points("m", "x (mm)", "y (mm)", "µm", &pts, 1e-3);
+        let (w, h) = m.fitted_size();
+        // The plotting area (the size less colour bar, labels, margins).
+        let (pw, ph) = (f64::from(w - 170), f64::from(h - 96));
+        let ratio = (pw / ph) / (900.0 / 600.0);
+        assert!((ratio - 1.0).abs() < 0.02, "{w} × {h}: {ratio}");
+        // A bed probed from 25 to 225 mm: both ends ticked; 0 when inside.
+        let t = heat::key_ticks(&[25.0, 75.0, 125.0, 175.0, 225.0], 0.0, 250.0);
+        assert_eq!(t.first(), Some(&0.0));
+        assert!(t.contains(&25.0) && t.contains(&225.0), "{t:?}");
+        let svg = m.to_svg().unwrap();
+        let labels = svg_texts(&svg);
+        for end in ["0", "800", "500"] {
+            assert!(labels.contains(&end.to_string()), "{end}: {labels:?}");
+        }
     }
 
     #[test]
