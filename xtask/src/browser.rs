@@ -372,15 +372,24 @@ pub fn check_page(
 /// [`write_pages`] lays them out under `out`: the demo's four pages, then
 /// one page of each other kind under `out/pages/<name>/`.
 fn pages(out: &Path) -> Vec<(&'static str, PathBuf)> {
-    let r = out.join("demo").join("report");
+    // `--pages DIR` of a demo's own folder (DIR/report/…, the layout
+    // before every page kind was checked): its four pages.
+    let own_demo = out.join("report").join("index.html").is_file();
+    let r = if own_demo {
+        out.join("report")
+    } else {
+        out.join("demo").join("report")
+    };
     let mut v = vec![
         ("compare", r.join("index.html")),
         ("diagnose", r.join("diagnose").join("index.html")),
         ("history", r.join("history").join("index.html")),
         ("final", r.join("final").join("index.html")),
     ];
-    for (name, _) in PAGE_COMMANDS {
-        v.push((name, out.join("pages").join(name).join("index.html")));
+    if !own_demo {
+        for (name, _) in PAGE_COMMANDS {
+            v.push((name, out.join("pages").join(name).join("index.html")));
+        }
     }
     v
 }
@@ -512,7 +521,8 @@ fn write_pages(root: &Path, out: &Path) -> Result<()> {
 /// into `out/browser`, then every page checked in Chromium at each of
 /// [`WIDTHS_PX`]; screenshots in `out/screens/<page>-<width>.png`.
 /// `--pages DIR` checks the pages already written to DIR by an earlier run
-/// (no commands run) — an older build's, say.
+/// (no commands run) — an older build's, say; DIR may also be a demo's own
+/// `--out` folder (its four pages are checked).
 pub fn test(args: &[String]) -> Result<()> {
     let browser = chromium().ok_or(
         "no Chromium found (chromium, chromium-browser, google-chrome or $CHROMIUM): \
