@@ -404,38 +404,77 @@ const PAGE_COMMANDS: [(&str, &[&str]); 11] = [
     (
         "probe-2d",
         &[
-            "probe", "calibrate", "om/ball.csv", "--ball-diameter-mm", "4", "-o", "probe.json",
+            "probe",
+            "calibrate",
+            "om/ball.csv",
+            "--ball-diameter-mm",
+            "4",
+            "-o",
+            "probe.json",
         ],
     ),
     (
         "probe-3d",
         &[
-            "probe", "calibrate", "om/ball3d.csv", "--ball-diameter-mm", "4", "--plane", "xyz",
-            "-o", "probe3d.json",
+            "probe",
+            "calibrate",
+            "om/ball3d.csv",
+            "--ball-diameter-mm",
+            "4",
+            "--plane",
+            "xyz",
+            "-o",
+            "probe3d.json",
         ],
     ),
     (
         "separate-reversal",
-        &["separate", "reversal", "om/run0.csv", "om/run180.csv", "-o", "rev.csv"],
+        &[
+            "separate",
+            "reversal",
+            "om/run0.csv",
+            "om/run180.csv",
+            "-o",
+            "rev.csv",
+        ],
     ),
     (
         "separate-three-probe",
         &[
-            "separate", "three-probe", "om/three-probe.csv", "--angles-deg", "0,99.84,202.5",
-            "-o", "tp.csv",
+            "separate",
+            "three-probe",
+            "om/three-probe.csv",
+            "--angles-deg",
+            "0,99.84,202.5",
+            "-o",
+            "tp.csv",
         ],
     ),
     (
         "separate-multi-step",
-        &["separate", "multi-step", "om/multi-step.csv", "-o", "ms.csv"],
+        &[
+            "separate",
+            "multi-step",
+            "om/multi-step.csv",
+            "-o",
+            "ms.csv",
+        ],
     ),
     ("workpiece", &["workpiece", "om/grinder.csv"]),
     (
         "diagnose-part",
-        &["diagnose-part", "om/run0.csv", "--reversal", "om/run180.csv"],
+        &[
+            "diagnose-part",
+            "om/run0.csv",
+            "--reversal",
+            "om/run180.csv",
+        ],
     ),
     ("bed", &["diagnose", "bed.csv", "--model", "bed.json"]),
-    ("bed-compare", &["compare", "bed.csv", "--model", "bed.json"]),
+    (
+        "bed-compare",
+        &["compare", "bed.csv", "--model", "bed.json"],
+    ),
 ];
 
 /// Runs `bin args…` in `dir`, failing with its stderr.
@@ -494,12 +533,18 @@ fn write_pages(root: &Path, out: &Path) -> Result<()> {
     if !status.success() {
         return Err(format!("`trueaxis demo` failed ({status})"));
     }
-    let data = root.join("host-tool").join("cli").join("tests").join("data");
+    let data = root
+        .join("host-tool")
+        .join("cli")
+        .join("tests")
+        .join("data");
     let data_s = data.to_string_lossy().into_owned();
     let bed = format!("{data_s}/bed_heightmap.csv");
     let setup: [&[&str]; 4] = [
         &["simulate", "--scenario", "on-machine", "-o", "om/"],
-        &["simulate", "--plan", "iso230:x", "--seed", "2", "-o", "iso.csv"],
+        &[
+            "simulate", "--plan", "iso230:x", "--seed", "2", "-o", "iso.csv",
+        ],
         &["import", &bed, "-o", "bed.csv"],
         &["fit", "bed.csv", "--model", "cubic19", "-o", "bed.json"],
     ];

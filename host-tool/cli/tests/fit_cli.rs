@@ -377,7 +377,10 @@ fn a_json_error_is_a_json_document_on_stdout() {
     // Issue 28: `--json` errors wrote nothing to stdout, so a script
     // reading it got no document at all.
     for (args, code) in [
-        (&["fit", "no-such.csv", "--model", "cubic19", "--json"][..], 1),
+        (
+            &["fit", "no-such.csv", "--model", "cubic19", "--json"][..],
+            1,
+        ),
         (&["fit", "--no-such-flag", "--json"][..], 2),
     ] {
         let out = run(args);
@@ -385,7 +388,10 @@ fn a_json_error_is_a_json_document_on_stdout() {
         let doc: serde_json::Value = serde_json::from_slice(&out.stdout)
             .unwrap_or_else(|e| panic!("{args:?}: {e}: {}", String::from_utf8_lossy(&out.stdout)));
         assert_eq!(doc["exit_code"], code, "{doc}");
-        assert!(doc["error"].as_str().is_some_and(|e| !e.is_empty()), "{doc}");
+        assert!(
+            doc["error"].as_str().is_some_and(|e| !e.is_empty()),
+            "{doc}"
+        );
     }
     // Without --json an error stays on stderr only.
     let out = run(&["fit", "no-such.csv", "--model", "cubic19"]);

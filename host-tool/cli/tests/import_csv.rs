@@ -490,7 +490,10 @@ fn excel_files_from_a_german_desktop_are_read_or_answered_with_the_names_meant()
     // .tsv with decimal commas.
     let txt = dir.join("unicode.txt");
     std::fs::copy(data("excel_unicode.txt"), &txt).unwrap();
-    assert_eq!(json(&trueaxis(&["import", txt.to_str().unwrap(), "--json"]))["rows"], 2);
+    assert_eq!(
+        json(&trueaxis(&["import", txt.to_str().unwrap(), "--json"]))["rows"],
+        2
+    );
     let tsv = dir.join("d.tsv");
     std::fs::write(&tsv, "x_mm\tex_um\n0\t1,5\n50\t-0,25\n").unwrap();
     let out = dir.join("d_out.csv");
@@ -509,8 +512,5 @@ fn excel_files_from_a_german_desktop_are_read_or_answered_with_the_names_meant()
     let out = trueaxis(&["import", words.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("`x (mm)` → x_mm, `ex [um]` → ex_um"),
-        "{err}"
-    );
+    assert!(err.contains("`x (mm)` → x_mm, `ex [um]` → ex_um"), "{err}");
 }

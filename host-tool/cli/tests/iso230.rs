@@ -271,13 +271,7 @@ fn the_page_shows_every_run_and_the_test_conditions() {
     let dir = std::env::temp_dir().join(format!("trueaxis-iso-page-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let rtl = data_file("iso_worked.rtl");
-    json(&run(&[
-        "iso230",
-        s(&rtl),
-        "--report",
-        s(&dir),
-        "--json",
-    ]));
+    json(&run(&["iso230", s(&rtl), "--report", s(&dir), "--json"]));
     let html = std::fs::read_to_string(dir.join("index.html")).unwrap();
     for want in [
         "Test conditions",
@@ -303,7 +297,14 @@ fn the_page_shows_every_run_and_the_test_conditions() {
     let x_of = |text: &str| -> f64 {
         let at = svg.find(text).unwrap_or_else(|| panic!("{text}"));
         let head = &svg[svg[..at].rfind("<text").unwrap()..at];
-        head.split("x=\"").nth(1).unwrap().split('"').next().unwrap().parse().unwrap()
+        head.split("x=\"")
+            .nth(1)
+            .unwrap()
+            .split('"')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
     };
     assert!(x_of("x̄↑ ± 2s (from below)") > x_of(">200.0<") + 10.0);
     let _ = std::fs::remove_dir_all(&dir);

@@ -359,7 +359,11 @@ fn the_on_machine_commands_find_the_simulated_answers() {
             scales.insert(ticks.join(" "));
         }
     }
-    assert_eq!(scales.len(), 1, "generatrices on different scales: {scales:#?}");
+    assert_eq!(
+        scales.len(),
+        1,
+        "generatrices on different scales: {scales:#?}"
+    );
     let pv1 = after["form"]["form_pv_um"].as_f64().unwrap();
     let eta = truth["removal_efficiency"].as_f64().unwrap();
     let ratio = pv1 / pv0;

@@ -165,11 +165,15 @@ fn the_workflow_suggests_only_commands_that_run() {
             "trueaxis compare data.csv --model m2.json",
         ),
         (
-            &["compare", "data.csv", "--model", "m2.json", "--report", "r2"][..],
+            &[
+                "compare", "data.csv", "--model", "m2.json", "--report", "r2",
+            ][..],
             "trueaxis diagnose data.csv --model m2.json --report r2/diagnose",
         ),
         (
-            &["improve", "data.csv", "--model", "cubic19", "-o", "imp.json"][..],
+            &[
+                "improve", "data.csv", "--model", "cubic19", "-o", "imp.json",
+            ][..],
             "trueaxis history imp.json --report history",
         ),
     ] {
@@ -203,13 +207,23 @@ fn iso_runs_beds_and_imports_suggest_commands_that_run() {
             "simulate", "--plan", "iso230:x", "--seed", "2", "-o", "iso.csv",
         ],
     );
-    assert!(next_lines(&sim)[0].starts_with("trueaxis iso230 iso.csv"), "{sim}");
+    assert!(
+        next_lines(&sim)[0].starts_with("trueaxis iso230 iso.csv"),
+        "{sim}"
+    );
     log.follow(&w, &sim, 2);
     // A 3-target .rtl (no cubic along x) and an ecmc .dat (needs --axis).
     tx(&w, &["iso230", "iso_worked.rtl", "--report", "iso_rtl"]);
     tx(
         &w,
-        &["iso230", "axis1_ISO230.dat", "--axis", "x", "--report", "iso_dat"],
+        &[
+            "iso230",
+            "axis1_ISO230.dat",
+            "--axis",
+            "x",
+            "--report",
+            "iso_dat",
+        ],
     );
     for file in ["axis1_ISO230.dat", "bed_heightmap.csv"] {
         let mut args = vec!["import", file, "-o"];
@@ -224,7 +238,9 @@ fn iso_runs_beds_and_imports_suggest_commands_that_run() {
     log.pages(&w, &w);
     // The bed is fitted with a grid, not the machine-tool polynomial.
     assert!(
-        log.ran.iter().any(|c| c.starts_with("trueaxis fit bed_heightmap.csv.csv --model grid:")),
+        log.ran
+            .iter()
+            .any(|c| c.starts_with("trueaxis fit bed_heightmap.csv.csv --model grid:")),
         "{:#?}",
         log.ran
     );
@@ -243,17 +259,57 @@ fn the_on_machine_commands_suggest_commands_that_run() {
     log.follow(&w, &sim, 2);
     let runs: [&[&str]; 6] = [
         &[
-            "probe", "calibrate", "om/ball3d.csv", "--ball-diameter-mm", "4", "--plane", "xyz",
-            "-o", "probe3d.json", "--report", "p3",
+            "probe",
+            "calibrate",
+            "om/ball3d.csv",
+            "--ball-diameter-mm",
+            "4",
+            "--plane",
+            "xyz",
+            "-o",
+            "probe3d.json",
+            "--report",
+            "p3",
         ],
-        &["separate", "reversal", "om/run0.csv", "om/run180.csv", "-o", "rev.csv", "--report", "sr"],
         &[
-            "separate", "three-probe", "om/three-probe.csv", "--angles-deg", "0,99.84,202.5", "-o",
-            "tp.csv", "--report", "st",
+            "separate",
+            "reversal",
+            "om/run0.csv",
+            "om/run180.csv",
+            "-o",
+            "rev.csv",
+            "--report",
+            "sr",
         ],
-        &["separate", "multi-step", "om/multi-step.csv", "-o", "ms.csv", "--report", "sm"],
+        &[
+            "separate",
+            "three-probe",
+            "om/three-probe.csv",
+            "--angles-deg",
+            "0,99.84,202.5",
+            "-o",
+            "tp.csv",
+            "--report",
+            "st",
+        ],
+        &[
+            "separate",
+            "multi-step",
+            "om/multi-step.csv",
+            "-o",
+            "ms.csv",
+            "--report",
+            "sm",
+        ],
         &["workpiece", "om/grinder.csv", "--report", "wp"],
-        &["diagnose-part", "om/run0.csv", "--reversal", "om/run180.csv", "--report", "dp"],
+        &[
+            "diagnose-part",
+            "om/run0.csv",
+            "--reversal",
+            "om/run180.csv",
+            "--report",
+            "dp",
+        ],
     ];
     for args in runs {
         let out = tx(&w, args);

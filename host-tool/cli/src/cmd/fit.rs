@@ -9,8 +9,8 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 
 use crate::cmd::out::{self, outln};
-use crate::report::diagnose::shell_word;
 use crate::input;
+use crate::report::diagnose::shell_word;
 use crate::workflow::model_output;
 use trueaxis_engine::diagnose::outliers;
 use trueaxis_engine::effect::Effect;

@@ -50,18 +50,30 @@ fn read(path: &std::path::Path, pl: [&str; 2], session: Option<i64>) -> Result<V
 /// pasted where `calibrate` ran (no `SCAN.csv` placeholder, issue 28) —
 /// the ball's own scan corrected with the calibration, a check that its
 /// form falls to the noise; part scans are corrected the same way.
-fn correct_next(scan: &std::path::Path, probe: &std::path::Path) -> String {
+fn correct_next(
+    scan: &std::path::Path,
+    probe: &std::path::Path,
+    plane: &str,
+    session: Option<i64>,
+) -> String {
     use crate::report::diagnose::shell_word;
     let stem = scan
         .file_stem()
         .map_or("scan".into(), |s| s.to_string_lossy().into_owned());
     let out = scan.with_file_name(format!("{stem}_corrected.csv"));
-    format!(
-        "trueaxis probe correct {} --probe {} -o {}",
+    let mut cmd = format!(
+        "trueaxis probe correct {} --probe {}",
         shell_word(&scan.display().to_string()),
         shell_word(&probe.display().to_string()),
-        shell_word(&out.display().to_string())
-    )
+    );
+    if plane != "xz" {
+        cmd.push_str(&format!(" --plane {plane}"));
+    }
+    if let Some(n) = session {
+        cmd.push_str(&format!(" --session {n}"));
+    }
+    cmd.push_str(&format!(" -o {}", shell_word(&out.display().to_string())));
+    cmd
 }
 
 /// What to do next after a 3-D calibration, in words: a 3-D ball scan
@@ -154,7 +166,7 @@ impl Calibrate {
                         form_pv_nm: pr.form_pv_nm,
                         ball_pv_nm: [cal.pv_without_form_nm, cal.pv_with_form_nm],
                         warnings: &cal.warnings,
-                        next: correct_next(&self.scan, &self.output),
+                        next: correct_next(&self.scan, &self.output, &self.plane, self.session),
                     },
                     dir,
                 )
@@ -199,6 +211,11 @@ impl Calibrate {
             }
             let _ = writeln!(s, "  on the ball    {:.1} nm PV with the radius only → {:.1} nm PV with the form (residual RMS {:.1} nm)", cal.pv_without_form_nm, cal.pv_with_form_nm, pr.residual_rms_nm);
             let _ = writeln!(s, "  probe file written to {}", self.output.display());
+            let _ = writeln!(
+                s,
+                "next: {}",
+                correct_next(&self.scan, &self.output, &self.plane, self.session)
+            );
             if let Some(r) = &report {
                 let _ = writeln!(s, "  report: {}", r.display());
             }

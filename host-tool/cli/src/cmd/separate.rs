@@ -507,6 +507,19 @@ impl Reversal {
             if let Some(p) = &report {
                 out::print(&format!("report: {}\n", p.display()))?;
             }
+            // Which error is in a part scan, with the reversal telling
+            // part and slide apart (the two runs as given).
+            if let Some(run180) = &self.run180 {
+                let w = |p: &std::path::Path| {
+                    crate::report::diagnose::shell_word(&p.display().to_string())
+                };
+                out::print(&format!(
+                    "next: trueaxis diagnose-part {} --reversal {} --axis {}\n",
+                    w(&self.run0),
+                    w(run180),
+                    self.axis
+                ))?;
+            }
         }
         Ok(())
     }

@@ -441,9 +441,17 @@ pub fn build_report(
         // no z has no plane z = 0 to speak of).
         let on = |plane: &Plane| {
             if data.pos_mm[plane.normal].is_none() {
-                format!("over {}–{}", AXES[(plane.normal + 1) % 3], AXES[(plane.normal + 2) % 3])
+                format!(
+                    "over {}–{}",
+                    AXES[(plane.normal + 1) % 3],
+                    AXES[(plane.normal + 2) % 3]
+                )
             } else {
-                format!("on the plane {} = {} mm", AXES[plane.normal], plot_num(plane.at_mm))
+                format!(
+                    "on the plane {} = {} mm",
+                    AXES[plane.normal],
+                    plot_num(plane.at_mm)
+                )
             }
         };
         page.heading("Residual maps on measured planes");
@@ -528,7 +536,10 @@ pub fn build_report(
             let plane = &first[first.len() / 2];
             let raw = data.err_um[t].as_ref();
             let (b_title, a_title) = if bed {
-                ("bed height before (as probed)".to_string(), "bed height after (residual)".to_string())
+                (
+                    "bed height before (as probed)".to_string(),
+                    "bed height after (residual)".to_string(),
+                )
             } else {
                 (
                     format!("{} before (raw error)", TARGETS[t]),

@@ -387,7 +387,15 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
             let next = d
                 .warnings
                 .iter()
-                .find(|w| ["aliasing", "one_direction", "constant_temperature", "no_temperature"].contains(&w.code.as_str()))
+                .find(|w| {
+                    [
+                        "aliasing",
+                        "one_direction",
+                        "constant_temperature",
+                        "no_temperature",
+                    ]
+                    .contains(&w.code.as_str())
+                })
                 .map(|w| format!("measure first: {}", w.detail))
                 .or_else(|| {
                     Some(format!(
@@ -752,8 +760,8 @@ fn thermal_slope(
         ),
         _ => axis_title(&column),
     };
-    let colour = plot::target_of(&c.target.to_string())
-        .map_or(plot::OTHER_COLOURS[0], target_colour);
+    let colour =
+        plot::target_of(&c.target.to_string()).map_or(plot::OTHER_COLOURS[0], target_colour);
     let plot = XyPlot::new(
         format!(
             "Thermal growth of {}{}: the slope",

@@ -14,8 +14,8 @@ use trueaxis_engine::diagnose::ABOVE_NOISE_RATIO;
 use trueaxis_engine::history::{History, Step};
 
 use crate::report::plot::{self, format_value, Series, Style, Ticks, XyPlot};
-use plotters::style::RGBColor;
 use crate::report::{Page, Tone, Verdict};
+use plotters::style::RGBColor;
 
 /// A step's label on the plot: the seed for the first fit, else what it
 /// added, short (`+ periodic ex x 5.00011`), several joined by `, `.
@@ -190,7 +190,11 @@ pub fn plot(h: &History, noise_um: &BTreeMap<String, f64>) -> XyPlot {
             let colour = plot::target_of(t).map_or(RGBColor(120, 120, 120), |i| {
                 plot::lighter(plot::target_colour(i), 0.45)
             });
-            p = p.with_dashed(*nf, format!("{t} noise floor {} µm", format_value(*nf)), colour);
+            p = p.with_dashed(
+                *nf,
+                format!("{t} noise floor {} µm", format_value(*nf)),
+                colour,
+            );
         }
     }
     let values: Vec<f64> = h

@@ -217,7 +217,10 @@ pub fn write_page(res: &Iso230, data: &Dataset, data_path: &str, dir: &Path) -> 
         .collect();
     if !flagged.is_empty() {
         page.heading("Flagged readings");
-        page.table(&["target (mm)", "dir", "run", "deviation (µm)", "why"], flagged);
+        page.table(
+            &["target (mm)", "dir", "run", "deviation (µm)", "why"],
+            flagged,
+        );
     }
     let f = |v: f64| format!("{v:.3}");
     let rows = res
@@ -291,14 +294,30 @@ pub fn svg_with(res: &Iso230, readings: &[Reading]) -> Result<String> {
     let down = darker(DIRECTION_COLOURS[1], 0.3);
     let mut entries = vec![
         ("x̄↑ ± 2s (from below)".to_string(), up, LegendMark::LineDot),
-        ("x̄↓ ± 2s (from above)".to_string(), down, LegendMark::LineDot),
+        (
+            "x̄↓ ± 2s (from above)".to_string(),
+            down,
+            LegendMark::LineDot,
+        ),
     ];
     if !readings.is_empty() {
-        entries.push(("runs ↑ (readings)".into(), DIRECTION_COLOURS[0], LegendMark::Dot));
-        entries.push(("runs ↓ (readings)".into(), DIRECTION_COLOURS[1], LegendMark::Dot));
+        entries.push((
+            "runs ↑ (readings)".into(),
+            DIRECTION_COLOURS[0],
+            LegendMark::Dot,
+        ));
+        entries.push((
+            "runs ↓ (readings)".into(),
+            DIRECTION_COLOURS[1],
+            LegendMark::Dot,
+        ));
     }
     if readings.iter().any(|r| r.flag.is_some()) {
-        entries.push(("flagged reading".into(), RGBColor(200, 0, 0), LegendMark::Dot));
+        entries.push((
+            "flagged reading".into(),
+            RGBColor(200, 0, 0),
+            LegendMark::Dot,
+        ));
     }
     let mut buf = String::new();
     let size = (900u32, 520u32);
@@ -331,7 +350,11 @@ pub fn svg_with(res: &Iso230, readings: &[Reading]) -> Result<String> {
         runs.sort_unstable();
         runs.dedup();
         for (d, run) in runs {
-            let colour = if d > 0 { DIRECTION_COLOURS[0] } else { DIRECTION_COLOURS[1] };
+            let colour = if d > 0 {
+                DIRECTION_COLOURS[0]
+            } else {
+                DIRECTION_COLOURS[1]
+            };
             let shift = if d > 0 { -dx } else { dx };
             let mut pts: Vec<(f64, f64)> = readings
                 .iter()
@@ -340,7 +363,10 @@ pub fn svg_with(res: &Iso230, readings: &[Reading]) -> Result<String> {
                 .collect();
             pts.sort_by(|a, b| a.0.total_cmp(&b.0));
             if run.is_some() {
-                chart.draw_series(LineSeries::new(pts.clone(), colour.mix(0.45).stroke_width(1)))?;
+                chart.draw_series(LineSeries::new(
+                    pts.clone(),
+                    colour.mix(0.45).stroke_width(1),
+                ))?;
             }
             chart.draw_series(
                 pts.iter()

@@ -353,13 +353,21 @@ fn write_key(h: &mut String) {
     let hex = |c: plotters::style::RGBColor| format!("#{:02x}{:02x}{:02x}", c.0, c.1, c.2);
     h.push_str("<p class=\"key\">Colours on every plot: ");
     for (t, c) in ["ex", "ey", "ez"].iter().zip(plot::TARGET_COLOURS) {
-        let _ = write!(h, "<span><i style=\"background:{}\"></i>{t}</span> ", hex(c));
+        let _ = write!(
+            h,
+            "<span><i style=\"background:{}\"></i>{t}</span> ",
+            hex(c)
+        );
     }
     for (d, c) in ["approach +1", "approach −1"]
         .iter()
         .zip(plot::DIRECTION_COLOURS)
     {
-        let _ = write!(h, "<span><i style=\"background:{}\"></i>{d}</span> ", hex(c));
+        let _ = write!(
+            h,
+            "<span><i style=\"background:{}\"></i>{d}</span> ",
+            hex(c)
+        );
     }
     h.push_str("(a model, fit or mean: the darker shade of its target; held-out: dashed)</p>\n");
 }
@@ -541,7 +549,10 @@ mod tests {
         );
         let html = p.to_html();
         assert!(html.contains("<td class=\"t\">periodic:target=ex</td><td>-6751</td><td>47 %</td><td class=\"t\">periodogram of the ex residual</td>"), "{html}");
-        assert!(html.contains("<th class=\"t\">add</th><th>ΔBIC</th>"), "{html}");
+        assert!(
+            html.contains("<th class=\"t\">add</th><th>ΔBIC</th>"),
+            "{html}"
+        );
         assert!(html.contains("<div class=\"grid\">\n<figure id=\"a\""));
         assert!(html.contains("<div class=\"scroll\"><table>"));
         assert_eq!(p.figure_count(), 2);
@@ -560,7 +571,10 @@ mod tests {
             ],
         );
         let html = p.to_html();
-        assert!(html.contains("<td class=\"t\">DEC</td><td class=\"t\">5</td>"), "{html}");
+        assert!(
+            html.contains("<td class=\"t\">DEC</td><td class=\"t\">5</td>"),
+            "{html}"
+        );
         assert!(html.contains("<th class=\"t\">value</th>"), "{html}");
     }
 
@@ -579,9 +593,8 @@ mod tests {
         // shrinks its text to a third; a grid cell wider than the window
         // made five pages 576 px wide at 390 px (issue 28).
         let html = Page::new("t").to_html();
-        assert!(html.contains(
-            "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
-        ));
+        assert!(html
+            .contains("<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"));
         assert!(STYLE.contains("minmax(min(340px,100%),1fr)"));
         assert!(STYLE.contains("minmax(min(560px,100%),1fr)"));
         assert!(!STYLE.contains("minmax(560px"));

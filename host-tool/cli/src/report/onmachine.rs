@@ -610,7 +610,9 @@ pub fn workpiece_page(w: &WorkpiecePage, dir: &Path) -> Result<PathBuf> {
         .flat_map(|&c| (0..=100).map(move |k| (c, z0 + (z1 - z0) * k as f64 / 100.0)))
         .map(|(c, z)| w.form.at(c, z))
         .chain(w.points.iter().map(|p| p[2]))
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(v), h.max(v)));
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+            (l.min(v), h.max(v))
+        });
     let pad = 0.08 * (hi - lo).max(1e-6);
     let mut figs = Vec::new();
     for &c in cs.iter().step_by(step) {

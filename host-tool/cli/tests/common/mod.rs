@@ -114,7 +114,11 @@ pub fn assert_no_document(args: &[&str], out: &Output) {
     if args.contains(&"--json") {
         let doc: Value = serde_json::from_slice(&out.stdout)
             .unwrap_or_else(|e| panic!("{args:?}: stdout is no one JSON document ({e})"));
-        assert_eq!(doc["exit_code"].as_i64(), out.status.code().map(i64::from), "{doc}");
+        assert_eq!(
+            doc["exit_code"].as_i64(),
+            out.status.code().map(i64::from),
+            "{doc}"
+        );
         let msg = doc["error"].as_str().unwrap_or_else(|| panic!("{doc}"));
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(

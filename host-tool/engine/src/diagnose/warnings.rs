@@ -133,7 +133,11 @@ fn bed_warnings(data: &Dataset) -> Vec<Warning> {
     let mut spacing = Vec::new();
     for a in [0, 1] {
         if let Some(dl) = densest_lines(data, a, &all) {
-            spacing.push(format!("{} mm along {}", fmt_num(dl.spacing_mm, 3), AXES[a]));
+            spacing.push(format!(
+                "{} mm along {}",
+                fmt_num(dl.spacing_mm, 3),
+                AXES[a]
+            ));
         }
     }
     if !spacing.is_empty() {

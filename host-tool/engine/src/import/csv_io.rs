@@ -851,6 +851,9 @@ mod tests {
 
     #[test]
     fn windows_1252_bytes_read_as_excel_wrote_them() {
-        assert_eq!(windows_1252(b"\x80 \xb5m \xb0C \xfc \x96 \x81"), "€ µm °C ü – \u{fffd}");
+        assert_eq!(
+            windows_1252(b"\x80 \xb5m \xb0C \xfc \x96 \x81"),
+            "€ µm °C ü – \u{fffd}"
+        );
     }
 }

@@ -23,9 +23,7 @@ use anyhow::Context;
 use crate::data::Dataset;
 
 pub use bedmesh::{klipper_profiles, read_klipper_mesh, read_rrf_heightmap};
-pub use csv_io::{
-    column_names, probable_column, read_csv, windows_1252, write_csv, ENCODING_NOTE,
-};
+pub use csv_io::{column_names, probable_column, read_csv, windows_1252, write_csv, ENCODING_NOTE};
 pub use ecmc::read_ecmc;
 pub use rtl::read_rtl;
 

@@ -260,8 +260,8 @@ impl HeatMap {
         let (y0, y1) = (ye[0], ye[ye.len() - 1]);
         // Ticked at both ends of the measured positions and at 0 when it
         // is inside, with round numbers between (issue 28: no 0 tick).
-        let xt = KeyAxis::new(x0, x1, key_ticks(&self.x, x0, x1));
-        let yt = KeyAxis::new(y0, y1, key_ticks(&self.y, y0, y1));
+        let xt = KeyAxis::new(x0, x1, key_ticks(&self.x));
+        let yt = KeyAxis::new(y0, y1, key_ticks(&self.y));
         let mut chart = ChartBuilder::on(&map_area)
             .caption(&self.title, ("sans-serif", 17))
             .margin(12)
@@ -276,8 +276,8 @@ impl HeatMap {
             .y_desc(&self.y_label)
             .x_labels(6)
             .y_labels(8)
-            .x_label_formatter(&|v| format_tick(*v))
-            .y_label_formatter(&|v| format_tick(*v))
+            .x_label_formatter(&|v| map_tick(*v, x1 - x0))
+            .y_label_formatter(&|v| map_tick(*v, y1 - y0))
             .draw()
             .map_err(plot_err)?;
         let nx = self.x.len();
@@ -360,7 +360,11 @@ impl HeatMap {
         let w = f64::from(self.size.0.saturating_sub(extra_w).max(60));
         let h_max = f64::from(self.size.1) * 1.6 - f64::from(extra_h);
         let h = w * sy / sx;
-        let (w, h) = if h > h_max { (h_max * sx / sy, h_max) } else { (w, h.max(40.0)) };
+        let (w, h) = if h > h_max {
+            (h_max * sx / sy, h_max)
+        } else {
+            (w, h.max(40.0))
+        };
         (w.round() as u32 + extra_w, h.round() as u32 + extra_h)
     }
 
@@ -468,6 +472,25 @@ pub(super) fn nearest(sorted: &[f64], x: f64) -> usize {
 }
 
 /// Cell edges around centres: midpoints, ends extended by half a spacing.
+/// A map's tick label: the position as written when it has at most 3
+/// decimals (`247.47`), else rounded to what the axis span reads (a bin
+/// centre `33.333333` → `33.3` on an 800 mm axis).
+pub(crate) fn map_tick(v: f64, span: f64) -> String {
+    let s = format_tick(v);
+    if s.split('.').nth(1).map_or(0, str::len) <= 3 {
+        return s;
+    }
+    let decimals = if span >= 100.0 {
+        1
+    } else if span >= 10.0 {
+        2
+    } else {
+        3
+    };
+    let p = 10f64.powi(decimals);
+    format_tick((v * p).round() / p)
+}
+
 /// A linear f64 axis ticked exactly at given values (plotters' own picks
 /// round numbers only, so a bed probed from 25 to 225 mm had neither end
 /// labelled).
@@ -503,17 +526,18 @@ impl plotters::coord::ranged1d::Ranged for KeyAxis {
     }
 }
 
-/// Tick positions for a map axis over the cell centres `c` drawn from
-/// `lo` to `hi`: the first and last centre (the measured ends), 0 when it
-/// lies inside, and round multiples of a 1-2-5 step between them that do
+/// Tick positions for a map axis over the cell centres `c`: the first and last centre (the measured ends), 0 when the
+/// measured positions straddle it, and round multiples of a 1-2-5 step between them that do
 /// not crowd the ends.
-pub(crate) fn key_ticks(c: &[f64], lo: f64, hi: f64) -> Vec<f64> {
+pub(crate) fn key_ticks(c: &[f64]) -> Vec<f64> {
     let (Some(&first), Some(&last)) = (c.first(), c.last()) else {
-        return vec![lo, hi];
+        return Vec::new();
     };
     let span = (last - first).abs();
     let mut t = vec![first, last];
-    if lo <= 0.0 && 0.0 <= hi {
+    // 0 when the measured positions straddle it (next to an end it would
+    // only crowd that end's label).
+    if first < 0.0 && 0.0 < last {
         t.push(0.0);
     }
     if span > 0.0 {

@@ -1342,7 +1342,10 @@ mod tests {
         let ey = hex(TARGET_COLOURS[1]);
         assert_eq!(dot_colours(&one), vec![ey.clone()]);
         let c = dot_colours(&two);
-        assert_eq!(c, vec![hex(TARGET_COLOURS[0]), hex(DIRECTION_COLOURS[0]), ey]);
+        assert_eq!(
+            c,
+            vec![hex(TARGET_COLOURS[0]), hex(DIRECTION_COLOURS[0]), ey]
+        );
         // A model is its target's darker shade; other series never take a
         // target's or a direction's colour.
         let s = [
@@ -1358,7 +1361,13 @@ mod tests {
         }
         assert_eq!(c[3], DIRECTION_COLOURS[1]);
         // Bars of targets: each target's bars in its colour.
-        let bars = before_after("r", "µm", &["ex".into(), "ez".into()], &[2.0, 1.0], &[1.0, 0.5]);
+        let bars = before_after(
+            "r",
+            "µm",
+            &["ex".into(), "ez".into()],
+            &[2.0, 1.0],
+            &[1.0, 0.5],
+        );
         let f = bars.colour_fn();
         assert_eq!(f(1, Some(0)), TARGET_COLOURS[0]);
         assert_eq!(f(1, Some(1)), TARGET_COLOURS[2]);
@@ -1368,7 +1377,10 @@ mod tests {
     #[test]
     fn a_peak_below_the_false_alarm_level_is_not_red() {
         let svg = XyPlot::new("p", "f", "power")
-            .with(Series::line("Lomb–Scargle power", vec![(0.1, 0.1), (0.2, 0.05)]))
+            .with(Series::line(
+                "Lomb–Scargle power",
+                vec![(0.1, 0.1), (0.2, 0.05)],
+            ))
             .with_vline_coloured(0.1, "10 mm", NO_FINDING)
             .to_svg()
             .unwrap();
@@ -1444,10 +1456,18 @@ mod tests {
         let (pw, ph) = (f64::from(w - 170), f64::from(h - 96));
         let ratio = (pw / ph) / (900.0 / 600.0);
         assert!((ratio - 1.0).abs() < 0.02, "{w} × {h}: {ratio}");
-        // A bed probed from 25 to 225 mm: both ends ticked; 0 when inside.
-        let t = heat::key_ticks(&[25.0, 75.0, 125.0, 175.0, 225.0], 0.0, 250.0);
-        assert_eq!(t.first(), Some(&0.0));
-        assert!(t.contains(&25.0) && t.contains(&225.0), "{t:?}");
+        // A bed probed from 25 to 225 mm: both ends ticked; 0 when the
+        // positions straddle it.
+        let t = heat::key_ticks(&[25.0, 75.0, 125.0, 175.0, 225.0]);
+        assert_eq!(t.first(), Some(&25.0));
+        assert!(t.contains(&225.0), "{t:?}");
+        assert_eq!(heat::map_tick(33.333333, 800.0), "33.3");
+        assert_eq!(heat::map_tick(247.47, 200.0), "247.47");
+        let t = heat::key_ticks(&[-150.0, -50.0, 50.0, 150.0]);
+        assert!(
+            t.contains(&0.0) && t.contains(&-150.0) && t.contains(&150.0),
+            "{t:?}"
+        );
         let svg = m.to_svg().unwrap();
         let labels = svg_texts(&svg);
         for end in ["0", "800", "500"] {
