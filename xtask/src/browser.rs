@@ -676,6 +676,35 @@ mod tests {
     }
 
     #[test]
+    fn a_phone_width_is_checked_in_a_frame_and_every_page_kind_is_listed() {
+        // Chromium widens a window below 500 px: 390 px is laid out in an
+        // iframe that wide, whose measure the frame page copies out.
+        let f = frame_page("index.browser-check.html", 390);
+        assert!(f.contains("<iframe src=\"index.browser-check.html\" width=\"390\""));
+        assert!(f.contains("getElementById('browser-check')"));
+        assert!(WIDTHS_PX.contains(&390) && WIDTHS_PX.contains(&1280));
+        assert!(390 < MIN_WINDOW_PX);
+        let names: Vec<&str> = pages(Path::new("/nowhere")).iter().map(|p| p.0).collect();
+        for kind in [
+            "compare",
+            "diagnose",
+            "history",
+            "final",
+            "iso230",
+            "probe-2d",
+            "probe-3d",
+            "separate-reversal",
+            "separate-three-probe",
+            "separate-multi-step",
+            "workpiece",
+            "diagnose-part",
+            "bed",
+        ] {
+            assert!(names.contains(&kind), "{kind} is not checked");
+        }
+    }
+
+    #[test]
     fn a_diagnose_page_must_say_where_the_model_fails_on_its_first_screen() {
         let dom = "<pre id=\"browser-check\">\noverview_top=812.5\nlayout_ms=3\n</pre>";
         let m = parse(dom).unwrap();

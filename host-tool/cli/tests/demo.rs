@@ -242,21 +242,13 @@ fn demo_finds_both_hidden_effects_and_its_table_compensates_the_data() {
 
     // Every page's Next command runs as pasted (issue 28; the demo's paths
     // are absolute here, as --out was), in the demo's folder.
-    let mut pages = vec![out.clone()];
     let mut failed = Vec::new();
     let mut ran = 0;
-    while let Some(d) = pages.pop() {
-        for e in std::fs::read_dir(&d).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                pages.push(p);
-            } else if p.file_name().is_some_and(|f| f == "index.html") {
-                if let Some(cmd) = common::page_next(&p) {
-                    ran += 1;
-                    if let Err(e) = common::paste(&out, &cmd) {
-                        failed.push(format!("{}: {e}", p.display()));
-                    }
-                }
+    for p in common::pages_under(&out) {
+        if let Some(cmd) = common::page_next(&p) {
+            ran += 1;
+            if let Err(e) = common::paste(&out, &cmd) {
+                failed.push(format!("{}: {e}", p.display()));
             }
         }
     }

@@ -293,7 +293,7 @@ fn the_page_shows_every_run_and_the_test_conditions() {
         .count();
     assert!(open >= 12, "{open} open dots: the runs are not plotted");
     // The legend sits right of the plot area: its text starts right of
-    // the last x tick label ("200.0").
+    // the last x tick label (200.0).
     let x_of = |text: &str| -> f64 {
         let at = svg.find(text).unwrap_or_else(|| panic!("{text}"));
         let head = &svg[svg[..at].rfind("<text").unwrap()..at];
@@ -306,6 +306,6 @@ fn the_page_shows_every_run_and_the_test_conditions() {
             .parse()
             .unwrap()
     };
-    assert!(x_of("x̄↑ ± 2s (from below)") > x_of(">200.0<") + 10.0);
+    assert!(x_of("x̄↑ ± 2s (from below)") > x_of("200.0\n</text>") + 10.0);
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -15,7 +15,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{page_next, paste, tmp_dir};
+use common::{page_next, pages_under, paste, tmp_dir};
 
 const BIN: &str = env!("CARGO_BIN_EXE_trueaxis");
 const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data");
@@ -85,24 +85,6 @@ impl Log {
             }
         }
     }
-}
-
-/// Every `index.html` under `root`, sorted.
-fn pages_under(root: &Path) -> Vec<PathBuf> {
-    let mut v = Vec::new();
-    let mut stack = vec![root.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else if p.file_name().is_some_and(|f| f == "index.html") {
-                v.push(p);
-            }
-        }
-    }
-    v.sort();
-    v
 }
 
 fn copy_data(dir: &Path, name: &str) {

@@ -309,3 +309,21 @@ pub fn paste(dir: &Path, cmd: &str) -> Result<String, String> {
         ))
     }
 }
+
+/// Every `index.html` under `root`, sorted.
+pub fn pages_under(root: &Path) -> Vec<PathBuf> {
+    let mut v = Vec::new();
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if p.file_name().is_some_and(|f| f == "index.html") {
+                v.push(p);
+            }
+        }
+    }
+    v.sort();
+    v
+}
