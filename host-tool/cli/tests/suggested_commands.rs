@@ -298,6 +298,12 @@ fn the_on_machine_commands_suggest_commands_that_run() {
         log.follow(&w, &out, 2);
     }
     log.pages(&w, &w);
+    // The probe page says what its radius interval is about (issue 28).
+    let probe_page = std::fs::read_to_string(w.join("probe").join("index.html")).unwrap();
+    assert!(
+        probe_page.contains("zero mean and no tilt"),
+        "the radius convention"
+    );
     // No placeholder a user would have to replace.
     for c in &log.ran {
         for placeholder in ["SCAN.csv", "SURFACE.csv", "DATA.csv", "MODEL.json"] {
