@@ -683,7 +683,7 @@ mod tests {
         assert!(f.contains("<iframe src=\"index.browser-check.html\" width=\"390\""));
         assert!(f.contains("getElementById('browser-check')"));
         assert!(WIDTHS_PX.contains(&390) && WIDTHS_PX.contains(&1280));
-        assert!(390 < MIN_WINDOW_PX);
+        const { assert!(390 < MIN_WINDOW_PX) };
         let names: Vec<&str> = pages(Path::new("/nowhere")).iter().map(|p| p.0).collect();
         for kind in [
             "compare",

@@ -471,7 +471,7 @@ pub fn part_diagnosis_page(
     let unknown = !measures.is_empty();
     let mut details = vec![format!(
         "{} scan, {}{}",
-        crate::report::a_or_an(&d.kind.to_string()),
+        crate::report::a_or_an(d.kind),
         crate::report::count(d.points, "point"),
         d.noise_um
             .map(|n| format!(", reading noise {n:.3} µm"))
