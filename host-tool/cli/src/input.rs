@@ -28,10 +28,22 @@ const NAMED: usize = 3;
 /// line) and says on stderr which rows were left out, if any.
 pub fn load_data(path: &Path, axis: Option<usize>) -> Result<Dataset> {
     let data = import::load_with_axis(path, axis)?;
+    if let Some(note) = encoding_note(&data) {
+        eprintln!("{note}");
+    }
     if let Some(note) = skipped_note(&data) {
         eprintln!("{note}");
     }
     Ok(data)
+}
+
+/// `note: d.csv is not valid UTF-8 …: read as Windows-1252 …` when the
+/// reader decoded the file so (docs/cli.md § Measurement CSV).
+pub fn encoding_note(data: &Dataset) -> Option<String> {
+    data.metadata
+        .iter()
+        .find(|(k, _)| k == import::ENCODING_NOTE)
+        .map(|(_, v)| format!("note: {} is {v}", data.source))
 }
 
 /// `note: 2 rows of d.csv were left out (line 409: no error value on this

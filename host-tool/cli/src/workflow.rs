@@ -210,3 +210,41 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
     }
     std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
 }
+
+/// What to run on a data file just written (`simulate`, `import`), as it
+/// runs when pasted where the command ran: an ISO 230-2 run (one axis
+/// moving, approached from both sides) is evaluated by `iso230`; a probed
+/// surface (a bed) is fitted with a grid on its probe spacing (a bed wants
+/// a mesh, not a machine's polynomial); anything else with the cubic seed.
+pub fn next_for_data(data: &Dataset, path: &Path) -> String {
+    let p = crate::report::diagnose::shell_word(&path.display().to_string());
+    let moving: Vec<usize> = (0..3).filter(|&a| spacing_mm(data, a).is_some()).collect();
+    if let [a] = moving[..] {
+        if data.dir[a].is_some() {
+            return format!("trueaxis iso230 {p} --report iso230");
+        }
+    }
+    if data.is_probed_surface() {
+        let step = [0, 1]
+            .iter()
+            .filter_map(|&a| spacing_mm(data, a))
+            .fold(f64::INFINITY, f64::min);
+        return format!(
+            "trueaxis fit {p} --model grid:{} -o bed.json",
+            trueaxis_engine::lines::plot_num(step)
+        );
+    }
+    format!("trueaxis fit {p} --model cubic19 -o model.json")
+}
+
+/// The median gap between the distinct positions along `axis` (µm-rounded);
+/// None when the axis is absent or does not move.
+fn spacing_mm(data: &Dataset, axis: usize) -> Option<f64> {
+    let col = data.pos_mm[axis].as_ref()?;
+    let mut p: Vec<i64> = col.iter().map(|v| (v * 1000.0).round() as i64).collect();
+    p.sort_unstable();
+    p.dedup();
+    let mut gaps: Vec<i64> = p.windows(2).map(|w| w[1] - w[0]).collect();
+    gaps.sort_unstable();
+    gaps.get(gaps.len() / 2).map(|g| *g as f64 / 1000.0)
+}

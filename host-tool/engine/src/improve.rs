@@ -185,6 +185,16 @@ impl ImproveStep {
     }
 }
 
+/// The diagnosis' warnings about the measurement's design (what the data
+/// cannot show, whatever the model), carried into [`Improvement::warnings`].
+pub const DESIGN_WARNINGS: [&str; 5] = [
+    "aliasing",
+    "one_direction",
+    "constant_temperature",
+    "no_temperature",
+    "noise_floor_upper_bound",
+];
+
 /// The whole run.
 #[derive(Clone, Debug, Serialize)]
 pub struct Improvement {
@@ -197,7 +207,9 @@ pub struct Improvement {
     /// The last diagnosis' verdict.
     pub verdict: Verdict,
     /// What the user should know about the data (`aux_misspelled`,
-    /// `aux_columns`), as diagnose's `warnings`.
+    /// `aux_columns`) and the last diagnosis' design warnings
+    /// ([`DESIGN_WARNINGS`]: `aliasing`, `no_temperature`, …), as
+    /// diagnose's `warnings`.
     pub warnings: Vec<diagnose::Warning>,
     /// Readings left out of every fit as outliers, found with the final
     /// model (empty with `keep_outliers`).
@@ -341,7 +353,16 @@ pub fn improve_with(
                 model_file: out.display().to_string(),
                 steps,
                 verdict: d.verdict,
-                warnings: Vec::new(),
+                // What the measurement's design hides, as the last
+                // diagnosis says it (issue 28: improve said "at the noise
+                // floor" with `warnings: []` where diagnose warned that the
+                // grid hides leads and no temperature was logged).
+                warnings: d
+                    .warnings
+                    .iter()
+                    .filter(|w| DESIGN_WARNINGS.contains(&w.code.as_str()))
+                    .cloned()
+                    .collect(),
                 outliers: found,
             });
         }

@@ -303,8 +303,10 @@ impl Args {
         );
         let mut cmd = <Args as clap::Args>::augment_args(clap::Command::new("export"))
             .bin_name("trueaxis export");
-        cmd.error(clap::error::ErrorKind::ArgumentConflict, msg)
-            .exit()
+        crate::cmd::out::usage_exit(
+            cmd.error(clap::error::ErrorKind::ArgumentConflict, msg),
+            self.json,
+        )
     }
 
     pub fn run(self) -> Result<()> {

@@ -10,6 +10,7 @@ use anyhow::{Context, Result};
 
 use crate::cmd::out::{self, outln};
 use crate::input;
+use crate::report::diagnose::shell_word;
 use crate::workflow::model_output;
 use trueaxis_engine::diagnose::outliers;
 use trueaxis_engine::effect::Effect;
@@ -120,12 +121,30 @@ impl Args {
             return Ok(());
         }
         let s = &model.stats;
+        // One count when every target has it, else each target's (issue
+        // 28: "21 terms per target" when two targets had 19).
+        let counts: std::collections::BTreeSet<usize> =
+            s.terms_per_target.values().copied().collect();
+        let terms = match counts.len() {
+            0 => format!("{} per target", crate::report::count(s.terms, "term")),
+            1 => format!(
+                "{} per target",
+                crate::report::count(counts.into_iter().next().unwrap_or(s.terms), "term")
+            ),
+            _ => format!(
+                "terms per target {}",
+                s.terms_per_target
+                    .iter()
+                    .map(|(t, n)| format!("{t} {n}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        };
         outln!(
-            "{}: {} on {} rows, {} terms per target",
+            "{}: {} on {}, {terms}",
             self.data.display(),
             model.spec(),
-            data.len(),
-            s.terms
+            crate::report::count(data.len(), "row"),
         )?;
         outln!(
             "  {:<4} {:>7} {:>12} {:>16} {:>12} {:>10}",
@@ -168,6 +187,13 @@ impl Args {
             }
         }
         outln!("  model written to {}", out.display())?;
+        // Where the model fails, on a page (issue 28: every command that
+        // writes something says what to run next).
+        outln!(
+            "next: trueaxis compare {} --model {} --report report",
+            shell_word(&self.data.display().to_string()),
+            shell_word(&out.display().to_string())
+        )?;
         Ok(())
     }
 }

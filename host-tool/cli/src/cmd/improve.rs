@@ -101,7 +101,13 @@ impl Args {
             &progress,
         )
         .with_context(|| format!("{}: cannot improve {seed}", self.data.display()))?;
-        let r = Improvement { warnings, ..r };
+        // The data's warnings first, then the last diagnosis' design
+        // warnings the engine carried.
+        let design = r.warnings.clone();
+        let r = Improvement {
+            warnings: warnings.into_iter().chain(design.iter().cloned()).collect(),
+            ..r
+        };
         if let Some(e) = write_err {
             return Err(e);
         }
@@ -121,11 +127,20 @@ impl Args {
                 }
                 out::print(&text)?;
             }
+            for w in &design {
+                outln!("warning ({}): {}", w.code, w.detail)?;
+            }
             outln!(
                 "{}: model {} written to {}",
                 r.steps.last().map_or(String::new(), ImproveStep::outcome),
                 r.model,
                 r.model_file
+            )?;
+            // The history page shows the steps and proposes what follows
+            // (the export at the noise floor, else the diagnosis).
+            outln!(
+                "next: trueaxis history {} --report history",
+                crate::report::diagnose::shell_word(&r.model_file)
             )?;
         }
         Ok(())

@@ -122,6 +122,10 @@ impl Args {
                 duration_s,
                 self.output.display()
             )?;
+            outln!(
+                "next: {}",
+                crate::workflow::next_for_data(&data, &self.output)
+            )?;
         }
         Ok(())
     }
@@ -159,6 +163,10 @@ impl Args {
                     e * 100.0,
                     self.output.display()
                 )?;
+                outln!(
+                    "next: trueaxis workpiece {}",
+                    crate::report::diagnose::shell_word(&self.output.display().to_string())
+                )?;
             }
             return Ok(());
         }
@@ -187,6 +195,11 @@ impl Args {
                 "simulated an on-machine campaign ({} files, the hidden answers in truth.json) → {}",
                 files.len(),
                 dir.display()
+            )?;
+            outln!(
+                "next: trueaxis probe calibrate {} --ball-diameter-mm {} -o probe.json --report probe",
+                crate::report::diagnose::shell_word(&dir.join("ball.csv").display().to_string()),
+                trueaxis_engine::lines::plot_num(onmachine::BALL_DIAMETER_MM)
             )?;
         }
         Ok(())
@@ -282,6 +295,10 @@ impl Args {
                 duration_s,
                 cfg.machine.name,
                 self.output.display()
+            )?;
+            outln!(
+                "next: {}",
+                crate::workflow::next_for_data(&data, &self.output)
             )?;
             for w in warnings {
                 outln!("warning: {w}")?;

@@ -61,8 +61,12 @@ struct Grid {
 }
 
 impl Grid {
+    /// The position of node `i` along `axis`, rounded to 1 nm: min + i ×
+    /// spacing in binary floating point leaves `247.46999999999997` where
+    /// the probe stood at 247.47 (issue 28), which the CSV and every page
+    /// would then print.
     fn pos(&self, axis: usize, i: usize) -> f64 {
-        self.min[axis] + self.spacing[axis] * i as f64
+        ((self.min[axis] + self.spacing[axis] * i as f64) * 1e6).round() / 1e6
     }
 }
 
@@ -717,5 +721,22 @@ xmin,xmax,ymin,ymax,radius,xspacing,yspacing,xnum,ynum\n\
         assert!(e.message.contains("max_x"), "{e}");
         let e = read_klipper_mesh("[printer]\n", "p.cfg", None).unwrap_err();
         assert!(e.message.contains("no `#*# [bed_mesh"), "{e}");
+    }
+
+    #[test]
+    fn node_positions_print_as_probed() {
+        let g = Grid {
+            min: [20.0, 10.1],
+            spacing: [32.67, 23.13],
+            count: [9, 9],
+        };
+        for a in 0..2 {
+            for i in 0..9 {
+                let p = g.pos(a, i).to_string();
+                let decimals = p.split('.').nth(1).map_or(0, str::len);
+                assert!(decimals <= 2, "{p}");
+            }
+        }
+        assert_eq!(g.pos(0, 7), 248.69);
     }
 }

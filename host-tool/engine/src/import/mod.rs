@@ -23,7 +23,7 @@ use anyhow::Context;
 use crate::data::Dataset;
 
 pub use bedmesh::{klipper_profiles, read_klipper_mesh, read_rrf_heightmap};
-pub use csv_io::{column_names, probable_column, read_csv, write_csv};
+pub use csv_io::{column_names, probable_column, read_csv, windows_1252, write_csv, ENCODING_NOTE};
 pub use ecmc::read_ecmc;
 pub use rtl::read_rtl;
 
@@ -169,7 +169,10 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> anyhow::Result<Dataset> {
     }
     let ds = match ext.as_str() {
         "csv" if bedmesh::is_rrf_heightmap(&text()) => read_rrf_heightmap(&text(), &name)?,
-        "csv" => read_csv(bytes.as_slice(), &name)?,
+        // Excel's "Unicode text" (.txt, UTF-16, tab-separated) and tab-
+        // separated files (.tsv) are the CSV with another delimiter, which
+        // the reader detects (issue 28: "unknown file type").
+        "csv" | "txt" | "tsv" => read_csv(bytes.as_slice(), &name)?,
         "rtl" => read_rtl(&text(), &name, opts.axis)?,
         "dat" if ecmc::is_ecmc_iso230(&text()) => read_ecmc(&text(), &name, opts.axis)?,
         "dat" => anyhow::bail!(
@@ -177,7 +180,7 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> anyhow::Result<Dataset> {
         ),
         "cfg" => read_klipper_mesh(&text(), &name, opts.profile.as_deref())?,
         other => anyhow::bail!(
-            "{name}: unknown file type `.{other}` (expected .csv, .rtl, .dat (ecmc ISO 230-2) or .cfg (Klipper bed mesh))"
+            "{name}: unknown file type `.{other}` (expected .csv, .txt/.tsv (tab-separated, Excel's \"Unicode text\"), .rtl, .dat (ecmc ISO 230-2) or .cfg (Klipper bed mesh))"
         ),
     };
     ds.validate()?;
