@@ -10,6 +10,7 @@
 use core::fmt;
 
 use crate::cost::{estimate, CostEstimate};
+use crate::definition::{check_definition, Departure, DEFINITION_BOUND_NM};
 use crate::eval::{LoadError, ModelCap};
 use crate::table::Table;
 
@@ -96,6 +97,10 @@ pub enum LimitError {
     /// It cannot be loaded for another reason (terms, MLP inputs,
     /// coefficient ranges: the same for every capacity).
     Load(LoadError),
+    /// Its fixed-point or f32 evaluation departs from its own definition
+    /// by more than [`DEFINITION_BOUND_NM`] ([`crate::definition`]): the
+    /// board would not correct by what the table says.
+    OffDefinition(Departure),
     /// Its fixed-point evaluation is estimated above [`MODEL_BUDGET_INSTR`]:
     /// the correction loop could not evaluate it every period.
     TooSlow {
@@ -125,6 +130,43 @@ impl fmt::Display for LimitError {
                 needed.saturating_sub(max)
             ),
             LimitError::Load(e) => write!(f, "the board cannot load the table: {e}"),
+            LimitError::OffDefinition(d) => {
+                let axis = ["ex", "ey", "ez"][usize::from(d.output % 3)];
+                write!(
+                    f,
+                    "its {} evaluation departs from the table's own definition (the f64 sum of its \
+                     terms) by {} nm on {axis}",
+                    d.path.name(),
+                    d.error_nm
+                )?;
+                match d.at {
+                    Some(i) => write!(
+                        f,
+                        " at x = {:.6} mm, y = {:.6} mm, z = {:.6} mm, tool arm {:.6} mm, \
+                         temperatures {:?} m°C, reversal {:?} (Q30)",
+                        f64::from(i.pos_nm[0]) / 1e6,
+                        f64::from(i.pos_nm[1]) / 1e6,
+                        f64::from(i.pos_nm[2]) / 1e6,
+                        f64::from(i.tool_nm) / 1e6,
+                        i.temp_mc,
+                        i.rev_q30
+                    )?,
+                    None => {
+                        write!(f, " somewhere in its envelope: rounding")?;
+                        if let Some((k, kind)) = d.term {
+                            write!(f, " in term {k} ({})", kind.name())?;
+                        }
+                        write!(
+                            f,
+                            " can reach that wherever the definition is not clamped (its \
+                             coefficients, weights or factor range are beyond what the evaluation \
+                             represents: the rounding to its binary scale, times a tool arm, a \
+                             temperature difference or a network's weights)"
+                        )?
+                    }
+                }
+                write!(f, "; the board allows {DEFINITION_BOUND_NM} nm")
+            }
             LimitError::TooSlow { estimate, budget } => write!(
                 f,
                 "its evaluation is estimated at {estimate} instructions, the board's {} Hz \
@@ -160,8 +202,9 @@ pub fn check_cost(table: &Table<'_>, budget_instr: u32) -> Result<CostEstimate, 
 
 /// Checks `table` against the board's limits: its size, whether it loads
 /// into a [`BoardModel`] (built in `model`, which is left loaded when it
-/// fits; ≈ 16.3 KiB, so callers with a small stack pass a static), and
-/// whether the loop can evaluate it ([`check_cost`]).
+/// fits; ≈ 16.3 KiB, so callers with a small stack pass a static), whether
+/// its evaluations are its definition ([`check_definition`]) and whether
+/// the loop can evaluate it ([`check_cost`]).
 pub fn check_into(table: &Table<'_>, model: &mut BoardModel) -> Result<(), LimitError> {
     let bytes = table.bytes().len();
     if bytes > STAGE_BYTES {
@@ -181,6 +224,9 @@ pub fn check_into(table: &Table<'_>, model: &mut BoardModel) -> Result<(), Limit
         },
         e => LimitError::Load(e),
     })?;
+    if let Some(d) = check_definition(table, model) {
+        return Err(LimitError::OffDefinition(d));
+    }
     check_cost(table, MODEL_BUDGET_INSTR).map(|_| ())
 }
 
