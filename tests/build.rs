@@ -66,6 +66,9 @@ fn main() {
         fs::write(out.join(format!("{name}.vectors")), vectors).expect("write vectors");
     }
     bench_list(&out, benches.map(|(name, _)| name));
+    // The safety suite's table that the board must refuse (issue 25).
+    let off = tables::off_definition(0x0FFD_EF00).unwrap_or_else(|e| panic!("off_definition: {e}"));
+    fs::write(out.join("off_definition.bin"), off).expect("write off_definition.bin");
     random::write(&out);
 }
 
