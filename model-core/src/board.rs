@@ -132,18 +132,15 @@ impl fmt::Display for LimitError {
             LimitError::Load(e) => write!(f, "the board cannot load the table: {e}"),
             LimitError::OffDefinition(d) => {
                 let axis = ["ex", "ey", "ez"][usize::from(d.output % 3)];
-                write!(
-                    f,
-                    "its {} evaluation departs from the table's own definition (the f64 sum of its \
-                     terms) by {} nm on {axis}",
-                    d.path.name(),
-                    d.error_nm
-                )?;
+                let path = d.path.name();
+                let nm = d.error_nm;
                 match d.at {
                     Some(i) => write!(
                         f,
-                        " at x = {:.6} mm, y = {:.6} mm, z = {:.6} mm, tool arm {:.6} mm, \
-                         temperatures {:?} m°C, reversal {:?} (Q30)",
+                        "its {path} evaluation departs from the table's own definition (the f64 sum \
+                         of its terms) by {nm} nm on {axis} at x = {:.6} mm, y = {:.6} mm, \
+                         z = {:.6} mm, tool arm {:.6} mm, temperatures {:?} m°C, reversal {:?} \
+                         (Q30)",
                         f64::from(i.pos_nm[0]) / 1e6,
                         f64::from(i.pos_nm[1]) / 1e6,
                         f64::from(i.pos_nm[2]) / 1e6,
@@ -152,16 +149,21 @@ impl fmt::Display for LimitError {
                         i.rev_q30
                     )?,
                     None => {
-                        write!(f, " somewhere in its envelope: rounding")?;
+                        write!(
+                            f,
+                            "its {path} evaluation can depart from the table's own definition (the \
+                             f64 sum of its terms) by up to {nm} nm on {axis} wherever the \
+                             definition is not clamped: the rounding"
+                        )?;
                         if let Some((k, kind)) = d.term {
-                            write!(f, " in term {k} ({})", kind.name())?;
+                            write!(f, " of term {k} ({})", kind.name())?;
                         }
                         write!(
                             f,
-                            " can reach that wherever the definition is not clamped (its \
-                             coefficients, weights or factor range are beyond what the evaluation \
-                             represents: the rounding to its binary scale, times a tool arm, a \
-                             temperature difference or a network's weights)"
+                            " (its coefficients, weights or factor range are beyond what the \
+                             evaluation represents: a value rounded to its binary scale, then \
+                             multiplied by a tool arm, a temperature difference or a network's \
+                             weights)"
                         )?
                     }
                 }
@@ -203,8 +205,8 @@ pub fn check_cost(table: &Table<'_>, budget_instr: u32) -> Result<CostEstimate, 
 /// Checks `table` against the board's limits: its size, whether it loads
 /// into a [`BoardModel`] (built in `model`, which is left loaded when it
 /// fits; ≈ 16.3 KiB, so callers with a small stack pass a static), whether
-/// its evaluations are its definition ([`check_definition`]) and whether
-/// the loop can evaluate it ([`check_cost`]).
+/// the loop can evaluate it ([`check_cost`]) and whether its evaluations
+/// are its definition ([`check_definition`]).
 pub fn check_into(table: &Table<'_>, model: &mut BoardModel) -> Result<(), LimitError> {
     let bytes = table.bytes().len();
     if bytes > STAGE_BYTES {
@@ -224,10 +226,14 @@ pub fn check_into(table: &Table<'_>, model: &mut BoardModel) -> Result<(), Limit
         },
         e => LimitError::Load(e),
     })?;
-    if let Some(d) = check_definition(table, model) {
-        return Err(LimitError::OffDefinition(d));
+    check_cost(table, MODEL_BUDGET_INSTR)?;
+    // Last: the dearest check (DEFINITION_POINTS evaluations in f64, f32
+    // and fixed point; BENCHMARKS.md), run only on a table the board
+    // would otherwise take.
+    match check_definition(table, model) {
+        Some(d) => Err(LimitError::OffDefinition(d)),
+        None => Ok(()),
     }
-    check_cost(table, MODEL_BUDGET_INSTR).map(|_| ())
 }
 
 /// [`check_into`] with a model of its own (host: it is boxed).

@@ -39,7 +39,12 @@
 //! evaluation is not what they say. `tests/definition.rs` property-tests
 //! it over the edge-table generator: every table the check accepts is
 //! within the bound at random inputs of its envelope.
+//!
+//! Nothing here panics for any parsed table (the board runs it): holds are
+//! `max`/`min`, not `clamp`, whose panic message would also pull f64
+//! formatting into the board's image.
 #![allow(clippy::needless_range_loop)] // per-output loops mirror [ex, ey, ez]
+#![allow(clippy::manual_clamp)] // see above
 
 use crate::eval::{Inputs, ModelCap, MAX_TEMPS};
 use crate::table::{Table, TermKind, TermView};
@@ -204,19 +209,23 @@ pub fn definition_nm(table: &Table<'_>, inp: &Inputs) -> [f64; 3] {
     let env = table.envelope();
     let mut held = *inp;
     for a in 0..3 {
-        held.pos_nm[a] = inp.pos_nm[a].clamp(env.travel_min_nm[a], env.travel_max_nm[a]);
+        held.pos_nm[a] = inp.pos_nm[a]
+            .max(env.travel_min_nm[a])
+            .min(env.travel_max_nm[a]);
     }
     for ch in 0..table.channel_count().min(MAX_TEMPS) {
-        held.temp_mc[ch] = inp.temp_mc[ch].clamp(env.temp_min_mc[ch], env.temp_max_mc[ch]);
+        held.temp_mc[ch] = inp.temp_mc[ch]
+            .max(env.temp_min_mc[ch])
+            .min(env.temp_max_mc[ch]);
     }
-    held.tool_nm = inp.tool_nm.clamp(env.tool_min_nm, env.tool_max_nm);
+    held.tool_nm = inp.tool_nm.max(env.tool_min_nm).min(env.tool_max_nm);
     let v = eval_f64(table, &held);
     core::array::from_fn(|o| {
         let max = f64::from(env.max_corr_nm[o]);
         // A non-finite definition is no definition: it departs from any
         // evaluation (the check refuses the table).
         if v[o].is_finite() {
-            v[o].clamp(-max, max)
+            v[o].max(-max).min(max)
         } else {
             f64::INFINITY
         }
@@ -265,7 +274,7 @@ fn grid_value(g: &crate::table::GridView<'_>, pos: &[f64; 3]) -> f64 {
             continue;
         }
         let span = f64::from(ax.nodes - 1) * f64::from(ax.step_nm);
-        let d = (pos[a] - f64::from(ax.origin_nm)).clamp(0.0, span);
+        let d = (pos[a] - f64::from(ax.origin_nm)).max(0.0).min(span);
         let f = d / f64::from(ax.step_nm);
         let i = (libm::floor(f) as usize).min(usize::from(ax.nodes) - 2);
         idx[a] = i;
@@ -403,7 +412,9 @@ fn mlp_bound_nm(table: &Table<'_>, outputs: u8, net: &crate::table::MlpView<'_>)
     for i in 0..n_in.min(crate::limits::MAX_MLP_INPUTS) {
         let r = net.input(i);
         let mid_true = (r.min + r.max) / 2.0;
-        let mid = libm::round(mid_true).clamp(i32::MIN as f64, i32::MAX as f64);
+        let mid = libm::round(mid_true)
+            .max(i32::MIN as f64)
+            .min(i32::MAX as f64);
         let k = 2.0 / (r.max - r.min);
         resid[i] = (mid - mid_true) * k;
         let (lo, hi) = match r.source {
@@ -634,11 +645,12 @@ pub fn check_point(table: &Table<'_>, k: u32) -> Inputs {
             2 | 3 => hi,
             4 => mid,
             r => extra[r as usize - 4]
-                .clamp(i64::from(lo), i64::from(hi))
+                .max(i64::from(lo))
+                .min(i64::from(hi))
                 .try_into()
                 .unwrap_or(mid),
         };
-        v.clamp(lo, hi)
+        v.max(lo).min(hi)
     };
     let pos_nm = core::array::from_fn(|a| {
         let (lo, hi) = (env.travel_min_nm[a], env.travel_max_nm[a]);

@@ -215,7 +215,7 @@ fn the_issues_off_definition_tables_are_refused_and_really_depart() {
         assert!(d.error_nm > DEFINITION_BOUND_NM, "{name}: {d:?}");
         let msg = e.to_string();
         assert!(
-            msg.contains("departs from the table's own definition")
+            msg.contains("from the table's own definition")
                 && msg.contains(&format!("{} nm", d.error_nm))
                 && msg.contains(&format!("{DEFINITION_BOUND_NM} nm")),
             "{name}: {msg}"
@@ -281,7 +281,7 @@ fn a_refusal_names_the_path_the_output_and_the_term() {
         let msg = LimitError::OffDefinition(d).to_string();
         let kind = want.2.unwrap().1.name();
         assert!(
-            msg.contains(want.0.name()) && msg.contains(&format!("term 0 ({kind})")),
+            msg.contains(want.0.name()) && msg.contains(&format!("of term 0 ({kind})")),
             "{msg}"
         );
     }

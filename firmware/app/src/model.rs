@@ -36,8 +36,10 @@ pub enum InvalidTable {
     /// Valid, but it does not fit the firmware's model capacity.
     Load(model_core::LoadError),
     /// Its fixed-point or f32 evaluation departs from its own definition
-    /// (`model_core::definition`, [`load_checked`]).
+    /// (`model_core::definition`, [`check_loaded`]).
     OffDefinition(model_core::definition::Departure),
+    /// [`check_loaded`] on a buffer with no model in it.
+    NotLoaded,
 }
 
 /// Everything the model is evaluated on.
@@ -116,17 +118,30 @@ fn load_table(t: &model_core::Table<'_>, dst: &mut ModelBuf) -> Result<(), Inval
     Ok(())
 }
 
-/// [`load_into`], then the definition check (`model_core::definition`,
-/// what `model_core::board::check` runs on the host): a table whose
-/// fixed-point or f32 evaluation departs from its own f64 definition by
-/// more than `DEFINITION_BOUND_NM` is refused and `dst` left empty. What
-/// the board runs before it writes a table (commit) and before it boots
-/// one (the slots' scan).
+/// [`load_into`], then [`check_loaded`]: what the boot's scan of the slots
+/// runs on each stored table.
 pub fn load_checked(bytes: &[u8], dst: &mut ModelBuf) -> Result<(), InvalidTable> {
     dst.loaded = false;
     let t = model_core::parse(bytes).map_err(InvalidTable::Format)?;
     load_table(&t, dst)?;
-    if let Some(d) = model_core::definition::check_definition(&t, &dst.model) {
+    check_table(&t, dst)
+}
+
+/// The definition check (`model_core::definition`, what
+/// `model_core::board::check` runs on the host last) on `bytes` loaded in
+/// `dst`: a table whose fixed-point or f32 evaluation departs from its own
+/// f64 definition by more than `DEFINITION_BOUND_NM` is refused and `dst`
+/// left empty. What a commit runs before it writes a table.
+pub fn check_loaded(bytes: &[u8], dst: &mut ModelBuf) -> Result<(), InvalidTable> {
+    let t = model_core::parse(bytes).map_err(InvalidTable::Format)?;
+    check_table(&t, dst)
+}
+
+fn check_table(t: &model_core::Table<'_>, dst: &mut ModelBuf) -> Result<(), InvalidTable> {
+    if !dst.loaded {
+        return Err(InvalidTable::NotLoaded);
+    }
+    if let Some(d) = model_core::definition::check_definition(t, &dst.model) {
         dst.loaded = false;
         return Err(InvalidTable::OffDefinition(d));
     }

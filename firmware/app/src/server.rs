@@ -496,16 +496,15 @@ impl<'b, 'm, F: MultiwriteNorFlash + ReadNorFlash> Server<'b, 'm, F> {
                 // order of `model_core::board::check` — what `trueaxis
                 // export`, `upload` and `flash` refuse with: a table that
                 // does not load into the board's model (format, capacity,
-                // ranges) or whose evaluation departs from its own
-                // definition, then one the loop cannot evaluate every
-                // period.
-                if model::load_checked(&self.stage[..u.size as usize], spare(&mut self.spares))
-                    .is_err()
-                {
+                // ranges), then one the loop cannot evaluate every period,
+                // then one whose evaluation departs from its own
+                // definition (the dearest check, last).
+                let staged = &self.stage[..u.size as usize];
+                if model::load_into(staged, spare(&mut self.spares)).is_err() {
                     self.upload = None;
                     return Err(LinkError::InvalidTable);
                 }
-                if let Ok(t) = model_core::parse(&self.stage[..u.size as usize]) {
+                if let Ok(t) = model_core::parse(staged) {
                     if let Err(LimitError::TooSlow { estimate, budget }) =
                         check_cost(&t, self.cfg.model_budget_instr)
                     {
@@ -515,6 +514,10 @@ impl<'b, 'm, F: MultiwriteNorFlash + ReadNorFlash> Server<'b, 'm, F> {
                             budget_instr: budget,
                         });
                     }
+                }
+                if model::check_loaded(staged, spare(&mut self.spares)).is_err() {
+                    self.upload = None;
+                    return Err(LinkError::InvalidTable);
                 }
                 self.require_quiet(now_us, engine)?;
                 let spare = spare(&mut self.spares);

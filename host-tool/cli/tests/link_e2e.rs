@@ -595,6 +595,63 @@ fn tables_beyond_the_boards_limits_are_refused_before_touching_it() {
     }
 }
 
+/// The sample table with an Abbe term whose coefficients sum near the
+/// loader's limit and a tool-arm range reaching 2^31 nm: valid and
+/// loadable, but its fixed point departs from its own definition by tens
+/// of µm (issue 25).
+fn off_definition_table() -> Vec<u8> {
+    use model_core::spec::TermSpec;
+    let mut spec = sample_spec(0);
+    spec.terms.push(TermSpec::Abbe {
+        output: 0,
+        coefs: vec![([1, 0, 0], 30_000.0)],
+    });
+    spec.envelope.tool_min_nm = -i32::MAX;
+    spec.envelope.tool_max_nm = i32::MAX;
+    spec.encode().unwrap()
+}
+
+/// Issue 25: `trueaxis upload` and `flash` refuse a table whose fixed
+/// point departs from its own definition, saying by how much, on which
+/// output and what the board allows, before touching the board; and the
+/// board, sent the same table anyway (the link client's raw upload, as a
+/// host tool that does not check would), refuses it at commit and keeps
+/// the table it runs.
+#[test]
+fn an_off_definition_table_is_refused_by_upload_flash_and_the_board() {
+    let bad = off_definition_table();
+    let path = table_file("off_definition", &bad);
+    let board = Board::start();
+    let good = sample_table(0);
+    let good_path = table_file("off_definition_good", &good);
+    upload_json(&good_path, &board.port);
+    for args in [
+        vec!["upload", path.to_str().unwrap(), "--port", &board.port],
+        vec!["flash", path.to_str().unwrap()],
+    ] {
+        let out = trueaxis(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        for want in [
+            "does not fit the board",
+            "its fixed-point evaluation can depart from the table's own definition",
+            "nm on ex",
+            "(Abbe)",
+            "the board allows 100 nm",
+        ] {
+            assert!(err.contains(want), "{args:?}: no `{want}` in {err}");
+        }
+    }
+    let mut client = Client::open(&board.port, Timing::default()).unwrap();
+    let e = client.upload(&bad, |_, _| {}).unwrap_err();
+    assert!(
+        e.to_string().contains("rejected the table as invalid"),
+        "{e}"
+    );
+    drop(client);
+    assert_eq!(status_json(&board.port)["active"]["crc32"], crc_hex(&good));
+}
+
 #[test]
 fn status_without_a_board_fails_with_the_port_named() {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
