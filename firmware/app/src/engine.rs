@@ -691,7 +691,7 @@ impl<'m> Engine<'m> {
             return 0;
         }
         let mut lost = 0;
-        for i in 0..3 {
+        for (i, &count_now) in counts.iter().enumerate() {
             let bit = 1u8 << i;
             let Some(h) = self.cfg.axes[i].home else {
                 continue;
@@ -701,7 +701,7 @@ impl<'m> Engine<'m> {
                 continue;
             }
             if self.home_run[i] == 0 {
-                self.home_edge[i] = (counts[i], self.last_dir[i]);
+                self.home_edge[i] = (count_now, self.last_dir[i]);
             }
             self.home_run[i] = self.home_run[i].saturating_add(1);
             if self.home_run[i] < h.debounce_ticks {

@@ -56,7 +56,7 @@ pub const fn guard_rasr() -> u32 {
     RASR_ENABLE | (size << RASR_SIZE_SHIFT) | RASR_XN
 }
 
-const _: () = assert!(GUARD_BYTES.is_power_of_two() && GUARD_BASE % GUARD_BYTES == 0);
+const _: () = assert!(GUARD_BYTES.is_power_of_two() && GUARD_BASE.is_multiple_of(GUARD_BYTES));
 const _: () = assert!(GUARD_BASE + GUARD_BYTES == 0x2000_0000);
 
 /// Makes the [`GUARD_BYTES`] below SRAM a no-access MPU region (region 0),
