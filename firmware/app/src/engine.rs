@@ -51,7 +51,8 @@ use crate::model::{self, ModelBuf, ModelInputs};
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct AxisConfig {
     /// Encoder scale, picometres per count (a 0.1 µm scale read in
-    /// quadrature: 25 000 pm). Negative flips the direction.
+    /// quadrature: 25 000 pm). Negative flips the direction; at most
+    /// ±(2^31 − 1) (2.1 mm per count: count × scale stays in i64).
     pub pm_per_count: i64,
     /// Position at count 0 before the axis is referenced, nm (the
     /// correction waits for the reference, see the module doc). An axis
@@ -165,6 +166,12 @@ pub enum ConfigError {
         /// Axis index.
         axis: usize,
     },
+    /// An encoder scale beyond ±(2^31 − 1) pm per count (2.1 mm): the
+    /// position (count × scale, in i64) would overflow.
+    Scale {
+        /// Axis index.
+        axis: usize,
+    },
     /// A home switch with a debounce of 0 ticks or a negative tolerance.
     HomeSwitch {
         /// Axis index.
@@ -187,6 +194,9 @@ impl EngineConfig {
             }
             if self.max_step_nm_per_tick(self.fault_ramp_nm_per_ms) > self.step_budget_nm(axis) {
                 return Err(ConfigError::RampTooFast { axis });
+            }
+            if a.pm_per_count.unsigned_abs() > i32::MAX as u64 {
+                return Err(ConfigError::Scale { axis });
             }
             if !(1..=32).contains(&a.counter_bits)
                 || (a.counter_bits < 32 && a.pm_per_count != 0 && a.max_speed_nm_per_ms <= 0)
@@ -447,7 +457,8 @@ impl<'m> Engine<'m> {
                 if a.pm_per_count == 0 {
                     u32::MAX
                 } else {
-                    (STILL_BAND_NM * 1000 / a.pm_per_count.abs()).min(u32::MAX as i64) as u32
+                    (STILL_BAND_NM as u64 * 1000 / a.pm_per_count.unsigned_abs())
+                        .min(u32::MAX as u64) as u32
                 }
             }),
             now_us: 0,
@@ -1004,8 +1015,12 @@ fn safe_gap_us(a: AxisConfig) -> u64 {
         return u64::MAX;
     }
     let half = 1u64 << (a.counter_bits.max(1) - 1);
-    // speed is nm/ms = pm/µs: counts in a gap = gap · speed / |pm|.
-    (half * a.pm_per_count.unsigned_abs() - 1) / a.max_speed_nm_per_ms as u64
+    // speed is nm/ms = pm/µs: counts in a gap = gap · speed / |pm|. (A
+    // product beyond u64 — a scale of more than 2^33 pm per count — holds
+    // at u64::MAX: no gap of a running board is that long.)
+    half.saturating_mul(a.pm_per_count.unsigned_abs())
+        .saturating_sub(1)
+        / a.max_speed_nm_per_ms as u64
 }
 
 /// The encoder-jump threshold in counts: the smallest |Δcounts| with

@@ -882,6 +882,52 @@ fn temperature_range_holds_at_its_ends_and_one_past() {
     }
 }
 
+/// The home switch's tolerance at its limit and one past, and positions
+/// at the ends of the i32 range: a referenced X whose switch turns on
+/// exactly `tolerance_nm` from its position (either side) is fine, 1 nm
+/// farther is a mismatch; an X referenced at i32::MAX or i32::MIN checks
+/// without overflow (the check is in i64).
+#[test]
+fn the_home_tolerance_holds_to_the_nanometre() {
+    let tol = 50_000;
+    for (at, mismatch) in [
+        (-5_000_000 + tol, false),
+        (-5_000_000 - tol, false),
+        (-5_000_000 + tol + 1, true),
+        (-5_000_000 - tol - 1, true),
+        (i32::MAX, true),
+        (i32::MIN, true),
+    ] {
+        let mut cfg = sim_engine_config();
+        cfg.axes[0].pm_per_count = 1000; // 1 nm per count
+        cfg.axes[0].home = Some(home_at_minus_5mm());
+        let mut e = Engine::new(cfg).unwrap();
+        let clock = FakeClock(Cell::new(0));
+        let mut io = Fake::new();
+        io.counts[0] = 1000;
+        run(&mut e, &clock, &mut io, 1);
+        // Referenced so that the count where the switch will turn on
+        // (one below this one) is at `at` (held at the i32 range).
+        assert!(e.reference(0, at.saturating_add(1)));
+        e.reference(1, 0);
+        e.reference(2, 0);
+        run(&mut e, &clock, &mut io, 1);
+        io.counts[0] -= 1; // moving towards negative counts
+        io.home = 1;
+        run(&mut e, &clock, &mut io, 3); // the debounce: 3 ticks
+        assert_eq!(
+            e.faults().contains(Faults::HOME_MISMATCH),
+            mismatch,
+            "switch at {at} nm, home −5 mm ± {tol}"
+        );
+        assert_eq!(e.referenced()[0], !mismatch, "at {at}");
+        if !mismatch {
+            // Checked, not re-referenced: the position stays as tracked.
+            assert_eq!(e.telemetry().pos_nm[0], at);
+        }
+    }
+}
+
 /// Issue 25, the home-switch hole: X is referenced at 300 mm and moving
 /// towards its switch's side; its home switch (home position 0, 4-tick
 /// debounce, 100 µm tolerance, the board's) glitches for one tick (50 µs
@@ -1081,6 +1127,38 @@ fn the_widenings_safe_gap_holds_to_the_microsecond() {
             assert_eq!(e.referenced()[2], keeps, "{bits} bits, gap {gap} µs");
             assert_eq!(e.faults().contains(Faults::POSITION_LOST), !keeps);
         }
+    }
+    // The largest scale the configuration takes (±(2^31 − 1) pm per
+    // count) with the slowest and fastest speeds: no overflow, and one
+    // past the scale is refused.
+    let mut cfg = sim_engine_config();
+    cfg.axes[0].pm_per_count = i32::MAX as i64;
+    cfg.axes[0].max_speed_nm_per_ms = 1;
+    cfg.axes[0].counter_bits = 31;
+    cfg.axes[1].pm_per_count = -(i32::MAX as i64);
+    cfg.axes[1].max_speed_nm_per_ms = i32::MAX;
+    cfg.axes[1].counter_bits = 1;
+    let mut e = Engine::new(cfg).unwrap();
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    reference_at_zero(&mut e);
+    run(&mut e, &clock, &mut io, 2);
+    clock.0.set(u64::MAX / 2);
+    run(&mut e, &clock, &mut io, 2);
+    assert_eq!(e.referenced(), [true; 3], "no motion: no loss");
+    for pm in [
+        i32::MAX as i64 + 1,
+        -(i32::MAX as i64) - 1,
+        i64::MIN,
+        i64::MAX,
+    ] {
+        let mut cfg = sim_engine_config();
+        cfg.axes[2].pm_per_count = pm;
+        assert_eq!(
+            Engine::new(cfg).err(),
+            Some(ConfigError::Scale { axis: 2 }),
+            "{pm}"
+        );
     }
     let mut cfg = sim_engine_config();
     cfg.axes[1].counter_bits = 16; // max speed 0: unbounded

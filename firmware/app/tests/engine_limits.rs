@@ -184,8 +184,9 @@ proptest! {
             // referenced X — more than 1 mm from 12 mm loses the
             // reference (a fault). Reached the other way, or before X ever
             // moved: nothing.
+            // (The engine sees motion between two reads: none at its first.)
             let dx = io.counts[0] as i64 - x_before as i64;
-            if dx != 0 {
+            if dx != 0 && last_home.is_some() {
                 dir_x = dx.signum();
             }
             if last_home.is_some_and(|h| io.home & !h & 1 != 0) && dir_x > 0 {

@@ -13,11 +13,6 @@
 //! slew limiting and pulse output (the engine's share). Each line also
 //! carries model-core's static cost estimate of the same evaluation
 //! (`est=`), which `cargo xtask test` checks against the count.
-//!
-//! Also, once per table, the board's definition check
-//! (`model_core::definition::check_definition`, what a commit and the
-//! boot's scan of the slots run after loading a table): `CHECK <name>
-//! instructions=N accepted=…` — what the check adds to a commit or a boot.
 #![no_std]
 #![no_main]
 
@@ -134,30 +129,10 @@ fn sanity(name: &str, model: &Model) {
     }
 }
 
-/// Counts one run of the definition check on the loaded table and logs
-/// the `CHECK` line.
-fn check(counter: &InstructionCounter, name: &str, bytes: &'static [u8], model: &Model) {
-    let Ok(table) = model_core::parse(bytes) else {
-        defmt::panic!("bench table {=str} does not parse", name)
-    };
-    let (d, n) = counter
-        .measure(|| model_core::definition::check_definition(black_box(&table), black_box(model)));
-    defmt::info!(
-        "CHECK {=str} instructions={=u32} accepted={=bool}",
-        name,
-        n,
-        d.is_none()
-    );
-}
-
 #[cortex_m_rt::entry]
 fn main() -> ! {
     let counter = InstructionCounter::start();
     let model = cortex_m::singleton!(: Model = Model::empty()).expect("once");
-    defmt::info!(
-        "MODEL_BUDGET instructions={=u32}",
-        model_core::board::MODEL_BUDGET_INSTR
-    );
     for &(name, bytes) in BENCH_TABLES {
         load(name, bytes, model);
         sanity(name, model);
@@ -174,7 +149,6 @@ fn main() -> ! {
             Model::eval_fixed,
             est.fixed_instr,
         );
-        check(&counter, name, bytes, model);
     }
     trueaxis_qemu::exit(0)
 }

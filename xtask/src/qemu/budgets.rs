@@ -54,6 +54,23 @@ pub(super) fn run_bench_log(calibrate: bool) -> Result<String> {
     Ok(run.log)
 }
 
+/// Builds and runs the definition-check image (tests/src/bin/defcheck.rs,
+/// firmware release profile, `-icount shift=0`) and returns its log.
+pub(super) fn run_defcheck_log() -> Result<String> {
+    let elf = build_package_bin(PACKAGE, "defcheck", Profile::Release, &[])?;
+    eprintln!("\n$ qemu defcheck (-icount shift=0)");
+    let run = run_image(&elf, &QemuOpts::default())?;
+    if !run.status.success() {
+        return Err(format!(
+            "the defcheck image failed ({})\n{}{}",
+            describe(&run.status),
+            run.log,
+            run.stderr
+        ));
+    }
+    Ok(run.log)
+}
+
 /// The most instructions the board's definition check
 /// (`model_core::definition::check_definition`) may take on a table the
 /// board accepts otherwise (fixed-point estimate within its model budget):
@@ -63,7 +80,7 @@ pub(super) fn run_bench_log(calibrate: bool) -> Result<String> {
 /// bench tables (BENCHMARKS.md, "Definition check").
 pub const CHECK_BUDGET_INSTR: u64 = 100_000_000;
 
-/// One `CHECK <name> instructions=N accepted=…` line of the bench image.
+/// One `CHECK <name> instructions=N accepted=…` line of the defcheck image.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub(super) struct CheckResult {
     name: String,
@@ -71,7 +88,7 @@ pub(super) struct CheckResult {
     accepted: bool,
 }
 
-/// Reads the bench image's `CHECK` lines.
+/// Reads the defcheck image's `CHECK` lines.
 pub(super) fn parse_check_log(log: &str) -> Result<Vec<CheckResult>> {
     let mut out = Vec::new();
     for line in log.lines() {
@@ -92,7 +109,7 @@ pub(super) fn parse_check_log(log: &str) -> Result<Vec<CheckResult>> {
         });
     }
     if out.is_empty() {
-        return Err(format!("the bench image printed no CHECK line:\n{log}"));
+        return Err(format!("the defcheck image printed no CHECK line:\n{log}"));
     }
     Ok(out)
 }
@@ -132,13 +149,13 @@ pub(super) fn check_checks(
     }
 }
 
-/// The board's model budget as the bench image prints it (`MODEL_BUDGET
+/// The board's model budget as the defcheck image prints it (`MODEL_BUDGET
 /// instructions=N`: model-core's `board::MODEL_BUDGET_INSTR`, defined once).
 pub(super) fn parse_model_budget(log: &str) -> Result<u64> {
     log.lines()
         .find_map(|l| l.split("MODEL_BUDGET instructions=").nth(1))
         .and_then(|v| v.trim().parse().ok())
-        .ok_or_else(|| format!("the bench image printed no MODEL_BUDGET line:\n{log}"))
+        .ok_or_else(|| format!("the defcheck image printed no MODEL_BUDGET line:\n{log}"))
 }
 
 /// The definition check's counts, on stderr.
@@ -219,8 +236,8 @@ pub(super) fn budget_of(name: &str) -> Option<u64> {
 
 /// The bench image in `cargo xtask test`: the budgets must hold.
 pub(super) fn check_bench() -> Result<()> {
-    let log = run_bench_log(false)?;
-    let results = parse_bench_log(&log)?;
+    let results = run_bench(false)?;
+    let log = run_defcheck_log()?;
     let checks = parse_check_log(&log)?;
     print_bench_table(&results);
     print_check_table(&checks);
@@ -260,9 +277,8 @@ pub fn bench_mcu(args: &[String]) -> Result<()> {
             ))
         }
     }
-    let log = run_bench_log(false)?;
-    let results = parse_bench_log(&log)?;
-    let checks = parse_check_log(&log)?;
+    let results = run_bench(false)?;
+    let checks = parse_check_log(&run_defcheck_log()?)?;
     for r in &results {
         println!(
             "{{\"bench\": \"{}\", \"instructions_per_update\": {}, \"outputs\": 3}}",
