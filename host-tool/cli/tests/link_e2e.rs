@@ -291,6 +291,13 @@ fn a_cut_upload_keeps_the_old_table_and_the_next_upload_resumes() {
 /// answer to a request `lost` picks (a frame lost on the way back) and
 /// passes every other byte through.
 fn lossy_proxy(board: &str, lost: fn(&Request) -> bool) -> String {
+    proxy(board, lost, None)
+}
+
+/// A TCP proxy between the host and the board that replaces the board's
+/// first answer to a request `pick` picks by `instead` (`None`: drops it)
+/// and passes every other byte through.
+fn proxy(board: &str, lost: fn(&Request) -> bool, instead: Option<Response>) -> String {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = format!("tcp://{}", listener.local_addr().unwrap());
     let board = board.strip_prefix("tcp://").unwrap().to_string();
@@ -343,9 +350,13 @@ fn lossy_proxy(board: &str, lost: fn(&Request) -> bool) -> String {
                 else {
                     continue;
                 };
+                let mut p = p;
                 if !dropped && Some(p.seq) == *lost_seq.lock().unwrap() {
                     dropped = true;
-                    continue;
+                    match &instead {
+                        None => continue,
+                        Some(r) => p.msg = r.clone(),
+                    }
                 }
                 let mut frame = [0u8; MAX_FRAME_BYTES];
                 let k = encode_frame(&p, &mut frame).unwrap();
@@ -379,6 +390,25 @@ fn an_upload_whose_commit_answer_is_lost_still_succeeds() {
     let s = status_json(&board.port);
     assert_eq!(s["active"]["crc32"], crc_hex(&table));
     assert_eq!(s["active"]["seq"], 1, "written once");
+}
+
+/// Issue 25: `Activate` is under the commit's quiet rule. An axis that
+/// starts moving between the commit and the activation gets `AxesMoving`
+/// for the `Activate` — but the commit ran the table already, so the
+/// upload succeeds (what runs is checked by `Identify`), with the
+/// committed table reported active.
+#[test]
+fn an_upload_whose_activate_meets_a_moving_axis_still_succeeds() {
+    let board = Board::start();
+    let refused = Response::Error(trueaxis_protocol::LinkError::AxesMoving { quiet_ms: 200 });
+    let proxy = proxy(&board.port, |r| matches!(r, Request::Activate), Some(refused));
+    let table = sample_table(0);
+    let mut c = Client::open(&proxy, Timing::default()).unwrap();
+    let r = c.upload(&table, |_, _| {}).unwrap();
+    assert_eq!(r.committed.crc32, table_id(&table));
+    assert_eq!(r.activated, r.committed);
+    drop(c);
+    assert_eq!(status_json(&board.port)["active"]["crc32"], crc_hex(&table));
 }
 
 /// Uploading the table that already runs writes nothing: written again it
