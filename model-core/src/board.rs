@@ -207,6 +207,7 @@ pub fn check_cost(table: &Table<'_>, budget_instr: u32) -> Result<CostEstimate, 
 /// fits; ≈ 16.3 KiB, so callers with a small stack pass a static), whether
 /// the loop can evaluate it ([`check_cost`]) and whether its evaluations
 /// are its definition ([`check_definition`]).
+#[inline] // see `definition`'s module doc: compiled only where it is called
 pub fn check_into(table: &Table<'_>, model: &mut BoardModel) -> Result<(), LimitError> {
     let bytes = table.bytes().len();
     if bytes > STAGE_BYTES {

@@ -40,6 +40,12 @@
 //! it over the edge-table generator: every table the check accepts is
 //! within the bound at random inputs of its envelope.
 //!
+//! Every function is `#[inline]`: compiled only into the crates that call
+//! it. As ordinary functions they were compiled into model-core's object
+//! whether used or not, and under the images' fat LTO that changed how
+//! the bench image's `eval_f32` compiled (`poly_deg5_f32` 793 → 1159
+//! instructions, over its cost estimate) without the image calling any.
+//!
 //! Nothing here panics for any parsed table (the board runs it): holds are
 //! `max`/`min`, not `clamp`, whose panic message would also pull f64
 //! formatting into the board's image.
@@ -68,6 +74,7 @@ pub enum EvalPath {
 
 impl EvalPath {
     /// "fixed-point" or "f32".
+    #[inline]
     pub fn name(self) -> &'static str {
         match self {
             EvalPath::Fixed => "fixed-point",
@@ -100,6 +107,7 @@ pub struct Departure {
 /// (T − T_ref)·poly with T in °C, reversal amplitude × state (Q30 / 2^30),
 /// Abbe arm × poly, the MLP's tanh layers with min–max scaling, the grid's
 /// multilinear interpolation held at its edges. Absent outputs are 0.
+#[inline]
 pub fn eval_f64(table: &Table<'_>, inp: &Inputs) -> [f64; 3] {
     let sc = table.scaling();
     let pos = inp.pos_nm.map(f64::from);
@@ -205,6 +213,7 @@ pub fn eval_f64(table: &Table<'_>, inp: &Inputs) -> [f64; 3] {
 /// the envelope (positions to the travel, the channels the table declares
 /// to their ranges, the tool arm to its range), each output clamped to its
 /// max |correction|.
+#[inline]
 pub fn definition_nm(table: &Table<'_>, inp: &Inputs) -> [f64; 3] {
     let env = table.envelope();
     let mut held = *inp;
@@ -233,6 +242,7 @@ pub fn definition_nm(table: &Table<'_>, inp: &Inputs) -> [f64; 3] {
 }
 
 /// y = W·x + b for the next layer of `net`'s parameters (from `k` on).
+#[inline]
 fn dense(net: &crate::table::MlpView<'_>, k: &mut usize, x: &[f64], y: &mut [f64]) {
     let n = x.len();
     for (j, yj) in y.iter_mut().enumerate() {
@@ -249,6 +259,7 @@ fn dense(net: &crate::table::MlpView<'_>, k: &mut usize, x: &[f64], y: &mut [f64
     }
 }
 
+#[inline]
 fn poly(u: &[f64; 3], coefs: crate::table::PolyCoefs<'_>) -> f64 {
     coefs
         .iter()
@@ -264,6 +275,7 @@ fn poly(u: &[f64; 3], coefs: crate::table::PolyCoefs<'_>) -> f64 {
         .sum()
 }
 
+#[inline]
 fn grid_value(g: &crate::table::GridView<'_>, pos: &[f64; 3]) -> f64 {
     let mut idx = [0usize; 3];
     let mut t = [0.0f64; 3];
@@ -306,6 +318,7 @@ fn grid_value(g: &crate::table::GridView<'_>, pos: &[f64; 3]) -> f64 {
 
 /// The largest |factor| a thermal (ΔT, m°C) or Abbe (arm, nm) term sees
 /// inside the envelope.
+#[inline]
 fn max_factor(table: &Table<'_>, view: &TermView<'_>) -> f64 {
     let env = table.envelope();
     match *view {
@@ -329,6 +342,7 @@ fn max_factor(table: &Table<'_>, view: &TermView<'_>) -> f64 {
 /// The largest |value| `view` can add to an output inside the envelope,
 /// nm, per output (a network's output j can exceed its range: its output
 /// layer is linear, |y| ≤ Σ|w| + |b| with |tanh| ≤ 1).
+#[inline]
 fn max_term_nm(table: &Table<'_>, view: &TermView<'_>) -> [f64; 3] {
     let mut m = [0.0f64; 3];
     let sum = |c: crate::table::PolyCoefs<'_>| c.iter().map(|(_, c)| c.abs()).sum::<f64>();
@@ -397,6 +411,7 @@ fn max_term_nm(table: &Table<'_>, view: &TermView<'_>) -> [f64; 3] {
 /// and the pre-activation's to Q26, and tanh_q30's 5·10^-9; f32, 2^-24 of
 /// every product and sum, and tanh_f32's 5·10^-7. `f64::INFINITY` for a
 /// layer the loader would refuse.
+#[inline]
 fn mlp_bound_nm(table: &Table<'_>, outputs: u8, net: &crate::table::MlpView<'_>) -> [[f64; 3]; 2] {
     const W: usize = crate::limits::MAX_HIDDEN_UNITS;
     let env = table.envelope();
@@ -513,6 +528,7 @@ pub struct StaticBound {
 }
 
 impl StaticBound {
+    #[inline]
     fn add(
         &mut self,
         path: usize,
@@ -539,6 +555,7 @@ impl StaticBound {
 /// bounded by its coefficients ([`max_term_nm`]). The other terms' own
 /// evaluation errors (sine, interpolation) are what the sampled points
 /// measure.
+#[inline]
 pub fn static_bound_nm(table: &Table<'_>) -> StaticBound {
     const FIXED: usize = 0;
     const F32: usize = 1;
@@ -620,6 +637,7 @@ pub fn static_bound_nm(table: &Table<'_>) -> StaticBound {
 /// scaling centre and 1 nm beside it, range ends and middles, reversal ±1
 /// and 0) by a fixed pseudo-random sequence — the eight travel corners
 /// first —, the second half draws each input uniformly from its range.
+#[inline]
 pub fn check_point(table: &Table<'_>, k: u32) -> Inputs {
     let env = table.envelope();
     let sc = table.scaling();
@@ -697,6 +715,7 @@ pub fn check_point(table: &Table<'_>, k: u32) -> Inputs {
 /// bound and the [`DEFINITION_POINTS`] inputs of [`check_point`], or
 /// `None` when both stay within [`DEFINITION_BOUND_NM`] everywhere. Stops
 /// at the first input beyond the bound.
+#[inline]
 pub fn check_definition<const P: usize, const G: usize>(
     table: &Table<'_>,
     model: &ModelCap<P, G>,
@@ -743,10 +762,12 @@ pub fn check_definition<const P: usize, const G: usize>(
 }
 
 /// `e` > `bound`, or NaN (a non-finite definition or bound departs).
+#[inline]
 fn beyond(e: f64, bound: f64) -> bool {
     e > bound || e.is_nan()
 }
 
+#[inline]
 fn ceil_nm(e: f64) -> u32 {
     if e.is_nan() || e >= u32::MAX as f64 {
         u32::MAX

@@ -120,6 +120,7 @@ fn load_table(t: &model_core::Table<'_>, dst: &mut ModelBuf) -> Result<(), Inval
 
 /// [`load_into`], then [`check_loaded`]: what the boot's scan of the slots
 /// runs on each stored table.
+#[inline] // compiled only where called (model_core::definition)
 pub fn load_checked(bytes: &[u8], dst: &mut ModelBuf) -> Result<(), InvalidTable> {
     dst.loaded = false;
     let t = model_core::parse(bytes).map_err(InvalidTable::Format)?;
@@ -132,11 +133,13 @@ pub fn load_checked(bytes: &[u8], dst: &mut ModelBuf) -> Result<(), InvalidTable
 /// `dst`: a table whose fixed-point or f32 evaluation departs from its own
 /// f64 definition by more than `DEFINITION_BOUND_NM` is refused and `dst`
 /// left empty. What a commit runs before it writes a table.
+#[inline] // compiled only where called (model_core::definition)
 pub fn check_loaded(bytes: &[u8], dst: &mut ModelBuf) -> Result<(), InvalidTable> {
     let t = model_core::parse(bytes).map_err(InvalidTable::Format)?;
     check_table(&t, dst)
 }
 
+#[inline] // compiled only where called (model_core::definition)
 fn check_table(t: &model_core::Table<'_>, dst: &mut ModelBuf) -> Result<(), InvalidTable> {
     if !dst.loaded {
         return Err(InvalidTable::NotLoaded);

@@ -401,7 +401,11 @@ fn an_upload_whose_commit_answer_is_lost_still_succeeds() {
 fn an_upload_whose_activate_meets_a_moving_axis_still_succeeds() {
     let board = Board::start();
     let refused = Response::Error(trueaxis_protocol::LinkError::AxesMoving { quiet_ms: 200 });
-    let proxy = proxy(&board.port, |r| matches!(r, Request::Activate), Some(refused));
+    let proxy = proxy(
+        &board.port,
+        |r| matches!(r, Request::Activate),
+        Some(refused),
+    );
     let table = sample_table(0);
     let mut c = Client::open(&proxy, Timing::default()).unwrap();
     let r = c.upload(&table, |_, _| {}).unwrap();
