@@ -335,13 +335,15 @@ pub struct Engine<'m> {
     /// position).
     home_stable: Option<u8>,
     /// Per axis: ticks in a row the switch input has differed from
-    /// `home_stable`.
+    /// `home_stable`; and a bit per axis where that is not 0.
     home_run: [u8; 3],
+    home_busy: u8,
     /// Per axis: the count and the direction of motion at the first tick
     /// of that run (where a confirmed edge is).
     home_edge: [(i32, i8); 3],
-    /// Per axis: the sign of the last change of the count (0 before any).
-    last_dir: [i8; 3],
+    /// Per axis: the last non-zero change of the count (its sign is the
+    /// direction the axis last moved; 0 before any).
+    last_move: [i32; 3],
     /// Per axis: the longest gap between two ticks over which the counter
     /// widening is proven right at the axis's top speed, µs (`u64::MAX`:
     /// the count is read whole, or there is no encoder); and the shortest
@@ -433,8 +435,9 @@ impl<'m> Engine<'m> {
                 .fold(0, |m, a| m | 1 << a),
             home_stable: None,
             home_run: [0; 3],
+            home_busy: 0,
             home_edge: [(0, 0); 3],
-            last_dir: [0; 3],
+            last_move: [0; 3],
             safe_gap_us,
             min_safe_gap_us: safe_gap_us.into_iter().min().unwrap_or(u64::MAX),
             stall: Stall::None,
@@ -680,6 +683,23 @@ impl<'m> Engine<'m> {
         raw_position_nm(count, a.pm_per_count, self.nm_per_count[axis], a.origin_nm)
     }
 
+    /// A gap of `gap_us` between two ticks longer than some axis's counter
+    /// widening can follow at its top speed (a stall): every such axis
+    /// that moved (left the still band) between `prev` and `counts` lost
+    /// its position — `POSITION_LOST`. Returns those axes.
+    #[inline(never)]
+    fn stalled(&self, gap_us: u64, counts: &[i32; 3], prev: &[i32; 3], events: &mut Faults) -> u8 {
+        let mut lost = 0;
+        for i in 0..3 {
+            let d = counts[i].wrapping_sub(prev[i]).unsigned_abs();
+            if gap_us > self.safe_gap_us[i] && d > self.still_band_counts[i] {
+                *events = events.union(Faults::POSITION_LOST);
+                lost |= 1 << i;
+            }
+        }
+        lost
+    }
+
     /// Makes `count` on `axis` the machine position `pos_nm`.
     fn set_reference(&mut self, axis: usize, count: i32, pos_nm: i32) {
         self.ref_offset_nm[axis] = pos_nm as i64 - self.raw_nm(axis, count);
@@ -698,9 +718,6 @@ impl<'m> Engine<'m> {
     #[inline(never)]
     fn home_switches(&mut self, raw: u8, counts: &[i32; 3], events: &mut Faults) -> u8 {
         let stable = *self.home_stable.get_or_insert(raw);
-        if raw == stable && self.home_run == [0; 3] {
-            return 0;
-        }
         let mut lost = 0;
         for (i, &count_now) in counts.iter().enumerate() {
             let bit = 1u8 << i;
@@ -709,16 +726,19 @@ impl<'m> Engine<'m> {
             };
             if (raw ^ stable) & bit == 0 {
                 self.home_run[i] = 0;
+                self.home_busy &= !bit;
                 continue;
             }
             if self.home_run[i] == 0 {
-                self.home_edge[i] = (count_now, self.last_dir[i]);
+                self.home_edge[i] = (count_now, self.last_move[i].signum() as i8);
             }
             self.home_run[i] = self.home_run[i].saturating_add(1);
+            self.home_busy |= bit;
             if self.home_run[i] < h.debounce_ticks {
                 continue;
             }
             self.home_run[i] = 0;
+            self.home_busy &= !bit;
             self.home_stable = Some(self.home_stable.unwrap_or(stable) ^ bit);
             let (count, dir) = self.home_edge[i];
             if raw & bit == 0 || dir != h.approach.sign() {
@@ -797,34 +817,29 @@ impl<'m> Engine<'m> {
         // counter turns — the reference is gone too).
         let mut lost = 0u8;
         if let Some(prev) = self.last_counts {
-            let stalled = gap.is_some_and(|g| g > self.min_safe_gap_us);
             for i in 0..3 {
                 let d = counts[i].wrapping_sub(prev[i]);
                 if d != 0 {
-                    self.last_dir[i] = if d > 0 { 1 } else { -1 };
+                    self.last_move[i] = d;
                 }
                 // |Δcounts| · |pm/count| ≥ threshold ⇔ the jump exceeds
                 // the limit in whole nm, ⇔ |Δcounts| ≥ the threshold in
                 // counts (precomputed: no 64-bit multiply per tick).
-                let d_counts = d.unsigned_abs();
-                if d_counts >= self.jump_threshold_counts[i] {
+                if d.unsigned_abs() >= self.jump_threshold_counts[i] {
                     events = events.union(Faults::ENCODER_JUMP);
                     lost |= 1 << i;
                 }
-                if stalled
-                    && gap.is_some_and(|g| g > self.safe_gap_us[i])
-                    && d_counts > self.still_band_counts[i]
-                {
-                    events = events.union(Faults::POSITION_LOST);
-                    lost |= 1 << i;
-                }
+            }
+            if let Some(g) = gap.filter(|&g| g > self.min_safe_gap_us) {
+                lost |= self.stalled(g, &counts, &prev, &mut events);
             }
         }
         self.last_counts = Some(counts);
         // The home switches (debounced; an edge references an axis that
         // has no reference, and checks one that has).
+        // (Out of line only when a switch changed or is being debounced.)
         let home = enc.home_switches() & self.home_mask;
-        if self.home_mask != 0 {
+        if self.home_mask != 0 && (self.home_stable != Some(home) || self.home_busy != 0) {
             lost |= self.home_switches(home, &counts, &mut events);
         }
         // Unreferenced positions: counts · scale + the configured origin.
