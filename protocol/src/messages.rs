@@ -486,6 +486,6 @@ mod tests {
             .union(Faults::POSITION_LOST)
             .names()
             .eq(["home_mismatch", "position_lost"]));
-        assert_eq!(bytes(&Faults(1 << 12)), bytes(&1u16 << 12));
+        assert_eq!(bytes(&Faults(1 << 12)), bytes(&(1u16 << 12)));
     }
 }

@@ -690,8 +690,8 @@ impl<'m> Engine<'m> {
     #[inline(never)]
     fn stalled(&self, gap_us: u64, counts: &[i32; 3], prev: &[i32; 3], events: &mut Faults) -> u8 {
         let mut lost = 0;
-        for i in 0..3 {
-            let d = counts[i].wrapping_sub(prev[i]).unsigned_abs();
+        for (i, (c, p)) in counts.iter().zip(prev).enumerate() {
+            let d = c.wrapping_sub(*p).unsigned_abs();
             if gap_us > self.safe_gap_us[i] && d > self.still_band_counts[i] {
                 *events = events.union(Faults::POSITION_LOST);
                 lost |= 1 << i;
