@@ -10,6 +10,7 @@
 use core::fmt;
 
 use crate::cost::{estimate, CostEstimate};
+use crate::definition::{check_definition, Departure, DEFINITION_BOUND_NM};
 use crate::eval::{LoadError, ModelCap};
 use crate::table::Table;
 
@@ -96,6 +97,10 @@ pub enum LimitError {
     /// It cannot be loaded for another reason (terms, MLP inputs,
     /// coefficient ranges: the same for every capacity).
     Load(LoadError),
+    /// Its fixed-point or f32 evaluation departs from its own definition
+    /// by more than [`DEFINITION_BOUND_NM`] ([`crate::definition`]): the
+    /// board would not correct by what the table says.
+    OffDefinition(Departure),
     /// Its fixed-point evaluation is estimated above [`MODEL_BUDGET_INSTR`]:
     /// the correction loop could not evaluate it every period.
     TooSlow {
@@ -125,6 +130,45 @@ impl fmt::Display for LimitError {
                 needed.saturating_sub(max)
             ),
             LimitError::Load(e) => write!(f, "the board cannot load the table: {e}"),
+            LimitError::OffDefinition(d) => {
+                let axis = ["ex", "ey", "ez"][usize::from(d.output % 3)];
+                let path = d.path.name();
+                let nm = d.error_nm;
+                match d.at {
+                    Some(i) => write!(
+                        f,
+                        "its {path} evaluation departs from the table's own definition (the f64 sum \
+                         of its terms) by {nm} nm on {axis} at x = {:.6} mm, y = {:.6} mm, \
+                         z = {:.6} mm, tool arm {:.6} mm, temperatures {:?} m°C, reversal {:?} \
+                         (Q30)",
+                        f64::from(i.pos_nm[0]) / 1e6,
+                        f64::from(i.pos_nm[1]) / 1e6,
+                        f64::from(i.pos_nm[2]) / 1e6,
+                        f64::from(i.tool_nm) / 1e6,
+                        i.temp_mc,
+                        i.rev_q30
+                    )?,
+                    None => {
+                        write!(
+                            f,
+                            "its {path} evaluation can depart from the table's own definition (the \
+                             f64 sum of its terms) by up to {nm} nm on {axis} wherever the \
+                             definition is not clamped: the rounding"
+                        )?;
+                        if let Some((k, kind)) = d.term {
+                            write!(f, " of term {k} ({})", kind.name())?;
+                        }
+                        write!(
+                            f,
+                            " (its coefficients, weights or factor range are beyond what the \
+                             evaluation represents: a value rounded to its binary scale, then \
+                             multiplied by a tool arm, a temperature difference or a network's \
+                             weights)"
+                        )?
+                    }
+                }
+                write!(f, "; the board allows {DEFINITION_BOUND_NM} nm")
+            }
             LimitError::TooSlow { estimate, budget } => write!(
                 f,
                 "its evaluation is estimated at {estimate} instructions, the board's {} Hz \
@@ -160,8 +204,10 @@ pub fn check_cost(table: &Table<'_>, budget_instr: u32) -> Result<CostEstimate, 
 
 /// Checks `table` against the board's limits: its size, whether it loads
 /// into a [`BoardModel`] (built in `model`, which is left loaded when it
-/// fits; ≈ 16.3 KiB, so callers with a small stack pass a static), and
-/// whether the loop can evaluate it ([`check_cost`]).
+/// fits; ≈ 16.3 KiB, so callers with a small stack pass a static), whether
+/// the loop can evaluate it ([`check_cost`]) and whether its evaluations
+/// are its definition ([`check_definition`]).
+#[inline] // see `definition`'s module doc: compiled only where it is called
 pub fn check_into(table: &Table<'_>, model: &mut BoardModel) -> Result<(), LimitError> {
     let bytes = table.bytes().len();
     if bytes > STAGE_BYTES {
@@ -181,7 +227,14 @@ pub fn check_into(table: &Table<'_>, model: &mut BoardModel) -> Result<(), Limit
         },
         e => LimitError::Load(e),
     })?;
-    check_cost(table, MODEL_BUDGET_INSTR).map(|_| ())
+    check_cost(table, MODEL_BUDGET_INSTR)?;
+    // Last: the dearest check (DEFINITION_POINTS evaluations in f64, f32
+    // and fixed point; BENCHMARKS.md), run only on a table the board
+    // would otherwise take.
+    match check_definition(table, model) {
+        Some(d) => Err(LimitError::OffDefinition(d)),
+        None => Ok(()),
+    }
 }
 
 /// [`check_into`] with a model of its own (host: it is boxed).

@@ -14,6 +14,9 @@
 //!   capacity) as constants the firmware uses and the host checks.
 //! - [`cost`]: a static estimate of a table's evaluation cost in
 //!   instructions, for the board's admission of a table at commit.
+//! - [`definition`]: a table's own f64 definition read from its bytes, and
+//!   the check that the fixed-point and f32 evaluations stay within a
+//!   bound of it (the board's admission too).
 //! - `spec` (feature `std`): [`TableSpec`] — the host's owned description,
 //!   `encode` and the f64 reference `eval_f64`.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
@@ -21,6 +24,7 @@
 
 pub mod board;
 pub mod cost;
+pub mod definition;
 pub mod eval;
 pub mod limits;
 pub mod math;

@@ -312,60 +312,17 @@ fn dir_tracker_ramps_without_steps() {
     }
 }
 
-/// Tables at the edges of what load accepts (huge grid values, coefficient
-/// sums just under the fixed-point limit, large amplitudes, steep MLPs):
+/// Tables at the edges of what load accepts (`common::extreme_spec`: huge
+/// grid values, coefficient sums just under the fixed-point limit, large
+/// amplitudes, steep MLPs):
 /// evaluating them with any inputs must not overflow (this test is meant to
 /// run in debug, where integer overflow panics).
 #[test]
 fn extreme_but_valid_models_never_overflow() {
-    use model_core::TermSpec;
     let mut rng = Rng(4242);
     let mut loaded = 0;
     for round in 0..40 {
-        let mut spec = random_spec(900 + round, &ALL_KINDS);
-        spec.envelope.max_corr_nm = [model_core::table::MAX_CORR_LIMIT_NM; 3];
-        let scale = [1.0, 10.0, 100.0, 500.0][round as usize % 4];
-        for t in spec.terms.iter_mut() {
-            match t {
-                TermSpec::Poly { coefs, .. } => {
-                    let n = coefs.len() as f64;
-                    for c in coefs.iter_mut() {
-                        c.1 = rng.sym(6.0e8 / n);
-                    }
-                }
-                TermSpec::Grid(g) => {
-                    for v in g.values_nm.iter_mut() {
-                        *v = rng.sym(4.1e6);
-                    }
-                }
-                TermSpec::Reversal { amplitude_nm, .. } => *amplitude_nm = rng.sym(2.0e9),
-                TermSpec::Periodic { sin_nm, cos_nm, .. } => {
-                    for v in sin_nm.iter_mut().chain(cos_nm.iter_mut()) {
-                        *v = rng.sym(2.0e8);
-                    }
-                }
-                TermSpec::Thermal { coefs_nm_per_k, .. } => {
-                    for c in coefs_nm_per_k.iter_mut() {
-                        c.1 = rng.sym(1e4 * scale);
-                    }
-                }
-                TermSpec::Abbe { coefs, .. } => {
-                    for c in coefs.iter_mut() {
-                        c.1 = rng.sym(1e-3 * scale);
-                    }
-                }
-                TermSpec::Mlp(m) => {
-                    for l in m.hidden.iter_mut().chain(std::iter::once(&mut m.output)) {
-                        for w in l.weights.iter_mut().chain(l.bias.iter_mut()) {
-                            *w *= scale.sqrt();
-                        }
-                    }
-                    for v in m.out_max_nm.iter_mut() {
-                        *v = 5e6;
-                    }
-                }
-            }
-        }
+        let spec = extreme_spec(round, &mut rng);
         let bytes = match spec.encode() {
             Ok(b) => b,
             Err(e) => {

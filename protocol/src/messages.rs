@@ -155,6 +155,18 @@ impl Faults {
     /// With [`TRIAL_FAILED`](Self::TRIAL_FAILED): the watchdog (the
     /// correction loop stopped).
     pub const RESET_BY_WATCHDOG: Faults = Faults(1 << 10);
+    /// A referenced axis's home switch turned on (debounced, approached
+    /// from its side) farther from the switch's position than the axis's
+    /// tolerance: the tracked position or the switch is wrong. The axis's
+    /// reference is dropped ([`NOT_REFERENCED`](Self::NOT_REFERENCED));
+    /// stays active until `ClearFaults`.
+    pub const HOME_MISMATCH: Faults = Faults(1 << 11);
+    /// The encoders were not read for longer than the counters' widening
+    /// can follow at the axis's top speed (a stall: a flash erase, a halt)
+    /// and the axis moved meanwhile: its count may be off by whole turns of
+    /// the hardware counter. The axis's reference is dropped; stays active
+    /// until `ClearFaults`.
+    pub const POSITION_LOST: Faults = Faults(1 << 12);
 
     /// True when no bit is set.
     pub const fn is_empty(self) -> bool {
@@ -170,7 +182,7 @@ impl Faults {
     }
     /// Names of the set bits, for humans.
     pub fn names(self) -> impl Iterator<Item = &'static str> {
-        const NAMES: [&str; 11] = [
+        const NAMES: [&str; 13] = [
             "no_table",
             "bad_table",
             "sensor_range",
@@ -182,6 +194,8 @@ impl Faults {
             "reset_by_panic",
             "reset_by_hardfault",
             "reset_by_watchdog",
+            "home_mismatch",
+            "position_lost",
         ];
         NAMES
             .into_iter()
@@ -460,5 +474,18 @@ mod tests {
             "reset_by_watchdog"
         ]));
         assert_eq!(crate::PROTOCOL_VERSION, 2);
+    }
+
+    /// Issue 25's fault bits come after the old ones; the field is a bit
+    /// set, so its encoding (a u16) is the same for every value.
+    #[test]
+    fn the_position_fault_bits_are_appended() {
+        assert_eq!(Faults::HOME_MISMATCH.0, 1 << 11);
+        assert_eq!(Faults::POSITION_LOST.0, 1 << 12);
+        assert!(Faults::HOME_MISMATCH
+            .union(Faults::POSITION_LOST)
+            .names()
+            .eq(["home_mismatch", "position_lost"]));
+        assert_eq!(bytes(&Faults(1 << 12)), bytes(&(1u16 << 12)));
     }
 }

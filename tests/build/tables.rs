@@ -107,6 +107,24 @@ pub fn full(seed: u64) -> Result<Vec<u8>, EncodeError> {
     spec.encode()
 }
 
+/// cubic19 plus an Abbe term whose coefficient sum is near the loader's
+/// limit (3·10^4 nm per nm of arm: scale q = 16) with a tool-arm range
+/// of ±(2^31 − 1) nm: it loads, but its fixed point departs from its own
+/// definition by tens of µm (issue 25) — the board must refuse it.
+pub fn off_definition(seed: u64) -> Result<Vec<u8>, EncodeError> {
+    let mut rng = Rng::new(seed);
+    let mut spec = base(4);
+    spec.terms = cubic19_terms(&mut rng);
+    spec.terms.push(TermSpec::Abbe {
+        output: 0,
+        coefs: vec![([1, 0, 0], 30_000.0)],
+    });
+    spec.envelope.tool_min_nm = -i32::MAX;
+    spec.envelope.tool_max_nm = i32::MAX;
+    spec.envelope.max_corr_nm = [model_core::table::MAX_CORR_LIMIT_NM; 3];
+    spec.encode()
+}
+
 pub fn nn_3x16x3(seed: u64) -> Result<Vec<u8>, EncodeError> {
     const HIDDEN: usize = 16;
     let mut rng = Rng::new(seed);

@@ -16,6 +16,7 @@ pub mod time_driver;
 pub mod usart;
 
 use defmt_semihosting as _;
+use trueaxis_stack_guard as _;
 
 /// Ends the emulation with `code` as QEMU's exit status.
 pub fn exit(code: i32) -> ! {
@@ -64,31 +65,34 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 // A fault must not hang QEMU: report the faulting PC and exit 1. defmt is not
 // used here because the fault may have hit inside the logger's critical
 // section (it would then panic re-entrantly); the semihosting stderr stream
-// is separate from the defmt frames on stdout. (A stack overflow does not get
-// here: the exception frame cannot be pushed below RAM, see qemu.x, and QEMU
-// stops with a lockup instead — also a failed run.)
-#[allow(unsafe_code)] // cortex-m-rt requires HardFault handlers to be `unsafe fn`
-#[cortex_m_rt::exception]
-unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
+// is separate from the defmt frames on stdout. Entered through
+// trueaxis_stack_guard's HardFault entry (the board's), which moves to a
+// fresh stack first: a stack overflow gets here too — its exception frame
+// could not be pushed, so `sp` (the stack pointer at the fault) is below
+// RAM and the report says so.
+#[allow(unsafe_code)] // the symbol the fault entry branches to
+#[unsafe(no_mangle)]
+extern "C" fn trueaxis_hard_fault(sp: u32) -> ! {
     use core::fmt::Write as _;
     if let Some(hook) = fault_hook() {
         hook(FaultKind::HardFault)
     }
-    let at = frame as *const cortex_m_rt::ExceptionFrame as usize;
-    let readable = (0x2000_0000..0x2002_0000 - 32).contains(&at);
+    let readable = (0x2000_0000..0x2002_0000 - 32).contains(&sp);
     if let Ok(mut err) = semihosting::io::stderr() {
         let mut w = FmtAdapter(&mut err);
         let _ = if readable {
-            writeln!(
-                w,
-                "HardFault: pc={:#010x} lr={:#010x}",
-                frame.pc(),
-                frame.lr()
-            )
+            // SAFETY: the exception frame's eight words are in RAM (checked
+            // above); pc and lr are its words 6 and 5.
+            #[allow(unsafe_code)]
+            let (pc, lr) = unsafe {
+                let f = sp as *const u32;
+                (f.add(6).read_volatile(), f.add(5).read_volatile())
+            };
+            writeln!(w, "HardFault: pc={pc:#010x} lr={lr:#010x}")
         } else {
             writeln!(
                 w,
-                "HardFault: exception frame at {at:#010x} (stack overflow?)"
+                "HardFault: stack overflow (stack pointer {sp:#010x} below RAM)"
             )
         };
     }

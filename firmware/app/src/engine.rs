@@ -51,7 +51,8 @@ use crate::model::{self, ModelBuf, ModelInputs};
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct AxisConfig {
     /// Encoder scale, picometres per count (a 0.1 µm scale read in
-    /// quadrature: 25 000 pm). Negative flips the direction.
+    /// quadrature: 25 000 pm). Negative flips the direction; at most
+    /// ±(2^31 − 1) (2.1 mm per count: count × scale stays in i64).
     pub pm_per_count: i64,
     /// Position at count 0 before the axis is referenced, nm (the
     /// correction waits for the reference, see the module doc). An axis
@@ -61,13 +62,61 @@ pub struct AxisConfig {
     /// Displacement of one correction step pulse at the drive, nm (> 0).
     pub pulse_nm: i32,
     /// Fastest the axis can travel, nm/ms (= mm/s · 1000); a larger jump
-    /// between two ticks is an encoder fault. 0 disables the check.
+    /// between two ticks is an encoder fault. 0 disables the check (and is
+    /// refused for a widened counter, see `counter_bits`).
     pub max_speed_nm_per_ms: i32,
-    /// Machine position at which the axis's home switch trips, nm: the
-    /// engine references the axis there when the switch input
-    /// ([`Encoders::home_switches`]) turns on. `None`: no switch; the axis
-    /// is referenced over the link only.
-    pub home_nm: Option<i32>,
+    /// Width of the hardware counter the count is widened from, bits: 16
+    /// for the board's timers (`sensors::Widen16`), 32 when the count is
+    /// read whole. The widening follows the axis only while it moves less
+    /// than half the counter's range between two reads; a longer gap
+    /// between ticks (a stall) with motion loses the reference
+    /// ([`Faults::POSITION_LOST`]).
+    pub counter_bits: u8,
+    /// The axis's home switch, or `None` (referenced over the link only).
+    pub home: Option<HomeSwitch>,
+}
+
+/// A home (reference) switch ([`Encoders::home_switches`]) and what the
+/// engine believes of it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct HomeSwitch {
+    /// Machine position at which the switch trips when approached in
+    /// `approach`, nm.
+    pub pos_nm: i32,
+    /// The direction the axis moves when it homes onto the switch: an edge
+    /// reached moving the other way references nothing (a switch trips at
+    /// another point from the other side).
+    pub approach: Approach,
+    /// Ticks the input must read the same in a row before the engine
+    /// believes a change (≥ 1): a glitch shorter than that is no edge. The
+    /// edge's position is the count at the first of those ticks, so the
+    /// debounce adds no position error.
+    pub debounce_ticks: u8,
+    /// How far a referenced axis may be from `pos_nm` when its switch
+    /// turns on, nm: farther is a fault ([`Faults::HOME_MISMATCH`]: the
+    /// tracked position or the switch is wrong) that drops the reference,
+    /// never a new reference.
+    pub tolerance_nm: i32,
+}
+
+/// A direction of motion along an axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Approach {
+    /// Towards smaller counts.
+    Negative,
+    /// Towards larger counts.
+    Positive,
+}
+
+impl Approach {
+    fn sign(self) -> i8 {
+        match self {
+            Approach::Negative => -1,
+            Approach::Positive => 1,
+        }
+    }
 }
 
 /// Engine configuration (from the board; fixed at build time).
@@ -109,6 +158,25 @@ pub enum ConfigError {
         /// Axis index.
         axis: usize,
     },
+    /// An axis whose count is widened from a counter of fewer than 32 bits
+    /// needs a top speed (> 0): without one no gap between two reads can
+    /// be proven short enough for the widening. Also a counter of 0 or
+    /// more than 32 bits.
+    CounterUnbounded {
+        /// Axis index.
+        axis: usize,
+    },
+    /// An encoder scale beyond ±(2^31 − 1) pm per count (2.1 mm): the
+    /// position (count × scale, in i64) would overflow.
+    Scale {
+        /// Axis index.
+        axis: usize,
+    },
+    /// A home switch with a debounce of 0 ticks or a negative tolerance.
+    HomeSwitch {
+        /// Axis index.
+        axis: usize,
+    },
 }
 
 impl EngineConfig {
@@ -126,6 +194,19 @@ impl EngineConfig {
             }
             if self.max_step_nm_per_tick(self.fault_ramp_nm_per_ms) > self.step_budget_nm(axis) {
                 return Err(ConfigError::RampTooFast { axis });
+            }
+            if a.pm_per_count.unsigned_abs() > i32::MAX as u64 {
+                return Err(ConfigError::Scale { axis });
+            }
+            if !(1..=32).contains(&a.counter_bits)
+                || (a.counter_bits < 32 && a.pm_per_count != 0 && a.max_speed_nm_per_ms <= 0)
+            {
+                return Err(ConfigError::CounterUnbounded { axis });
+            }
+            if a.home
+                .is_some_and(|h| h.debounce_ticks == 0 || h.tolerance_nm < 0)
+            {
+                return Err(ConfigError::HomeSwitch { axis });
             }
         }
         Ok(())
@@ -181,6 +262,18 @@ pub const STILL_US: u64 = 20_000;
 /// is compensated for.
 pub const STILL_BAND_NM: i64 = 1000;
 
+/// Where an announced stall is ([`Engine::begin_stall`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stall {
+    None,
+    /// Between `begin_stall` and `end_stall`.
+    Open,
+    /// Ended: the next tick is still part of it (on the board the first
+    /// tick after an erase may run before the link task ends the stall,
+    /// in a simulation after).
+    Closing,
+}
+
 /// What a tick did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -234,10 +327,32 @@ pub struct Engine<'m> {
     pending_ref: [Option<i32>; 3],
     /// Some `pending_ref` is set.
     ref_pending: bool,
-    /// The home switches at the previous tick (`None` before the first:
-    /// an axis already on its switch at power-up is not referenced by it —
-    /// only the switch turning on marks the position).
-    last_home: Option<u8>,
+    /// Bit per axis: the axis has a home switch.
+    home_mask: u8,
+    /// The home switches as the engine believes them (debounced; `None`
+    /// before the first tick: an axis already on its switch at power-up
+    /// is not referenced by it — only the switch turning on marks the
+    /// position).
+    home_stable: Option<u8>,
+    /// Per axis: ticks in a row the switch input has differed from
+    /// `home_stable`; and a bit per axis where that is not 0.
+    home_run: [u8; 3],
+    home_busy: u8,
+    /// Per axis: the count and the direction of motion at the first tick
+    /// of that run (where a confirmed edge is).
+    home_edge: [(i32, i8); 3],
+    /// Per axis: the last non-zero change of the count (its sign is the
+    /// direction the axis last moved; 0 before any).
+    last_move: [i32; 3],
+    /// Per axis: the longest gap between two ticks over which the counter
+    /// widening is proven right at the axis's top speed, µs (`u64::MAX`:
+    /// the count is read whole, or there is no encoder); and the shortest
+    /// of the three, so that a tick checks one number.
+    safe_gap_us: [u64; 3],
+    min_safe_gap_us: u64,
+    /// A stall announced by [`begin_stall`](Self::begin_stall): its gap is
+    /// no overrun (but is checked for motion like any gap).
+    stall: Stall,
 
     last_counts: Option<[i32; 3]>,
     pos_nm: [i32; 3],
@@ -289,6 +404,7 @@ impl<'m> Engine<'m> {
         let nm_per_count = cfg
             .axes
             .map(|a| (a.pm_per_count % 1000 == 0).then_some(a.pm_per_count / 1000));
+        let safe_gap_us = cfg.axes.map(safe_gap_us);
         Ok(Self {
             cfg,
             jump_threshold_counts,
@@ -314,7 +430,17 @@ impl<'m> Engine<'m> {
                 .fold(0, |m, a| m | 1 << a),
             pending_ref: [None; 3],
             ref_pending: false,
-            last_home: None,
+            home_mask: (0..3)
+                .filter(|&a| cfg.axes[a].home.is_some())
+                .fold(0, |m, a| m | 1 << a),
+            home_stable: None,
+            home_run: [0; 3],
+            home_busy: 0,
+            home_edge: [(0, 0); 3],
+            last_move: [0; 3],
+            safe_gap_us,
+            min_safe_gap_us: safe_gap_us.into_iter().min().unwrap_or(u64::MAX),
+            stall: Stall::None,
             last_counts: None,
             pos_nm: [0; 3],
             rev_q30: [0; 3],
@@ -334,7 +460,8 @@ impl<'m> Engine<'m> {
                 if a.pm_per_count == 0 {
                     u32::MAX
                 } else {
-                    (STILL_BAND_NM * 1000 / a.pm_per_count.abs()).min(u32::MAX as i64) as u32
+                    (STILL_BAND_NM as u64 * 1000 / a.pm_per_count.unsigned_abs())
+                        .min(u32::MAX as u64) as u32
                 }
             }),
             now_us: 0,
@@ -366,7 +493,9 @@ impl<'m> Engine<'m> {
             return old;
         };
         self.slew_nm_per_ms = self.cfg.effective_slew(model::slew_nm_per_ms(m));
-        self.dirs = model::DirTrackers::for_model(m);
+        // The reversal state is the machine's, not the table's: kept, with
+        // the new table's transition lengths from now on.
+        self.dirs.set_transitions(m);
         self.active = Some(info);
         self.sticky = Faults(self.sticky.0 & !Faults::BAD_TABLE.0);
         self.model.replace(model)
@@ -464,11 +593,23 @@ impl<'m> Engine<'m> {
         }
     }
 
-    /// Forgets the time of the last tick, so the next one is not counted as
-    /// an overrun. Called after an operation that stalls the CPU on purpose
-    /// (a flash erase, only allowed while the axes stand still).
-    pub fn resync_clock(&mut self) {
-        self.last_tick_us = None;
+    /// Announces a stall the board causes on purpose (a flash erase or
+    /// program, which stops every instruction fetch on the single-bank
+    /// F405; allowed only while the axes stand still): until
+    /// [`end_stall`](Self::end_stall) and for one tick after it, a gap
+    /// between ticks is not a loop overrun. It is still checked like any
+    /// gap: an axis that moved more than its counter's widening can follow
+    /// loses its reference ([`Faults::POSITION_LOST`]).
+    pub fn begin_stall(&mut self) {
+        self.stall = Stall::Open;
+    }
+
+    /// Ends the stall [`begin_stall`](Self::begin_stall) announced (the
+    /// next tick is still part of it).
+    pub fn end_stall(&mut self) {
+        if self.stall == Stall::Open {
+            self.stall = Stall::Closing;
+        }
     }
 
     /// The model's correction for `inj`, evaluated now (no slew limit), and
@@ -542,6 +683,82 @@ impl<'m> Engine<'m> {
         raw_position_nm(count, a.pm_per_count, self.nm_per_count[axis], a.origin_nm)
     }
 
+    /// A gap of `gap_us` between two ticks longer than some axis's counter
+    /// widening can follow at its top speed (a stall): every such axis
+    /// that moved (left the still band) between `prev` and `counts` lost
+    /// its position — `POSITION_LOST`. Returns those axes.
+    #[inline(never)]
+    fn stalled(&self, gap_us: u64, counts: &[i32; 3], prev: &[i32; 3], events: &mut Faults) -> u8 {
+        let mut lost = 0;
+        for (i, (c, p)) in counts.iter().zip(prev).enumerate() {
+            let d = c.wrapping_sub(*p).unsigned_abs();
+            if gap_us > self.safe_gap_us[i] && d > self.still_band_counts[i] {
+                *events = events.union(Faults::POSITION_LOST);
+                lost |= 1 << i;
+            }
+        }
+        lost
+    }
+
+    /// Makes `count` on `axis` the machine position `pos_nm`.
+    fn set_reference(&mut self, axis: usize, count: i32, pos_nm: i32) {
+        self.ref_offset_nm[axis] = pos_nm as i64 - self.raw_nm(axis, count);
+        self.ref_offset_i32[axis] = i32::try_from(self.ref_offset_nm[axis]).ok();
+        self.referenced |= 1 << axis;
+    }
+
+    /// The home switch inputs `raw` of one tick (bits of axes with a
+    /// switch), at `counts`: debounced (a change believed after
+    /// `debounce_ticks` ticks in a row, dated at the first of them); a
+    /// switch turning on while the axis moves in its approach direction
+    /// references an axis without a reference at the switch's position
+    /// (at the count of that first tick), and checks one with a reference
+    /// — farther than the tolerance from the switch is `HOME_MISMATCH`.
+    /// Returns the axes whose reference that loses.
+    #[inline(never)]
+    fn home_switches(&mut self, raw: u8, counts: &[i32; 3], events: &mut Faults) -> u8 {
+        let stable = *self.home_stable.get_or_insert(raw);
+        let mut lost = 0;
+        for (i, &count_now) in counts.iter().enumerate() {
+            let bit = 1u8 << i;
+            let Some(h) = self.cfg.axes[i].home else {
+                continue;
+            };
+            if (raw ^ stable) & bit == 0 {
+                self.home_run[i] = 0;
+                self.home_busy &= !bit;
+                continue;
+            }
+            if self.home_run[i] == 0 {
+                self.home_edge[i] = (count_now, self.last_move[i].signum() as i8);
+            }
+            self.home_run[i] = self.home_run[i].saturating_add(1);
+            self.home_busy |= bit;
+            if self.home_run[i] < h.debounce_ticks {
+                continue;
+            }
+            self.home_run[i] = 0;
+            self.home_busy &= !bit;
+            self.home_stable = Some(self.home_stable.unwrap_or(stable) ^ bit);
+            let (count, dir) = self.home_edge[i];
+            if raw & bit == 0 || dir != h.approach.sign() {
+                // Off the switch, or on it from the other side (or with
+                // no motion seen): no edge that marks the position.
+                continue;
+            }
+            if self.referenced & bit == 0 {
+                self.set_reference(i, count, h.pos_nm);
+            } else {
+                let at = self.raw_nm(i, count) + self.ref_offset_nm[i];
+                if (at - h.pos_nm as i64).abs() > h.tolerance_nm as i64 {
+                    *events = events.union(Faults::HOME_MISMATCH);
+                    lost |= bit;
+                }
+            }
+        }
+        lost
+    }
+
     /// One period of the correction loop.
     pub fn tick<C, E, T, S>(
         &mut self,
@@ -564,13 +781,17 @@ impl<'m> Engine<'m> {
         // (gap ≥ 2 periods) is an overrun; jitter below that is not. (A gap
         // left by a tick that already counted itself as late is not
         // counted again; see the end of the tick.)
-        if let Some(prev) = self.last_tick_us {
-            let gap = start_us.saturating_sub(prev);
+        // (A gap in an announced stall is not an overrun, see begin_stall.)
+        let gap = self.last_tick_us.map(|prev| start_us.saturating_sub(prev));
+        if let Some(gap) = gap {
             self.worst_loop_us = self.worst_loop_us.max(gap.min(u32::MAX as u64) as u32);
-            if gap >= 2 * self.cfg.period_us as u64 && !self.late_end {
+            if gap >= 2 * self.cfg.period_us as u64 && !self.late_end && self.stall == Stall::None {
                 self.overruns = self.overruns.saturating_add(1);
                 events = events.union(Faults::LOOP_OVERRUN);
             }
+        }
+        if self.stall == Stall::Closing {
+            self.stall = Stall::None;
         }
         self.last_tick_us = Some(start_us);
         self.late_end = false;
@@ -589,45 +810,50 @@ impl<'m> Engine<'m> {
             self.still_anchor = Some(counts);
             self.last_motion_us = Some(start_us);
         }
+        // Per axis, against the previous tick's counts: the direction of
+        // motion, an encoder jump (counts lost or invented: the reference
+        // is gone), and motion across a gap longer than the counter's
+        // widening can follow (a stall: the count may be off by whole
+        // counter turns — the reference is gone too).
+        let mut lost = 0u8;
+        if let Some(prev) = self.last_counts {
+            for i in 0..3 {
+                let d = counts[i].wrapping_sub(prev[i]);
+                if d != 0 {
+                    self.last_move[i] = d;
+                }
+                // |Δcounts| · |pm/count| ≥ threshold ⇔ the jump exceeds
+                // the limit in whole nm, ⇔ |Δcounts| ≥ the threshold in
+                // counts (precomputed: no 64-bit multiply per tick).
+                if d.unsigned_abs() >= self.jump_threshold_counts[i] {
+                    events = events.union(Faults::ENCODER_JUMP);
+                    lost |= 1 << i;
+                }
+            }
+            if let Some(g) = gap.filter(|&g| g > self.min_safe_gap_us) {
+                lost |= self.stalled(g, &counts, &prev, &mut events);
+            }
+        }
+        self.last_counts = Some(counts);
+        // The home switches (debounced; an edge references an axis that
+        // has no reference, and checks one that has).
+        // (Out of line only when a switch changed or is being debounced.)
+        let home = enc.home_switches() & self.home_mask;
+        if self.home_mask != 0 && (self.home_stable != Some(home) || self.home_busy != 0) {
+            lost |= self.home_switches(home, &counts, &mut events);
+        }
         // Unreferenced positions: counts · scale + the configured origin.
         // A reference asked for since the last tick: the counts read now
         // are the position it names.
-        // A home switch turning on: its axis is at its configured home.
-        let home = enc.home_switches();
-        let rising = self.last_home.map_or(0, |h| home & !h);
-        self.last_home = Some(home);
-        if rising != 0 {
-            for (i, a) in self.cfg.axes.iter().enumerate() {
-                if let (true, Some(pos)) = (rising & 1 << i != 0, a.home_nm) {
-                    self.pending_ref[i] = Some(pos);
-                    self.ref_pending = true;
-                }
-            }
-        }
         if self.ref_pending {
             self.ref_pending = false;
             for (i, &count) in counts.iter().enumerate() {
                 if let Some(pos) = self.pending_ref[i].take() {
-                    self.ref_offset_nm[i] = pos as i64 - self.raw_nm(i, count);
-                    self.ref_offset_i32[i] = i32::try_from(self.ref_offset_nm[i]).ok();
-                    self.referenced |= 1 << i;
+                    self.set_reference(i, count, pos);
                 }
             }
         }
-        if let Some(prev) = self.last_counts {
-            for i in 0..3 {
-                // |Δcounts| · |pm/count| ≥ threshold ⇔ the jump exceeds
-                // the limit in whole nm, ⇔ |Δcounts| ≥ the threshold in
-                // counts (precomputed: no 64-bit multiply per tick).
-                let d_counts = counts[i].wrapping_sub(prev[i]).unsigned_abs();
-                if d_counts >= self.jump_threshold_counts[i] {
-                    events = events.union(Faults::ENCODER_JUMP);
-                    // Counts were lost or invented: the reference is gone.
-                    self.referenced &= !(1 << i);
-                }
-            }
-        }
-        self.last_counts = Some(counts);
+        self.referenced &= !lost;
         // Per axis (unreferenced, referenced) position, each held to i32:
         // in 32 bits when every step fits (the usual case), else in i64.
         let both: [(i32, i32); 3] = core::array::from_fn(|i| {
@@ -793,6 +1019,23 @@ fn positions_i32(
 ) -> Option<(i32, i32)> {
     let raw = count.checked_mul(nm_per_count?)?.checked_add(origin_nm)?;
     Some((raw, raw.checked_add(ref_offset_nm?)?))
+}
+
+/// The longest gap between two reads of `a`'s counter over which its
+/// widening is proven right, µs: the axis at its top speed moves less than
+/// half the counter's range (2^(bits−1) counts) — gap · speed / |scale| <
+/// 2^(bits−1). `u64::MAX` for a count read whole (32 bits) or no encoder.
+fn safe_gap_us(a: AxisConfig) -> u64 {
+    if a.counter_bits >= 32 || a.pm_per_count == 0 || a.max_speed_nm_per_ms <= 0 {
+        return u64::MAX;
+    }
+    let half = 1u64 << (a.counter_bits.max(1) - 1);
+    // speed is nm/ms = pm/µs: counts in a gap = gap · speed / |pm|. (A
+    // product beyond u64 — a scale of more than 2^33 pm per count — holds
+    // at u64::MAX: no gap of a running board is that long.)
+    half.saturating_mul(a.pm_per_count.unsigned_abs())
+        .saturating_sub(1)
+        / a.max_speed_nm_per_ms as u64
 }
 
 /// The encoder-jump threshold in counts: the smallest |Δcounts| with

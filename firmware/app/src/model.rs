@@ -22,11 +22,8 @@ pub const FW_GRID: usize = model_core::board::MODEL_GRID;
 
 /// The firmware's prepared model: model-core's evaluator with capacities
 /// sized for the F405's RAM ([`model_core::board::BoardModel`]).
-/// `Model::load` builds the model on the stack and returns it by value, so
-/// loading one costs a few model sizes of stack; with model-core's default
-/// capacity (≈ 26 KiB) that was ≈ 79 KiB, more than the board has. A table
-/// that needs more is refused at commit (`InvalidTable::Load`), never half
-/// loaded. Evaluation is the same code whatever the capacity, so results
+/// A table that needs more is refused at commit (`InvalidTable::Load`),
+/// never half loaded. Evaluation is the same code whatever the capacity, so results
 /// are bit-identical to the host's.
 pub type Model = model_core::board::BoardModel;
 
@@ -38,6 +35,11 @@ pub enum InvalidTable {
     Format(model_core::TableError),
     /// Valid, but it does not fit the firmware's model capacity.
     Load(model_core::LoadError),
+    /// Its fixed-point or f32 evaluation departs from its own definition
+    /// (`model_core::definition`, [`check_loaded`]).
+    OffDefinition(model_core::definition::Departure),
+    /// [`check_loaded`] on a buffer with no model in it.
+    NotLoaded,
 }
 
 /// Everything the model is evaluated on.
@@ -70,37 +72,83 @@ pub struct Evaluation {
 const _: () = assert!(LINK_TEMPS >= MAX_TEMPS);
 
 /// A RAM buffer for one prepared model, empty until a table is loaded
-/// (`const`-constructible, so the board can put it in a `static`).
-#[derive(Debug, Default)]
-pub struct ModelBuf(Option<Model>);
+/// (`const`-constructible, so the board can put it in a `static`). The
+/// model is loaded in place ([`load_into`]): never built on the stack and
+/// moved, which cost the board a 35 KiB stack frame (issue 25).
+#[derive(Debug)]
+pub struct ModelBuf {
+    model: Model,
+    loaded: bool,
+}
 
 impl ModelBuf {
     /// An empty buffer.
     pub const fn new() -> Self {
-        Self(None)
+        Self {
+            model: Model::empty(),
+            loaded: false,
+        }
     }
 
     /// The model, if one is loaded.
     pub fn get(&self) -> Option<&Model> {
-        self.0.as_ref()
+        self.loaded.then_some(&self.model)
+    }
+}
+
+impl Default for ModelBuf {
+    fn default() -> Self {
+        Self::new()
     }
 }
 
 /// Validates `bytes` fully (format, version, CRC, envelope) and prepares
-/// the model in `dst` (emptied first, so a refused table leaves it empty).
+/// the model in `dst`, in place (emptied first, so a refused table leaves
+/// it empty).
 pub fn load_into(bytes: &[u8], dst: &mut ModelBuf) -> Result<(), InvalidTable> {
-    dst.0 = None;
+    dst.loaded = false;
     let t = model_core::parse(bytes).map_err(InvalidTable::Format)?;
-    // Written so the loaded model goes straight from model-core's result
-    // into the buffer: every extra temporary is 16.3 KiB of stack.
-    let r = Model::load(&t);
-    match r {
-        Ok(m) => {
-            dst.0 = Some(m);
-            Ok(())
-        }
-        Err(e) => Err(InvalidTable::Load(e)),
+    load_table(&t, dst)
+}
+
+fn load_table(t: &model_core::Table<'_>, dst: &mut ModelBuf) -> Result<(), InvalidTable> {
+    dst.loaded = false;
+    dst.model.load_into(t).map_err(InvalidTable::Load)?;
+    dst.loaded = true;
+    Ok(())
+}
+
+/// [`load_into`], then [`check_loaded`]: what the boot's scan of the slots
+/// runs on each stored table.
+#[inline] // compiled only where called (model_core::definition)
+pub fn load_checked(bytes: &[u8], dst: &mut ModelBuf) -> Result<(), InvalidTable> {
+    dst.loaded = false;
+    let t = model_core::parse(bytes).map_err(InvalidTable::Format)?;
+    load_table(&t, dst)?;
+    check_table(&t, dst)
+}
+
+/// The definition check (`model_core::definition`, what
+/// `model_core::board::check` runs on the host last) on `bytes` loaded in
+/// `dst`: a table whose fixed-point or f32 evaluation departs from its own
+/// f64 definition by more than `DEFINITION_BOUND_NM` is refused and `dst`
+/// left empty. What a commit runs before it writes a table.
+#[inline] // compiled only where called (model_core::definition)
+pub fn check_loaded(bytes: &[u8], dst: &mut ModelBuf) -> Result<(), InvalidTable> {
+    let t = model_core::parse(bytes).map_err(InvalidTable::Format)?;
+    check_table(&t, dst)
+}
+
+#[inline] // compiled only where called (model_core::definition)
+fn check_table(t: &model_core::Table<'_>, dst: &mut ModelBuf) -> Result<(), InvalidTable> {
+    if !dst.loaded {
+        return Err(InvalidTable::NotLoaded);
     }
+    if let Some(d) = model_core::definition::check_definition(t, &dst.model) {
+        dst.loaded = false;
+        return Err(InvalidTable::OffDefinition(d));
+    }
+    Ok(())
 }
 
 /// The model-core inputs for `i`.
@@ -172,6 +220,13 @@ impl DirTrackers {
                 Transition::new(m.reversal_transition_nm(a).unwrap_or(0))
             }),
         }
+    }
+
+    /// Takes the model's reversal transition lengths, keeping each axis's
+    /// state (the direction the machine last moved is not the table's: a
+    /// table switch must not reset it).
+    pub fn set_transitions(&mut self, m: &Model) {
+        self.transition = Self::for_model(m).transition;
     }
 
     /// Feeds the positions of one tick; returns the reversal state per axis.

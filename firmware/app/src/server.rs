@@ -237,8 +237,10 @@ impl<'b, 'm, F: MultiwriteNorFlash + ReadNorFlash> Server<'b, 'm, F> {
         record: Option<BootRecord>,
     ) -> BootReport {
         let spare = spare(&mut self.spares);
+        // A table is booted only if it passes what a commit checks
+        // (`trueaxis flash` writes slots without the board seeing them).
         self.store
-            .scan(self.stage, |b| model::load_into(b, spare).is_ok());
+            .scan(self.stage, |b| model::load_checked(b, spare).is_ok());
         let failed = boot::failed_trial(record, reset, self.store.active());
         if let Some(f) = failed {
             engine.with_engine(|e| e.latch(Faults::TRIAL_FAILED.union(f.fault.bit())));
@@ -494,14 +496,15 @@ impl<'b, 'm, F: MultiwriteNorFlash + ReadNorFlash> Server<'b, 'm, F> {
                 // order of `model_core::board::check` — what `trueaxis
                 // export`, `upload` and `flash` refuse with: a table that
                 // does not load into the board's model (format, capacity,
-                // ranges), then one the loop cannot evaluate every period.
-                if model::load_into(&self.stage[..u.size as usize], spare(&mut self.spares))
-                    .is_err()
-                {
+                // ranges), then one the loop cannot evaluate every period,
+                // then one whose evaluation departs from its own
+                // definition (the dearest check, last).
+                let staged = &self.stage[..u.size as usize];
+                if model::load_into(staged, spare(&mut self.spares)).is_err() {
                     self.upload = None;
                     return Err(LinkError::InvalidTable);
                 }
-                if let Ok(t) = model_core::parse(&self.stage[..u.size as usize]) {
+                if let Ok(t) = model_core::parse(staged) {
                     if let Err(LimitError::TooSlow { estimate, budget }) =
                         check_cost(&t, self.cfg.model_budget_instr)
                     {
@@ -512,13 +515,18 @@ impl<'b, 'm, F: MultiwriteNorFlash + ReadNorFlash> Server<'b, 'm, F> {
                         });
                     }
                 }
+                if model::check_loaded(staged, spare(&mut self.spares)).is_err() {
+                    self.upload = None;
+                    return Err(LinkError::InvalidTable);
+                }
                 self.require_quiet(now_us, engine)?;
                 let spare = spare(&mut self.spares);
                 let table = &self.stage[..u.size as usize];
+                engine.with_engine(|e| e.begin_stall());
                 let r = self
                     .store
                     .commit(table, |b| model::load_into(b, spare).is_ok());
-                engine.with_engine(|e| e.resync_clock());
+                engine.with_engine(|e| e.end_stall());
                 // Committed or refused by the store (an invalid table): either
                 // way the staged upload is spent; a new upload starts from
                 // byte 0, a repeated commit gets the same answer (above).
@@ -534,7 +542,13 @@ impl<'b, 'm, F: MultiwriteNorFlash + ReadNorFlash> Server<'b, 'm, F> {
                 self.last_done = Some(Done::Committed(info));
                 Response::Committed(info)
             }
-            Request::Activate => Response::Activated(self.activate_newest(engine)?),
+            Request::Activate => {
+                // Under the commit's quiet rule: a table switch while an
+                // axis moves changes the correction under a moving machine
+                // (and the table runs at once after a commit anyway).
+                self.require_quiet(now_us, engine)?;
+                Response::Activated(self.activate_newest(engine)?)
+            }
             Request::Rollback => {
                 // Idempotent: a rollback repeated after its answer was lost
                 // (no upload or commit since) gets the same answer while
@@ -547,8 +561,9 @@ impl<'b, 'm, F: MultiwriteNorFlash + ReadNorFlash> Server<'b, 'm, F> {
                 }
                 self.require_quiet(now_us, engine)?;
                 self.last_done = None;
+                engine.with_engine(|e| e.begin_stall());
                 let r = self.store.rollback();
-                engine.with_engine(|e| e.resync_clock());
+                engine.with_engine(|e| e.end_stall());
                 r.map_err(store_error)?;
                 let info = self.activate_newest(engine)?;
                 self.last_done = Some(Done::RolledBack(info));

@@ -55,7 +55,9 @@ pub fn sim_engine_config() -> EngineConfig {
         origin_nm: 0,
         pulse_nm: 100,
         max_speed_nm_per_ms: 0,
-        home_nm: None,
+        // The fake encoders are i32 counts: nothing to widen.
+        counter_bits: 32,
+        home: None,
     };
     EngineConfig {
         axes: [axis; 3],
@@ -339,37 +341,45 @@ impl SimBoard {
     /// Serves TCP connections on `listener` until `stop` is set, ticking in
     /// step with wall-clock time: every client that connects is served,
     /// each with its own frame receiver (a second `trueaxis status` while a
-    /// `monitor` runs gets its answer, not silence). Returns the board.
+    /// `monitor` runs gets its answer, not silence). Nothing blocks: each
+    /// client's answers wait in its own queue and are written as its
+    /// socket takes them, and a client with more than [`OUTBOX_BYTES`]
+    /// unread is not read from until it catches up — one that sends and
+    /// never reads stalls itself (TCP's back-pressure), not the board nor
+    /// the other clients. Returns the board.
     pub fn serve(mut self, listener: TcpListener, stop: Arc<AtomicBool>) -> Self {
         let _ = listener.set_nonblocking(true);
         let mut clock = WallClock::new(&self);
-        let mut conns: Vec<(TcpStream, Port)> = Vec::new();
+        let mut conns: Vec<Conn> = Vec::new();
         let mut buf = [0u8; 1024];
         while !stop.load(Ordering::Relaxed) {
             while let Ok((s, _)) = listener.accept() {
                 let _ = s.set_nonblocking(true);
                 let _ = s.set_nodelay(true);
-                conns.push((s, Port::new()));
+                conns.push(Conn {
+                    stream: s,
+                    port: Port::new(),
+                    outbox: Vec::new(),
+                });
             }
             let mut idle = true;
-            conns.retain_mut(|(s, port)| {
-                let open = match s.read(&mut buf) {
-                    Ok(0) => false,
-                    Ok(n) => {
-                        idle = false;
-                        let out = self.receive(port, &buf[..n]);
-                        // Answers are small: written blocking, then back to
-                        // non-blocking reads.
-                        let _ = s.set_nonblocking(false);
-                        let ok = s.write_all(&out).is_ok();
-                        let _ = s.set_nonblocking(true);
-                        ok
-                    }
-                    Err(e) => matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut),
-                };
+            conns.retain_mut(|c| {
+                let mut open = c.flush();
+                if open && c.outbox.len() < OUTBOX_BYTES {
+                    open = match c.stream.read(&mut buf) {
+                        Ok(0) => false,
+                        Ok(n) => {
+                            idle = false;
+                            let out = self.receive(&mut c.port, &buf[..n]);
+                            c.outbox.extend_from_slice(&out);
+                            c.flush()
+                        }
+                        Err(e) => matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut),
+                    };
+                }
                 if !open {
                     // An injection ends with the client that started it.
-                    self.server.port_closed(port, &*self.engine);
+                    self.server.port_closed(&mut c.port, &*self.engine);
                 }
                 open
             });
@@ -404,6 +414,39 @@ impl SimBoard {
             clock.catch_up(&mut self);
         }
         self
+    }
+}
+
+/// Unread answers a TCP client may have queued before the board stops
+/// reading its requests, bytes.
+pub const OUTBOX_BYTES: usize = 4096;
+
+/// A TCP client of [`SimBoard::serve`]: its socket (non-blocking), frame
+/// receiver and the answers its socket has not taken yet.
+struct Conn {
+    stream: TcpStream,
+    port: Port,
+    outbox: Vec<u8>,
+}
+
+impl Conn {
+    /// Writes what the socket takes of the queued answers without waiting;
+    /// false when the connection is gone.
+    fn flush(&mut self) -> bool {
+        while !self.outbox.is_empty() {
+            match self.stream.write(&self.outbox) {
+                Ok(0) => return false,
+                Ok(n) => {
+                    self.outbox.drain(..n);
+                }
+                Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
+                    return true
+                }
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(_) => return false,
+            }
+        }
+        true
     }
 }
 

@@ -8,7 +8,7 @@ mod common;
 use std::cell::Cell;
 
 use model_core::{DirTracker, Inputs, Model};
-use trueaxis_app::engine::{round_div, ConfigError, Engine, EngineConfig};
+use trueaxis_app::engine::{round_div, Approach, ConfigError, Engine, EngineConfig, HomeSwitch};
 use trueaxis_app::hw::Clock;
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::sim::{sample_spec, sample_table, sim_engine_config};
@@ -353,8 +353,13 @@ fn a_tick_that_ends_past_the_next_deadline_is_an_overrun() {
     assert!(e.faults().is_empty());
 }
 
+/// A stall the server announces around a flash operation
+/// (`begin_stall` … `end_stall`) is no overrun, whichever comes first
+/// after the erase: the tick (the board, where the loop preempts the link
+/// task as soon as the flash lets it) or `end_stall` (the simulation).
+/// Outside it a gap is an overrun again.
 #[test]
-fn a_stall_announced_by_resync_is_not_an_overrun() {
+fn a_stall_announced_by_the_server_is_not_an_overrun() {
     let table = sample_table(0);
     let mut e = Engine::new(sim_engine_config()).unwrap();
     reference_at_zero(&mut e);
@@ -362,11 +367,26 @@ fn a_stall_announced_by_resync_is_not_an_overrun() {
     let clock = FakeClock(Cell::new(0));
     let mut io = Fake::new();
     run(&mut e, &clock, &mut io, 10);
-    clock.0.set(clock.0.get() + 1_500_000); // a 1.5 s flash erase
-    e.resync_clock();
+    // The board's order: a normal tick, the 1.5 s erase, the first tick
+    // after it, then the link task ends the stall.
+    e.begin_stall();
+    run(&mut e, &clock, &mut io, 1);
+    clock.0.set(clock.0.get() + 1_500_000);
+    run(&mut e, &clock, &mut io, 1);
+    e.end_stall();
     run(&mut e, &clock, &mut io, 10);
-    assert!(e.faults().is_empty());
+    // The simulation's: the stall ends before the next tick.
+    e.begin_stall();
+    clock.0.set(clock.0.get() + 1_500_000);
+    e.end_stall();
+    run(&mut e, &clock, &mut io, 10);
+    assert!(e.faults().is_empty(), "{:?}", e.faults());
     assert_eq!(e.telemetry().overruns, 0);
+    // Over: the next long gap is an overrun.
+    clock.0.set(clock.0.get() + 10_000);
+    run(&mut e, &clock, &mut io, 1);
+    assert_eq!(e.telemetry().overruns, 1);
+    assert!(e.faults().contains(Faults::LOOP_OVERRUN));
 }
 
 #[test]
@@ -713,11 +733,22 @@ fn sensor_checks_stay_on_while_injecting() {
     assert!(e.faults().is_empty(), "{:?}", e.faults());
 }
 
+/// X's home switch: at −5 mm, approached moving towards negative counts,
+/// debounced over 3 ticks, 50 µm tolerance.
+fn home_at_minus_5mm() -> HomeSwitch {
+    HomeSwitch {
+        pos_nm: -5_000_000,
+        approach: Approach::Negative,
+        debounce_ticks: 3,
+        tolerance_nm: 50_000,
+    }
+}
+
 #[test]
 fn a_home_switch_references_its_axis_when_it_turns_on() {
     // X has a home switch at -5 mm; Y and Z have none.
     let mut cfg = sim_engine_config();
-    cfg.axes[0].home_nm = Some(-5_000_000);
+    cfg.axes[0].home = Some(home_at_minus_5mm());
     let table = sample_table(0);
     let mut e = Engine::new(cfg).unwrap();
     e.set_model(loaded(&table), info(&table));
@@ -725,40 +756,95 @@ fn a_home_switch_references_its_axis_when_it_turns_on() {
     let mut io = Fake::new();
     // Switched on with every axis on its switch: that is no edge, no
     // reference (the switch turning on marks the position, not being on).
-    io.counts = [1234, 0, 0];
+    io.counts = [5000, 0, 0];
     io.home = 0b111;
     run(&mut e, &clock, &mut io, 10);
     assert_eq!(e.telemetry().referenced, [false; 3]);
-    // Off the switch, back on it at count 4321 (moving: a switch works
-    // while the axis moves, unlike a reference over the link). Y's input
-    // does nothing: Y has no home position configured.
+    // Off the switch (debounced), then X homes: moving towards negative
+    // counts, the switch turns on at count 4321 and the axis moves on
+    // while the input is debounced (a switch works while the axis moves,
+    // unlike a reference over the link). Y's input does nothing: Y has no
+    // switch configured.
     io.home = 0;
-    run(&mut e, &clock, &mut io, 1);
-    io.counts[0] = 4321;
-    run(&mut e, &clock, &mut io, 1);
+    run(&mut e, &clock, &mut io, 3);
+    for c in (4322..4400).rev() {
+        io.counts[0] = c;
+        run(&mut e, &clock, &mut io, 1);
+    }
     io.home = 0b011;
-    run(&mut e, &clock, &mut io, 1);
+    for c in [4321, 4320, 4319] {
+        io.counts[0] = c;
+        run(&mut e, &clock, &mut io, 1);
+    }
     let t = e.telemetry();
     assert_eq!(t.referenced, [true, false, false]);
-    assert_eq!(t.pos_nm[0], -5_000_000);
+    // Referenced at the count of the first tick on the switch: the
+    // debounce costs no position.
+    assert_eq!(t.pos_nm[0], -5_000_000 - 2 * 100);
     // Staying on the switch and moving on does not re-reference.
-    io.counts[0] += 10;
+    io.counts[0] -= 10;
     run(&mut e, &clock, &mut io, 1);
-    assert_eq!(e.telemetry().pos_nm[0], -5_000_000 + 1000);
+    assert_eq!(e.telemetry().pos_nm[0], -5_000_000 - 12 * 100);
     // With Y and Z referenced over the link, the correction ramps in.
     e.reference(1, 0);
     e.reference(2, 0);
     run(&mut e, &clock, &mut io, 1000);
     assert!(e.faults().is_empty(), "{:?}", e.faults());
-    // X last moved forward: the reversal state is +1.
+    // X last moved towards negative counts: the reversal state is −1.
     let m = Model::load(&model_core::parse(&table).unwrap()).unwrap();
     let want = m.eval_fixed(&Inputs {
-        pos_nm: [-5_000_000 + 1000, 0, 0],
-        rev_q30: [1 << 30, 0, 0],
+        pos_nm: [-5_000_000 - 12 * 100, 0, 0],
+        rev_q30: [-(1 << 30), 0, 0],
         temp_mc: [20_000; model_core::MAX_TEMPS],
         tool_nm: 0,
     });
     assert_eq!(e.corr_nm(), want.corr_nm);
+}
+
+/// Referencing by the switch needs the approach direction and a debounced
+/// input: an edge reached moving the other way, or with the axis never
+/// seen moving, references nothing, nor does an input on for fewer ticks
+/// than the debounce.
+#[test]
+fn a_home_switch_references_only_from_its_side_and_debounced() {
+    let mut cfg = sim_engine_config();
+    cfg.axes[0].home = Some(home_at_minus_5mm());
+    let mut e = Engine::new(cfg).unwrap();
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    run(&mut e, &clock, &mut io, 5);
+    // On while X never moved: no direction, no reference.
+    io.home = 1;
+    run(&mut e, &clock, &mut io, 5);
+    io.home = 0;
+    run(&mut e, &clock, &mut io, 5);
+    assert_eq!(e.referenced()[0], false);
+    // Reached moving towards positive counts: the wrong side.
+    for c in 1..=10 {
+        io.counts[0] = c;
+        io.home = u8::from(c > 5);
+        run(&mut e, &clock, &mut io, 1);
+    }
+    io.home = 0;
+    run(&mut e, &clock, &mut io, 5);
+    assert_eq!(e.referenced()[0], false);
+    // From the right side, but on for 2 ticks of the 3 the debounce
+    // wants (a glitch), twice: nothing.
+    for _ in 0..2 {
+        for k in 0..6 {
+            io.counts[0] -= 1;
+            io.home = u8::from((2..4).contains(&k));
+            run(&mut e, &clock, &mut io, 1);
+        }
+    }
+    assert_eq!(e.referenced()[0], false);
+    // Three ticks on: referenced.
+    for k in 0..6 {
+        io.counts[0] -= 1;
+        io.home = u8::from(k >= 2);
+        run(&mut e, &clock, &mut io, 1);
+    }
+    assert_eq!(e.referenced()[0], true);
 }
 
 /// The plausible temperature range at its ends (the tick compares with a
@@ -794,4 +880,307 @@ fn temperature_range_holds_at_its_ends_and_one_past() {
             assert_eq!(faulted(t, 2), lo > hi, "{t} on channel 2");
         }
     }
+}
+
+/// The home switch's tolerance at its limit and one past, and positions
+/// at the ends of the i32 range: a referenced X whose switch turns on
+/// exactly `tolerance_nm` from its position (either side) is fine, 1 nm
+/// farther is a mismatch; an X referenced at i32::MAX or i32::MIN checks
+/// without overflow (the check is in i64).
+#[test]
+fn the_home_tolerance_holds_to_the_nanometre() {
+    let tol = 50_000;
+    for (at, mismatch) in [
+        (-5_000_000 + tol, false),
+        (-5_000_000 - tol, false),
+        (-5_000_000 + tol + 1, true),
+        (-5_000_000 - tol - 1, true),
+        (i32::MAX, true),
+        (i32::MIN, true),
+    ] {
+        let mut cfg = sim_engine_config();
+        cfg.axes[0].pm_per_count = 1000; // 1 nm per count
+        cfg.axes[0].home = Some(home_at_minus_5mm());
+        let mut e = Engine::new(cfg).unwrap();
+        let clock = FakeClock(Cell::new(0));
+        let mut io = Fake::new();
+        io.counts[0] = 1000;
+        run(&mut e, &clock, &mut io, 1);
+        // Referenced so that the count where the switch will turn on
+        // (one below this one) is at `at` (held at the i32 range).
+        assert!(e.reference(0, at.saturating_add(1)));
+        e.reference(1, 0);
+        e.reference(2, 0);
+        run(&mut e, &clock, &mut io, 1);
+        io.counts[0] -= 1; // moving towards negative counts
+        io.home = 1;
+        run(&mut e, &clock, &mut io, 3); // the debounce: 3 ticks
+        assert_eq!(
+            e.faults().contains(Faults::HOME_MISMATCH),
+            mismatch,
+            "switch at {at} nm, home −5 mm ± {tol}"
+        );
+        assert_eq!(e.referenced()[0], !mismatch, "at {at}");
+        if !mismatch {
+            // Checked, not re-referenced: the position stays as tracked.
+            assert_eq!(e.telemetry().pos_nm[0], at);
+        }
+    }
+}
+
+/// Issue 25, the home-switch hole: X is referenced at 300 mm and moving
+/// towards its switch's side; its home switch (home position 0, 4-tick
+/// debounce, 100 µm tolerance, the board's) glitches for one tick (50 µs
+/// on the board): nothing happens. Then the axis passes over an input
+/// that stays on for 20 ticks, 300 mm from where the switch is: no new
+/// reference either — a fault (`HOME_MISMATCH`) that drops X's
+/// reference, so the output ramps to zero; the next real homing (a
+/// debounced edge at the switch, from its side) references X again, and
+/// after `ClearFaults` the board corrects. Before issue 25 the glitch set
+/// X to 0, still referenced, and ex jumped.
+#[test]
+fn a_home_switch_glitch_or_pass_never_re_references_a_referenced_axis() {
+    let mut cfg = sim_engine_config();
+    cfg.axes[0].home = Some(HomeSwitch {
+        pos_nm: 0,
+        approach: Approach::Negative,
+        debounce_ticks: 4,
+        tolerance_nm: 100_000,
+    });
+    let table = sample_table(0);
+    let mut e = Engine::new(cfg).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    assert!(e.reference(0, 300_000_000));
+    assert!(e.reference(1, 0));
+    assert!(e.reference(2, 0));
+    run(&mut e, &clock, &mut io, 500);
+    assert!(e.faults().is_empty(), "{:?}", e.faults());
+    let tracked = |io: &Fake| 300_000_000 + io.counts[0] * 100;
+    let step = |e: &mut Engine<'_>, io: &mut Fake, home: u8| {
+        io.counts[0] -= 20; // 2 µm per tick towards the switch's side
+        io.home = home;
+        run(e, &clock, io, 1);
+    };
+    for _ in 0..50 {
+        step(&mut e, &mut io, 0);
+    }
+    let corr = e.corr_nm();
+    // A one-tick glitch: debounced away, nothing else.
+    step(&mut e, &mut io, 1);
+    step(&mut e, &mut io, 0);
+    assert_eq!(e.telemetry().pos_nm[0], tracked(&io), "a glitch moved X");
+    assert_eq!(e.referenced(), [true; 3]);
+    assert!(e.faults().is_empty(), "{:?}", e.faults());
+    assert!((e.corr_nm()[0] - corr[0]).abs() < 50, "no jump");
+    // A pass over an input that is on for 20 ticks, 300 mm from the switch.
+    for _ in 0..20 {
+        step(&mut e, &mut io, 1);
+    }
+    step(&mut e, &mut io, 0);
+    assert_eq!(e.telemetry().pos_nm[0], tracked(&io), "a pass moved X");
+    assert!(
+        e.faults().contains(Faults::HOME_MISMATCH) && e.faults().contains(Faults::NOT_REFERENCED),
+        "{:?}",
+        e.faults()
+    );
+    assert_eq!(e.referenced(), [false, true, true]);
+    // The mismatch came 4 ticks into the pass (the debounce); the output
+    // ramped to zero at the fault ramp over the 16 after.
+    assert_eq!(e.corr_nm(), [0; 3], "the output ramps to zero");
+    // Real homing: the switch turns on (debounced, from its side) at the
+    // count where X is 0 mm by the machine's own scale — the axis is
+    // referenced there; `ClearFaults` lets the correction back in.
+    for _ in 0..5 {
+        step(&mut e, &mut io, 0);
+    }
+    // The count of the first tick on the switch.
+    let at = io.counts[0] - 20;
+    for _ in 0..4 {
+        step(&mut e, &mut io, 1);
+    }
+    assert_eq!(e.referenced(), [true; 3]);
+    assert_eq!(e.telemetry().pos_nm[0], (io.counts[0] - at) * 100);
+    assert!(e.faults().contains(Faults::HOME_MISMATCH), "sticky");
+    e.clear_faults();
+    run(&mut e, &clock, &mut io, 1);
+    assert!(e.faults().is_empty(), "{:?}", e.faults());
+}
+
+/// Encoders as the board reads them: 16-bit hardware counters (the true
+/// count modulo 2^16) widened by `Widen16` at every read.
+struct Counters {
+    true_counts: [i64; 3],
+    wide: [trueaxis_app::sensors::Widen16; 3],
+}
+
+impl trueaxis_app::hw::Encoders for Counters {
+    fn read_counts(&mut self) -> [i32; 3] {
+        core::array::from_fn(|a| self.wide[a].update(self.true_counts[a] as u16))
+    }
+}
+
+/// Issue 25, the stalled-erase hole: the board's geometry (25 nm per
+/// count, 500 mm/s, 16-bit counters widened in software, 50 µs ticks);
+/// the loop stalls for 1.5 s (a flash erase) while X moves 66 236 counts
+/// (1.656 mm). The widened count then reads 700 counts (17.5 µm): the
+/// position is 1.6384 mm wrong, and the jump check (2 000 counts a tick)
+/// does not see it. The gap is longer than the widening can follow
+/// (1 638 µs at 500 mm/s) and X moved: `POSITION_LOST`, X unreferenced,
+/// the output ramps to zero. A stall without motion keeps the reference;
+/// so does motion across a gap the widening covers.
+#[test]
+fn motion_during_a_long_stall_is_not_a_silent_position_error() {
+    let mut cfg = sim_engine_config();
+    cfg.period_us = 50;
+    cfg.max_steps_per_tick = 2;
+    for a in cfg.axes.iter_mut() {
+        a.pm_per_count = 25_000;
+        a.max_speed_nm_per_ms = 500_000;
+        a.counter_bits = 16;
+    }
+    let table = sample_table(0);
+    let mut e = Engine::new(cfg).unwrap();
+    e.set_model(loaded(&table), info(&table));
+    let clock = FakeClock(Cell::new(0));
+    let mut enc = Counters {
+        true_counts: [0; 3],
+        wide: [trueaxis_app::sensors::Widen16::new(0); 3],
+    };
+    let mut io = Fake::new();
+    reference_at_zero(&mut e);
+    let mut tick = |e: &mut Engine<'_>, enc: &mut Counters, dt: u64| {
+        clock.0.set(clock.0.get() + dt);
+        let mut t = Fake { ..io };
+        e.tick(&clock, enc, &mut t, &mut io);
+    };
+    for _ in 0..20_000 {
+        tick(&mut e, &mut enc, 50);
+    }
+    assert!(e.faults().is_empty(), "{:?}", e.faults());
+    // A 1.5 s stall at rest (a commit's erase after the quiet time): the
+    // reference stays.
+    e.begin_stall();
+    tick(&mut e, &mut enc, 1_500_000);
+    e.end_stall();
+    tick(&mut e, &mut enc, 50);
+    assert!(e.faults().is_empty(), "{:?}", e.faults());
+    // Motion across a gap the widening covers (1 600 µs; 25 µm, within
+    // the jump check's 2 000 counts).
+    enc.true_counts[1] += 1000;
+    tick(&mut e, &mut enc, 1_600);
+    tick(&mut e, &mut enc, 50);
+    assert_eq!(e.referenced(), [true; 3]);
+    e.clear_faults(); // the late tick's overrun
+                      // The issue's stall: 1.5 s, X moves 66 236 counts.
+    e.begin_stall();
+    enc.true_counts[0] += 66_236;
+    tick(&mut e, &mut enc, 1_500_000);
+    e.end_stall();
+    let pos = e.telemetry().pos_nm[0];
+    assert_eq!(pos, 700 * 25, "the widening aliased as the issue says");
+    assert!(
+        !e.referenced()[0]
+            && e.faults().contains(Faults::NOT_REFERENCED)
+            && e.faults().contains(Faults::POSITION_LOST),
+        "X corrects from a position 1.6384 mm wrong: referenced {:?}, faults {:?}",
+        e.referenced(),
+        e.faults()
+    );
+    assert_eq!(e.referenced(), [false, true, true]);
+    // Not an overrun (the stall was announced), and the output ramps to
+    // zero until X is referenced again.
+    assert!(!e.faults().contains(Faults::LOOP_OVERRUN));
+    let before = e.corr_nm()[0].abs();
+    tick(&mut e, &mut enc, 50);
+    assert!(e.corr_nm()[0].abs() <= before);
+}
+
+/// The widening's safe gap at the ends of its range and one past, per
+/// counter width: an axis that moved across a gap of exactly the longest
+/// the widening covers keeps its reference, one µs more loses it; a
+/// 32-bit count never does; and a widened counter without a top speed is
+/// refused by the configuration check.
+#[test]
+fn the_widenings_safe_gap_holds_to_the_microsecond() {
+    for bits in [8u8, 16, 31] {
+        // 100 nm per count at 100 nm/µs: the safe gap is 2^(bits−1) − 1 µs.
+        let safe = (1u64 << (bits - 1)) - 1;
+        for (gap, keeps) in [(safe, true), (safe + 1, false)] {
+            let mut cfg = sim_engine_config();
+            cfg.period_us = 50;
+            for a in cfg.axes.iter_mut() {
+                a.pm_per_count = 100_000;
+                a.max_speed_nm_per_ms = 100_000;
+                a.counter_bits = bits;
+            }
+            let mut e = Engine::new(cfg).unwrap();
+            let clock = FakeClock(Cell::new(0));
+            let mut io = Fake::new();
+            reference_at_zero(&mut e);
+            run(&mut e, &clock, &mut io, 5);
+            clock.0.set(clock.0.get() + gap - 50);
+            // 5 µm: beyond the 1 µm still band, within a tick's jump limit.
+            io.counts[2] += 50;
+            run(&mut e, &clock, &mut io, 1);
+            assert_eq!(e.referenced()[2], keeps, "{bits} bits, gap {gap} µs");
+            assert_eq!(e.faults().contains(Faults::POSITION_LOST), !keeps);
+        }
+    }
+    // The largest scale the configuration takes (±(2^31 − 1) pm per
+    // count) with the slowest and fastest speeds: no overflow, and one
+    // past the scale is refused.
+    let mut cfg = sim_engine_config();
+    cfg.axes[0].pm_per_count = i32::MAX as i64;
+    cfg.axes[0].max_speed_nm_per_ms = 1;
+    cfg.axes[0].counter_bits = 31;
+    cfg.axes[1].pm_per_count = -(i32::MAX as i64);
+    cfg.axes[1].max_speed_nm_per_ms = i32::MAX;
+    cfg.axes[1].counter_bits = 1;
+    let mut e = Engine::new(cfg).unwrap();
+    let clock = FakeClock(Cell::new(0));
+    let mut io = Fake::new();
+    reference_at_zero(&mut e);
+    run(&mut e, &clock, &mut io, 2);
+    clock.0.set(u64::MAX / 2);
+    run(&mut e, &clock, &mut io, 2);
+    assert_eq!(e.referenced(), [true; 3], "no motion: no loss");
+    for pm in [
+        i32::MAX as i64 + 1,
+        -(i32::MAX as i64) - 1,
+        i64::MIN,
+        i64::MAX,
+    ] {
+        let mut cfg = sim_engine_config();
+        cfg.axes[2].pm_per_count = pm;
+        assert_eq!(
+            Engine::new(cfg).err(),
+            Some(ConfigError::Scale { axis: 2 }),
+            "{pm}"
+        );
+    }
+    let mut cfg = sim_engine_config();
+    cfg.axes[1].counter_bits = 16; // max speed 0: unbounded
+    assert_eq!(
+        Engine::new(cfg).err(),
+        Some(ConfigError::CounterUnbounded { axis: 1 })
+    );
+    for bits in [0u8, 33] {
+        let mut cfg = sim_engine_config();
+        cfg.axes[2].counter_bits = bits;
+        assert_eq!(
+            Engine::new(cfg).err(),
+            Some(ConfigError::CounterUnbounded { axis: 2 })
+        );
+    }
+    let mut cfg = sim_engine_config();
+    cfg.axes[0].home = Some(HomeSwitch {
+        debounce_ticks: 0,
+        ..home_at_minus_5mm()
+    });
+    assert_eq!(
+        Engine::new(cfg).err(),
+        Some(ConfigError::HomeSwitch { axis: 0 })
+    );
 }

@@ -1,8 +1,9 @@
 //! The engine's output limits as properties (issue 14), over random tables
 //! (slew from 1 nm/ms to the format's limit of 10 000 000 nm/ms, max |correction| 0.1–100 µm), random
 //! motion, late ticks, table switches, temperature faults and their
-//! clearing, referencing (over the link and by X's home switch) and
-//! references lost (encoder jumps):
+//! clearing, referencing (over the link and by X's home switch, which
+//! references an unreferenced X and faults on a referenced one far from
+//! it) and references lost (encoder jumps, home-switch mismatches):
 //! - the output changes per tick by at most the rate in force (the table's
 //!   slew as the engine applies it, or the fault ramp while a fault is
 //!   active) plus 1 nm of rounding;
@@ -19,7 +20,7 @@ mod common;
 use std::cell::Cell;
 
 use proptest::prelude::*;
-use trueaxis_app::engine::{round_div, Engine};
+use trueaxis_app::engine::{round_div, Approach, Engine, HomeSwitch};
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::sim::{sample_spec, sim_engine_config};
 use trueaxis_protocol::{Faults, Slot, SlotInfo};
@@ -112,7 +113,15 @@ proptest! {
         for a in cfg.axes.iter_mut() {
             a.max_speed_nm_per_ms = 1_500_000;
         }
-        cfg.axes[0].home_nm = Some(12_000_000);
+        // X's switch at 12 mm, approached towards positive counts, believed
+        // at once (a debounce of 1: the debounce has its own tests), 1 mm
+        // tolerance — a referenced X far from 12 mm faults on an edge.
+        cfg.axes[0].home = Some(HomeSwitch {
+            pos_nm: 12_000_000,
+            approach: Approach::Positive,
+            debounce_ticks: 1,
+            tolerance_nm: 1_000_000,
+        });
         let pulse_nm = cfg.axes.map(|a| a.pulse_nm as i64);
         let period = cfg.period_us as i64;
         let fault_ramp = cfg.fault_ramp_nm_per_ms as i64;
@@ -128,8 +137,13 @@ proptest! {
         let mut referenced = [false; 3];
         let mut ever_all = false;
         let mut last_home: Option<u8> = None;
+        // X's reference offset (nm at count 0: positions are counts · 100)
+        // and the direction it last moved, as the engine sees them.
+        let mut offset_x = 0i64;
+        let mut dir_x = 0i64;
         for op in ops {
             let mut dt = period as u64;
+            let x_before = io.counts[0];
             match op {
                 Op::Move(d) => {
                     for (c, d) in io.counts.iter_mut().zip(d) {
@@ -147,6 +161,9 @@ proptest! {
                 Op::Reference(axis, pos) => {
                     prop_assert!(e.reference(axis, pos));
                     referenced[axis] = true;
+                    if axis == 0 {
+                        offset_x = pos as i64 - io.counts[0] as i64 * 100;
+                    }
                 }
                 Op::Home(axis, on) => {
                     if on {
@@ -161,10 +178,24 @@ proptest! {
                     referenced[axis] = false;
                 }
             }
-            // The switch turning on references X (the only axis with a
-            // home position); on at the first tick is no edge.
-            if last_home.is_some_and(|h| io.home & !h & 1 != 0) {
-                referenced[0] = true;
+            // X's switch turning on (the only axis with one; on at the
+            // first tick is no edge), reached moving towards positive
+            // counts: it references X without a reference, and checks a
+            // referenced X — more than 1 mm from 12 mm loses the
+            // reference (a fault). Reached the other way, or before X ever
+            // moved: nothing.
+            // (The engine sees motion between two reads: none at its first.)
+            let dx = io.counts[0] as i64 - x_before as i64;
+            if dx != 0 && last_home.is_some() {
+                dir_x = dx.signum();
+            }
+            if last_home.is_some_and(|h| io.home & !h & 1 != 0) && dir_x > 0 {
+                if !referenced[0] {
+                    referenced[0] = true;
+                    offset_x = 12_000_000 - io.counts[0] as i64 * 100;
+                } else if (io.counts[0] as i64 * 100 + offset_x - 12_000_000).abs() > 1_000_000 {
+                    referenced[0] = false;
+                }
             }
             last_home = Some(io.home);
             clock.0.set(clock.0.get() + dt);

@@ -1049,6 +1049,12 @@ fn the_board_refuses_exactly_what_board_check_refuses() {
             Some(LinkError::InvalidTable),
         ),
         (
+            "off its definition",
+            off_definition_table(),
+            check(&parse(&off_definition_table()).unwrap()),
+            Some(LinkError::InvalidTable),
+        ),
+        (
             "loop budget",
             slow,
             Err(LimitError::TooSlow {
@@ -1094,4 +1100,109 @@ fn the_board_refuses_exactly_what_board_check_refuses() {
             }
         }
     }
+}
+
+/// The sample table with an Abbe term whose coefficients sum near the
+/// loader's limit and a tool-arm range reaching 2^31 nm: it loads, but its
+/// fixed point departs from its own definition by tens of µm.
+fn off_definition_table() -> Vec<u8> {
+    use model_core::spec::TermSpec;
+    let mut spec = trueaxis_app::sim::sample_spec(0);
+    spec.terms.push(TermSpec::Abbe {
+        output: 0,
+        coefs: vec![([1, 0, 0], 30_000.0)],
+    });
+    spec.envelope.tool_min_nm = -i32::MAX;
+    spec.envelope.tool_max_nm = i32::MAX;
+    let bad = spec.encode().unwrap();
+    assert!(matches!(
+        model_core::board::check(&parse(&bad).unwrap()),
+        Err(model_core::board::LimitError::OffDefinition(_))
+    ));
+    bad
+}
+
+/// Issue 25: a table whose fixed point departs from its own definition —
+/// an Abbe term whose coefficients sum near the loader's limit, with a
+/// tool-arm range reaching 2^31 nm — is refused at commit (nothing
+/// written), and the table that ran keeps running.
+#[test]
+fn an_off_definition_table_is_refused_at_commit_and_the_old_one_keeps_running() {
+    let bad = off_definition_table();
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    let good = sample_table(1);
+    install(&mut b, &mut p, &good);
+    let ops = b.flash_ops();
+    stage(&mut b, &mut p, 10, &bad, table_id(&bad));
+    assert_eq!(
+        call(&mut b, &mut p, 12, Request::Commit),
+        Response::Error(LinkError::InvalidTable)
+    );
+    assert_eq!(b.flash_ops(), ops, "nothing written");
+    assert_eq!(b.engine().active().map(|a| a.crc32), Some(table_id(&good)));
+}
+
+/// Issue 25: the same table reaching a slot without a commit (written
+/// through a debug probe by a host tool that did not check it): the boot
+/// does not run it — the other slot's table runs.
+#[test]
+fn an_off_definition_table_in_flash_is_not_booted() {
+    use trueaxis_app::sim::{SimFlash, SIM_LAYOUT, SIM_SLOT_BYTES};
+    use trueaxis_app::store::TableStore;
+    let good = sample_table(1);
+    let bad = off_definition_table();
+    let flash = SimFlash::new_erased(vec![0; 2 * SIM_SLOT_BYTES as usize]);
+    let mut store = TableStore::new(flash, SIM_LAYOUT).unwrap();
+    let mut buf = vec![0u8; model_core::board::STAGE_BYTES];
+    store.scan(&mut buf, |_| true);
+    store.commit(&good, |_| true).unwrap();
+    store.commit(&bad, |_| true).unwrap();
+    assert_eq!(store.active().map(|a| a.crc32), Some(table_id(&bad)));
+    let b = SimBoard::with_flash(store.into_flash());
+    assert_eq!(b.engine().active().map(|a| a.crc32), Some(table_id(&good)));
+}
+
+/// Issue 25: `Activate` while an axis moves. It reloads the newest table
+/// and used to reset the reversal trackers: ex dropped by the whole
+/// reversal amplitude (2.5 µm) until X had travelled 20 µm. Now it is
+/// refused while the axes move (the commit's quiet rule) and, at rest,
+/// keeps the reversal state.
+#[test]
+fn activate_while_moving_does_not_reset_the_reversal_state() {
+    let mut b = SimBoard::new();
+    let mut p = Port::new();
+    let t = sample_table(0);
+    install(&mut b, &mut p, &t);
+    reference_all(&mut b, &mut p);
+    // X moves forward 0.1 µm per tick for 500 ticks: reversal state +1.
+    for _ in 0..500 {
+        b.io.lock().unwrap().counts[0] += 1;
+        b.tick(1);
+    }
+    let before = b.engine().telemetry().model_corr_nm;
+    let answer = call(&mut b, &mut p, 20, Request::Activate);
+    assert_eq!(
+        answer,
+        Response::Error(LinkError::AxesMoving { quiet_ms: 200 })
+    );
+    b.io.lock().unwrap().counts[0] += 1;
+    b.tick(1);
+    let after = b.engine().telemetry().model_corr_nm;
+    assert!(
+        (after[0] - before[0]).abs() < 100,
+        "Activate while moving ({answer:?}) changed ex {} -> {}",
+        before[0],
+        after[0]
+    );
+    // At rest for the quiet time it goes through, and the reversal state
+    // (+1: X last moved forward) is kept across the table's reload.
+    b.tick(250);
+    let before = b.engine().telemetry().model_corr_nm;
+    assert!(matches!(
+        call(&mut b, &mut p, 21, Request::Activate),
+        Response::Activated(_)
+    ));
+    b.tick(1);
+    assert_eq!(b.engine().telemetry().model_corr_nm, before);
 }

@@ -36,7 +36,7 @@ use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, interrupt as irq_attr, Peri, Peripherals};
 use static_cell::StaticCell;
 
-use trueaxis_app::engine::{AxisConfig, EngineConfig};
+use trueaxis_app::engine::{Approach, AxisConfig, EngineConfig, HomeSwitch};
 use trueaxis_app::hw::{Encoders, StepOutput};
 use trueaxis_app::sensors::{Ntc, Widen16};
 use trueaxis_app::store::Layout;
@@ -129,9 +129,28 @@ const AXIS: AxisConfig = AxisConfig {
     origin_nm: 0,
     pulse_nm: 100,
     max_speed_nm_per_ms: 500_000,
-    // The home switches (PC8-PC10) trip at the machine's origin; a build
-    // for a machine whose switches sit elsewhere sets that position here.
-    home_nm: Some(0),
+    // TIM2-TIM4 in encoder mode, read as 16 bits and widened (`Widen16`):
+    // at 500 mm/s and 25 nm per count the widening follows the axis over
+    // gaps up to 1.638 ms between ticks; an axis that moves across a
+    // longer gap (a stall) loses its reference.
+    counter_bits: 16,
+    home: Some(HOME),
+};
+
+/// The home switches (PC8-PC10) trip at the machine's origin, approached
+/// moving towards negative counts (homing to the minimum end); a build
+/// for a machine whose switches sit elsewhere sets that here. Debounced
+/// over 4 ticks (200 µs; the edge is dated at the first of them, so the
+/// debounce costs no accuracy). A referenced axis whose switch turns on
+/// more than 100 µm from 0 — a glitch on the input, or a position that
+/// drifted — faults (`home_mismatch`) and loses its reference: 100 µm is
+/// a mechanical switch's repeatability with margin plus the 25 µm a
+/// 500 mm/s pass moves in the one tick the input is read late.
+const HOME: HomeSwitch = HomeSwitch {
+    pos_nm: 0,
+    approach: Approach::Negative,
+    debounce_ticks: 4,
+    tolerance_nm: 100_000,
 };
 
 /// Thermistors fitted on PC0-PC3.

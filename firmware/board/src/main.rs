@@ -47,6 +47,8 @@ const QUIET_MS: u32 = 500;
 
 #[cortex_m_rt::entry]
 fn main() -> ! {
+    // First: a stack overflow faults from here on (trueaxis_stack_guard).
+    trueaxis_stack_guard::enable();
     let cause = reset::reset_cause();
     let record = reset::read_record();
     let p = embassy_stm32::init(board::clocks());

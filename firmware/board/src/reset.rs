@@ -8,9 +8,12 @@
 //!   [`RecordRam`]) and by the two handlers below, read once at boot.
 //! - The panic handler and the HardFault handler record which fault it was
 //!   and reset at once (`SCB::sys_reset`): the next boot decides whether
-//!   the running table failed its trial. (A fault that cannot reach its
-//!   handler — a lockup — stops the loop, and the watchdog resets; the
-//!   reset flags say so.)
+//!   the running table failed its trial. A stack overflow is a HardFault
+//!   too: the stack sits below the statics with an MPU guard region under
+//!   it, and the fault entry moves to a fresh stack before this handler
+//!   runs (trueaxis_stack_guard). (A fault that cannot reach its handler —
+//!   a lockup — stops the loop, and the watchdog resets; the reset flags
+//!   say so.)
 //! - [`reset_cause`]: RCC_CSR's reset flags, read and cleared at boot.
 #![allow(unsafe_code)] // a `.uninit` static and the fault handlers
 
@@ -93,7 +96,11 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     record_fault_and_reset(Fault::Panic)
 }
 
-#[cortex_m_rt::exception]
-unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+/// The HardFault handler, entered through trueaxis_stack_guard's entry on
+/// a fresh stack (so a stack overflow, which left the stack pointer below
+/// RAM, gets here too instead of locking the core up); `_sp` is the stack
+/// pointer at the fault.
+#[unsafe(no_mangle)]
+extern "C" fn trueaxis_hard_fault(_sp: u32) -> ! {
     record_fault_and_reset(Fault::HardFault)
 }

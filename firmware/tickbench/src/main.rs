@@ -32,7 +32,7 @@ use core::hint::black_box;
 use model_core::board;
 use semihosting::println;
 use stm32_metapac::TIM2;
-use trueaxis_app::engine::{AxisConfig, Engine, EngineConfig};
+use trueaxis_app::engine::{Approach, AxisConfig, Engine, EngineConfig, HomeSwitch};
 use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_protocol::{Slot, SlotInfo, LINK_TEMPS};
@@ -70,6 +70,14 @@ static TABLES: [(&str, &[u8]); 6] = [
     ),
 ];
 
+/// The board's home switch (firmware/board/src/board.rs).
+const HOME: HomeSwitch = HomeSwitch {
+    pos_nm: 0,
+    approach: Approach::Negative,
+    debounce_ticks: 4,
+    tolerance_nm: 100_000,
+};
+
 /// The board's configuration (firmware/board/src/board.rs).
 const CONFIG: EngineConfig = EngineConfig {
     axes: [AxisConfig {
@@ -77,7 +85,8 @@ const CONFIG: EngineConfig = EngineConfig {
         origin_nm: 0,
         pulse_nm: 100,
         max_speed_nm_per_ms: 500_000,
-        home_nm: None,
+        counter_bits: 16,
+        home: Some(HOME),
     }; 3],
     period_us: 50,
     max_steps_per_tick: 2,

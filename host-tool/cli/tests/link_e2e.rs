@@ -293,6 +293,13 @@ fn a_cut_upload_keeps_the_old_table_and_the_next_upload_resumes() {
 /// answer to a request `lost` picks (a frame lost on the way back) and
 /// passes every other byte through.
 fn lossy_proxy(board: &str, lost: fn(&Request) -> bool) -> String {
+    proxy(board, lost, None)
+}
+
+/// A TCP proxy between the host and the board that replaces the board's
+/// first answer to a request `pick` picks by `instead` (`None`: drops it)
+/// and passes every other byte through.
+fn proxy(board: &str, lost: fn(&Request) -> bool, instead: Option<Response>) -> String {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = format!("tcp://{}", listener.local_addr().unwrap());
     let board = board.strip_prefix("tcp://").unwrap().to_string();
@@ -345,9 +352,13 @@ fn lossy_proxy(board: &str, lost: fn(&Request) -> bool) -> String {
                 else {
                     continue;
                 };
+                let mut p = p;
                 if !dropped && Some(p.seq) == *lost_seq.lock().unwrap() {
                     dropped = true;
-                    continue;
+                    match &instead {
+                        None => continue,
+                        Some(r) => p.msg = r.clone(),
+                    }
                 }
                 let mut frame = [0u8; MAX_FRAME_BYTES];
                 let k = encode_frame(&p, &mut frame).unwrap();
@@ -381,6 +392,29 @@ fn an_upload_whose_commit_answer_is_lost_still_succeeds() {
     let s = status_json(&board.port);
     assert_eq!(s["active"]["crc32"], crc_hex(&table));
     assert_eq!(s["active"]["seq"], 1, "written once");
+}
+
+/// Issue 25: `Activate` is under the commit's quiet rule. An axis that
+/// starts moving between the commit and the activation gets `AxesMoving`
+/// for the `Activate` — but the commit ran the table already, so the
+/// upload succeeds (what runs is checked by `Identify`), with the
+/// committed table reported active.
+#[test]
+fn an_upload_whose_activate_meets_a_moving_axis_still_succeeds() {
+    let board = Board::start();
+    let refused = Response::Error(trueaxis_protocol::LinkError::AxesMoving { quiet_ms: 200 });
+    let proxy = proxy(
+        &board.port,
+        |r| matches!(r, Request::Activate),
+        Some(refused),
+    );
+    let table = sample_table(0);
+    let mut c = Client::open(&proxy, Timing::default()).unwrap();
+    let r = c.upload(&table, |_, _| {}).unwrap();
+    assert_eq!(r.committed.crc32, table_id(&table));
+    assert_eq!(r.activated, r.committed);
+    drop(c);
+    assert_eq!(status_json(&board.port)["active"]["crc32"], crc_hex(&table));
 }
 
 /// Uploading the table that already runs writes nothing: written again it
@@ -595,6 +629,63 @@ fn tables_beyond_the_boards_limits_are_refused_before_touching_it() {
             assert!(err.contains(&want), "{args:?}: {err}");
         }
     }
+}
+
+/// The sample table with an Abbe term whose coefficients sum near the
+/// loader's limit and a tool-arm range reaching 2^31 nm: valid and
+/// loadable, but its fixed point departs from its own definition by tens
+/// of µm (issue 25).
+fn off_definition_table() -> Vec<u8> {
+    use model_core::spec::TermSpec;
+    let mut spec = sample_spec(0);
+    spec.terms.push(TermSpec::Abbe {
+        output: 0,
+        coefs: vec![([1, 0, 0], 30_000.0)],
+    });
+    spec.envelope.tool_min_nm = -i32::MAX;
+    spec.envelope.tool_max_nm = i32::MAX;
+    spec.encode().unwrap()
+}
+
+/// Issue 25: `trueaxis upload` and `flash` refuse a table whose fixed
+/// point departs from its own definition, saying by how much, on which
+/// output and what the board allows, before touching the board; and the
+/// board, sent the same table anyway (the link client's raw upload, as a
+/// host tool that does not check would), refuses it at commit and keeps
+/// the table it runs.
+#[test]
+fn an_off_definition_table_is_refused_by_upload_flash_and_the_board() {
+    let bad = off_definition_table();
+    let path = table_file("off_definition", &bad);
+    let board = Board::start();
+    let good = sample_table(0);
+    let good_path = table_file("off_definition_good", &good);
+    upload_json(&good_path, &board.port);
+    for args in [
+        vec!["upload", path.to_str().unwrap(), "--port", &board.port],
+        vec!["flash", path.to_str().unwrap()],
+    ] {
+        let out = trueaxis(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        for want in [
+            "does not fit the board",
+            "its fixed-point evaluation can depart from the table's own definition",
+            "nm on ex",
+            "(Abbe)",
+            "the board allows 100 nm",
+        ] {
+            assert!(err.contains(want), "{args:?}: no `{want}` in {err}");
+        }
+    }
+    let mut client = Client::open(&board.port, Timing::default()).unwrap();
+    let e = client.upload(&bad, |_, _| {}).unwrap_err();
+    assert!(
+        e.to_string().contains("rejected the table as invalid"),
+        "{e}"
+    );
+    drop(client);
+    assert_eq!(status_json(&board.port)["active"]["crc32"], crc_hex(&good));
 }
 
 #[test]

@@ -531,7 +531,7 @@ fn factored_term<const P: usize>(
     let per_mc = matches!(factor, Factor::Temp { .. });
     let coef = |c: f64| if per_mc { c / 1000.0 } else { c };
     let sum: f64 = coefs.iter().map(|(_, c)| coef(c).abs()).sum();
-    let q = choose_q(sum, 16).ok_or(range_err)?;
+    let q = super::factored_q(sum).ok_or(range_err)?;
     for (mono, c) in coefs.iter() {
         let idx = mono_index(mono).unwrap_or(0) as u8;
         pools.push(coef(c) as f32, to_q(coef(c), q), idx);
@@ -698,7 +698,7 @@ fn mlp_term<const P: usize>(
             }
             worst = worst.max(s);
         }
-        let q = choose_q(worst, 0).ok_or(range_err)?;
+        let q = super::mlp_layer_q(worst).ok_or(range_err)?;
         qs[layer.min(2)] = q as u8;
     }
     // Output layer q goes last so the evaluators find it at index 2.

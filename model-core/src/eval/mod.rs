@@ -48,7 +48,7 @@ mod kernels;
 mod load;
 
 /// What the firmware feeds the model each cycle.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Inputs {
     /// x, y, z machine position, nm (encoder counts × scale).
@@ -462,6 +462,19 @@ struct FactoredF32 {
 /// every block shift s = q + 14 in [16, 46] (`load`) — Σ|c| between
 /// ~0.25 nm and ~0.5 m — or an output without coefficients.
 /// [`crate::cost`] asks the same to pick the path's cost.
+/// The binary scale q of a thermal or Abbe term's coefficients (Σ|c| ≤
+/// `sum_abs`): the largest with Σ|c|·2^q < 2^31, at least 16 (`None`: the
+/// loader refuses the term). Shared with `definition`'s static bound.
+pub(crate) fn factored_q(sum_abs: f64) -> Option<i32> {
+    kernels::choose_q(sum_abs, 16)
+}
+
+/// The binary scale q of an MLP layer whose largest row has Σ|w| + |b| =
+/// `worst` (`load::mlp_term`); `None`: the loader refuses the term.
+pub(crate) fn mlp_layer_q(worst: f64) -> Option<i32> {
+    kernels::choose_q(worst, 0)
+}
+
 pub(crate) fn poly_fixed_takes(sum_abs: [f64; 3]) -> bool {
     sum_abs.iter().all(|&s| {
         s == 0.0 || kernels::choose_q(s, 0).is_some_and(|q| poly_fixed_shift_ok((q + 14) as u32))

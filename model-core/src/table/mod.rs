@@ -255,6 +255,19 @@ pub enum TermKind {
 }
 
 impl TermKind {
+    /// The kind's name in messages.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Poly => "polynomial",
+            Self::Periodic => "periodic",
+            Self::Thermal => "thermal",
+            Self::Reversal => "reversal",
+            Self::Abbe => "Abbe",
+            Self::Mlp => "MLP",
+            Self::Grid => "grid",
+        }
+    }
+
     fn from_u8(v: u8) -> Option<Self> {
         Some(match v {
             1 => Self::Poly,

@@ -256,6 +256,125 @@ pub fn random_spec(seed: u64, kinds: &[Kind]) -> TableSpec {
     spec
 }
 
+/// The edge-table generator: a table at the edges of what load accepts
+/// (every term kind; huge grid values, coefficient sums just under the
+/// fixed-point limit, large amplitudes, steep MLPs), model `round` of the
+/// stream `rng` draws (`extreme_but_valid_models_never_overflow`).
+pub fn extreme_spec(round: u64, rng: &mut Rng) -> TableSpec {
+    let mut spec = random_spec(900 + round, &ALL_KINDS);
+    spec.envelope.max_corr_nm = [model_core::table::MAX_CORR_LIMIT_NM; 3];
+    let scale = [1.0, 10.0, 100.0, 500.0][round as usize % 4];
+    for t in spec.terms.iter_mut() {
+        match t {
+            TermSpec::Poly { coefs, .. } => {
+                let n = coefs.len() as f64;
+                for c in coefs.iter_mut() {
+                    c.1 = rng.sym(6.0e8 / n);
+                }
+            }
+            TermSpec::Grid(g) => {
+                for v in g.values_nm.iter_mut() {
+                    *v = rng.sym(4.1e6);
+                }
+            }
+            TermSpec::Reversal { amplitude_nm, .. } => *amplitude_nm = rng.sym(2.0e9),
+            TermSpec::Periodic { sin_nm, cos_nm, .. } => {
+                for v in sin_nm.iter_mut().chain(cos_nm.iter_mut()) {
+                    *v = rng.sym(2.0e8);
+                }
+            }
+            TermSpec::Thermal { coefs_nm_per_k, .. } => {
+                for c in coefs_nm_per_k.iter_mut() {
+                    c.1 = rng.sym(1e4 * scale);
+                }
+            }
+            TermSpec::Abbe { coefs, .. } => {
+                for c in coefs.iter_mut() {
+                    c.1 = rng.sym(1e-3 * scale);
+                }
+            }
+            TermSpec::Mlp(m) => {
+                for l in m.hidden.iter_mut().chain(std::iter::once(&mut m.output)) {
+                    for w in l.weights.iter_mut().chain(l.bias.iter_mut()) {
+                        *w *= scale.sqrt();
+                    }
+                }
+                for v in m.out_max_nm.iter_mut() {
+                    *v = 5e6;
+                }
+            }
+        }
+    }
+    spec
+}
+
+/// [`extreme_spec`] widened for the definition check (issue 25): a random
+/// subset of the term kinds, every term's coefficients scaled by 10^−6 …
+/// 10^12 (an MLP's hidden weights by 10^−3 … 10^12), the max |correction|
+/// from 100 nm to the format's limit (or at the limit: nothing clamped),
+/// and on half the draws a tool-arm range reaching ±2^31 nm — the tables
+/// whose fixed point or f32 can depart from their own definition.
+pub fn edge_spec(seed: u64) -> TableSpec {
+    let mut rng = Rng(seed ^ 0xED6E_5EED);
+    let kinds: Vec<Kind> = (0..rng.int(1, 4))
+        .map(|_| ALL_KINDS[rng.int(0, 8) as usize])
+        .collect();
+    let mut spec = random_spec(seed, &kinds);
+    let logu = |rng: &mut Rng, lo: f64, hi: f64| 10f64.powf(rng.range(lo, hi));
+    let unclamped = rng.unit() < 0.5;
+    for a in 0..3 {
+        spec.envelope.max_corr_nm[a] = if unclamped {
+            model_core::table::MAX_CORR_LIMIT_NM
+        } else {
+            (logu(&mut rng, 2.0, 6.6) as i32).min(model_core::table::MAX_CORR_LIMIT_NM)
+        };
+    }
+    if rng.unit() < 0.5 {
+        let arm = |rng: &mut Rng| (logu(rng, 3.0, 9.34) as i64).min(i32::MAX as i64) as i32;
+        spec.envelope.tool_min_nm = -arm(&mut rng);
+        spec.envelope.tool_max_nm = arm(&mut rng);
+    }
+    for t in spec.terms.iter_mut() {
+        let s = logu(&mut rng, -6.0, 12.0);
+        match t {
+            TermSpec::Poly { coefs, .. }
+            | TermSpec::Thermal {
+                coefs_nm_per_k: coefs,
+                ..
+            }
+            | TermSpec::Abbe { coefs, .. } => {
+                for c in coefs.iter_mut() {
+                    c.1 *= s;
+                }
+            }
+            TermSpec::Grid(g) => {
+                for v in g.values_nm.iter_mut() {
+                    *v *= s;
+                }
+            }
+            TermSpec::Reversal { amplitude_nm, .. } => *amplitude_nm *= s,
+            TermSpec::Periodic { sin_nm, cos_nm, .. } => {
+                for v in sin_nm.iter_mut().chain(cos_nm.iter_mut()) {
+                    *v *= s;
+                }
+            }
+            TermSpec::Mlp(m) => {
+                let w = logu(&mut rng, -3.0, 12.0);
+                for l in m.hidden.iter_mut() {
+                    for x in l.weights.iter_mut().chain(l.bias.iter_mut()) {
+                        *x *= w;
+                    }
+                }
+                let w2 = logu(&mut rng, -6.0, 9.0);
+                for x in m.output.weights.iter_mut().chain(m.output.bias.iter_mut()) {
+                    *x *= w2;
+                }
+            }
+        }
+    }
+    spec
+}
+
 /// Random inputs inside the envelope (plus, with `outside`, sometimes beyond it).
 pub fn random_inputs(rng: &mut Rng, spec: &TableSpec, outside: bool) -> Inputs {
     let env = &spec.envelope;

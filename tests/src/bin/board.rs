@@ -109,7 +109,8 @@ fn engine_config() -> EngineConfig {
         pulse_nm: 100,
         // Injected positions jump along the trajectory: no jump check.
         max_speed_nm_per_ms: 0,
-        home_nm: None,
+        counter_bits: 32,
+        home: None,
     };
     EngineConfig {
         axes: [axis; 3],

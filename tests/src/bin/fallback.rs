@@ -124,7 +124,8 @@ fn engine_config() -> EngineConfig {
         origin_nm: 0,
         pulse_nm: 100,
         max_speed_nm_per_ms: 0,
-        home_nm: None,
+        counter_bits: 32,
+        home: None,
     };
     EngineConfig {
         axes: [axis; 3],

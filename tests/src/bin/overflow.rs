@@ -1,7 +1,9 @@
 //! A deliberately overflowing image: unbounded recursion must stop the
 //! emulation with a fault as soon as the stack leaves RAM (the stack sits
 //! below the statics, see qemu.x), not corrupt the statics and carry on.
-//! xtask requires QEMU to end in a lockup, not a clean exit or a hang.
+//! xtask requires exit 1 with the HardFault handler's stack-overflow
+//! report (the board's fault entry, trueaxis_stack_guard, reaches the
+//! handler on a fresh stack) — not a clean exit, a lockup or a hang.
 #![no_std]
 #![no_main]
 

@@ -34,6 +34,11 @@ pub const BUDGETS: [(&str, u64); 6] = [
 /// evaluates the cost estimate's calibration set (the QEMU crate's
 /// `calibrate` feature: build/cost_tables.rs, `calibration`).
 pub(super) fn run_bench(calibrate: bool) -> Result<Vec<BenchResult>> {
+    parse_bench_log(&run_bench_log(calibrate)?)
+}
+
+/// The bench image's log ([`run_bench`]).
+pub(super) fn run_bench_log(calibrate: bool) -> Result<String> {
     let features: &[&str] = if calibrate { &["calibrate"] } else { &[] };
     let elf = build_package_bin(PACKAGE, "bench", Profile::Release, features)?;
     eprintln!("\n$ qemu bench (-icount shift=0)");
@@ -46,7 +51,127 @@ pub(super) fn run_bench(calibrate: bool) -> Result<Vec<BenchResult>> {
             run.stderr
         ));
     }
-    parse_bench_log(&run.log)
+    Ok(run.log)
+}
+
+/// Builds and runs the definition-check image (tests/src/bin/defcheck.rs,
+/// firmware release profile, `-icount shift=0`) and returns its log.
+pub(super) fn run_defcheck_log() -> Result<String> {
+    let elf = build_package_bin(PACKAGE, "defcheck", Profile::Release, &[])?;
+    eprintln!("\n$ qemu defcheck (-icount shift=0)");
+    let run = run_image(&elf, &QemuOpts::default())?;
+    if !run.status.success() {
+        return Err(format!(
+            "the defcheck image failed ({})\n{}{}",
+            describe(&run.status),
+            run.log,
+            run.stderr
+        ));
+    }
+    Ok(run.log)
+}
+
+/// The most instructions the board's definition check
+/// (`model_core::definition::check_definition`) may take on a table the
+/// board accepts otherwise (fixed-point estimate within its model budget):
+/// 100 M, 0.6 s at 168 MHz — a commit waits for it before it writes
+/// (the link task, which the correction loop preempts), and the boot runs
+/// it on each slot before the loop starts. Measured: 2.0–38.9 M on the
+/// bench tables (BENCHMARKS.md, "Definition check").
+pub const CHECK_BUDGET_INSTR: u64 = 100_000_000;
+
+/// One `CHECK <name> instructions=N accepted=…` line of the defcheck image.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(super) struct CheckResult {
+    name: String,
+    instructions: u64,
+    accepted: bool,
+}
+
+/// Reads the defcheck image's `CHECK` lines.
+pub(super) fn parse_check_log(log: &str) -> Result<Vec<CheckResult>> {
+    let mut out = Vec::new();
+    for line in log.lines() {
+        let Some(rest) = line.split("CHECK ").nth(1) else {
+            continue;
+        };
+        let field = |key: &str| {
+            rest.split_whitespace()
+                .find_map(|w| w.strip_prefix(key)?.strip_prefix('='))
+                .ok_or_else(|| format!("CHECK line without {key}: {line}"))
+        };
+        out.push(CheckResult {
+            name: rest.split_whitespace().next().unwrap_or("").to_owned(),
+            instructions: field("instructions")?
+                .parse()
+                .map_err(|e| format!("CHECK instructions: {e} in {line}"))?,
+            accepted: field("accepted")? == "true",
+        });
+    }
+    if out.is_empty() {
+        return Err(format!("the defcheck image printed no CHECK line:\n{log}"));
+    }
+    Ok(out)
+}
+
+/// Every bench table passes the definition check (they are realistic
+/// tables: an accuracy of 1 nm, far inside the bound), and on every one
+/// the board would take otherwise (its `_fixed` estimate within
+/// `model_budget`) the check costs at most [`CHECK_BUDGET_INSTR`].
+pub(super) fn check_checks(
+    checks: &[CheckResult],
+    results: &[BenchResult],
+    model_budget: u64,
+) -> Result<()> {
+    let mut misses = Vec::new();
+    for c in checks {
+        let takes = results
+            .iter()
+            .find(|r| r.name == format!("{}_fixed", c.name))
+            .and_then(|r| r.est)
+            .is_some_and(|est| est <= model_budget);
+        if !c.accepted {
+            misses.push(format!("{}: refused by the definition check", c.name));
+        } else if takes && c.instructions > CHECK_BUDGET_INSTR {
+            misses.push(format!(
+                "{}: the definition check takes {} instructions, budget {CHECK_BUDGET_INSTR}",
+                c.name, c.instructions
+            ));
+        }
+    }
+    if misses.is_empty() {
+        Ok(())
+    } else {
+        Err(format!(
+            "definition check (model-core/src/definition.rs):\n  {}",
+            misses.join("\n  ")
+        ))
+    }
+}
+
+/// The board's model budget as the defcheck image prints it (`MODEL_BUDGET
+/// instructions=N`: model-core's `board::MODEL_BUDGET_INSTR`, defined once).
+pub(super) fn parse_model_budget(log: &str) -> Result<u64> {
+    log.lines()
+        .find_map(|l| l.split("MODEL_BUDGET instructions=").nth(1))
+        .and_then(|v| v.trim().parse().ok())
+        .ok_or_else(|| format!("the defcheck image printed no MODEL_BUDGET line:\n{log}"))
+}
+
+/// The definition check's counts, on stderr.
+pub(super) fn print_check_table(checks: &[CheckResult]) {
+    eprintln!(
+        "\n{:<24} {:>14} {:>10}",
+        "definition check", "instructions", "ms@168MHz"
+    );
+    for c in checks {
+        eprintln!(
+            "{:<24} {:>14} {:>10.1}",
+            c.name,
+            c.instructions,
+            c.instructions as f64 / 168_000.0
+        );
+    }
 }
 
 /// Every name of [`BUDGETS`] measured, and no worst call above its budget;
@@ -112,7 +237,14 @@ pub(super) fn budget_of(name: &str) -> Option<u64> {
 /// The bench image in `cargo xtask test`: the budgets must hold.
 pub(super) fn check_bench() -> Result<()> {
     let results = run_bench(false)?;
+    let log = run_defcheck_log()?;
+    let checks = parse_check_log(&log)?;
     print_bench_table(&results);
+    print_check_table(&checks);
+    check_checks(&checks, &results, parse_model_budget(&log)?)?;
+    eprintln!(
+        "qemu: every bench table passes the definition check, within {CHECK_BUDGET_INSTR} instructions where the board takes it"
+    );
     check_budgets(&results)?;
     eprintln!("qemu: instruction budgets met ({} benches)", BUDGETS.len());
     check_estimates(&results)?;
@@ -146,13 +278,21 @@ pub fn bench_mcu(args: &[String]) -> Result<()> {
         }
     }
     let results = run_bench(false)?;
+    let checks = parse_check_log(&run_defcheck_log()?)?;
     for r in &results {
         println!(
             "{{\"bench\": \"{}\", \"instructions_per_update\": {}, \"outputs\": 3}}",
             r.name, r.per_update
         );
     }
+    for c in &checks {
+        println!(
+            "{{\"definition_check\": \"{}\", \"instructions\": {}, \"accepted\": {}}}",
+            c.name, c.instructions, c.accepted
+        );
+    }
     print_bench_table(&results);
+    print_check_table(&checks);
     Ok(())
 }
 
@@ -491,6 +631,36 @@ pub(super) fn parse_bench_log(log: &str) -> Result<Vec<BenchResult>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn check_lines_are_read_and_held_to_the_budget() {
+        let log = "INFO  MODEL_BUDGET instructions=5320\n\
+                   INFO  BENCH a_fixed total=64 calls=64 min=1 max=1 est=500\n\
+                   INFO  BENCH slow_fixed total=64 calls=64 min=1 max=1 est=9000\n\
+                   INFO  CHECK a instructions=6934249 accepted=true\n\
+                   INFO  CHECK slow instructions=150000000 accepted=true\n";
+        let checks = parse_check_log(log).unwrap();
+        let results = parse_bench_log(log).unwrap();
+        assert_eq!(parse_model_budget(log).unwrap(), 5320);
+        assert_eq!(checks[0].instructions, 6_934_249);
+        // `slow` is over the check's budget but the board refuses it for
+        // its cost first: no miss.
+        assert!(check_checks(&checks, &results, 5320).is_ok());
+        // A table the board takes whose check is too slow, or a refusal.
+        let over = [CheckResult {
+            name: "a".into(),
+            instructions: CHECK_BUDGET_INSTR + 1,
+            accepted: true,
+        }];
+        assert!(check_checks(&over, &results, 5320).is_err());
+        let refused = [CheckResult {
+            name: "a".into(),
+            instructions: 1,
+            accepted: false,
+        }];
+        assert!(check_checks(&refused, &results, 5320).is_err());
+        assert!(parse_check_log("nothing").is_err());
+    }
 
     #[test]
     fn bench_lines_become_means() {

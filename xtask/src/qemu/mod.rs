@@ -65,18 +65,38 @@ pub fn test_all() -> Result<()> {
     }
     eprintln!("qemu: fault image exits 1 with a HardFault report, as it must");
     // And a stack overflow must stop the run (the stack sits below the
-    // statics, tests/qemu.x): QEMU ends in a lockup, never a clean exit.
+    // statics, tests/qemu.x, with the board's guard: trueaxis_stack_guard's
+    // fault entry leaves the overflowed stack): exit 1 with the HardFault
+    // handler's report of it, never a clean exit or a lockup.
     let overflow = build_bin("overflow", Profile::Dev)?;
     let run = run_image(&overflow, &QemuOpts::default())?;
-    if run.status.success() || !run.stderr.contains("Lockup") {
+    if run.status.code() != Some(1) || !run.stderr.contains("HardFault: stack overflow") {
         return Err(format!(
-            "the overflow image should lock the core up, got {}\n{}{}",
+            "the overflow image should exit 1 with a stack-overflow report, got {}\n{}{}",
             describe(&run.status),
             run.log,
             run.stderr
         ));
     }
-    eprintln!("qemu: stack overflow image stops with a lockup, as it must");
+    eprintln!("qemu: stack overflow image faults with a report, as it must");
+    // The board's stack guard end to end (issue 25): an overflow while a
+    // table is on trial reaches the HardFault handler, which records it in
+    // the boot record and resets; the next boot finds the record whole.
+    let guard = build_bin("stack_guard", Profile::Dev)?;
+    let run = run_image(&guard, &QemuOpts::default())?;
+    if !run.status.success()
+        || !run
+            .log
+            .contains("a stack overflow faulted: the boot record kept its table")
+    {
+        return Err(format!(
+            "the stack_guard image should exit 0 after the overflow's reset, got {}\n{}{}",
+            describe(&run.status),
+            run.log,
+            run.stderr
+        ));
+    }
+    eprintln!("qemu: a stack overflow faults and the boot record survives it (stack_guard)");
     // The boot fallback through real resets (SYSRESETREQ; QEMU keeps RAM):
     // a table that faults during its trial is left for the previous one.
     let fallback = build_bin("fallback", Profile::Dev)?;
