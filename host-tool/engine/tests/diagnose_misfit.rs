@@ -9,6 +9,7 @@
 //! says smooth error is left above the noise floor, and `smooth_misfit`
 //! says why.
 
+use trueaxis_engine::model::Seed;
 use trueaxis_engine::diagnose::synth::{generate, SynthConfig};
 use trueaxis_engine::diagnose::{diagnose, Options, Verdict};
 
@@ -20,7 +21,7 @@ fn a_smooth_misfit_is_not_named_as_a_physical_effect() {
         misfit_um: 0.5,
         ..SynthConfig::default()
     });
-    let d = diagnose(&data, &Options::seed("cubic19")).expect("diagnose runs");
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).expect("diagnose runs");
     let named: Vec<&str> = d
         .candidates
         .iter()

@@ -64,7 +64,7 @@ impl Args {
         let progress = |line: &str| eprintln!("{line}");
         let r = improve_with(
             &data,
-            &seed,
+            seed,
             &out,
             self.keep_outliers,
             |s| {

@@ -1,0 +1,278 @@
+//! The candidate search: for one target at the current model, every named
+//! effect the data could show, each as a typed `fit --add` spec with the
+//! evidence that proposed it ([`Proposal`]). How a family is searched is
+//! its own file here (`periodic`: a periodogram on the densest lines;
+//! `thermal`: per channel, alone or times each axis, the lag searched on a
+//! grid and refined by Brent's method, and the multi-sensor forward
+//! selection; `reversal`, `abbe`, `drift`, `squareness`, `higher_order`),
+//! registered below one line each; the order of the registry is the order
+//! of the candidates. This file holds what they share: the proposal, the
+//! driver [`propose`], the numbers as a spec writes them ([`fmt_num`],
+//! [`shown`]) and the one-dimensional minimiser [`brent_min`]. Scoring is
+//! `score`'s.
+
+use crate::effect::{Axis, EffectSpec, Family};
+
+use super::target::{State, TargetData};
+use super::Evidence;
+
+/// A candidate before scoring: its spec and what the search learned.
+#[derive(Clone, Debug)]
+pub(super) struct Proposal {
+    /// The effect, typed.
+    pub(super) spec: EffectSpec,
+    /// Nonlinear parameters searched for (period, lag): each costs ln n.
+    pub(super) searched: usize,
+    /// What proposed it, in words.
+    pub(super) note: String,
+}
+
+impl Proposal {
+    /// The family.
+    pub(super) fn family(&self) -> Family {
+        self.spec.family()
+    }
+
+    /// The axis it runs or grows along (index), if any.
+    pub(super) fn axis(&self) -> Option<usize> {
+        self.spec.along().map(Axis::index)
+    }
+}
+
+/// `v` with `decimals` places, trailing zeros dropped (`5.08`, `600`): how
+/// a number is written into a spec and a note.
+pub(super) fn fmt_num(v: f64, decimals: usize) -> String {
+    let s = format!("{v:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+/// `v` as a spec shows it with `decimals` places ([`fmt_num`]): the value
+/// the columns of a proposed effect use, so that the spec printed is the
+/// effect scored (a period to 10 nm, a lag to 1 s).
+pub(super) fn shown(v: f64, decimals: usize) -> f64 {
+    fmt_num(v, decimals)
+        .parse()
+        .expect("a formatted finite number parses")
+}
+
+/// What a family's search is given: one target's data and model, where
+/// its evidence goes, and which effect it is restricted to.
+pub(super) struct Search<'a> {
+    /// The target's data.
+    pub(super) td: &'a TargetData<'a>,
+    /// The current model.
+    pub(super) st: &'a State,
+    /// Where plot material goes (the periodograms).
+    pub(super) ev: &'a mut Evidence,
+    /// With `only`, just the candidates that could be that effect (the
+    /// re-search of an effect already in the model, against the model
+    /// without it).
+    pub(super) only: Option<&'a EffectSpec>,
+    /// The axes that move: terms in position only along them. One held at
+    /// one position (every axis of a thermal test at one point) has no
+    /// travel to fit them on — `fit` refuses them — and each would only be
+    /// reported as `in_model_span`.
+    pub(super) moving: Vec<usize>,
+}
+
+impl Search<'_> {
+    /// The target's name.
+    pub(super) fn tn(&self) -> &'static str {
+        crate::data::TARGETS[self.td.t]
+    }
+
+    /// The target, typed.
+    pub(super) fn target(&self) -> crate::effect::Target {
+        crate::effect::Target::from_index(self.td.t).expect("a target index")
+    }
+
+    /// Whether an effect of `family` along `axis`, following `channel`,
+    /// times `times` is searched for ([`Search::only`]).
+    pub(super) fn want(
+        &self,
+        family: Family,
+        axis: Option<usize>,
+        channel: Option<&str>,
+        times: Option<usize>,
+    ) -> bool {
+        let ax = |a: Option<usize>| a.and_then(Axis::from_index);
+        self.only
+            .is_none_or(|k| k.admits(family, ax(axis), channel, ax(times)))
+    }
+}
+
+/// How the diagnosis searches for one family.
+pub(super) trait FamilySearch: Sync {
+    /// The family it proposes.
+    fn family(&self) -> Family;
+    /// Its proposals for the target at the model.
+    fn propose(&self, s: &mut Search) -> Vec<Proposal>;
+    /// Whether an effect of the family already in the model has a
+    /// nonlinear parameter to search again (against the model without it).
+    fn researchable(&self, _td: &TargetData) -> bool {
+        false
+    }
+}
+
+/// The registry: one line per family, `module` (whose `SEARCH` implements
+/// [`FamilySearch`]); the candidates come in this order.
+macro_rules! searches {
+    ($($module:ident),+ $(,)?) => {
+        $(mod $module;)+
+
+        /// Every family's search, in candidate order.
+        const SEARCHES: &[&dyn FamilySearch] = &[$(&$module::SEARCH),+];
+    };
+}
+
+searches! {
+    periodic,
+    thermal,
+    reversal,
+    abbe,
+    drift,
+    squareness,
+    higher_order,
+}
+
+/// Builds the candidate library for one target at the current model; with
+/// `only`, just the candidates that could be that effect (the re-search of
+/// an effect already in the model, against the model without it).
+pub(super) fn propose(
+    td: &TargetData,
+    st: &State,
+    ev: &mut Evidence,
+    only: Option<&EffectSpec>,
+) -> Vec<Proposal> {
+    let mut s = Search {
+        td,
+        st,
+        ev,
+        only,
+        moving: td.data.varying_axes(),
+    };
+    SEARCHES.iter().flat_map(|f| f.propose(&mut s)).collect()
+}
+
+/// Whether an effect of `family` already in the model is searched again.
+pub(super) fn researchable(family: Family, td: &TargetData) -> bool {
+    SEARCHES
+        .iter()
+        .any(|f| f.family() == family && f.researchable(td))
+}
+
+/// Minimum of `f` on [lo, hi] to `tol` by Brent's method (parabolic
+/// interpolation through the three best points, a golden-section step
+/// where the parabola is not safe; the bounded form of scipy's
+/// `fminbound`): (x, f(x)). Assumes one minimum in the bracket (the grid
+/// point and its neighbours). On the smooth residual sum of a lag, 6–9
+/// evaluations where golden section alone needs 11–14 — each evaluation is
+/// a projection of an n-long column on the model.
+pub(super) fn brent_min(f: impl Fn(f64) -> f64, lo: f64, hi: f64, tol: f64) -> (f64, f64) {
+    const GOLD: f64 = 0.381_966_011_250_105_1; // (3 − √5)/2
+    let sqrt_eps = f64::EPSILON.sqrt();
+    let (mut a, mut b) = (lo, hi);
+    // x: best so far, w: second best, v: the previous w.
+    let mut x = a + GOLD * (b - a);
+    let mut fx = f(x);
+    let (mut w, mut fw, mut v, mut fv) = (x, fx, x, fx);
+    let (mut step, mut prev) = (0.0f64, 0.0f64);
+    for _ in 0..100 {
+        let m = 0.5 * (a + b);
+        let tol1 = sqrt_eps * x.abs() + tol / 3.0;
+        let tol2 = 2.0 * tol1;
+        if (x - m).abs() <= tol2 - 0.5 * (b - a) {
+            break;
+        }
+        let mut golden = true;
+        if prev.abs() > tol1 {
+            let r = (x - w) * (fx - fv);
+            let q = (x - v) * (fx - fw);
+            let mut p = (x - v) * q - (x - w) * r;
+            let mut q = 2.0 * (q - r);
+            if q > 0.0 {
+                p = -p;
+            }
+            q = q.abs();
+            let older = prev;
+            prev = step;
+            if p.abs() < (0.5 * q * older).abs() && p > q * (a - x) && p < q * (b - x) {
+                golden = false;
+                step = p / q;
+                let u = x + step;
+                if u - a < tol2 || b - u < tol2 {
+                    step = if m >= x { tol1 } else { -tol1 };
+                }
+            }
+        }
+        if golden {
+            prev = if x >= m { a - x } else { b - x };
+            step = GOLD * prev;
+        }
+        let u = x + if step >= 0.0 {
+            step.max(tol1)
+        } else {
+            step.min(-tol1)
+        };
+        let fu = f(u);
+        if fu <= fx {
+            if u >= x {
+                a = x;
+            } else {
+                b = x;
+            }
+            (v, fv, w, fw, x, fx) = (w, fw, x, fx, u, fu);
+        } else {
+            if u < x {
+                a = u;
+            } else {
+                b = u;
+            }
+            if fu <= fw || w == x {
+                (v, fv, w, fw) = (w, fw, u, fu);
+            } else if fu <= fv || v == x || v == w {
+                (v, fv) = (u, fu);
+            }
+        }
+    }
+    (x, fx)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::brent_min;
+    use std::cell::Cell;
+
+    #[test]
+    fn brent_finds_the_minimum_to_the_tolerance_in_few_evaluations() {
+        // A lag-like residual sum: smooth, asymmetric, minimum at 913.4 s
+        // inside the grid bracket 600…1200 s.
+        let calls = Cell::new(0);
+        let f = |x: f64| {
+            calls.set(calls.get() + 1);
+            let d = (x - 913.4) / 300.0;
+            1.0 + d * d + 0.3 * d * d * d
+        };
+        let (x, fx) = brent_min(f, 600.0, 1200.0, 1.0);
+        assert!((x - 913.4).abs() <= 1.0, "{x}");
+        assert!((1.0..1.0 + 1e-4).contains(&fx), "{fx}");
+        // Golden section alone needs ⌈ln(600/1)/ln(1.618)⌉ + 1 = 15.
+        assert!(calls.get() <= 10, "{} evaluations", calls.get());
+    }
+
+    #[test]
+    fn brent_on_a_monotone_bracket_ends_at_its_low_edge_and_on_a_flat_one_stays_inside() {
+        let (x, _) = brent_min(|x| x, 120.0, 300.0, 1.0);
+        assert!((120.0..=121.5).contains(&x), "{x}");
+        let (x, _) = brent_min(|x| -x, 120.0, 300.0, 1.0);
+        assert!((298.5..=300.0).contains(&x), "{x}");
+        // A flat sum (the lag not identified): any point, but in the bracket
+        // and a finite number of evaluations.
+        let (x, fx) = brent_min(|_| 2.0, 0.0, 120.0, 1.0);
+        assert!((0.0..=120.0).contains(&x) && fx == 2.0);
+    }
+}
