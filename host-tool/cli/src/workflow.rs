@@ -8,9 +8,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use trueaxis_engine::compare::{self, Comparison, Warning};
 use trueaxis_engine::data::Dataset;
+use trueaxis_engine::effect::EffectSpec;
 use trueaxis_engine::export::table::{self, TableExport, TableOptions};
 use trueaxis_engine::history::history_path;
-use trueaxis_engine::effect::EffectSpec;
 use trueaxis_engine::model::{ModelFile, Seed};
 
 use crate::input;

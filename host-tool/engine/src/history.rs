@@ -139,7 +139,11 @@ fn next(model_path: &Path, mut step: Step) -> Result<History> {
             && last.data_sha256 == step.data_sha256
             && last.adds.iter().zip(specs(&last.adds)).all(|(a, sa)| {
                 step.adds.iter().zip(&new).any(|(b, sb)| {
-                    a == b || sa.as_ref().zip(sb.as_ref()).is_some_and(|(x, y)| x.same_effect(y))
+                    a == b
+                        || sa
+                            .as_ref()
+                            .zip(sb.as_ref())
+                            .is_some_and(|(x, y)| x.same_effect(y))
                 })
             })
     });

@@ -313,7 +313,12 @@ pub fn improve_with(
         // target), added — or swapped in for the same effect — together.
         let mut seen = std::collections::BTreeSet::new();
         if steps.len() <= MAX_STEPS {
-            for (c, s) in d.candidates.iter().zip(&specs).filter(|(c, _)| c.significant) {
+            for (c, s) in d
+                .candidates
+                .iter()
+                .zip(&specs)
+                .filter(|(c, _)| c.significant)
+            {
                 if !seen.insert(c.target.clone()) {
                     continue;
                 }

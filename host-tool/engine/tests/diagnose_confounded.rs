@@ -12,10 +12,10 @@
 //! the run, a temperature × x would go with tool length × x as well (a third
 //! member of the same confound, which the `confounded` warning covers).
 
-use trueaxis_engine::model::Seed;
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::diagnose::synth::{generate, Hidden, Plan, SynthConfig};
 use trueaxis_engine::diagnose::{diagnose, Diagnosis, Options, Verdict};
+use trueaxis_engine::model::Seed;
 
 /// A 100 mm grid, one approach direction, tool length by tool length.
 fn tool_by_tool(hidden: Vec<Hidden>) -> Dataset {

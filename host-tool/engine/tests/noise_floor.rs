@@ -3,9 +3,9 @@
 //! estimated on a cubic19 fit's residual lands within 0.7–1.4× of the
 //! simulated σ (fixed seeds).
 
-use trueaxis_engine::model::Seed;
 use trueaxis_engine::diagnose::noise::noise_floor;
 use trueaxis_engine::fit::{fit, FitOptions};
+use trueaxis_engine::model::Seed;
 use trueaxis_engine::simulate::{simulate, Effect, SimConfig};
 
 fn sim(

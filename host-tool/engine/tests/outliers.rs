@@ -2,8 +2,8 @@
 //! by 20–40 µm — are found on exactly their rows, left out, and change
 //! neither the noise floor nor the verdict; no effect is added for them.
 
-use trueaxis_engine::model::Seed;
 use trueaxis_engine::diagnose::{diagnose, Options, Verdict};
+use trueaxis_engine::model::Seed;
 use trueaxis_engine::simulate::{simulate_detailed, SimConfig, SimOutput, Spikes};
 
 fn sim(spikes: Option<Spikes>) -> SimOutput {

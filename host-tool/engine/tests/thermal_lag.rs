@@ -10,9 +10,9 @@
 //! And a lag at the edge of the searched grid is searched further out, or
 //! said to be unidentified when the test is shorter than it.
 
-use trueaxis_engine::model::Seed;
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::diagnose::{diagnose, Options};
+use trueaxis_engine::model::Seed;
 use trueaxis_engine::simulate::{simulate, Effect, SimConfig, Timing};
 
 fn sim(plans: &[&str], effects: &[&str], dwell_s: f64, feed_mm_s: f64, seed: u64) -> Dataset {

@@ -11,9 +11,9 @@
 //! y 400, z 400 mm) that the grid sees and the line does not. The bump is
 //! no effect of the library, so nothing explains it.
 
-use trueaxis_engine::model::Seed;
 use trueaxis_engine::data::TARGETS;
 use trueaxis_engine::diagnose::{diagnose, Options, Verdict, REGION_ABOVE_NOISE_RATIO};
+use trueaxis_engine::model::Seed;
 use trueaxis_engine::simulate::{simulate, SimConfig};
 
 #[test]

@@ -15,8 +15,8 @@ use serde::Serialize;
 use crate::data::{AXES, TARGETS};
 use crate::lines::{densest_lines, group_rows};
 
-use super::search::fmt_num;
 use super::periodogram::periodogram;
+use super::search::fmt_num;
 use super::target::{State, TargetData};
 use super::warnings::dense_line_text;
 use super::{Candidate, ALIASING_SPACING_MM};

@@ -78,8 +78,8 @@ pub use swap::swap_in;
 pub use warnings::above_noise;
 
 use noise::{noise_floor, NoiseMethod};
-use search::propose;
 use periodogram::Periodogram;
+use search::propose;
 use target::{fwl, hold_out_blocks, State, TargetData};
 use warnings::{above_noise_warning, dedup_warnings, design_warnings, region_above_noise_warning};
 
@@ -588,6 +588,9 @@ pub struct CandidateSpec {
     pub replaces: Option<EffectSpec>,
 }
 
+/// A scored candidate and its typed effect.
+type Listed = (Candidate, CandidateSpec);
+
 /// What one target of [`diagnose_with`] found, before the targets are joined.
 struct TargetOut {
     t: usize,
@@ -597,7 +600,7 @@ struct TargetOut {
     regions: Vec<Region>,
     warnings: Vec<Warning>,
     path: Vec<PathStep>,
-    candidates: Vec<(Candidate, CandidateSpec)>,
+    candidates: Vec<Listed>,
     unexplained: Vec<Unexplained>,
     unresolved: Vec<Unresolved>,
     noise_floor_um: Option<f64>,

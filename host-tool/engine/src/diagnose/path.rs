@@ -18,9 +18,9 @@ use super::swap::swap_in;
 use super::target::{State, TargetData};
 use super::warnings::plausibility_warning;
 use super::{
-    Candidate, CandidateSpec, ComponentEvidence, Evidence, Options, PathStep, PeriodogramEvidence,
-    Unresolved, Warning, COMPETING_OVERLAP, CONFOUNDED_OVERLAP, DBIC_SIGNIFICANT, MAX_PATH_STEPS, MIN_GAP_DBIC,
-    MIN_HELD_OUT_GAIN,
+    Candidate, ComponentEvidence, Listed, Evidence, Options, PathStep, PeriodogramEvidence,
+    Unresolved, Warning, COMPETING_OVERLAP, CONFOUNDED_OVERLAP, DBIC_SIGNIFICANT, MAX_PATH_STEPS,
+    MIN_GAP_DBIC, MIN_HELD_OUT_GAIN,
 };
 
 /// The evidence's ending of a held-back candidate.
@@ -449,7 +449,7 @@ pub(super) fn follow(
     ev: &mut Evidence,
     path: &mut Vec<PathStep>,
     unresolved: &mut Vec<Unresolved>,
-) -> Result<(Vec<(Candidate, CandidateSpec)>, State, bool)> {
+) -> Result<(Vec<Listed>, State, bool)> {
     let t = td.t;
     let tn = TARGETS[t].to_string();
     let (mut cur, mut blocked) = rank_target(td, &st0, &opts.seed, warnings, ev, None);
@@ -458,7 +458,7 @@ pub(super) fn follow(
     // step takes the place of its stale first-step entry (the same
     // effect) with the scores of the step that added it.
     let mut st = st0;
-    let mut list: Option<Vec<(Candidate, CandidateSpec)>> = None;
+    let mut list: Option<Vec<Listed>> = None;
     let mut on_path: Vec<(usize, EffectSpec)> = Vec::new();
     for k in 1..=MAX_PATH_STEPS {
         if !cur.iter().any(|s| s.cand.significant) {

@@ -1,6 +1,7 @@
 //! A candidate's physical parameter (CTE, backlash, amplitude, angle,
-//! drift rate, …) with its 95 % interval and a plausibility check, and the
-//! covariance that takes a searched thermal lag's own uncertainty into
+//! drift rate, …) with its 95 % interval and a plausibility check — read
+//! off the fit as its family describes it (`effect::PhysicalParam`) — and
+//! the covariance that takes a searched thermal lag's own uncertainty into
 //! account.
 
 use crate::effect::{EffectSpec, Reading, Scale};

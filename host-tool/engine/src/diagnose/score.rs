@@ -12,7 +12,7 @@ use crate::model::Seed;
 use super::physical::{lag_aware_xtx_inv, param_key, physical};
 use super::search::Proposal;
 use super::target::{block_rms, forward_blocks, forward_rms, fwl_many, State, TargetData};
-use super::{Candidate, CandidateSpec, HoldOutKind, Warning, IN_SPAN_SHARE};
+use super::{Candidate, CandidateSpec, HoldOutKind, Listed, Warning, IN_SPAN_SHARE};
 
 /// The scored candidates of one target, with the columns needed for overlaps.
 pub(super) struct Scored {
@@ -27,7 +27,7 @@ pub(super) struct Scored {
 impl Scored {
     /// The candidate and its typed effect, for the target's list (the
     /// columns are not kept).
-    pub(super) fn listed(self) -> (Candidate, CandidateSpec) {
+    pub(super) fn listed(self) -> Listed {
         let spec = CandidateSpec {
             add: self.spec,
             replaces: self.replaces,
@@ -36,7 +36,7 @@ impl Scored {
     }
 
     /// [`Scored::listed`] of a copy.
-    pub(super) fn to_listed(&self) -> (Candidate, CandidateSpec) {
+    pub(super) fn to_listed(&self) -> Listed {
         let spec = CandidateSpec {
             add: self.spec.clone(),
             replaces: self.replaces.clone(),

@@ -7,8 +7,8 @@ use crate::data::{Dataset, AXES};
 use crate::features::Norm;
 use crate::lines::densest_lines;
 
-use super::search::fmt_num;
 use super::noise::NoiseFloor;
+use super::search::fmt_num;
 use super::{Candidate, Warning, ABOVE_NOISE_RATIO, ALIASING_SPACING_MM, CONSTANT_TEMPERATURE_K};
 
 /// The `implausible_parameter` warning for an effect the diagnosis accepts

@@ -63,8 +63,12 @@ pub struct Info {
     /// Its simulated form: parses the pairs of `simulate --effect
     /// <name>:…`; None for a family the simulator does not make (the
     /// machine's squareness, a seed's missing degree).
-    pub simulate: Option<fn(&Pairs) -> Result<Box<dyn SimForm>>>,
+    pub simulate: Option<SimParse>,
 }
+
+/// Parses the pairs of `simulate --effect <family>:…` into the family's
+/// simulated form.
+pub type SimParse = fn(&Pairs) -> Result<Box<dyn SimForm>>;
 
 /// What makes a type a family: its [`Info`] and how an effect of it is
 /// read from the pairs of an `--add` string (its keys already checked
@@ -983,7 +987,12 @@ mod tests {
             ),
             EffectSpec::new(Target::Ez, thermal::Thermal::new("bed", None, vec![0.0])),
             EffectSpec::new(Target::Ex, reversal::Reversal { axis: Axis::X }),
-            EffectSpec::new(Target::Ey, abbe::Abbe { times: Some(Axis::X) }),
+            EffectSpec::new(
+                Target::Ey,
+                abbe::Abbe {
+                    times: Some(Axis::X),
+                },
+            ),
             EffectSpec::new(Target::Ey, drift::Drift { order: 3 }),
             EffectSpec::new(Target::Ey, drift::Drift { order: 1 }),
             EffectSpec::new(Target::Ex, squareness::Squareness { axis: Axis::Y }),
@@ -1070,7 +1079,9 @@ mod tests {
         kv.finish("x, bidir, runs").unwrap();
         let e = Pairs::parse("x=1,bidir").unwrap_err().to_string();
         assert_eq!(e, "`bidir`: expected key=value");
-        let e = Pairs::parse_with_flags("bidir,bidir=0").unwrap_err().to_string();
+        let e = Pairs::parse_with_flags("bidir,bidir=0")
+            .unwrap_err()
+            .to_string();
         assert_eq!(e, "key `bidir` given twice");
         let kv = Pairs::parse_with_flags("new_session").unwrap();
         assert_eq!(
