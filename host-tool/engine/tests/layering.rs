@@ -40,7 +40,11 @@ const LAYERS: &[(&str, u8)] = &[
 /// as shared — are named through `super::`), and the files that are not
 /// a family.
 const ROOMS: &[(&str, &[&str], &[&str])] = &[
-    ("effect", &["data", "features"], &["mod", "sim"]),
+    (
+        "effect",
+        &["data", "features"],
+        &["mod", "pairs", "sim", "tests"],
+    ),
     (
         "diagnose/search",
         &["data", "effect", "features", "lines"],

@@ -18,7 +18,7 @@ use super::swap::swap_in;
 use super::target::{State, TargetData};
 use super::warnings::plausibility_warning;
 use super::{
-    Candidate, ComponentEvidence, Listed, Evidence, Options, PathStep, PeriodogramEvidence,
+    Candidate, ComponentEvidence, Evidence, Listed, Options, PathStep, PeriodogramEvidence,
     Unresolved, Warning, COMPETING_OVERLAP, CONFOUNDED_OVERLAP, DBIC_SIGNIFICANT, MAX_PATH_STEPS,
     MIN_GAP_DBIC, MIN_HELD_OUT_GAIN,
 };
