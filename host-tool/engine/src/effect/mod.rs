@@ -441,10 +441,10 @@ impl FromStr for EffectSpec {
 }
 
 fn parse_spec(s: &str) -> Result<EffectSpec> {
-    let (family, rest) = s.split_once(':').ok_or_else(|| {
-        anyhow!("expected `<family>:<key>=<value>,…`, e.g. `periodic:target=ey,axis=y,period_mm=5`")
-    })?;
-    let kv = Pairs::parse(rest)?;
+    let (family, kv) = Pairs::of_effect(
+        s,
+        "expected `<family>:<key>=<value>,…`, e.g. `periodic:target=ey,axis=y,period_mm=5`",
+    )?;
     let family: Family = family.parse()?;
     let allowed = family.info().keys;
     if let Some(k) = kv.keys().find(|k| !allowed.contains(k)) {

@@ -36,6 +36,14 @@ impl<'a> Pairs<'a> {
         Ok(Self::with(pairs))
     }
 
+    /// An effect, `<family>:<key>=<value>,…`, split at its first `:` into
+    /// the family's name as written and its pairs; `expected` is the
+    /// message without a `:`.
+    pub fn of_effect(s: &'a str, expected: &str) -> Result<(&'a str, Pairs<'a>)> {
+        let (family, rest) = s.split_once(':').ok_or_else(|| anyhow!("{expected}"))?;
+        Ok((family, Pairs::parse(rest)?))
+    }
+
     /// `key=value` parts and bare flags (`bidir`: a plan's options); blank
     /// parts are skipped.
     pub fn parse_with_flags(s: &'a str) -> Result<Pairs<'a>> {

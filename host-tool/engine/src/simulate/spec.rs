@@ -214,10 +214,10 @@ impl FromStr for Effect {
 /// A family's simulated form (its file in `effect/` parses the pairs) or
 /// a guide bump.
 fn parse_effect(s: &str) -> Result<Effect> {
-    let (family, rest) = s.split_once(':').ok_or_else(|| {
-        anyhow!("expected <family>:<key>=<value>,…, e.g. periodic:axis=y,period_mm=5.08,amp_um=3")
-    })?;
-    let kv = Pairs::parse(rest)?;
+    let (family, kv) = Pairs::of_effect(
+        s,
+        "expected <family>:<key>=<value>,…, e.g. periodic:axis=y,period_mm=5.08,amp_um=3",
+    )?;
     if family == "bump" {
         return Bump::parse(&kv).map(Effect::new);
     }

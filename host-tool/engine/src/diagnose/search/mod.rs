@@ -105,38 +105,41 @@ impl Search<'_> {
     }
 }
 
-/// How the diagnosis searches for one family.
-pub(super) trait FamilySearch: Sync {
+/// How the diagnosis searches for one family: its file's `propose` and
+/// `researchable`.
+struct FamilySearch {
     /// The family it proposes.
-    fn family(&self) -> Family;
+    family: Family,
     /// Its proposals for the target at the model.
-    fn propose(&self, s: &mut Search) -> Vec<Proposal>;
+    propose: fn(&mut Search) -> Vec<Proposal>,
     /// Whether an effect of the family already in the model has a
     /// nonlinear parameter to search again (against the model without it).
-    fn researchable(&self, _td: &TargetData) -> bool {
-        false
-    }
+    researchable: fn(&TargetData) -> bool,
 }
 
-/// The registry: one line per family, `module` (whose `SEARCH` implements
-/// [`FamilySearch`]); the candidates come in this order.
+/// The registry: one line per family, `module => Family` (the module has
+/// `propose` and `researchable`); the candidates come in this order.
 macro_rules! searches {
-    ($($module:ident),+ $(,)?) => {
+    ($($module:ident => $family:ident),+ $(,)?) => {
         $(mod $module;)+
 
         /// Every family's search, in candidate order.
-        const SEARCHES: &[&dyn FamilySearch] = &[$(&$module::SEARCH),+];
+        const SEARCHES: &[FamilySearch] = &[$(FamilySearch {
+            family: Family::$family,
+            propose: $module::propose,
+            researchable: $module::researchable,
+        }),+];
     };
 }
 
 searches! {
-    periodic,
-    thermal,
-    reversal,
-    abbe,
-    drift,
-    squareness,
-    higher_order,
+    periodic => Periodic,
+    thermal => Thermal,
+    reversal => Reversal,
+    abbe => Abbe,
+    drift => Drift,
+    squareness => Squareness,
+    higher_order => HigherOrder,
 }
 
 /// Builds the candidate library for one target at the current model; with
@@ -155,14 +158,14 @@ pub(super) fn propose(
         only,
         moving: td.data.varying_axes(),
     };
-    SEARCHES.iter().flat_map(|f| f.propose(&mut s)).collect()
+    SEARCHES.iter().flat_map(|f| (f.propose)(&mut s)).collect()
 }
 
 /// Whether an effect of `family` already in the model is searched again.
 pub(super) fn researchable(family: Family, td: &TargetData) -> bool {
     SEARCHES
         .iter()
-        .any(|f| f.family() == family && f.researchable(td))
+        .any(|f| f.family == family && (f.researchable)(td))
 }
 
 /// Minimum of `f` on [lo, hi] to `tol` by Brent's method (parabolic

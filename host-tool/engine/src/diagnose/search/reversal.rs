@@ -5,58 +5,53 @@
 use crate::effect::reversal::Reversal;
 use crate::effect::{Axis, EffectSpec, Family};
 
-use super::{FamilySearch, Proposal, Search};
+use super::super::target::TargetData;
+use super::{Proposal, Search};
 
-/// The reversal search.
-pub(super) struct ReversalSearch;
+/// No nonlinear parameter to search again.
+pub(super) fn researchable(_td: &TargetData) -> bool {
+    false
+}
 
-/// The registry's entry.
-pub(super) const SEARCH: ReversalSearch = ReversalSearch;
-
-impl FamilySearch for ReversalSearch {
-    fn family(&self) -> Family {
-        Family::Reversal
-    }
-
-    fn propose(&self, s: &mut Search) -> Vec<Proposal> {
-        let (td, st) = (s.td, s.st);
-        let data = td.data;
-        let mut out = Vec::new();
-        for a in data.axes() {
-            if !s.want(Family::Reversal, Some(a), None, None) {
-                continue;
-            }
-            let Some(d) = &data.dir[a] else { continue };
-            let (mut up, mut down) = (0, 0);
-            for &r in &td.rows {
-                if d[r] > 0 {
-                    up += 1;
-                } else {
-                    down += 1;
-                }
-            }
-            if up == 0 || down == 0 {
-                continue;
-            }
-            let (mut su, mut sd) = (0.0, 0.0);
-            for (i, &r) in td.rows.iter().enumerate() {
-                if d[r] > 0 {
-                    su += st.resid[i];
-                } else {
-                    sd += st.resid[i];
-                }
-            }
-            let axis = Axis::from_index(a).expect("an axis index");
-            out.push(Proposal {
-                spec: EffectSpec::new(s.target(), Reversal { axis }),
-                searched: 0,
-                note: format!(
-                    "forward/backward split on {axis}: mean residual {:+.2} µm ({up} points approached from −) vs {:+.2} µm ({down} from +)",
-                    su / up as f64,
-                    sd / down as f64
-                ),
-            });
+/// The proposals for the target at the model.
+pub(super) fn propose(s: &mut Search) -> Vec<Proposal> {
+    let (td, st) = (s.td, s.st);
+    let data = td.data;
+    let mut out = Vec::new();
+    for a in data.axes() {
+        if !s.want(Family::Reversal, Some(a), None, None) {
+            continue;
         }
-        out
+        let Some(d) = &data.dir[a] else { continue };
+        let (mut up, mut down) = (0, 0);
+        for &r in &td.rows {
+            if d[r] > 0 {
+                up += 1;
+            } else {
+                down += 1;
+            }
+        }
+        if up == 0 || down == 0 {
+            continue;
+        }
+        let (mut su, mut sd) = (0.0, 0.0);
+        for (i, &r) in td.rows.iter().enumerate() {
+            if d[r] > 0 {
+                su += st.resid[i];
+            } else {
+                sd += st.resid[i];
+            }
+        }
+        let axis = Axis::from_index(a).expect("an axis index");
+        out.push(Proposal {
+            spec: EffectSpec::new(s.target(), Reversal { axis }),
+            searched: 0,
+            note: format!(
+                "forward/backward split on {axis}: mean residual {:+.2} µm ({up} points approached from −) vs {:+.2} µm ({down} from +)",
+                su / up as f64,
+                sd / down as f64
+            ),
+        });
     }
+    out
 }

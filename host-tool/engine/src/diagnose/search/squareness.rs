@@ -5,33 +5,28 @@
 use crate::effect::squareness::Squareness;
 use crate::effect::{Axis, EffectSpec, Family};
 
-use super::{FamilySearch, Proposal, Search};
+use super::super::target::TargetData;
+use super::{Proposal, Search};
 
-/// The squareness search.
-pub(super) struct SquarenessSearch;
+/// No nonlinear parameter to search again.
+pub(super) fn researchable(_td: &TargetData) -> bool {
+    false
+}
 
-/// The registry's entry.
-pub(super) const SEARCH: SquarenessSearch = SquarenessSearch;
-
-impl FamilySearch for SquarenessSearch {
-    fn family(&self) -> Family {
-        Family::Squareness
-    }
-
-    fn propose(&self, s: &mut Search) -> Vec<Proposal> {
-        let tn = s.tn();
-        let mut out = Vec::new();
-        for &a in &s.moving {
-            if a == s.td.t || !s.want(Family::Squareness, Some(a), None, None) {
-                continue;
-            }
-            let axis = Axis::from_index(a).expect("an axis index");
-            out.push(Proposal {
-                spec: EffectSpec::new(s.target(), Squareness { axis }),
-                searched: 0,
-                note: format!("the {tn} residual is linear in {axis}"),
-            });
+/// The proposals for the target at the model.
+pub(super) fn propose(s: &mut Search) -> Vec<Proposal> {
+    let tn = s.tn();
+    let mut out = Vec::new();
+    for &a in &s.moving {
+        if a == s.td.t || !s.want(Family::Squareness, Some(a), None, None) {
+            continue;
         }
-        out
+        let axis = Axis::from_index(a).expect("an axis index");
+        out.push(Proposal {
+            spec: EffectSpec::new(s.target(), Squareness { axis }),
+            searched: 0,
+            note: format!("the {tn} residual is linear in {axis}"),
+        });
     }
+    out
 }

@@ -15,157 +15,146 @@ use crate::features::Feature;
 use super::super::linalg::small_fit;
 use super::super::target::{forward_blocks, forward_rms, rss_many, State, TargetData};
 use super::super::{CONSTANT_TEMPERATURE_K, DBIC_SIGNIFICANT, MIN_HELD_OUT_GAIN};
-use super::{brent_min, fmt_num, shown, FamilySearch, Proposal, Search};
+use super::{brent_min, fmt_num, shown, Proposal, Search};
 
-/// The thermal search.
-pub(super) struct ThermalSearch;
+/// The lag, when the data has time to search it on.
+pub(super) fn researchable(td: &TargetData) -> bool {
+    td.data.t_s.is_some()
+}
 
-/// The registry's entry.
-pub(super) const SEARCH: ThermalSearch = ThermalSearch;
-
-impl FamilySearch for ThermalSearch {
-    fn family(&self) -> Family {
-        Family::Thermal
-    }
-
-    /// The lag, when the data has time to search it on.
-    fn researchable(&self, td: &TargetData) -> bool {
-        td.data.t_s.is_some()
-    }
-
-    fn propose(&self, s: &mut Search) -> Vec<Proposal> {
-        let (td, st) = (s.td, s.st);
-        let target = s.target();
-        let tn = target.name();
-        // thermal: per channel that varies, alone or times each axis; lag searched.
-        let duration = duration_s(td);
-        let (data, only, moving) = (td.data, s.only, &s.moving);
-        let want = |channel: &str, times: Option<usize>| {
-            only.is_none_or(|k| {
-                k.admits(
-                    Family::Thermal,
-                    None,
-                    Some(channel),
-                    times.and_then(Axis::from_index),
-                )
-            })
-        };
-        let mut out = Vec::new();
-        for ch in &data.temps {
-            let lo = ch.temp_c.iter().copied().fold(f64::INFINITY, f64::min);
-            let hi = ch.temp_c.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            if hi - lo < CONSTANT_TEMPERATURE_K {
-                continue;
-            }
-            let times: Vec<Option<usize>> = std::iter::once(None)
-                .chain(moving.iter().map(|&a| Some(a)))
-                .collect();
-            // Each variant (alone, times each axis) searches its lag on its
-            // own: in parallel, joined in order.
-            let found: Vec<Option<Proposal>> = times
-                .par_iter()
-                .map(|&tm| {
-                    if !want(&ch.name, tm) {
-                        return None;
+/// The proposals for the target at the model.
+pub(super) fn propose(s: &mut Search) -> Vec<Proposal> {
+    let (td, st) = (s.td, s.st);
+    let target = s.target();
+    let tn = target.name();
+    // thermal: per channel that varies, alone or times each axis; lag searched.
+    let duration = duration_s(td);
+    let (data, only, moving) = (td.data, s.only, &s.moving);
+    let want = |channel: &str, times: Option<usize>| {
+        only.is_none_or(|k| {
+            k.admits(
+                Family::Thermal,
+                None,
+                Some(channel),
+                times.and_then(Axis::from_index),
+            )
+        })
+    };
+    let mut out = Vec::new();
+    for ch in &data.temps {
+        let lo = ch.temp_c.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = ch.temp_c.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if hi - lo < CONSTANT_TEMPERATURE_K {
+            continue;
+        }
+        let times: Vec<Option<usize>> = std::iter::once(None)
+            .chain(moving.iter().map(|&a| Some(a)))
+            .collect();
+        // Each variant (alone, times each axis) searches its lag on its
+        // own: in parallel, joined in order.
+        let found: Vec<Option<Proposal>> = times
+            .par_iter()
+            .map(|&tm| {
+                if !want(&ch.name, tm) {
+                    return None;
+                }
+                // The lag as the spec writes it (to 1 s): the columns scored
+                // are those of the string proposed.
+                let spec_at = |lag: f64| {
+                    EffectSpec::new(
+                        target,
+                        Thermal::new(&ch.name, tm.and_then(Axis::from_index), vec![shown(lag, 0)]),
+                    )
+                };
+                let rss_at = |lag: f64| rss_many(td, st, &[spec_at(lag)])[0];
+                let mut lags: Vec<f64> = if data.t_s.is_some() {
+                    LAGS_S.to_vec()
+                } else {
+                    vec![0.0]
+                };
+                let specs: Vec<EffectSpec> = lags.iter().map(|&lag| spec_at(lag)).collect();
+                let mut grid = rss_many(td, st, &specs);
+                let argmin = |g: &[f64]| {
+                    g.iter()
+                        .enumerate()
+                        .fold((0, f64::INFINITY), |b, (i, &r)| if r < b.1 { (i, r) } else { b })
+                };
+                // A best lag at the grid's longest: search further out, by
+                // half again each time, up to half the test's duration (a
+                // longer lag is a slope the test cannot tell from a smaller
+                // growth: the test is shorter than the time constant).
+                while lags.len() > 1 && argmin(&grid).0 == lags.len() - 1 {
+                    let next = lags[lags.len() - 1] * LAG_EXTEND;
+                    if next > 0.5 * duration {
+                        break;
                     }
-                    // The lag as the spec writes it (to 1 s): the columns scored
-                    // are those of the string proposed.
-                    let spec_at = |lag: f64| {
-                        EffectSpec::new(
-                            target,
-                            Thermal::new(&ch.name, tm.and_then(Axis::from_index), vec![shown(lag, 0)]),
-                        )
-                    };
-                    let rss_at = |lag: f64| rss_many(td, st, &[spec_at(lag)])[0];
-                    let mut lags: Vec<f64> = if data.t_s.is_some() {
-                        LAGS_S.to_vec()
-                    } else {
-                        vec![0.0]
-                    };
-                    let specs: Vec<EffectSpec> = lags.iter().map(|&lag| spec_at(lag)).collect();
-                    let mut grid = rss_many(td, st, &specs);
-                    let argmin = |g: &[f64]| {
-                        g.iter()
-                            .enumerate()
-                            .fold((0, f64::INFINITY), |b, (i, &r)| if r < b.1 { (i, r) } else { b })
-                    };
-                    // A best lag at the grid's longest: search further out, by
-                    // half again each time, up to half the test's duration (a
-                    // longer lag is a slope the test cannot tell from a smaller
-                    // growth: the test is shorter than the time constant).
-                    while lags.len() > 1 && argmin(&grid).0 == lags.len() - 1 {
-                        let next = lags[lags.len() - 1] * LAG_EXTEND;
-                        if next > 0.5 * duration {
-                            break;
-                        }
-                        lags.push(next);
-                        grid.push(rss_at(next));
+                    lags.push(next);
+                    grid.push(rss_at(next));
+                }
+                let (best_i, best_rss) = argmin(&grid);
+                if !best_rss.is_finite() {
+                    return None;
+                }
+                let mut best = (best_rss, lags[best_i]);
+                let unidentified = lags.len() > 1 && best_i == lags.len() - 1;
+                // The grid only brackets the lag (a true 1000 s was reported as
+                // 900 s, and the CTE's interval, which takes the lag as known,
+                // then missed the truth): refine between the grid neighbours of
+                // the best point by Brent's method to 1 s.
+                // Not when the best is the longest lag tried: the sum still
+                // falls there, the refinement would only walk to the edge.
+                if lags.len() > 1 && !unidentified {
+                    let lo = lags[best_i.saturating_sub(1)];
+                    let hi = lags[(best_i + 1).min(lags.len() - 1)];
+                    let (lag, rss) = brent_min(rss_at, lo, hi, 1.0);
+                    if rss < best.0 {
+                        best = (rss, lag.round());
                     }
-                    let (best_i, best_rss) = argmin(&grid);
-                    if !best_rss.is_finite() {
-                        return None;
-                    }
-                    let mut best = (best_rss, lags[best_i]);
-                    let unidentified = lags.len() > 1 && best_i == lags.len() - 1;
-                    // The grid only brackets the lag (a true 1000 s was reported as
-                    // 900 s, and the CTE's interval, which takes the lag as known,
-                    // then missed the truth): refine between the grid neighbours of
-                    // the best point by Brent's method to 1 s.
-                    // Not when the best is the longest lag tried: the sum still
-                    // falls there, the refinement would only walk to the edge.
-                    if lags.len() > 1 && !unidentified {
-                        let lo = lags[best_i.saturating_sub(1)];
-                        let hi = lags[(best_i + 1).min(lags.len() - 1)];
-                        let (lag, rss) = brent_min(rss_at, lo, hi, 1.0);
-                        if rss < best.0 {
-                            best = (rss, lag.round());
-                        }
-                    }
-                    let flag = if unidentified {
-                        format!(
-                            "; lag not identified: the best is the longest lag tried ({} s, half the {:.1} h the readings span) — the test is shorter than the time constant; measure at least 3× as long to identify it",
-                            fmt_num(lags[lags.len() - 1], 0),
-                            duration / 3600.0
-                        )
-                    } else {
-                        String::new()
-                    };
-                    let note = if data.t_s.is_some() {
-                        format!(
-                            "the {tn} residual follows T_{}_C{} (range {:.2} K), lag {} s found by search{flag}",
-                            ch.name,
-                            tm.map_or(String::new(), |a| format!(" × {}", AXES[a])),
-                            hi - lo,
-                            fmt_num(best.1, 0)
-                        )
-                    } else {
-                        format!(
-                            "the {tn} residual follows T_{}_C{} (range {:.2} K)",
-                            ch.name,
-                            tm.map_or(String::new(), |a| format!(" × {}", AXES[a])),
-                            hi - lo
-                        )
-                    };
-                    Some(Proposal {
-                        spec: spec_at(best.1),
-                        searched: usize::from(data.t_s.is_some()),
-                        note,
-                    })
+                }
+                let flag = if unidentified {
+                    format!(
+                        "; lag not identified: the best is the longest lag tried ({} s, half the {:.1} h the readings span) — the test is shorter than the time constant; measure at least 3× as long to identify it",
+                        fmt_num(lags[lags.len() - 1], 0),
+                        duration / 3600.0
+                    )
+                } else {
+                    String::new()
+                };
+                let note = if data.t_s.is_some() {
+                    format!(
+                        "the {tn} residual follows T_{}_C{} (range {:.2} K), lag {} s found by search{flag}",
+                        ch.name,
+                        tm.map_or(String::new(), |a| format!(" × {}", AXES[a])),
+                        hi - lo,
+                        fmt_num(best.1, 0)
+                    )
+                } else {
+                    format!(
+                        "the {tn} residual follows T_{}_C{} (range {:.2} K)",
+                        ch.name,
+                        tm.map_or(String::new(), |a| format!(" × {}", AXES[a])),
+                        hi - lo
+                    )
+                };
+                Some(Proposal {
+                    spec: spec_at(best.1),
+                    searched: usize::from(data.t_s.is_some()),
+                    note,
                 })
-                .collect();
-            out.extend(found.into_iter().flatten());
-        }
-        // thermal, several sensors: when no one sensor follows the growth.
-        let multi_wanted = only.is_none_or(|k| {
-            k.family() == Family::Thermal
-                && k.times().is_none()
-                && k.channel().is_some_and(|c| c.contains('+'))
-        });
-        if multi_wanted && data.t_s.is_some() {
-            out.extend(multi_sensor(td, st, target));
-        }
-        out
+            })
+            .collect();
+        out.extend(found.into_iter().flatten());
     }
+    // thermal, several sensors: when no one sensor follows the growth.
+    let multi_wanted = only.is_none_or(|k| {
+        k.family() == Family::Thermal
+            && k.times().is_none()
+            && k.channel().is_some_and(|c| c.contains('+'))
+    });
+    if multi_wanted && data.t_s.is_some() {
+        out.extend(multi_sensor(td, st, target));
+    }
+    out
 }
 
 /// Thermal lags tried, s (then refined between neighbours).
