@@ -24,15 +24,13 @@ pub struct Abbe {
 }
 
 impl FamilyDef for Abbe {
-    const INFO: Info = Info {
-        name: "abbe",
-        keys: &["target", "times"],
-        check: "check tool_mm (unit mm, the arm from the measuring line) and whether the tool length changed between passes for another reason",
-        in_span_hint: "; measure with two or more tool lengths (tool_mm) to separate an Abbe error",
-        time_dependent: false,
-        aliasable: false,
-        simulate: Some(Sim::parse),
-    };
+    const INFO: Info = Info::new(
+        "abbe",
+        &["target", "times"],
+        "check tool_mm (unit mm, the arm from the measuring line) and whether the tool length changed between passes for another reason",
+    )
+    .in_span_hint("; measure with two or more tool lengths (tool_mm) to separate an Abbe error")
+    .simulated(Sim::parse);
 
     fn parse(kv: &Pairs, _target: Target) -> Result<Abbe> {
         Ok(Abbe {
@@ -127,10 +125,6 @@ impl Sim {
 }
 
 impl SimForm for Sim {
-    fn target(&self) -> usize {
-        self.target
-    }
-
     fn valid(&self) -> bool {
         !self.tools_mm.is_empty()
     }

@@ -22,15 +22,13 @@ pub struct Drift {
 }
 
 impl FamilyDef for Drift {
-    const INFO: Info = Info {
-        name: "drift",
-        keys: &["target", "order"],
-        check: "check that t_s is in seconds and whether a temperature channel explains the drift",
-        in_span_hint: "",
-        time_dependent: true,
-        aliasable: false,
-        simulate: Some(Sim::parse),
-    };
+    const INFO: Info = Info::new(
+        "drift",
+        &["target", "order"],
+        "check that t_s is in seconds and whether a temperature channel explains the drift",
+    )
+    .time_dependent()
+    .simulated(Sim::parse);
 
     fn parse(kv: &Pairs, _target: Target) -> Result<Drift> {
         Ok(Drift {
@@ -102,10 +100,6 @@ impl Sim {
 }
 
 impl SimForm for Sim {
-    fn target(&self) -> usize {
-        self.target
-    }
-
     fn check_numbers(&self, what: &dyn Fn(&str) -> String) -> Result<()> {
         DRIFT_UM_PER_H.check(&what("um_per_h"), self.um_per_h)
     }

@@ -25,15 +25,12 @@ pub struct HigherOrder {
 }
 
 impl FamilyDef for HigherOrder {
-    const INFO: Info = Info {
-        name: "higher_order",
-        keys: &["target", "axis", "degree"],
-        check: "check the data",
-        in_span_hint: "",
-        time_dependent: false,
-        aliasable: true,
-        simulate: None,
-    };
+    const INFO: Info = Info::new(
+        "higher_order",
+        &["target", "axis", "degree"],
+        "check the data",
+    )
+    .aliasable();
 
     fn parse(kv: &Pairs, _target: Target) -> Result<HigherOrder> {
         let axis = kv.need_axis("axis")?;

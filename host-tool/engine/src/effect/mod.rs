@@ -72,6 +72,51 @@ pub struct Info {
 /// simulated form.
 pub type SimParse = fn(&Pairs) -> Result<Box<dyn SimForm>>;
 
+impl Info {
+    /// A family named `name` with `keys`, `check` its words for an
+    /// implausible parameter; judged by the block hold-out, no wave, not
+    /// simulated — the methods below say otherwise.
+    pub const fn new(
+        name: &'static str,
+        keys: &'static [&'static str],
+        check: &'static str,
+    ) -> Info {
+        Info {
+            name,
+            keys,
+            check,
+            in_span_hint: "",
+            time_dependent: false,
+            aliasable: false,
+            simulate: None,
+        }
+    }
+
+    /// With `hint` appended to its `in_model_span` warning.
+    pub const fn in_span_hint(mut self, hint: &'static str) -> Info {
+        self.in_span_hint = hint;
+        self
+    }
+
+    /// Judged by forward chaining: the error follows time.
+    pub const fn time_dependent(mut self) -> Info {
+        self.time_dependent = true;
+        self
+    }
+
+    /// A wave along an axis that a coarse sampling can alias.
+    pub const fn aliasable(mut self) -> Info {
+        self.aliasable = true;
+        self
+    }
+
+    /// Simulated: `parse` reads `simulate --effect <name>:…`.
+    pub const fn simulated(mut self, parse: SimParse) -> Info {
+        self.simulate = Some(parse);
+        self
+    }
+}
+
 /// What makes a type a family: its [`Info`] and how an effect of it is
 /// read from the pairs of an `--add` string (its keys already checked
 /// against [`Info::keys`]; `target` parsed).

@@ -30,15 +30,13 @@ pub struct Periodic {
 }
 
 impl FamilyDef for Periodic {
-    const INFO: Info = Info {
-        name: "periodic",
-        keys: &["target", "axis", "period_mm", "harmonics"],
-        check: "check the period against the screw lead and the scale pitch, and the amplitude against the screw's class",
-        in_span_hint: "",
-        time_dependent: false,
-        aliasable: true,
-        simulate: Some(Sim::parse),
-    };
+    const INFO: Info = Info::new(
+        "periodic",
+        &["target", "axis", "period_mm", "harmonics"],
+        "check the period against the screw lead and the scale pitch, and the amplitude against the screw's class",
+    )
+    .aliasable()
+    .simulated(Sim::parse);
 
     fn parse(kv: &Pairs, _target: Target) -> Result<Periodic> {
         let axis = kv.need_axis("axis")?;
@@ -167,10 +165,6 @@ impl Sim {
 }
 
 impl SimForm for Sim {
-    fn target(&self) -> usize {
-        self.target
-    }
-
     fn valid(&self) -> bool {
         self.period_mm > 0.0 && self.harmonics >= 1
     }

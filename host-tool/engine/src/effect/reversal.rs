@@ -24,15 +24,12 @@ pub struct Reversal {
 }
 
 impl FamilyDef for Reversal {
-    const INFO: Info = Info {
-        name: "reversal",
-        keys: &["target", "axis"],
-        check: "check the drive (a loose coupling or a worn nut) and the sign of the dir column",
-        in_span_hint: "",
-        time_dependent: false,
-        aliasable: false,
-        simulate: Some(Sim::parse),
-    };
+    const INFO: Info = Info::new(
+        "reversal",
+        &["target", "axis"],
+        "check the drive (a loose coupling or a worn nut) and the sign of the dir column",
+    )
+    .simulated(Sim::parse);
 
     fn parse(kv: &Pairs, _target: Target) -> Result<Reversal> {
         Ok(Reversal {
@@ -110,10 +107,6 @@ impl Sim {
 }
 
 impl SimForm for Sim {
-    fn target(&self) -> usize {
-        self.target
-    }
-
     fn check_numbers(&self, what: &dyn Fn(&str) -> String) -> Result<()> {
         BACKLASH_UM.check(&what("backlash_um"), self.backlash_um)
     }

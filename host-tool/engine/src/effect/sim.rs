@@ -41,8 +41,6 @@ pub trait Sensor {
 /// A family's simulated form. `Display` is the canonical spec, with every
 /// parameter (parsing it gives the same form back).
 pub trait SimForm: fmt::Display + fmt::Debug + Send + Sync {
-    /// Target index (0 = ex) the error is added to.
-    fn target(&self) -> usize;
     /// Whether the form can be simulated at all (a period > 0, a tool
     /// list not empty): a form built in Rust may not be.
     fn valid(&self) -> bool {

@@ -22,15 +22,12 @@ pub struct Squareness {
 }
 
 impl FamilyDef for Squareness {
-    const INFO: Info = Info {
-        name: "squareness",
-        keys: &["target", "axis"],
-        check: "check that the error and position columns belong to the axes they name",
-        in_span_hint: "; use a seed without linear cross terms (kinematic) to estimate squareness",
-        time_dependent: false,
-        aliasable: false,
-        simulate: None,
-    };
+    const INFO: Info = Info::new(
+        "squareness",
+        &["target", "axis"],
+        "check that the error and position columns belong to the axes they name",
+    )
+    .in_span_hint("; use a seed without linear cross terms (kinematic) to estimate squareness");
 
     fn parse(kv: &Pairs, target: Target) -> Result<Squareness> {
         let axis = kv.need_axis("axis")?;

@@ -62,15 +62,13 @@ impl Thermal {
 }
 
 impl FamilyDef for Thermal {
-    const INFO: Info = Info {
-        name: "thermal",
-        keys: &["target", "channel", "times", "offset", "lag_s", "t_ref_c"],
-        check: "check the sensor: one that sees only part of the structure's temperature change (placed on a cover, in the air stream, far from the screw nut or scale) makes the apparent coefficient too large; put it on the part that grows or add a second sensor there",
-        in_span_hint: "",
-        time_dependent: true,
-        aliasable: false,
-        simulate: Some(Sim::parse),
-    };
+    const INFO: Info = Info::new(
+        "thermal",
+        &["target", "channel", "times", "offset", "lag_s", "t_ref_c"],
+        "check the sensor: one that sees only part of the structure's temperature change (placed on a cover, in the air stream, far from the screw nut or scale) makes the apparent coefficient too large; put it on the part that grows or add a second sensor there",
+    )
+    .time_dependent()
+    .simulated(Sim::parse);
 
     fn parse(kv: &Pairs, _target: Target) -> Result<Thermal> {
         let channel = kv.need("channel")?;
@@ -326,10 +324,6 @@ impl Sensor for Sim {
 }
 
 impl SimForm for Sim {
-    fn target(&self) -> usize {
-        self.target
-    }
-
     fn valid(&self) -> bool {
         self.tau_s >= 0.0 && self.lag_s >= 0.0 && self.swing_period_s > 0.0
     }

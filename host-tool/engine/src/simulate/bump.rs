@@ -53,10 +53,6 @@ impl Bump {
 }
 
 impl SimForm for Bump {
-    fn target(&self) -> usize {
-        self.target
-    }
-
     fn valid(&self) -> bool {
         self.width_mm > 0.0
     }
