@@ -36,6 +36,10 @@ run() { # run NAME ARGS...: stdout → NAME.json (timing blanked), exit code →
   echo $? >"../$name.rc"
   sed -i -E 's/"elapsed_s": ?[0-9.e+-]+/"elapsed_s":0/g' "../$name.out"
   sed -i -E 's/Done in [0-9.]+ s/Done in _ s/' "../$name.err"
+  # diagnose searches its targets in parallel and each prints its progress
+  # lines as it goes, so their order varies from run to run (the same
+  # binary twice): stderr is compared as a sorted list of lines.
+  LC_ALL=C sort -o "../$name.err" "../$name.err"
 }
 run sim1 simulate --plan grid:50 --plan line:y:0.5,bidir --effect periodic:axis=y,period_mm=5.08,amp_um=3 --seed 3 -o data.csv --json
 run sim2 simulate --plan grid:100 --plan line:x:1,bidir --effect thermal:channel=bed,times=x,rise_c=3 --effect reversal:axis=x,backlash_um=8 --effect abbe:angle_urad=48.5,tools_mm=0/100/150 --effect drift:um_per_h=0.5 --seed 5 -o data2.csv --json

@@ -1,11 +1,16 @@
-//! `cargo xtask test-browser` (part of `cargo xtask test`): the demo's
-//! report pages opened in a real browser — headless Chromium at 1280 px —
-//! and checked the way a person would look at them: every figure is drawn
-//! (has a size) and every image loaded, nothing is wider than the window,
-//! the verdict card is the first thing under the title and visible without
-//! scrolling, the page weight and the time to lay it out stay within
-//! limits. A screenshot of each page is written to `out/screens/` to look
-//! at.
+//! `cargo xtask test-browser` (part of `cargo xtask test`): every kind of
+//! report page (the demo's compare, diagnose, history and final pages;
+//! ISO 230-2 from a simulated run and from an `.rtl`; the on-machine
+//! pages — probe 2-D and 3-D, separate reversal / three-probe / multi-step,
+//! workpiece, diagnose-part; a printer bed's diagnose page) opened in a
+//! real browser — headless Chromium at 1280 px (a laptop) and at 390 px
+//! (a phone) — and checked the way a person would look at them: the page
+//! declares a viewport (else a phone lays it out 980 px wide and shrinks
+//! the text), every figure is drawn (has a size) and every image loaded,
+//! nothing is wider than the window, the verdict card is the first thing
+//! under the title and visible without scrolling, the page weight and the
+//! time to lay it out stay within limits. A screenshot of each page at
+//! each width is written to `out/screens/<page>-<width>.png` to look at.
 //!
 //! How: a copy of each page gets a small script at the end of its body that
 //! measures the laid-out page (`scrollWidth`, each figure's box, each
@@ -21,9 +26,10 @@ use std::time::{Duration, Instant};
 
 use crate::{root, Result};
 
-/// The window width the pages are checked at (a laptop; the issue's 1400 px
-/// screen cut the 1440 px colour bar off).
-pub const VIEWPORT_PX: u32 = 1280;
+/// The window widths the pages are checked at: a laptop (the issue's
+/// 1400 px screen cut the 1440 px colour bar off) and a phone held upright
+/// (issue 28: five pages were 576 px wide at 390 px).
+pub const WIDTHS_PX: [u32; 2] = [1280, 390];
 /// A page (HTML with its inlined SVGs) may weigh at most this much.
 pub const MAX_PAGE_BYTES: u64 = 4_000_000;
 /// From navigation start to the end of the body, laid out, at most.
@@ -55,6 +61,8 @@ pub fn chromium() -> Option<String> {
 pub struct Measure {
     /// `window.innerWidth`.
     pub viewport: f64,
+    /// The page has `<meta name="viewport" content="width=device-width…">`.
+    pub viewport_meta: bool,
     /// `document.documentElement.scrollWidth`.
     pub scroll_width: f64,
     /// `document.documentElement.scrollHeight` (reported, not limited).
@@ -88,6 +96,8 @@ const SCRIPT: &str = r#"<script>
   var out = [];
   var vw = window.innerWidth;
   out.push('viewport=' + vw);
+  var meta = document.querySelector('meta[name="viewport"]');
+  out.push('viewport_meta=' + (meta !== null && /width=device-width/.test(meta.getAttribute('content') || '')));
   out.push('scroll_width=' + document.documentElement.scrollWidth);
   out.push('height=' + document.documentElement.scrollHeight);
   var figs = document.querySelectorAll('figure > svg');
@@ -135,6 +145,7 @@ pub fn parse(dom: &str) -> std::result::Result<Measure, String> {
         let num = || v.trim().parse::<f64>().map_err(|e| format!("{k}={v}: {e}"));
         match k {
             "viewport" => m.viewport = num()?,
+            "viewport_meta" => m.viewport_meta = v.trim() == "true",
             "scroll_width" => m.scroll_width = num()?,
             "height" => m.height = num()?,
             "figures" => m.figures = num()? as usize,
@@ -162,14 +173,21 @@ pub fn overview_failures(m: &Measure) -> Vec<String> {
     }
 }
 
-/// Every way the page fails the check, in words (empty: it passes).
-pub fn failures(m: &Measure, page_bytes: u64) -> Vec<String> {
+/// Every way the page fails the check at window width `width`, in words
+/// (empty: it passes).
+pub fn failures(m: &Measure, page_bytes: u64, width: u32) -> Vec<String> {
     let mut f = Vec::new();
-    if (m.viewport - f64::from(VIEWPORT_PX)).abs() > 0.5 {
+    if (m.viewport - f64::from(width)).abs() > 0.5 {
         f.push(format!(
-            "the window was {} px wide, not {VIEWPORT_PX}: the check did not run at the width it means",
+            "the window was {} px wide, not {width}: the check did not run at the width it means",
             m.viewport
         ));
+    }
+    if !m.viewport_meta {
+        f.push(
+            "no <meta name=\"viewport\" content=\"width=device-width\">: a phone lays the page out 980 px wide and shrinks it"
+                .into(),
+        );
     }
     if m.scroll_width > m.viewport + 0.5 {
         f.push(format!(
@@ -241,9 +259,33 @@ fn output_within(cmd: &mut Command, limit: Duration) -> std::result::Result<Stri
     }
 }
 
+/// Chromium's smallest window width: a narrower `--window-size` is widened
+/// to it, so narrower widths are checked in an iframe ([`frame_page`]).
+pub const MIN_WINDOW_PX: u32 = 500;
+
+/// A page holding `src` (a file beside it) in an iframe `width` px wide
+/// and 2000 px high; when the frame has loaded, the `#browser-check` text
+/// inside it is copied into this page's own `<pre id="browser-check">`
+/// (`--dump-dom` prints the top page only). The grey right of the frame is
+/// what the phone does not show.
+pub fn frame_page(src: &str, width: u32) -> String {
+    format!(
+        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><style>body{{margin:0;background:#777}}\
+iframe{{border:0;display:block;background:#fff}}</style>\n<script>\nfunction copyCheck(f) {{\n\
+  var d = null; try {{ d = f.contentDocument; }} catch (e) {{}}\n\
+  var p = d ? d.getElementById('browser-check') : null;\n\
+  if (!p) {{ return; }}\n\
+  var pre = document.createElement('pre');\n  pre.id = 'browser-check';\n\
+  pre.textContent = p.textContent;\n  document.body.appendChild(pre);\n}}\n</script></head>\n\
+<body><iframe src=\"{}\" width=\"{width}\" height=\"2000\" onload=\"copyCheck(this)\"></iframe></body></html>\n",
+        src.replace('"', "%22")
+    )
+}
+
 /// Common flags: headless, no sandbox (root in a container), no GPU, the
-/// window size, nothing from the network.
-fn browser_cmd(browser: &str) -> Command {
+/// window size (at least [`MIN_WINDOW_PX`]), nothing from the network;
+/// file pages may read their frames (the narrow-width check).
+fn browser_cmd(browser: &str, width: u32) -> Command {
     let mut c = Command::new(browser);
     c.args([
         "--headless",
@@ -252,17 +294,19 @@ fn browser_cmd(browser: &str) -> Command {
         "--disable-dev-shm-usage",
         "--hide-scrollbars",
         "--no-first-run",
-        &format!("--window-size={VIEWPORT_PX},2000"),
+        "--allow-file-access-from-files",
+        &format!("--window-size={},2000", width.max(MIN_WINDOW_PX)),
     ]);
     c
 }
 
-/// Checks one page; writes its screenshot to `shot`. Returns the measure
-/// and the failures.
+/// Checks one page in a window `width` px wide; writes its screenshot to
+/// `shot`. Returns the measure and the failures.
 pub fn check_page(
     browser: &str,
     page: &Path,
     shot: &Path,
+    width: u32,
 ) -> std::result::Result<(Measure, u64, f64, Vec<String>), String> {
     // file:// needs an absolute path.
     let page = &page
@@ -278,42 +322,252 @@ pub fn check_page(
     let injected = format!("{}{SCRIPT}{}", &html[..end], &html[end..]);
     std::fs::write(&copy, injected).map_err(|e| format!("{}: {e}", copy.display()))?;
     let url = |p: &Path| format!("file://{}", p.display());
+    // Below Chromium's smallest window (500 px) the page is laid out in an
+    // iframe of the width asked for, inside a frame page that copies the
+    // measure out of it (the frame's innerWidth is the width a phone
+    // gives the page). The frame sits beside the page as well.
+    let framed = |target: &Path, name: &str| -> std::result::Result<PathBuf, String> {
+        if width >= MIN_WINDOW_PX {
+            return Ok(target.to_path_buf());
+        }
+        let frame = page.with_file_name(name);
+        let file = target.file_name().unwrap_or_default().to_string_lossy();
+        std::fs::write(&frame, frame_page(&file, width))
+            .map_err(|e| format!("{}: {e}", frame.display()))?;
+        Ok(frame)
+    };
+    let check = framed(&copy, "index.browser-frame.html")?;
     let t0 = Instant::now();
     let dom = output_within(
-        browser_cmd(browser).arg("--dump-dom").arg(url(&copy)),
+        browser_cmd(browser, width)
+            .arg("--dump-dom")
+            .arg(url(&check)),
         Duration::from_secs(MAX_BROWSER_S),
     );
     let wall_s = t0.elapsed().as_secs_f64();
     let _ = std::fs::remove_file(&copy);
+    if check != copy {
+        let _ = std::fs::remove_file(&check);
+    }
     let m = parse(&dom?)?;
     if let Some(dir) = shot.parent() {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     }
-    output_within(
-        browser_cmd(browser)
+    let view = framed(page, "index.browser-frame.html")?;
+    let shot_run = output_within(
+        browser_cmd(browser, width)
             .arg(format!("--screenshot={}", shot.display()))
-            .arg(url(page)),
+            .arg(url(&view)),
         Duration::from_secs(MAX_BROWSER_S),
-    )?;
-    let f = failures(&m, bytes);
+    );
+    if view != *page {
+        let _ = std::fs::remove_file(&view);
+    }
+    shot_run?;
+    let f = failures(&m, bytes, width);
     Ok((m, bytes, wall_s, f))
 }
 
-/// The pages the demo writes, with a short name for the screenshot.
-fn demo_pages(out: &Path) -> Vec<(&'static str, PathBuf)> {
-    let r = out.join("report");
-    vec![
+/// Every page kind, with a short name for the screenshot, as
+/// [`write_pages`] lays them out under `out`: the demo's four pages, then
+/// one page of each other kind under `out/pages/<name>/`.
+fn pages(out: &Path) -> Vec<(&'static str, PathBuf)> {
+    // `--pages DIR` of a demo's own folder (DIR/report/…, the layout
+    // before every page kind was checked): its four pages.
+    let own_demo = out.join("report").join("index.html").is_file();
+    let r = if own_demo {
+        out.join("report")
+    } else {
+        out.join("demo").join("report")
+    };
+    let mut v = vec![
         ("compare", r.join("index.html")),
         ("diagnose", r.join("diagnose").join("index.html")),
         ("history", r.join("history").join("index.html")),
         ("final", r.join("final").join("index.html")),
-    ]
+    ];
+    if !own_demo {
+        for (name, _) in PAGE_COMMANDS {
+            v.push((name, out.join("pages").join(name).join("index.html")));
+        }
+    }
+    v
 }
 
-/// `cargo xtask test-browser [--pages DIR]`: the demo (debug build) into
-/// `out/browser/demo`, then every report page checked in Chromium;
-/// screenshots in `out/screens/<page>.png`. `--pages DIR` checks the pages
-/// of a demo already written to DIR (no demo run) — an older build's, say.
+/// The commands that write the pages beside the demo's, run in `out` after
+/// `simulate --scenario on-machine -o om/` and `simulate --plan iso230:x`
+/// (`{data}` is the tests' data folder, the report folder is appended as
+/// `--report pages/<name>`).
+const PAGE_COMMANDS: [(&str, &[&str]); 11] = [
+    ("iso230", &["iso230", "iso.csv"]),
+    ("iso230-rtl", &["iso230", "{data}/iso_worked.rtl"]),
+    (
+        "probe-2d",
+        &[
+            "probe",
+            "calibrate",
+            "om/ball.csv",
+            "--ball-diameter-mm",
+            "4",
+            "-o",
+            "probe.json",
+        ],
+    ),
+    (
+        "probe-3d",
+        &[
+            "probe",
+            "calibrate",
+            "om/ball3d.csv",
+            "--ball-diameter-mm",
+            "4",
+            "--plane",
+            "xyz",
+            "-o",
+            "probe3d.json",
+        ],
+    ),
+    (
+        "separate-reversal",
+        &[
+            "separate",
+            "reversal",
+            "om/run0.csv",
+            "om/run180.csv",
+            "-o",
+            "rev.csv",
+        ],
+    ),
+    (
+        "separate-three-probe",
+        &[
+            "separate",
+            "three-probe",
+            "om/three-probe.csv",
+            "--angles-deg",
+            "0,99.84,202.5",
+            "-o",
+            "tp.csv",
+        ],
+    ),
+    (
+        "separate-multi-step",
+        &[
+            "separate",
+            "multi-step",
+            "om/multi-step.csv",
+            "-o",
+            "ms.csv",
+        ],
+    ),
+    ("workpiece", &["workpiece", "om/grinder.csv"]),
+    (
+        "diagnose-part",
+        &[
+            "diagnose-part",
+            "om/run0.csv",
+            "--reversal",
+            "om/run180.csv",
+        ],
+    ),
+    ("bed", &["diagnose", "bed.csv", "--model", "bed.json"]),
+    (
+        "bed-compare",
+        &["compare", "bed.csv", "--model", "bed.json"],
+    ),
+];
+
+/// Runs `bin args…` in `dir`, failing with its stderr.
+fn run_in(dir: &Path, bin: &Path, args: &[&str]) -> Result<()> {
+    let out = Command::new(bin)
+        .args(args)
+        .current_dir(dir)
+        .stdout(Stdio::null())
+        .output()
+        .map_err(|e| format!("cannot start {}: {e}", bin.display()))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "`trueaxis {}` failed ({}): {}",
+            args.join(" "),
+            out.status,
+            String::from_utf8_lossy(&out.stderr)
+        ))
+    }
+}
+
+/// Builds the CLI (debug) and writes every page kind into `out`: the demo
+/// into `out/demo`, the rest into `out/pages/<name>`.
+fn write_pages(root: &Path, out: &Path) -> Result<()> {
+    let args = ["build", "--quiet", "-p", "trueaxis"];
+    eprintln!("\n$ cargo {}", args.join(" "));
+    let status = Command::new("cargo")
+        .args(args)
+        .current_dir(root)
+        .status()
+        .map_err(|e| format!("cannot start cargo: {e}"))?;
+    if !status.success() {
+        return Err(format!("`cargo {}` failed ({status})", args.join(" ")));
+    }
+    let target = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("target"));
+    let bin = target.join("debug").join("trueaxis");
+    if out.exists() {
+        std::fs::remove_dir_all(out).map_err(|e| format!("remove {}: {e}", out.display()))?;
+    }
+    std::fs::create_dir_all(out).map_err(|e| format!("create {}: {e}", out.display()))?;
+    // --json: the story goes to stderr, the summary (one long JSON line)
+    // to a file beside the pages rather than the terminal.
+    eprintln!("$ trueaxis demo --out demo --json  (in {})", out.display());
+    let summary = out.join("demo.json");
+    let file = std::fs::File::create(&summary)
+        .map_err(|e| format!("create {}: {e}", summary.display()))?;
+    let status = Command::new(&bin)
+        .args(["demo", "--out", "demo", "--json"])
+        .current_dir(out)
+        .stdout(file)
+        .status()
+        .map_err(|e| format!("cannot start {}: {e}", bin.display()))?;
+    if !status.success() {
+        return Err(format!("`trueaxis demo` failed ({status})"));
+    }
+    let data = root
+        .join("host-tool")
+        .join("cli")
+        .join("tests")
+        .join("data");
+    let data_s = data.to_string_lossy().into_owned();
+    let bed = format!("{data_s}/bed_heightmap.csv");
+    let setup: [&[&str]; 4] = [
+        &["simulate", "--scenario", "on-machine", "-o", "om/"],
+        &[
+            "simulate", "--plan", "iso230:x", "--seed", "2", "-o", "iso.csv",
+        ],
+        &["import", &bed, "-o", "bed.csv"],
+        &["fit", "bed.csv", "--model", "cubic19", "-o", "bed.json"],
+    ];
+    for args in setup {
+        run_in(out, &bin, args)?;
+    }
+    for (name, args) in PAGE_COMMANDS {
+        let report = format!("pages/{name}");
+        let mut a: Vec<String> = args.iter().map(|s| s.replace("{data}", &data_s)).collect();
+        a.extend(["--report".into(), report]);
+        let a: Vec<&str> = a.iter().map(String::as_str).collect();
+        eprintln!("$ trueaxis {}", a.join(" "));
+        run_in(out, &bin, &a)?;
+    }
+    Ok(())
+}
+
+/// `cargo xtask test-browser [--pages DIR]`: every page kind (debug build)
+/// into `out/browser`, then every page checked in Chromium at each of
+/// [`WIDTHS_PX`]; screenshots in `out/screens/<page>-<width>.png`.
+/// `--pages DIR` checks the pages already written to DIR by an earlier run
+/// (no commands run) — an older build's, say; DIR may also be a demo's own
+/// `--out` folder (its four pages are checked).
 pub fn test(args: &[String]) -> Result<()> {
     let browser = chromium().ok_or(
         "no Chromium found (chromium, chromium-browser, google-chrome or $CHROMIUM): \
@@ -325,8 +579,8 @@ pub fn test(args: &[String]) -> Result<()> {
         [flag, dir] if flag == "--pages" => Some(PathBuf::from(dir)),
         _ => {
             return Err(format!(
-            "test-browser: unexpected arguments {args:?} (usage: test-browser [--pages DEMO_DIR])"
-        ))
+                "test-browser: unexpected arguments {args:?} (usage: test-browser [--pages DIR])"
+            ))
         }
     };
     let screens = match &given {
@@ -336,54 +590,41 @@ pub fn test(args: &[String]) -> Result<()> {
     let out = match given {
         Some(dir) => dir,
         None => {
-            let out = root.join("out").join("browser").join("demo");
-            std::fs::create_dir_all(&out).map_err(|e| format!("create {}: {e}", out.display()))?;
-            let out_s = out.to_string_lossy().into_owned();
-            // --json: the story goes to stderr, the summary (one long JSON
-            // line) to a file beside the pages rather than the terminal.
-            let args = [
-                "run", "--quiet", "-p", "trueaxis", "--", "demo", "--out", &out_s, "--json",
-            ];
-            eprintln!("\n$ cargo {}", args.join(" "));
-            let summary = out.join("demo.json");
-            let file = std::fs::File::create(&summary)
-                .map_err(|e| format!("create {}: {e}", summary.display()))?;
-            let status = Command::new("cargo")
-                .args(args)
-                .current_dir(&root)
-                .stdout(file)
-                .status()
-                .map_err(|e| format!("cannot start cargo: {e}"))?;
-            if !status.success() {
-                return Err(format!("`cargo {}` failed ({status})", args.join(" ")));
-            }
+            let out = root.join("out").join("browser");
+            write_pages(&root, &out)?;
             out
         }
     };
     let mut failed = Vec::new();
-    for (name, page) in demo_pages(&out) {
-        let shot = screens.join(format!("{name}.png"));
-        let (m, bytes, wall_s, mut f) = check_page(&browser, &page, &shot)
-            .map_err(|e| format!("{name} page ({}): {e}", page.display()))?;
-        if name == "diagnose" {
-            f.extend(overview_failures(&m));
-        }
-        eprintln!(
-            "{name:<9} {:>5.2} MB  laid out in {:>5.0} ms (browser {wall_s:.1} s)  {} figures  width {}/{} px  height {} px  verdict first: {}  {}",
-            bytes as f64 / 1e6,
-            m.layout_ms,
-            m.figures,
-            m.scroll_width,
-            m.viewport,
-            m.height,
-            m.verdict_first,
-            if f.is_empty() { "ok" } else { "FAILED" }
-        );
-        for x in &f {
-            eprintln!("    {x}");
-        }
-        if !f.is_empty() {
-            failed.push(format!("{name} ({}): {}", page.display(), f.join("; ")));
+    for (name, page) in pages(&out) {
+        for width in WIDTHS_PX {
+            let shot = screens.join(format!("{name}-{width}.png"));
+            let (m, bytes, wall_s, mut f) = check_page(&browser, &page, &shot, width)
+                .map_err(|e| format!("{name} page ({}): {e}", page.display()))?;
+            if name == "diagnose" && width == WIDTHS_PX[0] {
+                f.extend(overview_failures(&m));
+            }
+            eprintln!(
+                "{name:<21} {width:>4} px {:>5.2} MB  laid out in {:>5.0} ms (browser {wall_s:.1} s)  {} figures  width {}/{} px  height {} px  verdict first: {}  {}",
+                bytes as f64 / 1e6,
+                m.layout_ms,
+                m.figures,
+                m.scroll_width,
+                m.viewport,
+                m.height,
+                m.verdict_first,
+                if f.is_empty() { "ok" } else { "FAILED" }
+            );
+            for x in &f {
+                eprintln!("    {x}");
+            }
+            if !f.is_empty() {
+                failed.push(format!(
+                    "{name} at {width} px ({}): {}",
+                    page.display(),
+                    f.join("; ")
+                ));
+            }
         }
     }
     eprintln!("screenshots: {}", screens.display());
@@ -404,6 +645,7 @@ mod tests {
     fn good() -> Measure {
         Measure {
             viewport: 1280.0,
+            viewport_meta: true,
             scroll_width: 1280.0,
             height: 5000.0,
             figures: 3,
@@ -419,9 +661,10 @@ mod tests {
 
     #[test]
     fn dumped_dom_is_read_back() {
-        let dom = "<html><body><h1>t</h1><pre id=\"browser-check\">\nviewport=1280\nscroll_width=1295\nheight=9000\nfigures=2\nbad_figure=map_ex 1440x420 right 1460\nimages=1\nbroken_image=a.png\nverdict_first=false\nverdict_top=812.5\nlayout_ms=123.4\n</pre></body></html>";
+        let dom = "<html><body><h1>t</h1><pre id=\"browser-check\">\nviewport=1280\nviewport_meta=true\nscroll_width=1295\nheight=9000\nfigures=2\nbad_figure=map_ex 1440x420 right 1460\nimages=1\nbroken_image=a.png\nverdict_first=false\nverdict_top=812.5\nlayout_ms=123.4\n</pre></body></html>";
         let m = parse(dom).unwrap();
         assert_eq!(m.viewport, 1280.0);
+        assert!(m.viewport_meta);
         assert_eq!(m.scroll_width, 1295.0);
         assert_eq!(m.height, 9000.0);
         assert_eq!(m.figures, 2);
@@ -430,6 +673,35 @@ mod tests {
         assert!(!m.verdict_first);
         assert_eq!(m.verdict_top, 812.5);
         assert!(parse("<html></html>").is_err());
+    }
+
+    #[test]
+    fn a_phone_width_is_checked_in_a_frame_and_every_page_kind_is_listed() {
+        // Chromium widens a window below 500 px: 390 px is laid out in an
+        // iframe that wide, whose measure the frame page copies out.
+        let f = frame_page("index.browser-check.html", 390);
+        assert!(f.contains("<iframe src=\"index.browser-check.html\" width=\"390\""));
+        assert!(f.contains("getElementById('browser-check')"));
+        assert!(WIDTHS_PX.contains(&390) && WIDTHS_PX.contains(&1280));
+        const { assert!(390 < MIN_WINDOW_PX) };
+        let names: Vec<&str> = pages(Path::new("/nowhere")).iter().map(|p| p.0).collect();
+        for kind in [
+            "compare",
+            "diagnose",
+            "history",
+            "final",
+            "iso230",
+            "probe-2d",
+            "probe-3d",
+            "separate-reversal",
+            "separate-three-probe",
+            "separate-multi-step",
+            "workpiece",
+            "diagnose-part",
+            "bed",
+        ] {
+            assert!(names.contains(&kind), "{kind} is not checked");
+        }
     }
 
     #[test]
@@ -449,7 +721,7 @@ mod tests {
 
     #[test]
     fn each_failure_is_named() {
-        assert!(failures(&good(), 1000).is_empty());
+        assert!(failures(&good(), 1000, 1280).is_empty());
         let cases: Vec<(Measure, u64, &str)> = vec![
             (
                 Measure {
@@ -502,6 +774,14 @@ mod tests {
             (good(), MAX_PAGE_BYTES + 1, "weighs"),
             (
                 Measure {
+                    viewport_meta: false,
+                    ..good()
+                },
+                1000,
+                "viewport",
+            ),
+            (
+                Measure {
                     viewport: 800.0,
                     scroll_width: 800.0,
                     ..good()
@@ -511,7 +791,7 @@ mod tests {
             ),
         ];
         for (m, bytes, want) in cases {
-            let f = failures(&m, bytes);
+            let f = failures(&m, bytes, 1280);
             assert_eq!(f.len(), 1, "{want}: {f:?}");
             assert!(f[0].contains(want), "{want}: {f:?}");
         }

@@ -60,10 +60,12 @@ tasks:
   test        every test: fmt, clippy, host tests, no_std build, firmware, QEMU
   demo        the main job, end to end (writes into out/demo)
   test-qemu   only the QEMU suites and the end-to-end run (part of `test`)
-  test-browser  the demo's report pages in headless Chromium at 1280 px: figures
-              drawn, nothing wider than the window, verdict first, weight and
-              layout time within limits; screenshots in out/screens (part of
-              `test`); --pages DIR checks a demo already written to DIR
+  test-browser  every kind of report page (the demo's, ISO 230-2, on-machine, a
+              bed) in headless Chromium at 1280 and 390 px: a viewport,
+              figures drawn, nothing wider than the window, verdict first,
+              weight and layout time within limits; screenshots in
+              out/screens (part of `test`); --pages DIR checks pages already
+              written to DIR (an earlier run's, or a demo's --out folder)
   bench-mcu   instruction counts per model update under QEMU (-icount shift=0);
               --calibrate: model-core's cost estimate against the counts of
               the bench tables and 191 seeded random ones (BENCHMARKS.md)";

@@ -16,6 +16,7 @@ use anyhow::{Context, Result};
 
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::import;
+use trueaxis_engine::warning::Warning;
 
 /// The JSON key with the number of rows left out on load.
 pub const SKIPPED_KEY: &str = "skipped_count";
@@ -27,10 +28,22 @@ const NAMED: usize = 3;
 /// line) and says on stderr which rows were left out, if any.
 pub fn load_data(path: &Path, axis: Option<usize>) -> Result<Dataset> {
     let data = import::load_with_axis(path, axis)?;
+    if let Some(note) = encoding_note(&data) {
+        eprintln!("{note}");
+    }
     if let Some(note) = skipped_note(&data) {
         eprintln!("{note}");
     }
     Ok(data)
+}
+
+/// `note: d.csv is not valid UTF-8 …: read as Windows-1252 …` when the
+/// reader decoded the file so (docs/cli.md § Measurement CSV).
+pub fn encoding_note(data: &Dataset) -> Option<String> {
+    data.metadata
+        .iter()
+        .find(|(k, _)| k == import::ENCODING_NOTE)
+        .map(|(_, v)| format!("note: {} is {v}", data.source))
 }
 
 /// `note: 2 rows of d.csv were left out (line 409: no error value on this
@@ -75,19 +88,19 @@ pub fn load_board_table(path: &Path) -> Result<Vec<u8>> {
 /// Every warning about the data themselves that fit, diagnose and improve
 /// give: auxiliary columns ([`aux_warnings`]) and units the data probably
 /// do not have (`units_suspect`, trueaxis_engine::units).
-pub fn data_warnings(data: &Dataset) -> Vec<(&'static str, String)> {
+pub fn data_warnings(data: &Dataset) -> Vec<Warning> {
     let mut w = aux_warnings(data);
     w.extend(trueaxis_engine::units::suspect(data));
     w
 }
 
 /// What `fit`, `improve` and `diagnose` say about the data's auxiliary
-/// columns (docs/cli.md § Measurement CSV: kept and reported), as (code, detail):
+/// columns (docs/cli.md § Measurement CSV: kept and reported):
 /// `aux_misspelled` for those whose name looks like a contract column
 /// written another way (`ey [um]` → `ey_um`, `T_bed` → `T_bed_C`, see
 /// `import::probable_column`), `aux_columns` for the rest. Neither is used
 /// by any model; both are written back by `import`.
-pub fn aux_warnings(data: &Dataset) -> Vec<(&'static str, String)> {
+pub fn aux_warnings(data: &Dataset) -> Vec<Warning> {
     let mut meant = Vec::new();
     let mut other = Vec::new();
     for c in &data.aux {
@@ -98,7 +111,7 @@ pub fn aux_warnings(data: &Dataset) -> Vec<(&'static str, String)> {
     }
     let mut w = Vec::new();
     if !meant.is_empty() {
-        w.push((
+        w.push(Warning::new(
             "aux_misspelled",
             format!(
                 "{}: {} kept as auxiliary and not fitted, though the name looks like a contract column written another way: {} — rename the header to the contract name to use it",
@@ -109,7 +122,7 @@ pub fn aux_warnings(data: &Dataset) -> Vec<(&'static str, String)> {
         ));
     }
     if !other.is_empty() {
-        w.push((
+        w.push(Warning::new(
             "aux_columns",
             format!(
                 "{}: auxiliary {} {} kept, not used by any model: {}",
@@ -220,13 +233,13 @@ mod tests {
         assert_eq!(
             aux_warnings(&d),
             vec![
-                (
+                Warning::new(
                     "aux_misspelled",
-                    "r5.csv: columns are kept as auxiliary and not fitted, though the name looks like a contract column written another way: `ey [um]` (probably `ey_um`), `T_bed` (probably `T_bed_C`) — rename the header to the contract name to use it".to_string()
+                    "r5.csv: columns are kept as auxiliary and not fitted, though the name looks like a contract column written another way: `ey [um]` (probably `ey_um`), `T_bed` (probably `T_bed_C`) — rename the header to the contract name to use it"
                 ),
-                (
+                Warning::new(
                     "aux_columns",
-                    "r5.csv: auxiliary column is kept, not used by any model: `feed`".to_string()
+                    "r5.csv: auxiliary column is kept, not used by any model: `feed`"
                 ),
             ]
         );

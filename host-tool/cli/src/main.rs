@@ -66,7 +66,11 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let json = std::env::args_os().skip(1).any(|a| a == "--json");
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => cmd::out::usage_exit(e, json),
+    };
     let result = match cli.command {
         Command::Import(a) => a.run(),
         Command::Simulate(a) => a.run(),
@@ -95,7 +99,11 @@ fn main() -> ExitCode {
         // more output, which is not a failure (cmd/out.rs).
         Err(e) if cmd::out::is_stdout_closed(&e) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", cmd::flags::render(&e));
+            // Under --json stdout carries one document, an error too.
+            if json {
+                cmd::out::json_error(&e, 1);
+            }
             ExitCode::FAILURE
         }
     }

@@ -5,6 +5,8 @@
 //! and the exported table — evaluated by model-core exactly as the board does
 //! — compensates the simulated measurements down to that noise.
 
+mod common;
+
 use std::path::PathBuf;
 
 use model_core::{parse, Inputs, Model, MAX_TEMPS};
@@ -237,5 +239,20 @@ fn demo_finds_both_hidden_effects_and_its_table_compensates_the_data() {
     for f in ["probe.json", "pass.csv", "after.csv", "truth.json"] {
         assert!(out.join("on-machine").join(f).exists(), "{f}");
     }
+
+    // Every page's Next command runs as pasted (issue 28; the demo's paths
+    // are absolute here, as --out was), in the demo's folder.
+    let mut failed = Vec::new();
+    let mut ran = 0;
+    for p in common::pages_under(&out) {
+        if let Some(cmd) = common::page_next(&p) {
+            ran += 1;
+            if let Err(e) = common::paste(&out, &cmd) {
+                failed.push(format!("{}: {e}", p.display()));
+            }
+        }
+    }
+    assert!(failed.is_empty(), "{}", failed.join("\n"));
+    assert!(ran >= 4, "the demo's pages proposed {ran} commands");
     let _ = std::fs::remove_dir_all(&out);
 }

@@ -213,7 +213,7 @@ fn expect_exit(args: &[&str], code: i32, needle: &str) {
         "{args:?}: expected `{needle}` in stderr: {err}"
     );
     if code == 1 {
-        assert!(out.stdout.is_empty(), "no JSON on failure");
+        common::assert_no_document(args, &out);
     }
 }
 
@@ -332,4 +332,68 @@ fn bad_input_exits_1_and_usage_exits_2() {
         2,
         "blocks",
     );
+}
+
+#[test]
+fn the_text_gives_each_targets_term_count_when_they_differ() {
+    // Issue 28: "21 terms per target" when ey and ez had 19.
+    let dir = common::tmp_dir("fit", "terms");
+    let csv = dir.join("d.csv");
+    common::json(&common::run(&[
+        "simulate",
+        "--plan",
+        "grid:100",
+        "--plan",
+        "line:x:5,bidir",
+        "--seed",
+        "4",
+        "-o",
+        common::s(&csv),
+        "--json",
+    ]));
+    let out = common::run(&[
+        "fit",
+        common::s(&csv),
+        "--model",
+        "cubic19",
+        "--add",
+        "reversal:target=ex,axis=x",
+        "-o",
+        common::s(&dir.join("m.json")),
+    ]);
+    common::assert_success(&out);
+    let text = String::from_utf8_lossy(&out.stdout);
+    let first = text.lines().next().unwrap();
+    assert!(
+        first.contains("terms per target ex 20, ey 19, ez 19"),
+        "{first}"
+    );
+    assert!(first.contains(" rows, "), "{first}");
+    assert!(text.contains("\nnext: trueaxis compare "), "{text}");
+}
+
+#[test]
+fn a_json_error_is_a_json_document_on_stdout() {
+    // Issue 28: `--json` errors wrote nothing to stdout, so a script
+    // reading it got no document at all.
+    for (args, code) in [
+        (
+            &["fit", "no-such.csv", "--model", "cubic19", "--json"][..],
+            1,
+        ),
+        (&["fit", "--no-such-flag", "--json"][..], 2),
+    ] {
+        let out = run(args);
+        assert_eq!(out.status.code(), Some(code), "{args:?}");
+        let doc: serde_json::Value = serde_json::from_slice(&out.stdout)
+            .unwrap_or_else(|e| panic!("{args:?}: {e}: {}", String::from_utf8_lossy(&out.stdout)));
+        assert_eq!(doc["exit_code"], code, "{doc}");
+        assert!(
+            doc["error"].as_str().is_some_and(|e| !e.is_empty()),
+            "{doc}"
+        );
+    }
+    // Without --json an error stays on stderr only.
+    let out = run(&["fit", "no-such.csv", "--model", "cubic19"]);
+    assert!(out.stdout.is_empty());
 }

@@ -16,7 +16,7 @@ fn fails_at(file: &str, line: usize, col: Option<usize>, expect: &str) {
     let out = trueaxis(&["import", path.to_str().unwrap(), "--json"]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{file}: stderr {stderr}");
-    assert!(out.stdout.is_empty(), "{file}: no JSON on failure");
+    common::assert_no_document(&["import", path.to_str().unwrap(), "--json"], &out);
     let loc = match col {
         Some(c) => format!("{}:{line}:{c}: ", path.display()),
         None => format!("{}:{line}: ", path.display()),
@@ -461,4 +461,56 @@ fn implausible_temperatures() {
             && stderr.contains("looks like kelvin"),
         "{stderr}"
     );
+}
+
+/// Issue 28: Excel's German "CSV" (Windows-1252, `;`, decimal comma), its
+/// "Unicode text" saved as `.txt` and a `.tsv` are read; a header that
+/// misses the contract names is answered with the closest ones.
+#[test]
+fn excel_files_from_a_german_desktop_are_read_or_answered_with_the_names_meant() {
+    let dir = common::tmp_dir("import", "excel-de");
+    // `Temperatur ü` and `°` as single Windows-1252 bytes (0xFC, 0xB0).
+    let cp1252 = dir.join("messung.csv");
+    std::fs::write(
+        &cp1252,
+        b"# Pr\xfcfstand: Halle 3, 21 \xb0C\r\nx_mm;ex_um;Temperatur \xfc\r\n0;1,5;20,1\r\n50;-0,25;20,2\r\n",
+    )
+    .unwrap();
+    let out = trueaxis(&["import", cp1252.to_str().unwrap(), "--json"]);
+    let doc = json(&out);
+    assert_eq!(doc["rows"], 2, "{doc}");
+    assert_eq!(doc["aux"][0], "Temperatur ü", "{doc}");
+    assert!(
+        doc["metadata"].to_string().contains("Halle 3, 21 °C"),
+        "{doc}"
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("read as Windows-1252"), "{err}");
+    // Excel's "Unicode text" (UTF-16, tabs) under its own .txt name, and a
+    // .tsv with decimal commas.
+    let txt = dir.join("unicode.txt");
+    std::fs::copy(data("excel_unicode.txt"), &txt).unwrap();
+    assert_eq!(
+        json(&trueaxis(&["import", txt.to_str().unwrap(), "--json"]))["rows"],
+        2
+    );
+    let tsv = dir.join("d.tsv");
+    std::fs::write(&tsv, "x_mm\tex_um\n0\t1,5\n50\t-0,25\n").unwrap();
+    let out = dir.join("d_out.csv");
+    json(&trueaxis(&[
+        "import",
+        tsv.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--json",
+    ]));
+    let written = std::fs::read_to_string(&out).unwrap();
+    assert!(written.contains("\n0,1.5\n50,-0.25\n"), "{written}");
+    // A header in words: the error names the contract columns meant.
+    let words = dir.join("words.csv");
+    std::fs::write(&words, "x (mm);ex [um]\n0;1,5\n50;2\n").unwrap();
+    let out = trueaxis(&["import", words.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("`x (mm)` → x_mm, `ex [um]` → ex_um"), "{err}");
 }

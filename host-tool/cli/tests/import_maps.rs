@@ -246,3 +246,64 @@ fn a_mesh_exported_from_a_fit_of_a_mesh_gives_the_mesh_back() {
     assert_eq!(out.status.code(), Some(1));
     assert!(stderr(&out).contains("a bed mesh"), "{}", stderr(&out));
 }
+
+#[test]
+fn a_bed_is_spoken_of_as_a_bed() {
+    // Issue 28: a printer's heightmap was told to measure ball-screw leads
+    // forward and backward, coloured with high = blue and captioned with a
+    // plane z = 0 it does not have.
+    let dir = tmp_dir("maps", "bed-words");
+    let csv = dir.join("bed.csv");
+    json(&run(&[
+        "import",
+        s(&data("bed_heightmap.csv")),
+        "-o",
+        s(&csv),
+        "--json",
+    ]));
+    let model = dir.join("bed.json");
+    json(&run(&[
+        "fit",
+        s(&csv),
+        "--model",
+        "cubic19",
+        "-o",
+        s(&model),
+        "--json",
+    ]));
+    let report = dir.join("diag");
+    let d = json(&run(&[
+        "diagnose",
+        s(&csv),
+        "--model",
+        s(&model),
+        "--report",
+        s(&report),
+        "--json",
+    ]));
+    let text = d["warnings"].to_string();
+    assert!(text.contains("bed_model"), "{text}");
+    for machine_tool in ["ball-screw", "one_direction", "no_temperature", "ISO 230-2"] {
+        assert!(!text.contains(machine_tool), "{machine_tool}: {text}");
+    }
+    let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+    assert!(
+        html.contains("--model grid:") && html.contains("--format klipper-mesh"),
+        "the card proposes a grid and a mesh"
+    );
+    // The compare page draws the bed's height, high = warm, over x–y.
+    let cmp = dir.join("cmp");
+    json(&run(&[
+        "compare",
+        s(&csv),
+        "--model",
+        s(&model),
+        "--report",
+        s(&cmp),
+        "--json",
+    ]));
+    let html = std::fs::read_to_string(cmp.join("index.html")).unwrap();
+    assert!(html.contains("bed height"), "no bed height on the page");
+    assert!(html.contains("as Klipper and Mainsail colour a mesh"));
+    assert!(!html.contains("plane z = 0"), "an invented plane z = 0");
+}

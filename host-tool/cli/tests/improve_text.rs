@@ -59,3 +59,48 @@ fn a_step_that_adds_two_effects_explains_both() {
         "{text}"
     );
 }
+
+#[test]
+fn improve_carries_diagnoses_design_warnings() {
+    // Issue 28: on the README workflow `improve --json` had `warnings: []`
+    // and "at the noise floor" where diagnose warned that the grid hides
+    // leads and that no temperature was logged.
+    let dir = tmp_dir("improve_text", "design");
+    let data = dir.join("d.csv");
+    let o = run(&[
+        "simulate",
+        "--plan",
+        "grid:100",
+        "--seed",
+        "2",
+        "-o",
+        s(&data),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let m = dir.join("m.json");
+    let o = run(&[
+        "improve",
+        s(&data),
+        "--model",
+        "cubic19",
+        "-o",
+        s(&m),
+        "--json",
+    ]);
+    let doc = common::json(&o);
+    let codes: Vec<&str> = doc["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|w| w["code"].as_str())
+        .collect();
+    for want in ["aliasing", "no_temperature"] {
+        assert!(codes.contains(&want), "{want} missing: {codes:?}");
+    }
+    // The text says them before its closing line, and what to run next.
+    let o = run(&["improve", s(&data), "--model", "cubic19", "-o", s(&m)]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("warning (aliasing): "), "{text}");
+    assert!(text.contains("warning (no_temperature): "), "{text}");
+    assert!(text.contains("\nnext: trueaxis history "), "{text}");
+}

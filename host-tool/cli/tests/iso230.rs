@@ -263,3 +263,49 @@ fn axis_option_reaches_the_rtl_reader() {
     assert!((v["A_um"].as_f64().unwrap() - 10.742641).abs() < TOL);
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn the_page_shows_every_run_and_the_test_conditions() {
+    // Issue 28: individual runs were not plotted (one reading 100 µm off
+    // was invisible) and the .rtl's test conditions were dropped.
+    let dir = std::env::temp_dir().join(format!("trueaxis-iso-page-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let rtl = data_file("iso_worked.rtl");
+    json(&run(&["iso230", s(&rtl), "--report", s(&dir), "--json"]));
+    let html = std::fs::read_to_string(dir.join("index.html")).unwrap();
+    for want in [
+        "Test conditions",
+        "VMC-1",
+        "SN-42",
+        "2026-11-20",
+        "A. Tester",
+        "20.1 C",
+        "XL-80",
+    ] {
+        assert!(html.contains(want), "{want} missing from the page");
+    }
+    // The 12 readings as open dots (stroke, no fill) beside the 6 means.
+    let svg = std::fs::read_to_string(dir.join("iso230_x.svg")).unwrap();
+    let open = svg
+        .split("<circle")
+        .skip(1)
+        .filter(|c| c[..c.find("/>").unwrap()].contains("fill=\"none\""))
+        .count();
+    assert!(open >= 12, "{open} open dots: the runs are not plotted");
+    // The legend sits right of the plot area: its text starts right of
+    // the last x tick label (200.0).
+    let x_of = |text: &str| -> f64 {
+        let at = svg.find(text).unwrap_or_else(|| panic!("{text}"));
+        let head = &svg[svg[..at].rfind("<text").unwrap()..at];
+        head.split("x=\"")
+            .nth(1)
+            .unwrap()
+            .split('"')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    assert!(x_of("x̄↑ ± 2s (from below)") > x_of("200.0\n</text>") + 10.0);
+    let _ = std::fs::remove_dir_all(&dir);
+}

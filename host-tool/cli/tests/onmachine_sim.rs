@@ -340,6 +340,30 @@ fn the_on_machine_commands_find_the_simulated_answers() {
         .count();
     assert_eq!(gens, 6);
     assert!(dir.join("wp-report").join("around.svg").exists());
+    // One y scale on every generatrix (issue 28): the same tick labels.
+    let mut scales = std::collections::BTreeSet::new();
+    for e in std::fs::read_dir(dir.join("wp-report")).unwrap().flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.starts_with("gen") && name.ends_with(".svg") {
+            let svg = std::fs::read_to_string(e.path()).unwrap();
+            // Tick labels are the texts that read as numbers.
+            let ticks: Vec<String> = svg
+                .split("<text")
+                .skip(1)
+                .map(|t| {
+                    let t = &t[t.find('>').unwrap() + 1..];
+                    t[..t.find("</text>").unwrap()].trim().to_string()
+                })
+                .filter(|t| t.replace('−', "-").parse::<f64>().is_ok())
+                .collect();
+            scales.insert(ticks.join(" "));
+        }
+    }
+    assert_eq!(
+        scales.len(),
+        1,
+        "generatrices on different scales: {scales:#?}"
+    );
     let pv1 = after["form"]["form_pv_um"].as_f64().unwrap();
     let eta = truth["removal_efficiency"].as_f64().unwrap();
     let ratio = pv1 / pv0;

@@ -157,6 +157,24 @@ impl Dataset {
         col.iter().all(|&p| p == first).then_some(first)
     }
 
+    /// A probed surface — a printer bed (RepRapFirmware heightmap, Klipper
+    /// mesh, any z-only grid over x and y) rather than a machine-tool
+    /// measurement: ez is the only target, x and y both vary, z is absent
+    /// or constant and no approach direction is logged. Its pages speak of
+    /// a bed (height up = warm, a grid or smoother mesh as the model).
+    pub fn is_probed_surface(&self) -> bool {
+        let varies = |a: usize| {
+            self.pos_mm[a]
+                .as_ref()
+                .is_some_and(|c| c.iter().any(|&p| p != c[0]))
+        };
+        self.targets() == [2]
+            && varies(0)
+            && varies(1)
+            && !varies(2)
+            && self.dir.iter().all(Option::is_none)
+    }
+
     /// Indices (0 = ex, 1 = ey, 2 = ez) of the targets present.
     pub fn targets(&self) -> Vec<usize> {
         (0..3).filter(|&t| self.err_um[t].is_some()).collect()

@@ -19,6 +19,7 @@ use crate::effect::{Effect, EffectSpec};
 use crate::fit::{self, FitOptions};
 use crate::history;
 use crate::model::Seed;
+use crate::progress::{Event, ImproveStage, Sink};
 
 /// Most effects `improve` adds before it stops anyway.
 pub const MAX_STEPS: usize = 8;
@@ -185,6 +186,16 @@ impl ImproveStep {
     }
 }
 
+/// The diagnosis' warnings about the measurement's design (what the data
+/// cannot show, whatever the model), carried into [`Improvement::warnings`].
+pub const DESIGN_WARNINGS: [&str; 5] = [
+    "aliasing",
+    "one_direction",
+    "constant_temperature",
+    "no_temperature",
+    "noise_floor_upper_bound",
+];
+
 /// The whole run.
 #[derive(Clone, Debug, Serialize)]
 pub struct Improvement {
@@ -197,7 +208,9 @@ pub struct Improvement {
     /// The last diagnosis' verdict.
     pub verdict: Verdict,
     /// What the user should know about the data (`aux_misspelled`,
-    /// `aux_columns`), as diagnose's `warnings`.
+    /// `aux_columns`) and the last diagnosis' design warnings
+    /// ([`DESIGN_WARNINGS`]: `aliasing`, `no_temperature`, …), as
+    /// diagnose's `warnings`.
     pub warnings: Vec<diagnose::Warning>,
     /// Readings left out of every fit as outliers, found with the final
     /// model (empty with `keep_outliers`).
@@ -219,18 +232,20 @@ pub fn improve(
     keep_outliers: bool,
     on_step: impl FnMut(&ImproveStep),
 ) -> Result<Improvement> {
-    improve_with(data, seed, out, keep_outliers, on_step, &|_| {})
+    improve_with(data, seed, out, keep_outliers, on_step, &Sink::none())
 }
 
-/// [`improve`], telling `progress` what it is doing (each step's outlier
-/// screen, fit and diagnosis, as [`diagnose::diagnose_with`] does).
+/// [`improve`], telling `progress` what it is doing (each step's fit and
+/// diagnosis, [`Event::Improve`], and the diagnosis' own events, as
+/// [`diagnose::diagnose_with`] sends them). `on_step` is no progress: it
+/// gets each step's result.
 pub fn improve_with(
     data: &Dataset,
     seed: Seed,
     out: &std::path::Path,
     keep_outliers: bool,
     mut on_step: impl FnMut(&ImproveStep),
-    progress: diagnose::Progress,
+    progress: &Sink,
 ) -> Result<Improvement> {
     let mut adds: Vec<EffectSpec> = Vec::new();
     let mut steps = Vec::new();
@@ -242,11 +257,14 @@ pub fn improve_with(
     loop {
         let effects: Vec<Effect> = adds.iter().cloned().map(Effect::new).collect();
         let k = steps.len() + 1;
-        progress(&format!(
-            "improve: step {k}: fitting {seed}{} to {} rows",
-            adds.iter().map(|a| format!(" + {a}")).collect::<String>(),
-            data.len()
-        ));
+        progress.emit(&Event::Improve {
+            step: k,
+            stage: ImproveStage::Fitting {
+                seed: seed.to_string(),
+                adds: adds.iter().map(ToString::to_string).collect(),
+                rows: data.len(),
+            },
+        });
         let found = if keep_outliers {
             Vec::new()
         } else {
@@ -262,7 +280,10 @@ pub fn improve_with(
             || sha256.clone(),
         )?;
         history::save_with_model(out, &model)?;
-        progress(&format!("improve: step {k}: diagnosing"));
+        progress.emit(&Event::Improve {
+            step: k,
+            stage: ImproveStage::Diagnosing,
+        });
         let (d, specs) = diagnose::diagnose_specs(
             &clean,
             &Options {
@@ -340,7 +361,16 @@ pub fn improve_with(
                 model_file: out.display().to_string(),
                 steps,
                 verdict: d.verdict,
-                warnings: Vec::new(),
+                // What the measurement's design hides, as the last
+                // diagnosis says it (issue 28: improve said "at the noise
+                // floor" with `warnings: []` where diagnose warned that the
+                // grid hides leads and no temperature was logged).
+                warnings: d
+                    .warnings
+                    .iter()
+                    .filter(|w| DESIGN_WARNINGS.contains(&w.code.as_str()))
+                    .cloned()
+                    .collect(),
                 outliers: found,
             });
         }

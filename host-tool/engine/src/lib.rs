@@ -3,10 +3,11 @@
 //! `trueaxis` binary crate). Layered bottom-up — a module imports only from
 //! the layers below it:
 //!
-//! data → features → effect / lsq / lines / regions → holdout → model →
+//! data → features → effect / linalg / lines / regions → holdout → model →
 //! fit → diagnose / compare / export / history / iso230 → improve → (the
 //! CLI's commands). `import` (files ↔ data sets) and `units` (units the
-//! data probably do not have) sit beside `data`;
+//! data probably do not have) sit beside `data`, and so do `warning` and
+//! `progress`, which import nothing;
 //! `simulate` makes data sets from the effect families' simulated forms
 //! and is imported by no engine module.
 //!
@@ -16,7 +17,9 @@
 //! - `simulate`: the synthetic machine (21 geometric errors, effects, plans, noise).
 //! - `features`: the model's terms — the cubic monomials and the effects' columns.
 //! - `effect`: effects as types, one file per family (keys, columns, words, physical parameter, simulated form) — Family, Target, Axis, EffectSpec, Effect, and the one `key=value` grammar.
-//! - `lsq`: least squares with rank and conditioning checks.
+//! - `warning`: the one warning type (code + detail) every result carries.
+//! - `progress`: the one progress event type long computations emit; the caller renders it.
+//! - `linalg`: the linear algebra — least squares with rank and conditioning checks (`lsq`), diagnose's basis and small fits (`basis`), Brent's minimisation (`brent`).
 //! - `holdout`: block-held-out validation (spatial blocks, not random rows).
 //! - `lines`: lines and planes of a measurement plan (compare's plots, diagnose's periodic search).
 //! - `regions`: where a residual concentrates — one region type and binning for compare and diagnose.
@@ -45,13 +48,15 @@ pub mod holdout;
 pub mod import;
 pub mod improve;
 pub mod iso230;
+pub mod linalg;
 pub mod lines;
-pub mod lsq;
 pub mod model;
 pub mod part_diagnosis;
 pub mod probe;
+pub mod progress;
 pub mod regions;
 pub mod separate;
 pub mod simulate;
 pub mod units;
+pub mod warning;
 pub mod workpiece;

@@ -6,17 +6,24 @@
 //! have a narrower rule: what their files may name of the crate, and that
 //! a family's file names no other family (docs/host.md § Adding an effect
 //! family).
+//!
+//! And the rule of docs/host.md § Messages: the engine says what is wrong
+//! in its own terms — its options, its numbers — and the CLI names the
+//! flag that changes it; no code in the folders that keep the rule
+//! (strings included, comments not) names a `--flag`.
 
 use std::path::{Path, PathBuf};
 
 /// Layer of each top-level engine module, lowest first.
 const LAYERS: &[(&str, u8)] = &[
     ("data", 0),
+    ("warning", 0),
+    ("progress", 0),
     ("import", 1),
     ("features", 1),
     ("units", 1),
     ("effect", 2),
-    ("lsq", 2),
+    ("linalg", 2),
     ("lines", 2),
     ("regions", 2),
     ("simulate", 3),
@@ -39,7 +46,7 @@ const LAYERS: &[(&str, u8)] = &[
 /// may name (their own module's shared files — `mod.rs`, and those listed
 /// as shared — are named through `super::`), and the files that are not
 /// a family.
-const ROOMS: &[(&str, &[&str], &[&str])] = &[
+const FAMILY_ROOMS: &[(&str, &[&str], &[&str])] = &[
     (
         "effect",
         &["data", "features"],
@@ -47,7 +54,7 @@ const ROOMS: &[(&str, &[&str], &[&str])] = &[
     ),
     (
         "diagnose/search",
-        &["data", "effect", "features", "lines"],
+        &["data", "effect", "features", "linalg", "lines"],
         &["mod"],
     ),
 ];
@@ -164,7 +171,7 @@ fn room_violations(stem: &str, src: &str, allowed: &[&str], families: &[&str]) -
 fn a_family_file_names_only_its_room_s_modules_and_no_other_family() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let mut bad = Vec::new();
-    for (folder, allowed, shared) in ROOMS {
+    for (folder, allowed, shared) in FAMILY_ROOMS {
         let dir = src.join(folder);
         let mut files = Vec::new();
         rust_files(&dir, &mut files);
@@ -212,4 +219,60 @@ fn the_checker_sees_an_upward_import() {
     );
     assert_eq!(v, ["crate::model", "thermal:: (another family)"]);
     assert!(room_violations("mod", "use super::thermal::Sim;", &[], &families).is_empty());
+}
+
+/// Engine folders whose messages name no command-line flag.
+const ROOMS: &[&str] = &["export", "effect", "diagnose/search"];
+
+/// `--name` flags a source line names outside a comment.
+fn flags(line: &str) -> Vec<String> {
+    let code = line.split("//").next().unwrap_or("");
+    let mut v = Vec::new();
+    let mut rest = code;
+    while let Some(i) = rest.find("--") {
+        rest = &rest[i + 2..];
+        let name: String = rest
+            .chars()
+            .take_while(|c| c.is_ascii_lowercase() || *c == '-')
+            .collect();
+        if name.starts_with(|c: char| c.is_ascii_lowercase()) {
+            v.push(format!("--{name}"));
+        }
+    }
+    v
+}
+
+#[test]
+fn no_engine_message_names_a_cli_flag() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut bad = Vec::new();
+    for room in ROOMS {
+        let mut files = Vec::new();
+        rust_files(&src.join(room), &mut files);
+        assert!(!files.is_empty(), "{room}: no sources");
+        for f in &files {
+            let text = std::fs::read_to_string(f).unwrap();
+            for (i, line) in text.lines().enumerate() {
+                for flag in flags(line) {
+                    let rel = f.strip_prefix(&src).unwrap().display();
+                    bad.push(format!("{rel}:{}: {flag}", i + 1));
+                }
+            }
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "CLI flags named in the engine:\n{}",
+        bad.join("\n")
+    );
+}
+
+#[test]
+fn the_checker_sees_a_flag_in_a_string_and_not_in_a_comment() {
+    assert_eq!(
+        flags(r#"bail!("--max-corr-um must be positive"); // --drop-lag"#),
+        ["--max-corr-um"]
+    );
+    assert!(flags("/// give it with --temp-range-c").is_empty());
+    assert!(flags("let i = n - -1;").is_empty());
 }

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
-use crate::cmd::out;
+use crate::cmd::out::{self, outln};
 use crate::input;
 use crate::workflow::run_compare;
 use trueaxis_engine::compare::{self, Comparison};
@@ -34,7 +34,13 @@ pub struct Args {
 pub fn text(c: &Comparison) -> String {
     use std::fmt::Write as _;
     let mut s = String::new();
-    let _ = writeln!(s, "{} vs {} ({} rows)", c.data, c.model, c.rows);
+    let _ = writeln!(
+        s,
+        "{} vs {} ({})",
+        c.data,
+        c.model,
+        crate::report::count(c.rows, "row")
+    );
     let _ = writeln!(
         s,
         "{:<6} {:>7} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
@@ -147,6 +153,18 @@ impl Args {
             out::json(&c)?;
         } else {
             out::print(&text(&c))?;
+            // Which effect is missing: diagnose (issue 28: every command
+            // that writes something says what to run next).
+            outln!(
+                "next: {}",
+                crate::report::compare::next_command(
+                    &c.model,
+                    &self.data,
+                    &self.model,
+                    self.report.as_deref(),
+                    data.is_probed_surface()
+                )
+            )?;
         }
         Ok(())
     }

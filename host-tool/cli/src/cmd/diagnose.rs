@@ -62,15 +62,10 @@ impl Args {
                 follow_path: true,
                 keep_outliers: self.keep_outliers,
             },
-            &|line: &str| eprintln!("{line}"),
+            &crate::cmd::progress::stderr(self.json),
         )
         .with_context(|| format!("{}: cannot diagnose", self.data.display()))?;
-        for (code, detail) in input::data_warnings(&data) {
-            d.warnings.push(diagnose::Warning {
-                code: code.into(),
-                detail,
-            });
-        }
+        d.warnings.extend(input::data_warnings(&data));
         let model_out = next_model_path(&self.model, &self.data);
         if let Some(dir) = &self.report {
             // A model file's history (MODEL.history.json beside it), when
@@ -99,7 +94,20 @@ impl Args {
             input::add_skipped_count(&mut doc, &data);
             out::json_pretty(&doc)?;
         } else {
-            crate::cmd::out::print(&text(&d, &self.data, &model_out, self.verbose))?;
+            let mut t = text(&d, &self.data, &model_out, self.verbose);
+            if data.is_probed_surface() {
+                // A bed's next step is its mesh, whatever a cubic lacks.
+                t = t
+                    .lines()
+                    .filter(|l| !l.starts_with("next: ") && !l.starts_with("measure first: "))
+                    .map(|l| format!("{l}\n"))
+                    .collect();
+                t.push_str(&format!(
+                    "next: {}\n",
+                    crate::report::diagnose::bed_next(&data, &self.data.display().to_string())
+                ));
+            }
+            crate::cmd::out::print(&t)?;
         }
         Ok(())
     }
@@ -295,7 +303,17 @@ pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path, verbose: bool) ->
             s.push_str(&format!("  [{}] {}\n", w.code, w.detail));
         }
     }
-    if let Some(cmd) = next_command(d, data_path, model_out) {
+    // The page's next command (a fit with what is missing; at the noise
+    // floor the refit and its export), printed when it is one to run.
+    if let Some(cmd) = next_command(d, data_path, model_out).or_else(|| {
+        crate::report::diagnose::verdict(
+            d,
+            &data_path.display().to_string(),
+            &model_out.display().to_string(),
+        )
+        .next
+        .filter(|n| n.starts_with("trueaxis "))
+    }) {
         s.push_str(&format!("next: {cmd}\n"));
     }
     let mut lines: Vec<&str> = d.held_back().map(|(_, a)| a.measure.as_str()).collect();

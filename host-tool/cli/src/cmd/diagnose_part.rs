@@ -25,14 +25,14 @@ pub struct Args {
     /// (`x_mm,z_mm` in the plane of `--plane`); a `t_s` column (seconds)
     /// gives time stamps. The kind is read from the header.
     pub scan: PathBuf,
-    /// The travel axis of a straightness run [default: x].
+    /// The travel axis of a straightness run.
     #[arg(long, default_value = "x", value_parser = ["x", "y", "z"])]
     pub axis: String,
-    /// The plane of an arc scan [default: xz].
+    /// The plane of an arc scan.
     #[arg(long, default_value = "xz")]
     pub plane: String,
     /// An arc scan: the outward direction of the surface where the probe
-    /// touches, `+z`, `-x`, … [default: +z].
+    /// touches, `+z`, `-x`, …
     #[arg(long, default_value = "+z", allow_hyphen_values = true)]
     pub side: String,
     /// The probe calibrated on a master ball (`probe calibrate`'s file,

@@ -10,10 +10,12 @@ use anyhow::{Context, Result};
 
 use crate::cmd::out::{self, outln};
 use crate::input;
+use crate::report::diagnose::shell_word;
 use crate::workflow::model_output;
 use trueaxis_engine::diagnose::outliers;
 use trueaxis_engine::effect::Effect;
 use trueaxis_engine::fit::{self, nn::NnOptions, FitOptions};
+use trueaxis_engine::warning::Warning;
 
 /// Arguments of `trueaxis fit`.
 #[derive(clap::Args, Debug)]
@@ -73,7 +75,7 @@ impl Args {
                 seed: self.seed,
                 ..NnOptions::default()
             },
-            progress: crate::cmd::progress::bar(!self.json),
+            progress: crate::cmd::progress::stderr(self.json),
         };
         // Outliers: a screen that cannot run (too few points for its
         // linear model) is said, and the fit below then names the problem
@@ -83,7 +85,10 @@ impl Args {
             Vec::new()
         } else {
             outliers::find(&data, &seed, &adds).unwrap_or_else(|e| {
-                screen_warning = Some(format!("outliers: not screened ({e:#})"));
+                screen_warning = Some(Warning::new(
+                    "outliers_not_screened",
+                    format!("outliers: not screened ({e:#})"),
+                ));
                 Vec::new()
             })
         };
@@ -97,10 +102,12 @@ impl Args {
         })
         .with_context(|| format!("{}: cannot fit {}", self.data.display(), self.model))?;
         model.stats.warnings.extend(screen_warning);
-        // Fit's warnings are strings (MODEL.json `stats.warnings`); the
-        // code leads, as `warning (code): …` elsewhere.
-        for (code, detail) in input::data_warnings(&data) {
-            model.stats.warnings.push(format!("{code}: {detail}"));
+        // Fit's warnings are kept as text (MODEL.json `stats.warnings`): a
+        // data warning's text leads with its code, as `warning (code): …`
+        // elsewhere.
+        for w in input::data_warnings(&data) {
+            let text = format!("{}: {}", w.code, w.detail);
+            model.stats.warnings.push(Warning::new(&w.code, text));
         }
         trueaxis_engine::history::save_with_model(&out, &model)?;
         for w in &model.stats.warnings {
@@ -114,12 +121,30 @@ impl Args {
             return Ok(());
         }
         let s = &model.stats;
+        // One count when every target has it, else each target's (issue
+        // 28: "21 terms per target" when two targets had 19).
+        let counts: std::collections::BTreeSet<usize> =
+            s.terms_per_target.values().copied().collect();
+        let terms = match counts.len() {
+            0 => format!("{} per target", crate::report::count(s.terms, "term")),
+            1 => format!(
+                "{} per target",
+                crate::report::count(counts.into_iter().next().unwrap_or(s.terms), "term")
+            ),
+            _ => format!(
+                "terms per target {}",
+                s.terms_per_target
+                    .iter()
+                    .map(|(t, n)| format!("{t} {n}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        };
         outln!(
-            "{}: {} on {} rows, {} terms per target",
+            "{}: {} on {}, {terms}",
             self.data.display(),
             model.spec(),
-            data.len(),
-            s.terms
+            crate::report::count(data.len(), "row"),
         )?;
         outln!(
             "  {:<4} {:>7} {:>12} {:>16} {:>12} {:>10}",
@@ -162,6 +187,13 @@ impl Args {
             }
         }
         outln!("  model written to {}", out.display())?;
+        // Where the model fails, on a page (issue 28: every command that
+        // writes something says what to run next).
+        outln!(
+            "next: trueaxis compare {} --model {} --report report",
+            shell_word(&self.data.display().to_string()),
+            shell_word(&out.display().to_string())
+        )?;
         Ok(())
     }
 }

@@ -3,7 +3,7 @@
 //! `trueaxis_engine::history`), as a table, one JSON document, or an HTML page with
 //! the RMS and held-out RMS per target plotted against the step.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 
@@ -26,6 +26,28 @@ pub struct Args {
     pub json: bool,
 }
 
+/// The data file a model was fitted to, as a path that reads from where
+/// `history` runs: the model stores the path as typed at fit time, relative
+/// to where `fit` ran; run from elsewhere (`history run1/model.json`), the
+/// file is looked for beside the model as well. The stored path when
+/// neither exists (or the source is no file, `simulate:…`).
+pub fn data_path_from_here(source: &str, model: &Path) -> String {
+    let stored = Path::new(source);
+    if stored.is_file() || source.starts_with("simulate:") {
+        return source.to_string();
+    }
+    let dir = model.parent().unwrap_or(Path::new(""));
+    let beside = [
+        (!stored.is_absolute()).then(|| dir.join(stored)),
+        stored.file_name().map(|f| dir.join(f)),
+    ];
+    beside
+        .into_iter()
+        .flatten()
+        .find(|p| p.is_file())
+        .map_or_else(|| source.to_string(), |p| p.display().to_string())
+}
+
 impl Args {
     pub fn run(self) -> Result<()> {
         let h = history::load(&self.model)?;
@@ -34,7 +56,7 @@ impl Args {
             // the page proposes (a placeholder when the model is unreadable:
             // the history is still worth its page).
             let data = ModelFile::load(&self.model)
-                .map(|m| m.data.source)
+                .map(|m| data_path_from_here(&m.data.source, &self.model))
                 .unwrap_or_else(|_| "DATA.csv".into());
             let index = write_report(
                 &h,

@@ -52,6 +52,9 @@ impl Args {
                 profile: self.profile.clone(),
             },
         )?;
+        if let Some(note) = crate::input::encoding_note(&data) {
+            eprintln!("{note}");
+        }
         if let Some(out) = &self.output {
             let f = std::fs::File::create(out)
                 .with_context(|| format!("cannot create {}", out.display()))?;
@@ -76,9 +79,9 @@ impl Args {
             outln!("{doc}")?;
         } else {
             outln!(
-                "{}: {} rows, columns {}",
+                "{}: {}, columns {}",
                 self.file.display(),
-                data.len(),
+                crate::report::count(data.len(), "row"),
                 columns.join(", ")
             )?;
             for (k, v) in &data.metadata {
@@ -89,13 +92,17 @@ impl Args {
                 outln!("  auxiliary channels kept: {}", names.join(", "))?;
             }
             if !data.skipped.is_empty() {
-                outln!("  {} rows left out:", data.skipped.len())?;
+                outln!(
+                    "  {} left out:",
+                    crate::report::count(data.skipped.len(), "row")
+                )?;
                 for s in &data.skipped {
                     outln!("    line {}: {}", s.line, s.reason)?;
                 }
             }
             if let Some(out) = &self.output {
                 outln!("wrote {}", out.display())?;
+                outln!("next: {}", crate::workflow::next_for_data(&data, out))?;
             }
         }
         Ok(())

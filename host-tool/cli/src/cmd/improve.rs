@@ -7,7 +7,6 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use trueaxis_engine::diagnose;
 use trueaxis_engine::improve::{improve_with, ImproveStep, Improvement};
 
 use crate::cmd::out::{self, outln};
@@ -44,13 +43,7 @@ impl Args {
         }
         let out = model_output(&self.data, self.output.clone())?;
         let data = input::load_data(&self.data, None)?;
-        let warnings: Vec<diagnose::Warning> = input::data_warnings(&data)
-            .into_iter()
-            .map(|(code, detail)| diagnose::Warning {
-                code: code.into(),
-                detail,
-            })
-            .collect();
+        let warnings = input::data_warnings(&data);
         // On stderr in both modes, before the steps (as fit's warnings).
         for w in &warnings {
             eprintln!("warning ({}): {}", w.code, w.detail);
@@ -61,7 +54,7 @@ impl Args {
         // and is returned once the loop is done.
         let mut write_err: Option<anyhow::Error> = None;
         // Progress on stderr in both modes (each step's fit and diagnosis).
-        let progress = |line: &str| eprintln!("{line}");
+        let progress = crate::cmd::progress::stderr(json);
         let r = improve_with(
             &data,
             seed,
@@ -108,7 +101,13 @@ impl Args {
             &progress,
         )
         .with_context(|| format!("{}: cannot improve {seed}", self.data.display()))?;
-        let r = Improvement { warnings, ..r };
+        // The data's warnings first, then the last diagnosis' design
+        // warnings the engine carried.
+        let design = r.warnings.clone();
+        let r = Improvement {
+            warnings: warnings.into_iter().chain(design.iter().cloned()).collect(),
+            ..r
+        };
         if let Some(e) = write_err {
             return Err(e);
         }
@@ -128,11 +127,20 @@ impl Args {
                 }
                 out::print(&text)?;
             }
+            for w in &design {
+                outln!("warning ({}): {}", w.code, w.detail)?;
+            }
             outln!(
                 "{}: model {} written to {}",
                 r.steps.last().map_or(String::new(), ImproveStep::outcome),
                 r.model,
                 r.model_file
+            )?;
+            // The history page shows the steps and proposes what follows
+            // (the export at the noise floor, else the diagnosis).
+            outln!(
+                "next: trueaxis history {} --report history",
+                crate::report::diagnose::shell_word(&r.model_file)
             )?;
         }
         Ok(())

@@ -51,6 +51,7 @@ impl Args {
             // The page writes the plot beside it as iso230_<axis>.svg.
             page = Some(crate::report::iso230::write_page(
                 &res,
+                &data,
                 &self.data.display().to_string(),
                 dir,
             )?);

@@ -10,6 +10,7 @@
 //! other write error is a real error (exit 1).
 
 use std::io::{ErrorKind, Write};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Result;
 
@@ -23,9 +24,14 @@ pub fn is_stdout_closed(e: &anyhow::Error) -> bool {
     e.chain().any(|c| c.is::<StdoutClosed>())
 }
 
+/// Something was written to stdout (a `--json` command that fails after
+/// its document must not write a second one).
+static WROTE: AtomicBool = AtomicBool::new(false);
+
 /// Writes `text` to stdout as is and flushes (so a closed pipe is seen
 /// here, not later in a destructor that cannot report it).
 pub fn print(text: &str) -> Result<()> {
+    WROTE.store(true, Ordering::Relaxed);
     let mut out = std::io::stdout().lock();
     match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
         Ok(()) => Ok(()),
@@ -42,6 +48,35 @@ pub fn json<T: serde::Serialize + ?Sized>(doc: &T) -> Result<()> {
 /// Writes `doc` as pretty-printed JSON (still one document).
 pub fn json_pretty<T: serde::Serialize + ?Sized>(doc: &T) -> Result<()> {
     print(&(serde_json::to_string_pretty(doc)? + "\n"))
+}
+
+/// The JSON document a `--json` command that fails writes to stdout, so a
+/// script reading stdout gets one document either way (docs/cli.md):
+/// `{"error": "…", "exit_code": 1}` — the message as on stderr.
+pub fn error_json(e: &anyhow::Error, exit_code: u8) -> serde_json::Value {
+    serde_json::json!({"error": super::flags::render(e), "exit_code": exit_code})
+}
+
+/// Exits on a clap error: a usage error (exit 2) under `--json` is a JSON
+/// document on stdout too (`{error, exit_code, usage}`); help and version
+/// print as they always do.
+pub fn usage_exit(e: clap::Error, json: bool) -> ! {
+    if json && e.use_stderr() {
+        let _ = self::json(&serde_json::json!({
+            "error": e.kind().to_string(),
+            "exit_code": 2,
+            "usage": e.render().to_string(),
+        }));
+    }
+    e.exit()
+}
+
+/// Writes [`error_json`] to stdout unless something was written already
+/// (a document then a failed check: the document stands).
+pub fn json_error(e: &anyhow::Error, exit_code: u8) {
+    if !WROTE.load(Ordering::Relaxed) {
+        let _ = json(&error_json(e, exit_code));
+    }
 }
 
 /// `println!` through [`print`]: evaluates to `anyhow::Result<()>`.

@@ -46,9 +46,42 @@ fn read(path: &std::path::Path, pl: [&str; 2], session: Option<i64>) -> Result<V
 }
 
 /// The page's next step after a calibration written to `probe`.
-fn correct_next(probe: &std::path::Path) -> String {
+/// What to run next after a 2-D calibration: a command that runs as
+/// pasted where `calibrate` ran (no `SCAN.csv` placeholder, issue 28) —
+/// the ball's own scan corrected with the calibration, a check that its
+/// form falls to the noise; part scans are corrected the same way.
+fn correct_next(
+    scan: &std::path::Path,
+    probe: &std::path::Path,
+    plane: &str,
+    session: Option<i64>,
+) -> String {
+    use crate::report::diagnose::shell_word;
+    let stem = scan
+        .file_stem()
+        .map_or("scan".into(), |s| s.to_string_lossy().into_owned());
+    let out = scan.with_file_name(format!("{stem}_corrected.csv"));
+    let mut cmd = format!(
+        "trueaxis probe correct {} --probe {}",
+        shell_word(&scan.display().to_string()),
+        shell_word(&probe.display().to_string()),
+    );
+    if plane != "xz" {
+        cmd.push_str(&format!(" --plane {plane}"));
+    }
+    if let Some(n) = session {
+        cmd.push_str(&format!(" --session {n}"));
+    }
+    cmd.push_str(&format!(" -o {}", shell_word(&out.display().to_string())));
+    cmd
+}
+
+/// What to do next after a 3-D calibration, in words: a 3-D ball scan
+/// corrected as a circle would mean nothing, and the part scans are not
+/// known here.
+fn correct_next_3d(probe: &std::path::Path) -> String {
     format!(
-        "trueaxis probe correct SCAN.csv --probe {} -o SURFACE.csv",
+        "correct each part scan with this calibration: `trueaxis probe correct` with --probe {} (docs/on-machine.md)",
         probe.display()
     )
 }
@@ -78,8 +111,7 @@ pub struct Calibrate {
     /// The master ball's calibrated diameter, mm (its certificate).
     #[arg(long)]
     pub ball_diameter_mm: f64,
-    /// The plane of the scan, or `xyz` for a 3-D scan over the ball
-    /// [default: xz].
+    /// The plane of the scan, or `xyz` for a 3-D scan over the ball.
     #[arg(long, default_value = "xz")]
     pub plane: String,
     /// Where to write the probe file.
@@ -134,7 +166,7 @@ impl Calibrate {
                         form_pv_nm: pr.form_pv_nm,
                         ball_pv_nm: [cal.pv_without_form_nm, cal.pv_with_form_nm],
                         warnings: &cal.warnings,
-                        next: correct_next(&self.output),
+                        next: correct_next(&self.scan, &self.output, &self.plane, self.session),
                     },
                     dir,
                 )
@@ -179,6 +211,11 @@ impl Calibrate {
             }
             let _ = writeln!(s, "  on the ball    {:.1} nm PV with the radius only → {:.1} nm PV with the form (residual RMS {:.1} nm)", cal.pv_without_form_nm, cal.pv_with_form_nm, pr.residual_rms_nm);
             let _ = writeln!(s, "  probe file written to {}", self.output.display());
+            let _ = writeln!(
+                s,
+                "next: {}",
+                correct_next(&self.scan, &self.output, &self.plane, self.session)
+            );
             if let Some(r) = &report {
                 let _ = writeln!(s, "  report: {}", r.display());
             }
@@ -214,7 +251,7 @@ impl Calibrate {
                         residual_nm: &cal.residual_nm,
                         ball_pv_nm: [cal.pv_without_form_nm, cal.pv_with_form_nm],
                         warnings: &cal.warnings,
-                        next: correct_next(&self.output),
+                        next: correct_next_3d(&self.output),
                     },
                     dir,
                 )
@@ -326,15 +363,15 @@ pub struct Correct {
     /// The probe file `probe calibrate` wrote.
     #[arg(long)]
     pub probe: PathBuf,
-    /// The plane of the scan [default: xz].
+    /// The plane of the scan.
     #[arg(long, default_value = "xz")]
     pub plane: String,
     /// Which side of the part the probe touches: the outward direction of
-    /// the surface, `+z`, `-z`, `+x`, `-x`, `+y`, `-y` [default: +z].
+    /// the surface, `+z`, `-z`, `+x`, `-x`, `+y`, `-y`.
     #[arg(long, default_value = "+z", allow_hyphen_values = true)]
     pub side: String,
     /// The nominal shape the form error is taken against: `circle` or
-    /// `line` (least squares) [default: circle].
+    /// `line` (least squares).
     #[arg(long, default_value = "circle")]
     pub nominal: String,
     /// Where to write the corrected contact points (CSV).

@@ -399,7 +399,7 @@ pub struct Reversal {
     /// when RUN0 is a measurement CSV whose session holds both
     /// orientations, `orientation_deg` 0 and 180).
     pub run180: Option<PathBuf>,
-    /// The travel axis [default: x].
+    /// The travel axis.
     #[arg(long, default_value = "x", value_parser = ["x", "y", "z"])]
     pub axis: String,
     /// Where to write `<axis>_mm,part_um,slide_um`.
@@ -506,6 +506,19 @@ impl Reversal {
             ))?;
             if let Some(p) = &report {
                 out::print(&format!("report: {}\n", p.display()))?;
+            }
+            // Which error is in a part scan, with the reversal telling
+            // part and slide apart (the two runs as given).
+            if let Some(run180) = &self.run180 {
+                let w = |p: &std::path::Path| {
+                    crate::report::diagnose::shell_word(&p.display().to_string())
+                };
+                out::print(&format!(
+                    "next: trueaxis diagnose-part {} --reversal {} --axis {}\n",
+                    w(&self.run0),
+                    w(run180),
+                    self.axis
+                ))?;
             }
         }
         Ok(())

@@ -122,6 +122,10 @@ impl Args {
                 duration_s,
                 self.output.display()
             )?;
+            outln!(
+                "next: {}",
+                crate::workflow::next_for_data(&data, &self.output)
+            )?;
         }
         Ok(())
     }
@@ -159,6 +163,10 @@ impl Args {
                     e * 100.0,
                     self.output.display()
                 )?;
+                outln!(
+                    "next: trueaxis workpiece {}",
+                    crate::report::diagnose::shell_word(&self.output.display().to_string())
+                )?;
             }
             return Ok(());
         }
@@ -188,6 +196,11 @@ impl Args {
                 files.len(),
                 dir.display()
             )?;
+            outln!(
+                "next: trueaxis probe calibrate {} --ball-diameter-mm {} -o probe.json --report probe",
+                crate::report::diagnose::shell_word(&dir.join("ball.csv").display().to_string()),
+                trueaxis_engine::lines::plot_num(onmachine::BALL_DIAMETER_MM)
+            )?;
         }
         Ok(())
     }
@@ -206,7 +219,7 @@ impl Args {
             .map(|s| s.parse::<Effect>())
             .collect::<Result<_>>()?;
         // Every number is range-checked by `cfg.check()` below, with the
-        // flag's name in the message.
+        // flag's name in the message (cmd/flags.rs).
         cfg.noise_um = self.noise_um;
         cfg.seed = self.seed;
         cfg.tool_mm = self.tool_mm;
@@ -282,6 +295,10 @@ impl Args {
                 duration_s,
                 cfg.machine.name,
                 self.output.display()
+            )?;
+            outln!(
+                "next: {}",
+                crate::workflow::next_for_data(&data, &self.output)
             )?;
             for w in warnings {
                 outln!("warning: {w}")?;

@@ -33,13 +33,13 @@ pub struct Args {
     /// The nominal diameter, mm (with --gcode: X is programmed in diameter).
     #[arg(long)]
     pub nominal_diameter_mm: Option<f64>,
-    /// Feed of the correction pass, mm/min [default: 100].
+    /// Feed of the correction pass, mm/min.
     #[arg(long, default_value_t = 100.0)]
     pub feed_mm_min: f64,
-    /// Angle between points of the pass, degrees [default: 10].
+    /// Angle between points of the pass, degrees.
     #[arg(long, default_value_t = 10.0)]
     pub c_step_deg: f64,
-    /// Stations along z of the pass (intervals) [default: 20].
+    /// Stations along z of the pass (intervals).
     #[arg(long, default_value_t = 20)]
     pub z_steps: usize,
     /// Write an HTML page (the form along the generatrices and around the

@@ -135,7 +135,7 @@ pub fn write_report_from(
     sources: Option<Sources>,
 ) -> Result<PathBuf> {
     let mut page = Page::new(format!("trueaxis compare — {} vs {}", c.data, c.model));
-    page.verdict(verdict(c, sources, dir));
+    page.verdict(verdict_for(c, sources, dir, data.is_probed_surface()));
     build_report(&mut page, data, predicted, c)?;
     page.write(dir)
 }
@@ -143,6 +143,12 @@ pub fn write_report_from(
 /// The compare page's verdict: what is left after compensation, where, and
 /// what it follows — and that `diagnose` names what is missing.
 pub fn verdict(c: &Comparison, sources: Option<Sources>, dir: &Path) -> Verdict {
+    verdict_for(c, sources, dir, false)
+}
+
+/// [`verdict`] for data that may be a probed surface (`bed`: the next
+/// command exports a bed mesh when the model is no linear seed).
+pub fn verdict_for(c: &Comparison, sources: Option<Sources>, dir: &Path, bed: bool) -> Verdict {
     let um = |v: f64| format!("{} µm", format_value(v));
     let worst = c
         .targets
@@ -243,12 +249,7 @@ pub fn verdict(c: &Comparison, sources: Option<Sources>, dir: &Path) -> Verdict 
             .into(),
     );
     let next = Some(match sources {
-        Some(s) => format!(
-            "trueaxis diagnose {} --model {} --report {}",
-            s.data.display(),
-            s.model.display(),
-            dir.join("diagnose").display()
-        ),
+        Some(s) => next_command(&c.model, s.data, s.model, Some(dir), bed),
         None => format!(
             "trueaxis diagnose {} --model MODEL.json --report {}",
             c.data,
@@ -266,6 +267,38 @@ pub fn verdict(c: &Comparison, sources: Option<Sources>, dir: &Path) -> Verdict 
         next,
         tone: if action { Tone::Action } else { Tone::Unknown },
     }
+}
+
+/// What to run after a comparison, each path one shell word as typed (the
+/// command runs where compare ran): `trueaxis diagnose DATA --model MODEL
+/// [--report DIR/diagnose]` for a linear seed (`model_spec`: what diagnose
+/// works on); for a grid, local or network model, which diagnose refuses,
+/// the export — a bed mesh for a probed surface, else the firmware table.
+pub fn next_command(
+    model_spec: &str,
+    data: &Path,
+    model: &Path,
+    report: Option<&Path>,
+    bed: bool,
+) -> String {
+    use crate::report::diagnose::shell_word;
+    let word = |p: &Path| shell_word(&p.display().to_string());
+    let seed = model_spec.split([' ', '+']).next().unwrap_or("");
+    if !matches!(seed, "cubic19" | "kinematic") {
+        return if bed {
+            format!(
+                "trueaxis export {} --format klipper-mesh -o mesh.cfg",
+                word(model)
+            )
+        } else {
+            format!("trueaxis export {} -o table.bin", word(model))
+        };
+    }
+    let mut cmd = format!("trueaxis diagnose {} --model {}", word(data), word(model));
+    if let Some(dir) = report {
+        cmd.push_str(&format!(" --report {}", word(&dir.join("diagnose"))));
+    }
+    cmd
 }
 
 /// Adds the comparison's sections to `page` (so `demo` and `diagnose` can
@@ -289,6 +322,7 @@ pub fn build_report(
         page.paragraph(format!("Warning ({}): {}", w.code, w.detail));
     }
     page.heading("Summary");
+    page.colour_key();
     let f = |v: f64| format!("{v:.3}");
     let rows = c
         .targets
@@ -391,8 +425,41 @@ pub fn build_report(
     // `planes` lists the planes of each orientation together.
     let groups: Vec<&[Plane]> = planes.chunk_by(|a, b| a.normal == b.normal).collect();
     if let Some(first) = groups.first() {
+        // A probed bed is drawn as a bed mesh is (Klipper, Mainsail): its
+        // height, up warm — ez is the tool's error, −height (issue 28: a
+        // high bed showed blue).
+        let bed = data.is_probed_surface();
+        let sign = if bed { -1.0 } else { 1.0 };
+        let what = |t: usize| {
+            if bed {
+                "bed height".to_string()
+            } else {
+                format!("{} residual", TARGETS[t])
+            }
+        };
+        // Where a map lies: a plane of the volume, or the bed (a file with
+        // no z has no plane z = 0 to speak of).
+        let on = |plane: &Plane| {
+            if data.pos_mm[plane.normal].is_none() {
+                format!(
+                    "over {}–{}",
+                    AXES[(plane.normal + 1) % 3],
+                    AXES[(plane.normal + 2) % 3]
+                )
+            } else {
+                format!(
+                    "on the plane {} = {} mm",
+                    AXES[plane.normal],
+                    plot_num(plane.at_mm)
+                )
+            }
+        };
         page.heading("Residual maps on measured planes");
-        page.paragraph("Mean residual per grid position (both directions and repeats averaged); grey cells were not measured. Red: the machine is further along the error's axis than the model says.");
+        page.paragraph(if bed {
+            "The bed height the model leaves (−ez: the residual of the tool's error, turned into the bed's height) per probe point. Red: the bed stands higher than the model says, as Klipper and Mainsail colour a mesh."
+        } else {
+            "Mean residual per grid position (both directions and repeats averaged); grey cells were not measured. Red: the machine is further along the error's axis than the model says."
+        });
         if data.axes().len() == 3 {
             for same in &groups {
                 let normal = AXES[same[0].normal];
@@ -428,15 +495,15 @@ pub fn build_report(
                     let plane = &same[i];
                     let title = if data.axes().len() == 3 {
                         format!(
-                            "{} residual at {} = {} mm",
-                            TARGETS[t],
+                            "{} at {} = {} mm",
+                            what(t),
                             AXES[plane.normal],
                             plot_num(plane.at_mm)
                         )
                     } else {
-                        format!("{} residual", TARGETS[t])
+                        what(t)
                     };
-                    let mut m = plane_map(data, plane, title, |r| res[r]);
+                    let mut m = plane_map(data, plane, title, |r| res[r].map(|v| sign * v));
                     m.size = SMALL_MAP;
                     maps.push((
                         format!("map_{}_{}{}", TARGETS[t], AXES[plane.normal], i),
@@ -447,8 +514,8 @@ pub fn build_report(
             }
             let limit = maps.iter().fold(0.0f64, |l, m| l.max(m.2.max_abs()));
             page.subheading(format!(
-                "{} residual on the measured planes — one colour scale, ±{} µm",
-                TARGETS[t],
+                "{} on the measured planes — one colour scale, ±{} µm",
+                what(t),
                 format_value(limit)
             ));
             let mut figs = Vec::with_capacity(maps.len());
@@ -456,12 +523,11 @@ pub fn build_report(
                 m.limit = Some(limit);
                 figs.push(Figure {
                     name,
-                    caption: format!(
-                        "Residual of {} on the plane {} = {} mm.",
-                        TARGETS[t],
-                        AXES[plane.normal],
-                        plot_num(plane.at_mm)
-                    ),
+                    caption: if bed {
+                        format!("The bed height the model leaves, {}.", on(plane))
+                    } else {
+                        format!("Residual of {} {}.", TARGETS[t], on(plane))
+                    },
                     svg: m.to_svg()?,
                 });
             }
@@ -469,25 +535,27 @@ pub fn build_report(
             // Before vs after on the middle plane, one colour scale.
             let plane = &first[first.len() / 2];
             let raw = data.err_um[t].as_ref();
-            let before = plane_map(
-                data,
-                plane,
-                format!("{} before (raw error)", TARGETS[t]),
-                |r| raw.and_then(|c| c[r]),
-            );
-            let after = plane_map(
-                data,
-                plane,
-                format!("{} after (residual)", TARGETS[t]),
-                |r| res[r],
-            );
+            let (b_title, a_title) = if bed {
+                (
+                    "bed height before (as probed)".to_string(),
+                    "bed height after (residual)".to_string(),
+                )
+            } else {
+                (
+                    format!("{} before (raw error)", TARGETS[t]),
+                    format!("{} after (residual)", TARGETS[t]),
+                )
+            };
+            let before = plane_map(data, plane, b_title, |r| {
+                raw.and_then(|c| c[r]).map(|v| sign * v)
+            });
+            let after = plane_map(data, plane, a_title, |r| res[r].map(|v| sign * v));
             page.figure(
                 format!("map_before_after_{}", TARGETS[t]),
                 format!(
-                    "{} before and after compensation on the plane {} = {} mm, on one colour scale.",
-                    TARGETS[t],
-                    AXES[plane.normal],
-                    plot_num(plane.at_mm)
+                    "{} before and after compensation {}, on one colour scale.",
+                    if bed { "The bed height" } else { TARGETS[t] },
+                    on(plane)
                 ),
                 heat_map_pair(&before, &after)?,
             );

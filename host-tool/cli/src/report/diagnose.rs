@@ -18,7 +18,8 @@ use trueaxis_engine::features;
 use trueaxis_engine::diagnose::{Verdict as DVerdict, ABOVE_NOISE_RATIO};
 
 use crate::report::plot::{
-    axis_title, format_value, heat_map_pair, HeatMap, Series, Style, Ticks, XyPlot,
+    self, axis_title, darker, format_value, heat_map_pair, target_colour, HeatMap, Series, Style,
+    Ticks, XyPlot, DIRECTION_COLOURS,
 };
 use crate::report::{Figure, Page, Tone, Verdict};
 
@@ -58,6 +59,33 @@ pub fn fit_command(d: &Diagnosis, data_path: &str, model_out: &str) -> Option<St
     // so the command runs as printed and the history continues.
     cmd.push_str(&format!(" -o {}", shell_word(model_out)));
     Some(cmd)
+}
+
+/// The diagnosed model fitted again as it is (its seed and every `--add`),
+/// written to `model_out`: the first half of the command at the noise
+/// floor ("fit, then export").
+pub fn refit_command(d: &Diagnosis, data_path: &str, model_out: &str) -> String {
+    let mut parts = d.model.split(" + ");
+    let mut cmd = format!(
+        "trueaxis fit {} --model {}",
+        shell_word(data_path),
+        parts.next().unwrap_or("cubic19")
+    );
+    for a in parts {
+        cmd.push_str(&format!(" --add {}", shell_word(a)));
+    }
+    cmd.push_str(&format!(" -o {}", shell_word(model_out)));
+    cmd
+}
+
+/// What to run for a probed bed (issue 28: beds were told to measure
+/// ball-screw leads): fit a grid on the probe spacing and export it as a
+/// Klipper mesh, as it runs when pasted where diagnose ran.
+pub fn bed_next(data: &Dataset, data_path: &str) -> String {
+    format!(
+        "{} && trueaxis export bed.json --format klipper-mesh -o mesh.cfg",
+        crate::workflow::next_for_data(data, std::path::Path::new(data_path))
+    )
 }
 
 /// A path as one shell word: as it is when it has only characters no
@@ -314,8 +342,9 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
                     Tone::Unknown
                 },
                 Some(format!(
-                    "trueaxis fit {data_path} --model {} -o model.json && trueaxis export model.json -o table.bin",
-                    d.model.replace(" + ", " --add ")
+                    "{} && trueaxis export {} -o table.bin",
+                    refit_command(d, data_path, model_out),
+                    shell_word(model_out)
                 )),
             )
         }
@@ -338,12 +367,22 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
             let next = d
                 .warnings
                 .iter()
-                .find(|w| ["aliasing", "one_direction", "constant_temperature", "no_temperature"].contains(&w.code.as_str()))
+                .find(|w| {
+                    [
+                        "aliasing",
+                        "one_direction",
+                        "constant_temperature",
+                        "no_temperature",
+                    ]
+                    .contains(&w.code.as_str())
+                })
                 .map(|w| format!("measure first: {}", w.detail))
                 .or_else(|| {
                     Some(format!(
-                        "trueaxis fit {data_path} --model {} -o model.json && trueaxis compare {data_path} --model model.json --report report",
-                        d.model.replace(" + ", " --add ")
+                        "{} && trueaxis compare {} --model {} --report report",
+                        refit_command(d, data_path, model_out),
+                        shell_word(data_path),
+                        shell_word(model_out)
                     ))
                 });
             (
@@ -461,6 +500,40 @@ fn binned_mean(pts: &[(f64, f64)], bins: usize) -> Vec<(f64, f64)> {
 /// Bins per axis of the working-volume overview at most.
 const OVERVIEW_BINS: usize = 12;
 
+/// The cell centres of an overview axis over the sorted distinct measured
+/// positions: the positions themselves when there are at most `max`, else
+/// the centres of the most even bins (at most `max`) of which none is
+/// empty — a complete grid never shows a hole.
+fn overview_centres(distinct: &[f64], max: usize) -> Vec<f64> {
+    if distinct.len() <= max {
+        return distinct.to_vec();
+    }
+    let (lo, hi) = (distinct[0], distinct[distinct.len() - 1]);
+    for n in (1..=max).rev() {
+        let w = (hi - lo) / n as f64;
+        let mut filled = vec![false; n];
+        for &p in distinct {
+            filled[(((p - lo) / w) as usize).min(n - 1)] = true;
+        }
+        if filled.iter().all(|&f| f) {
+            return (0..n).map(|k| lo + w * (k as f64 + 0.5)).collect();
+        }
+    }
+    vec![0.5 * (lo + hi)]
+}
+
+/// The index of the centre nearest `v` (centres ascending, not empty).
+fn nearest_index(centres: &[f64], v: f64) -> usize {
+    let i = centres.partition_point(|&c| c < v);
+    if i == 0 {
+        0
+    } else if i == centres.len() || v - centres[i - 1] <= centres[i] - v {
+        i - 1
+    } else {
+        i
+    }
+}
+
 /// Where in the working volume the final residual is large, on the first
 /// screen (issue 13): per target, the RMS of the residual after the path in
 /// even bins (≤ 12 per axis) projected on each pair of moving axes — small
@@ -485,26 +558,18 @@ fn volume_overview(page: &mut Page, d: &Diagnosis, data: &Dataset) -> Result<()>
             let (Some(pa), Some(pb)) = (data.pos_mm[a].as_ref(), data.pos_mm[b].as_ref()) else {
                 continue;
             };
+            // Cells on the measured positions (issue 28: 11 grid lines cut
+            // into 12 even bins left a grey "not measured" band on a
+            // complete grid): each distinct position its own cell while
+            // they are few, else even bins, as many as leave none empty.
             let bins = |p: &[f64]| {
-                let (lo, hi) = rows
-                    .iter()
-                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &r| {
-                        (l.min(p[r]), h.max(p[r]))
-                    });
-                let mut distinct: Vec<i64> =
-                    rows.iter().map(|&r| (p[r] * 1e3).round() as i64).collect();
-                distinct.sort_unstable();
-                distinct.dedup();
-                (lo, hi, distinct.len().clamp(1, OVERVIEW_BINS))
+                let mut distinct: Vec<f64> = rows.iter().map(|&r| p[r]).collect();
+                distinct.sort_by(f64::total_cmp);
+                distinct.dedup_by(|a, b| (*a - *b).abs() < 1e-3);
+                overview_centres(&distinct, OVERVIEW_BINS)
             };
-            let ((alo, ahi, na), (blo, bhi, nb)) = (bins(pa), bins(pb));
-            let cell = |v: f64, lo: f64, hi: f64, n: usize| {
-                if hi > lo {
-                    (((v - lo) / (hi - lo) * n as f64) as usize).min(n - 1)
-                } else {
-                    0
-                }
-            };
+            let (ca, cb) = (bins(pa), bins(pb));
+            let (na, nb) = (ca.len(), cb.len());
             let mut ss = vec![0.0; na * nb];
             let mut count = vec![0usize; na * nb];
             let mut worst: Option<(f64, f64, f64)> = None;
@@ -513,18 +578,13 @@ fn volume_overview(page: &mut Page, d: &Diagnosis, data: &Dataset) -> Result<()>
                 if !v.is_finite() {
                     continue;
                 }
-                let k = cell(pb[r], blo, bhi, nb) * na + cell(pa[r], alo, ahi, na);
+                let k = nearest_index(&cb, pb[r]) * na + nearest_index(&ca, pa[r]);
                 ss[k] += v * v;
                 count[k] += 1;
                 if worst.is_none_or(|w| v.abs() > w.2.abs()) {
                     worst = Some((pa[r], pb[r], v));
                 }
             }
-            let centres = |lo: f64, hi: f64, n: usize| -> Vec<f64> {
-                (0..n)
-                    .map(|k| lo + (hi - lo) * (k as f64 + 0.5) / n as f64)
-                    .collect()
-            };
             let values = ss
                 .iter()
                 .zip(&count)
@@ -535,8 +595,8 @@ fn volume_overview(page: &mut Page, d: &Diagnosis, data: &Dataset) -> Result<()>
                 format!("{} (mm)", AXES[a]),
                 format!("{} (mm)", AXES[b]),
                 "µm",
-                centres(alo, ahi, na),
-                centres(blo, bhi, nb),
+                ca,
+                cb,
                 values,
                 worst,
                 rows.len(),
@@ -680,6 +740,8 @@ fn thermal_slope(
         ),
         _ => axis_title(&column),
     };
+    let colour =
+        plot::target_of(&c.target.to_string()).map_or(plot::OTHER_COLOURS[0], target_colour);
     let plot = XyPlot::new(
         format!(
             "Thermal growth of {}{}: the slope",
@@ -689,11 +751,14 @@ fn thermal_slope(
         t_title.clone(),
         y_label,
     )
-    .with(Series::points("component + residual", pts.clone()))
-    .with(Series::line(
-        format!("least squares: {} {unit}", format_value(slope)),
-        vec![(lo, icpt + slope * lo), (hi, icpt + slope * hi)],
-    ));
+    .with(Series::points("component + residual", pts.clone()).coloured(colour))
+    .with(
+        Series::line(
+            format!("least squares: {} {unit}", format_value(slope)),
+            vec![(lo, icpt + slope * lo), (hi, icpt + slope * hi)],
+        )
+        .coloured(darker(colour, 0.45)),
+    );
     let fitted = c.physical.as_ref().map_or(String::new(), |ph| {
         format!(
             "; the model's {} is {} {} (95 %: {} … {})",
@@ -821,7 +886,15 @@ pub fn write_for(
     history: Option<&trueaxis_engine::history::History>,
 ) -> Result<PathBuf> {
     let mut page = Page::new(format!("trueaxis diagnose — {}", data.source));
-    page.verdict(verdict(d, data_path, model_out));
+    let mut v = verdict(d, data_path, model_out);
+    if data.is_probed_surface() {
+        v.details.insert(
+            0,
+            "A probed bed (ez over x and y only): its model is a grid over the probe points or a smoother mesh, exported as the firmware's bed mesh.".into(),
+        );
+        v.next = Some(bed_next(data, data_path));
+    }
+    page.verdict(v);
     volume_overview(&mut page, d, data)?;
     page.heading("Diagnosis");
     page.paragraph(format!(
@@ -912,6 +985,7 @@ pub fn write_for(
         crate::report::history::add_to_page(&mut page, h, &noise)?;
     }
     page.heading("Evidence");
+    page.colour_key();
     // The x–y evidence side by side, two per row; the maps below full width.
     let mut figs: Vec<Figure> = Vec::new();
     // Periodograms: every target and axis with dense lines at the starting
@@ -936,13 +1010,7 @@ pub fn write_for(
             "share of variance",
         )
         .with_x_ticks(Ticks::Period)
-        .with(Series::line("Lomb–Scargle power", pts));
-        if let Some(k) = e.pg.peak() {
-            plot = plot.with_vline(
-                e.pg.freq_per_mm[k],
-                format!("{} mm", format_value(1.0 / e.pg.freq_per_mm[k])),
-            );
-        }
+        .with(Series::line("Lomb–Scargle power", pts).coloured(plot::target_colour(e.target)));
         let rows = d
             .evidence
             .resid_before
@@ -953,11 +1021,21 @@ pub fn write_for(
         let sampling = periodogram_sampling(data, e.axis, rows);
         let mut caption =
             format!("Lomb–Scargle periodogram of the {tn} residual along {ax}{at} (dense lines)");
-        if let Some(level) = sampling
+        let level = sampling
             .as_ref()
-            .and_then(|s| false_alarm_level(s.points, e.pg.power.len(), FALSE_ALARM))
-        {
-            plot = plot.with_dashed(level, "1 % false-alarm level", 1);
+            .and_then(|s| false_alarm_level(s.points, e.pg.power.len(), FALSE_ALARM));
+        // The peak is marked red only when it is a finding (above the 1 %
+        // level, or no level known); a peak below it is marked grey.
+        if let Some(k) = e.pg.peak() {
+            let label = format!("{} mm", format_value(1.0 / e.pg.freq_per_mm[k]));
+            plot = if level.is_some_and(|l| e.pg.power[k] < l) {
+                plot.with_vline_coloured(e.pg.freq_per_mm[k], label, plot::NO_FINDING)
+            } else {
+                plot.with_vline(e.pg.freq_per_mm[k], label)
+            };
+        }
+        if let Some(level) = level {
+            plot = plot.with_dashed(level, "1 % false-alarm level", plot::NO_FINDING);
             caption.push_str(&format!(
                 "; dashed: the power noise alone passes somewhere in the band with 1 % probability ({} points, {} independent frequencies) — a peak below it is no finding",
                 sampling.as_ref().map_or(0, |s| s.points),
@@ -1092,16 +1170,22 @@ pub fn write_for(
             format!("dir_{} = −1", AXES[*a]),
             down.clone(),
         ))
-        .with(Series::styled(
-            "forward profile (mean per bin)",
-            binned_mean(&up, PROFILE_BINS),
-            Style::LinePoints,
-        ))
-        .with(Series::styled(
-            "backward profile (mean per bin)",
-            binned_mean(&down, PROFILE_BINS),
-            Style::LinePoints,
-        ));
+        .with(
+            Series::styled(
+                "forward profile (mean per bin)",
+                binned_mean(&up, PROFILE_BINS),
+                Style::LinePoints,
+            )
+            .coloured(darker(DIRECTION_COLOURS[0], 0.35)),
+        )
+        .with(
+            Series::styled(
+                "backward profile (mean per bin)",
+                binned_mean(&down, PROFILE_BINS),
+                Style::LinePoints,
+            )
+            .coloured(darker(DIRECTION_COLOURS[1], 0.35)),
+        );
         figs.push(Figure {
             name: format!("reversal_{}_{}", TARGETS[*t], AXES[*a]),
             caption: format!(
@@ -1142,8 +1226,8 @@ pub fn write_for(
             label,
             format!("{} (µm)", TARGETS[t]),
         )
-        .with(Series::points("component + residual", partial))
-        .with(Series::points("fitted component", fitted));
+        .with(Series::points("component + residual", partial).coloured(target_colour(t)))
+        .with(Series::points("fitted component", fitted).coloured(darker(target_colour(t), 0.5)));
         figs.push(Figure {
             name: format!("component_{}_{}", TARGETS[t], comp.step),
             caption: format!(
@@ -1249,7 +1333,17 @@ mod tests {
             "{}",
             v.headline
         );
-        assert!(v.next.unwrap().contains("trueaxis export model.json"));
+        // The model it diagnosed, refitted and exported: the same path in
+        // both halves (it wrote model.json and exported that).
+        assert_eq!(
+            v.next.unwrap(),
+            "trueaxis fit d.csv --model cubic19 -o m.json && trueaxis export m.json -o table.bin"
+        );
+        let spaced = verdict(&diagnosis(0.2, Some(0.2)), "my data.csv", "a b/m.json");
+        assert_eq!(
+            spaced.next.unwrap(),
+            "trueaxis fit 'my data.csv' --model cubic19 -o 'a b/m.json' && trueaxis export 'a b/m.json' -o table.bin"
+        );
     }
 
     #[test]
@@ -1805,5 +1899,27 @@ mod tests {
             assert_eq!(u.0, d.0);
         }
         assert!(binned_mean(&[], 10).is_empty());
+    }
+
+    #[test]
+    fn a_complete_grid_overview_has_no_empty_cell() {
+        // 11 grid lines 0…500 every 50 mm: 11 cells on the lines, none
+        // empty (12 even bins left one empty).
+        let lines: Vec<f64> = (0..=10).map(|k| 50.0 * f64::from(k)).collect();
+        assert_eq!(overview_centres(&lines, OVERVIEW_BINS), lines);
+        // 17 lines and a dense line every 0.5 mm: even bins, none empty.
+        let mut many: Vec<f64> = (0..=16).map(|k| 50.0 * f64::from(k)).collect();
+        many.extend((0..1600).map(|k| 0.5 * f64::from(k)));
+        many.sort_by(f64::total_cmp);
+        many.dedup();
+        let c = overview_centres(&many, OVERVIEW_BINS);
+        assert!(c.len() <= OVERVIEW_BINS && c.len() >= 6, "{c:?}");
+        let mut hit = vec![false; c.len()];
+        for p in &many {
+            hit[nearest_index(&c, *p)] = true;
+        }
+        assert!(hit.iter().all(|&h| h));
+        assert_eq!(nearest_index(&[0.0, 10.0, 20.0], 14.0), 1);
+        assert_eq!(nearest_index(&[0.0, 10.0, 20.0], 16.0), 2);
     }
 }

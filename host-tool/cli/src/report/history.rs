@@ -14,8 +14,9 @@ use trueaxis_engine::diagnose::ABOVE_NOISE_RATIO;
 use trueaxis_engine::effect::EffectSpec;
 use trueaxis_engine::history::{History, Step};
 
-use crate::report::plot::{format_value, Series, Style, Ticks, XyPlot};
+use crate::report::plot::{self, format_value, Series, Style, Ticks, XyPlot};
 use crate::report::{Page, Tone, Verdict};
+use plotters::style::RGBColor;
 
 /// A step's label on the plot: the seed for the first fit, else what it
 /// added, short (`+ periodic ex x 5.00011`), several joined by `, `.
@@ -144,8 +145,9 @@ pub fn plot(h: &History, noise_um: &BTreeMap<String, f64>) -> XyPlot {
         .collect::<std::collections::BTreeSet<_>>()
         .into_iter()
         .collect();
-    // In-sample series first, so target i has palette colour i and its
-    // noise floor the same colour; held-out after them.
+    // Each target in its colour on every page (plot::target_of by the
+    // series' name): in-sample solid, held-out dashed with hollow dots, the
+    // noise floor a paler dashed line.
     for t in &targets {
         let rms: Vec<(f64, f64)> = h
             .steps
@@ -164,13 +166,20 @@ pub fn plot(h: &History, noise_um: &BTreeMap<String, f64>) -> XyPlot {
             p = p.with(Series::styled(
                 format!("{t} held-out RMS"),
                 held,
-                Style::LinePoints,
+                Style::DashedPoints,
             ));
         }
     }
-    for (i, t) in targets.iter().enumerate() {
+    for t in &targets {
         if let Some(nf) = noise_um.get(*t).filter(|v| v.is_finite()) {
-            p = p.with_dashed(*nf, format!("{t} noise floor {} µm", format_value(*nf)), i);
+            let colour = plot::target_of(t).map_or(RGBColor(120, 120, 120), |i| {
+                plot::lighter(plot::target_colour(i), 0.45)
+            });
+            p = p.with_dashed(
+                *nf,
+                format!("{t} noise floor {} µm", format_value(*nf)),
+                colour,
+            );
         }
     }
     let values: Vec<f64> = h
@@ -223,6 +232,7 @@ pub fn write_report(
     let mut page = Page::new(format!("trueaxis history — {name}"));
     page.verdict(verdict(h, name, data, noise_um));
     page.heading("History");
+    page.colour_key();
     add_to_page(&mut page, h, noise_um)?;
     page.write(dir)
 }
@@ -233,6 +243,11 @@ pub fn write_report(
 /// fitted to, for it).
 pub fn verdict(h: &History, model: &str, data: &str, noise_um: &BTreeMap<String, f64>) -> Verdict {
     let um = |v: f64| format!("{} µm", format_value(v));
+    // One shell word each: the command runs as pasted.
+    let (model, data) = (
+        &crate::report::diagnose::shell_word(model),
+        &crate::report::diagnose::shell_word(data),
+    );
     let (Some(first), Some(last)) = (h.steps.first(), h.steps.last()) else {
         return Verdict {
             headline: "The history is empty: no fit was recorded.".into(),

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 
+use trueaxis_engine::data::{Dataset, AXES};
 use trueaxis_engine::iso230::{max, min, Iso230, TargetStats};
 
 use crate::report::plot::format_value;
@@ -60,11 +61,7 @@ pub fn verdict(res: &Iso230, data_path: &str) -> Verdict {
         Vec::new()
     };
     let removable = res.e_um > 1.5 * r_uni;
-    let mut next = format!("trueaxis fit {data_path} --model cubic19");
-    if big_reversal {
-        next.push_str(&format!(" --add 'reversal:target=e{ax},axis={ax}'"));
-    }
-    next.push_str(" -o model.json");
+    let next = fit_command(res, data_path, big_reversal);
     Verdict {
         headline: format!(
             "Axis {ax}: accuracy A = {}; compensation can remove most of the systematic E = {}{}, not the repeatability (one direction, up to {}).",
@@ -84,20 +81,147 @@ pub fn verdict(res: &Iso230, data_path: &str) -> Verdict {
     }
 }
 
-/// Writes `DIR/index.html` (verdict, plot, per-target table) and
+/// The command that fits a model to the run, as it runs when pasted where
+/// `iso230` ran: an ecmc `.dat` (which does not name its axis) imported
+/// first with `--axis`; the cubic seed when the run has the 4 targets a
+/// cubic along one axis needs, else a grid model on the targets' spacing
+/// (a 3-target run cannot fit 4 terms); a reversal term when B is large.
+pub fn fit_command(res: &Iso230, data_path: &str, reversal: bool) -> String {
+    let ax = &res.axis;
+    let data = crate::report::diagnose::shell_word(data_path);
+    let (mut cmd, input) = if data_path.to_ascii_lowercase().ends_with(".dat") {
+        (
+            format!("trueaxis import {data} --axis {ax} -o run.csv && "),
+            "run.csv".to_string(),
+        )
+    } else {
+        (String::new(), data)
+    };
+    let mut pos: Vec<f64> = res.per_target.iter().map(|t| t.pos_mm).collect();
+    pos.sort_by(f64::total_cmp);
+    let step = pos
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| *d > 1e-9)
+        .fold(f64::INFINITY, f64::min);
+    let model = if pos.len() >= 4 || !step.is_finite() {
+        "cubic19".to_string()
+    } else {
+        format!("grid:{}", trueaxis_engine::lines::plot_num(step))
+    };
+    cmd.push_str(&format!("trueaxis fit {input} --model {model}"));
+    if reversal {
+        cmd.push_str(&format!(" --add 'reversal:target=e{ax},axis={ax}'"));
+    }
+    cmd.push_str(" -o model.json");
+    cmd
+}
+
+/// One reading of the run: where, what, from which side, in which run, and
+/// why it is flagged (None: not flagged — the hook for the engine's
+/// reading checks: a flagged reading is ringed in red and named).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Reading {
+    pub pos_mm: f64,
+    pub err_um: f64,
+    /// +1 approached from below, −1 from above.
+    pub dir: i8,
+    /// The run (`pass_id`), when the file tells.
+    pub run: Option<i64>,
+    pub flag: Option<String>,
+}
+
+/// Every reading of `axis`'s error along `axis` with its direction and run.
+pub fn readings(data: &Dataset, axis: usize) -> Vec<Reading> {
+    let (Some(pos), Some(err), Some(dir)) = (
+        data.pos_mm[axis].as_ref(),
+        data.err_um[axis].as_ref(),
+        data.dir[axis].as_ref(),
+    ) else {
+        return Vec::new();
+    };
+    (0..data.len())
+        .filter_map(|r| {
+            Some(Reading {
+                pos_mm: pos[r],
+                err_um: err[r]?,
+                dir: dir[r],
+                run: data.pass_id.as_ref().map(|p| p[r]),
+                flag: None,
+            })
+        })
+        .collect()
+}
+
+/// The test conditions a file's metadata gives (an `.rtl`'s machine,
+/// serial number, date, operator, air and material temperature, laser;
+/// an ecmc file's header), as (what, value) rows; the file format line
+/// is left out (the title says the file).
+pub fn conditions(data: &Dataset) -> Vec<Vec<String>> {
+    data.metadata
+        .iter()
+        .filter(|(k, _)| !matches!(k.as_str(), "format" | "axis" | "Software"))
+        .map(|(k, v)| {
+            let what = match k.as_str() {
+                "By" => "operator (By)".to_string(),
+                k => k
+                    .strip_prefix("environment ")
+                    .or_else(|| k.strip_prefix("equipment "))
+                    .unwrap_or(k)
+                    .to_string(),
+            };
+            vec![what, v.clone()]
+        })
+        .collect()
+}
+
+/// Writes `DIR/index.html` (verdict, the file's test conditions, the plot
+/// of every run's readings beside the means, the per-target table) and
 /// `DIR/iso230_<axis>.svg`; returns the page's path.
-pub fn write_page(res: &Iso230, data_path: &str, dir: &Path) -> Result<PathBuf> {
+pub fn write_page(res: &Iso230, data: &Dataset, data_path: &str, dir: &Path) -> Result<PathBuf> {
     let mut page = Page::new(format!(
         "trueaxis iso230 — axis {} of {data_path}",
         res.axis
     ));
     page.verdict(verdict(res, data_path));
-    page.heading("Mean deviation by direction");
+    let axis = AXES.iter().position(|a| *a == res.axis).unwrap_or(0);
+    let conds = conditions(data);
+    if !conds.is_empty() {
+        page.heading("Test conditions (from the file)");
+        page.table(&["what", "value"], conds);
+    }
+    let reads = readings(data, axis);
+    page.heading("Every run beside the means");
     page.figure(
         format!("iso230_{}", res.axis),
-        "x̄↑ and x̄↓ (mean deviation approaching from below and from above) at each target, with ±2s bands.",
-        svg(res)?,
+        format!(
+            "Each run's readings (thin lines and open dots: {} readings in {} run(s) per direction) beside x̄↑ and x̄↓ (the mean deviation approaching from below and from above) with their ±2s bands: a reading far from its run's neighbours stands out.",
+            reads.len(),
+            res.runs
+        ),
+        svg_with(res, &reads)?,
     );
+    let flagged: Vec<Vec<String>> = reads
+        .iter()
+        .filter_map(|r| {
+            r.flag.as_ref().map(|f| {
+                vec![
+                    format!("{:.3}", r.pos_mm),
+                    if r.dir > 0 { "↑" } else { "↓" }.to_string(),
+                    r.run.map_or("—".into(), |k| k.to_string()),
+                    format!("{:.3}", r.err_um),
+                    f.clone(),
+                ]
+            })
+        })
+        .collect();
+    if !flagged.is_empty() {
+        page.heading("Flagged readings");
+        page.table(
+            &["target (mm)", "dir", "run", "deviation (µm)", "why"],
+            flagged,
+        );
+    }
     let f = |v: f64| format!("{v:.3}");
     let rows = res
         .per_target
@@ -141,23 +265,69 @@ pub fn plot_svg(res: &Iso230, path: &Path) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))
 }
 
-/// The plot of [`plot_svg`] as an SVG document.
+/// The plot of [`plot_svg`] as an SVG document (the means and bands only).
 pub fn svg(res: &Iso230) -> Result<String> {
+    svg_with(res, &[])
+}
+
+/// The means with their ±2s bands and every run's readings: each run a
+/// thin line with open dots in its direction's colour (the readings
+/// approached from below a little left of the target, from above a little
+/// right, so they do not hide each other), a flagged reading ringed red;
+/// the legend in a strip of its own right of the plot, never on the data.
+pub fn svg_with(res: &Iso230, readings: &[Reading]) -> Result<String> {
+    use crate::report::plot::{darker, draw_legend, legend_width, LegendMark, DIRECTION_COLOURS};
     use plotters::prelude::*;
     let t = &res.per_target;
     let lo = min(t
         .iter()
-        .map(|s| (s.mean_up_um - 2.0 * s.s_up_um).min(s.mean_down_um - 2.0 * s.s_down_um)));
+        .map(|s| (s.mean_up_um - 2.0 * s.s_up_um).min(s.mean_down_um - 2.0 * s.s_down_um))
+        .chain(readings.iter().map(|r| r.err_um)));
     let hi = max(t
         .iter()
-        .map(|s| (s.mean_up_um + 2.0 * s.s_up_um).max(s.mean_down_um + 2.0 * s.s_down_um)));
+        .map(|s| (s.mean_up_um + 2.0 * s.s_up_um).max(s.mean_down_um + 2.0 * s.s_down_um))
+        .chain(readings.iter().map(|r| r.err_um)));
     let pad = ((hi - lo) * 0.1).max(0.05);
     let (x0, x1) = (t[0].pos_mm, t[t.len() - 1].pos_mm);
     let xpad = ((x1 - x0) * 0.03).max(1.0);
+    let up = darker(DIRECTION_COLOURS[0], 0.2);
+    let down = darker(DIRECTION_COLOURS[1], 0.3);
+    let mut entries = vec![
+        ("x̄↑ ± 2s (from below)".to_string(), up, LegendMark::LineDot),
+        (
+            "x̄↓ ± 2s (from above)".to_string(),
+            down,
+            LegendMark::LineDot,
+        ),
+    ];
+    if !readings.is_empty() {
+        entries.push((
+            "runs ↑ (readings)".into(),
+            DIRECTION_COLOURS[0],
+            LegendMark::Dot,
+        ));
+        entries.push((
+            "runs ↓ (readings)".into(),
+            DIRECTION_COLOURS[1],
+            LegendMark::Dot,
+        ));
+    }
+    if readings.iter().any(|r| r.flag.is_some()) {
+        entries.push((
+            "flagged reading".into(),
+            RGBColor(200, 0, 0),
+            LegendMark::Dot,
+        ));
+    }
     let mut buf = String::new();
-    let root = SVGBackend::with_string(&mut buf, (900, 520)).into_drawing_area();
+    let size = (900u32, 520u32);
+    let whole = SVGBackend::with_string(&mut buf, size).into_drawing_area();
+    let (root, legend) = whole.split_horizontally(size.0 - legend_width(&entries));
     let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
-        root.fill(&WHITE)?;
+        whole.fill(&WHITE)?;
+        draw_legend(&legend, &entries).map_err(|e| e.to_string())?;
+        // Left and right of the target by 0.6 % of the travel.
+        let dx = 0.006 * (x1 - x0).abs().max(1.0);
         let mut chart = ChartBuilder::on(&root)
             .caption(
                 format!(
@@ -175,15 +345,40 @@ pub fn svg(res: &Iso230) -> Result<String> {
             .x_desc(format!("target position along {} (mm)", res.axis))
             .y_desc("deviation (µm)")
             .draw()?;
-        let up = BLUE;
-        let down = RED;
-        for (color, f, label) in [
+        // Every run: its readings in order of position, per direction.
+        let mut runs: Vec<(i8, Option<i64>)> = readings.iter().map(|r| (r.dir, r.run)).collect();
+        runs.sort_unstable();
+        runs.dedup();
+        for (d, run) in runs {
+            let colour = if d > 0 {
+                DIRECTION_COLOURS[0]
+            } else {
+                DIRECTION_COLOURS[1]
+            };
+            let shift = if d > 0 { -dx } else { dx };
+            let mut pts: Vec<(f64, f64)> = readings
+                .iter()
+                .filter(|r| r.dir == d && r.run == run)
+                .map(|r| (r.pos_mm + shift, r.err_um))
+                .collect();
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            if run.is_some() {
+                chart.draw_series(LineSeries::new(
+                    pts.clone(),
+                    colour.mix(0.45).stroke_width(1),
+                ))?;
+            }
+            chart.draw_series(
+                pts.iter()
+                    .map(|p| Circle::new(*p, 3, colour.stroke_width(1))),
+            )?;
+        }
+        for (color, f) in [
             (
                 up,
                 (|s: &TargetStats| (s.mean_up_um, s.s_up_um)) as fn(&TargetStats) -> (f64, f64),
-                "x̄↑",
             ),
-            (down, |s: &TargetStats| (s.mean_down_um, s.s_down_um), "x̄↓"),
+            (down, |s: &TargetStats| (s.mean_down_um, s.s_down_um)),
         ] {
             let band: Vec<(f64, f64)> = t
                 .iter()
@@ -194,31 +389,25 @@ pub fn svg(res: &Iso230) -> Result<String> {
                 band,
                 color.mix(0.15).filled(),
             )))?;
-            chart
-                .draw_series(LineSeries::new(
-                    t.iter().map(|s| (s.pos_mm, f(s).0)),
-                    color.stroke_width(2),
-                ))?
-                .label(format!("{label} ± 2s"))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                });
+            chart.draw_series(LineSeries::new(
+                t.iter().map(|s| (s.pos_mm, f(s).0)),
+                color.stroke_width(2),
+            ))?;
             chart.draw_series(
                 t.iter()
                     .map(|s| Circle::new((s.pos_mm, f(s).0), 3, color.filled())),
             )?;
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
-        root.present()?;
+        let red = RGBColor(200, 0, 0);
+        chart.draw_series(readings.iter().filter(|r| r.flag.is_some()).map(|r| {
+            let shift = if r.dir > 0 { -dx } else { dx };
+            Circle::new((r.pos_mm + shift, r.err_um), 7, red.stroke_width(2))
+        }))?;
+        whole.present()?;
         Ok(())
     };
     draw().map_err(|e| anyhow::anyhow!("drawing the ISO 230-2 plot: {e}"))?;
-    drop(root);
+    drop((root, legend, whole));
     // Scales to the window like every report figure (viewBox, no width).
     Ok(crate::report::plot::responsive(buf))
 }

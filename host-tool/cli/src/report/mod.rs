@@ -37,6 +37,9 @@ enum Block {
     /// Figures side by side, as many per row as the window holds (small
     /// multiples: the planes of one target on one colour scale).
     Grid(Vec<Figure>, GridKind),
+    /// The page's colour key: each target's and direction's colour, the
+    /// same on every plot of every page.
+    Key,
 }
 
 /// How wide the cells of a grid of figures are at least.
@@ -161,6 +164,14 @@ impl Page {
         self
     }
 
+    /// The colour key shared by every plot below it: ex, ey, ez and the
+    /// two approach directions, each a swatch in its colour
+    /// ([`plot::TARGET_COLOURS`], [`plot::DIRECTION_COLOURS`]).
+    pub fn colour_key(&mut self) -> &mut Page {
+        self.blocks.push(Block::Key);
+        self
+    }
+
     /// Figures side by side in a grid that fills the window's width.
     pub fn grid(&mut self, figures: Vec<Figure>) -> &mut Page {
         if !figures.is_empty() {
@@ -196,7 +207,7 @@ impl Page {
         let mut h = String::new();
         let _ = write!(
             h,
-            "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{}</title>\n<style>{}</style>\n</head>\n<body>\n<h1>{}</h1>\n",
+            "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n<title>{}</title>\n<style>{}</style>\n</head>\n<body>\n<h1>{}</h1>\n",
             esc(&self.title),
             STYLE,
             esc(&self.title)
@@ -218,28 +229,41 @@ impl Page {
                 Block::Table { header, rows } => {
                     // A wide table scrolls inside its box; the page never
                     // gets wider than the window.
+                    // Numbers align right (their digits line up), words
+                    // left (a right-aligned sentence is hard to read) — by
+                    // column: a column with any word in it is a text
+                    // column, its header and its one number included
+                    // (issue 28: "5" right-aligned under words).
+                    let numeric: Vec<bool> = (0..header.len())
+                        .map(|k| {
+                            rows.iter()
+                                .filter_map(|r| r.get(k))
+                                .all(|c| is_number_cell(c))
+                        })
+                        .collect();
+                    let class = |k: usize| {
+                        if numeric.get(k).copied().unwrap_or(false) {
+                            ""
+                        } else {
+                            " class=\"t\""
+                        }
+                    };
                     h.push_str("<div class=\"scroll\"><table>\n<thead><tr>");
-                    for c in header {
-                        let _ = write!(h, "<th>{}</th>", esc(c));
+                    for (k, c) in header.iter().enumerate() {
+                        let _ = write!(h, "<th{}>{}</th>", class(k), esc(c));
                     }
                     h.push_str("</tr></thead>\n<tbody>\n");
                     for r in rows {
                         h.push_str("<tr>");
-                        for c in r {
-                            // Numbers align right (their digits line up),
-                            // words left (a right-aligned sentence is hard
-                            // to read).
-                            if is_number_cell(c) {
-                                let _ = write!(h, "<td>{}</td>", esc(c));
-                            } else {
-                                let _ = write!(h, "<td class=\"t\">{}</td>", esc(c));
-                            }
+                        for (k, c) in r.iter().enumerate() {
+                            let _ = write!(h, "<td{}>{}</td>", class(k), esc(c));
                         }
                         h.push_str("</tr>\n");
                     }
                     h.push_str("</tbody>\n</table></div>\n");
                 }
                 Block::Figure(f) => write_figure(&mut h, f),
+                Block::Key => write_key(&mut h),
                 Block::Grid(figs, kind) => {
                     h.push_str(match kind {
                         GridKind::Small => "<div class=\"grid\">\n",
@@ -324,6 +348,30 @@ fn write_verdict(h: &mut String, v: &Verdict) {
     h.push_str("</section>\n");
 }
 
+/// The colour key: one swatch per target and per approach direction.
+fn write_key(h: &mut String) {
+    let hex = |c: plotters::style::RGBColor| format!("#{:02x}{:02x}{:02x}", c.0, c.1, c.2);
+    h.push_str("<p class=\"key\">Colours on every plot: ");
+    for (t, c) in ["ex", "ey", "ez"].iter().zip(plot::TARGET_COLOURS) {
+        let _ = write!(
+            h,
+            "<span><i style=\"background:{}\"></i>{t}</span> ",
+            hex(c)
+        );
+    }
+    for (d, c) in ["approach +1", "approach −1"]
+        .iter()
+        .zip(plot::DIRECTION_COLOURS)
+    {
+        let _ = write!(
+            h,
+            "<span><i style=\"background:{}\"></i>{d}</span> ",
+            hex(c)
+        );
+    }
+    h.push_str("(a model, fit or mean: the darker shade of its target; held-out: dashed)</p>\n");
+}
+
 /// A figure with its caption and a link to its SVG file; its width is at
 /// most the drawing's own (the SVG scales down to narrower windows).
 fn write_figure(h: &mut String, f: &Figure) {
@@ -354,6 +402,25 @@ fn svg_width(svg: &str) -> Option<u32> {
     let i = svg.find("viewBox=\"")? + "viewBox=\"".len();
     let v: Vec<&str> = svg[i..].split('"').next()?.split_whitespace().collect();
     v.get(2)?.parse::<f64>().ok().map(|w| w.round() as u32)
+}
+
+/// `1 row`, `2 rows`, `0 rows`: a count with its noun in the right number
+/// (issue 28: "1 rows").
+pub fn count(n: usize, noun: &str) -> String {
+    if n == 1 {
+        format!("1 {noun}")
+    } else {
+        format!("{n} {noun}s")
+    }
+}
+
+/// `a straightness scan`, `an arc scan`: the article a word takes.
+pub fn a_or_an(word: &str) -> String {
+    let an = word
+        .chars()
+        .next()
+        .is_some_and(|c| "aeiouAEIOU".contains(c));
+    format!("{} {word}", if an { "an" } else { "a" })
 }
 
 /// HTML-escapes text for element content and attribute values.
@@ -392,17 +459,20 @@ p,li,figcaption,h1,h2,h3{overflow-wrap:break-word}\
 h1{font-size:1.5em}h2{font-size:1.25em;border-bottom:1px solid #ccc;margin-top:1.6em}\
 h3{font-size:1.05em}table{border-collapse:collapse;margin:.6em 0}\
 th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right;font-variant-numeric:tabular-nums}\
-th{background:#f3f3f3}td:first-child,th:first-child,td.t{text-align:left}\
+th{background:#f3f3f3}td.t,th.t{text-align:left}\
 .scroll{max-width:100%;overflow-x:auto}\
 figure{margin:.6em 0}figure svg{display:block;width:100%;height:auto}\
 figcaption{font-size:.9em;color:#555;max-width:720px}pre{background:#f6f6f6;padding:.6em;overflow-x:auto}\
-.grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(340px,1fr));gap:.4em 1em}\
-.grid.wide{grid-template-columns:repeat(auto-fill,minmax(560px,1fr))}.grid figure{margin:0}\
+.grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(min(340px,100%),1fr));gap:.4em 1em}\
+.grid.wide{grid-template-columns:repeat(auto-fill,minmax(min(560px,100%),1fr))}.grid figure{margin:0}\
+@media (max-width:600px){body{padding:0 .5em;margin:.5em auto}h1{font-size:1.25em}th,td{padding:.2em .35em}}\
 .verdict{border:2px solid #999;border-left-width:10px;border-radius:6px;padding:.4em 1em;margin:1em 0;background:#fafafa}\
 .verdict.good{border-color:#009e73;background:#eefaf5}.verdict.action{border-color:#d55e00;background:#fff4ec}\
 .verdict.unknown{border-color:#e69f00;background:#fffaeb}\
 .verdict .headline{font-size:1.25em;font-weight:bold;margin:.4em 0}\
-.verdict .undermine{color:#7a3b00}pre.next{white-space:pre-wrap;word-break:break-all;background:#fff;border:1px solid #ccc}";
+.verdict .undermine{color:#7a3b00}\
+.key{font-size:.9em;color:#444}.key span{white-space:nowrap;margin-right:.6em}\
+.key i{display:inline-block;width:.9em;height:.9em;margin-right:.25em;vertical-align:-.1em;border-radius:2px}pre.next{white-space:pre-wrap;word-break:break-all;background:#fff;border:1px solid #ccc}";
 
 #[cfg(test)]
 mod tests {
@@ -479,9 +549,55 @@ mod tests {
         );
         let html = p.to_html();
         assert!(html.contains("<td class=\"t\">periodic:target=ex</td><td>-6751</td><td>47 %</td><td class=\"t\">periodogram of the ex residual</td>"), "{html}");
+        assert!(
+            html.contains("<th class=\"t\">add</th><th>ΔBIC</th>"),
+            "{html}"
+        );
         assert!(html.contains("<div class=\"grid\">\n<figure id=\"a\""));
         assert!(html.contains("<div class=\"scroll\"><table>"));
         assert_eq!(p.figure_count(), 2);
+    }
+
+    #[test]
+    fn a_column_with_words_is_left_aligned_whole() {
+        // A value column holding "VMC-1", "A. Tester" and "5": the number
+        // aligns with the words, not alone at the right (issue 28).
+        let mut p = Page::new("t");
+        p.table(
+            &["what", "value"],
+            vec![
+                vec!["Machine".into(), "VMC-1".into()],
+                vec!["DEC".into(), "5".into()],
+            ],
+        );
+        let html = p.to_html();
+        assert!(
+            html.contains("<td class=\"t\">DEC</td><td class=\"t\">5</td>"),
+            "{html}"
+        );
+        assert!(html.contains("<th class=\"t\">value</th>"), "{html}");
+    }
+
+    #[test]
+    fn counts_and_articles_read_as_english() {
+        assert_eq!(count(1, "row"), "1 row");
+        assert_eq!(count(3, "row"), "3 rows");
+        assert_eq!(count(0, "point"), "0 points");
+        assert_eq!(a_or_an("arc"), "an arc");
+        assert_eq!(a_or_an("straightness"), "a straightness");
+    }
+
+    #[test]
+    fn pages_fit_a_phone() {
+        // Without the viewport a phone lays the page out 980 px wide and
+        // shrinks its text to a third; a grid cell wider than the window
+        // made five pages 576 px wide at 390 px (issue 28).
+        let html = Page::new("t").to_html();
+        assert!(html
+            .contains("<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"));
+        assert!(STYLE.contains("minmax(min(340px,100%),1fr)"));
+        assert!(STYLE.contains("minmax(min(560px,100%),1fr)"));
+        assert!(!STYLE.contains("minmax(560px"));
     }
 
     #[test]

@@ -253,6 +253,10 @@ pub struct ProbePage<'a> {
     pub next: String,
 }
 
+/// What the radius's interval is about (issue 28: a simulated probe's
+/// true radius lay outside it without a word on why).
+pub const RADIUS_CONVENTION: &str = "the radius is the one that fits best with a form error of zero mean and no tilt over the calibrated angles (docs/on-machine.md): the interval is that radius's; a radius defined otherwise — a simulation's truth, a nominal value — differs by the mean of the form over the arc and may lie outside it";
+
 /// Writes the probe calibration page into `dir`.
 pub fn probe_page(p: &ProbePage, dir: &Path) -> Result<PathBuf> {
     let mut page = Page::new("Probe calibration on the master ball");
@@ -267,7 +271,8 @@ pub fn probe_page(p: &ProbePage, dir: &Path) -> Result<PathBuf> {
             "on the ball: {:.0} nm PV with the radius only → {:.0} nm PV with the form",
             p.ball_pv_nm[0], p.ball_pv_nm[1]
         ),
-        "cannot know: the form outside the calibrated angles (never extrapolated: such contacts get the radius only)".into()],
+        "cannot know: the form outside the calibrated angles (never extrapolated: such contacts get the radius only)".into(),
+        RADIUS_CONVENTION.into()],
         warnings: p.warnings.to_vec(),
         next: Some(p.next.clone()),
         tone: if p.warnings.is_empty() { Tone::Good } else { Tone::Unknown },
@@ -367,6 +372,7 @@ pub fn probe3d_page(p: &Probe3dPage, dir: &Path) -> Result<PathBuf> {
             format!(
                 "cannot know: the form in directions more than {half:.1}° from the cone's axis (the grey band of the map) — contacts there are corrected with the radius only, never an extrapolated polynomial; to know them, scan the ball over those directions"
             ),
+            RADIUS_CONVENTION.replace("calibrated angles", "calibrated cone"),
         ],
         warnings: p.warnings.to_vec(),
         next: Some(p.next.clone()),
@@ -464,9 +470,9 @@ pub fn part_diagnosis_page(
         .collect();
     let unknown = !measures.is_empty();
     let mut details = vec![format!(
-        "a {} scan, {} points{}",
-        d.kind,
-        d.points,
+        "{} scan, {}{}",
+        crate::report::a_or_an(d.kind),
+        crate::report::count(d.points, "point"),
         d.noise_um
             .map(|n| format!(", reading noise {n:.3} µm"))
             .unwrap_or_default()
@@ -596,6 +602,18 @@ pub fn workpiece_page(w: &WorkpiecePage, dir: &Path) -> Result<PathBuf> {
     cs.sort_by(f64::total_cmp);
     cs.dedup_by(|a, b| (*a - *b).abs() < 1e-6);
     let step = cs.len().div_ceil(6).max(1);
+    // One y scale for every generatrix (and the fit over the measured
+    // length): they are compared by height.
+    let [z0, z1] = w.z_range_mm;
+    let (lo, hi) = cs
+        .iter()
+        .flat_map(|&c| (0..=100).map(move |k| (c, z0 + (z1 - z0) * k as f64 / 100.0)))
+        .map(|(c, z)| w.form.at(c, z))
+        .chain(w.points.iter().map(|p| p[2]))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+            (l.min(v), h.max(v))
+        });
+    let pad = 0.08 * (hi - lo).max(1e-6);
     let mut figs = Vec::new();
     for &c in cs.iter().step_by(step) {
         let mut pts: Vec<(f64, f64)> = w
@@ -605,7 +623,6 @@ pub fn workpiece_page(w: &WorkpiecePage, dir: &Path) -> Result<PathBuf> {
             .map(|p| (p[1], p[2]))
             .collect();
         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let [z0, z1] = w.z_range_mm;
         let fit: Vec<(f64, f64)> = (0..=100)
             .map(|k| {
                 let z = z0 + (z1 - z0) * k as f64 / 100.0;
@@ -618,7 +635,8 @@ pub fn workpiece_page(w: &WorkpiecePage, dir: &Path) -> Result<PathBuf> {
             "deviation (µm)",
         )
         .with(Series::points("measured", pts))
-        .with(Series::line("fitted form", fit));
+        .with(Series::line("fitted form", fit))
+        .with_y_range(lo - pad, hi + pad);
         figs.push(super::Figure {
             name: format!("gen{}", (c * 10.0).round() as i64),
             caption: format!("along z at c = {c:.1}°"),

@@ -103,8 +103,33 @@ pub fn expect_exit(args: &[&str], code: i32, needles: &[&str]) -> String {
     for n in needles {
         assert!(err.contains(n), "{args:?}: expected `{n}` in stderr: {err}");
     }
-    assert!(out.stdout.is_empty(), "no output on failure: {args:?}");
+    assert_no_document(args, &out);
     err
+}
+
+/// A failed run writes no half document: under `--json` stdout holds only
+/// the error document (`{"error": …, "exit_code": …}`, the message as on
+/// stderr), without it nothing.
+pub fn assert_no_document(args: &[&str], out: &Output) {
+    // Usage errors too (exit 2, clap's or one a command raises after
+    // parsing, like `export`'s flags of another format) carry the document.
+    if args.contains(&"--json") {
+        let doc: Value = serde_json::from_slice(&out.stdout)
+            .unwrap_or_else(|e| panic!("{args:?}: stdout is no one JSON document ({e})"));
+        assert_eq!(
+            doc["exit_code"].as_i64(),
+            out.status.code().map(i64::from),
+            "{doc}"
+        );
+        let msg = doc["error"].as_str().unwrap_or_else(|| panic!("{doc}"));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            out.status.code() == Some(2) || err.contains(msg),
+            "{args:?}: the error document says what stderr says: {msg} / {err}"
+        );
+    } else {
+        assert!(out.stdout.is_empty(), "no output on failure: {args:?}");
+    }
 }
 
 /// Copies the CSV `src` to `dst` with one more row whose error cells
@@ -245,4 +270,62 @@ pub fn on_machine_campaign(dir: &Path) -> (PathBuf, Value) {
         "--json",
     ]));
     (camp, doc["truth"].clone())
+}
+
+/// A page's Next (`<pre class="next">`), unescaped, when it is a command
+/// (some pages say in words what to measure first).
+pub fn page_next(page: &Path) -> Option<String> {
+    let html = std::fs::read_to_string(page).unwrap();
+    let start = html.find("<pre class=\"next\">")? + "<pre class=\"next\">".len();
+    let end = start + html[start..].find("</pre>")?;
+    let cmd = html[start..end]
+        .replace("&#39;", "'")
+        .replace("&quot;", "\"")
+        .replace("&lt;", "<")
+        .replace("&gt;", ">")
+        .replace("&amp;", "&");
+    cmd.starts_with("trueaxis ").then_some(cmd)
+}
+
+/// Pastes `cmd` into `sh` in `dir`, as a user would; its stdout, or the
+/// failure in words.
+pub fn paste(dir: &Path, cmd: &str) -> Result<String, String> {
+    let script = format!(
+        "trueaxis() {{ '{}' \"$@\"; }}\n{cmd}\n",
+        env!("CARGO_BIN_EXE_trueaxis")
+    );
+    let out = Command::new("sh")
+        .arg("-c")
+        .arg(&script)
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    if out.status.success() {
+        Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+    } else {
+        Err(format!(
+            "`{cmd}` (in {}) exited {:?}: {}",
+            dir.display(),
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr)
+        ))
+    }
+}
+
+/// Every `index.html` under `root`, sorted.
+pub fn pages_under(root: &Path) -> Vec<PathBuf> {
+    let mut v = Vec::new();
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if p.file_name().is_some_and(|f| f == "index.html") {
+                v.push(p);
+            }
+        }
+    }
+    v.sort();
+    v
 }

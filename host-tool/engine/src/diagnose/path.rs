@@ -9,8 +9,6 @@ use crate::effect::{Effect, EffectSpec, Family};
 use crate::model::Seed;
 
 use super::aliasing;
-use super::linalg::small_fit;
-use super::linalg::Basis;
 use super::score::{score, Replacing, Scored};
 use super::search::{propose, researchable, Proposal};
 use super::smooth;
@@ -22,6 +20,9 @@ use super::{
     Unresolved, Warning, COMPETING_OVERLAP, CONFOUNDED_OVERLAP, DBIC_SIGNIFICANT, MAX_PATH_STEPS,
     MIN_GAP_DBIC, MIN_HELD_OUT_GAIN,
 };
+use crate::linalg::basis::small_fit;
+use crate::linalg::basis::Basis;
+use crate::progress::{DiagnoseStage, Event};
 
 /// The evidence's ending of a held-back candidate.
 const HELD_BACK: &str = " — held back, not added: aliasing-suspect (see aliasing: the sampling along its axis cannot tell it from a lead's alias)";
@@ -93,11 +94,13 @@ pub(super) fn rank_target(
         .filter(|k| k.target().index() == td.t)
         .collect();
     let tn = TARGETS[td.t];
-    (td.progress)(&format!(
-        "diagnose: {tn}: searching candidates (periodograms, lags) at {} + {} effect(s)",
-        seed,
-        st.adds.len()
-    ));
+    td.progress.emit(&Event::Diagnose {
+        target: tn,
+        stage: DiagnoseStage::Searching {
+            seed: seed.to_string(),
+            effects: st.adds.len(),
+        },
+    });
     let props: Vec<Proposal> = propose(td, st, ev, None)
         .into_iter()
         .filter(|p| {
@@ -105,10 +108,12 @@ pub(super) fn rank_target(
                 && only.is_none_or(|o| o.iter().any(|x| x.same_effect(&p.spec)))
         })
         .collect();
-    (td.progress)(&format!(
-        "diagnose: {tn}: scoring {} candidates",
-        props.len()
-    ));
+    td.progress.emit(&Event::Diagnose {
+        target: tn,
+        stage: DiagnoseStage::Scoring {
+            candidates: props.len(),
+        },
+    });
     let mut sc = score(td, st, props, seed, warnings, None);
     for old in own.iter().filter(|_| only.is_none()) {
         if !researchable(old.family(), td) {
@@ -521,14 +526,17 @@ pub(super) fn follow(
                 }
             }
         }
-        (td.progress)(&format!(
-            "diagnose: {tn}: step {k}: {} (held-out RMS {:.3} µm)",
-            on_path
-                .last()
-                .map(|(_, a)| a.to_string())
-                .unwrap_or_default(),
-            next.held_out_rms
-        ));
+        td.progress.emit(&Event::Diagnose {
+            target: TARGETS[t],
+            stage: DiagnoseStage::Added {
+                step: k,
+                add: on_path
+                    .last()
+                    .map(|(_, a)| a.to_string())
+                    .unwrap_or_default(),
+                held_out_rms_um: next.held_out_rms,
+            },
+        });
         st = next;
         if !opts.follow_path {
             break;

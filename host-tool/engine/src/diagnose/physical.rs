@@ -7,10 +7,10 @@
 use crate::effect::{EffectSpec, Reading, Scale};
 use crate::features::Feature;
 
-use super::linalg::small_fit;
 use super::search::Proposal;
 use super::target::{FwlFit, State, TargetData};
 use super::Physical;
+use crate::linalg::basis::small_fit;
 
 /// The `params` key of a physical parameter: its name and unit
 /// (`cte` in µm/m/K → `cte_um_per_m_k`).

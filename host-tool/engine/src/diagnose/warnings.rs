@@ -113,7 +113,44 @@ pub(super) fn dense_line_text(data: &Dataset, a: usize) -> String {
     )
 }
 
+/// A probed surface (a printer bed) is spoken of as a bed: no lead screws,
+/// no approach direction, no ISO 230-2 runs (issue 28: a delta printer's
+/// heightmap was told to measure a dense line every 0.5 mm, forward and
+/// backward) — what its mesh spacing cannot show, and that the model for a
+/// bed is a grid or a smoother mesh.
+fn bed_warnings(data: &Dataset) -> Vec<Warning> {
+    let all: Vec<usize> = (0..data.len()).collect();
+    let mut w = Vec::new();
+    let mut spacing = Vec::new();
+    for a in [0, 1] {
+        if let Some(dl) = densest_lines(data, a, &all) {
+            spacing.push(format!(
+                "{} mm along {}",
+                fmt_num(dl.spacing_mm, 3),
+                AXES[a]
+            ));
+        }
+    }
+    if !spacing.is_empty() {
+        w.push(Warning {
+            code: "aliasing".into(),
+            detail: format!(
+                "the bed was probed every {}: a bump or dip narrower than two probe spacings is not in the mesh; probe a denser mesh where the first layer fails",
+                spacing.join(" and ")
+            ),
+        });
+    }
+    w.push(Warning {
+        code: "bed_model".into(),
+        detail: "a probed bed is modelled by a grid over its probe points (`--model grid:<spacing>`) or a smoother mesh, not by a machine's polynomial: fit a grid and export it as the firmware's bed mesh (`--format klipper-mesh` or `rrf-heightmap`)".into(),
+    });
+    w
+}
+
 pub(super) fn design_warnings(data: &Dataset) -> Vec<Warning> {
+    if data.is_probed_surface() {
+        return bed_warnings(data);
+    }
     let mut w = Vec::new();
     let all: Vec<usize> = (0..data.len()).collect();
     let axes = data.axes();

@@ -108,27 +108,55 @@ impl Limit {
     /// Cyclic error amplitude (1–8 µm typical), and a guide bump's height.
     pub const AMP_UM: Limit = Limit::closed(-100.0, 100.0, "µm");
 
-    /// `Ok` when `v` is finite and inside; otherwise an error naming `what`.
-    pub fn check(&self, what: &str, v: f64) -> Result<()> {
+    /// `Ok` when `v` is finite and inside; otherwise how it is not.
+    pub fn test(&self, v: f64) -> Result<(), OutOfRange> {
         let low_ok = if self.min_inclusive {
             v >= self.min
         } else {
             v > self.min
         };
         if v.is_finite() && low_ok && v <= self.max {
-            return Ok(());
+            Ok(())
+        } else {
+            Err(OutOfRange {
+                value: v,
+                limit: *self,
+            })
         }
-        let lo = if self.min_inclusive { "≥" } else { ">" };
-        let unit = if self.unit.is_empty() {
+    }
+
+    /// `Ok` when `v` is finite and inside; otherwise an error naming `what`.
+    pub fn check(&self, what: &str, v: f64) -> anyhow::Result<()> {
+        self.test(v).map_err(|e| anyhow::anyhow!("{what} = {e}"))
+    }
+}
+
+/// A number that is not finite or outside its [`Limit`]: `1e300: expected
+/// a finite value ≥ 0 µm and ≤ 100 µm` (the caller names the number).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OutOfRange {
+    /// The number given.
+    pub value: f64,
+    /// Its range.
+    pub limit: Limit,
+}
+
+impl fmt::Display for OutOfRange {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let l = &self.limit;
+        let lo = if l.min_inclusive { "≥" } else { ">" };
+        let unit = if l.unit.is_empty() {
             String::new()
         } else {
-            format!(" {}", self.unit)
+            format!(" {}", l.unit)
         };
         // `{:?}`: 1e300 prints as `1e300`, not as 301 digits.
-        anyhow::bail!(
-            "{what} = {v:?}: expected a finite value {lo} {}{unit} and ≤ {}{unit}",
-            self.min,
-            self.max
+        write!(
+            f,
+            "{:?}: expected a finite value {lo} {}{unit} and ≤ {}{unit}",
+            self.value, l.min, l.max
         )
     }
 }
+
+impl std::error::Error for OutOfRange {}

@@ -32,7 +32,7 @@
 //! #*# min_x = 35.0 …  max_x, min_y, max_y (keys in any order)
 //! ```
 
-use super::ImportError;
+use super::{ImportError, Needs};
 use crate::data::{Dataset, SkippedRow, ERR_PLAUSIBLE_UM, POS_PLAUSIBLE_MM};
 
 /// First words of a RepRapFirmware height map file.
@@ -61,8 +61,12 @@ struct Grid {
 }
 
 impl Grid {
+    /// The position of node `i` along `axis`, rounded to 1 nm: min + i ×
+    /// spacing in binary floating point leaves `247.46999999999997` where
+    /// the probe stood at 247.47 (issue 28), which the CSV and every page
+    /// would then print.
     fn pos(&self, axis: usize, i: usize) -> f64 {
-        self.min[axis] + self.spacing[axis] * i as f64
+        ((self.min[axis] + self.spacing[axis] * i as f64) * 1e6).round() / 1e6
     }
 }
 
@@ -443,11 +447,14 @@ pub fn read_klipper_mesh(
                 1,
                 None,
                 format!(
-                    "{} bed mesh profiles ({}); choose one: trueaxis import FILE --profile NAME -o mesh.csv",
+                    "{} bed mesh profiles ({}); expected the one to read",
                     profiles.len(),
                     profiles.join(", ")
                 ),
-            ))
+            )
+            .needing(Needs::Profile {
+                profiles: profiles.clone(),
+            }))
         }
     };
     let lines: Vec<(usize, &str)> = text
@@ -687,7 +694,13 @@ xmin,xmax,ymin,ymax,radius,xspacing,yspacing,xnum,ynum\n\
         );
         assert_eq!(klipper_profiles(&two), ["default", "hot"]);
         let e = read_klipper_mesh(&two, "p.cfg", None).unwrap_err();
-        assert!(e.message.contains("--profile"), "{e}");
+        assert_eq!(
+            e.needs,
+            Some(Needs::Profile {
+                profiles: vec!["default".into(), "hot".into()]
+            }),
+            "{e}"
+        );
         let hot = read_klipper_mesh(&two, "p.cfg", Some("hot")).unwrap();
         assert_eq!(hot.len(), 4);
         assert!((hot.err_um[2].as_ref().unwrap()[3].unwrap() + 400.0).abs() < 1e-9);
@@ -708,5 +721,22 @@ xmin,xmax,ymin,ymax,radius,xspacing,yspacing,xnum,ynum\n\
         assert!(e.message.contains("max_x"), "{e}");
         let e = read_klipper_mesh("[printer]\n", "p.cfg", None).unwrap_err();
         assert!(e.message.contains("no `#*# [bed_mesh"), "{e}");
+    }
+
+    #[test]
+    fn node_positions_print_as_probed() {
+        let g = Grid {
+            min: [20.0, 10.1],
+            spacing: [32.67, 23.13],
+            count: [9, 9],
+        };
+        for a in 0..2 {
+            for i in 0..9 {
+                let p = g.pos(a, i).to_string();
+                let decimals = p.split('.').nth(1).map_or(0, str::len);
+                assert!(decimals <= 2, "{p}");
+            }
+        }
+        assert_eq!(g.pos(0, 7), 248.69);
     }
 }

@@ -175,6 +175,30 @@ pub fn probable_column(name: &str) -> Option<String> {
     sensor.filter(|s| !s.is_empty()).map(|s| format!("T_{s}_C"))
 }
 
+/// The header's names that are probably contract columns written another
+/// way, as "; the header has `x (mm)` → x_mm, `ex [um]` → ex_um — rename
+/// them" (empty when none is): a header that misses the contract names
+/// is answered with the closest ones (issue 28).
+fn closest_names(names: &[String]) -> String {
+    let pairs: Vec<String> = names
+        .iter()
+        .filter_map(|n| {
+            probable_column(n)
+                .filter(|p| p != n)
+                .map(|p| format!("`{n}` → {p}"))
+        })
+        .collect();
+    if pairs.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "; the header has {} — rename {} so",
+            pairs.join(", "),
+            if pairs.len() == 1 { "it" } else { "them" }
+        )
+    }
+}
+
 /// Parses a finite number or says what was expected. With `decimal_comma`
 /// (a `;`-separated file, as Excel writes it where the comma is the
 /// decimal mark) `1,5` reads as 1.5.
@@ -246,18 +270,54 @@ pub fn read_csv<R: Read>(mut reader: R, name: &str) -> anyhow::Result<Dataset> {
     reader
         .read_to_end(&mut bytes)
         .with_context(|| format!("cannot read {name}"))?;
+    let mut note = None;
     let text = match utf16_text(&bytes, name)? {
         Some(t) => t,
-        None => String::from_utf8(bytes).map_err(|e| {
-            let upto = &e.as_bytes()[..e.utf8_error().valid_up_to()];
-            let line = upto.iter().filter(|&&b| b == b'\n').count() + 1;
-            ImportError::at(name, line, None, "expected UTF-8 or UTF-16 text")
-        })?,
+        None => match String::from_utf8(bytes) {
+            Ok(t) => t,
+            // Excel's "CSV" in a Western European locale (German, French,
+            // …) is Windows-1252: `°C`, `µm`, `ü` as single bytes that are
+            // not UTF-8. Read as that, and say so (issue 28: refused
+            // without a hint).
+            Err(e) => {
+                let upto = &e.as_bytes()[..e.utf8_error().valid_up_to()];
+                let line = upto.iter().filter(|&&b| b == b'\n').count() + 1;
+                note = Some(format!(
+                    "not valid UTF-8 (from line {line}): read as Windows-1252, the encoding Excel's \"CSV\" uses in Western Europe — save as \"CSV UTF-8\" to be sure of `°` and `µ`"
+                ));
+                windows_1252(e.as_bytes())
+            }
+        },
     };
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
-    let ds = parse(text, name)?;
+    let mut ds = parse(text, name)?;
+    if let Some(n) = note {
+        ds.metadata.push((ENCODING_NOTE.into(), n));
+    }
     ds.validate()?;
     Ok(ds)
+}
+
+/// The metadata key under which the reader says it decoded the file as
+/// Windows-1252 (the CLI prints it as a note).
+pub const ENCODING_NOTE: &str = "encoding";
+
+/// Windows-1252 bytes as text: ASCII and 0xA0–0xFF are Latin-1 (the code
+/// point is the byte); 0x80–0x9F are the code page's own (€, ‚, „, …, ™);
+/// the five bytes it leaves undefined become U+FFFD.
+pub fn windows_1252(bytes: &[u8]) -> String {
+    const HIGH: [char; 32] = [
+        '€', '\u{fffd}', '‚', 'ƒ', '„', '…', '†', '‡', 'ˆ', '‰', 'Š', '‹', 'Œ', '\u{fffd}', 'Ž',
+        '\u{fffd}', '\u{fffd}', '‘', '’', '“', '”', '•', '–', '—', '˜', '™', 'š', '›', 'œ',
+        '\u{fffd}', 'ž', 'Ÿ',
+    ];
+    bytes
+        .iter()
+        .map(|&b| match b {
+            0x80..=0x9f => HIGH[usize::from(b - 0x80)],
+            b => char::from(b),
+        })
+        .collect()
 }
 
 fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
@@ -377,7 +437,10 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
             name,
             header_line,
             None,
-            format!("no position column; expected at least one of x_mm, y_mm, z_mm{hint}"),
+            format!(
+                "no position column; expected at least one of x_mm, y_mm, z_mm{hint}{}",
+                closest_names(&names)
+            ),
         ));
     }
     if !cols.iter().any(|c| matches!(c, Col::Err(_))) {
@@ -385,7 +448,10 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
             name,
             header_line,
             None,
-            "no error column; expected at least one of ex_um, ey_um, ez_um",
+            format!(
+                "no error column; expected at least one of ex_um, ey_um, ez_um{}",
+                closest_names(&names)
+            ),
         ));
     }
 
@@ -619,7 +685,9 @@ pub fn column_names(data: &Dataset) -> Vec<String> {
 // One column per axis/target index, named through AXES/TARGETS.
 #[allow(clippy::needless_range_loop)]
 pub fn write_csv<W: Write>(data: &Dataset, mut out: W) -> anyhow::Result<()> {
-    for (k, v) in &data.metadata {
+    // The reader's note on the encoding is about the file read, not the
+    // UTF-8 one written.
+    for (k, v) in data.metadata.iter().filter(|(k, _)| k != ENCODING_NOTE) {
         if k.is_empty() {
             writeln!(out, "# {v}")?;
         } else {
@@ -779,5 +847,13 @@ mod tests {
         assert_eq!(a.dir, b.dir);
         assert_eq!(a.temps, b.temps);
         assert_eq!(a.aux[0].cells[0], "a,b");
+    }
+
+    #[test]
+    fn windows_1252_bytes_read_as_excel_wrote_them() {
+        assert_eq!(
+            windows_1252(b"\x80 \xb5m \xb0C \xfc \x96 \x81"),
+            "€ µm °C ü – \u{fffd}"
+        );
     }
 }

@@ -52,22 +52,31 @@ pub(super) fn utf16_text(bytes: &[u8], name: &str) -> Result<Option<String>, Imp
 /// The dialect of a CSV file (`body`: the header line and the rows): the
 /// separator from the header line — `,`, `;` or tab — and whether `,` is
 /// the decimal mark. It is for a `;`-separated file (as Excel writes it
-/// where the comma is the decimal mark) unless some number in it is written
-/// with a decimal point: then a comma in a number could be a thousands
+/// where the comma is the decimal mark), and for a tab-separated one that
+/// writes `1,5` (Excel's "Unicode text" there), unless some number in it is
+/// written with a decimal point: then a comma in a number could be a thousands
 /// separator (`1,234`), and such a cell is refused as not a number rather
 /// than read as 1.234.
+/// Whether `mark` stands between two digits somewhere in `body` (`1.5`).
+fn between_digits(body: &str, mark: u8) -> bool {
+    body.as_bytes()
+        .windows(3)
+        .any(|w| w[0].is_ascii_digit() && w[1] == mark && w[2].is_ascii_digit())
+}
+
 pub(super) fn dialect(body: &str) -> (u8, bool) {
     let header = body.lines().next().unwrap_or("");
     if header.contains(',') && !header.contains(';') {
         (b',', false)
     } else if header.contains(';') {
-        let b = body.as_bytes();
-        let dot_decimal = b
-            .windows(3)
-            .any(|w| w[0].is_ascii_digit() && w[1] == b'.' && w[2].is_ascii_digit());
-        (b';', !dot_decimal)
+        (b';', !between_digits(body, b'.'))
     } else if header.contains('\t') {
-        (b'\t', false)
+        // Excel's "Unicode text" in a German locale: tabs and `1,5` (a
+        // comma in a tab-separated file is no separator).
+        (
+            b'\t',
+            !between_digits(body, b'.') && between_digits(body, b','),
+        )
     } else {
         (b',', false)
     }

@@ -32,7 +32,10 @@ use crate::data::{Dataset, TempChannel};
 use crate::effect::SimRows;
 
 pub use bump::Bump;
-pub use config::{Effect, Limit, RefReturn, SimConfig, Spikes, Timing};
+pub use config::{
+    BadSpikes, ConfigError, Effect, Limit, OutOfRange, RefReturn, Setting, SimConfig, Spikes,
+    Timing,
+};
 pub use machine::{AxisErrors, ErrorFn, Machine, Realistic, Squareness, Wave, PRESETS, REALISTIC};
 pub use plan::{iso_targets, stations, Plan, Visit};
 pub use thermal_test::{scenario, SCENARIOS};

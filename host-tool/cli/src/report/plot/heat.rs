@@ -258,12 +258,16 @@ impl HeatMap {
         let ye = edges(&self.y);
         let (x0, x1) = (xe[0], xe[xe.len() - 1]);
         let (y0, y1) = (ye[0], ye[ye.len() - 1]);
+        // Ticked at both ends of the measured positions and at 0 when it
+        // is inside, with round numbers between (issue 28: no 0 tick).
+        let xt = KeyAxis::new(x0, x1, key_ticks(&self.x));
+        let yt = KeyAxis::new(y0, y1, key_ticks(&self.y));
         let mut chart = ChartBuilder::on(&map_area)
             .caption(&self.title, ("sans-serif", 17))
             .margin(12)
             .x_label_area_size(42)
             .y_label_area_size(60)
-            .build_cartesian_2d(x0..x1, y0..y1)
+            .build_cartesian_2d(xt, yt)
             .map_err(plot_err)?;
         chart
             .configure_mesh()
@@ -272,8 +276,8 @@ impl HeatMap {
             .y_desc(&self.y_label)
             .x_labels(6)
             .y_labels(8)
-            .x_label_formatter(&|v| format_tick(*v))
-            .y_label_formatter(&|v| format_tick(*v))
+            .x_label_formatter(&|v| map_tick(*v, x1 - x0))
+            .y_label_formatter(&|v| map_tick(*v, y1 - y0))
             .draw()
             .map_err(plot_err)?;
         let nx = self.x.len();
@@ -337,6 +341,33 @@ impl HeatMap {
         Ok(())
     }
 
+    /// The drawing's size with the map at the machine's aspect ratio: a
+    /// millimetre is as long across as up (issue 28: an 800 × 500 mm plane
+    /// was drawn 289 × 262 px). The width given is kept and the height
+    /// follows, unless the plane is so tall that it would pass 1.6 × the
+    /// given height: then the height is capped and the width follows.
+    pub fn fitted_size(&self) -> (u32, u32) {
+        let xe = edges(&self.x);
+        let ye = edges(&self.y);
+        let (sx, sy) = (xe[xe.len() - 1] - xe[0], ye[ye.len() - 1] - ye[0]);
+        if !(sx > 0.0 && sy > 0.0) {
+            return self.size;
+        }
+        // Around the plotting area: colour bar, y labels, margins; caption,
+        // x labels, margins and the note strip.
+        let extra_w = 86 + 60 + 24;
+        let extra_h = 42 + 30 + 24 + if self.note().is_some() { NOTE_STRIP } else { 0 };
+        let w = f64::from(self.size.0.saturating_sub(extra_w).max(60));
+        let h_max = f64::from(self.size.1) * 1.6 - f64::from(extra_h);
+        let h = w * sy / sx;
+        let (w, h) = if h > h_max {
+            (h_max * sx / sy, h_max)
+        } else {
+            (w, h.max(40.0))
+        };
+        (w.round() as u32 + extra_w, h.round() as u32 + extra_h)
+    }
+
     /// Renders the map with its colour bar as an SVG document.
     pub fn to_svg(&self) -> Result<String> {
         if self.x.is_empty() || self.y.is_empty() {
@@ -349,7 +380,7 @@ impl HeatMap {
         }
         let mut buf = String::new();
         {
-            let root = SVGBackend::with_string(&mut buf, self.size).into_drawing_area();
+            let root = SVGBackend::with_string(&mut buf, self.fitted_size()).into_drawing_area();
             root.fill(&WHITE).map_err(plot_err)?;
             self.draw(&root)?;
             root.present().map_err(plot_err)?;
@@ -362,7 +393,8 @@ impl HeatMap {
 /// ranges), so "after" is visibly smaller than "before" when it is.
 pub fn heat_map_pair(before: &HeatMap, after: &HeatMap) -> Result<String> {
     let limit = before.max_abs().max(after.max_abs());
-    let (w, h) = before.size;
+    // Both at the plane's aspect ratio, side by side.
+    let (w, h) = before.fitted_size();
     let mut buf = String::new();
     {
         let root = SVGBackend::with_string(&mut buf, (2 * w, h)).into_drawing_area();
@@ -440,6 +472,95 @@ pub(super) fn nearest(sorted: &[f64], x: f64) -> usize {
 }
 
 /// Cell edges around centres: midpoints, ends extended by half a spacing.
+/// A map's tick label: the position as written when it has at most 3
+/// decimals (`247.47`), else rounded to what the axis span reads (a bin
+/// centre `33.333333` → `33.3` on an 800 mm axis).
+pub(crate) fn map_tick(v: f64, span: f64) -> String {
+    let s = format_tick(v);
+    if s.split('.').nth(1).map_or(0, str::len) <= 3 {
+        return s;
+    }
+    let decimals = if span >= 100.0 {
+        1
+    } else if span >= 10.0 {
+        2
+    } else {
+        3
+    };
+    let p = 10f64.powi(decimals);
+    format_tick((v * p).round() / p)
+}
+
+/// A linear f64 axis ticked exactly at given values (plotters' own picks
+/// round numbers only, so a bed probed from 25 to 225 mm had neither end
+/// labelled).
+struct KeyAxis {
+    inner: plotters::coord::types::RangedCoordf64,
+    keys: Vec<f64>,
+}
+
+impl KeyAxis {
+    fn new(lo: f64, hi: f64, keys: Vec<f64>) -> KeyAxis {
+        KeyAxis {
+            inner: (lo..hi).into(),
+            keys,
+        }
+    }
+}
+
+impl plotters::coord::ranged1d::Ranged for KeyAxis {
+    type FormatOption = plotters::coord::ranged1d::DefaultFormatting;
+    type ValueType = f64;
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        self.inner.map(value, limit)
+    }
+    fn key_points<Hint: plotters::coord::ranged1d::KeyPointHint>(&self, hint: Hint) -> Vec<f64> {
+        if hint.weight().allow_light_points() {
+            Vec::new()
+        } else {
+            self.keys.clone()
+        }
+    }
+    fn range(&self) -> std::ops::Range<f64> {
+        self.inner.range()
+    }
+}
+
+/// Tick positions for a map axis over the cell centres `c`: the first and last centre (the measured ends), 0 when the
+/// measured positions straddle it, and round multiples of a 1-2-5 step between them that do
+/// not crowd the ends.
+pub(crate) fn key_ticks(c: &[f64]) -> Vec<f64> {
+    let (Some(&first), Some(&last)) = (c.first(), c.last()) else {
+        return Vec::new();
+    };
+    let span = (last - first).abs();
+    let mut t = vec![first, last];
+    // 0 when the measured positions straddle it (next to an end it would
+    // only crowd that end's label).
+    if first < 0.0 && 0.0 < last {
+        t.push(0.0);
+    }
+    if span > 0.0 {
+        let raw = span / 5.0;
+        let mag = 10f64.powf(raw.log10().floor());
+        let step = [1.0, 2.0, 5.0, 10.0]
+            .iter()
+            .map(|m| m * mag)
+            .find(|s| *s >= raw)
+            .unwrap_or(10.0 * mag);
+        let mut v = (first / step).ceil() * step;
+        while v < last {
+            if t.iter().all(|k| (v - k).abs() > 0.45 * step) {
+                t.push(v);
+            }
+            v += step;
+        }
+    }
+    t.sort_by(f64::total_cmp);
+    t.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    t
+}
+
 pub(super) fn edges(c: &[f64]) -> Vec<f64> {
     match c.len() {
         0 => vec![0.0, 1.0],

@@ -17,7 +17,7 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 pub mod decimate;
-mod heat;
+pub(crate) mod heat;
 
 pub use decimate::Reduction;
 pub use heat::{diverging, heat_map_pair, HeatMap};
@@ -26,16 +26,114 @@ pub use heat::{diverging, heat_map_pair, HeatMap};
 pub const SIZE: (u32, u32) = (720, 420);
 
 /// Series colours, chosen to stay distinct for colour-blind readers
-/// (Okabe–Ito palette).
+/// (Okabe–Ito palette). The first three are the targets' and the next two
+/// the approach directions' ([`TARGET_COLOURS`], [`DIRECTION_COLOURS`]):
+/// a series that is neither takes its colour from [`OTHER_COLOURS`], so a
+/// green cloud is ez on every plot of every page (issue 28: ey was
+/// vermillion on one plot and green on the next).
 pub const PALETTE: [RGBColor; 7] = [
-    RGBColor(0, 114, 178),   // blue
-    RGBColor(213, 94, 0),    // vermillion
-    RGBColor(0, 158, 115),   // bluish green
+    RGBColor(0, 114, 178),   // blue: ex
+    RGBColor(213, 94, 0),    // vermillion: ey
+    RGBColor(0, 158, 115),   // bluish green: ez
+    RGBColor(230, 159, 0),   // orange: approach from below (dir +1)
+    RGBColor(86, 180, 233),  // sky blue: approach from above (dir −1)
     RGBColor(204, 121, 167), // reddish purple
-    RGBColor(230, 159, 0),   // orange
-    RGBColor(86, 180, 233),  // sky blue
     RGBColor(0, 0, 0),       // black
 ];
+
+/// A marker that is a finding (a periodogram peak above its false-alarm
+/// level).
+pub const FINDING: RGBColor = RGBColor(200, 0, 0);
+/// A marker or level that is no finding (a peak below the false-alarm
+/// level, the level itself).
+pub const NO_FINDING: RGBColor = RGBColor(110, 110, 110);
+
+/// ex, ey, ez: one colour each on every plot and page.
+pub const TARGET_COLOURS: [RGBColor; 3] = [PALETTE[0], PALETTE[1], PALETTE[2]];
+/// Approach direction +1 and −1.
+pub const DIRECTION_COLOURS: [RGBColor; 2] = [PALETTE[3], PALETTE[4]];
+/// Series that are no target and no direction (a fit, a reference line,
+/// the on-machine pages' profiles), in turn.
+pub const OTHER_COLOURS: [RGBColor; 4] = [
+    RGBColor(0, 0, 0),       // black
+    PALETTE[5],              // reddish purple
+    RGBColor(120, 120, 120), // grey
+    RGBColor(170, 140, 0),   // dark yellow
+];
+
+/// The target a series is of, by its name's first word (`ex`, `ex model`,
+/// `ex RMS`, `ez held-out`): 0, 1, 2 for ex, ey, ez.
+pub fn target_of(name: &str) -> Option<usize> {
+    let first = name.split([' ', '_', ':']).next()?;
+    ["ex", "ey", "ez"].iter().position(|t| *t == first)
+}
+
+/// The approach direction a series is of (`dir_x = +1` → 0, `… −1` → 1).
+fn direction_of(name: &str) -> Option<usize> {
+    let t = name.trim_end();
+    if !t.starts_with("dir") {
+        return None;
+    }
+    if t.ends_with("+1") {
+        Some(0)
+    } else if t.ends_with("-1") || t.ends_with("−1") {
+        Some(1)
+    } else {
+        None
+    }
+}
+
+/// The colour of target `t` (0 ex, 1 ey, 2 ez).
+pub fn target_colour(t: usize) -> RGBColor {
+    TARGET_COLOURS[t % 3]
+}
+
+/// A colour `f` of the way to black (a model line over its measured dots).
+pub fn darker(c: RGBColor, f: f64) -> RGBColor {
+    let d = |v: u8| (f64::from(v) * (1.0 - f)).round() as u8;
+    RGBColor(d(c.0), d(c.1), d(c.2))
+}
+
+/// A colour `f` of the way to white (a "before" bar beside its "after").
+pub fn lighter(c: RGBColor, f: f64) -> RGBColor {
+    let l = |v: u8| (f64::from(v) + (255.0 - f64::from(v)) * f).round() as u8;
+    RGBColor(l(c.0), l(c.1), l(c.2))
+}
+
+/// A band's colour: its target's (by name), else grey.
+fn band_colour(b: &Band) -> RGBColor {
+    target_of(&b.name).map_or(RGBColor(120, 120, 120), target_colour)
+}
+
+/// The colours of a plot's series in order: a given colour, else the
+/// target's (a model darker than its measurement), else the direction's,
+/// else the next of [`OTHER_COLOURS`].
+fn series_colours(series: &[Series]) -> Vec<RGBColor> {
+    let mut other = 0;
+    series
+        .iter()
+        .map(|s| {
+            if let Some(c) = s.colour {
+                return c;
+            }
+            if let Some(t) = target_of(&s.name) {
+                let c = target_colour(t);
+                // A model, a fit or a mean over its measurement: darker.
+                return if ["model", "mean", "fit"].iter().any(|w| s.name.contains(w)) {
+                    darker(c, 0.45)
+                } else {
+                    c
+                };
+            }
+            if let Some(d) = direction_of(&s.name) {
+                return DIRECTION_COLOURS[d];
+            }
+            let c = OTHER_COLOURS[other % OTHER_COLOURS.len()];
+            other += 1;
+            c
+        })
+        .collect()
+}
 
 /// How a series is drawn.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -48,6 +146,9 @@ pub enum Style {
     LinePoints,
     /// A staircase: each value holds until the next x (history of fits).
     Step,
+    /// A dashed line with dots (a held-out figure beside its in-sample
+    /// one, in the same colour).
+    DashedPoints,
 }
 
 /// One named series of (x, y) points.
@@ -59,6 +160,8 @@ pub struct Series {
     pub points: Vec<(f64, f64)>,
     /// How to draw them.
     pub style: Style,
+    /// Its colour; None: by its name ([`series_colours`]).
+    pub colour: Option<RGBColor>,
 }
 
 impl Series {
@@ -68,6 +171,7 @@ impl Series {
             name: name.into(),
             points,
             style: Style::Line,
+            colour: None,
         }
     }
 
@@ -77,6 +181,7 @@ impl Series {
             name: name.into(),
             points,
             style: Style::Points,
+            colour: None,
         }
     }
 
@@ -86,7 +191,15 @@ impl Series {
             name: name.into(),
             points,
             style,
+            colour: None,
         }
+    }
+
+    /// The series in a given colour (a target's periodogram, say, whose
+    /// name does not start with the target).
+    pub fn coloured(mut self, c: RGBColor) -> Series {
+        self.colour = Some(c);
+        self
     }
 }
 
@@ -113,13 +226,14 @@ pub struct XyPlot {
     pub series: Vec<Series>,
     /// Shaded bands, drawn first (under the series).
     pub bands: Vec<Band>,
-    /// Vertical marker lines with a label (a periodogram's peak).
-    pub vlines: Vec<(f64, String)>,
+    /// Vertical marker lines with a label and colour (a periodogram's
+    /// peak: [`FINDING`] red, [`NO_FINDING`] grey).
+    pub vlines: Vec<(f64, String, RGBColor)>,
     /// Horizontal marker lines with a label (a noise floor, a limit).
     pub hlines: Vec<(f64, String)>,
-    /// Horizontal dashed lines with a label, drawn in the series colour
-    /// `(y, label, palette index)` (a target's noise floor).
-    pub dashed: Vec<(f64, String, usize)>,
+    /// Horizontal dashed lines with a label, drawn in a colour
+    /// `(y, label, colour)` (a target's noise floor in the target's).
+    pub dashed: Vec<(f64, String, RGBColor)>,
     /// Text labels at data coordinates (what each fit step added).
     pub notes: Vec<(f64, f64, String)>,
     /// Grey dotted vertical marks with a label at the foot (the sampling
@@ -129,6 +243,9 @@ pub struct XyPlot {
     pub x_ticks: Ticks,
     /// The y axis on a log10 scale ([`XyPlot::with_log_y`]).
     pub log_y: bool,
+    /// A fixed y range (small multiples compared by height share one:
+    /// [`XyPlot::with_y_range`]); None: the data's, padded.
+    pub y_range: Option<(f64, f64)>,
     /// Size in pixels.
     pub size: (u32, u32),
 }
@@ -168,8 +285,19 @@ impl XyPlot {
             vmarks: Vec::new(),
             x_ticks: Ticks::Auto,
             log_y: false,
+            y_range: None,
             size: SIZE,
         }
+    }
+
+    /// Draws the y axis from `lo` to `hi` whatever the data (plots compared
+    /// side by side: issue 28's generatrices each had a scale of their own,
+    /// so a 2 µm wave looked as tall as a 20 µm one).
+    pub fn with_y_range(mut self, lo: f64, hi: f64) -> XyPlot {
+        if lo.is_finite() && hi.is_finite() && hi > lo {
+            self.y_range = Some((lo, hi));
+        }
+        self
     }
 
     /// Draws the y axis on a log10 scale, ticked at 1, 2 and 5 × 10ᵏ in the
@@ -216,8 +344,8 @@ impl XyPlot {
         self
     }
 
-    /// Adds a dashed horizontal line in the colour of palette entry `colour`.
-    pub fn with_dashed(mut self, y: f64, label: impl Into<String>, colour: usize) -> XyPlot {
+    /// Adds a dashed horizontal line in `colour`.
+    pub fn with_dashed(mut self, y: f64, label: impl Into<String>, colour: RGBColor) -> XyPlot {
         self.dashed.push((y, label.into(), colour));
         self
     }
@@ -240,9 +368,19 @@ impl XyPlot {
         self
     }
 
-    /// Adds a vertical marker line.
-    pub fn with_vline(mut self, x: f64, label: impl Into<String>) -> XyPlot {
-        self.vlines.push((x, label.into()));
+    /// Adds a vertical marker line in [`FINDING`] red.
+    pub fn with_vline(self, x: f64, label: impl Into<String>) -> XyPlot {
+        self.with_vline_coloured(x, label, FINDING)
+    }
+
+    /// Adds a vertical marker line in a colour.
+    pub fn with_vline_coloured(
+        mut self,
+        x: f64,
+        label: impl Into<String>,
+        colour: RGBColor,
+    ) -> XyPlot {
+        self.vlines.push((x, label.into(), colour));
         self
     }
 
@@ -299,34 +437,32 @@ impl XyPlot {
             }
             Ticks::Direction => (-1.6, 1.6),
         };
-        (x, padded_range(&ys, 0.08))
+        (x, self.y_range.unwrap_or_else(|| padded_range(&ys, 0.08)))
     }
 
     /// Legend entries: (text, colour, is a band, is points only).
     fn legend_entries(&self) -> Vec<(String, RGBColor, LegendMark)> {
         let mut v = Vec::new();
-        for (i, b) in self.bands.iter().enumerate() {
+        for b in &self.bands {
             if !b.name.is_empty() {
-                v.push((b.name.clone(), PALETTE[i % PALETTE.len()], LegendMark::Area));
+                v.push((b.name.clone(), band_colour(b), LegendMark::Area));
             }
         }
-        for (i, s) in self.series.iter().enumerate() {
+        let colours = series_colours(&self.series);
+        for (s, colour) in self.series.iter().zip(colours) {
             if !s.name.is_empty() {
                 let mark = match s.style {
                     Style::Points => LegendMark::Dot,
                     Style::LinePoints => LegendMark::LineDot,
+                    Style::DashedPoints => LegendMark::Dashed,
                     Style::Line | Style::Step => LegendMark::Line,
                 };
-                v.push((s.name.clone(), PALETTE[i % PALETTE.len()], mark));
+                v.push((s.name.clone(), colour, mark));
             }
         }
         for (_, label, c) in &self.dashed {
             if !label.is_empty() {
-                v.push((
-                    label.clone(),
-                    PALETTE[c % PALETTE.len()],
-                    LegendMark::Dashed,
-                ));
+                v.push((label.clone(), *c, LegendMark::Dashed));
             }
         }
         v
@@ -352,7 +488,7 @@ impl XyPlot {
                     decimate::MAX_SCATTER_POINTS,
                     decimate::SCATTER_BINS,
                 ),
-                Style::Line | Style::Step | Style::LinePoints => {
+                Style::Line | Style::Step | Style::LinePoints | Style::DashedPoints => {
                     decimate::line(&finite, decimate::LINE_BINS)
                 }
             };
@@ -475,8 +611,8 @@ impl XyPlot {
                 mesh.disable_x_mesh();
             }
             mesh.draw().map_err(plot_err)?;
-            for (i, b) in self.bands.iter().enumerate() {
-                let colour = PALETTE[i % PALETTE.len()];
+            for b in &self.bands {
+                let colour = band_colour(b);
                 let pts: Vec<_> = b
                     .points
                     .iter()
@@ -525,7 +661,8 @@ impl XyPlot {
                     chart
                         .draw_series(std::iter::once(Text::new(
                             label.clone(),
-                            (*x, y1 - 0.1 * (y1 - y0)),
+                            // At the foot: the top holds the peak's label.
+                            (*x, y0 + 0.02 * (y1 - y0)),
                             ("sans-serif", 11)
                                 .into_font()
                                 .color(&RGBColor(90, 90, 90))
@@ -535,7 +672,7 @@ impl XyPlot {
                 }
             }
             for (y, _, c) in &self.dashed {
-                let colour = PALETTE[c % PALETTE.len()];
+                let colour = *c;
                 let style = ShapeStyle::from(&colour).stroke_width(2);
                 let n = 48;
                 let dashes = (0..n).step_by(2).map(|k| {
@@ -545,8 +682,8 @@ impl XyPlot {
                 });
                 chart.draw_series(dashes).map_err(plot_err)?;
             }
-            for (i, s) in self.series.iter().enumerate() {
-                let colour = PALETTE[i % PALETTE.len()];
+            let colours = series_colours(&self.series);
+            for (s, &colour) in self.series.iter().zip(&colours) {
                 let pts: Vec<(f64, f64)> = s
                     .points
                     .iter()
@@ -585,10 +722,21 @@ impl XyPlot {
                             .draw_series(pts.iter().map(|p| Circle::new(*p, 4, colour.filled())))
                             .map_err(plot_err)?;
                     }
+                    Style::DashedPoints => {
+                        chart
+                            .draw_series(DashedLineSeries::new(pts.clone(), 8, 5, line_style))
+                            .map_err(plot_err)?;
+                        chart
+                            .draw_series(
+                                pts.iter()
+                                    .map(|p| Circle::new(*p, 4, colour.stroke_width(2))),
+                            )
+                            .map_err(plot_err)?;
+                    }
                 }
             }
-            for (x, label) in &self.vlines {
-                let style = ShapeStyle::from(&RGBColor(200, 0, 0)).stroke_width(1);
+            for (x, label, colour) in &self.vlines {
+                let style = ShapeStyle::from(colour).stroke_width(1);
                 chart
                     .draw_series(std::iter::once(PathElement::new(
                         vec![(*x, y0), (*x, y1)],
@@ -599,7 +747,7 @@ impl XyPlot {
                     .draw_series(std::iter::once(Text::new(
                         label.clone(),
                         (*x, y1 - 0.04 * (y1 - y0)),
-                        ("sans-serif", 12).into_font().color(&RGBColor(200, 0, 0)),
+                        ("sans-serif", 12).into_font().color(colour),
                     )))
                     .map_err(plot_err)?;
             }
@@ -645,7 +793,7 @@ where
 
 /// How a legend entry is drawn.
 #[derive(Clone, Copy, Debug)]
-enum LegendMark {
+pub(crate) enum LegendMark {
     Line,
     Dot,
     LineDot,
@@ -656,7 +804,7 @@ enum LegendMark {
 
 /// Pixels for a legend strip holding `entries` (the built-in font's
 /// metrics are not known here: ~6.6 px per character at 12 px).
-fn legend_width(entries: &[(String, RGBColor, LegendMark)]) -> u32 {
+pub(crate) fn legend_width(entries: &[(String, RGBColor, LegendMark)]) -> u32 {
     let chars = entries
         .iter()
         .map(|e| e.0.chars().count())
@@ -666,7 +814,7 @@ fn legend_width(entries: &[(String, RGBColor, LegendMark)]) -> u32 {
 }
 
 /// Draws the legend entries top-down in `area` (a strip right of the plot).
-fn draw_legend<DB: DrawingBackend>(
+pub(crate) fn draw_legend<DB: DrawingBackend>(
     area: &DrawingArea<DB, plotters::coord::Shift>,
     entries: &[(String, RGBColor, LegendMark)],
 ) -> Result<()>
@@ -827,6 +975,33 @@ pub struct BarPlot {
 }
 
 impl BarPlot {
+    /// The colour of group `k`'s bar in category `cat` (None: its legend
+    /// swatch). When every category is a target each target's bars are in
+    /// its colour, the groups told apart by lightness (the first, "before",
+    /// palest; the legend in greys of the same lightness); otherwise each
+    /// group has a colour of its own.
+    fn colour_fn(&self) -> impl Fn(usize, Option<usize>) -> RGBColor {
+        let targets: Option<Vec<usize>> = self.categories.iter().map(|c| target_of(c)).collect();
+        let g = self.groups.len();
+        move |k: usize, cat: Option<usize>| {
+            // Lightness: the last group full, the first 60 % to white.
+            let light = if g > 1 {
+                0.6 * (g - 1 - k.min(g - 1)) as f64 / (g - 1) as f64
+            } else {
+                0.0
+            };
+            match &targets {
+                Some(t) => {
+                    let base = cat
+                        .and_then(|i| t.get(i))
+                        .map_or(RGBColor(80, 80, 80), |&t| target_colour(t));
+                    lighter(base, light)
+                }
+                None => OTHER_COLOURS[k % OTHER_COLOURS.len()],
+            }
+        }
+    }
+
     /// Renders the plot as an SVG document.
     pub fn to_svg(&self) -> Result<String> {
         let n = self.categories.len().max(1);
@@ -850,11 +1025,12 @@ impl BarPlot {
         {
             let root = SVGBackend::with_string(&mut buf, self.size).into_drawing_area();
             root.fill(&WHITE).map_err(plot_err)?;
+            let colour = self.colour_fn();
             let entries: Vec<(String, RGBColor, LegendMark)> = self
                 .groups
                 .iter()
                 .enumerate()
-                .map(|(k, (name, _))| (name.clone(), PALETTE[k % PALETTE.len()], LegendMark::Bar))
+                .map(|(k, (name, _))| (name.clone(), colour(k, None), LegendMark::Bar))
                 .collect();
             let (root, legend) =
                 root.split_horizontally(self.size.0.saturating_sub(legend_width(&entries)));
@@ -887,14 +1063,15 @@ impl BarPlot {
                 .map_err(plot_err)?;
             let width = 0.8 / g as f64;
             for (k, (_, values)) in self.groups.iter().enumerate() {
-                let colour = PALETTE[k % PALETTE.len()];
+                let colour = &colour;
                 let bars = values
                     .iter()
                     .enumerate()
                     .filter(|(_, v)| v.is_finite())
                     .map(move |(i, v)| {
                         let x0 = i as f64 + 0.1 + k as f64 * width;
-                        Rectangle::new([(x0, 0.0), (x0 + width * 0.92, *v)], colour.filled())
+                        let c = colour(k, Some(i));
+                        Rectangle::new([(x0, 0.0), (x0 + width * 0.92, *v)], c.filled())
                     });
                 chart.draw_series(bars).map_err(plot_err)?;
                 // The value on top of each bar: a report is read for numbers.
@@ -1053,8 +1230,13 @@ mod tests {
             0.1,
         );
         let pair = heat_map_pair(&m, &m).unwrap();
-        assert!(!root(&pair).contains("width=\"1440\""), "{}", root(&pair));
-        assert!(root(&pair).contains("viewBox=\"0 0 1440 420\""));
+        let (w, h) = m.fitted_size();
+        assert!(!root(&pair).contains(" width="), "{}", root(&pair));
+        assert!(
+            root(&pair).contains(&format!("viewBox=\"0 0 {} {h}\"", 2 * w)),
+            "{}",
+            root(&pair)
+        );
     }
 
     #[test]
@@ -1124,6 +1306,87 @@ mod tests {
         assert!(texts(&one).contains(&"1".to_string()));
     }
 
+    /// The fill colours of the circles (dots: legend and data) in an SVG,
+    /// each once, in the order they first appear.
+    fn dot_colours(svg: &str) -> Vec<String> {
+        let mut v: Vec<String> = Vec::new();
+        for c in svg.split("<circle").skip(1) {
+            let c = &c[..c.find("/>").unwrap_or(c.len())];
+            if let Some(f) = c.split("fill=\"").nth(1).map(|f| f[..7].to_string()) {
+                if !v.contains(&f) {
+                    v.push(f);
+                }
+            }
+        }
+        v
+    }
+
+    fn hex(c: RGBColor) -> String {
+        format!("#{:02X}{:02X}{:02X}", c.0, c.1, c.2)
+    }
+
+    #[test]
+    fn a_target_has_one_colour_whatever_the_order_of_the_series() {
+        // ey first on one plot, third on the next: the same vermillion
+        // (issue 28: ey was vermillion on one plot and green on another).
+        let one = XyPlot::new("a", "x", "y")
+            .with(Series::points("ey", vec![(0.0, 1.0)]))
+            .to_svg()
+            .unwrap();
+        let two = XyPlot::new("b", "x", "y")
+            .with(Series::points("ex measured", vec![(0.0, 1.0)]))
+            .with(Series::points("dir_x = +1", vec![(0.0, 2.0)]))
+            .with(Series::points("ey", vec![(0.0, 3.0)]))
+            .to_svg()
+            .unwrap();
+        let ey = hex(TARGET_COLOURS[1]);
+        assert_eq!(dot_colours(&one), vec![ey.clone()]);
+        let c = dot_colours(&two);
+        assert_eq!(
+            c,
+            vec![hex(TARGET_COLOURS[0]), hex(DIRECTION_COLOURS[0]), ey]
+        );
+        // A model is its target's darker shade; other series never take a
+        // target's or a direction's colour.
+        let s = [
+            Series::line("ex model", vec![]),
+            Series::line("y = x", vec![]),
+            Series::line("fitted form", vec![]),
+            Series::line("dir_y = −1", vec![]),
+        ];
+        let c = series_colours(&s);
+        assert_eq!(c[0], darker(TARGET_COLOURS[0], 0.45));
+        for other in [c[1], c[2]] {
+            assert!(!TARGET_COLOURS.contains(&other) && !DIRECTION_COLOURS.contains(&other));
+        }
+        assert_eq!(c[3], DIRECTION_COLOURS[1]);
+        // Bars of targets: each target's bars in its colour.
+        let bars = before_after(
+            "r",
+            "µm",
+            &["ex".into(), "ez".into()],
+            &[2.0, 1.0],
+            &[1.0, 0.5],
+        );
+        let f = bars.colour_fn();
+        assert_eq!(f(1, Some(0)), TARGET_COLOURS[0]);
+        assert_eq!(f(1, Some(1)), TARGET_COLOURS[2]);
+        assert_eq!(f(0, Some(1)), lighter(TARGET_COLOURS[2], 0.6));
+    }
+
+    #[test]
+    fn a_peak_below_the_false_alarm_level_is_not_red() {
+        let svg = XyPlot::new("p", "f", "power")
+            .with(Series::line(
+                "Lomb–Scargle power",
+                vec![(0.1, 0.1), (0.2, 0.05)],
+            ))
+            .with_vline_coloured(0.1, "10 mm", NO_FINDING)
+            .to_svg()
+            .unwrap();
+        assert!(!svg.contains(&hex(FINDING)), "red on a no-finding plot");
+    }
+
     #[test]
     fn empty_plot_still_renders() {
         let svg = XyPlot::new("nothing", "x", "y").to_svg().unwrap();
@@ -1176,6 +1439,40 @@ mod tests {
                 .len(),
             heat::MAX_CELLS
         );
+    }
+
+    #[test]
+    fn maps_are_drawn_at_the_machines_aspect_ratio_and_ticked_at_their_ends() {
+        // An 800 × 500 mm plane every 100 mm (issue 28: drawn 289 × 262).
+        let mut pts = Vec::new();
+        for iy in 0..6 {
+            for ix in 0..9 {
+                pts.push((100.0 * f64::from(ix), 100.0 * f64::from(iy), 1.0));
+            }
+        }
+        let m = HeatMap::from_points("m", "x (mm)", "y (mm)", "µm", &pts, 1e-3);
+        let (w, h) = m.fitted_size();
+        // The plotting area (the size less colour bar, labels, margins).
+        let (pw, ph) = (f64::from(w - 170), f64::from(h - 96));
+        let ratio = (pw / ph) / (900.0 / 600.0);
+        assert!((ratio - 1.0).abs() < 0.02, "{w} × {h}: {ratio}");
+        // A bed probed from 25 to 225 mm: both ends ticked; 0 when the
+        // positions straddle it.
+        let t = heat::key_ticks(&[25.0, 75.0, 125.0, 175.0, 225.0]);
+        assert_eq!(t.first(), Some(&25.0));
+        assert!(t.contains(&225.0), "{t:?}");
+        assert_eq!(heat::map_tick(33.333333, 800.0), "33.3");
+        assert_eq!(heat::map_tick(247.47, 200.0), "247.47");
+        let t = heat::key_ticks(&[-150.0, -50.0, 50.0, 150.0]);
+        assert!(
+            t.contains(&0.0) && t.contains(&-150.0) && t.contains(&150.0),
+            "{t:?}"
+        );
+        let svg = m.to_svg().unwrap();
+        let labels = svg_texts(&svg);
+        for end in ["0", "800", "500"] {
+            assert!(labels.contains(&end.to_string()), "{end}: {labels:?}");
+        }
     }
 
     #[test]

@@ -8,9 +8,9 @@ use std::f64::consts::TAU;
 
 use crate::effect::periodic::Periodic;
 use crate::effect::{Axis, EffectSpec, Family};
+use crate::linalg::basis::small_fit;
 use crate::lines::densest_lines;
 
-use super::super::linalg::small_fit;
 use super::super::periodogram::{self, periodogram};
 use super::super::target::TargetData;
 use super::super::{PeriodogramEvidence, PERIODIC_MAX_PERIOD_MM};

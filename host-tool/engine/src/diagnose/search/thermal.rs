@@ -11,11 +11,12 @@ use crate::effect::thermal::Thermal;
 use crate::data::AXES;
 use crate::effect::{Axis, EffectSpec, Family, Target, T_REF_C};
 use crate::features::Feature;
+use crate::linalg::basis::small_fit;
+use crate::linalg::brent::brent_min;
 
-use super::super::linalg::small_fit;
 use super::super::target::{forward_blocks, forward_rms, rss_many, State, TargetData};
 use super::super::{CONSTANT_TEMPERATURE_K, DBIC_SIGNIFICANT, MIN_HELD_OUT_GAIN};
-use super::{brent_min, fmt_num, shown, Proposal, Search};
+use super::{fmt_num, shown, Proposal, Search};
 
 /// The lag, when the data has time to search it on.
 pub(super) fn researchable(td: &TargetData) -> bool {
