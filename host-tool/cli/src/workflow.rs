@@ -10,10 +10,11 @@ use anyhow::{anyhow, bail, Context, Result};
 use model_core::table::MAX_SLEW_LIMIT_NM_PER_MS;
 use trueaxis_engine::compare::{self, Comparison, Warning};
 use trueaxis_engine::data::{Dataset, TARGETS};
+use trueaxis_engine::effect::EffectSpec;
 use trueaxis_engine::export::checks::{MaxCorrError, TinyCorrections, MAX_CORR_LIMIT_UM};
 use trueaxis_engine::export::table::{self, TableError, TableExport, TableOptions};
 use trueaxis_engine::history::history_path;
-use trueaxis_engine::model::ModelFile;
+use trueaxis_engine::model::{ModelFile, Seed};
 
 use crate::input;
 
@@ -42,7 +43,7 @@ pub fn model_output(data: &std::path::Path, output: Option<PathBuf>) -> Result<P
 /// Seed and effects of `--model`: a seed spec, or the `seed` and `adds` of
 /// a MODEL.json. Only linear seeds can be diagnosed: the candidates are
 /// scored by partialling the model's columns out of theirs.
-pub fn model_spec(model: &str) -> Result<(String, Vec<String>)> {
+pub fn model_spec(model: &str) -> Result<(Seed, Vec<EffectSpec>)> {
     let (seed, adds) = if model.ends_with(".json") || Path::new(model).is_file() {
         // Read and checked as every command reads a MODEL.json: a damaged
         // file is refused here too, not half-used.
@@ -56,7 +57,12 @@ pub fn model_spec(model: &str) -> Result<(String, Vec<String>)> {
             "diagnose works on linear seeds (cubic19, kinematic); the model is `{seed}` — fit a cubic19 or kinematic model to find missing effects"
         );
     }
-    Ok((seed, adds))
+    // The file's effects were checked when it was loaded.
+    let adds = adds
+        .iter()
+        .map(|a| a.parse())
+        .collect::<Result<Vec<EffectSpec>>>()?;
+    Ok((seed.parse()?, adds))
 }
 
 /// Runs the comparison of `data` with `model` (and writes the report when

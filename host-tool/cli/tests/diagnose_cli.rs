@@ -13,6 +13,7 @@ use common::{fit, json, run, s};
 use serde_json::Value;
 use trueaxis_engine::diagnose::synth::{generate, Hidden, Plan, SynthConfig};
 use trueaxis_engine::diagnose::{diagnose, Options};
+use trueaxis_engine::model::Seed;
 
 fn tmp_dir(name: &str) -> std::path::PathBuf {
     common::tmp_dir("diag", name)
@@ -83,7 +84,12 @@ fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
     assert_eq!(v["verdict"], "missing_effect");
     let cands = v["candidates"].as_array().unwrap();
     assert!(!cands.is_empty());
-    let families = [
+    // The families docs/cli.md lists are the engine's registry.
+    let families: Vec<&str> = trueaxis_engine::effect::Family::ALL
+        .iter()
+        .map(|f| f.as_str())
+        .collect();
+    assert!(families.starts_with(&[
         "periodic",
         "thermal",
         "reversal",
@@ -91,7 +97,7 @@ fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
         "drift",
         "squareness",
         "higher_order",
-    ];
+    ]));
     for c in cands {
         assert!(families.contains(&c["effect"].as_str().unwrap()), "{c}");
         assert!(["ex", "ey", "ez"].contains(&c["target"].as_str().unwrap()));
@@ -246,15 +252,15 @@ fn improve_runs_to_the_noise_floor_and_keeps_the_history() {
     // No effect is in the model twice (the same family, target, axis,
     // channel and times — a re-found lag or period replaces the old one).
     let m: Value = serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
-    let adds: Vec<&str> = m["adds"]
+    let adds: Vec<trueaxis_engine::effect::EffectSpec> = m["adds"]
         .as_array()
         .unwrap()
         .iter()
-        .map(|a| a.as_str().unwrap())
+        .map(|a| a.as_str().unwrap().parse().unwrap())
         .collect();
     for (i, a) in adds.iter().enumerate() {
         for b in &adds[i + 1..] {
-            assert!(!trueaxis_engine::diagnose::same_effect(a, b), "{adds:?}");
+            assert!(!a.same_effect(b), "{a} and {b}");
         }
     }
     let out = run(&["history", s(&model)]);
@@ -274,7 +280,7 @@ fn grid_only_data_warns_aliasing_with_the_line_to_add() {
         hidden: vec![Hidden::Periodic],
         ..SynthConfig::default()
     });
-    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
     for axis in ["x", "y", "z"] {
         assert!(
             d.warnings.iter().any(|w| w.code == "aliasing"
@@ -297,7 +303,7 @@ fn one_direction_data_warns_one_direction() {
         bidirectional: false,
         ..SynthConfig::default()
     });
-    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
     assert!(
         d.warnings.iter().any(|w| w.code == "one_direction"),
         "{:?}",

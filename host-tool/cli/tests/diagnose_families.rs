@@ -12,6 +12,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use trueaxis_engine::diagnose::synth::{generate, Hidden, SynthConfig};
 use trueaxis_engine::diagnose::{diagnose, Diagnosis, Options, Verdict};
+use trueaxis_engine::model::Seed;
 
 const NOISE_UM: f64 = 0.3;
 
@@ -44,7 +45,7 @@ fn run(hidden: Vec<Hidden>, seed: u64, model: &'static str) -> Arc<Diagnosis> {
             hidden,
             ..SynthConfig::default()
         });
-        Arc::new(diagnose(&data, &Options::seed(model)).expect("diagnose runs"))
+        Arc::new(diagnose(&data, &Options::seed(model.parse().unwrap())).expect("diagnose runs"))
     })
     .clone()
 }
@@ -209,7 +210,7 @@ fn simulated_mill_with_a_single_dense_pass() {
     cfg.noise_um = 0.2;
     cfg.seed = 7;
     let data = simulate(&cfg);
-    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
     let adds: Vec<&str> = d.path.iter().map(|s| s.add.as_str()).collect();
     let periodic = adds
         .iter()
@@ -246,7 +247,7 @@ fn implausible_cte_is_found_and_flagged_not_hidden() {
         amplitude: 60.0 / 11.5,
         ..SynthConfig::default()
     });
-    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
     assert_eq!(d.verdict, Verdict::MissingEffect, "{:#?}", d.candidates[0]);
     let top = &d.candidates[0];
     assert!(top.significant, "{}", top.evidence);
@@ -296,7 +297,7 @@ fn residual_above_the_noise_is_said_even_without_a_candidate() {
         misfit_um: 1.0,
         ..SynthConfig::default()
     });
-    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
     assert_eq!(d.verdict, Verdict::AboveNoiseFloor, "{:?}", d.path);
     assert!(d.candidates.iter().all(|c| !c.significant));
     let left: Vec<&str> = d.unexplained.iter().map(|u| u.target.as_str()).collect();
@@ -335,8 +336,8 @@ fn an_effect_already_in_the_model_is_replaced_not_added_twice() {
         ..SynthConfig::default()
     });
     let old = "thermal:target=ex,channel=bed,times=x,offset=1,lag_s=3600";
-    let mut opts = Options::seed("cubic19");
-    opts.adds = vec![old.to_string()];
+    let mut opts = Options::seed(Seed::Cubic19);
+    opts.adds = vec![old.parse().unwrap()];
     let d = diagnose(&data, &opts).unwrap();
     let top = &d.candidates[0];
     assert!(top.significant, "{}", top.evidence);
@@ -376,7 +377,7 @@ fn an_off_grid_thermal_lag_and_its_cte_are_recovered() {
             thermal_lag_s: lag,
             ..SynthConfig::default()
         });
-        let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+        let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
         let top = &d.candidates[0];
         assert!(
             top.significant && top.add.starts_with("thermal:target=ex,channel=bed,times=x"),
@@ -412,7 +413,7 @@ fn confounded_only_when_the_data_cannot_separate_the_pair() {
     });
     let t_s = data.t_s.clone().unwrap();
     data.temps[0].temp_c = t_s.iter().map(|t| 20.0 + t / 3600.0).collect();
-    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
     assert!(
         d.warnings.iter().any(|w| w.code == "confounded"
             && w.detail.contains("`drift:target=ez`")
@@ -454,7 +455,7 @@ fn three_effects_on_one_target_are_all_found_and_reported() {
         hidden: hidden.clone(),
         ..SynthConfig::default()
     });
-    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
     let ex: Vec<_> = d.path.iter().filter(|s| s.target == "ex").collect();
     for h in &hidden {
         let (family, _, axis) = h.expected();
@@ -540,7 +541,7 @@ fn drift_rate_is_the_mean_over_the_session_for_any_order() {
         *v.as_mut().unwrap() += 1.5 * (t / 3600.0).powi(2);
     }
     let truth = 1.5 * t_s.iter().copied().fold(0.0, f64::max) / 3600.0;
-    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
     let top = &d.candidates[0];
     assert!(
         top.significant && top.add.starts_with("drift:target=ez,order="),
@@ -586,7 +587,7 @@ fn a_weak_fifth_degree_term_is_declined_by_the_gain_rule() {
         (outside - 0.087).abs() < 0.001,
         "outside the span: {outside} µm"
     );
-    let d = diagnose(&generate(&cfg), &Options::seed("cubic19")).unwrap();
+    let d = diagnose(&generate(&cfg), &Options::seed(Seed::Cubic19)).unwrap();
     let c = d
         .candidates
         .iter()

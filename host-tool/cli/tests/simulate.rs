@@ -353,14 +353,15 @@ fn cli_json_shape_and_bad_specs() {
 #[test]
 fn effects_are_constructible_from_rust() {
     let mut cfg = perfect(&["line:x:10"], &[]);
-    cfg.effects.push(Effect::Periodic {
-        target: 0,
-        axis: 0,
-        period_mm: 20.0,
-        amp_um: 1.0,
-        harmonics: 2,
-        phase_deg: 0.0,
-    });
+    cfg.effects
+        .push(Effect::new(trueaxis_engine::effect::periodic::Sim {
+            target: 0,
+            axis: 0,
+            period_mm: 20.0,
+            amp_um: 1.0,
+            harmonics: 2,
+            phase_deg: 0.0,
+        }));
     let d = simulate::simulate(&cfg);
     let ex = col(&d, 0);
     // x = 5: sin(π/2) + ½·sin(π) = 1.

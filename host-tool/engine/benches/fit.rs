@@ -18,9 +18,10 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::DVector;
 
 use trueaxis_engine::data::Dataset;
-use trueaxis_engine::features::{seed_monomials, Feature, Norm};
+use trueaxis_engine::features::{Feature, Norm};
 use trueaxis_engine::fit::{self, nn, FitOptions};
 use trueaxis_engine::linalg::lsq;
+use trueaxis_engine::model::Seed;
 
 /// The seed's 17 × 11 × 11 grid (50 mm, 800 × 500 × 500 mm) with smooth
 /// errors and a deterministic pseudo-noise.
@@ -52,7 +53,8 @@ fn mill_grid() -> Dataset {
 fn bench(c: &mut Criterion) {
     let data = mill_grid();
     let norm = Norm::from_data(&data);
-    let features: Vec<Feature> = seed_monomials("cubic19", 0, &[0, 1, 2])
+    let features: Vec<Feature> = Seed::Cubic19
+        .monomials(0, &[0, 1, 2])
         .unwrap()
         .into_iter()
         .map(|exp| Feature::Monomial { exp })

@@ -62,7 +62,7 @@ fn run_trial(id: usize, sc: Scenario, trial: usize, out: &std::path::Path) -> Re
     };
     let data = generate(&cfg);
     let model = sc.hidden.map_or("cubic19", |h| h.seed());
-    let opts = Options::seed(model);
+    let opts = Options::seed(model.parse()?);
     let t0 = std::time::Instant::now();
     let d = diagnose(&data, &opts)?;
     let secs = t0.elapsed().as_secs_f64();

@@ -1,8 +1,9 @@
 //! The vocabulary of linear compensation models: a `Feature` is one column of
 //! a design matrix (a monomial of the normalised positions, a sine of a lead
 //! screw's phase, a temperature rise times a position, …), a seed (`cubic19`,
-//! `kinematic`) is a set of monomials per target, and an `Effect` is what a
-//! user — or `diagnose` — adds with `fit --add "<effect>:<key>=<value>,…"`.
+//! `kinematic`) is a set of monomials per target, and an effect (`effect/`)
+//! is what a user — or `diagnose` — adds with `fit --add
+//! "<effect>:<key>=<value>,…"`, made of these columns.
 //!
 //! Defined once here because fit, diagnose, compare and export must agree on
 //! what a column means: diagnose scores candidate columns, fit solves for
@@ -12,7 +13,7 @@
 use std::f64::consts::TAU;
 use std::fmt;
 
-use anyhow::{anyhow, bail, Result};
+use anyhow::{anyhow, Result};
 use serde::{Deserialize, Serialize};
 
 use crate::data::{Dataset, AXES};
@@ -319,24 +320,9 @@ pub fn lagged(temp_c: &[f64], t_s: &[f64], session: Option<&[i64]>, tau_s: f64) 
 // once). Their order is the order of the fit's columns and of MODEL.json's
 // coefficients; every MODEL.json names each coefficient by its exponents, so
 // files written with the order the host used to have (kinematic ey/ez: the
-// other axes first) read and export the same.
+// other axes first) read and export the same. A seed's monomials on a data
+// set are `model::Seed::monomials`.
 pub use model_core::monomials::{kinematic, CUBIC19};
-
-/// Monomials of a seed spec for target `t`, restricted to `axes` — the
-/// data's varying axes (`Dataset::varying_axes`): a monomial in an absent
-/// axis, or in one held at a single position, is constant on the data and
-/// would duplicate `1` (or vanish).
-pub fn seed_monomials(spec: &str, t: usize, axes: &[usize]) -> Result<Vec<[u8; 3]>> {
-    let all: Vec<[u8; 3]> = match spec {
-        "cubic19" => CUBIC19.to_vec(),
-        "kinematic" => kinematic(t).to_vec(),
-        other => bail!("unknown polynomial seed `{other}` (expected cubic19 or kinematic)"),
-    };
-    Ok(all
-        .into_iter()
-        .filter(|e| (0..3).all(|a| e[a] == 0 || axes.contains(&a)))
-        .collect())
-}
 
 /// True when the feature's value changes with the position of `axis`.
 pub fn feature_uses_axis(f: &Feature, axis: usize) -> bool {
@@ -397,27 +383,6 @@ mod tests {
                 }
             }
         }
-    }
-
-    #[test]
-    fn seeds_are_model_cores_lists_in_its_order() {
-        // The host fits, and export writes, exactly model-core's sets.
-        for t in 0..3 {
-            assert_eq!(
-                seed_monomials("kinematic", t, &[0, 1, 2]).unwrap(),
-                model_core::monomials::kinematic(t)
-            );
-            assert_eq!(
-                seed_monomials("cubic19", t, &[0, 1, 2]).unwrap(),
-                model_core::monomials::CUBIC19
-            );
-        }
-    }
-
-    #[test]
-    fn seed_drops_absent_axes() {
-        let m = seed_monomials("cubic19", 0, &[0]).unwrap();
-        assert_eq!(m, vec![[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]]);
     }
 
     #[test]

@@ -17,6 +17,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::effect::EffectSpec;
+
 /// Format tag of a history file.
 pub const HISTORY_FORMAT: &str = "trueaxis-history/1";
 
@@ -126,13 +128,23 @@ fn next(model_path: &Path, mut step: Step) -> Result<History> {
             steps: Vec::new(),
         }
     };
+    // The step's effects as the file and the model write them; one that
+    // does not parse is the same as nothing but itself.
+    let specs = |adds: &[String]| -> Vec<Option<EffectSpec>> {
+        adds.iter().map(|a| a.parse().ok()).collect()
+    };
     let continues = h.steps.last().is_some_and(|last| {
+        let new = specs(&step.adds);
         last.seed == step.seed
             && last.data_sha256 == step.data_sha256
-            && last.adds.iter().all(|a| {
-                step.adds
-                    .iter()
-                    .any(|b| a == b || crate::effect::same_effect(a, b))
+            && last.adds.iter().zip(specs(&last.adds)).all(|(a, sa)| {
+                step.adds.iter().zip(&new).any(|(b, sb)| {
+                    a == b
+                        || sa
+                            .as_ref()
+                            .zip(sb.as_ref())
+                            .is_some_and(|(x, y)| x.same_effect(y))
+                })
             })
     });
     if !continues {

@@ -15,9 +15,10 @@ use crate::data::Dataset;
 use crate::diagnose::noise::NoiseMethod;
 use crate::diagnose::outliers::{self, Outlier};
 use crate::diagnose::{self, Options, Verdict};
-use crate::effect::Effect;
+use crate::effect::{Effect, EffectSpec};
 use crate::fit::{self, FitOptions};
 use crate::history;
+use crate::model::Seed;
 use crate::progress::{Event, ImproveStage, Sink};
 
 /// Most effects `improve` adds before it stops anyway.
@@ -226,7 +227,7 @@ pub struct Improvement {
 /// (`diagnose::outliers`) unless `keep_outliers`.
 pub fn improve(
     data: &Dataset,
-    seed: &str,
+    seed: Seed,
     out: &std::path::Path,
     keep_outliers: bool,
     on_step: impl FnMut(&ImproveStep),
@@ -240,13 +241,13 @@ pub fn improve(
 /// gets each step's result.
 pub fn improve_with(
     data: &Dataset,
-    seed: &str,
+    seed: Seed,
     out: &std::path::Path,
     keep_outliers: bool,
     mut on_step: impl FnMut(&ImproveStep),
     progress: &Sink,
 ) -> Result<Improvement> {
-    let mut adds: Vec<String> = Vec::new();
+    let mut adds: Vec<EffectSpec> = Vec::new();
     let mut steps = Vec::new();
     let mut added: Vec<AddedEffect> = Vec::new();
     // Every step's model was fitted to the measurement file, whichever
@@ -254,37 +255,39 @@ pub fn improve_with(
     // file, whose hash is the same at every step.
     let sha256 = crate::import::content_hash(data);
     loop {
-        let effects = adds
-            .iter()
-            .map(|a| Effect::parse(a))
-            .collect::<Result<Vec<_>>>()?;
+        let effects: Vec<Effect> = adds.iter().cloned().map(Effect::new).collect();
         let k = steps.len() + 1;
         progress.emit(&Event::Improve {
             step: k,
             stage: ImproveStage::Fitting {
                 seed: seed.to_string(),
-                adds: adds.clone(),
+                adds: adds.iter().map(ToString::to_string).collect(),
                 rows: data.len(),
             },
         });
         let found = if keep_outliers {
             Vec::new()
         } else {
-            outliers::find(data, seed, &effects)?
+            outliers::find(data, &seed, &effects)?
         };
         let clean = outliers::without(data, &found);
-        let model = fit::fit_recorded(&clean, seed, &effects, &FitOptions::default(), || {
-            sha256.clone()
-        })?;
+        // `fit` takes the `--model` text (it records it as given).
+        let model = fit::fit_recorded(
+            &clean,
+            &seed.to_string(),
+            &effects,
+            &FitOptions::default(),
+            || sha256.clone(),
+        )?;
         history::save_with_model(out, &model)?;
         progress.emit(&Event::Improve {
             step: k,
             stage: ImproveStage::Diagnosing,
         });
-        let d = diagnose::diagnose_with(
+        let (d, specs) = diagnose::diagnose_specs(
             &clean,
             &Options {
-                seed: seed.to_string(),
+                seed,
                 adds: adds.clone(),
                 follow_path: false,
                 keep_outliers: true,
@@ -331,11 +334,16 @@ pub fn improve_with(
         // target), added — or swapped in for the same effect — together.
         let mut seen = std::collections::BTreeSet::new();
         if steps.len() <= MAX_STEPS {
-            for c in d.candidates.iter().filter(|c| c.significant) {
+            for (c, s) in d
+                .candidates
+                .iter()
+                .zip(&specs)
+                .filter(|(c, _)| c.significant)
+            {
                 if !seen.insert(c.target.clone()) {
                     continue;
                 }
-                if diagnose::swap_in(&mut adds, &c.add, c.replaces.as_deref()) {
+                if diagnose::swap_in(&mut adds, &s.add, s.replaces.as_ref()) {
                     added.push(AddedEffect {
                         target: c.target.clone(),
                         add: c.add.clone(),

@@ -8,15 +8,15 @@
 //! CLI's commands). `import` (files ↔ data sets) and `units` (units the
 //! data probably do not have) sit beside `data`, and so do `warning` and
 //! `progress`, which import nothing;
-//! `simulate` makes data sets from `features`' thermal lag and is imported
-//! by no engine module.
+//! `simulate` makes data sets from the effect families' simulated forms
+//! and is imported by no engine module.
 //!
 //! - `data`: the measurement data set (docs/cli.md § Measurement CSV) every command works on.
 //! - `import`: measurement files in (the trueaxis CSV, Renishaw .rtl, ecmc ISO 230-2 .dat, RepRapFirmware and Klipper bed maps) and the CSV out.
 //! - `units`: `units_suspect` — errors in mm in µm columns, nm as µm, positions in metres.
 //! - `simulate`: the synthetic machine (21 geometric errors, effects, plans, noise).
 //! - `features`: the model's terms — the cubic monomials and the effects' columns.
-//! - `effect`: the `--add` grammar as types — Family, Target, Axis, EffectSpec, Effect.
+//! - `effect`: effects as types, one file per family (keys, columns, words, physical parameter, simulated form) — Family, Target, Axis, EffectSpec, Effect, and the one `key=value` grammar.
 //! - `warning`: the one warning type (code + detail) every result carries.
 //! - `progress`: the one progress event type long computations emit; the caller renders it.
 //! - `linalg`: the linear algebra — least squares with rank and conditioning checks (`lsq`), diagnose's basis and small fits (`basis`), Brent's minimisation (`brent`).

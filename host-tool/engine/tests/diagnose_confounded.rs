@@ -15,6 +15,7 @@
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::diagnose::synth::{generate, Hidden, Plan, SynthConfig};
 use trueaxis_engine::diagnose::{diagnose, Diagnosis, Options, Verdict};
+use trueaxis_engine::model::Seed;
 
 /// A 100 mm grid, one approach direction, tool length by tool length.
 fn tool_by_tool(hidden: Vec<Hidden>) -> Dataset {
@@ -60,7 +61,7 @@ fn assert_pair_reported(d: &Diagnosis) {
 fn an_independent_effect_is_found_past_a_confounded_pair() {
     let d = diagnose(
         &tool_by_tool(vec![Hidden::Abbe, Hidden::AbbeX]),
-        &Options::seed("cubic19"),
+        &Options::seed(Seed::Cubic19),
     )
     .expect("diagnose runs");
     let steps: Vec<&str> = d
@@ -96,7 +97,7 @@ fn a_confounded_pair_alone_is_not_the_noise_floor() {
     // the verdict says something is left that the data cannot attribute.
     let mut data = tool_by_tool(vec![Hidden::Abbe]);
     data.u_um = Some(vec![3.0; data.len()]);
-    let d = diagnose(&data, &Options::seed("cubic19")).expect("diagnose runs");
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).expect("diagnose runs");
     assert!(d.path.iter().all(|s| s.target != "ex"), "{:#?}", d.path);
     assert!(d.unexplained.is_empty(), "{:#?}", d.unexplained);
     assert_pair_reported(&d);

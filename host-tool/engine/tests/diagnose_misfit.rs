@@ -11,6 +11,7 @@
 
 use trueaxis_engine::diagnose::synth::{generate, SynthConfig};
 use trueaxis_engine::diagnose::{diagnose, Options, Verdict};
+use trueaxis_engine::model::Seed;
 
 #[test]
 fn a_smooth_misfit_is_not_named_as_a_physical_effect() {
@@ -20,7 +21,7 @@ fn a_smooth_misfit_is_not_named_as_a_physical_effect() {
         misfit_um: 0.5,
         ..SynthConfig::default()
     });
-    let d = diagnose(&data, &Options::seed("cubic19")).expect("diagnose runs");
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).expect("diagnose runs");
     let named: Vec<&str> = d
         .candidates
         .iter()

@@ -7,6 +7,7 @@
 
 use trueaxis_engine::diagnose::synth::{generate, SynthConfig};
 use trueaxis_engine::diagnose::{diagnose, Diagnosis, Options};
+use trueaxis_engine::model::Seed;
 
 fn warned(d: &Diagnosis, code: &str, needle: &str) -> bool {
     d.warnings
@@ -23,7 +24,7 @@ fn effects_in_the_model_span_are_kept_unidentifiable_and_warned() {
     // The Abbe arm grows with z (a measuring offset along the ram): the
     // column tool·u_y = z·u_y is a combination of cubic19's y·z and y.
     data.tool_mm = data.pos_mm[2].clone();
-    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
     for (add, fix) in [
         ("abbe:target=ex,times=y", "two or more tool lengths"),
         (
@@ -58,7 +59,7 @@ fn effects_in_the_model_span_are_kept_unidentifiable_and_warned() {
         seed: 7,
         ..SynthConfig::default()
     });
-    let d = diagnose(&data, &Options::seed("kinematic")).unwrap();
+    let d = diagnose(&data, &Options::seed(Seed::Kinematic)).unwrap();
     for add in ["abbe:target=ex,times=y", "squareness:target=ex,axis=y"] {
         let c = d.candidates.iter().find(|c| c.add == add).unwrap();
         assert!(c.identifiable, "{add}");
@@ -76,7 +77,7 @@ fn a_constant_temperature_is_warned_and_not_tested() {
     data.temps[1].temp_c = (0..n)
         .map(|i| 20.5 + 0.01 * ((i % 7) as f64 / 7.0))
         .collect();
-    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
     assert!(
         warned(&d, "constant_temperature", "T_air_C spans only"),
         "{:?}",
@@ -103,7 +104,7 @@ fn data_without_a_temperature_says_thermal_cannot_be_tested() {
         ..SynthConfig::default()
     });
     data.temps.clear();
-    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
     assert!(
         warned(&d, "no_temperature", "thermal effects cannot be tested"),
         "{:?}",

@@ -1,7 +1,11 @@
 //! The engine's layering (lib.rs, docs/host.md) checked on its sources: a
 //! module may name `crate::<module>` only for modules in a lower layer, so
 //! no import goes upward and none runs in a circle. A new top-level module
-//! must be given its layer here.
+//! must be given its layer here. The family rooms (`effect/`, one file per
+//! effect family, and `diagnose/search/`, how the search proposes each)
+//! have a narrower rule: what their files may name of the crate, and that
+//! a family's file names no other family (docs/host.md § Adding an effect
+//! family).
 //!
 //! And the rule of docs/host.md § Messages: the engine says what is wrong
 //! in its own terms — its options, its numbers — and the CLI names the
@@ -36,6 +40,23 @@ const LAYERS: &[(&str, u8)] = &[
     ("history", 6),
     ("iso230", 6),
     ("improve", 7),
+];
+
+/// Folders of one file per effect family: the crate modules their files
+/// may name (their own module's shared files — `mod.rs`, and those listed
+/// as shared — are named through `super::`), and the files that are not
+/// a family.
+const FAMILY_ROOMS: &[(&str, &[&str], &[&str])] = &[
+    (
+        "effect",
+        &["data", "features"],
+        &["mod", "pairs", "sim", "tests"],
+    ),
+    (
+        "diagnose/search",
+        &["data", "effect", "features", "linalg", "lines"],
+        &["mod"],
+    ),
 ];
 
 fn layer(module: &str) -> Option<u8> {
@@ -110,6 +131,77 @@ fn no_engine_module_imports_from_its_own_layer_or_above() {
     );
 }
 
+/// Whether `code` names `module::` as a path segment (not the tail of
+/// another name).
+fn names(code: &str, module: &str) -> bool {
+    let pat = format!("{module}::");
+    code.match_indices(&pat).any(|(i, _)| {
+        !code[..i]
+            .chars()
+            .next_back()
+            .is_some_and(|c| c.is_ascii_alphanumeric() || c == '_')
+    })
+}
+
+/// What family file `stem` (of a room that may name `allowed` of the crate,
+/// beside the families `families`) names against its room's rule.
+fn room_violations(stem: &str, src: &str, allowed: &[&str], families: &[&str]) -> Vec<String> {
+    let code: String = src
+        .lines()
+        .map(|l| l.split("//").next().unwrap_or(""))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let mut bad: Vec<String> = crate_paths(src)
+        .into_iter()
+        .filter(|m| !allowed.contains(&m.as_str()))
+        .map(|m| format!("crate::{m}"))
+        .collect();
+    if families.contains(&stem) {
+        bad.extend(
+            families
+                .iter()
+                .filter(|f| **f != stem && names(&code, f))
+                .map(|f| format!("{f}:: (another family)")),
+        );
+    }
+    bad
+}
+
+#[test]
+fn a_family_file_names_only_its_room_s_modules_and_no_other_family() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut bad = Vec::new();
+    for (folder, allowed, shared) in FAMILY_ROOMS {
+        let dir = src.join(folder);
+        let mut files = Vec::new();
+        rust_files(&dir, &mut files);
+        let stems: Vec<String> = files
+            .iter()
+            .map(|f| f.file_stem().unwrap().to_string_lossy().into_owned())
+            .collect();
+        let families: Vec<&str> = stems
+            .iter()
+            .map(String::as_str)
+            .filter(|s| !shared.contains(s))
+            .collect();
+        assert!(families.len() >= 7, "{folder}: {families:?}");
+        let own = folder.split('/').next().unwrap();
+        for (f, stem) in files.iter().zip(&stems) {
+            let text = std::fs::read_to_string(f).unwrap();
+            let mut allowed_here: Vec<&str> = allowed.to_vec();
+            allowed_here.push(own);
+            for v in room_violations(stem, &text, &allowed_here, &families) {
+                bad.push(format!("{folder}/{stem}.rs: {v}"));
+            }
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "family rooms naming what they may not:\n{}",
+        bad.join("\n")
+    );
+}
+
 #[test]
 fn the_checker_sees_an_upward_import() {
     assert_eq!(
@@ -117,10 +209,20 @@ fn the_checker_sees_an_upward_import() {
         ["fit"]
     );
     assert!(layer("model") < layer("fit"));
+    // A family file that reaches for another family or out of its room.
+    let families = ["periodic", "thermal"];
+    let v = room_violations(
+        "periodic",
+        "use super::thermal::Sim; // periodic::x\nuse crate::model::Seed;\nlet a = my_thermal::x;",
+        &["data", "effect"],
+        &families,
+    );
+    assert_eq!(v, ["crate::model", "thermal:: (another family)"]);
+    assert!(room_violations("mod", "use super::thermal::Sim;", &[], &families).is_empty());
 }
 
 /// Engine folders whose messages name no command-line flag.
-const ROOMS: &[&str] = &["export"];
+const ROOMS: &[&str] = &["export", "effect", "diagnose/search"];
 
 /// `--name` flags a source line names outside a comment.
 fn flags(line: &str) -> Vec<String> {

@@ -5,6 +5,7 @@
 
 use trueaxis_engine::diagnose::noise::noise_floor;
 use trueaxis_engine::fit::{fit, FitOptions};
+use trueaxis_engine::model::Seed;
 use trueaxis_engine::simulate::{simulate, Effect, SimConfig};
 
 fn sim(
@@ -159,7 +160,7 @@ fn the_floor_is_the_simulated_noise_with_a_guide_bump() {
 fn at_noise_floor_only_when_the_residual_is_at_the_floor() {
     use trueaxis_engine::diagnose::{diagnose, Options, Verdict};
     let wavy = sim("mill800-wavy", &["grid:50"], &[], 0.2, 5);
-    let d = diagnose(&wavy, &Options::seed("cubic19")).unwrap();
+    let d = diagnose(&wavy, &Options::seed(Seed::Cubic19)).unwrap();
     assert_eq!(d.verdict, Verdict::AboveNoiseFloor, "{:#?}", d.unexplained);
     assert!(d.candidates.iter().all(|c| !c.significant));
     let left: Vec<&str> = d.unexplained.iter().map(|u| u.target.as_str()).collect();
@@ -176,7 +177,7 @@ fn at_noise_floor_only_when_the_residual_is_at_the_floor() {
 
     // improve stops there and says so, with the worst cell.
     let out = std::env::temp_dir().join(format!("trueaxis-noise-{}.json", std::process::id()));
-    let imp = trueaxis_engine::improve::improve(&wavy, "cubic19", &out, false, |_| {}).unwrap();
+    let imp = trueaxis_engine::improve::improve(&wavy, Seed::Cubic19, &out, false, |_| {}).unwrap();
     let last = imp.steps.last().unwrap();
     assert_eq!(imp.verdict, Verdict::AboveNoiseFloor);
     let outcome = last.outcome();
@@ -189,7 +190,7 @@ fn at_noise_floor_only_when_the_residual_is_at_the_floor() {
     let _ = std::fs::remove_file(trueaxis_engine::history::history_path(&out));
 
     let plain = sim("mill800", &["grid:50"], &[], 0.2, 5);
-    let d = diagnose(&plain, &Options::seed("cubic19")).unwrap();
+    let d = diagnose(&plain, &Options::seed(Seed::Cubic19)).unwrap();
     assert_eq!(d.verdict, Verdict::AtNoiseFloor, "{:#?}", d.unexplained);
     assert!(d.unexplained.is_empty());
 }

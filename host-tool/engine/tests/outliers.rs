@@ -3,6 +3,7 @@
 //! neither the noise floor nor the verdict; no effect is added for them.
 
 use trueaxis_engine::diagnose::{diagnose, Options, Verdict};
+use trueaxis_engine::model::Seed;
 use trueaxis_engine::simulate::{simulate_detailed, SimConfig, SimOutput, Spikes};
 
 fn sim(spikes: Option<Spikes>) -> SimOutput {
@@ -27,13 +28,13 @@ fn beam_breaks_are_found_left_out_and_explain_nothing() {
         amp_um: 20.0,
     }));
     assert!(spiky.spikes.len() > 10, "{}", spiky.spikes.len());
-    let dc = diagnose(&clean.data, &Options::seed("cubic19")).unwrap();
-    let ds = diagnose(&spiky.data, &Options::seed("cubic19")).unwrap();
+    let dc = diagnose(&clean.data, &Options::seed(Seed::Cubic19)).unwrap();
+    let ds = diagnose(&spiky.data, &Options::seed(Seed::Cubic19)).unwrap();
     let kept = diagnose(
         &spiky.data,
         &Options {
             keep_outliers: true,
-            ..Options::seed("cubic19")
+            ..Options::seed(Seed::Cubic19)
         },
     )
     .unwrap();
@@ -69,7 +70,7 @@ fn beam_breaks_are_found_left_out_and_explain_nothing() {
     // improve leaves them out of every fit and adds nothing for them.
     let out = std::env::temp_dir().join(format!("trueaxis-outliers-{}.json", std::process::id()));
     let imp =
-        trueaxis_engine::improve::improve(&spiky.data, "cubic19", &out, false, |_| {}).unwrap();
+        trueaxis_engine::improve::improve(&spiky.data, Seed::Cubic19, &out, false, |_| {}).unwrap();
     let _ = std::fs::remove_file(&out);
     let _ = std::fs::remove_file(trueaxis_engine::history::history_path(&out));
     assert_eq!(imp.steps.len(), 1, "{:?}", imp.model);
@@ -100,14 +101,14 @@ fn shape_the_model_lacks_is_not_an_outlier() {
             ],
             ..SynthConfig::default()
         });
-        let o = find(&data, "cubic19", &[]).unwrap();
+        let o = find(&data, &Seed::Cubic19, &[]).unwrap();
         assert!(o.is_empty(), "seed {seed}: {o:?}");
     }
     let mut cfg = SimConfig::preset("mill800-wavy").unwrap();
     cfg.plans = vec!["grid:50".parse().unwrap()];
     cfg.effects = vec!["reversal:axis=x,backlash_um=8".parse().unwrap()];
     cfg.noise_um = 0.2;
-    let o = find(&simulate_detailed(&cfg).data, "cubic19", &[]).unwrap();
+    let o = find(&simulate_detailed(&cfg).data, &Seed::Cubic19, &[]).unwrap();
     assert!(o.is_empty(), "{o:?}");
 }
 
@@ -122,8 +123,8 @@ fn beam_breaks_on_shaped_data_leave_the_verdict_as_it_was() {
     });
     let clean = sim_on("mill800-wavy", &["grid:50"], 5, None);
     let spiky = sim_on("mill800-wavy", &["grid:50"], 5, sp);
-    let dc = diagnose(&clean.data, &Options::seed("cubic19")).unwrap();
-    let ds = diagnose(&spiky.data, &Options::seed("cubic19")).unwrap();
+    let dc = diagnose(&clean.data, &Options::seed(Seed::Cubic19)).unwrap();
+    let ds = diagnose(&spiky.data, &Options::seed(Seed::Cubic19)).unwrap();
     let mut found: Vec<(usize, String)> = ds
         .outliers
         .iter()

@@ -12,6 +12,7 @@
 
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::diagnose::{diagnose, Options};
+use trueaxis_engine::model::Seed;
 use trueaxis_engine::simulate::{simulate, Effect, SimConfig, Timing};
 
 fn sim(plans: &[&str], effects: &[&str], dwell_s: f64, feed_mm_s: f64, seed: u64) -> Dataset {
@@ -47,7 +48,7 @@ fn improve_names_the_warm_up_seen_by_the_grid_before_dense_lines() {
     );
     let out =
         std::env::temp_dir().join(format!("trueaxis-thermal-lag-{}.json", std::process::id()));
-    let imp = trueaxis_engine::improve::improve(&data, "cubic19", &out, false, |_| {}).unwrap();
+    let imp = trueaxis_engine::improve::improve(&data, Seed::Cubic19, &out, false, |_| {}).unwrap();
     let _ = std::fs::remove_file(&out);
     let _ = std::fs::remove_file(trueaxis_engine::history::history_path(&out));
     let added: Vec<&trueaxis_engine::improve::AddedEffect> =
@@ -89,7 +90,7 @@ fn a_lag_beyond_the_grid_is_searched_further_or_said_unidentified() {
     let thermal_of = |hours: usize| {
         let plan = format!("point:x=400,y=250,z=250,repeats={}", hours * 60);
         let data = sim(&[plan.as_str()], &[effect], 60.0, 25.0, 7);
-        let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+        let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
         d.candidates
             .into_iter()
             .find(|c| c.target == "ex" && c.add.starts_with("thermal:target=ex,channel=bed,lag_s="))

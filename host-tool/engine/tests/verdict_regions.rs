@@ -13,6 +13,7 @@
 
 use trueaxis_engine::data::TARGETS;
 use trueaxis_engine::diagnose::{diagnose, Options, Verdict, REGION_ABOVE_NOISE_RATIO};
+use trueaxis_engine::model::Seed;
 use trueaxis_engine::simulate::{simulate, SimConfig};
 
 #[test]
@@ -38,7 +39,7 @@ fn a_region_far_above_the_floor_is_named_whatever_the_overall_rms() {
             *v += 4.0 * (-d2 / (2.0 * 60.0 * 60.0)).exp();
         }
     }
-    let d = diagnose(&data, &Options::seed("cubic19")).unwrap();
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
     let floor = d.noise_floor_um["ex"].expect("a floor from the dense line");
     let overall = d.rms_um["ex"];
     // The situation of the 1M capture: overall within 1.3× of the floor.

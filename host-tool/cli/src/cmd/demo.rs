@@ -588,6 +588,7 @@ fn demo_stage(
 ) -> Result<(trueaxis_engine::model::ModelFile, String, Improvement)> {
     use std::fmt::Write as _;
     let mut s = String::new();
+    let seed: trueaxis_engine::model::Seed = seed.parse()?;
     let first = diagnose::diagnose(data, &Options::seed(seed))?;
     let _ = writeln!(s, "Diagnose {seed} — which physical effect is missing?");
     let mut worst: Vec<&diagnose::Region> = first.worst_regions.iter().collect();

@@ -12,7 +12,7 @@ use crate::cmd::out::{self, outln};
 use crate::input;
 use crate::workflow::model_spec;
 use trueaxis_engine::diagnose::{self, Diagnosis, Options, Verdict};
-use trueaxis_engine::effect::Effect;
+use trueaxis_engine::effect::EffectSpec;
 
 /// Arguments of `trueaxis diagnose`.
 #[derive(clap::Args, Debug)]
@@ -46,9 +46,9 @@ impl Args {
     pub fn run(self) -> Result<()> {
         let (seed, mut adds) = model_spec(&self.model)?;
         for a in &self.add {
-            let e = Effect::parse(a)?;
-            if !adds.contains(&e.spec) {
-                adds.push(e.spec);
+            let spec: EffectSpec = a.parse()?;
+            if !adds.contains(&spec) {
+                adds.push(spec);
             }
         }
         let data = input::load_data(&self.data, None)?;

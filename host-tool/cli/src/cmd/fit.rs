@@ -59,7 +59,7 @@ pub struct Args {
 impl Args {
     pub fn run(self) -> Result<()> {
         // Parse everything that can be wrong with the command before reading data.
-        trueaxis_engine::model::Seed::parse(&self.model)?;
+        let seed = trueaxis_engine::model::Seed::parse(&self.model)?;
         let adds = self
             .add
             .iter()
@@ -84,7 +84,7 @@ impl Args {
         let found = if self.keep_outliers {
             Vec::new()
         } else {
-            outliers::find(&data, &self.model, &adds).unwrap_or_else(|e| {
+            outliers::find(&data, &seed, &adds).unwrap_or_else(|e| {
                 screen_warning = Some(Warning::new(
                     "outliers_not_screened",
                     format!("outliers: not screened ({e:#})"),

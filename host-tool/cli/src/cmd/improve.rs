@@ -57,7 +57,7 @@ impl Args {
         let progress = crate::cmd::progress::stderr(json);
         let r = improve_with(
             &data,
-            &seed,
+            seed,
             &out,
             self.keep_outliers,
             |s| {

@@ -12,7 +12,7 @@ use anyhow::Result;
 
 use trueaxis_engine::data::{Dataset, AXES, TARGETS};
 use trueaxis_engine::diagnose::{Candidate, Diagnosis};
-use trueaxis_engine::effect::Family;
+use trueaxis_engine::effect::{EffectSpec, Family};
 use trueaxis_engine::features;
 
 use trueaxis_engine::diagnose::{Verdict as DVerdict, ABOVE_NOISE_RATIO};
@@ -101,32 +101,12 @@ pub fn shell_word(s: &str) -> String {
     }
 }
 
-/// An effect in words: "a periodic error of ex along x".
+/// An effect in words: "a periodic error of ex along x" (its family's
+/// words, `EffectSpec::describe`).
 pub fn effect_words(c: &Candidate) -> String {
-    let along = c
-        .axis
-        .as_deref()
-        .map_or(String::new(), |a| format!(" along {a}"));
-    let t = &c.target;
-    match c.effect {
-        Family::Periodic => format!("a periodic error of {t}{along} (lead screw or scale pitch)"),
-        Family::Thermal => format!(
-            "thermal growth of {t} with the {}{}",
-            c.channel
-                .as_deref()
-                .map_or("temperature".into(), |c| axis_title(c).replace(" (°C)", "")),
-            c.axis
-                .as_deref()
-                .map_or(String::new(), |a| format!(", growing along {a}"))
-        ),
-        Family::Reversal => format!("a reversal error (backlash) of {t}{along}"),
-        Family::Abbe => format!("an Abbe error of {t} (a tilt times the tool length){along}"),
-        Family::Drift => format!("a drift of {t} with time"),
-        Family::Squareness => format!("out-of-squareness: {t} growing{along}"),
-        Family::HigherOrder => format!(
-            "a smooth shape of {t}{along} the seed cannot follow (higher order, not a named physical effect)"
-        ),
-    }
+    c.add
+        .parse::<EffectSpec>()
+        .map_or_else(|_| c.add.clone(), |s| s.describe())
 }
 
 /// The physical value in words: "amplitude 3.08 µm (95 %: 3.03 … 3.13)",

@@ -11,6 +11,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 
 use trueaxis_engine::diagnose::ABOVE_NOISE_RATIO;
+use trueaxis_engine::effect::EffectSpec;
 use trueaxis_engine::history::{History, Step};
 
 use crate::report::plot::{self, format_value, Series, Style, Ticks, XyPlot};
@@ -56,33 +57,17 @@ fn spec_value<'a>(add: &'a str, key: &str) -> Option<&'a str> {
 /// x (lead screw or scale pitch), period 5 mm", "thermal growth of ex with
 /// the bed temperature, growing along x, lag 600 s".
 pub fn effect_words(add: &str) -> String {
-    let family = add.split(':').next().unwrap_or(add);
-    let t = spec_value(add, "target").unwrap_or("the error");
-    let along = spec_value(add, "axis").map_or(String::new(), |a| format!(" along {a}"));
-    let mut w = match family {
-        "periodic" => format!("a periodic error of {t}{along} (lead screw or scale pitch)"),
-        "thermal" => {
-            let ch = spec_value(add, "channel").unwrap_or("a sensor");
-            let sensors: Vec<String> = ch.split('+').map(|c| c.replace('_', " ")).collect();
-            format!(
-                "thermal growth of {t} with the {} temperature{}",
-                sensors.join(" and "),
-                spec_value(add, "times")
-                    .filter(|a| *a != "none")
-                    .map_or(String::new(), |a| format!(", growing along {a}"))
-            )
-        }
-        "reversal" => format!("a reversal error (backlash) of {t}{along}"),
-        "abbe" => format!("an Abbe error of {t} (a tilt times the tool length)"),
-        "drift" => format!("a drift of {t} with time"),
-        "squareness" => format!("out-of-squareness: {t} growing{along}"),
-        "higher_order" => format!("a smooth shape of {t}{along} the seed cannot follow"),
-        _ => add.to_string(),
+    let Ok(spec) = add.parse::<EffectSpec>() else {
+        return add.to_string();
     };
-    if let Some(p) = spec_value(add, "period_mm").and_then(|p| p.parse::<f64>().ok()) {
+    let mut w = spec.describe();
+    if let Some(p) = spec.period_mm() {
         w.push_str(&format!(", period {} mm", format_value(p)));
     }
-    if let Some(l) = spec_value(add, "lag_s").filter(|l| l.parse::<f64>().is_ok_and(|v| v > 0.0)) {
+    if let Some(l) = spec
+        .param("lag_s")
+        .filter(|l| l.parse::<f64>().is_ok_and(|v| v > 0.0))
+    {
         w.push_str(&format!(", lag {l} s"));
     }
     w

@@ -13,11 +13,10 @@
 use serde::Serialize;
 
 use crate::data::{AXES, TARGETS};
-use crate::effect::Family;
 use crate::lines::{densest_lines, group_rows};
 
-use super::candidates::fmt_num;
 use super::periodogram::periodogram;
+use super::search::fmt_num;
 use super::target::{State, TargetData};
 use super::warnings::dense_line_text;
 use super::{Candidate, ALIASING_SPACING_MM};
@@ -150,7 +149,7 @@ fn seen_wave_mm(td: &TargetData, st: &State, a: usize, spacing_mm: f64) -> Optio
 /// the contenders only (ΔBIC < 0): a term that explains nothing needs no
 /// reason not to be added.
 pub(super) fn check(td: &TargetData, st: &State, cand: &Candidate) -> Option<Aliasing> {
-    if !matches!(cand.effect, Family::Periodic | Family::HigherOrder)
+    if !cand.effect.info().aliasable
         || !cand.identifiable
         || cand.delta_bic.is_none_or(|d| d >= 0.0)
     {
@@ -162,8 +161,11 @@ pub(super) fn check(td: &TargetData, st: &State, cand: &Candidate) -> Option<Ali
     if dl.spacing_mm <= ALIASING_SPACING_MM {
         return None;
     }
-    let seen = match cand.params.get("period_mm") {
-        Some(&p) => p,
+    // A wave of its own period (periodic), or the one the residual shows
+    // (higher_order).
+    let own_period = cand.params.get("period_mm").copied();
+    let seen = match own_period {
+        Some(p) => p,
         None => seen_wave_mm(td, st, a, dl.spacing_mm)?,
     };
     let aliases = alias_periods(seen, dl.spacing_mm);
@@ -175,12 +177,12 @@ pub(super) fn check(td: &TargetData, st: &State, cand: &Candidate) -> Option<Ali
     let s = fmt_num(dl.spacing_mm, 3);
     let measure = dense_line_text(data, a);
     let shown: Vec<String> = named(&aliases).into_iter().map(period_words).collect();
-    let what = match cand.effect {
-        Family::Periodic => format!(
+    let what = match own_period {
+        Some(_) => format!(
             "{tn} varies along {ax} with a period of {} mm",
             period_words(seen)
         ),
-        _ => format!(
+        None => format!(
             "{tn} varies along {ax} like a {} mm wave",
             period_words(seen)
         ),

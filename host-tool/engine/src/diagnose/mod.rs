@@ -37,22 +37,24 @@
 //!
 //! This module holds the result types and [`diagnose`] itself; the steps
 //! live in its submodules: `target` (one target's data, its fitted model
-//! and a candidate's FWL fit), `candidates` (the library proposed at a
-//! model), `score` and `physical` (ΔBIC, held-out gain, the physical
-//! parameter), `aliasing` (whether the sampling can support a wave),
-//! `path` (the ranking and the BIC-ordered path), `warnings`
-//! (design, plausibility, noise floor) and `swap` (an effect put into a
-//! model's list in place of the same effect; sameness is
-//! `effect::same_effect`). Worst regions are [`crate::regions::worst_cells`].
+//! and a candidate's FWL fit), `search` (the library proposed at a model,
+//! one file per family), `score` and `physical` (ΔBIC, held-out gain, the
+//! physical parameter as its family describes it), `aliasing` (whether the
+//! sampling can support a wave), `path` (the ranking and the BIC-ordered
+//! path), `warnings` (design, plausibility, noise floor) and `swap` (an
+//! effect put into a model's list in place of the same effect; sameness is
+//! [`EffectSpec::same_effect`]). Worst regions are
+//! [`crate::regions::worst_cells`]. Inside, effects and the seed are typed
+//! ([`EffectSpec`], [`Seed`]); the strings are the JSON's.
 
 pub mod aliasing;
-mod candidates;
 pub mod noise;
 pub mod outliers;
 mod path;
 pub mod periodogram;
 mod physical;
 mod score;
+mod search;
 mod smooth;
 mod swap;
 pub mod synth;
@@ -66,18 +68,18 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::data::{Dataset, AXES, TARGETS};
-use crate::effect::{Effect, Family};
+use crate::effect::{Effect, EffectSpec, Family};
 use crate::features::Norm;
+use crate::model::Seed;
 use crate::progress::{DiagnoseStage, Event, Sink};
 
-pub use crate::effect::same_effect;
 pub use crate::regions::Region;
 pub use swap::swap_in;
 pub use warnings::above_noise;
 
-use candidates::propose;
 use noise::{noise_floor, NoiseMethod};
 use periodogram::Periodogram;
+use search::propose;
 use target::{fwl, hold_out_blocks, State, TargetData};
 use warnings::{above_noise_warning, dedup_warnings, design_warnings, region_above_noise_warning};
 
@@ -125,9 +127,9 @@ pub const REGION_MIN_POINTS: usize = 20;
 #[derive(Clone, Debug)]
 pub struct Options {
     /// Seed model (`cubic19`, `kinematic`).
-    pub seed: String,
-    /// Effects already in the model (`fit --add` strings).
-    pub adds: Vec<String>,
+    pub seed: Seed,
+    /// Effects already in the model.
+    pub adds: Vec<EffectSpec>,
     /// Follow the BIC-ordered path past the first effect (several missing
     /// effects). `improve` turns it off: it refits between steps itself.
     pub follow_path: bool,
@@ -138,9 +140,9 @@ pub struct Options {
 
 impl Options {
     /// The seed alone, with the path.
-    pub fn seed(seed: &str) -> Options {
+    pub fn seed(seed: Seed) -> Options {
         Options {
-            seed: seed.to_string(),
+            seed,
             adds: Vec::new(),
             follow_path: true,
             keep_outliers: false,
@@ -566,6 +568,19 @@ impl Diagnosis {
     }
 }
 
+/// A candidate's `add` and `replaces` as types (the JSON has them as
+/// strings): what `improve` puts into its model.
+#[derive(Clone, Debug)]
+pub struct CandidateSpec {
+    /// The effect (`add`).
+    pub add: EffectSpec,
+    /// The effect in the model it replaces (`replaces`).
+    pub replaces: Option<EffectSpec>,
+}
+
+/// A scored candidate and its typed effect.
+type Listed = (Candidate, CandidateSpec);
+
 /// What one target of [`diagnose_with`] found, before the targets are joined.
 struct TargetOut {
     t: usize,
@@ -575,7 +590,7 @@ struct TargetOut {
     regions: Vec<Region>,
     warnings: Vec<Warning>,
     path: Vec<PathStep>,
-    candidates: Vec<Candidate>,
+    candidates: Vec<Listed>,
     unexplained: Vec<Unexplained>,
     unresolved: Vec<Unresolved>,
     noise_floor_um: Option<f64>,
@@ -589,6 +604,7 @@ fn one_target(
     norm: Norm,
     t: usize,
     opts: &Options,
+    effects: &[Effect],
     progress: &Sink,
     of: (usize, usize),
 ) -> Result<TargetOut> {
@@ -616,7 +632,7 @@ fn one_target(
         progress,
         forward: Default::default(),
     };
-    let st0 = State::new(&td, &opts.seed, &opts.adds)?;
+    let st0 = State::new(&td, &opts.seed, effects)?;
     let rms = st0.rms();
     let held_out_rms = st0.held_out_rms;
     let regions = crate::regions::worst_cells(data, &td.norm, t, &td.rows, &st0.resid);
@@ -695,18 +711,21 @@ pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
 /// [`diagnose`], telling `progress` what it is doing (each target's
 /// stages, [`Event::Diagnose`]).
 pub fn diagnose_with(data: &Dataset, opts: &Options, progress: &Sink) -> Result<Diagnosis> {
-    let effects = opts
-        .adds
-        .iter()
-        .map(|a| Effect::parse(a))
-        .collect::<Result<Vec<_>>>()?;
+    diagnose_specs(data, opts, progress).map(|(d, _)| d)
+}
+
+/// [`diagnose_with`], with each candidate's effect typed, in the order of
+/// [`Diagnosis::candidates`].
+pub fn diagnose_specs(
+    data: &Dataset,
+    opts: &Options,
+    progress: &Sink,
+) -> Result<(Diagnosis, Vec<CandidateSpec>)> {
+    let effects: Vec<Effect> = opts.adds.iter().cloned().map(Effect::new).collect();
     // Outliers first: left in, they would lift the noise floor and be
     // "explained" by some effect. (A seed that is not linear is refused
     // below, with its own message.)
-    let linear = matches!(
-        crate::model::Seed::parse(&opts.seed),
-        Ok(crate::model::Seed::Cubic19 | crate::model::Seed::Kinematic)
-    );
+    let linear = matches!(opts.seed, Seed::Cubic19 | Seed::Kinematic);
     let outliers = if opts.keep_outliers || !linear {
         Vec::new()
     } else {
@@ -715,8 +734,8 @@ pub fn diagnose_with(data: &Dataset, opts: &Options, progress: &Sink) -> Result<
     let cleaned = (!outliers.is_empty()).then(|| outliers::without(data, &outliers));
     let data = cleaned.as_ref().unwrap_or(data);
     let norm = Norm::from_data(data);
-    let model = std::iter::once(opts.seed.clone())
-        .chain(opts.adds.iter().cloned())
+    let model = std::iter::once(opts.seed.to_string())
+        .chain(opts.adds.iter().map(ToString::to_string))
         .collect::<Vec<_>>()
         .join(" + ");
     let mut warnings = design_warnings(data);
@@ -739,7 +758,7 @@ pub fn diagnose_with(data: &Dataset, opts: &Options, progress: &Sink) -> Result<
     let outs: Vec<Result<TargetOut>> = targets
         .par_iter()
         .enumerate()
-        .map(|(i, &t)| one_target(data, norm, t, opts, progress, (i + 1, nt)))
+        .map(|(i, &t)| one_target(data, norm, t, opts, &effects, progress, (i + 1, nt)))
         .collect();
     for out in outs {
         let o = out?;
@@ -762,7 +781,7 @@ pub fn diagnose_with(data: &Dataset, opts: &Options, progress: &Sink) -> Result<
     }
     // Significant (on the path) first, by step — so the best of the
     // starting model leads — then the rest by ΔBIC.
-    candidates.sort_by(|a, b| {
+    candidates.sort_by(|(a, _), (b, _)| {
         b.significant
             .cmp(&a.significant)
             .then(b.identifiable.cmp(&a.identifiable))
@@ -783,6 +802,7 @@ pub fn diagnose_with(data: &Dataset, opts: &Options, progress: &Sink) -> Result<
     // back as aliasing-suspect (systematic error the data show and the
     // sampling cannot attribute) *and* every target within 1.3× its floor
     // (a target without an estimate does not block it).
+    let (candidates, specs): (Vec<Candidate>, Vec<CandidateSpec>) = candidates.into_iter().unzip();
     let held_back: Vec<String> = candidates
         .iter()
         .filter(|c| c.held_back)
@@ -799,7 +819,7 @@ pub fn diagnose_with(data: &Dataset, opts: &Options, progress: &Sink) -> Result<
         warnings.extend(rejected_warnings(&candidates, &rms_um, &noise_floor_um));
     }
     dedup_warnings(&mut warnings);
-    Ok(Diagnosis {
+    let d = Diagnosis {
         model,
         rms_um,
         held_out_rms_um,
@@ -816,7 +836,8 @@ pub fn diagnose_with(data: &Dataset, opts: &Options, progress: &Sink) -> Result<
         outliers,
         hold_out,
         evidence: ev,
-    })
+    };
+    Ok((d, specs))
 }
 
 /// `rejected_candidate` warnings: with nothing significant, the best
@@ -919,6 +940,7 @@ pub struct TargetLibrary {
 /// same columns (nonlinear parameters — period, lag — come from our search).
 pub fn library(data: &Dataset, opts: &Options) -> Result<Vec<TargetLibrary>> {
     let norm = Norm::from_data(data);
+    let effects: Vec<Effect> = opts.adds.iter().cloned().map(Effect::new).collect();
     let mut out = Vec::new();
     for t in data.targets() {
         let (rows, y): (Vec<usize>, Vec<f64>) = data.measured(t).unzip();
@@ -934,7 +956,7 @@ pub fn library(data: &Dataset, opts: &Options) -> Result<Vec<TargetLibrary>> {
             progress: &Sink::none(),
             forward: Default::default(),
         };
-        let st = State::new(&td, &opts.seed, &opts.adds)?;
+        let st = State::new(&td, &opts.seed, &effects)?;
         let mut groups = Vec::new();
         for p in propose(&td, &st, &mut Evidence::default(), None) {
             let Ok(ff) = fwl(&td, &st, &p.spec, p.searched) else {
@@ -944,9 +966,9 @@ pub fn library(data: &Dataset, opts: &Options) -> Result<Vec<TargetLibrary>> {
                 continue;
             }
             groups.push(LibraryGroup {
-                add: p.spec,
-                effect: p.family,
-                axis: p.axis.map(|a| AXES[a].to_string()),
+                add: p.spec.to_string(),
+                effect: p.family(),
+                axis: p.axis().map(|a| AXES[a].to_string()),
                 columns: ff.partialled,
             });
         }

@@ -182,21 +182,21 @@ pub fn without(data: &Dataset, outliers: &[Outlier]) -> Dataset {
 /// design, too few points: [`lsq::solve_gram`](crate::linalg::lsq::solve_gram))
 /// the screen refits the data set by QR every round, which also words
 /// the errors.
-pub fn find(data: &Dataset, seed: &str, adds: &[Effect]) -> Result<Vec<Outlier>> {
-    let seed = match Seed::parse(seed)? {
-        s @ (Seed::Cubic19 | Seed::Kinematic) => s.to_string(),
-        _ => "cubic19".to_string(),
+pub fn find(data: &Dataset, seed: &Seed, adds: &[Effect]) -> Result<Vec<Outlier>> {
+    let seed = match seed {
+        s @ (Seed::Cubic19 | Seed::Kinematic) => *s,
+        _ => Seed::Cubic19,
     };
-    match find_by_gram(data, &seed, adds) {
+    match find_by_gram(data, seed, adds) {
         Some(found) => Ok(found),
-        None => find_by_refits(data, &seed, adds),
+        None => find_by_refits(data, seed, adds),
     }
 }
 
 /// [`find`]'s rounds by refitting the data set less the flagged readings
 /// (QR) each round — the screen where the normal equations are not to be
 /// trusted, and the words of its errors.
-fn find_by_refits(data: &Dataset, seed: &str, adds: &[Effect]) -> Result<Vec<Outlier>> {
+fn find_by_refits(data: &Dataset, seed: Seed, adds: &[Effect]) -> Result<Vec<Outlier>> {
     let mut found: Vec<Outlier> = Vec::new();
     for _ in 0..MAX_ROUNDS {
         let clean = without(data, &found);
@@ -219,7 +219,7 @@ fn find_by_refits(data: &Dataset, seed: &str, adds: &[Effect]) -> Result<Vec<Out
 
 /// [`find`]'s rounds from Gram sums; None when any round's normal
 /// equations are not to be trusted (the caller then refits by QR).
-fn find_by_gram(data: &Dataset, seed: &str, adds: &[Effect]) -> Option<Vec<Outlier>> {
+fn find_by_gram(data: &Dataset, seed: Seed, adds: &[Effect]) -> Option<Vec<Outlier>> {
     let design = Design::new(data, &Norm::from_data(data), seed, adds).ok()?;
     if design.targets.is_empty() {
         return None;
@@ -389,8 +389,8 @@ mod tests {
             ..Dataset::default()
         };
         let adds = [Effect::parse("periodic:target=ey,axis=y,period_mm=30").unwrap()];
-        let gram = find_by_gram(&d, "cubic19", &adds).expect("well conditioned");
-        let refits = find_by_refits(&d, "cubic19", &adds).unwrap();
+        let gram = find_by_gram(&d, Seed::Cubic19, &adds).expect("well conditioned");
+        let refits = find_by_refits(&d, Seed::Cubic19, &adds).unwrap();
         let key = |o: &Outlier| (o.target.clone(), o.row);
         assert_eq!(
             gram.iter().map(key).collect::<Vec<_>>(),
@@ -404,7 +404,7 @@ mod tests {
         for (t, r, _) in spikes {
             assert!(rows.contains(&(TARGETS[t].to_string(), r)), "{rows:?}");
         }
-        assert_eq!(find(&d, "cubic19", &adds).unwrap(), gram);
+        assert_eq!(find(&d, &Seed::Cubic19, &adds).unwrap(), gram);
     }
 
     #[test]
@@ -427,7 +427,7 @@ mod tests {
             line: (0..n).map(|i| i + 3).collect(),
             ..Dataset::default()
         };
-        let o = find(&d, "cubic19", &[]).unwrap();
+        let o = find(&d, &Seed::Cubic19, &[]).unwrap();
         assert_eq!(o.len(), 1, "{o:?}");
         assert_eq!(
             (o[0].row, o[0].line, o[0].target.as_str()),

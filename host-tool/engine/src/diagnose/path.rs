@@ -5,19 +5,20 @@
 use anyhow::Result;
 
 use crate::data::{AXES, TARGETS};
-use crate::effect::{same_effect, Effect, EffectSpec, Family, Target};
+use crate::effect::{Effect, EffectSpec, Family};
+use crate::model::Seed;
 
 use super::aliasing;
-use super::candidates::{propose, Proposal};
 use super::score::{score, Replacing, Scored};
+use super::search::{propose, researchable, Proposal};
 use super::smooth;
 use super::swap::swap_in;
 use super::target::{State, TargetData};
 use super::warnings::plausibility_warning;
 use super::{
-    Candidate, ComponentEvidence, Evidence, Options, PathStep, PeriodogramEvidence, Unresolved,
-    Warning, COMPETING_OVERLAP, CONFOUNDED_OVERLAP, DBIC_SIGNIFICANT, MAX_PATH_STEPS, MIN_GAP_DBIC,
-    MIN_HELD_OUT_GAIN,
+    Candidate, ComponentEvidence, Evidence, Listed, Options, PathStep, PeriodogramEvidence,
+    Unresolved, Warning, COMPETING_OVERLAP, CONFOUNDED_OVERLAP, DBIC_SIGNIFICANT, MAX_PATH_STEPS,
+    MIN_GAP_DBIC, MIN_HELD_OUT_GAIN,
 };
 use crate::linalg::basis::small_fit;
 use crate::linalg::basis::Basis;
@@ -29,8 +30,8 @@ const HELD_BACK: &str = " — held back, not added: aliasing-suspect (see aliasi
 /// held back by the gap rule: a competitor explains the same residual about
 /// as well, so the data cannot say which of them it is.
 pub(super) struct Blocked {
-    /// The blocked best (`add` string).
-    best: String,
+    /// The blocked best.
+    best: EffectSpec,
     /// The best with each competitor inside the gap rule's margin.
     pairs: Vec<Unresolved>,
     /// Candidates independent of the best and of every candidate competing
@@ -76,7 +77,7 @@ fn separating_measurement(a: &Candidate, b: &Candidate) -> String {
 pub(super) fn rank_target(
     td: &TargetData,
     st: &State,
-    seed_name: &str,
+    seed: &Seed,
     warnings: &mut Vec<Warning>,
     ev: &mut Evidence,
     only: Option<&[EffectSpec]>,
@@ -87,29 +88,24 @@ pub(super) fn rank_target(
     // searched again against the model without it. (Adding it twice fits
     // two lags of one temperature: a two-time-constant model of what is
     // one effect, and the path never ends.)
-    let own: Vec<(String, EffectSpec)> = st
+    let own: Vec<&EffectSpec> = st
         .adds
         .iter()
-        .filter_map(|a| {
-            let k: EffectSpec = a.parse().ok()?;
-            (Some(k.target) == Target::from_index(td.t)).then(|| (a.clone(), k))
-        })
+        .filter(|k| k.target().index() == td.t)
         .collect();
     let tn = TARGETS[td.t];
     td.progress.emit(&Event::Diagnose {
         target: tn,
         stage: DiagnoseStage::Searching {
-            seed: seed_name.to_string(),
+            seed: seed.to_string(),
             effects: st.adds.len(),
         },
     });
     let props: Vec<Proposal> = propose(td, st, ev, None)
         .into_iter()
         .filter(|p| {
-            let k = p.spec.parse::<EffectSpec>();
-            k.as_ref()
-                .map_or(true, |k| !own.iter().any(|(_, o)| o.same_effect(k)))
-                && only.is_none_or(|o| k.is_ok_and(|k| o.iter().any(|x| x.same_effect(&k))))
+            !own.iter().any(|o| o.same_effect(&p.spec))
+                && only.is_none_or(|o| o.iter().any(|x| x.same_effect(&p.spec)))
         })
         .collect();
     td.progress.emit(&Event::Diagnose {
@@ -118,42 +114,36 @@ pub(super) fn rank_target(
             candidates: props.len(),
         },
     });
-    let mut sc = score(td, st, props, seed_name, warnings, None);
-    for (old, key) in own.iter().filter(|_| only.is_none()) {
-        let searchable = match key.family {
-            Family::Periodic | Family::Drift | Family::HigherOrder => true,
-            Family::Thermal => td.data.t_s.is_some(),
-            Family::Reversal | Family::Abbe | Family::Squareness => false,
-        };
-        let Ok(old_effect) = Effect::parse(old) else {
-            continue;
-        };
-        if !searchable {
+    let mut sc = score(td, st, props, seed, warnings, None);
+    for old in own.iter().filter(|_| only.is_none()) {
+        if !researchable(old.family(), td) {
             continue;
         }
-        let rest: Vec<String> = st.adds.iter().filter(|a| *a != old).cloned().collect();
-        let Ok(reduced) = State::new(td, seed_name, &rest) else {
+        let old_features = old.features();
+        let rest: Vec<Effect> = st
+            .adds
+            .iter()
+            .filter(|a| a != old)
+            .cloned()
+            .map(Effect::new)
+            .collect();
+        let Ok(reduced) = State::new(td, seed, &rest) else {
             continue;
         };
-        let props: Vec<Proposal> = propose(td, &reduced, &mut Evidence::default(), Some(key))
+        let props: Vec<Proposal> = propose(td, &reduced, &mut Evidence::default(), Some(old))
             .into_iter()
-            .filter(|p| {
-                p.spec
-                    .parse::<EffectSpec>()
-                    .is_ok_and(|k| k.same_effect(key))
-                    && Effect::parse(&p.spec).is_ok_and(|e| e.features != old_effect.features)
-            })
+            .filter(|p| p.spec.same_effect(old) && p.spec.features() != old_features)
             .collect();
         let repl = Replacing {
             current: st,
-            old: old.clone(),
-            old_rank: old_effect.features.len(),
+            old: (*old).clone(),
+            old_rank: old_features.len(),
         };
         sc.extend(score(
             td,
             &reduced,
             props,
-            seed_name,
+            seed,
             &mut Vec::new(),
             Some(&repl),
         ));
@@ -311,7 +301,7 @@ pub(super) fn rank_target(
         // to correlate with it.
         let passes_alone = dbic < DBIC_SIGNIFICANT && gain >= MIN_HELD_OUT_GAIN;
         let smooth = (passes_alone && gap_ok && c.replaces.is_none())
-            .then(|| smooth::alternative(td, st, &c.add, sc[b].partialled.len()))
+            .then(|| smooth::alternative(td, st, &sc[b].spec, sc[b].partialled.len()))
             .flatten();
         let smooth_ok = smooth
             .as_ref()
@@ -438,10 +428,10 @@ fn blocking(sc: &[Scored], top: &[usize], spans: &[Basis], n: usize) -> Blocked 
                 .iter()
                 .all(|&jj| spans[jj].overlap(&bi) < COMPETING_OVERLAP)
         })
-        .filter_map(|i| sc[i].cand.add.parse::<EffectSpec>().ok())
+        .map(|i| sc[i].spec.clone())
         .collect();
     Blocked {
-        best: b.add.clone(),
+        best: sc[top[0]].spec.clone(),
         pairs,
         independent,
     }
@@ -464,7 +454,7 @@ pub(super) fn follow(
     ev: &mut Evidence,
     path: &mut Vec<PathStep>,
     unresolved: &mut Vec<Unresolved>,
-) -> Result<(Vec<Candidate>, State, bool)> {
+) -> Result<(Vec<Listed>, State, bool)> {
     let t = td.t;
     let tn = TARGETS[t].to_string();
     let (mut cur, mut blocked) = rank_target(td, &st0, &opts.seed, warnings, ev, None);
@@ -473,8 +463,8 @@ pub(super) fn follow(
     // step takes the place of its stale first-step entry (the same
     // effect) with the scores of the step that added it.
     let mut st = st0;
-    let mut list: Option<Vec<Candidate>> = None;
-    let mut on_path: Vec<(usize, String)> = Vec::new();
+    let mut list: Option<Vec<Listed>> = None;
+    let mut on_path: Vec<(usize, EffectSpec)> = Vec::new();
     for k in 1..=MAX_PATH_STEPS {
         if !cur.iter().any(|s| s.cand.significant) {
             // A confounded best does not end the path: an effect
@@ -484,7 +474,7 @@ pub(super) fn follow(
                 .and_then(|b| past_confounded(td, &st, &opts.seed, b))
             {
                 Some(alt) => {
-                    cur.retain(|s| !same_effect(&s.cand.add, &alt.cand.add));
+                    cur.retain(|s| !s.spec.same_effect(&alt.spec));
                     cur.insert(0, alt);
                 }
                 None => break,
@@ -493,10 +483,10 @@ pub(super) fn follow(
         let Some(bi) = cur.iter().position(|s| s.cand.significant) else {
             break;
         };
-        let best = &cur[bi].cand;
         let mut adds = st.adds.clone();
-        swap_in(&mut adds, &best.add, best.replaces.as_deref());
-        let next = State::new(td, &opts.seed, &adds)?;
+        swap_in(&mut adds, &cur[bi].spec, cur[bi].replaces.as_ref());
+        let effects: Vec<Effect> = adds.into_iter().map(Effect::new).collect();
+        let next = State::new(td, &opts.seed, &effects)?;
         if next.held_out_rms.is_nan() || next.held_out_rms >= st.held_out_rms {
             // Cannot happen with the same blocks, but a candidate that
             // does not lower the refit's held-out RMS is not added, and
@@ -508,7 +498,7 @@ pub(super) fn follow(
                 .push_str(" — but the refit's block-held-out RMS did not fall, so it is not added");
             break;
         }
-        let mut best = cur.remove(bi).cand;
+        let (mut best, typed) = cur.remove(bi).listed();
         best.step = Some(k);
         path.push(PathStep {
             target: tn.clone(),
@@ -519,25 +509,20 @@ pub(super) fn follow(
             replaces: best.replaces.clone(),
         });
         warnings.extend(plausibility_warning(&best));
-        on_path.push((k, best.add.clone()));
+        on_path.push((k, typed.add.clone()));
         match list.as_mut() {
             None => {
-                let mut l = vec![best];
-                l.extend(cur.drain(..).map(|s| s.cand));
+                let mut l = vec![(best, typed)];
+                l.extend(cur.drain(..).map(Scored::listed));
                 list = Some(l);
             }
             Some(l) => {
-                let key = best.add.parse::<EffectSpec>().ok();
-                let stale = l.iter().position(|c| {
-                    !c.on_path()
-                        && key
-                            .as_ref()
-                            .zip(c.add.parse::<EffectSpec>().ok())
-                            .is_some_and(|(a, b)| a.same_effect(&b))
-                });
+                let stale = l
+                    .iter()
+                    .position(|(c, s)| !c.on_path() && typed.add.same_effect(&s.add));
                 match stale {
-                    Some(i) => l[i] = best,
-                    None => l.push(best),
+                    Some(i) => l[i] = (best, typed),
+                    None => l.push((best, typed)),
                 }
             }
         }
@@ -545,7 +530,10 @@ pub(super) fn follow(
             target: TARGETS[t],
             stage: DiagnoseStage::Added {
                 step: k,
-                add: on_path.last().map_or("", |(_, a)| a.as_str()).to_string(),
+                add: on_path
+                    .last()
+                    .map(|(_, a)| a.to_string())
+                    .unwrap_or_default(),
                 held_out_rms_um: next.held_out_rms,
             },
         });
@@ -577,9 +565,9 @@ pub(super) fn follow(
     // list is the starting model's): stale flags are cleared, the final
     // ones take the place of their stale entries.
     if let Some(l) = list.as_mut() {
-        for c in l.iter_mut().filter(|c| !c.on_path() && c.held_back) {
-            match cur.iter().find(|s| s.cand.add == c.add) {
-                Some(f) => *c = f.cand.clone(),
+        for (c, s) in l.iter_mut().filter(|(c, _)| !c.on_path() && c.held_back) {
+            match cur.iter().find(|f| f.spec == s.add) {
+                Some(f) => (*c, *s) = f.to_listed(),
                 None => {
                     c.held_back = false;
                     c.evidence = c.evidence.replace(HELD_BACK, "");
@@ -587,17 +575,12 @@ pub(super) fn follow(
             }
         }
         for f in cur.iter().filter(|s| s.cand.held_back) {
-            let key = f.cand.add.parse::<EffectSpec>().ok();
-            let stale = l.iter().position(|c| {
-                !c.on_path()
-                    && key
-                        .as_ref()
-                        .zip(c.add.parse::<EffectSpec>().ok())
-                        .is_some_and(|(a, b)| a.same_effect(&b))
-            });
+            let stale = l
+                .iter()
+                .position(|(c, s)| !c.on_path() && f.spec.same_effect(&s.add));
             match stale {
-                Some(i) => l[i] = f.cand.clone(),
-                None => l.push(f.cand.clone()),
+                Some(i) => l[i] = f.to_listed(),
+                None => l.push(f.to_listed()),
             }
         }
     }
@@ -607,14 +590,14 @@ pub(super) fn follow(
         unresolved.extend(b.pairs);
     }
     let first = list.is_none();
-    let candidates = list.unwrap_or_else(|| cur.into_iter().map(|s| s.cand).collect());
+    let candidates = list.unwrap_or_else(|| cur.into_iter().map(Scored::listed).collect());
     let fit = (!on_path.is_empty()).then(|| small_fit(&st.cols, &td.y));
     for (k, add) in &on_path {
         if let Some(values) = fit.as_ref().and_then(|f| st.component(f, add)) {
             ev.components.push(ComponentEvidence {
                 target: t,
                 step: *k,
-                add: add.clone(),
+                add: add.to_string(),
                 values,
             });
         }
@@ -627,13 +610,13 @@ pub(super) fn follow(
 /// group shares one signal, whichever of them it is; left in the residual it
 /// would dilute every other effect's ΔBIC and gain). Returns the significant
 /// best of them, if any — to be added to the model *without* the stand-in.
-fn past_confounded(td: &TargetData, st: &State, seed: &str, b: &Blocked) -> Option<Scored> {
+fn past_confounded(td: &TargetData, st: &State, seed: &Seed, b: &Blocked) -> Option<Scored> {
     if b.independent.is_empty() {
         return None;
     }
-    let mut adds = st.adds.clone();
-    adds.push(b.best.clone());
-    let proxy = State::new(td, seed, &adds).ok()?;
+    let mut effects = st.effects();
+    effects.push(Effect::new(b.best.clone()));
+    let proxy = State::new(td, seed, &effects).ok()?;
     let (sc, _) = rank_target(
         td,
         &proxy,

@@ -1,12 +1,13 @@
 //! A candidate's physical parameter (CTE, backlash, amplitude, angle,
-//! drift rate, …) with its 95 % interval and a plausibility check, and the
-//! covariance that takes a searched thermal lag's own uncertainty into
+//! drift rate, …) with its 95 % interval and a plausibility check — read
+//! off the fit as its family describes it (`effect::PhysicalParam`) — and
+//! the covariance that takes a searched thermal lag's own uncertainty into
 //! account.
 
-use crate::effect::{Effect, Family};
+use crate::effect::{EffectSpec, Reading, Scale};
 use crate::features::Feature;
 
-use super::candidates::Proposal;
+use super::search::Proposal;
 use super::target::{FwlFit, State, TargetData};
 use super::Physical;
 use crate::linalg::basis::small_fit;
@@ -22,29 +23,34 @@ pub(super) fn param_key(ph: &Physical) -> String {
     format!("{}_{unit}", ph.name)
 }
 
+/// The physical parameter of proposal `p` fitted as `ff` (residual
+/// variance `sigma2`), as its family describes it
+/// ([`crate::effect::PhysicalParam`]): the value, its 95 % interval and
+/// whether it is plausible.
 pub(super) fn physical(
     td: &TargetData,
     p: &Proposal,
     ff: &FwlFit,
     sigma2: f64,
 ) -> Option<Physical> {
+    let param = p.spec.physical()?;
     let beta = &ff.fit.beta;
     let cov = |i: usize, j: usize| sigma2 * ff.fit.xtx_inv[(i, j)];
-    let lin = |scale: f64, name: &str, unit: &str, max_abs: f64, expected: &str| {
-        let v = beta[0] * scale;
-        let se = cov(0, 0).max(0.0).sqrt() * scale.abs();
-        Some(Physical {
-            name: name.into(),
-            unit: unit.into(),
-            value: v,
-            ci95: [v - 1.96 * se, v + 1.96 * se],
-            plausible: v.abs() <= max_abs,
-            expected: expected.into(),
-        })
-    };
-    let half = |a: usize| td.norm.half_span_mm[a];
-    match p.family {
-        Family::Periodic => {
+    let (value, ci95, plausible) = match param.reading {
+        Reading::Linear { scale, max_abs } => {
+            let scale = match scale {
+                Scale::Fixed(k) => k,
+                Scale::PerMetreAlong(a) => 1000.0 / td.norm.half_span_mm[a.index()],
+            };
+            let v = beta[0] * scale;
+            let se = cov(0, 0).max(0.0).sqrt() * scale.abs();
+            (v, [v - 1.96 * se, v + 1.96 * se], v.abs() <= max_abs)
+        }
+        Reading::Amplitude {
+            period_mm,
+            periods_mm,
+            max_um,
+        } => {
             let (a, b) = (beta[0], beta[1]);
             let amp = (a * a + b * b).sqrt();
             let se = if amp > 0.0 {
@@ -54,36 +60,10 @@ pub(super) fn physical(
             } else {
                 0.0
             };
-            let e = Effect::parse(&p.spec).ok()?;
-            let period = match e.features.first()? {
-                Feature::Periodic { period_mm, .. } => *period_mm,
-                _ => return None,
-            };
-            Some(Physical {
-                name: "amplitude".into(),
-                unit: "µm".into(),
-                value: amp,
-                ci95: [amp - 1.96 * se, amp + 1.96 * se],
-                plausible: (0.5..=100.0).contains(&period) && amp <= 20.0,
-                expected: "periods 0.5–100 mm (leads 2–40 mm), amplitude up to ~8 µm".into(),
-            })
+            let plausible = (periods_mm[0]..=periods_mm[1]).contains(&period_mm) && amp <= max_um;
+            (amp, [amp - 1.96 * se, amp + 1.96 * se], plausible)
         }
-        Family::Thermal => match p.axis {
-            Some(a) => lin(
-                1000.0 / half(a),
-                "cte",
-                "µm/m/K",
-                30.0,
-                "|CTE| ≤ 30 µm/m/K (steel 11.5, cast iron 10, aluminium 23)",
-            ),
-            None => lin(1.0, "offset_per_kelvin", "µm/K", 20.0, "≤ 20 µm/K"),
-        },
-        Family::Reversal => lin(2.0, "backlash", "µm", 60.0, "backlash 1–50 µm"),
-        Family::Abbe => {
-            let scale = 1000.0;
-            lin(scale, "angle", "µrad", 300.0, "angular errors 10–60 µrad")
-        }
-        Family::Drift => {
+        Reading::MeanRate { max_abs } => {
             // The mean rate over the session, (f(t_end) − f(t_start)) / span,
             // a linear combination of every power's coefficient (the linear
             // coefficient alone is not the rate once t² or t³ is in).
@@ -107,26 +87,9 @@ pub(super) fn physical(
                 .map(|(i, j)| g[i] * g[j] * cov(i, j))
                 .sum();
             let se = var.max(0.0).sqrt();
-            Some(Physical {
-                name: "rate".into(),
-                unit: "µm/h".into(),
-                value: v,
-                ci95: [v - 1.96 * se, v + 1.96 * se],
-                plausible: v.abs() <= 30.0,
-                expected: "≤ 30 µm/h (mean over the session)".into(),
-            })
+            (v, [v - 1.96 * se, v + 1.96 * se], v.abs() <= max_abs)
         }
-        Family::Squareness => {
-            let a = p.axis?;
-            lin(
-                1000.0 / half(a),
-                "angle",
-                "µrad",
-                300.0,
-                "squareness 20–40 µrad",
-            )
-        }
-        Family::HigherOrder => {
+        Reading::ComponentRms => {
             let n = td.rows.len() as f64;
             let comp: f64 = (0..td.rows.len())
                 .map(|r| {
@@ -140,16 +103,17 @@ pub(super) fn physical(
             // interval was [amp, amp] before: a zero-width interval is a
             // claim of certainty the data do not give.)
             let se = (sigma2.max(0.0) / n).sqrt();
-            Some(Physical {
-                name: "component_rms".into(),
-                unit: "µm".into(),
-                value: amp,
-                ci95: [(amp - 1.96 * se).max(0.0), amp + 1.96 * se],
-                plausible: true,
-                expected: "any".into(),
-            })
+            (amp, [(amp - 1.96 * se).max(0.0), amp + 1.96 * se], true)
         }
-    }
+    };
+    Some(Physical {
+        name: param.name.into(),
+        unit: param.unit.into(),
+        value,
+        ci95,
+        plausible,
+        expected: param.expected.into(),
+    })
 }
 
 /// (XᵀX)⁻¹ of a lagged thermal candidate's coefficients with the lag's own
@@ -162,24 +126,24 @@ pub(super) fn physical(
 pub(super) fn lag_aware_xtx_inv(
     td: &TargetData,
     st: &State,
-    spec: &str,
+    spec: &EffectSpec,
     ff: &FwlFit,
 ) -> Option<nalgebra::DMatrix<f64>> {
-    let e = Effect::parse(spec).ok()?;
+    let features = spec.features();
     // A multi-sensor effect has a lag per channel: the one-lag derivative
     // below does not apply (its intervals take the lags as known).
-    if e.features.iter().any(|f| {
-        matches!((f, e.features.first()), (Feature::Thermal { channel: a, .. }, Some(Feature::Thermal { channel: b, .. })) if a != b)
+    if features.iter().any(|f| {
+        matches!((f, features.first()), (Feature::Thermal { channel: a, .. }, Some(Feature::Thermal { channel: b, .. })) if a != b)
     }) {
         return None;
     }
-    let lag = match e.features.first()? {
+    let lag = match features.first()? {
         Feature::Thermal { lag_s, .. } if *lag_s > 0.0 => *lag_s,
         _ => return None,
     };
     let h = (0.02 * lag).max(1.0);
     let cols_at = |l: f64| -> Option<Vec<Vec<f64>>> {
-        e.features
+        features
             .iter()
             .map(|f| match f {
                 Feature::Thermal {

@@ -5,25 +5,51 @@
 use std::collections::BTreeMap;
 
 use crate::data::{AXES, TARGETS};
-use crate::effect::{Effect, Family};
+use crate::effect::EffectSpec;
 use crate::features::Feature;
+use crate::model::Seed;
 
-use super::candidates::Proposal;
 use super::physical::{lag_aware_xtx_inv, param_key, physical};
+use super::search::Proposal;
 use super::target::{block_rms, forward_blocks, forward_rms, fwl_many, State, TargetData};
-use super::{Candidate, HoldOutKind, Warning, IN_SPAN_SHARE};
+use super::{Candidate, CandidateSpec, HoldOutKind, Listed, Warning, IN_SPAN_SHARE};
 
 /// The scored candidates of one target, with the columns needed for overlaps.
 pub(super) struct Scored {
     pub(super) cand: Candidate,
+    /// Its effect (`cand.add`), typed.
+    pub(super) spec: EffectSpec,
+    /// The effect it replaces (`cand.replaces`), typed.
+    pub(super) replaces: Option<EffectSpec>,
     pub(super) partialled: Vec<Vec<f64>>,
+}
+
+impl Scored {
+    /// The candidate and its typed effect, for the target's list (the
+    /// columns are not kept).
+    pub(super) fn listed(self) -> Listed {
+        let spec = CandidateSpec {
+            add: self.spec,
+            replaces: self.replaces,
+        };
+        (self.cand, spec)
+    }
+
+    /// [`Scored::listed`] of a copy.
+    pub(super) fn to_listed(&self) -> Listed {
+        let spec = CandidateSpec {
+            add: self.spec.clone(),
+            replaces: self.replaces.clone(),
+        };
+        (self.cand.clone(), spec)
+    }
 }
 
 /// A replacement's comparison: `st` passed to `score` is the model without
 /// the old effect; ΔBIC and gain are taken against the current model.
 pub(super) struct Replacing<'a> {
     pub(super) current: &'a State,
-    pub(super) old: String,
+    pub(super) old: EffectSpec,
     /// Columns of the old effect (its rank in the current model).
     pub(super) old_rank: usize,
 }
@@ -36,7 +62,7 @@ pub(super) fn score(
     td: &TargetData,
     st: &State,
     props: Vec<Proposal>,
-    seed_name: &str,
+    seed: &Seed,
     warnings: &mut Vec<Warning>,
     repl: Option<&Replacing>,
 ) -> Vec<Scored> {
@@ -52,10 +78,8 @@ pub(super) fn score(
         if chunk.is_empty() {
             break;
         }
-        let specs: Vec<(&str, usize)> = chunk
-            .iter()
-            .map(|p| (p.spec.as_str(), p.searched))
-            .collect();
+        let specs: Vec<(&EffectSpec, usize)> =
+            chunk.iter().map(|p| (&p.spec, p.searched)).collect();
         let fits = fwl_many(td, st, &specs);
         for (p, ff) in chunk.into_iter().zip(fits) {
             let Ok(mut ff) = ff else {
@@ -72,35 +96,19 @@ pub(super) fn score(
                 }
                 None => st.held_out_rms,
             };
-            let mut params = BTreeMap::new();
-            if let Ok(e) = Effect::parse(&p.spec) {
-                match e.features.first() {
-                    Some(Feature::Periodic { period_mm, .. }) => {
-                        params.insert("period_mm".into(), *period_mm);
-                        params.insert("harmonics".into(), (e.features.len() / 2) as f64);
-                    }
-                    Some(Feature::Thermal { lag_s, .. }) => {
-                        params.insert("lag_s".into(), *lag_s);
-                    }
-                    Some(Feature::Drift { .. }) => {
-                        params.insert("order".into(), e.features.len() as f64);
-                    }
-                    Some(Feature::Monomial { exp }) if p.family == Family::HigherOrder => {
-                        params.insert(
-                            "degree".into(),
-                            f64::from(exp.iter().sum::<u8>() + e.features.len() as u8 - 1),
-                        );
-                    }
-                    _ => {}
-                }
-            }
+            let params: BTreeMap<String, f64> = p
+                .spec
+                .searched_params()
+                .into_iter()
+                .map(|(k, v)| (k.to_string(), v))
+                .collect();
             let base = Candidate {
-                effect: p.family,
+                effect: p.family(),
                 target: tn.to_string(),
-                axis: p.axis.map(|a| AXES[a].to_string()),
-                channel: p.channel.clone(),
+                axis: p.axis().map(|a| AXES[a].to_string()),
+                channel: p.spec.follows(),
                 params,
-                add: p.spec.clone(),
+                add: p.spec.to_string(),
                 held_out_rms_um_after: None,
                 held_out_rms_um_before: None,
                 hold_out: HoldOutKind::Blocks,
@@ -113,7 +121,7 @@ pub(super) fn score(
                 significant: false,
                 physical: None,
                 confounded_with: Vec::new(),
-                replaces: repl.map(|r| r.old.clone()),
+                replaces: repl.map(|r| r.old.to_string()),
                 step: None,
                 aliasing: None,
                 held_back: false,
@@ -122,24 +130,18 @@ pub(super) fn score(
                 if repl.is_some() {
                     continue;
                 }
-                let cols = Effect::parse(&p.spec)
-                    .map(|e| {
-                        e.features
-                            .iter()
-                            .map(ToString::to_string)
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    })
-                    .unwrap_or_default();
+                let cols = p
+                    .spec
+                    .features()
+                    .iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ");
                 let detail = format!(
-                "{seed_name} already contains the column(s) {cols} for {tn} (up to a combination of its terms), so `{}` cannot be told from it{}",
-                p.spec,
-                match p.family {
-                    Family::Abbe => "; measure with two or more tool lengths (tool_mm) to separate an Abbe error",
-                    Family::Squareness => "; use a seed without linear cross terms (kinematic) to estimate squareness",
-                    _ => "",
-                }
-            );
+                    "{seed} already contains the column(s) {cols} for {tn} (up to a combination of its terms), so `{}` cannot be told from it{}",
+                    p.spec,
+                    p.family().info().in_span_hint
+                );
                 warnings.push(Warning {
                     code: "in_model_span".into(),
                     detail: detail.clone(),
@@ -149,6 +151,8 @@ pub(super) fn score(
                         evidence: detail,
                         ..base
                     },
+                    spec: p.spec,
+                    replaces: repl.map(|r| r.old.clone()),
                     partialled: ff.partialled,
                 });
                 continue;
@@ -158,7 +162,10 @@ pub(super) fn score(
             // any smooth curve in a block hold-out, but cannot say where a
             // cool-down or the next day goes; a temperature that causes the
             // error can. The other families keep the block hold-out.
-            let forward = matches!(p.family, Family::Thermal | Family::Drift)
+            let forward = p
+                .family()
+                .info()
+                .time_dependent
                 .then(|| forward_blocks(td))
                 .flatten();
             let (ref_held, held, kind) = match &forward {
@@ -226,9 +233,9 @@ pub(super) fn score(
             }
             // A multi-sensor thermal effect: every sensor's µm/K (the physical
             // parameter above is the first one's).
-            if let Ok(e) = Effect::parse(&p.spec) {
-                let per: Vec<String> = e
-                    .features
+            {
+                let features = p.spec.features();
+                let per: Vec<String> = features
                     .iter()
                     .zip(&ff.fit.beta)
                     .filter_map(|(f, b)| match f {
@@ -240,7 +247,7 @@ pub(super) fn score(
                         _ => None,
                     })
                     .collect();
-                if per.len() > 1 && per.len() == e.features.len() {
+                if per.len() > 1 && per.len() == features.len() {
                     evidence.push_str(&format!("; per sensor: {}", per.join(", ")));
                 }
             }
@@ -263,6 +270,8 @@ pub(super) fn score(
                     physical: phys,
                     ..base
                 },
+                spec: p.spec,
+                replaces: repl.map(|r| r.old.clone()),
                 partialled: ff.partialled,
             });
         }

@@ -17,7 +17,7 @@
 //! position and beats it clearly; a smooth misfit does not, and is then
 //! reported as smooth error that no named effect explains.
 
-use crate::effect::Effect;
+use crate::effect::EffectSpec;
 use crate::features::Feature;
 
 use super::target::{State, TargetData};
@@ -42,10 +42,10 @@ const DEGREES: (u8, u8) = (4, 5);
 pub(super) fn alternative(
     td: &TargetData,
     st: &State,
-    add: &str,
+    add: &EffectSpec,
     k: usize,
 ) -> Option<SmoothAlternative> {
-    let own: Vec<Feature> = Effect::parse(add).map(|e| e.features).unwrap_or_default();
+    let own: Vec<Feature> = add.features();
     let axes = td.data.varying_axes();
     if axes.is_empty() || k == 0 {
         return None;

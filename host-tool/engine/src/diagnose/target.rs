@@ -8,8 +8,9 @@ use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
 
 use crate::data::{Dataset, TARGETS};
-use crate::effect::Effect;
-use crate::features::{seed_monomials, Feature, Norm};
+use crate::effect::{Effect, EffectSpec};
+use crate::features::{Feature, Norm};
+use crate::model::Seed;
 use crate::regions::bin_index;
 
 use crate::linalg::basis::{self, small_fit, Basis, HoldOut};
@@ -38,11 +39,13 @@ impl TargetData<'_> {
 
 /// The fitted current model of one target.
 pub(super) struct State {
-    pub(super) adds: Vec<String>,
-    /// The model's columns, and the `add` string each belongs to (None for
-    /// the seed's): for the fitted component of each effect in the report.
+    /// The effects in the model (on every target).
+    pub(super) adds: Vec<EffectSpec>,
+    /// The model's columns, and the effect (index into `adds`) each
+    /// belongs to (None for the seed's): for the fitted component of each
+    /// effect in the report.
     pub(super) cols: std::sync::Arc<Vec<Vec<f64>>>,
-    pub(super) owner: Vec<Option<String>>,
+    pub(super) owner: Vec<Option<usize>>,
     pub(super) basis: Basis,
     pub(super) resid: Vec<f64>,
     pub(super) rss: f64,
@@ -51,22 +54,22 @@ pub(super) struct State {
 }
 
 impl State {
-    pub(super) fn new(td: &TargetData, seed: &str, adds: &[String]) -> Result<State> {
+    /// The model `seed` plus `effects` fitted to the target.
+    pub(super) fn new(td: &TargetData, seed: &Seed, effects: &[Effect]) -> Result<State> {
         // The seed's terms as `fit` has them: none in an axis held at one
         // position (those would be zero columns).
         let axes = td.data.varying_axes();
         let mut cols = Vec::new();
         let mut owner = Vec::new();
-        for exp in seed_monomials(seed, td.t, &axes)? {
+        for exp in seed.monomials(td.t, &axes)? {
             cols.push(td.col(&Feature::Monomial { exp })?);
             owner.push(None);
         }
-        for a in adds {
-            let e = Effect::parse(a)?;
-            if e.target == td.t {
+        for (i, e) in effects.iter().enumerate() {
+            if e.target() == td.t {
                 for f in &e.features {
                     cols.push(td.col(f)?);
-                    owner.push(Some(a.clone()));
+                    owner.push(Some(i));
                 }
             }
         }
@@ -88,7 +91,7 @@ impl State {
         let holdout = HoldOut::new(cols.clone(), &td.y, &td.fold, td.nfolds);
         let held_out_rms = holdout.rms(&[]).unwrap_or(f64::NAN);
         Ok(State {
-            adds: adds.to_vec(),
+            adds: effects.iter().map(|e| e.spec.clone()).collect(),
             cols,
             owner,
             basis,
@@ -103,12 +106,17 @@ impl State {
         (self.rss / self.resid.len() as f64).sqrt()
     }
 
+    /// The effects in the model, with their columns.
+    pub(super) fn effects(&self) -> Vec<Effect> {
+        self.adds.iter().cloned().map(Effect::new).collect()
+    }
+
     /// The fitted component of effect `add` in this model (its columns times
     /// their coefficients in `fit`, the model's full least-squares fit), per
     /// row.
-    pub(super) fn component(&self, fit: &basis::SmallFit, add: &str) -> Option<Vec<f64>> {
+    pub(super) fn component(&self, fit: &basis::SmallFit, add: &EffectSpec) -> Option<Vec<f64>> {
         let idx: Vec<usize> = (0..self.cols.len())
-            .filter(|&i| self.owner[i].as_deref() == Some(add))
+            .filter(|&i| self.owner[i].is_some_and(|k| self.adds[k] == *add))
             .collect();
         if idx.is_empty() {
             return None;
@@ -130,7 +138,12 @@ pub(super) struct FwlFit {
     pub(super) dbic: f64,
 }
 
-pub(super) fn fwl(td: &TargetData, st: &State, spec: &str, searched: usize) -> Result<FwlFit> {
+pub(super) fn fwl(
+    td: &TargetData,
+    st: &State,
+    spec: &EffectSpec,
+    searched: usize,
+) -> Result<FwlFit> {
     fwl_many(td, st, &[(spec, searched)])
         .pop()
         .expect("one result per spec")
@@ -141,14 +154,11 @@ pub(super) fn fwl(td: &TargetData, st: &State, spec: &str, searched: usize) -> R
 pub(super) fn fwl_many(
     td: &TargetData,
     st: &State,
-    specs: &[(&str, usize)],
+    specs: &[(&EffectSpec, usize)],
 ) -> Vec<Result<FwlFit>> {
     let cols: Vec<Result<Vec<Vec<f64>>>> = specs
         .iter()
-        .map(|(spec, _)| {
-            let e = Effect::parse(spec)?;
-            e.features.iter().map(|f| td.col(f)).collect()
-        })
+        .map(|(spec, _)| spec.features().iter().map(|f| td.col(f)).collect())
         .collect();
     let refs: Vec<&[f64]> = cols.iter().flatten().flatten().map(Vec::as_slice).collect();
     let mut parts = st.basis.residuals(&refs).into_iter();
@@ -193,19 +203,18 @@ const RSS_GROUP_COLS: usize = 6;
 /// (as [`fwl`]'s `fit.rss`), their columns projected on the model in
 /// groups — one pass over the basis per group instead of one per spec;
 /// +∞ for a spec whose columns the data cannot give.
-pub(super) fn rss_many(td: &TargetData, st: &State, specs: &[String]) -> Vec<f64> {
+pub(super) fn rss_many(td: &TargetData, st: &State, specs: &[EffectSpec]) -> Vec<f64> {
     let mut out = Vec::with_capacity(specs.len());
     let mut i = 0;
     while i < specs.len() {
         let mut group: Vec<Option<Vec<Vec<f64>>>> = Vec::new();
         let mut ncols = 0;
         while i < specs.len() && (group.is_empty() || ncols < RSS_GROUP_COLS) {
-            let cols = Effect::parse(&specs[i]).ok().and_then(|e| {
-                e.features
-                    .iter()
-                    .map(|f| td.col(f).ok())
-                    .collect::<Option<Vec<_>>>()
-            });
+            let cols = specs[i]
+                .features()
+                .iter()
+                .map(|f| td.col(f).ok())
+                .collect::<Option<Vec<_>>>();
             ncols += cols.as_ref().map_or(0, Vec::len);
             group.push(cols);
             i += 1;
@@ -459,11 +468,11 @@ mod tests {
             progress: &crate::progress::Sink::none(),
             forward: Default::default(),
         };
-        let st = State::new(&td, "cubic19", &[]).unwrap();
+        let st = State::new(&td, &Seed::Cubic19, &[]).unwrap();
         assert!(st.held_out_rms.is_finite());
         let blocks = forward_blocks(&td).unwrap();
         let gains = |spec: &str| {
-            let ff = fwl(&td, &st, spec, 0).unwrap();
+            let ff = fwl(&td, &st, &spec.parse().unwrap(), 0).unwrap();
             let block = 1.0 - st.holdout.rms(&ff.cols).unwrap() / st.held_out_rms;
             let (before, after) = forward_rms(blocks, &st.resid, &ff.partialled);
             (block, 1.0 - after / before)

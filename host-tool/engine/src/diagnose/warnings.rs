@@ -4,12 +4,11 @@
 //! noise floor.
 
 use crate::data::{Dataset, AXES};
-use crate::effect::Family;
 use crate::features::Norm;
 use crate::lines::densest_lines;
 
-use super::candidates::fmt_num;
 use super::noise::NoiseFloor;
+use super::search::fmt_num;
 use super::{Candidate, Warning, ABOVE_NOISE_RATIO, ALIASING_SPACING_MM, CONSTANT_TEMPERATURE_K};
 
 /// The `implausible_parameter` warning for an effect the diagnosis accepts
@@ -18,15 +17,7 @@ use super::{Candidate, Warning, ABOVE_NOISE_RATIO, ALIASING_SPACING_MM, CONSTANT
 /// the range, and what to check.
 pub(super) fn plausibility_warning(c: &Candidate) -> Option<Warning> {
     let ph = c.physical.as_ref().filter(|p| !p.plausible)?;
-    let check = match c.effect {
-        Family::Thermal => "check the sensor: one that sees only part of the structure's temperature change (placed on a cover, in the air stream, far from the screw nut or scale) makes the apparent coefficient too large; put it on the part that grows or add a second sensor there",
-        Family::Periodic => "check the period against the screw lead and the scale pitch, and the amplitude against the screw's class",
-        Family::Reversal => "check the drive (a loose coupling or a worn nut) and the sign of the dir column",
-        Family::Abbe => "check tool_mm (unit mm, the arm from the measuring line) and whether the tool length changed between passes for another reason",
-        Family::Drift => "check that t_s is in seconds and whether a temperature channel explains the drift",
-        Family::Squareness => "check that the error and position columns belong to the axes they name",
-        Family::HigherOrder => "check the data",
-    };
+    let check = c.effect.info().check;
     Some(Warning {
         code: "implausible_parameter".into(),
         detail: format!(

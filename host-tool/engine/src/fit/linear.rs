@@ -13,25 +13,26 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::data::{Dataset, AXES, TARGETS};
 use crate::effect::Effect;
-use crate::features::{feature_uses_axis, seed_monomials, Feature, Norm};
+use crate::features::{feature_uses_axis, Feature, Norm};
 use crate::holdout;
 use crate::linalg::lsq::{self, Gram, LsqError, LsqSolution, ILL_CONDITIONED};
-use crate::model::{FitStats, FittedModel, LinearModel, LinearOutput};
+use crate::model::{FitStats, FittedModel, LinearModel, LinearOutput, Seed};
 use crate::warning::Warning;
 
 /// The features of `seed` (+ the effects for `target`) for target `target`
 /// on data with the given axes.
 pub fn features_for(
-    seed: &str,
+    seed: Seed,
     adds: &[Effect],
     target: usize,
     axes: &[usize],
 ) -> Result<Vec<Feature>> {
-    let mut f: Vec<Feature> = seed_monomials(seed, target, axes)?
+    let mut f: Vec<Feature> = seed
+        .monomials(target, axes)?
         .into_iter()
         .map(|exp| Feature::Monomial { exp })
         .collect();
-    for e in adds.iter().filter(|e| e.target == target) {
+    for e in adds.iter().filter(|e| e.target() == target) {
         f.extend(e.features.iter().cloned());
     }
     Ok(f)
@@ -197,7 +198,7 @@ pub struct DesignTarget {
 impl Design {
     /// The design of `seed` + `adds` for every target of `data` with at
     /// least one value, on `data`'s own moving axes (as [`fit`] chooses).
-    pub fn new(data: &Dataset, norm: &Norm, seed: &str, adds: &[Effect]) -> Result<Design> {
+    pub fn new(data: &Dataset, norm: &Norm, seed: Seed, adds: &[Effect]) -> Result<Design> {
         let axes = data.varying_axes();
         let mut features: Vec<Feature> = Vec::new();
         let mut targets = Vec::new();
@@ -519,7 +520,7 @@ fn fit_group(
 /// held-out RMS over `blocks` hold-out blocks (none with `blocks` = 0).
 pub fn fit(
     data: &Dataset,
-    seed: &str,
+    seed: Seed,
     adds: &[Effect],
     blocks: usize,
 ) -> Result<(FittedModel, FitStats)> {
@@ -663,7 +664,7 @@ mod tests {
                     .sum()
             });
         }
-        let (m, s) = fit(&d, "cubic19", &[], 5).unwrap();
+        let (m, s) = fit(&d, Seed::Cubic19, &[], 5).unwrap();
         let FittedModel::Linear(m) = m else { panic!() };
         for o in &m.outputs {
             for (j, c) in o.coef_um.iter().enumerate() {
@@ -703,7 +704,7 @@ mod tests {
             Effect::parse("periodic:target=ey,axis=y,period_mm=30").unwrap(),
             Effect::parse("reversal:target=ey,axis=x").unwrap(),
         ];
-        let (m, s) = fit(&d, "cubic19", &adds, 5).unwrap();
+        let (m, s) = fit(&d, Seed::Cubic19, &adds, 5).unwrap();
         let FittedModel::Linear(m) = m else { panic!() };
         let o = &m.outputs[0];
         assert_eq!(o.target, 1);
@@ -734,7 +735,7 @@ mod tests {
         let mut u = vec![0.1; n];
         u[100] = 1e8;
         d.u_um = Some(u);
-        let (m, s) = fit(&d, "cubic19", &[], 5).unwrap();
+        let (m, s) = fit(&d, Seed::Cubic19, &[], 5).unwrap();
         let FittedModel::Linear(m) = m else { panic!() };
         let c = &m.outputs[0].coef_um;
         assert!(
@@ -744,12 +745,12 @@ mod tests {
         // The outlier still shows in the (unweighted) residual statistics.
         assert!(s.max_abs_um["ex"] > 499.0);
         d.u_um = Some(vec![0.1; n]);
-        let (m, _) = fit(&d, "cubic19", &[], 5).unwrap();
+        let (m, _) = fit(&d, Seed::Cubic19, &[], 5).unwrap();
         let FittedModel::Linear(m) = m else { panic!() };
         assert!((m.outputs[0].coef_um[0] - 1.0).abs() > 0.01);
         // u ≤ 0 is bad input.
         d.u_um = Some(vec![0.0; n]);
-        let e = fit(&d, "cubic19", &[], 5).unwrap_err().to_string();
+        let e = fit(&d, Seed::Cubic19, &[], 5).unwrap_err().to_string();
         assert!(e.contains("positive"), "{e}");
     }
 
@@ -764,7 +765,7 @@ mod tests {
         let x = d.pos_mm[0].clone().unwrap();
         d.tool_mm = Some(x.iter().map(|p| 100.0 + 1e-5 * (p / 37.0).sin()).collect());
         let adds = [Effect::parse("abbe:target=ex").unwrap()];
-        let (_, s) = fit(&d, "kinematic", &adds, 5).unwrap();
+        let (_, s) = fit(&d, Seed::Kinematic, &adds, 5).unwrap();
         assert!(
             s.condition_number["ex"] > ILL_CONDITIONED,
             "{:?}",
@@ -793,7 +794,7 @@ mod tests {
         set_target(&mut d, 0, |_, u| u[0]);
         d.err_um[1] = None;
         d.err_um[2] = None;
-        let e = fit(&d, "cubic19", &[], 5).unwrap_err().to_string();
+        let e = fit(&d, Seed::Cubic19, &[], 5).unwrap_err().to_string();
         assert!(
             e.contains("9 distinct points") && e.contains("10 terms"),
             "{e}"
@@ -813,7 +814,7 @@ mod tests {
         for t in 0..3 {
             set_target(&mut d, t, |_, u| u[0] + u[1]);
         }
-        let e = fit(&d, "cubic19", &[], 5).unwrap_err().to_string();
+        let e = fit(&d, Seed::Cubic19, &[], 5).unwrap_err().to_string();
         assert!(
             e.starts_with("ex: 9 distinct points but the model has 10 terms"),
             "{e}"
@@ -834,12 +835,12 @@ mod tests {
         d.err_um[1] = None;
         d.err_um[2] = None;
         assert_eq!(d.varying_axes(), vec![0]);
-        let (m, s) = fit(&d, "cubic19", &[], 5).unwrap();
+        let (m, s) = fit(&d, Seed::Cubic19, &[], 5).unwrap();
         let FittedModel::Linear(m) = m else { panic!() };
         let mut absent = d.clone();
         absent.pos_mm[1] = None;
         absent.pos_mm[2] = None;
-        let (ma, _) = fit(&absent, "cubic19", &[], 5).unwrap();
+        let (ma, _) = fit(&absent, Seed::Cubic19, &[], 5).unwrap();
         let FittedModel::Linear(ma) = ma else {
             panic!()
         };
@@ -862,7 +863,7 @@ mod tests {
                 c.iter_mut().for_each(|v| *v = p);
             }
         }
-        let (m1, s1) = fit(&one, "cubic19", &[], 5).unwrap();
+        let (m1, s1) = fit(&one, Seed::Cubic19, &[], 5).unwrap();
         let FittedModel::Linear(m1) = m1 else {
             panic!()
         };
@@ -887,7 +888,7 @@ mod tests {
         d.err_um[2] = None;
         // cubic19 already has y; squareness adds y again for ex.
         let adds = [Effect::parse("squareness:target=ex,axis=y").unwrap()];
-        let e = format!("{:#}", fit(&d, "cubic19", &adds, 5).unwrap_err());
+        let e = format!("{:#}", fit(&d, Seed::Cubic19, &adds, 5).unwrap_err());
         assert!(e.contains("{y, y} are collinear"), "{e}");
     }
 
@@ -927,7 +928,7 @@ mod tests {
     /// as after an outlier screen) and by the QR path [`fit_targets`].
     fn gram_and_qr(d: &Dataset, adds: &[Effect]) -> Vec<(TargetFit, Option<f64>, TargetFit, f64)> {
         let norm = Norm::from_data(d);
-        let design = Design::new(d, &norm, "cubic19", adds).unwrap();
+        let design = Design::new(d, &norm, Seed::Cubic19, adds).unwrap();
         (0..design.targets.len())
             .map(|k| {
                 let tg = &design.targets[k];
@@ -950,7 +951,7 @@ mod tests {
     #[test]
     fn design_predictions_follow_the_given_rows() {
         let (d, adds) = noisy_grid(130.0, false);
-        let design = Design::new(&d, &Norm::from_data(&d), "cubic19", &adds).unwrap();
+        let design = Design::new(&d, &Norm::from_data(&d), Seed::Cubic19, &adds).unwrap();
         let tg = &design.targets[0];
         let coef: Vec<f64> = (0..tg.cols.len()).map(|j| 1.0 + j as f64).collect();
         let local = [3, 5, 4, 6];

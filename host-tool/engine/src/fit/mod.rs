@@ -17,7 +17,7 @@ pub mod nn;
 
 use anyhow::{bail, Result};
 
-use crate::data::{Dataset, AXES, TARGETS};
+use crate::data::{Dataset, AXES};
 use crate::effect::Effect;
 use crate::holdout;
 use crate::model::{DataRef, ModelFile, ModelSeed, Seed, MODEL_FORMAT};
@@ -127,12 +127,12 @@ pub fn fit_recorded(
         bail!("{}: no data rows", data.source);
     }
     for e in adds {
-        if data.err_um[e.target].is_none() {
+        if data.err_um[e.target()].is_none() {
             bail!(
                 "effect `{}` is for {} but the data has no {}_um column",
                 e.spec,
-                TARGETS[e.target],
-                TARGETS[e.target]
+                e.spec.target(),
+                e.spec.target()
             );
         }
     }
@@ -157,7 +157,7 @@ pub fn fit_recorded(
             (m, s, name.to_string())
         }
         Seed::Cubic19 | Seed::Kinematic => {
-            let (m, s) = linear::fit(data, &parsed.to_string(), adds, blocks)?;
+            let (m, s) = linear::fit(data, parsed, adds, blocks)?;
             (m, s, parsed.to_string())
         }
         Seed::Nn { hidden } => {
@@ -182,7 +182,7 @@ pub fn fit_recorded(
     Ok(ModelFile {
         format: MODEL_FORMAT.to_string(),
         seed: seed_name,
-        adds: adds.iter().map(|e| e.spec.clone()).collect(),
+        adds: adds.iter().map(|e| e.spec.to_string()).collect(),
         data: DataRef {
             source: data.source.clone(),
             sha256: sha256(),

@@ -8,6 +8,8 @@ use std::str::FromStr;
 
 use anyhow::{bail, Result};
 
+use crate::features::{kinematic, CUBIC19};
+
 /// What a seed spec asks for.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Seed {
@@ -56,6 +58,25 @@ impl Seed {
             "kinematic" => Ok(Seed::Kinematic),
             other => bail!("unknown model `{other}` ({expected})"),
         }
+    }
+}
+
+impl Seed {
+    /// The monomials of a polynomial seed (`cubic19`, `kinematic`) for
+    /// target `t`, restricted to `axes` — the data's varying axes
+    /// (`Dataset::varying_axes`): a monomial in an absent axis, or in one
+    /// held at a single position, is constant on the data and would
+    /// duplicate `1` (or vanish). An error for a seed without monomials.
+    pub fn monomials(&self, t: usize, axes: &[usize]) -> Result<Vec<[u8; 3]>> {
+        let all: Vec<[u8; 3]> = match self {
+            Seed::Cubic19 => CUBIC19.to_vec(),
+            Seed::Kinematic => kinematic(t).to_vec(),
+            other => bail!("unknown polynomial seed `{other}` (expected cubic19 or kinematic)"),
+        };
+        Ok(all
+            .into_iter()
+            .filter(|e| (0..3).all(|a| e[a] == 0 || axes.contains(&a)))
+            .collect())
     }
 }
 
@@ -137,6 +158,28 @@ mod tests {
         assert!(m.local);
         assert_eq!(m.to_string(), "kinematic --local");
         assert!(!ModelSeed::parse("nn:4").unwrap().local);
+    }
+
+    #[test]
+    fn seeds_are_model_cores_lists_in_its_order() {
+        // The host fits, and export writes, exactly model-core's sets.
+        for t in 0..3 {
+            assert_eq!(
+                Seed::Kinematic.monomials(t, &[0, 1, 2]).unwrap(),
+                model_core::monomials::kinematic(t)
+            );
+            assert_eq!(
+                Seed::Cubic19.monomials(t, &[0, 1, 2]).unwrap(),
+                model_core::monomials::CUBIC19
+            );
+        }
+        assert!(Seed::Nn { hidden: 4 }.monomials(0, &[0]).is_err());
+    }
+
+    #[test]
+    fn seed_drops_absent_axes() {
+        let m = Seed::Cubic19.monomials(0, &[0]).unwrap();
+        assert_eq!(m, vec![[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]]);
     }
 
     #[test]

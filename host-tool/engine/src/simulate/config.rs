@@ -3,115 +3,73 @@
 //! measurement, noise and seed — constructible from Rust and from the
 //! CLI's spec strings (`spec.rs`).
 
+use std::fmt;
+use std::sync::Arc;
+
 use serde::{Deserialize, Serialize};
 
 use super::machine::Machine;
 use super::plan::Plan;
 use crate::data::AXES;
+pub use crate::effect::sim::OutOfRange;
+pub use crate::effect::Limit;
+use crate::effect::SimForm;
 
-/// A physical effect added to the geometric errors. Magnitudes as in
-/// ARCHITECTURE.md ("Physical magnitudes for simulation").
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "family", rename_all = "snake_case")]
-pub enum Effect {
-    /// Cyclic lead-screw / scale error along `axis`, added to `target`:
-    /// Σ_{h=1..harmonics} (amp_um / h)·sin(2π·h·q/period_mm + h·phase).
-    Periodic {
-        /// Target index (0 = ex); usually the axis itself.
-        target: usize,
-        /// Axis whose position drives it.
-        axis: usize,
-        /// Screw lead or scale pitch, mm (any value, e.g. 5.08).
-        period_mm: f64,
-        /// Amplitude of the fundamental, µm.
-        amp_um: f64,
-        /// Number of harmonics (1 = a pure sine).
-        harmonics: u8,
-        /// Phase of the fundamental at q = 0, degrees.
-        phase_deg: f64,
-    },
-    /// Thermal growth following a temperature that is recorded on the
-    /// channel `T_<channel>_C`: the sensor follows
-    /// start_c + rise_c·(1 − e^(−t/tau_s)) + swing_c·sin(2π·t/swing_period_s);
-    /// the structure follows the sensor
-    /// with a first-order lag `lag_s` (updated per reading, as
-    /// `features::lagged` models it); the error on `target` is
-    /// (T_struct − t_ref_c)·(cte_um_per_m_k·1e-3·q_times + offset_um_per_k).
-    Thermal {
-        /// Target index.
-        target: usize,
-        /// Sensor name (`bed` → column `T_bed_C`).
-        channel: String,
-        /// Axis whose position the growth is proportional to; `None` for a
-        /// growth that does not depend on position (spindle growth in Z).
-        times: Option<usize>,
-        /// Expansion coefficient, µm/m/K (steel 11.5).
-        cte_um_per_m_k: f64,
-        /// Position-independent growth, µm/K.
-        offset_um_per_k: f64,
-        /// Temperature at which the error is zero, °C.
-        t_ref_c: f64,
-        /// Sensor temperature at t = 0, °C.
-        start_c: f64,
-        /// Sensor rise to its final value, K.
-        rise_c: f64,
-        /// Time constant of the sensor's rise, s (0 = a step at t = 0).
-        tau_s: f64,
-        /// Lag of the structure behind the sensor, s (0 = none).
-        lag_s: f64,
-        /// Amplitude of a periodic swing added to the sensor (an air
-        /// conditioner's cycle), K; 0 = none. A swing lets drift (which
-        /// follows time only) be told apart from a monotonic warm-up.
-        swing_c: f64,
-        /// Period of the swing, s.
-        swing_period_s: f64,
-    },
-    /// Reversal (backlash) on `axis`: ±backlash_um/2 on `target` by the
-    /// direction of the last approach, so x̄↑ − x̄↓ = backlash_um.
-    Reversal {
-        /// Target index (usually the axis itself).
-        target: usize,
-        /// Axis whose `dir_*` drives it.
-        axis: usize,
-        /// Full backlash, µm.
-        backlash_um: f64,
-    },
-    /// A spindle tilt `angle_urad` that turns the tool length into an error
-    /// on `target` (angle × arm); the tool length changes per pass, cycling
-    /// through `tools_mm`, and is written to the `tool_mm` column.
-    Abbe {
-        /// Target index.
-        target: usize,
-        /// The tilt, µrad (48.5 µrad × 100 mm = 4.85 µm).
-        angle_urad: f64,
-        /// Tool lengths, one per pass in turn, mm.
-        tools_mm: Vec<f64>,
-    },
-    /// A guide bump: a localized straightness error along `axis` (a dent
-    /// or a proud spot of a guide rail, a bad scrape), a Gaussian of full
-    /// width at half maximum `width_mm` centred at `at_mm` on that axis:
-    /// amp_um·exp(−4 ln 2·((q − at_mm)/width_mm)²) added to `target`. No
-    /// polynomial seed follows it, and neighbour differences along a
-    /// 25–50 mm line count it as noise (issue 12).
-    Bump {
-        /// Target index (a straightness: usually not the axis' own).
-        target: usize,
-        /// Axis along which the bump sits.
-        axis: usize,
-        /// Centre of the bump on `axis`, mm.
-        at_mm: f64,
-        /// Full width at half maximum, mm.
-        width_mm: f64,
-        /// Height at the centre, µm.
-        amp_um: f64,
-    },
-    /// Slow drift in time not explained by temperature: um_per_h·t_s/3600.
-    Drift {
-        /// Target index.
-        target: usize,
-        /// Drift rate, µm/h.
-        um_per_h: f64,
-    },
+/// A physical effect added to the geometric errors: a family's simulated
+/// form (`effect::<family>::Sim`, e.g. [`crate::effect::periodic::Sim`]) or
+/// a guide bump ([`Bump`]). Magnitudes as in ARCHITECTURE.md ("Physical
+/// magnitudes for simulation"). Written and compared as its spec (`Display`
+/// gives every parameter; parsing it gives the same effect back).
+#[derive(Clone)]
+pub struct Effect(Arc<dyn SimForm>);
+
+impl Effect {
+    /// The effect of a simulated form.
+    pub fn new(form: impl SimForm + 'static) -> Effect {
+        Effect(Arc::new(form))
+    }
+
+    /// The form, for the simulator.
+    pub fn form(&self) -> &dyn SimForm {
+        self.0.as_ref()
+    }
+}
+
+impl From<Box<dyn SimForm>> for Effect {
+    fn from(form: Box<dyn SimForm>) -> Effect {
+        Effect(Arc::from(form))
+    }
+}
+
+impl fmt::Display for Effect {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
+impl fmt::Debug for Effect {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Effect({self})")
+    }
+}
+
+impl PartialEq for Effect {
+    fn eq(&self, o: &Effect) -> bool {
+        self.to_string() == o.to_string()
+    }
+}
+
+impl Serialize for Effect {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+impl<'de> Deserialize<'de> for Effect {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Effect, D::Error> {
+        let s = String::deserialize(d)?;
+        s.parse().map_err(serde::de::Error::custom)
+    }
 }
 
 /// Going back to a reference point between passes (to see drift).
@@ -142,39 +100,7 @@ impl Default for Timing {
     }
 }
 
-/// A sensible range for one simulation number: generous enough for any
-/// real machine and instrument (ARCHITECTURE.md's magnitudes sit well
-/// inside), tight enough that a typo (`1e300`, a NaN) is refused with its
-/// name instead of silently producing a file of absurd or NaN errors.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Limit {
-    /// Smallest value allowed.
-    pub min: f64,
-    /// Largest value allowed.
-    pub max: f64,
-    /// `min` itself is allowed (false: strictly greater, e.g. a step).
-    pub min_inclusive: bool,
-    /// Unit for the message.
-    pub unit: &'static str,
-}
-
 impl Limit {
-    const fn closed(min: f64, max: f64, unit: &'static str) -> Limit {
-        Limit {
-            min,
-            max,
-            min_inclusive: true,
-            unit,
-        }
-    }
-    const fn above(min: f64, max: f64, unit: &'static str) -> Limit {
-        Limit {
-            min,
-            max,
-            min_inclusive: false,
-            unit,
-        }
-    }
     /// Noise σ of the instrument: a laser reads to nm, a dial gauge to µm.
     pub const NOISE_UM: Limit = Limit::closed(0.0, 100.0, "µm");
     /// Share of error values with a spike.
@@ -182,101 +108,19 @@ impl Limit {
     /// Smallest spike (the largest is twice it; ≤ 2000 µm stays inside the
     /// import's ±10 000 µm plausibility limit with the machine's errors).
     pub const SPIKE_UM: Limit = Limit::closed(0.0, 1000.0, "µm");
-    /// Tool length / probe offset (and every Abbe tool length).
-    pub const TOOL_MM: Limit = Limit::closed(-1000.0, 1000.0, "mm");
     /// Traverse feed: up to 120 m/min rapids.
     pub const FEED_MM_S: Limit = Limit::above(0.0, 2000.0, "mm/s");
     /// Time at each point.
     pub const DWELL_S: Limit = Limit::closed(0.0, 3600.0, "s");
-    /// Raster spacing.
+    /// Raster spacing (and a guide bump's width).
     pub const STEP_MM: Limit = Limit::above(0.0, 10_000.0, "mm");
     /// ISO 230-2 overrun (also < travel/2, checked with the plan).
     pub const OVERRUN_MM: Limit = Limit::closed(0.0, 10_000.0, "mm");
     /// A pause: up to ~4 months.
     pub const DURATION_S: Limit = Limit::closed(0.0, 1e7, "s");
-    /// Lead or scale pitch (leads 2–40 mm; scales shorter).
-    pub const PERIOD_MM: Limit = Limit::above(0.0, 10_000.0, "mm");
-    /// Cyclic error amplitude (1–8 µm typical).
-    pub const AMP_UM: Limit = Limit::closed(-100.0, 100.0, "µm");
-    /// Harmonics of a cyclic error.
-    pub const HARMONICS: Limit = Limit::closed(1.0, 50.0, "");
-    /// A phase, degrees.
-    pub const PHASE_DEG: Limit = Limit::closed(-3600.0, 3600.0, "°");
-    /// Expansion coefficient (steel 11.5, aluminium 23, Invar ~1).
-    pub const CTE: Limit = Limit::closed(-100.0, 100.0, "µm/m/K");
-    /// Position-independent growth.
-    pub const OFFSET_UM_PER_K: Limit = Limit::closed(-100.0, 100.0, "µm/K");
-    /// A temperature of a machine shop.
-    pub const TEMP_C: Limit = Limit::closed(-50.0, 100.0, "°C");
-    /// A warm-up rise.
-    pub const RISE_C: Limit = Limit::closed(-50.0, 50.0, "K");
-    /// Time constants and lags.
-    pub const TIME_CONST_S: Limit = Limit::closed(0.0, 1e7, "s");
-    /// An air conditioner's swing.
-    pub const SWING_C: Limit = Limit::closed(-20.0, 20.0, "K");
-    /// Its period.
-    pub const SWING_PERIOD_S: Limit = Limit::above(0.0, 1e7, "s");
-    /// Backlash (5–50 µm on worn machines).
-    pub const BACKLASH_UM: Limit = Limit::closed(-1000.0, 1000.0, "µm");
-    /// A tilt (48.5 µrad typical; 10 mrad is a crash).
-    pub const ANGLE_URAD: Limit = Limit::closed(-10_000.0, 10_000.0, "µrad");
     /// A position on an axis (a guide bump's centre).
     pub const POSITION_MM: Limit = Limit::closed(-10_000.0, 10_000.0, "mm");
-    /// Drift rate.
-    pub const DRIFT_UM_PER_H: Limit = Limit::closed(-1000.0, 1000.0, "µm/h");
-
-    /// `Ok` when `v` is finite and inside; otherwise how it is not.
-    pub fn test(&self, v: f64) -> Result<(), OutOfRange> {
-        let low_ok = if self.min_inclusive {
-            v >= self.min
-        } else {
-            v > self.min
-        };
-        if v.is_finite() && low_ok && v <= self.max {
-            Ok(())
-        } else {
-            Err(OutOfRange {
-                value: v,
-                limit: *self,
-            })
-        }
-    }
-
-    /// `Ok` when `v` is finite and inside; otherwise an error naming `what`.
-    pub fn check(&self, what: &str, v: f64) -> anyhow::Result<()> {
-        self.test(v).map_err(|e| anyhow::anyhow!("{what} = {e}"))
-    }
 }
-
-/// A number that is not finite or outside its [`Limit`]: `1e300: expected
-/// a finite value ≥ 0 µm and ≤ 100 µm` (the caller names the number).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct OutOfRange {
-    /// The number given.
-    pub value: f64,
-    /// Its range.
-    pub limit: Limit,
-}
-
-impl std::fmt::Display for OutOfRange {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let l = &self.limit;
-        let lo = if l.min_inclusive { "≥" } else { ">" };
-        let unit = if l.unit.is_empty() {
-            String::new()
-        } else {
-            format!(" {}", l.unit)
-        };
-        // `{:?}`: 1e300 prints as `1e300`, not as 301 digits.
-        write!(
-            f,
-            "{:?}: expected a finite value {lo} {}{unit} and ≤ {}{unit}",
-            self.value, l.min, l.max
-        )
-    }
-}
-
-impl std::error::Error for OutOfRange {}
 
 /// One of [`SimConfig`]'s own numbers (beside the plans' and effects').
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -523,23 +367,7 @@ impl SimConfig {
             bail!("the plans would make {rows:.0} rows; expected at most 5 000 000 (use a coarser step)");
         }
         for e in &self.effects {
-            let ok = match e {
-                Effect::Abbe { tools_mm, .. } => !tools_mm.is_empty(),
-                Effect::Periodic {
-                    period_mm,
-                    harmonics,
-                    ..
-                } => *period_mm > 0.0 && *harmonics >= 1,
-                Effect::Thermal {
-                    tau_s,
-                    lag_s,
-                    swing_period_s,
-                    ..
-                } => *tau_s >= 0.0 && *lag_s >= 0.0 && *swing_period_s > 0.0,
-                Effect::Bump { width_mm, .. } => *width_mm > 0.0,
-                Effect::Reversal { .. } | Effect::Drift { .. } => true,
-            };
-            if !ok {
+            if !e.form().valid() {
                 bail!("effect `{e}`: expected tools_mm not empty, period_mm > 0, harmonics ≥ 1, tau_s and lag_s ≥ 0, swing_period_s > 0, width_mm > 0");
             }
         }
@@ -583,68 +411,7 @@ impl SimConfig {
             let family = e.to_string();
             let family = family.split(':').next().unwrap_or_default();
             let what = |k: &str| format!("effect `{family}`: {k}");
-            match e {
-                Effect::Periodic {
-                    period_mm,
-                    amp_um,
-                    harmonics,
-                    phase_deg,
-                    ..
-                } => {
-                    Limit::PERIOD_MM.check(&what("period_mm"), *period_mm)?;
-                    Limit::AMP_UM.check(&what("amp_um"), *amp_um)?;
-                    Limit::HARMONICS.check(&what("harmonics"), f64::from(*harmonics))?;
-                    Limit::PHASE_DEG.check(&what("phase_deg"), *phase_deg)?;
-                }
-                Effect::Thermal {
-                    cte_um_per_m_k,
-                    offset_um_per_k,
-                    t_ref_c,
-                    start_c,
-                    rise_c,
-                    tau_s,
-                    lag_s,
-                    swing_c,
-                    swing_period_s,
-                    ..
-                } => {
-                    Limit::CTE.check(&what("cte_um_per_m_k"), *cte_um_per_m_k)?;
-                    Limit::OFFSET_UM_PER_K.check(&what("offset_um_per_k"), *offset_um_per_k)?;
-                    Limit::TEMP_C.check(&what("t_ref_c"), *t_ref_c)?;
-                    Limit::TEMP_C.check(&what("start_c"), *start_c)?;
-                    Limit::RISE_C.check(&what("rise_c"), *rise_c)?;
-                    Limit::TIME_CONST_S.check(&what("tau_s"), *tau_s)?;
-                    Limit::TIME_CONST_S.check(&what("lag_s"), *lag_s)?;
-                    Limit::SWING_C.check(&what("swing_c"), *swing_c)?;
-                    Limit::SWING_PERIOD_S.check(&what("swing_period_s"), *swing_period_s)?;
-                }
-                Effect::Reversal { backlash_um, .. } => {
-                    Limit::BACKLASH_UM.check(&what("backlash_um"), *backlash_um)?
-                }
-                Effect::Abbe {
-                    angle_urad,
-                    tools_mm,
-                    ..
-                } => {
-                    Limit::ANGLE_URAD.check(&what("angle_urad"), *angle_urad)?;
-                    for t in tools_mm {
-                        Limit::TOOL_MM.check(&what("tools_mm"), *t)?;
-                    }
-                }
-                Effect::Bump {
-                    at_mm,
-                    width_mm,
-                    amp_um,
-                    ..
-                } => {
-                    Limit::POSITION_MM.check(&what("at_mm"), *at_mm)?;
-                    Limit::STEP_MM.check(&what("width_mm"), *width_mm)?;
-                    Limit::AMP_UM.check(&what("amp_um"), *amp_um)?;
-                }
-                Effect::Drift { um_per_h, .. } => {
-                    Limit::DRIFT_UM_PER_H.check(&what("um_per_h"), *um_per_h)?
-                }
-            }
+            e.form().check_numbers(&what)?;
         }
         Ok(())
     }

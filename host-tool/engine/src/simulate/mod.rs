@@ -1,7 +1,9 @@
 //! `simulate`: a synthetic machine measured along a plan, for tests, demos
 //! and benchmarks. The geometric errors come from [`Machine`]; on top of
 //! them optional physical [`Effect`]s (lead-screw periodic error, thermal
-//! growth, reversal, Abbe via tool length, drift), then Gaussian noise.
+//! growth, reversal, Abbe via tool length, drift — each family's simulated
+//! form lives in its file of `effect/` — and the guide [`Bump`]), then
+//! Gaussian noise.
 //!
 //! Everything is constructible from Rust (the diagnosis tests and the Monte
 //! Carlo benchmark build configs directly) and from spec strings (the CLI;
@@ -13,6 +15,7 @@
 //! temperatures to 1 mK (an instrument's display), and every effect is
 //! computed from the rounded temperature the file shows.
 
+mod bump;
 mod config;
 mod machine;
 pub mod onmachine;
@@ -25,8 +28,10 @@ use std::f64::consts::TAU;
 use rand_chacha::rand_core::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::data::{Dataset, TempChannel, AXES};
+use crate::data::{Dataset, TempChannel};
+use crate::effect::SimRows;
 
+pub use bump::Bump;
 pub use config::{
     BadSpikes, ConfigError, Effect, Limit, OutOfRange, RefReturn, Setting, SimConfig, Spikes,
     Timing,
@@ -134,10 +139,7 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
 
     // 2. Walk them: time, approach directions, tool length.
     let n = visits.len();
-    let abbe_tools: Option<&Vec<f64>> = cfg.effects.iter().find_map(|e| match e {
-        Effect::Abbe { tools_mm, .. } => Some(tools_mm),
-        _ => None,
-    });
+    let abbe_tools: Option<&[f64]> = cfg.effects.iter().find_map(|e| e.form().tools_mm());
     let mut pos = visits.first().map_or([0.0; 3], |v| v.0.pos_mm);
     let mut dir = [1i8; 3];
     let mut t = 0.0f64;
@@ -197,33 +199,16 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
     // 3. Temperature channels, in the order the effects name them.
     let mut temps: Vec<TempChannel> = Vec::new();
     for e in &cfg.effects {
-        if let Effect::Thermal {
-            channel,
-            start_c,
-            rise_c,
-            tau_s,
-            swing_c,
-            swing_period_s,
-            ..
-        } = e
-        {
-            if temps.iter().any(|c| &c.name == channel) {
+        if let Some(sensor) = e.form().sensor() {
+            if temps.iter().any(|c| c.name == sensor.name()) {
                 continue; // the first effect naming a channel defines its sensor
             }
             let temp_c = rows_t
                 .iter()
-                .map(|&t| {
-                    let f = if *tau_s > 0.0 {
-                        1.0 - (-t / tau_s).exp()
-                    } else {
-                        1.0
-                    };
-                    let swing = swing_c * (TAU * t / swing_period_s).sin();
-                    round_dec(start_c + rise_c * f + swing, 3)
-                })
+                .map(|&t| round_dec(sensor.temp_c(t), 3))
                 .collect();
             temps.push(TempChannel {
-                name: channel.clone(),
+                name: sensor.name().to_string(),
                 temp_c,
             });
         }
@@ -238,88 +223,16 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
             truth[i].push(e[i]);
         }
     }
+    let rows = SimRows {
+        pos_mm: &rows_pos,
+        dir: &rows_dir,
+        t_s: &rows_t,
+        session: &rows_session,
+        tool_mm: &rows_tool,
+        temps: &temps,
+    };
     for eff in &cfg.effects {
-        match eff {
-            Effect::Periodic {
-                target,
-                axis,
-                period_mm,
-                amp_um,
-                harmonics,
-                phase_deg,
-            } => {
-                let ph = phase_deg.to_radians();
-                for r in 0..n {
-                    let q = rows_pos[*axis][r];
-                    let v: f64 = (1..=*harmonics)
-                        .map(|h| {
-                            let h = f64::from(h);
-                            amp_um / h * (TAU * h * q / period_mm + h * ph).sin()
-                        })
-                        .sum();
-                    truth[*target][r] += v;
-                }
-            }
-            Effect::Thermal {
-                target,
-                channel,
-                times,
-                cte_um_per_m_k,
-                offset_um_per_k,
-                t_ref_c,
-                lag_s,
-                ..
-            } => {
-                let sensor = &temps
-                    .iter()
-                    .find(|c| &c.name == channel)
-                    .expect("channel made above")
-                    .temp_c;
-                let structure = if *lag_s > 0.0 {
-                    crate::features::lagged(sensor, &rows_t, Some(&rows_session), *lag_s)
-                } else {
-                    sensor.clone()
-                };
-                for r in 0..n {
-                    let arm_mm = times.map_or(0.0, |a| rows_pos[a][r]);
-                    let dt = structure[r] - t_ref_c;
-                    truth[*target][r] += dt * (cte_um_per_m_k * 1e-3 * arm_mm + offset_um_per_k);
-                }
-            }
-            Effect::Reversal {
-                target,
-                axis,
-                backlash_um,
-            } => {
-                for r in 0..n {
-                    truth[*target][r] += f64::from(rows_dir[*axis][r]) * backlash_um / 2.0;
-                }
-            }
-            Effect::Abbe {
-                target, angle_urad, ..
-            } => {
-                for r in 0..n {
-                    truth[*target][r] += angle_urad * rows_tool[r] * 1e-3;
-                }
-            }
-            Effect::Bump {
-                target,
-                axis,
-                at_mm,
-                width_mm,
-                amp_um,
-            } => {
-                for r in 0..n {
-                    let u = (rows_pos[*axis][r] - at_mm) / width_mm;
-                    truth[*target][r] += amp_um * (-4.0 * std::f64::consts::LN_2 * u * u).exp();
-                }
-            }
-            Effect::Drift { target, um_per_h } => {
-                for r in 0..n {
-                    truth[*target][r] += um_per_h * rows_t[r] / 3600.0;
-                }
-            }
-        }
+        eff.form().add_error(&rows, &mut truth);
     }
     // Spikes from a stream of their own, drawn row by row (one uniform per
     // value, two more per spike), so they change nothing else.
@@ -393,16 +306,8 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
     }
     for e in &cfg.effects {
         metadata.push(("effect".into(), e.to_string()));
-        if let Effect::Reversal { axis, .. } = e {
-            if !(rows_dir[*axis].contains(&1) && rows_dir[*axis].contains(&-1)) {
-                metadata.push((
-                    "warning".into(),
-                    format!(
-                        "reversal on {} but the plan approaches it from one direction only",
-                        AXES[*axis]
-                    ),
-                ));
-            }
+        if let Some(w) = e.form().warning(&rows) {
+            metadata.push(("warning".into(), w));
         }
     }
     let data = Dataset {
