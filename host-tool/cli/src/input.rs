@@ -183,12 +183,12 @@ pub fn add_skipped_count(doc: &mut serde_json::Value, data: &Dataset) {
 pub fn scan_text(
     path: &Path,
     session: Option<i64>,
-    kind: import::probe_csv::Small,
+    kind: trueaxis_engine::onmachine::probe_csv::Small,
 ) -> Result<String> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    if import::probe_csv::is_probe_csv(&text) {
-        let t = import::probe_csv::read(&text, &path.display().to_string())?;
+    if trueaxis_engine::onmachine::probe_csv::is_probe_csv(&text) {
+        let t = trueaxis_engine::onmachine::probe_csv::read(&text, &path.display().to_string())?;
         return t.small(session, kind);
     }
     if let Some(s) = session {

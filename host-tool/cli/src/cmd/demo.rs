@@ -464,8 +464,9 @@ impl Demo {
     /// ground and the part measured again. Returns the story and its
     /// numbers.
     pub fn on_machine(&self) -> Result<(String, serde_json::Value)> {
-        use trueaxis_engine::simulate::onmachine;
-        use trueaxis_engine::{import, probe, workpiece};
+        use trueaxis_engine::import;
+        use trueaxis_engine::onmachine::simulate as onmachine;
+        use trueaxis_engine::onmachine::{probe, workpiece};
         let dir = self.out.join("on-machine");
         let files = onmachine::campaign(SEED);
         for (f, content) in &files {

@@ -14,8 +14,11 @@ use serde_json::json;
 use crate::cmd::out;
 use crate::cmd::probe::{plane, read_probe, side, AnyProbe};
 use crate::cmd::separate::{read_multi_step, read_run};
-use trueaxis_engine::import::{self, probe_csv, probe_csv::Small};
-use trueaxis_engine::part_diagnosis::{self, Evidence, KnownProbe, Scan, Source, Status};
+use trueaxis_engine::import;
+use trueaxis_engine::onmachine::part_diagnosis::{
+    self, Evidence, KnownProbe, Scan, Source, Status,
+};
+use trueaxis_engine::onmachine::probe_csv::{self, Small};
 
 /// `trueaxis diagnose-part SCAN.csv [--probe P] [--reversal R] [--multi-step M]`.
 #[derive(clap::Args, Debug)]

@@ -9,9 +9,9 @@ use anyhow::{bail, Context, Result};
 use serde_json::json;
 
 use crate::cmd::out::{self, outln};
-use trueaxis_engine::import::probe_csv::Small;
-use trueaxis_engine::probe::sphere::{self, Probe3d};
-use trueaxis_engine::probe::{self, ProbeFile};
+use trueaxis_engine::onmachine::probe::sphere::{self, Probe3d};
+use trueaxis_engine::onmachine::probe::{self, ProbeFile};
+use trueaxis_engine::onmachine::probe_csv::Small;
 
 /// Arguments of `trueaxis probe`.
 #[derive(clap::Args, Debug)]
@@ -63,10 +63,10 @@ fn nominal_normals(
 ) -> Result<Option<Vec<[f64; 2]>>> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    if !trueaxis_engine::import::probe_csv::is_probe_csv(&text) {
+    if !trueaxis_engine::onmachine::probe_csv::is_probe_csv(&text) {
         return Ok(None);
     }
-    trueaxis_engine::import::probe_csv::read(&text, &path.display().to_string())?
+    trueaxis_engine::onmachine::probe_csv::read(&text, &path.display().to_string())?
         .normals(session, plane)
 }
 

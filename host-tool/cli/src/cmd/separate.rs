@@ -9,8 +9,9 @@ use anyhow::{bail, Context, Result};
 use serde_json::json;
 
 use crate::cmd::out;
-use trueaxis_engine::import::probe_csv::Small;
-use trueaxis_engine::{import, separate};
+use trueaxis_engine::import;
+use trueaxis_engine::onmachine::probe_csv::Small;
+use trueaxis_engine::onmachine::separate;
 
 /// Arguments of `trueaxis separate`.
 #[derive(clap::Args, Debug)]
@@ -426,7 +427,7 @@ impl Reversal {
                 // nothing and say the slide is straight: refused.
                 let text = std::fs::read_to_string(&self.run0)
                     .with_context(|| format!("cannot read {}", self.run0.display()))?;
-                if !import::probe_csv::is_probe_csv(&text) {
+                if !trueaxis_engine::onmachine::probe_csv::is_probe_csv(&text) {
                     bail!(
                         "{}: give the 180° run as RUN180.csv (or a measurement CSV whose session holds both orientations)",
                         self.run0.display()

@@ -305,7 +305,7 @@ pub fn probe_page(p: &ProbePage, dir: &Path) -> Result<PathBuf> {
 #[derive(Debug)]
 pub struct Probe3dPage<'a> {
     /// The probe file.
-    pub probe: &'a trueaxis_engine::probe::sphere::Probe3d,
+    pub probe: &'a trueaxis_engine::onmachine::probe::sphere::Probe3d,
     /// The probe-centre positions of the scan, mm.
     pub points: &'a [[f64; 3]],
     /// Residual per point with the form, nm.
@@ -440,11 +440,11 @@ pub fn probe3d_page(p: &Probe3dPage, dir: &Path) -> Result<PathBuf> {
 /// data cannot know and the sums they read), one row per source with its
 /// size or the measurement that would tell it, and the scan's profile.
 pub fn part_diagnosis_page(
-    d: &trueaxis_engine::part_diagnosis::PartDiagnosis,
+    d: &trueaxis_engine::onmachine::part_diagnosis::PartDiagnosis,
     verdict: &str,
     dir: &Path,
 ) -> Result<PathBuf> {
-    use trueaxis_engine::part_diagnosis::Status;
+    use trueaxis_engine::onmachine::part_diagnosis::Status;
     let mut page = Page::new("Which error is in this part scan");
     // Every measurement that would tell more: for what cannot be known,
     // and for what an estimate leaves out (a multi-step's inseparable
@@ -544,7 +544,7 @@ pub struct WorkpiecePage<'a> {
     /// `(c_deg, z_mm, dev_um)` of the scan.
     pub points: &'a [[f64; 3]],
     /// The fitted form (its deviation at `(c_deg, z_mm)`, µm: `at`).
-    pub form: &'a trueaxis_engine::workpiece::Form,
+    pub form: &'a trueaxis_engine::onmachine::workpiece::Form,
     /// The measured length, mm.
     pub z_range_mm: [f64; 2],
     /// Form PV, RMS and eccentricity, µm.

@@ -94,7 +94,7 @@ fn limit(c: &str) -> (f64, &'static str) {
 pub fn read(text: &str, name: &str) -> Result<ProbeTable> {
     let mut cols: Option<Vec<Option<usize>>> = None;
     let mut rows = Vec::new();
-    for (ln, _, cells) in super::data_lines(text) {
+    for (ln, _, cells) in crate::import::data_lines(text) {
         let Some(c) = &cols else {
             let mut map = vec![None; COLUMNS.len()];
             for (j, cell) in cells.iter().enumerate() {

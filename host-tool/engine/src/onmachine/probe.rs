@@ -565,7 +565,7 @@ pub fn form_deviation_nm(s: &[[f64; 2]], circle: bool) -> Result<Vec<f64>> {
     }
 }
 
-pub use crate::separate::pv;
+pub use crate::onmachine::separate::pv;
 
 /// `theta` in the convention of the module, from degrees.
 pub fn rad(deg: f64) -> f64 {

@@ -16,7 +16,7 @@ use rand_chacha::rand_core::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use super::normal;
+use crate::simulate::normal;
 
 /// The scenario's name.
 pub const ON_MACHINE: &str = "on-machine";

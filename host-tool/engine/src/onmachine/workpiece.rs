@@ -275,7 +275,7 @@ pub fn fit(p: &[Point], warnings: &mut Vec<String>) -> Result<Form> {
         .map(|(c, z)| form.at(c, z))
         .collect();
     let mean = grid.iter().sum::<f64>() / grid.len() as f64;
-    form.form_pv_um = crate::separate::pv(&grid);
+    form.form_pv_um = crate::onmachine::separate::pv(&grid);
     form.form_rms_um =
         (grid.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / grid.len() as f64).sqrt();
     if h >= 1 {
@@ -422,7 +422,7 @@ mod tests {
             .iter()
             .map(|q| q.dev_um + correction_um(&f, q.c_deg, q.z_mm))
             .collect();
-        let pv = crate::separate::pv;
+        let pv = crate::onmachine::separate::pv;
         let before: Vec<f64> = p.iter().map(|q| q.dev_um).collect();
         assert!(
             pv(&before) > 10.0 && pv(&after) < 0.01,

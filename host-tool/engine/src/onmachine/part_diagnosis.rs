@@ -20,8 +20,8 @@ use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
-use crate::probe;
-use crate::separate::{self, pv};
+use crate::onmachine::probe;
+use crate::onmachine::separate::{self, pv};
 
 /// z-value of a two-sided 95 % interval.
 const Z95: f64 = 1.96;

@@ -423,7 +423,7 @@ pub fn calibrate(p: &[[f64; 3]], ball_radius_mm: f64) -> Result<Calibration3d> {
     };
     if degree >= 2 {
         let f: Vec<f64> = dirs.iter().map(|&n| probe.form_nm_at(n)).collect();
-        probe.form_pv_nm = crate::separate::pv(&f);
+        probe.form_pv_nm = crate::onmachine::separate::pv(&f);
     } else {
         warnings.push(
             "no form error term is supported by held-out data: the probe is calibrated as a sphere of the fitted radius".into(),
@@ -434,8 +434,8 @@ pub fn calibrate(p: &[[f64; 3]], ball_radius_mm: f64) -> Result<Calibration3d> {
         (resid_nm.iter().map(|v| v * v).sum::<f64>() / resid_nm.len() as f64).sqrt();
     let without: Vec<f64> = rigid.resid.iter().map(|v| v * 1e6).collect();
     Ok(Calibration3d {
-        pv_without_form_nm: crate::separate::pv(&without),
-        pv_with_form_nm: crate::separate::pv(&resid_nm),
+        pv_without_form_nm: crate::onmachine::separate::pv(&without),
+        pv_with_form_nm: crate::onmachine::separate::pv(&resid_nm),
         residual_nm: resid_nm,
         probe,
         warnings,
@@ -527,7 +527,7 @@ mod tests {
             })
             .collect();
         let fitted: Vec<f64> = dirs.iter().map(|&n| pr.form_nm_at(n)).collect();
-        let pv_true = crate::separate::pv(&true_perp);
+        let pv_true = crate::onmachine::separate::pv(&true_perp);
         assert!(
             (pr.form_pv_nm - pv_true).abs() < 10.0,
             "form PV {} vs {pv_true}",
@@ -607,14 +607,15 @@ mod tests {
             let d = surf + 0.49715 + form([t.cos(), 0.0, t.sin()]) * 1e-6;
             centres.push([d * t.cos(), d * t.sin()]);
         }
-        let c = crate::probe::correct_with(&centres, [0.0, 1.0], pr.probe_radius_mm, |t| {
-            pr.in_plane([0, 2], t)
-        })
-        .unwrap();
+        let c =
+            crate::onmachine::probe::correct_with(&centres, [0.0, 1.0], pr.probe_radius_mm, |t| {
+                pr.in_plane([0, 2], t)
+            })
+            .unwrap();
         assert!(c.iter().all(|k| k.calibrated));
         let s: Vec<[f64; 2]> = c.iter().map(|k| k.surface_mm).collect();
-        let dev = crate::probe::form_deviation_nm(&s, true).unwrap();
-        let dev_true = crate::probe::form_deviation_nm(&truth, true).unwrap();
+        let dev = crate::onmachine::probe::form_deviation_nm(&s, true).unwrap();
+        let dev_true = crate::onmachine::probe::form_deviation_nm(&truth, true).unwrap();
         let worst = dev
             .iter()
             .zip(&dev_true)
@@ -631,7 +632,7 @@ mod tests {
                 [q[0] - 0.49715 * t.cos(), q[1] - 0.49715 * t.sin()]
             })
             .collect();
-        let dev0 = crate::probe::form_deviation_nm(&radius_only, true).unwrap();
+        let dev0 = crate::onmachine::probe::form_deviation_nm(&radius_only, true).unwrap();
         let worst0 = dev0
             .iter()
             .zip(&dev_true)
