@@ -175,6 +175,15 @@ pub fn add_skipped_count(doc: &mut serde_json::Value, data: &Dataset) {
     }
 }
 
+/// The engine's refusal of a file of several sessions read without
+/// saying which, with the flag that says it.
+pub fn session_flag(e: anyhow::Error) -> anyhow::Error {
+    match e.downcast_ref::<trueaxis_engine::onmachine::probe_csv::SessionNeeded>() {
+        Some(s) => anyhow::anyhow!(s.text("--session")),
+        None => e,
+    }
+}
+
 /// The text of an on-machine command's scan file: the file itself, or —
 /// for a measurement CSV with probe columns (`session_id`, `d_um`, …,
 /// docs/cli.md § Measurement CSV) — one session of it written as the small
@@ -189,7 +198,7 @@ pub fn scan_text(
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     if trueaxis_engine::onmachine::probe_csv::is_probe_csv(&text) {
         let t = trueaxis_engine::onmachine::probe_csv::read(&text, &path.display().to_string())?;
-        return t.small(session, kind);
+        return t.small(session, kind).map_err(session_flag);
     }
     if let Some(s) = session {
         anyhow::bail!(

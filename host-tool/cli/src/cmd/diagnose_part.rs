@@ -14,9 +14,10 @@ use serde_json::json;
 use crate::cmd::out;
 use crate::cmd::probe::{plane, read_probe, side, AnyProbe};
 use crate::cmd::separate::{read_multi_step, read_run};
+use crate::input::session_flag;
 use trueaxis_engine::import;
 use trueaxis_engine::onmachine::part_diagnosis::{
-    self, Evidence, KnownProbe, Scan, Source, Status,
+    self, Evidence, Input, KnownProbe, Scan, Source, Status,
 };
 use trueaxis_engine::onmachine::probe_csv::{self, Small};
 
@@ -87,7 +88,7 @@ impl Args {
         let mut pair = None;
         let text = if probe_csv::is_probe_csv(&raw) {
             let t = probe_csv::read(&raw, &name)?;
-            let rows = t.select(self.session)?;
+            let rows = t.select(self.session).map_err(session_flag)?;
             let has = |c: &str| rows.iter().any(|r| r.get(c).is_some());
             let a = self.axis.chars().next().unwrap_or('x');
             let kind = if has("d_um") && has("c_deg") {
@@ -97,13 +98,16 @@ impl Args {
                     r.get("orientation_deg")
                         .is_some_and(|o| o.rem_euclid(360.0) > 90.0)
                 }) {
-                    pair = Some(t.small(self.session, Small::Straightness(a, 180))?);
+                    pair = Some(
+                        t.small(self.session, Small::Straightness(a, 180))
+                            .map_err(session_flag)?,
+                    );
                 }
                 Small::Straightness(a, 0)
             } else {
                 Small::Positions
             };
-            t.small(self.session, kind)?
+            t.small(self.session, kind).map_err(session_flag)?
         } else {
             crate::input::scan_text(&self.scan, self.session, Small::Positions)?
         };
@@ -225,19 +229,30 @@ impl Args {
         let d = part_diagnosis::diagnose(&scan, &ev)
             .with_context(|| format!("{name}: cannot diagnose"))?;
         let verdict = verdict(&d);
+        let measures: Vec<Option<String>> = d
+            .findings
+            .iter()
+            .map(|f| f.measure.as_ref().map(|m| m.render(flag)))
+            .collect();
         let report = self
             .report
             .as_ref()
-            .map(|dir| crate::report::onmachine::part_diagnosis_page(&d, &verdict, dir))
+            .map(|dir| crate::report::onmachine::part_diagnosis_page(&d, &verdict, &measures, dir))
             .transpose()?;
         if self.json {
+            let mut findings = serde_json::to_value(&d.findings)?;
+            if let Some(a) = findings.as_array_mut() {
+                for (f, m) in a.iter_mut().zip(&measures) {
+                    f["measure"] = json!(m);
+                }
+            }
             let doc = json!({
                 "scan": name,
                 "kind": d.kind,
                 "points": d.points,
                 "noise_um": d.noise_um,
                 "verdict": verdict,
-                "findings": d.findings,
+                "findings": findings,
                 "combined": d.combined,
                 "report": report.as_ref().map(|p| p.display().to_string()),
             });
@@ -255,7 +270,7 @@ impl Args {
                 .unwrap_or_default()
         );
         let _ = writeln!(s, "  {verdict}");
-        for f in &d.findings {
+        for (f, measure) in d.findings.iter().zip(&measures) {
             let head = match (f.status, f.value, f.ci95) {
                 (Status::Estimated, Some(v), Some([lo, hi])) => {
                     format!(
@@ -269,7 +284,7 @@ impl Args {
             };
             let _ = writeln!(s, "  {:<21} {head}", f.source.label());
             let _ = writeln!(s, "  {:<21}   {}", "", f.what);
-            if let Some(m) = &f.measure {
+            if let Some(m) = measure {
                 let _ = writeln!(s, "  {:<21}   measure: {m}", "");
             }
         }
@@ -278,6 +293,17 @@ impl Args {
         }
         out::print(&s)
     }
+}
+
+/// An input the diagnosis asks for, as the flag that gives it.
+fn flag(i: Input) -> String {
+    match i {
+        Input::Reversal => "--reversal RUN180.csv",
+        Input::MultiStep => "--multi-step STEPS.csv",
+        Input::Probe => "--probe PROBE.json",
+        Input::PartDiameter => "--part-diameter-mm D",
+    }
+    .into()
 }
 
 fn precision(unit: &str) -> usize {

@@ -438,10 +438,12 @@ pub fn probe3d_page(p: &Probe3dPage, dir: &Path) -> Result<PathBuf> {
 
 /// The `diagnose-part` page: the verdict (what is identified, what these
 /// data cannot know and the sums they read), one row per source with its
-/// size or the measurement that would tell it, and the scan's profile.
+/// size or the measurement that would tell it (`measures`: each finding's,
+/// as the command words it), and the scan's profile.
 pub fn part_diagnosis_page(
     d: &trueaxis_engine::onmachine::part_diagnosis::PartDiagnosis,
     verdict: &str,
+    measures: &[Option<String>],
     dir: &Path,
 ) -> Result<PathBuf> {
     use trueaxis_engine::onmachine::part_diagnosis::Status;
@@ -449,11 +451,12 @@ pub fn part_diagnosis_page(
     // Every measurement that would tell more: for what cannot be known,
     // and for what an estimate leaves out (a multi-step's inseparable
     // harmonics, the slides in a corrected arc).
-    let measures: Vec<String> = d
+    let wanted: Vec<String> = d
         .findings
         .iter()
-        .filter_map(|f| {
-            let m = f.measure.as_ref()?;
+        .zip(measures)
+        .filter_map(|(f, m)| {
+            let m = m.as_ref()?;
             Some(match f.status {
                 Status::CannotKnow => {
                     format!("cannot know from these data — {}: {m}", f.source.label())
@@ -462,7 +465,7 @@ pub fn part_diagnosis_page(
             })
         })
         .collect();
-    let unknown = !measures.is_empty();
+    let unknown = !wanted.is_empty();
     let mut details = vec![format!(
         "a {} scan, {} points{}",
         d.kind,
@@ -471,7 +474,7 @@ pub fn part_diagnosis_page(
             .map(|n| format!(", reading noise {n:.3} µm"))
             .unwrap_or_default()
     )];
-    details.extend(measures);
+    details.extend(wanted);
     page.verdict(Verdict {
         headline: {
             let mut c = verdict.chars();
@@ -487,7 +490,8 @@ pub fn part_diagnosis_page(
     let rows = d
         .findings
         .iter()
-        .map(|f| {
+        .zip(measures)
+        .map(|(f, m)| {
             let size = match (f.value, f.ci95) {
                 (Some(v), Some([lo, hi])) => {
                     let p = if f.unit == "mm" { 6 } else { 3 };
@@ -505,7 +509,7 @@ pub fn part_diagnosis_page(
                 status.to_string(),
                 size,
                 f.what.clone(),
-                f.measure.clone().unwrap_or_default(),
+                m.clone().unwrap_or_default(),
             ]
         })
         .collect();

@@ -167,6 +167,84 @@ pub enum Status {
     CannotKnow,
 }
 
+/// What the user could give the diagnosis besides the scan (the
+/// [`Evidence`] field it fills). The engine names it; the command line
+/// writes it as its flag.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Input {
+    /// The straightness run with the part turned 180° ([`Evidence::reversal`]).
+    Reversal,
+    /// A multi-step set ([`Evidence::multi_step`]).
+    MultiStep,
+    /// A probe file from the ball calibration ([`Evidence::probe`]).
+    Probe,
+    /// The part's known diameter ([`Evidence::part_diameter_mm`]).
+    PartDiameter,
+}
+
+impl Input {
+    /// The input in the engine's words (what a caller without flags says).
+    pub fn words(self) -> &'static str {
+        match self {
+            Input::Reversal => "the run with the part turned 180°",
+            Input::MultiStep => "the multi-step set",
+            Input::Probe => "the probe file",
+            Input::PartDiameter => "the part's known diameter",
+        }
+    }
+}
+
+/// One piece of a [`Measure`].
+#[derive(Clone, Debug, PartialEq)]
+pub enum Piece {
+    /// Words.
+    Say(String),
+    /// An input to give, named by the caller (a flag at the command line).
+    Give(Input),
+}
+
+/// What to measure to know a source (or what an estimate leaves out):
+/// words and the [`Input`]s that would carry the measurement.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Measure(pub Vec<Piece>);
+
+impl Measure {
+    /// Words only.
+    fn say(s: impl Into<String>) -> Measure {
+        Measure(vec![Piece::Say(s.into())])
+    }
+
+    /// The text, each input named by `name`.
+    pub fn render(&self, name: impl Fn(Input) -> String) -> String {
+        self.0
+            .iter()
+            .map(|p| match p {
+                Piece::Say(s) => s.clone(),
+                Piece::Give(i) => name(*i),
+            })
+            .collect()
+    }
+
+    /// Whether it asks for `input`.
+    pub fn gives(&self, input: Input) -> bool {
+        self.0.contains(&Piece::Give(input))
+    }
+}
+
+impl std::fmt::Display for Measure {
+    /// In the engine's words ([`Input::words`]).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.render(|i| i.words().to_string()))
+    }
+}
+
+impl Serialize for Measure {
+    /// As its text in the engine's words; a command writes its own.
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
 /// One source's finding.
 #[derive(Clone, Debug, Serialize)]
 pub struct Finding {
@@ -184,7 +262,7 @@ pub struct Finding {
     pub what: String,
     /// What to measure to know it (or the part of it an estimate leaves
     /// out).
-    pub measure: Option<String>,
+    pub measure: Option<Measure>,
 }
 
 /// A sum the scan reads that these data cannot split.
@@ -295,7 +373,7 @@ fn not_in_scan(source: Source, unit: &'static str, why: &str) -> Finding {
     }
 }
 
-fn cannot_know(source: Source, unit: &'static str, why: String, measure: &str) -> Finding {
+fn cannot_know(source: Source, unit: &'static str, why: String, measure: Measure) -> Finding {
     Finding {
         source,
         status: Status::CannotKnow,
@@ -303,7 +381,7 @@ fn cannot_know(source: Source, unit: &'static str, why: String, measure: &str) -
         ci95: None,
         unit,
         what: why,
-        measure: Some(measure.to_string()),
+        measure: Some(measure),
     }
 }
 
@@ -351,7 +429,7 @@ fn thermal(
                 Source::ThermalDrift,
                 unit,
                 "the scan has no time stamps: a drift during the scan reads as form".into(),
-                &format!("add a `t_s` column (seconds) and {repeat_how}"),
+                Measure::say(format!("add a `t_s` column (seconds) and {repeat_how}")),
             ),
             None,
         );
@@ -365,7 +443,7 @@ fn thermal(
                 Source::ThermalDrift,
                 unit,
                 "no position is read twice: a drift during the scan reads as form".into(),
-                &format!("{repeat_how}, with its time stamp"),
+                Measure::say(format!("{repeat_how}, with its time stamp")),
             ),
             None,
         );
@@ -376,7 +454,7 @@ fn thermal(
                 Source::ThermalDrift,
                 unit,
                 "too few readings to know their noise".into(),
-                "read at least 8 points",
+                Measure::say("read at least 8 points"),
             ),
             None,
         );
@@ -467,8 +545,14 @@ fn straightness(pos: &[f64], d: &[f64], ev: &Evidence) -> Result<PartDiagnosis> 
             "one orientation reads part form + slide straightness as one sum ({:.3} µm PV together, line removed)",
             pv(&sum)
         );
-        let m = "turn the part 180° about the travel, reverse the probe and scan again: --reversal RUN180.csv (separate reversal)";
-        findings.push(cannot_know(Source::PartForm, "µm", why.clone(), m));
+        let m = Measure(vec![
+            Piece::Say(
+                "turn the part 180° about the travel, reverse the probe and scan again: ".into(),
+            ),
+            Piece::Give(Input::Reversal),
+            Piece::Say(" (separate reversal)".into()),
+        ]);
+        findings.push(cannot_know(Source::PartForm, "µm", why.clone(), m.clone()));
         findings.push(cannot_know(Source::SlideStraightness, "µm", why, m));
         combined.push(Combined {
             sources: vec![Source::PartForm, Source::SlideStraightness],
@@ -534,10 +618,10 @@ fn roundness(c_deg: &[f64], p: &[f64], ev: &Evidence) -> Result<PartDiagnosis> {
             "µm",
             format!("roundness (harmonics 2…) from the multi-step set of {} steps, without its harmonics {list}", ms.steps),
         );
-        part.measure = Some(format!(
+        part.measure = Some(Measure::say(format!(
             "the part's harmonics {list} cannot be told from the spindle's with {} steps: a multi-step whose number of steps divides none of the lobes you look for, or three probes (separate three-probe)",
             ms.steps
-        ));
+        )));
         findings.push(part);
         findings.push(pv_estimated(
             Source::SpindleErrorMotion,
@@ -551,8 +635,12 @@ fn roundness(c_deg: &[f64], p: &[f64], ev: &Evidence) -> Result<PartDiagnosis> {
             "one orientation reads part roundness + spindle error motion as one sum ({:.3} µm PV together, harmonics 0 and 1 removed)",
             pv(&sum)
         );
-        let m = "remount the part at N equally spaced steps and read a turn at each: --multi-step STEPS.csv (separate multi-step; the part's lobes at multiples of N stay inseparable, so choose N dividing none you look for), or read it with three probes (separate three-probe)";
-        findings.push(cannot_know(Source::PartForm, "µm", why.clone(), m));
+        let m = Measure(vec![
+            Piece::Say("remount the part at N equally spaced steps and read a turn at each: ".into()),
+            Piece::Give(Input::MultiStep),
+            Piece::Say(" (separate multi-step; the part's lobes at multiples of N stay inseparable, so choose N dividing none you look for), or read it with three probes (separate three-probe)".into()),
+        ]);
+        findings.push(cannot_know(Source::PartForm, "µm", why.clone(), m.clone()));
         findings.push(cannot_know(Source::SpindleErrorMotion, "µm", why, m));
         combined.push(Combined {
             sources: vec![Source::PartForm, Source::SpindleErrorMotion],
@@ -636,14 +724,20 @@ fn arc(p: &[[f64; 2]], side: [f64; 2], ev: &Evidence) -> Result<PartDiagnosis> {
             Source::ProbeRadius,
             "mm",
             format!("the centre path's radius ({rc:.6} mm) holds the part's radius and the probe's as one sum"),
-            "calibrate the probe on a master ball (probe calibrate, then --probe PROBE.json) or scan a part of known diameter (--part-diameter-mm D)",
+            Measure(vec![
+                Piece::Say("calibrate the probe on a master ball (probe calibrate, then ".into()),
+                Piece::Give(Input::Probe),
+                Piece::Say(") or scan a part of known diameter (".into()),
+                Piece::Give(Input::PartDiameter),
+                Piece::Say(")".into()),
+            ]),
         ),
     });
     let slide = cannot_know(
         Source::SlideStraightness,
         "nm",
         "an arc is scanned by moving two slides: their straightness adds to the form at the same points".into(),
-        "run a reversal along each slide (separate reversal)",
+        Measure::say("run a reversal along each slide (separate reversal)"),
     );
     match &ev.probe {
         Some(k) => {
@@ -675,7 +769,7 @@ fn arc(p: &[[f64; 2]], side: [f64; 2], ev: &Evidence) -> Result<PartDiagnosis> {
                 ),
             );
             if outside > 0 {
-                pf.measure = Some(format!("{outside} contact(s) lie outside the calibrated directions (corrected with the radius only): calibrate over the angles the part presents"));
+                pf.measure = Some(Measure::say(format!("{outside} contact(s) lie outside the calibrated directions (corrected with the radius only): calibrate over the angles the part presents")));
             }
             findings.push(pf);
             let s: Vec<[f64; 2]> = contacts.iter().map(|x| x.surface_mm).collect();
@@ -687,18 +781,27 @@ fn arc(p: &[[f64; 2]], side: [f64; 2], ev: &Evidence) -> Result<PartDiagnosis> {
                 "nm",
                 "peak to valley against the least-squares circle after the probe correction".into(),
             );
-            part.measure = Some("the slides' straightness along the arc is in it: run a reversal along each slide (separate reversal)".into());
+            part.measure = Some(Measure::say("the slides' straightness along the arc is in it: run a reversal along each slide (separate reversal)"));
             findings.push(part);
         }
         None => {
             let why = format!("on one scan the probe's form at a contact angle and the part's form there are one sum ({raw_pv_nm:.1} nm PV together, against the least-squares circle)");
-            findings.push(cannot_know(Source::ProbeForm, "nm", why.clone(), "calibrate the probe on a master ball over the same contact angles (probe calibrate, then --probe PROBE.json)"));
+            let calibrate = |how: &str| {
+                Measure(vec![
+                    Piece::Say(format!(
+                        "calibrate the probe on a master ball{how} (probe calibrate, then "
+                    )),
+                    Piece::Give(Input::Probe),
+                    Piece::Say(")".into()),
+                ])
+            };
             findings.push(cannot_know(
-                Source::PartForm,
+                Source::ProbeForm,
                 "nm",
-                why,
-                "calibrate the probe on a master ball (probe calibrate, then --probe PROBE.json)",
+                why.clone(),
+                calibrate(" over the same contact angles"),
             ));
+            findings.push(cannot_know(Source::PartForm, "nm", why, calibrate("")));
             combined.push(Combined {
                 sources: vec![
                     Source::ProbeForm,
@@ -782,7 +885,7 @@ mod tests {
         for s in [Source::PartForm, Source::SlideStraightness] {
             let f = one.get(s);
             assert_eq!(f.status, Status::CannotKnow);
-            assert!(f.value.is_none() && f.measure.as_ref().unwrap().contains("--reversal"));
+            assert!(f.value.is_none() && f.measure.as_ref().unwrap().gives(Input::Reversal));
         }
         assert_eq!(one.get(Source::ProbeRadius).status, Status::NotInScan);
         assert!(one
@@ -790,6 +893,7 @@ mod tests {
             .measure
             .as_ref()
             .unwrap()
+            .to_string()
             .contains("t_s"));
         assert_eq!(one.combined.len(), 1);
         let both = diagnose(

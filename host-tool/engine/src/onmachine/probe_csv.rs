@@ -184,6 +184,34 @@ pub fn read(text: &str, name: &str) -> Result<ProbeTable> {
     })
 }
 
+/// A file of several sessions read without saying which. Its text names
+/// the choice in the engine's words; a caller with a flag for it writes
+/// [`SessionNeeded::text`] with the flag.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{}", self.text("the session's number"))]
+pub struct SessionNeeded {
+    /// The file's name in messages.
+    pub file: String,
+    /// Its sessions, in order of appearance.
+    pub sessions: Vec<i64>,
+}
+
+impl SessionNeeded {
+    /// The message, the choice of session called `how`.
+    pub fn text(&self, how: &str) -> String {
+        format!(
+            "{}: {} sessions ({}): say which with {how}",
+            self.file,
+            self.sessions.len(),
+            self.sessions
+                .iter()
+                .map(|v| v.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    }
+}
+
 /// Which small scan file a session is read as.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Small {
@@ -236,15 +264,13 @@ impl ProbeTable {
                     .join(", ")
             ),
             None if all.len() == 1 => all[0],
-            None => bail!(
-                "{}: {} sessions ({}): say which with --session",
-                self.name,
-                all.len(),
-                all.iter()
-                    .map(|v| v.to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
+            None => {
+                return Err(SessionNeeded {
+                    file: self.name.clone(),
+                    sessions: all,
+                }
+                .into())
+            }
         };
         Ok(self
             .rows
@@ -468,11 +494,11 @@ mod tests {
             t.small(Some(2), Small::Positions).unwrap(),
             "x_mm,z_mm\n1.5,2.5\n"
         );
-        assert!(t
-            .small(None, Small::Positions)
-            .unwrap_err()
-            .to_string()
-            .contains("--session"));
+        let e = t.small(None, Small::Positions).unwrap_err();
+        assert_eq!(
+            e.downcast_ref::<SessionNeeded>().unwrap().sessions,
+            vec![1, 2]
+        );
         // Session 1 has no z: named by its line.
         let e = t.small(Some(1), Small::Workpiece).unwrap_err().to_string();
         assert!(e.contains("c.csv:3: no `c_deg`"), "{e}");
