@@ -175,6 +175,17 @@ pub fn add_skipped_count(doc: &mut serde_json::Value, data: &Dataset) {
     }
 }
 
+/// The first line of a CSV that is neither blank nor a comment, split
+/// into cells.
+pub fn header(text: &str) -> Vec<String> {
+    text.trim_start_matches('\u{feff}')
+        .lines()
+        .map(|l| l.trim_end_matches('\r'))
+        .find(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#'))
+        .map(|l| l.split(',').map(|c| c.trim().to_string()).collect())
+        .unwrap_or_default()
+}
+
 /// The engine's refusal of a file of several sessions read without
 /// saying which, with the flag that says it.
 pub fn session_flag(e: anyhow::Error) -> anyhow::Error {

@@ -41,8 +41,10 @@ const WING_USES: &[&str] = &["data", "import", "lsq", "simulate"];
 
 /// Layer of each module of the wing, lowest first.
 const WING_LAYERS: &[(&str, u8)] = &[
-    ("probe_csv", 0),
+    ("clock", 0),
     ("separate", 0),
+    ("probe_csv", 1),
+    ("spindle_log", 1),
     ("probe", 1),
     ("workpiece", 1),
     ("simulate", 1),
@@ -169,9 +171,15 @@ fn the_wing_uses_only_the_plumbing_its_own_modules_downward_and_nothing_imports_
                 bad.push(format!("{}: crate::{m}", rel.display()));
             }
         }
-        for m in paths_after(&text, &format!("crate::{WING}::")) {
+        // A module directly in the folder names its siblings as `super::`
+        // too.
+        let mut siblings = paths_after(&text, &format!("crate::{WING}::"));
+        if inner.components().count() == 1 {
+            siblings.extend(paths_after(&text, "super::"));
+        }
+        for m in siblings {
             match wing_layer(&m) {
-                _ if m == own => {}
+                _ if m == own || m.is_empty() => {}
                 Some(l) if l < own_layer => {}
                 _ => bad.push(format!("{}: crate::{WING}::{m}", rel.display())),
             }

@@ -491,7 +491,7 @@ impl Demo {
         // and with its form too.
         let (t, n) = text("part.csv")?;
         let scan = probe::read_scan(&t, &n, ["x", "z"])?;
-        let contacts = probe::correct(pr, &scan, [0.0, 1.0])?;
+        let contacts = probe::correct(pr, &scan, probe::Side::Toward([0.0, 1.0]))?;
         let surf: Vec<[f64; 2]> = contacts.iter().map(|c| c.surface_mm).collect();
         let radius_only: Vec<[f64; 2]> = contacts
             .iter()

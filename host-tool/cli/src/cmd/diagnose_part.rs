@@ -13,7 +13,7 @@ use serde_json::json;
 
 use crate::cmd::out;
 use crate::cmd::probe::{plane, read_probe, side, AnyProbe};
-use crate::cmd::separate::{read_multi_step, read_run};
+use crate::cmd::separate::{read_multi_step, read_run, AngleArgs};
 use crate::input::session_flag;
 use trueaxis_engine::import;
 use trueaxis_engine::onmachine::part_diagnosis::{
@@ -62,19 +62,13 @@ pub struct Args {
     /// directory.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// How the multi-step set's spindle angle is known, when its file
+    /// alone does not say.
+    #[command(flatten)]
+    pub angle: AngleArgs,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
-}
-
-/// The first line that is neither blank nor a comment, split into cells.
-fn header(text: &str) -> Vec<String> {
-    text.trim_start_matches('\u{feff}')
-        .lines()
-        .map(|l| l.trim_end_matches('\r'))
-        .find(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#'))
-        .map(|l| l.split(',').map(|c| c.trim().to_string()).collect())
-        .unwrap_or_default()
 }
 
 impl Args {
@@ -111,23 +105,20 @@ impl Args {
         } else {
             crate::input::scan_text(&self.scan, self.session, Small::Positions)?
         };
-        let head = header(&text);
+        let head = crate::input::header(&text);
         let has = |c: &str| head.iter().any(|h| h == c);
         let pos = format!("{}_mm", self.axis);
         let pl = plane(&self.plane)?;
-        // The kind from the header; each read with the time stamps when
-        // there is a `t_s` column (the last value of a row is its line).
-        let mut cols: Vec<String> = if has("p_um") {
+        // The kind from the header; the time stamps from a `t_s` or a
+        // `time` column (clock times).
+        let cols: Vec<String> = if has("p_um") {
             vec!["c_deg".into(), "p_um".into()]
         } else if has("d_um") {
             vec![pos.clone(), "d_um".into()]
         } else {
             vec![format!("{}_mm", pl[0]), format!("{}_mm", pl[1])]
         };
-        let timed = has("t_s");
-        if timed {
-            cols.push("t_s".into());
-        }
+        let times = trueaxis_engine::onmachine::clock::times(&text, &name)?;
         let names: Vec<&str> = cols.iter().map(String::as_str).collect();
         let rows = import::read_table(
             &text,
@@ -207,11 +198,11 @@ impl Args {
             },
         });
         let ev = Evidence {
-            t_s: timed.then(|| col(2)),
+            t_s: times,
             probe: known,
             part_diameter_mm: self.part_diameter_mm,
             reversal: match (&self.reversal, &pair) {
-                (Some(p), _) => Some(read_run(p, &self.axis, None, 180)?),
+                (Some(p), _) => Some(read_run(p, &self.axis, None, 180, None)?),
                 (None, Some(text)) => Some(
                     import::read_columns(text, &name, [pos.as_str(), "d_um"], "the 180° run")?
                         .into_iter()
@@ -223,7 +214,7 @@ impl Args {
             multi_step: self
                 .multi_step
                 .as_ref()
-                .map(|p| read_multi_step(p, None).map(|r| r.1))
+                .map(|p| read_multi_step(p, None, &self.angle).map(|r| r.1))
                 .transpose()?,
         };
         let d = part_diagnosis::diagnose(&scan, &ev)
@@ -234,18 +225,37 @@ impl Args {
             .iter()
             .map(|f| f.measure.as_ref().map(|m| m.render(flag)))
             .collect();
+        let sum_measures: Vec<Option<String>> = d
+            .combined
+            .iter()
+            .map(|c| c.measure.as_ref().map(|m| m.render(flag)))
+            .collect();
         let report = self
             .report
             .as_ref()
-            .map(|dir| crate::report::onmachine::part_diagnosis_page(&d, &verdict, &measures, dir))
+            .map(|dir| {
+                crate::report::onmachine::part_diagnosis_page(
+                    &d,
+                    &verdict,
+                    &measures,
+                    &sum_measures,
+                    dir,
+                )
+            })
             .transpose()?;
         if self.json {
-            let mut findings = serde_json::to_value(&d.findings)?;
-            if let Some(a) = findings.as_array_mut() {
-                for (f, m) in a.iter_mut().zip(&measures) {
-                    f["measure"] = json!(m);
+            // Each `measure` as this command words it (its flags).
+            let with_flags = |v: &mut serde_json::Value, m: &[Option<String>]| {
+                if let Some(a) = v.as_array_mut() {
+                    for (f, m) in a.iter_mut().zip(m) {
+                        f["measure"] = json!(m);
+                    }
                 }
-            }
+            };
+            let mut findings = serde_json::to_value(&d.findings)?;
+            with_flags(&mut findings, &measures);
+            let mut combined = serde_json::to_value(&d.combined)?;
+            with_flags(&mut combined, &sum_measures);
             let doc = json!({
                 "scan": name,
                 "kind": d.kind,
@@ -253,7 +263,7 @@ impl Args {
                 "noise_um": d.noise_um,
                 "verdict": verdict,
                 "findings": findings,
-                "combined": d.combined,
+                "combined": combined,
                 "report": report.as_ref().map(|p| p.display().to_string()),
             });
             return out::json_pretty(&doc);
@@ -288,6 +298,14 @@ impl Args {
                 let _ = writeln!(s, "  {:<21}   measure: {m}", "");
             }
         }
+        for (c, m) in d.combined.iter().zip(&sum_measures) {
+            let labels: Vec<&str> = c.sources.iter().map(|s| s.label()).collect();
+            let _ = writeln!(s, "  sum: {}  {}", labels.join(" + "), sum_size(c));
+            let _ = writeln!(s, "  {:<21}   {}", "", c.what);
+            if let Some(m) = m {
+                let _ = writeln!(s, "  {:<21}   measure: {m}", "");
+            }
+        }
         if let Some(r) = &report {
             let _ = writeln!(s, "  report: {}", r.display());
         }
@@ -304,6 +322,19 @@ fn flag(i: Input) -> String {
         Input::PartDiameter => "--part-diameter-mm D",
     }
     .into()
+}
+
+/// A sum's PV with its interval, as the text and the page show it.
+pub fn sum_size(c: &part_diagnosis::Combined) -> String {
+    let p = precision(c.unit);
+    match c.ci95 {
+        Some([lo, hi]) => format!(
+            "{:.p$} {u} PV (95 %: {lo:.p$} … {hi:.p$} {u})",
+            c.pv,
+            u = c.unit
+        ),
+        None => format!("{:.p$} {} PV", c.pv, c.unit),
+    }
 }
 
 fn precision(unit: &str) -> usize {
@@ -332,16 +363,17 @@ pub fn verdict(d: &part_diagnosis::PartDiagnosis) -> String {
     };
     if !unknown.is_empty() {
         let _ = write!(v, "; cannot know from these data: {}", unknown.join(", "));
-        for c in &d.combined {
-            let labels: Vec<&str> = c.sources.iter().map(|s| s.label()).collect();
-            let _ = write!(
-                v,
-                " ({} together {:.3} {} PV)",
-                labels.join(" + "),
-                c.pv,
-                c.unit
-            );
-        }
+    }
+    // The sums the data read, each said as one (never split).
+    for c in &d.combined {
+        let labels: Vec<&str> = c.sources.iter().map(|s| s.label()).collect();
+        let _ = write!(
+            v,
+            " ({} together {:.3} {} PV)",
+            labels.join(" + "),
+            c.pv,
+            c.unit
+        );
     }
     v
 }

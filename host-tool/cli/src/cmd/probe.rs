@@ -10,7 +10,7 @@ use serde_json::json;
 
 use crate::cmd::out::{self, outln};
 use trueaxis_engine::onmachine::probe::sphere::{self, Probe3d};
-use trueaxis_engine::onmachine::probe::{self, ProbeFile};
+use trueaxis_engine::onmachine::probe::{self, ProbeFile, Side};
 use trueaxis_engine::onmachine::probe_csv::Small;
 
 /// Arguments of `trueaxis probe`.
@@ -295,15 +295,19 @@ pub(crate) fn read_probe(path: &PathBuf) -> Result<AnyProbe> {
     }
 }
 
-/// `--side`: the outward direction of the surface, ± an axis of the plane.
-pub(crate) fn side(s: &str, pl: [&str; 2]) -> Result<[f64; 2]> {
+/// `--side`: the outward direction of the surface, ± an axis of the plane,
+/// or `out` / `in` for a circle probed from outside (a boss) or inside (a
+/// bore), the normals along its radii.
+pub(crate) fn side(s: &str, pl: [&str; 2]) -> Result<Side> {
     Ok(match s {
+        "out" => Side::Out,
+        "in" => Side::In,
         s if s.len() == 2 && (s.starts_with('+') || s.starts_with('-')) => {
             let sign = if s.starts_with('-') { -1.0 } else { 1.0 };
             let axis = &s[1..];
             match pl.iter().position(|a| *a == axis) {
-                Some(0) => [sign, 0.0],
-                Some(_) => [0.0, sign],
+                Some(0) => Side::Toward([sign, 0.0]),
+                Some(_) => Side::Toward([0.0, sign]),
                 None => bail!(
                     "--side `{s}`: expected ± one of the plane's axes {} and {}",
                     pl[0],
@@ -312,7 +316,7 @@ pub(crate) fn side(s: &str, pl: [&str; 2]) -> Result<[f64; 2]> {
             }
         }
         s => bail!(
-            "--side `{s}`: expected +{0}, -{0}, +{1} or -{1}",
+            "--side `{s}`: expected +{0}, -{0}, +{1} or -{1} (or out / in for a circle probed from outside / inside)",
             pl[0],
             pl[1]
         ),
@@ -331,7 +335,9 @@ pub struct Correct {
     #[arg(long, default_value = "xz")]
     pub plane: String,
     /// Which side of the part the probe touches: the outward direction of
-    /// the surface, `+z`, `-z`, `+x`, `-x`, `+y`, `-y` [default: +z].
+    /// the surface, `+z`, `-z`, `+x`, `-x`, `+y`, `-y`, or `out` / `in` for
+    /// a boss / a bore (all round or an arc: normals along the radii of the
+    /// circle through the centres) [default: +z].
     #[arg(long, default_value = "+z", allow_hyphen_values = true)]
     pub side: String,
     /// The nominal shape the form error is taken against: `circle` or
@@ -398,10 +404,10 @@ impl Correct {
                 ),
             ),
         };
-        let normals_from = if from_nominal {
-            "nominal"
-        } else {
-            "centre_path"
+        let normals_from = match (from_nominal, side) {
+            (true, _) => "nominal",
+            (false, Side::Toward(_)) => "centre_path",
+            (false, _) => "circle",
         };
         let outside = contacts.iter().filter(|c| !c.calibrated).count();
         let surf: Vec<[f64; 2]> = contacts.iter().map(|c| c.surface_mm).collect();
@@ -460,10 +466,10 @@ impl Correct {
                 "{}: {} contacts along the {} normals; part form vs a least-squares {}: {:.1} nm PV ({:.1} nm PV with the probe radius only); written to {}",
                 self.scan.display(),
                 contacts.len(),
-                if from_nominal {
-                    "nominal surface's"
-                } else {
-                    "centre path's"
+                match normals_from {
+                    "nominal" => "nominal surface's",
+                    "circle" => "circle's radial",
+                    _ => "centre path's",
                 },
                 self.nominal,
                 probe::pv(&dev),

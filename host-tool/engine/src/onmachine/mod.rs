@@ -10,12 +10,17 @@
 //!
 //! Inside, lowest first (a module uses only those above it in this list):
 //!
+//! - `clock`: time stamps — `t_s` seconds or clock times (ISO 8601,
+//!   `hh:mm:ss`).
+//! - `separate`: error separation — reversal (part form vs slide
+//!   straightness), three-probe and multi-step (part roundness vs the
+//!   spindle's ISO 230-7 error motion) from readings resampled by angle
+//!   (`separate::turn`); `pv`, `z_all` and the second-difference `noise`
+//!   every probing command uses.
 //! - `probe_csv`: the measurement CSV's probe columns — one campaign in one
 //!   file, a session read as the small scan file a command reads.
-//! - `separate`: error separation — reversal (part form vs slide
-//!   straightness), three-probe and multi-step (part roundness vs spindle
-//!   error motion); `pv` and the second-difference `noise` every probing
-//!   command uses.
+//! - `spindle_log`: readings round a turn as loggers write them — the
+//!   angle from `c_deg`, encoder counts, an index pulse or the speed.
 //! - `probe`: the probe's radius and form calibrated on a master ball
 //!   (`probe::sphere` in 3-D) and a workpiece scan corrected with them.
 //! - `workpiece`: a turned part's form from probed generatrices and the
@@ -25,8 +30,11 @@
 //! - `part_diagnosis`: which error is in a part scan — probe, part, slide,
 //!   spindle or drift — and what the data cannot tell.
 
-pub mod probe_csv;
+pub mod clock;
 pub mod separate;
+
+pub mod probe_csv;
+pub mod spindle_log;
 
 pub mod probe;
 pub mod simulate;

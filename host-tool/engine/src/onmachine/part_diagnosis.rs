@@ -45,14 +45,14 @@ pub enum Scan {
         /// Reading, µm.
         p_um: Vec<f64>,
     },
-    /// Probe-centre positions along an arc of a round part in a plane,
-    /// mm, in scan order; `side` is the outward direction of the surface
-    /// where the probe touches (as `probe correct --side`).
+    /// Probe-centre positions along an arc (or all round) of a round part
+    /// in a plane, mm, in scan order; `side` which way the surface faces
+    /// where the probe touches (as `probe correct`'s).
     Arc {
         /// Probe-centre positions, mm.
         p_mm: Vec<[f64; 2]>,
         /// Outward direction of the surface at the contacts.
-        side: [f64; 2],
+        side: probe::Side,
     },
 }
 
@@ -107,9 +107,9 @@ pub struct Evidence<'a> {
     /// A straightness scan's second run, the part turned 180° and the
     /// probe reversed: `(pos_mm, d_um)`.
     pub reversal: Option<Vec<(f64, f64)>>,
-    /// A multi-step set: one turn of readings (µm) per step, at the same
-    /// evenly spaced spindle angles.
-    pub multi_step: Option<Vec<Vec<f64>>>,
+    /// A multi-step set: the readings of each step at their spindle
+    /// angles.
+    pub multi_step: Option<Vec<separate::Step>>,
 }
 
 /// A candidate source of error in a part scan.
@@ -274,6 +274,35 @@ pub struct Combined {
     pub pv: f64,
     /// `µm` or `nm`.
     pub unit: &'static str,
+    /// Its 95 % interval `[lo, hi]`, in `unit` (every point's bound at
+    /// once), when the noise is known.
+    pub ci95: Option<[f64; 2]>,
+    /// What the sum is (which harmonics, what was removed).
+    pub what: String,
+    /// What would separate it.
+    pub measure: Option<Measure>,
+}
+
+/// A sum of `sources` with its PV and, with the per-point uncertainty
+/// `ci` (every point at once), its interval.
+fn combined_sum(
+    sources: Vec<Source>,
+    pv_: f64,
+    ci: Option<f64>,
+    unit: &'static str,
+    what: String,
+    measure: Measure,
+) -> Combined {
+    Combined {
+        sources,
+        pv: pv_,
+        unit,
+        ci95: ci
+            .filter(|c| c.is_finite())
+            .map(|c| [(pv_ - 2.0 * c).max(0.0), pv_ + 2.0 * c]),
+        what,
+        measure: Some(measure),
+    }
 }
 
 /// The diagnosis of one part scan.
@@ -322,34 +351,7 @@ fn estimated(source: Source, value: f64, half: f64, unit: &'static str, what: St
     }
 }
 
-/// The two-sided quantile that the largest of `n` independent standard
-/// normal deviates stays below with 95 % probability: `P(|N| > z) =
-/// 1 − 0.95^(1/n)`. A peak to valley is taken over all points, so its
-/// interval needs every point's bound at once, not one point's 1.96 (with
-/// 500 points the noise's extremes lie near ±3 σ).
-pub fn z_all(n: usize) -> f64 {
-    let tail = 1.0 - 0.95f64.powf(1.0 / n.max(1) as f64);
-    // erfc(z/√2) = tail, by bisection on Abramowitz & Stegun 7.1.26
-    // (absolute error below 1.5·10⁻⁷, relative below 0.2 % out to z = 5).
-    let erfc = |x: f64| {
-        let t = 1.0 / (1.0 + 0.327_591_1 * x);
-        let p = t
-            * (0.254_829_592
-                + t * (-0.284_496_736
-                    + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
-        p * (-x * x).exp()
-    };
-    let (mut lo, mut hi) = (0.0f64, 8.0f64);
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if erfc(mid / 2f64.sqrt()) > tail {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    0.5 * (lo + hi)
-}
+pub use crate::onmachine::separate::z_all;
 
 /// A peak to valley with its interval: when every point is within `ci` of
 /// the truth at once (95 %: `ci = z_all(n)·σ`), the peak and the valley
@@ -553,12 +555,15 @@ fn straightness(pos: &[f64], d: &[f64], ev: &Evidence) -> Result<PartDiagnosis> 
             Piece::Say(" (separate reversal)".into()),
         ]);
         findings.push(cannot_know(Source::PartForm, "µm", why.clone(), m.clone()));
-        findings.push(cannot_know(Source::SlideStraightness, "µm", why, m));
-        combined.push(Combined {
-            sources: vec![Source::PartForm, Source::SlideStraightness],
-            pv: pv(&sum),
-            unit: "µm",
-        });
+        findings.push(cannot_know(Source::SlideStraightness, "µm", why, m.clone()));
+        combined.push(combined_sum(
+            vec![Source::PartForm, Source::SlideStraightness],
+            pv(&sum),
+            noise.map(|n| z_all(pos.len()) * n),
+            "µm",
+            "the readings along the travel, line removed".into(),
+            m,
+        ));
     }
     findings.push(not_in_scan(
         Source::SpindleErrorMotion,
@@ -601,9 +606,8 @@ fn roundness(c_deg: &[f64], p: &[f64], ev: &Evidence) -> Result<PartDiagnosis> {
         not_in_scan(Source::ProbeForm, "nm", "a fixed probe touches the turning part in one direction: its form adds a constant, which is not roundness"),
     ];
     let mut combined = Vec::new();
-    if let Some(runs) = &ev.multi_step {
-        let ms = separate::multi_step(runs)?;
-        let ci = z_all(ms.samples) * ms.point_sigma_um;
+    if let Some(steps) = &ev.multi_step {
+        let ms = separate::multi_step(steps, None)?;
         let list: Vec<String> = ms
             .inseparable_harmonics
             .iter()
@@ -611,24 +615,44 @@ fn roundness(c_deg: &[f64], p: &[f64], ev: &Evidence) -> Result<PartDiagnosis> {
             .map(|k| k.to_string())
             .collect();
         let list = format!("{}, …", list.join(", "));
-        let mut part = pv_estimated(
+        let mut part = estimated(
             Source::PartForm,
             ms.part_pv_um,
-            ci,
+            0.0,
             "µm",
             format!("roundness (harmonics 2…) from the multi-step set of {} steps, without its harmonics {list}", ms.steps),
         );
-        part.measure = Some(Measure::say(format!(
+        part.ci95 = Some(ms.part_ci95_um);
+        let remedy = format!(
             "the part's harmonics {list} cannot be told from the spindle's with {} steps: a multi-step whose number of steps divides none of the lobes you look for, or three probes (separate three-probe)",
             ms.steps
-        )));
+        );
+        part.measure = Some(Measure::say(remedy.clone()));
         findings.push(part);
-        findings.push(pv_estimated(
+        let em = &ms.error_motion;
+        let mut spin = estimated(
             Source::SpindleErrorMotion,
-            ms.spindle_pv_um,
-            ci,
+            em.synchronous_um,
+            0.0,
             "µm",
-            format!("radial error motion along the probe from the multi-step set; it holds the part's harmonics {list} too"),
+            format!(
+                "synchronous radial error motion along the probe (ISO 230-7: the turn average, its once-per-turn term — centring, {:.3} µm — left out) from the multi-step set, without harmonics {list}",
+                em.centring_um
+            ),
+        );
+        spin.ci95 = Some(em.synchronous_ci95_um);
+        spin.measure = Some(Measure::say(remedy.clone()));
+        findings.push(spin);
+        combined.push(combined_sum(
+            vec![Source::PartForm, Source::SpindleErrorMotion],
+            ms.error_motion.excluded_pv_um,
+            Some(z_all(ms.samples) * ms.point_sigma_um),
+            "µm",
+            format!(
+                "harmonics {list}: the part's and the spindle's, which {} steps cannot tell apart",
+                ms.steps
+            ),
+            Measure::say(remedy),
         ));
     } else {
         let why = format!(
@@ -641,12 +665,20 @@ fn roundness(c_deg: &[f64], p: &[f64], ev: &Evidence) -> Result<PartDiagnosis> {
             Piece::Say(" (separate multi-step; the part's lobes at multiples of N stay inseparable, so choose N dividing none you look for), or read it with three probes (separate three-probe)".into()),
         ]);
         findings.push(cannot_know(Source::PartForm, "µm", why.clone(), m.clone()));
-        findings.push(cannot_know(Source::SpindleErrorMotion, "µm", why, m));
-        combined.push(Combined {
-            sources: vec![Source::PartForm, Source::SpindleErrorMotion],
-            pv: pv(&sum),
-            unit: "µm",
-        });
+        findings.push(cannot_know(
+            Source::SpindleErrorMotion,
+            "µm",
+            why,
+            m.clone(),
+        ));
+        combined.push(combined_sum(
+            vec![Source::PartForm, Source::SpindleErrorMotion],
+            pv(&sum),
+            noise.map(|n| z_all(c_deg.len()) * n),
+            "µm",
+            "the readings round the turn, harmonics 0 and 1 removed".into(),
+            m,
+        ));
     }
     findings.insert(
         3,
@@ -668,7 +700,7 @@ fn roundness(c_deg: &[f64], p: &[f64], ev: &Evidence) -> Result<PartDiagnosis> {
     })
 }
 
-fn arc(p: &[[f64; 2]], side: [f64; 2], ev: &Evidence) -> Result<PartDiagnosis> {
+fn arc(p: &[[f64; 2]], side: probe::Side, ev: &Evidence) -> Result<PartDiagnosis> {
     let (c, rc) = probe::kasa(p)?;
     let theta: Vec<f64> = p.iter().map(|q| (q[1] - c[1]).atan2(q[0] - c[0])).collect();
     let dev_um: Vec<f64> = p
@@ -693,7 +725,11 @@ fn arc(p: &[[f64; 2]], side: [f64; 2], ev: &Evidence) -> Result<PartDiagnosis> {
     // Convex (probed from outside): the centre path's radius is the part's
     // plus the probe's; a bore's is the part's minus the probe's.
     let mid = p[p.len() / 2];
-    let convex = (mid[0] - c[0]) * side[0] + (mid[1] - c[1]) * side[1] > 0.0;
+    let convex = match side {
+        probe::Side::Out => true,
+        probe::Side::In => false,
+        probe::Side::Toward(d) => (mid[0] - c[0]) * d[0] + (mid[1] - c[1]) * d[1] > 0.0,
+    };
     let sign = if convex { 1.0 } else { -1.0 };
     let from_diameter = ev
         .part_diameter_mm
@@ -772,17 +808,26 @@ fn arc(p: &[[f64; 2]], side: [f64; 2], ev: &Evidence) -> Result<PartDiagnosis> {
                 pf.measure = Some(Measure::say(format!("{outside} contact(s) lie outside the calibrated directions (corrected with the radius only): calibrate over the angles the part presents")));
             }
             findings.push(pf);
+            // The corrected contacts still hold the straightness of the
+            // slides that carried the probe along the arc: a sum, said as
+            // one (its interval is the noise's; the split is unknown).
             let s: Vec<[f64; 2]> = contacts.iter().map(|x| x.surface_mm).collect();
             let dev = probe::form_deviation_nm(&s, true)?;
-            let mut part = pv_estimated(
+            let by_reversal = Measure::say("run a reversal along each slide (separate reversal), or scan the part turned on the table so the slides' errors move with it");
+            findings.push(cannot_know(
                 Source::PartForm,
-                pv(&dev),
-                z_all(p.len()) * sigma * 1e3,
                 "nm",
-                "peak to valley against the least-squares circle after the probe correction".into(),
-            );
-            part.measure = Some(Measure::say("the slides' straightness along the arc is in it: run a reversal along each slide (separate reversal)"));
-            findings.push(part);
+                format!("the probe-corrected arc holds the part's form and the straightness of the slides that moved the probe along it as one sum ({:.1} nm PV together, against the least-squares circle)", pv(&dev)),
+                by_reversal.clone(),
+            ));
+            combined.push(combined_sum(
+                vec![Source::PartForm, Source::SlideStraightness],
+                pv(&dev),
+                Some(z_all(p.len()) * sigma * 1e3),
+                "nm",
+                "the arc corrected with the probe's radius and form, against the least-squares circle".into(),
+                by_reversal,
+            ));
         }
         None => {
             let why = format!("on one scan the probe's form at a contact angle and the part's form there are one sum ({raw_pv_nm:.1} nm PV together, against the least-squares circle)");
@@ -802,15 +847,18 @@ fn arc(p: &[[f64; 2]], side: [f64; 2], ev: &Evidence) -> Result<PartDiagnosis> {
                 calibrate(" over the same contact angles"),
             ));
             findings.push(cannot_know(Source::PartForm, "nm", why, calibrate("")));
-            combined.push(Combined {
-                sources: vec![
+            combined.push(combined_sum(
+                vec![
                     Source::ProbeForm,
                     Source::PartForm,
                     Source::SlideStraightness,
                 ],
-                pv: raw_pv_nm,
-                unit: "nm",
-            });
+                raw_pv_nm,
+                Some(z_all(p.len()) * sigma * 1e3),
+                "nm",
+                "the probe centres against their least-squares circle".into(),
+                calibrate(""),
+            ));
         }
     }
     findings.push(slide);

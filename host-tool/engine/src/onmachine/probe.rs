@@ -447,6 +447,20 @@ pub fn calibrate(p: &[[f64; 2]], ball_radius_mm: f64) -> Result<Calibration> {
     })
 }
 
+/// Which way the part's surface faces where the probe touches it — the
+/// outward normal, from the material toward the probe.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Side {
+    /// Roughly this direction in the plane (`[0, 1]`: probed from above,
+    /// +z); each normal is the centre path's, turned toward it.
+    Toward([f64; 2]),
+    /// Away from the centre of the circle the scan lies on: a boss or a
+    /// shaft probed from outside, all round or along an arc.
+    Out,
+    /// Toward that centre: a bore probed from inside.
+    In,
+}
+
 /// One corrected contact of a workpiece scan.
 #[derive(Clone, Debug, Serialize)]
 pub struct Contact {
@@ -461,10 +475,9 @@ pub struct Contact {
 }
 
 /// Corrects a workpiece scan (probe-centre positions `p`, mm, in scan
-/// order) with `probe`. `side` is the outward direction of the part's
-/// surface where the probe touches it, roughly (`[0, 1]`: the probe is
-/// above, +z): it orients the normals.
-pub fn correct(probe: &ProbeFile, p: &[[f64; 2]], side: [f64; 2]) -> Result<Vec<Contact>> {
+/// order) with `probe`. `side` says which way the part's surface faces
+/// where the probe touches it: it orients the normals.
+pub fn correct(probe: &ProbeFile, p: &[[f64; 2]], side: Side) -> Result<Vec<Contact>> {
     correct_with(p, side, probe.probe_radius_mm, |t| {
         probe.covers(t).then(|| probe.form_nm_at(t))
     })
@@ -477,7 +490,7 @@ pub fn correct(probe: &ProbeFile, p: &[[f64; 2]], side: [f64; 2]) -> Result<Vec<
 /// [`sphere::Probe3d::in_plane`].
 pub fn correct_with(
     p: &[[f64; 2]],
-    side: [f64; 2],
+    side: Side,
     r: f64,
     form: impl Fn(f64) -> Option<f64>,
 ) -> Result<Vec<Contact>> {
@@ -485,15 +498,38 @@ pub fn correct_with(
 }
 
 /// The outward normals of the probe-centre path `p` (the tangency
-/// relation: the part's normal at the contact is the centre path's),
-/// oriented towards `side`, from each point's neighbours.
-pub fn path_normals(p: &[[f64; 2]], side: [f64; 2]) -> Result<Vec<[f64; 2]>> {
+/// relation: the part's normal at the contact is the centre path's):
+/// toward [`Side::Toward`]'s direction from each point's neighbours, or —
+/// a circle probed from outside or inside ([`Side::Out`], [`Side::In`]) —
+/// along the radius of the least-squares circle through the centres,
+/// exact at every point of a full circle, where no one direction could
+/// orient them.
+pub fn path_normals(p: &[[f64; 2]], side: Side) -> Result<Vec<[f64; 2]>> {
     if p.len() < 3 {
         bail!(
             "{} points; a scan needs at least 3 to take normals from",
             p.len()
         );
     }
+    let side = match side {
+        Side::Toward(d) => d,
+        Side::Out | Side::In => {
+            let (c, _) = kasa(p)?;
+            let s = if side == Side::Out { 1.0 } else { -1.0 };
+            return p
+                .iter()
+                .enumerate()
+                .map(|(i, q)| {
+                    let (dx, dz) = (q[0] - c[0], q[1] - c[1]);
+                    let l = dx.hypot(dz);
+                    if !(l > 0.0) {
+                        bail!("point {} of the scan is the centre of its circle", i + 1);
+                    }
+                    Ok([s * dx / l, s * dz / l])
+                })
+                .collect();
+        }
+    };
     let mut out = Vec::with_capacity(p.len());
     for i in 0..p.len() {
         let (a, b) = (p[i.saturating_sub(1)], p[(i + 1).min(p.len() - 1)]);
@@ -609,11 +645,11 @@ mod tests {
         };
         let exact = contacts_along(&centres, &nominal, rb, |_| Some(0.0)).unwrap();
         assert!(off(&exact) < 1.0, "{} nm", off(&exact));
-        let chord = correct_with(&centres, [0.0, 1.0], rb, |_| Some(0.0)).unwrap();
+        let chord = correct_with(&centres, Side::Toward([0.0, 1.0]), rb, |_| Some(0.0)).unwrap();
         assert!(off(&chord) > 10_000.0, "{} nm", off(&chord));
         // Fewer than three points: only given normals can place them.
         assert!(contacts_along(&centres[..2], &nominal[..2], rb, |_| None).is_ok());
-        assert!(correct_with(&centres[..2], [0.0, 1.0], rb, |_| None).is_err());
+        assert!(correct_with(&centres[..2], Side::Toward([0.0, 1.0]), rb, |_| None).is_err());
         assert!(contacts_along(&centres, &nominal[..2], rb, |_| None).is_err());
     }
 
@@ -744,7 +780,7 @@ mod tests {
             let d = surf + 0.49715 + form(t) * 1e-6;
             centres.push([d * t.cos(), d * t.sin()]);
         }
-        let c = correct(&probe, &centres, [0.0, 1.0]).unwrap();
+        let c = correct(&probe, &centres, Side::Toward([0.0, 1.0])).unwrap();
         let s: Vec<[f64; 2]> = c.iter().map(|k| k.surface_mm).collect();
         let pv_true = pv(&form_deviation_nm(&truth, true).unwrap());
         let pv_corr = pv(&form_deviation_nm(&s, true).unwrap());
@@ -769,7 +805,7 @@ mod tests {
         assert!(c.iter().all(|k| k.calibrated));
         // Beyond the calibrated arc the form is not extrapolated.
         let below: Vec<[f64; 2]> = (0..10).map(|i| [i as f64, 0.0]).collect();
-        let c = correct(&probe, &below, [0.0, -1.0]).unwrap();
+        let c = correct(&probe, &below, Side::Toward([0.0, -1.0])).unwrap();
         assert!(c.iter().all(|k| !k.calibrated && k.form_nm == 0.0));
     }
 }

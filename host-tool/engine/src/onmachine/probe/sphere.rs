@@ -607,11 +607,13 @@ mod tests {
             let d = surf + 0.49715 + form([t.cos(), 0.0, t.sin()]) * 1e-6;
             centres.push([d * t.cos(), d * t.sin()]);
         }
-        let c =
-            crate::onmachine::probe::correct_with(&centres, [0.0, 1.0], pr.probe_radius_mm, |t| {
-                pr.in_plane([0, 2], t)
-            })
-            .unwrap();
+        let c = crate::onmachine::probe::correct_with(
+            &centres,
+            crate::onmachine::probe::Side::Toward([0.0, 1.0]),
+            pr.probe_radius_mm,
+            |t| pr.in_plane([0, 2], t),
+        )
+        .unwrap();
         assert!(c.iter().all(|k| k.calibrated));
         let s: Vec<[f64; 2]> = c.iter().map(|k| k.surface_mm).collect();
         let dev = crate::onmachine::probe::form_deviation_nm(&s, true).unwrap();
