@@ -186,6 +186,25 @@ pub fn header(text: &str) -> Vec<String> {
         .unwrap_or_default()
 }
 
+/// The lines in `path` of the rows [`scan_text`] gives for a session of
+/// a measurement CSV with probe columns; `None` for a small scan file
+/// (its own lines are the rows').
+pub fn scan_lines(path: &Path, session: Option<i64>) -> Result<Option<Vec<usize>>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    if !trueaxis_engine::onmachine::probe_csv::is_probe_csv(&text) {
+        return Ok(None);
+    }
+    let t = trueaxis_engine::onmachine::probe_csv::read(&text, &path.display().to_string())?;
+    Ok(Some(
+        t.select(session)
+            .map_err(session_flag)?
+            .iter()
+            .map(|r| r.line)
+            .collect(),
+    ))
+}
+
 /// The engine's refusal of a file of several sessions read without
 /// saying which, with the flag that says it.
 pub fn session_flag(e: anyhow::Error) -> anyhow::Error {

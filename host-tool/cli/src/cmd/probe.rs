@@ -45,6 +45,57 @@ fn read(path: &std::path::Path, pl: [&str; 2], session: Option<i64>) -> Result<V
     probe::read_scan(&text, &path.display().to_string(), pl)
 }
 
+/// The lines of the scan's rows: the campaign file's for a session of a
+/// measurement CSV, else the small file's own.
+fn lines_of(path: &std::path::Path, session: Option<i64>, own: Vec<usize>) -> Result<Vec<usize>> {
+    Ok(crate::input::scan_lines(path, session)?.unwrap_or(own))
+}
+
+/// The outliers as the JSON shows them (each by its line), and the
+/// warning that names them.
+fn outliers_said(
+    outliers: &[probe::Outlier],
+    lines: &[usize],
+    name: &str,
+) -> (serde_json::Value, Option<String>) {
+    let doc = outliers
+        .iter()
+        .map(|o| {
+            json!({
+                "line": lines.get(o.index),
+                "residual_nm": o.residual_nm,
+                "left_out": o.left_out,
+            })
+        })
+        .collect::<Vec<_>>();
+    let warn = (!outliers.is_empty()).then(|| {
+        let list: Vec<String> = outliers
+            .iter()
+            .take(10)
+            .map(|o| {
+                format!(
+                    "line {} ({:+.1} nm)",
+                    lines.get(o.index).copied().unwrap_or(o.index + 1),
+                    o.residual_nm
+                )
+            })
+            .collect();
+        let kept = outliers.iter().any(|o| !o.left_out);
+        format!(
+            "{name}: {} contact(s) far off the ball against their neighbours (dirt, a chip, a false trigger): {}{} — {}",
+            outliers.len(),
+            list.join(", "),
+            if outliers.len() > 10 { ", …" } else { "" },
+            if kept {
+                "fitted with them (--keep-outliers)"
+            } else {
+                "left out of the calibration; clean the ball and the stylus and probe again if they repeat"
+            }
+        )
+    });
+    (json!(doc), warn)
+}
+
 /// The page's next step after a calibration written to `probe`.
 fn correct_next(probe: &std::path::Path) -> String {
     format!(
@@ -95,6 +146,10 @@ pub struct Calibrate {
     /// (docs/cli.md § Measurement CSV, probe data).
     #[arg(long)]
     pub session: Option<i64>,
+    /// Fit the contacts found far off the ball too (they are named either
+    /// way; by default they are left out).
+    #[arg(long)]
+    pub keep_outliers: bool,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -107,9 +162,14 @@ impl Calibrate {
             return self.run_3d();
         }
         let pl = plane(&self.plane).map_err(|e| anyhow::anyhow!("{e} (or xyz for a 3-D scan)"))?;
-        let p = read(&self.scan, pl, self.session)?;
-        let cal = probe::calibrate(&p, self.ball_diameter_mm / 2.0)
-            .with_context(|| format!("{}: cannot calibrate", self.scan.display()))?;
+        let text = crate::input::scan_text(&self.scan, self.session, Small::Positions)?;
+        let name = self.scan.display().to_string();
+        let (p, own) = probe::read_scan_lines(&text, &name, pl)?;
+        let lines = lines_of(&self.scan, self.session, own)?;
+        let mut cal = probe::calibrate_with(&p, self.ball_diameter_mm / 2.0, self.keep_outliers)
+            .with_context(|| format!("{name}: cannot calibrate"))?;
+        let (outliers, said) = outliers_said(&cal.outliers, &lines, &name);
+        cal.warnings.extend(said);
         let pr = &cal.probe;
         crate::workflow::write_file(
             &self.output,
@@ -149,6 +209,7 @@ impl Calibrate {
                 "probe": pr,
                 "pv_without_form_nm": cal.pv_without_form_nm,
                 "pv_with_form_nm": cal.pv_with_form_nm,
+                "outliers": outliers,
                 "warnings": cal.warnings,
             });
             out::json_pretty(&doc)?;
@@ -193,9 +254,13 @@ impl Calibrate {
     /// `--plane xyz`: the 3-D calibration (docs/on-machine.md).
     fn run_3d(self) -> Result<()> {
         let text = crate::input::scan_text(&self.scan, self.session, Small::Positions)?;
-        let p = sphere::read_scan(&text, &self.scan.display().to_string())?;
-        let cal = sphere::calibrate(&p, self.ball_diameter_mm / 2.0)
-            .with_context(|| format!("{}: cannot calibrate", self.scan.display()))?;
+        let name = self.scan.display().to_string();
+        let (p, own) = sphere::read_scan_lines(&text, &name)?;
+        let lines = lines_of(&self.scan, self.session, own)?;
+        let mut cal = sphere::calibrate_with(&p, self.ball_diameter_mm / 2.0, self.keep_outliers)
+            .with_context(|| format!("{name}: cannot calibrate"))?;
+        let (outliers, said) = outliers_said(&cal.outliers, &lines, &name);
+        cal.warnings.extend(said);
         let pr = &cal.probe;
         crate::workflow::write_file(
             &self.output,
@@ -211,7 +276,16 @@ impl Calibrate {
                 crate::report::onmachine::probe3d_page(
                     &crate::report::onmachine::Probe3dPage {
                         probe: pr,
-                        points: &p,
+                        // The contacts fitted (the page's residuals are
+                        // theirs).
+                        points: &p
+                            .iter()
+                            .enumerate()
+                            .filter(|(i, _)| {
+                                !cal.outliers.iter().any(|o| o.index == *i && o.left_out)
+                            })
+                            .map(|(_, q)| *q)
+                            .collect::<Vec<_>>(),
                         residual_nm: &cal.residual_nm,
                         ball_pv_nm: [cal.pv_without_form_nm, cal.pv_with_form_nm],
                         warnings: &cal.warnings,
@@ -229,6 +303,7 @@ impl Calibrate {
                 "probe": pr,
                 "pv_without_form_nm": cal.pv_without_form_nm,
                 "pv_with_form_nm": cal.pv_with_form_nm,
+                "outliers": outliers,
                 "warnings": cal.warnings,
             });
             return out::json_pretty(&doc);

@@ -37,7 +37,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::lsq;
 
+pub mod robust;
 pub mod sphere;
+
+pub use robust::Outlier;
 
 /// Format tag of a probe file.
 pub const PROBE_FORMAT: &str = "trueaxis-probe/1";
@@ -79,6 +82,10 @@ pub struct ProbeFile {
     pub held_out_rms_nm: Vec<[f64; 2]>,
     /// Points in the calibration.
     pub points: usize,
+    /// The resolution the ball scan's coordinates were written at, mm,
+    /// when coarser than 10⁻⁷ mm: no interval above is below it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quantum_mm: Option<f64>,
 }
 
 impl ProbeFile {
@@ -152,12 +159,15 @@ fn wrap_deg(d: f64) -> f64 {
 /// The form order chosen by held-out RMS, shared by the 2-D and 3-D
 /// calibrations: each order of `orders` is fitted (`fit(train rows,
 /// order)` → the residual of every point, mm) on 4 of the 5 folds
-/// (`fold[i]` ∈ 0…4) and scored on the fifth; an order whose fit fails on a
-/// fold is not scored. Returns the held-out RMS per order, nm, and the
-/// smallest order within 2 % of the best (0 when none was scored).
+/// (`fold[i]` ∈ 0…4) and scored on the fifth, each held-out residual's
+/// square at most `clip`² (mm: one contact cannot decide); an order whose
+/// fit fails on a fold is not scored. Returns the held-out RMS per order,
+/// nm, and the smallest order within 2 % of the best (0 when none was
+/// scored).
 pub(crate) fn choose_order(
     orders: impl Iterator<Item = usize>,
     fold: &[usize],
+    clip: f64,
     fit: impl Fn(&[usize], usize) -> Result<Vec<f64>>,
 ) -> (Vec<(usize, f64)>, usize) {
     let mut held: Vec<(usize, f64)> = Vec::new();
@@ -169,7 +179,7 @@ pub(crate) fn choose_order(
                 continue 'orders;
             };
             for i in (0..fold.len()).filter(|&i| fold[i] == k) {
-                ss += resid[i] * resid[i];
+                ss += (resid[i] * resid[i]).min(clip * clip);
                 n += 1;
             }
         }
@@ -305,16 +315,90 @@ pub struct Calibration {
     pub pv_with_form_nm: f64,
     /// Problems with the calibration data.
     pub warnings: Vec<String>,
+    /// Contacts far off the ball (robust/outliers), named.
+    pub outliers: Vec<Outlier>,
+}
+
+/// The highest form order `n` contacts support.
+fn max_order(n: usize) -> usize {
+    MAX_ORDER.min((n / 10).saturating_sub(3) / 2 + 1)
 }
 
 /// Calibrates a probe on a master ball of radius `ball_radius_mm` from the
-/// probe-centre positions `p` (mm) of a 2-D scan in one plane.
+/// probe-centre positions `p` (mm) of a 2-D scan in one plane, outlier
+/// contacts left out ([`calibrate_with`]).
 pub fn calibrate(p: &[[f64; 2]], ball_radius_mm: f64) -> Result<Calibration> {
+    calibrate_with(p, ball_radius_mm, false)
+}
+
+/// [`calibrate`], the outlier contacts found against the most flexible
+/// form ([`robust::flag`]) named and — unless `keep_outliers` — left out
+/// before anything else is fitted; a coordinate quantum found in the scan
+/// is the floor of every interval.
+pub fn calibrate_with(
+    p: &[[f64; 2]],
+    ball_radius_mm: f64,
+    keep_outliers: bool,
+) -> Result<Calibration> {
     if !(ball_radius_mm.is_finite() && ball_radius_mm > 0.0) {
         bail!("the master ball radius must be a positive number of mm, got {ball_radius_mm}");
     }
     if p.len() < 12 {
         bail!("{} points on the ball; a calibration needs at least 12 (a few hundred along the arc for a form error)", p.len());
+    }
+    let q = robust::quantum(p.iter().flatten().copied());
+    let floor = q.map_or(0.0, |q| q / 12f64.sqrt());
+    let start = kasa(p)?;
+    // Each contact against its neighbours in angle (robust::flag).
+    let all: Vec<usize> = (0..p.len()).collect();
+    let rigid = fit_order(p, &all, 0, start)?;
+    let theta: Vec<f64> = p
+        .iter()
+        .map(|q| (q[1] - rigid.centre[1]).atan2(q[0] - rigid.centre[0]))
+        .collect();
+    let near = robust::nearest(p.len(), |i, j| {
+        let d = (theta[i] - theta[j]).rem_euclid(2.0 * PI);
+        d.min(2.0 * PI - d)
+    });
+    let (flagged, cut) = robust::flag(&rigid.resid, &near, floor);
+    let used: Vec<[f64; 2]> = (0..p.len())
+        .filter(|i| keep_outliers || !flagged.contains(i))
+        .map(|i| p[i])
+        .collect();
+    let mut cal = calibrate_points(&used, ball_radius_mm, cut)?;
+    let pr = &cal.probe;
+    cal.outliers = flagged
+        .iter()
+        .map(|&i| {
+            let (dx, dz) = (p[i][0] - pr.centre_mm[0], p[i][1] - pr.centre_mm[1]);
+            let d = dx.hypot(dz) - pr.ball_radius_mm - pr.probe_radius_mm;
+            Outlier {
+                index: i,
+                residual_nm: d * 1e6 - pr.form_nm_at(dz.atan2(dx)),
+                left_out: !keep_outliers,
+            }
+        })
+        .collect();
+    if let Some(q) = q.filter(|&q| q > 1e-7) {
+        let pr = &mut cal.probe;
+        pr.quantum_mm = Some(q);
+        let raised = robust::floor_all([&mut pr.probe_radius_ci95_mm], q)
+            | robust::floor_all(pr.form_ci95_nm.iter_mut(), q * 1e6);
+        if let Some(w) = robust::quantum_warning(q, raised, pr.residual_rms_nm) {
+            cal.warnings.push(w);
+        }
+    }
+    Ok(cal)
+}
+
+/// The calibration proper on the contacts `p` kept; `clip` (mm) bounds
+/// one held-out residual's say in the order.
+fn calibrate_points(p: &[[f64; 2]], ball_radius_mm: f64, clip: f64) -> Result<Calibration> {
+    if p.len() < 12 {
+        bail!(
+            "{} points on the ball besides the outliers; a calibration needs at least 12",
+            p.len()
+        );
     }
     let start = kasa(p)?;
     let all: Vec<usize> = (0..p.len()).collect();
@@ -352,11 +436,11 @@ pub fn calibrate(p: &[[f64; 2]], ball_radius_mm: f64) -> Result<Calibration> {
         let block = ((d / arc.max(1e-9)) * 20.0).floor().clamp(0.0, 19.0) as usize;
         block % 5
     };
-    let max_order = MAX_ORDER.min((p.len() / 10).saturating_sub(3) / 2 + 1);
     let folds: Vec<usize> = (0..p.len()).map(fold_of).collect();
     let (held, order) = choose_order(
-        std::iter::once(0).chain(2..=max_order),
+        std::iter::once(0).chain(2..=max_order(p.len())),
         &folds,
+        clip,
         |train, order| Ok(fit_order(p, train, order, start)?.resid),
     );
     let fit = fit_order(p, &all, order, start)?;
@@ -384,11 +468,14 @@ pub fn calibrate(p: &[[f64; 2]], ball_radius_mm: f64) -> Result<Calibration> {
     });
     let proj = lsq::solve(&rig, &DVector::from_vec(raw.clone()), None)?;
     let form_rigid_nm = [proj.coef[0], proj.coef[1], proj.coef[2]];
-    // Radius and centre take the removed part (nm → mm).
+    // Radius and centre take the removed part (nm → mm): moving the
+    // centre by δ changes each distance by −δ·n, so the first harmonic
+    // `c1 cos θ + s1 sin θ` left out of the form is a centre further by
+    // (c1, s1).
     let total_radius = fit.total_radius + form_rigid_nm[0] * 1e-6;
     let centre = [
-        fit.centre[0] - form_rigid_nm[1] * 1e-6,
-        fit.centre[1] - form_rigid_nm[2] * 1e-6,
+        fit.centre[0] + form_rigid_nm[1] * 1e-6,
+        fit.centre[1] + form_rigid_nm[2] * 1e-6,
     ];
     // The radius's interval in this parameterisation (form orthogonal to
     // radius and centre): the rigid columns alone at the final centre,
@@ -414,6 +501,7 @@ pub fn calibrate(p: &[[f64; 2]], ball_radius_mm: f64) -> Result<Calibration> {
         residual_rms_nm: 0.0,
         held_out_rms_nm: held.iter().map(|&(o, v)| [o as f64, v]).collect(),
         points: p.len(),
+        quantum_mm: None,
     };
     if probe.probe_radius_mm <= 0.0 {
         bail!(
@@ -444,6 +532,7 @@ pub fn calibrate(p: &[[f64; 2]], ball_radius_mm: f64) -> Result<Calibration> {
         theta_deg: thetas.iter().map(|t| t.to_degrees()).collect(),
         probe,
         warnings,
+        outliers: Vec::new(),
     })
 }
 
@@ -613,13 +702,26 @@ pub fn rad(deg: f64) -> f64 {
 /// probe-centre position per row (docs/on-machine.md). Other columns are
 /// ignored. Errors name the file, line and column.
 pub fn read_scan(text: &str, name: &str, plane: [&str; 2]) -> Result<Vec<[f64; 2]>> {
+    Ok(read_scan_lines(text, name, plane)?.0)
+}
+
+/// [`read_scan`], and each point's line in the text.
+pub fn read_scan_lines(
+    text: &str,
+    name: &str,
+    plane: [&str; 2],
+) -> Result<(Vec<[f64; 2]>, Vec<usize>)> {
     let cols = [format!("{}_mm", plane[0]), format!("{}_mm", plane[1])];
-    crate::import::read_columns(
+    let rows = crate::import::read_table(
         text,
         name,
-        [cols[0].as_str(), cols[1].as_str()],
+        &[cols[0].as_str(), cols[1].as_str()],
         &format!("the probe centre in the {}{} plane", plane[0], plane[1]),
-    )
+    )?;
+    Ok((
+        rows.iter().map(|r| [r[0], r[1]]).collect(),
+        rows.iter().map(|r| r[2] as usize).collect(),
+    ))
 }
 
 #[cfg(test)]
