@@ -18,6 +18,8 @@ use serde::Serialize;
 
 use crate::simulate::normal;
 
+pub mod cases;
+
 /// The scenario's name.
 pub const ON_MACHINE: &str = "on-machine";
 
