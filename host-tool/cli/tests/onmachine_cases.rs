@@ -206,7 +206,7 @@ fn nothing_a_spindle_analyser_writes_is_refused() {
         enc.push_str(&format!("{i},{rest}\n"));
         let p: Vec<&str> = rest.split(',').collect();
         for (k, v) in p.iter().enumerate() {
-            let mut cells = vec![""; 3];
+            let mut cells = [""; 3];
             cells[k] = v;
             sparse.push_str(&format!("{c_deg},{}\n", cells.join(",")));
         }

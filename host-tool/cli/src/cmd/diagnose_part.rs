@@ -182,18 +182,21 @@ impl Args {
         // variance σ²·p/N (the trace of the hat matrix over N).
         let ci = |rms: f64, p: usize, n: usize| 1.96 * rms * (p as f64 / n.max(1) as f64).sqrt();
         let known = probe.as_ref().map(|p| match p {
+            // Never below the resolution the ball was logged at.
             AnyProbe::Plane(p) => KnownProbe {
                 radius_mm: p.probe_radius_mm,
                 radius_ci95_mm: p.probe_radius_ci95_mm,
                 form_pv_nm: p.form_pv_nm,
-                form_ci95_nm: ci(p.residual_rms_nm, p.form_nm.len(), p.points),
+                form_ci95_nm: ci(p.residual_rms_nm, p.form_nm.len(), p.points)
+                    .max(p.quantum_mm.unwrap_or(0.0) * 1e6),
                 form: &form,
             },
             AnyProbe::Sphere(p) => KnownProbe {
                 radius_mm: p.probe_radius_mm,
                 radius_ci95_mm: p.probe_radius_ci95_mm,
                 form_pv_nm: p.form_pv_nm,
-                form_ci95_nm: ci(p.residual_rms_nm, p.form_nm.len(), p.points),
+                form_ci95_nm: ci(p.residual_rms_nm, p.form_nm.len(), p.points)
+                    .max(p.quantum_mm.unwrap_or(0.0) * 1e6),
                 form: &form,
             },
         });

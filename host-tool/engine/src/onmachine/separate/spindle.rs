@@ -604,7 +604,7 @@ mod tests {
     fn the_steps_separate_part_and_spindle_except_their_common_harmonics() {
         for (n, count) in [(360, 4), (360, 5), (360, 7), (512, 8), (1024, 5), (250, 7)] {
             let s = multi_step(&steps(n, count, 1, 0.0, 5), None).unwrap();
-            let ins = |k: usize| k % count == 0;
+            let ins = |k: usize| k.is_multiple_of(count);
             assert!(
                 s.inseparable_harmonics.iter().all(|&k| ins(k))
                     && (2..=(n - 1) / 2).filter(|&k| ins(k)).count()

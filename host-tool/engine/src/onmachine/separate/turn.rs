@@ -278,7 +278,7 @@ fn least_squares(theta: &[f64], y: &[f64], h: usize) -> Result<Vec<Complex<f64>>
         if j == 0 {
             (0, true)
         } else {
-            ((j + 1) / 2, j % 2 == 1)
+            (j.div_ceil(2), j % 2 == 1)
         }
     };
     let cc = |d: i64| c[d.unsigned_abs() as usize];

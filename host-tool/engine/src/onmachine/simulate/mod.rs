@@ -140,6 +140,9 @@ pub struct Truth {
     pub three_probe_angles_deg: [f64; 3],
     /// Peak to valley of the roundness, µm.
     pub roundness_pv_um: f64,
+    /// The spindle's synchronous radial error motion along probe 1 (x),
+    /// ISO 230-7 (once-per-turn term left out; it has none), µm.
+    pub spindle_error_motion_um: f64,
     /// Multi-step steps.
     pub multi_step_steps: usize,
     /// The grinder's removal efficiency.
@@ -349,6 +352,9 @@ pub fn truth(seed: u64) -> Truth {
         reversal_slide_pv_um: pv(detrend(&xs, &s).into_iter()),
         three_probe_angles_deg: THREE_PROBE_ANGLES_DEG,
         roundness_pv_um: pv((0..3600).map(|i| roundness_um((i as f64 / 10.0).to_radians()))),
+        spindle_error_motion_um: pv(
+            (0..3600).map(|i| spindle_xy_um((i as f64 / 10.0).to_radians())[0])
+        ),
         multi_step_steps: STEPS,
         removal_efficiency: REMOVAL_EFFICIENCY,
         grinder_form_pv_um: pv(g.iter().map(|q| grinder_form_um(q[0], q[1]) - mean)),
