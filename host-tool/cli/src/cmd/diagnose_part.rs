@@ -219,6 +219,7 @@ impl Args {
                 .as_ref()
                 .map(|p| read_multi_step(p, None, &self.angle).map(|r| r.1))
                 .transpose()?,
+            upr: self.angle.upr,
         };
         let d = part_diagnosis::diagnose(&scan, &ev)
             .with_context(|| format!("{name}: cannot diagnose"))?;

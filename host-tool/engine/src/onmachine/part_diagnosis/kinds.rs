@@ -118,7 +118,7 @@ pub(super) fn roundness(c_deg: &[f64], p: &[f64], ev: &Evidence) -> Result<PartD
     ];
     let mut combined = Vec::new();
     if let Some(steps) = &ev.multi_step {
-        let ms = separate::multi_step(steps, None)?;
+        let ms = separate::multi_step(steps, ev.upr)?;
         let list: Vec<String> = ms
             .inseparable_harmonics
             .iter()

@@ -113,6 +113,9 @@ pub struct Evidence<'a> {
     /// A multi-step set: the readings of each step at their spindle
     /// angles.
     pub multi_step: Option<Vec<separate::Step>>,
+    /// The highest harmonic the multi-step separation keeps (a roundness
+    /// instrument's filter, undulations per revolution); `None`: all.
+    pub upr: Option<usize>,
 }
 
 /// A candidate source of error in a part scan.
