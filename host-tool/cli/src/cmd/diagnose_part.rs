@@ -371,9 +371,20 @@ pub fn verdict(d: &part_diagnosis::PartDiagnosis) -> String {
     // The sums the data read, each said as one (never split).
     for c in &d.combined {
         let labels: Vec<&str> = c.sources.iter().map(|s| s.label()).collect();
+        // A sum of sources each estimated apart is a part of them (the
+        // harmonics a method cannot split): say which.
+        let part = if c
+            .sources
+            .iter()
+            .all(|s| d.get(*s).status == Status::Estimated)
+        {
+            format!(": {}", c.what)
+        } else {
+            String::new()
+        };
         let _ = write!(
             v,
-            " ({} together {:.3} {} PV)",
+            " ({} together {:.3} {} PV{part})",
             labels.join(" + "),
             c.pv,
             c.unit
