@@ -16,6 +16,7 @@ use anyhow::{Context, Result};
 
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::import;
+use trueaxis_engine::warning::Warning;
 
 /// The JSON key with the number of rows left out on load.
 pub const SKIPPED_KEY: &str = "skipped_count";
@@ -75,19 +76,19 @@ pub fn load_board_table(path: &Path) -> Result<Vec<u8>> {
 /// Every warning about the data themselves that fit, diagnose and improve
 /// give: auxiliary columns ([`aux_warnings`]) and units the data probably
 /// do not have (`units_suspect`, trueaxis_engine::units).
-pub fn data_warnings(data: &Dataset) -> Vec<(&'static str, String)> {
+pub fn data_warnings(data: &Dataset) -> Vec<Warning> {
     let mut w = aux_warnings(data);
     w.extend(trueaxis_engine::units::suspect(data));
     w
 }
 
 /// What `fit`, `improve` and `diagnose` say about the data's auxiliary
-/// columns (docs/cli.md § Measurement CSV: kept and reported), as (code, detail):
+/// columns (docs/cli.md § Measurement CSV: kept and reported):
 /// `aux_misspelled` for those whose name looks like a contract column
 /// written another way (`ey [um]` → `ey_um`, `T_bed` → `T_bed_C`, see
 /// `import::probable_column`), `aux_columns` for the rest. Neither is used
 /// by any model; both are written back by `import`.
-pub fn aux_warnings(data: &Dataset) -> Vec<(&'static str, String)> {
+pub fn aux_warnings(data: &Dataset) -> Vec<Warning> {
     let mut meant = Vec::new();
     let mut other = Vec::new();
     for c in &data.aux {
@@ -98,7 +99,7 @@ pub fn aux_warnings(data: &Dataset) -> Vec<(&'static str, String)> {
     }
     let mut w = Vec::new();
     if !meant.is_empty() {
-        w.push((
+        w.push(Warning::new(
             "aux_misspelled",
             format!(
                 "{}: {} kept as auxiliary and not fitted, though the name looks like a contract column written another way: {} — rename the header to the contract name to use it",
@@ -109,7 +110,7 @@ pub fn aux_warnings(data: &Dataset) -> Vec<(&'static str, String)> {
         ));
     }
     if !other.is_empty() {
-        w.push((
+        w.push(Warning::new(
             "aux_columns",
             format!(
                 "{}: auxiliary {} {} kept, not used by any model: {}",
@@ -196,22 +197,7 @@ pub fn scan_lines(path: &Path, session: Option<i64>) -> Result<Option<Vec<usize>
         return Ok(None);
     }
     let t = trueaxis_engine::onmachine::probe_csv::read(&text, &path.display().to_string())?;
-    Ok(Some(
-        t.select(session)
-            .map_err(session_flag)?
-            .iter()
-            .map(|r| r.line)
-            .collect(),
-    ))
-}
-
-/// The engine's refusal of a file of several sessions read without
-/// saying which, with the flag that says it.
-pub fn session_flag(e: anyhow::Error) -> anyhow::Error {
-    match e.downcast_ref::<trueaxis_engine::onmachine::probe_csv::SessionNeeded>() {
-        Some(s) => anyhow::anyhow!(s.text("--session")),
-        None => e,
-    }
+    Ok(Some(t.select(session)?.iter().map(|r| r.line).collect()))
 }
 
 /// The text of an on-machine command's scan file: the file itself, or —
@@ -228,7 +214,7 @@ pub fn scan_text(
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     if trueaxis_engine::onmachine::probe_csv::is_probe_csv(&text) {
         let t = trueaxis_engine::onmachine::probe_csv::read(&text, &path.display().to_string())?;
-        return t.small(session, kind).map_err(session_flag);
+        return t.small(session, kind);
     }
     if let Some(s) = session {
         anyhow::bail!(
@@ -259,13 +245,13 @@ mod tests {
         assert_eq!(
             aux_warnings(&d),
             vec![
-                (
+                Warning::new(
                     "aux_misspelled",
-                    "r5.csv: columns are kept as auxiliary and not fitted, though the name looks like a contract column written another way: `ey [um]` (probably `ey_um`), `T_bed` (probably `T_bed_C`) — rename the header to the contract name to use it".to_string()
+                    "r5.csv: columns are kept as auxiliary and not fitted, though the name looks like a contract column written another way: `ey [um]` (probably `ey_um`), `T_bed` (probably `T_bed_C`) — rename the header to the contract name to use it"
                 ),
-                (
+                Warning::new(
                     "aux_columns",
-                    "r5.csv: auxiliary column is kept, not used by any model: `feed`".to_string()
+                    "r5.csv: auxiliary column is kept, not used by any model: `feed`"
                 ),
             ]
         );

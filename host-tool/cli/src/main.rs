@@ -95,7 +95,7 @@ fn main() -> ExitCode {
         // more output, which is not a failure (cmd/out.rs).
         Err(e) if cmd::out::is_stdout_closed(&e) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", cmd::flags::render(&e));
             ExitCode::FAILURE
         }
     }

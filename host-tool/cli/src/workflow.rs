@@ -1,14 +1,17 @@
 //! The building blocks several commands share — where a model is written,
 //! which seed and effects `--model` names, a comparison with its report, a
-//! checked table export — so that no subcommand calls another (`demo` runs
-//! the same blocks as `compare`, `improve` and `export`).
+//! checked table export and the words of export's refusals — so that no
+//! subcommand calls another (`demo` runs the same blocks as `compare`,
+//! `improve` and `export`).
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
+use model_core::table::MAX_SLEW_LIMIT_NM_PER_MS;
 use trueaxis_engine::compare::{self, Comparison, Warning};
-use trueaxis_engine::data::Dataset;
-use trueaxis_engine::export::table::{self, TableExport, TableOptions};
+use trueaxis_engine::data::{Dataset, TARGETS};
+use trueaxis_engine::export::checks::{MaxCorrError, TinyCorrections, MAX_CORR_LIMIT_UM};
+use trueaxis_engine::export::table::{self, TableError, TableExport, TableOptions};
 use trueaxis_engine::history::history_path;
 use trueaxis_engine::model::ModelFile;
 
@@ -98,31 +101,107 @@ pub fn run_compare(
     Ok(c)
 }
 
-/// Exports `model` as a firmware table to `output` and fails when the
+/// Exports `model` as a firmware table to `output`; refused when the
 /// accuracy check is above `allow_error_nm` (the file is not written then).
-/// The building block `export` and `demo` share.
+/// The building block `export` and `demo` share. The engine words its
+/// refusals and warnings in the options' terms; here they name the flags
+/// that change them, as users have always read them.
 pub fn export_table(
     model: &ModelFile,
     output: &Path,
     opts: &TableOptions,
     allow_error_nm: f64,
 ) -> Result<TableExport> {
-    if !(allow_error_nm.is_finite() && allow_error_nm >= 0.0) {
-        bail!("--allow-error-nm must be a finite number ≥ 0, got {allow_error_nm}");
-    }
-    let e = table::export(model, opts)?;
-    let worst = e.max_f32_error_nm.max(e.max_fixed_error_nm);
-    if worst.is_nan() || worst > allow_error_nm {
-        bail!(
-            "accuracy check failed: the firmware's evaluation differs from the model by up to {worst:.3} nm (f32 {:.3}, fixed {:.3}) over {} sweep points, above the {allow_error_nm} nm allowed (--allow-error-nm); {} was not written",
-            e.max_f32_error_nm,
-            e.max_fixed_error_nm,
-            e.sweep_points,
-            output.display()
-        );
+    let opts = TableOptions {
+        allow_error_nm,
+        ..opts.clone()
+    };
+    let mut e = table::export(model, &opts).map_err(|e| table_refusal(e, output))?;
+    let mut clamped = e.clamped.iter();
+    for w in &mut e.warnings {
+        match w.code.as_str() {
+            "max_corr_below_model" => {
+                if let Some(c) = clamped.next() {
+                    w.detail = format!(
+                        "{}: --max-corr-um {} is below the model's {:.3} µm: the firmware will clamp",
+                        TARGETS[c.target],
+                        c.limit_nm / 1000.0,
+                        c.model_max_nm / 1000.0
+                    );
+                }
+            }
+            // The engine ends it with "or give the measured range".
+            "temp_range_unknown" => w.detail.push_str(" with --temp-range-c"),
+            _ => {}
+        }
     }
     write_file(output, &e.table)?;
     Ok(e)
+}
+
+/// A refused table export in the words of `trueaxis export` (flags named;
+/// `output` was not written).
+fn table_refusal(e: TableError, output: &Path) -> anyhow::Error {
+    let msg = match e {
+        TableError::BadAllowance { allowed_nm } => {
+            format!("--allow-error-nm must be a finite number ≥ 0, got {allowed_nm}")
+        }
+        TableError::BadReversalTransition { .. } => "--reversal-transition-um must be ≥ 0".into(),
+        TableError::Lag {
+            target,
+            term,
+            lag_s,
+        } => format!(
+            "{}: the thermal term {term} has a lag of {lag_s} s, which the firmware table cannot represent (it applies the coefficient to the sensor reading at once); refit without lag_s, or export with --drop-lag to use its steady state",
+            TARGETS[target]
+        ),
+        TableError::LocalModel => "local (piecewise) models cannot be exported as a table: the firmware evaluates one global model; fit a global seed (cubic19 with --add …) or grid:<step_mm>".into(),
+        TableError::Tiny(t) => tiny_refusal(&t),
+        TableError::MaxCorr(m) => max_corr_refusal(&m),
+        TableError::SlewBelowOne { .. } => "--max-slew-nm-per-ms must be ≥ 1".into(),
+        TableError::SlewAboveTableLimit { given_nm_per_ms } => format!(
+            "--max-slew-nm-per-ms {given_nm_per_ms}: a table holds at most {MAX_SLEW_LIMIT_NM_PER_MS} nm/ms (10 m/s; the format's and the board's limit) — check the unit (nm per ms)"
+        ),
+        TableError::BadFeed { .. } => "--max-feed-mm-per-min must be positive".into(),
+        e @ TableError::Accuracy { .. } => {
+            format!("{e} (--allow-error-nm); {} was not written", output.display())
+        }
+        TableError::Other(e) => return e,
+    };
+    anyhow!(msg)
+}
+
+/// [`TinyCorrections`] naming `--accept-tiny-corrections`.
+pub fn tiny_refusal(e: &TinyCorrections) -> String {
+    format!(
+        "{}; --accept-tiny-corrections exports it anyway",
+        e.finding()
+    )
+}
+
+/// A refused max |correction| limit naming `--max-corr-um`.
+pub fn max_corr_refusal(e: &MaxCorrError) -> String {
+    let cap = MAX_CORR_LIMIT_UM;
+    match e {
+        MaxCorrError::NotPositive { given_um } => {
+            format!("--max-corr-um must be positive, got {given_um}")
+        }
+        MaxCorrError::AboveTableLimit { target, given_um } => format!(
+            "{}: --max-corr-um {given_um} exceeds the table's limit of {cap} µm",
+            TARGETS[*target]
+        ),
+        MaxCorrError::DefaultAboveTableLimit { .. } => {
+            let way_out = if e.model_above_table_limit() {
+                format!("--max-corr-um (at most {cap}) would clamp it")
+            } else {
+                format!(
+                    "give the limit yourself with --max-corr-um (at most {cap}; at or above the model's {} µm nothing is clamped)",
+                    e.model_max_um()
+                )
+            };
+            format!("{}; {}{way_out}", e.finding(), e.suspect())
+        }
+    }
 }
 
 pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {

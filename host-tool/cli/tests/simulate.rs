@@ -15,7 +15,9 @@ use common::{assert_success, json, run};
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::import;
 use trueaxis_engine::iso230;
-use trueaxis_engine::simulate::{self, Effect, Machine, Plan, RefReturn, SimConfig};
+use trueaxis_engine::simulate::{
+    self, ConfigError, Effect, Machine, Plan, RefReturn, Setting, SimConfig,
+};
 
 fn tmp(name: &str) -> PathBuf {
     std::env::temp_dir().join(format!("trueaxis-sim-{}-{name}", std::process::id()))
@@ -606,15 +608,24 @@ fn every_numeric_option_is_validated() {
     let out = run(&["simulate", "--plan", "grid:100", "pause:1e300", "-o", o]);
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("plan `pause`: duration = 1e300"));
-    // From Rust too: check() refuses what the CLI refuses.
+    // From Rust too: check() refuses what the CLI refuses, in its own
+    // words (the field), which the CLI says with the flag.
     let mut cfg = SimConfig::preset("mill800").unwrap();
     cfg.plans = vec!["grid:100".parse().unwrap()];
     cfg.tool_mm = f64::NAN;
-    assert!(cfg
-        .check()
-        .unwrap_err()
-        .to_string()
-        .contains("--tool-mm = NaN"));
+    let e = cfg.check().unwrap_err();
+    assert!(
+        matches!(
+            e.downcast_ref::<ConfigError>(),
+            Some(ConfigError::Setting {
+                setting: Setting::ToolMm,
+                ..
+            })
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().starts_with("tool_mm = NaN"), "{e}");
+    assert!(trueaxis::cmd::flags::render(&e).starts_with("--tool-mm = NaN"));
     cfg.tool_mm = 100.0;
     cfg.check().unwrap();
     // The edges of the ranges are allowed.

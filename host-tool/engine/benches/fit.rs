@@ -20,7 +20,7 @@ use nalgebra::DVector;
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::features::{seed_monomials, Feature, Norm};
 use trueaxis_engine::fit::{self, nn, FitOptions};
-use trueaxis_engine::lsq;
+use trueaxis_engine::linalg::lsq;
 
 /// The seed's 17 × 11 × 11 grid (50 mm, 800 × 500 × 500 mm) with smooth
 /// errors and a deterministic pseudo-noise.

@@ -154,14 +154,9 @@ pub struct ChannelProfile {
     pub bins: Vec<Bin>,
 }
 
-/// A warning about the comparison itself.
-#[derive(Clone, Debug, Serialize)]
-pub struct Warning {
-    /// Stable machine-readable code (`data_hash_mismatch`, …).
-    pub code: String,
-    /// Human-readable detail.
-    pub detail: String,
-}
+/// A warning about the comparison itself (`data_hash_mismatch`, …): the
+/// engine's one warning type.
+pub use crate::warning::Warning;
 
 /// Everything `compare` finds, serialised as its `--json` document.
 #[derive(Clone, Debug, Serialize)]

@@ -35,7 +35,7 @@ use nalgebra::DVector;
 
 use crate::data::{Dataset, AXES, TARGETS};
 use crate::features::{Feature, Norm};
-use crate::lsq;
+use crate::linalg::lsq;
 
 /// Number of hold-out blocks unless the caller asks otherwise.
 pub const DEFAULT_BLOCKS: usize = 5;

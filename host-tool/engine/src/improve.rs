@@ -18,6 +18,7 @@ use crate::diagnose::{self, Options, Verdict};
 use crate::effect::Effect;
 use crate::fit::{self, FitOptions};
 use crate::history;
+use crate::progress::{Event, ImproveStage, Sink};
 
 /// Most effects `improve` adds before it stops anyway.
 pub const MAX_STEPS: usize = 8;
@@ -218,18 +219,20 @@ pub fn improve(
     keep_outliers: bool,
     on_step: impl FnMut(&ImproveStep),
 ) -> Result<Improvement> {
-    improve_with(data, seed, out, keep_outliers, on_step, &|_| {})
+    improve_with(data, seed, out, keep_outliers, on_step, &Sink::none())
 }
 
-/// [`improve`], telling `progress` what it is doing (each step's outlier
-/// screen, fit and diagnosis, as [`diagnose::diagnose_with`] does).
+/// [`improve`], telling `progress` what it is doing (each step's fit and
+/// diagnosis, [`Event::Improve`], and the diagnosis' own events, as
+/// [`diagnose::diagnose_with`] sends them). `on_step` is no progress: it
+/// gets each step's result.
 pub fn improve_with(
     data: &Dataset,
     seed: &str,
     out: &std::path::Path,
     keep_outliers: bool,
     mut on_step: impl FnMut(&ImproveStep),
-    progress: diagnose::Progress,
+    progress: &Sink,
 ) -> Result<Improvement> {
     let mut adds: Vec<String> = Vec::new();
     let mut steps = Vec::new();
@@ -244,11 +247,14 @@ pub fn improve_with(
             .map(|a| Effect::parse(a))
             .collect::<Result<Vec<_>>>()?;
         let k = steps.len() + 1;
-        progress(&format!(
-            "improve: step {k}: fitting {seed}{} to {} rows",
-            adds.iter().map(|a| format!(" + {a}")).collect::<String>(),
-            data.len()
-        ));
+        progress.emit(&Event::Improve {
+            step: k,
+            stage: ImproveStage::Fitting {
+                seed: seed.to_string(),
+                adds: adds.clone(),
+                rows: data.len(),
+            },
+        });
         let found = if keep_outliers {
             Vec::new()
         } else {
@@ -259,7 +265,10 @@ pub fn improve_with(
             sha256.clone()
         })?;
         history::save_with_model(out, &model)?;
-        progress(&format!("improve: step {k}: diagnosing"));
+        progress.emit(&Event::Improve {
+            step: k,
+            stage: ImproveStage::Diagnosing,
+        });
         let d = diagnose::diagnose_with(
             &clean,
             &Options {

@@ -135,7 +135,7 @@ pub fn min(it: impl Iterator<Item = f64>) -> f64 {
 /// position and an error column and a direction column whose position
 /// moves (an axis held at one position — y and z of a run along x — has
 /// no targets to evaluate).
-pub fn default_axis(data: &Dataset) -> Result<usize> {
+pub fn default_axis(data: &Dataset) -> std::result::Result<usize, AxisChoice> {
     let cands: Vec<usize> = data
         .varying_axes()
         .into_iter()
@@ -143,16 +143,42 @@ pub fn default_axis(data: &Dataset) -> Result<usize> {
         .collect();
     match cands.as_slice() {
         [a] => Ok(*a),
-        [] => bail!(
-            "{}: no moving axis has a position, an error and a direction column (x_mm, ex_um, dir_x); ISO 230-2 needs all three",
-            data.source
-        ),
-        _ => bail!(
-            "{}: several axes could be evaluated ({}); choose one with --axis",
-            data.source,
-            cands.iter().map(|&a| AXES[a]).collect::<Vec<_>>().join(", ")
-        ),
+        [] => Err(AxisChoice::NoAxis {
+            file: data.source.clone(),
+        }),
+        _ => Err(AxisChoice::Several {
+            file: data.source.clone(),
+            axes: cands,
+        }),
     }
+}
+
+/// Why [`default_axis`] cannot choose (a caller names its own way of
+/// choosing: the CLI, `--axis`).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum AxisChoice {
+    /// No axis can be evaluated.
+    #[error("{file}: no moving axis has a position, an error and a direction column (x_mm, ex_um, dir_x); ISO 230-2 needs all three")]
+    NoAxis {
+        /// The data's source.
+        file: String,
+    },
+    /// Several can: the caller must name one.
+    #[error(
+        "{file}: several axes could be evaluated ({}); expected one named",
+        axis_names(axes)
+    )]
+    Several {
+        /// The data's source.
+        file: String,
+        /// The axes that could be evaluated (0 = x).
+        axes: Vec<usize>,
+    },
+}
+
+/// `x, y`.
+pub fn axis_names(axes: &[usize]) -> String {
+    axes.iter().map(|&a| AXES[a]).collect::<Vec<_>>().join(", ")
 }
 
 /// Evaluates `axis` (0 = x) of `data`.

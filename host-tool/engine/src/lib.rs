@@ -3,18 +3,19 @@
 //! `trueaxis` binary crate). Layered bottom-up — a module imports only from
 //! the layers below it:
 //!
-//! data → features → effect / lsq / lines / regions → holdout → model →
+//! data → features → effect / linalg / lines / regions → holdout → model →
 //! fit → diagnose / compare / export / history / iso230 → improve → (the
 //! CLI's commands). `import` (files ↔ data sets) and `units` (units the
-//! data probably do not have) sit beside `data`;
+//! data probably do not have) sit beside `data`, and so do `warning` and
+//! `progress`, which import nothing;
 //! `simulate` makes data sets from `features`' thermal lag and is imported
 //! by no module of that pipeline.
 //!
 //! Beside the pipeline stands the **on-machine wing**, `onmachine/`: parts
 //! and probes measured on the machine (probe calibration, error
 //! separation, workpiece form, the part-scan diagnosis, the simulated
-//! campaign). It uses the plumbing below it (`data`, `import`, `lsq`,
-//! `simulate`'s normal deviates) and nothing of the pipeline imports it.
+//! campaign). It uses the plumbing below it (`data`, `import`, `linalg`'s
+//! least squares, `simulate`'s normal deviates) and nothing of the pipeline imports it.
 //!
 //! - `data`: the measurement data set (docs/cli.md § Measurement CSV) every command works on.
 //! - `import`: measurement files in (the trueaxis CSV, Renishaw .rtl, ecmc ISO 230-2 .dat, RepRapFirmware and Klipper bed maps) and the CSV out.
@@ -22,7 +23,9 @@
 //! - `simulate`: the synthetic machine (21 geometric errors, effects, plans, noise).
 //! - `features`: the model's terms — the cubic monomials and the effects' columns.
 //! - `effect`: the `--add` grammar as types — Family, Target, Axis, EffectSpec, Effect.
-//! - `lsq`: least squares with rank and conditioning checks.
+//! - `warning`: the one warning type (code + detail) every result carries.
+//! - `progress`: the one progress event type long computations emit; the caller renders it.
+//! - `linalg`: the linear algebra — least squares with rank and conditioning checks (`lsq`), diagnose's basis and small fits (`basis`), Brent's minimisation (`brent`).
 //! - `holdout`: block-held-out validation (spatial blocks, not random rows).
 //! - `lines`: lines and planes of a measurement plan (compare's plots, diagnose's periodic search).
 //! - `regions`: where a residual concentrates — one region type and binning for compare and diagnose.
@@ -48,10 +51,12 @@ pub mod holdout;
 pub mod import;
 pub mod improve;
 pub mod iso230;
+pub mod linalg;
 pub mod lines;
-pub mod lsq;
 pub mod model;
 pub mod onmachine;
+pub mod progress;
 pub mod regions;
 pub mod simulate;
 pub mod units;
+pub mod warning;

@@ -8,6 +8,7 @@
 //! told (docs/cli.md § Measurement CSV, Units).
 
 use crate::data::{Dataset, AXES, TARGETS};
+use crate::warning::Warning;
 
 /// Below this largest |error| (µm) on every target the errors are more
 /// likely mm than µm: no machine a table compensates is that good, and a
@@ -30,8 +31,8 @@ pub const STEEP_SLOPE_UM_PER_MM: f64 = 5.0;
 /// like metres.
 const SHORT_TRAVEL_MM: f64 = 2.0;
 
-/// The `units_suspect` warnings of a data set, as `(code, detail)`.
-pub fn suspect(data: &Dataset) -> Vec<(&'static str, String)> {
+/// The `units_suspect` warnings of a data set.
+pub fn suspect(data: &Dataset) -> Vec<Warning> {
     let mut w = Vec::new();
     let targets = data.targets();
     let max_abs: Vec<(usize, f64)> = targets
@@ -43,7 +44,7 @@ pub fn suspect(data: &Dataset) -> Vec<(&'static str, String)> {
             .iter()
             .map(|(t, m)| format!("max |{}| {m:.4} µm", TARGETS[*t]))
             .collect();
-        w.push((
+        w.push(Warning::new(
             "units_suspect",
             format!(
                 "{}: the errors are tiny ({}): no machine is that good — if they are mm, multiply them by 1000 (the columns are µm: `ex_um` …)",
@@ -57,7 +58,7 @@ pub fn suspect(data: &Dataset) -> Vec<(&'static str, String)> {
         .filter(|&&(_, m)| m > HUGE_ERROR_UM)
         .max_by(|a, b| a.1.total_cmp(&b.1))
     {
-        w.push((
+        w.push(Warning::new(
             "units_suspect",
             format!(
                 "{}: {} reaches {:.1} µm ({:.3} mm): if these are nm, divide them by 1000; if they are µm, check the reference (an offset left in) before compensating",
@@ -88,7 +89,7 @@ pub fn suspect(data: &Dataset) -> Vec<(&'static str, String)> {
                     continue;
                 };
                 if slope.abs() > STEEP_SLOPE_UM_PER_MM {
-                    w.push((
+                    w.push(Warning::new(
                         "units_suspect",
                         format!(
                             "{}: {} changes {slope:+.1} µm per mm of {} over a travel of only {span:.3} mm: if the positions are metres, multiply them by 1000 (the columns are mm: `{}_mm`)",
@@ -145,11 +146,11 @@ mod tests {
         let mm: Vec<f64> = um.iter().map(|v| v / 1000.0).collect();
         let w = suspect(&line(x.clone(), mm));
         assert_eq!(w.len(), 1, "{w:?}");
-        assert!(w[0].1.contains("multiply them by 1000"), "{w:?}");
+        assert!(w[0].detail.contains("multiply them by 1000"), "{w:?}");
         let nm: Vec<f64> = um.iter().map(|v| v * 1000.0).collect();
         let w = suspect(&line(x, nm));
         assert!(
-            w.iter().any(|(_, d)| d.contains("divide them by 1000")),
+            w.iter().any(|w| w.detail.contains("divide them by 1000")),
             "{w:?}"
         );
     }
@@ -162,7 +163,7 @@ mod tests {
             .map(|v| 15.0 * v + 0.3 * (v * 40.0).sin())
             .collect();
         let w = suspect(&line(m.clone(), e.clone()));
-        assert!(w.iter().any(|(_, d)| d.contains("metres")), "{w:?}");
+        assert!(w.iter().any(|w| w.detail.contains("metres")), "{w:?}");
         // The same errors over the travel in mm are an ordinary scale error.
         let mm: Vec<f64> = m.iter().map(|v| v * 1000.0).collect();
         assert!(suspect(&line(mm, e)).is_empty());

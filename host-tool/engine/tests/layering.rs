@@ -6,17 +6,24 @@
 //! The on-machine wing (`onmachine/`) stands beside that pipeline: it may
 //! use only the plumbing in [`WING_USES`], its own modules only downward
 //! ([`WING_LAYERS`]), and no module of the pipeline may name it.
+//!
+//! And the rule of docs/host.md § Messages: the engine says what is wrong
+//! in its own terms — its options, its numbers — and the CLI names the
+//! flag that changes it; no code in the folders that keep the rule
+//! (strings included, comments not) names a `--flag`.
 
 use std::path::{Path, PathBuf};
 
 /// Layer of each top-level engine module, lowest first.
 const LAYERS: &[(&str, u8)] = &[
     ("data", 0),
+    ("warning", 0),
+    ("progress", 0),
     ("import", 1),
     ("features", 1),
     ("units", 1),
     ("effect", 2),
-    ("lsq", 2),
+    ("linalg", 2),
     ("lines", 2),
     ("regions", 2),
     ("simulate", 3),
@@ -37,7 +44,7 @@ const WING: &str = "onmachine";
 /// What of the engine the wing may use: the generic plumbing below the
 /// pipeline (the CSV line reader, the data set's plausible ranges, least
 /// squares, the simulator's seeded normal deviates).
-const WING_USES: &[&str] = &["data", "import", "lsq", "simulate"];
+const WING_USES: &[&str] = &["data", "import", "linalg", "simulate"];
 
 /// Layer of each module of the wing, lowest first.
 const WING_LAYERS: &[(&str, u8)] = &[
@@ -209,4 +216,60 @@ fn the_checker_sees_an_upward_import() {
     );
     assert!(wing_layer("separate") < wing_layer("part_diagnosis"));
     assert_eq!(layer(WING), None);
+}
+
+/// Engine folders whose messages name no command-line flag.
+const ROOMS: &[&str] = &["export", "onmachine"];
+
+/// `--name` flags a source line names outside a comment.
+fn flags(line: &str) -> Vec<String> {
+    let code = line.split("//").next().unwrap_or("");
+    let mut v = Vec::new();
+    let mut rest = code;
+    while let Some(i) = rest.find("--") {
+        rest = &rest[i + 2..];
+        let name: String = rest
+            .chars()
+            .take_while(|c| c.is_ascii_lowercase() || *c == '-')
+            .collect();
+        if name.starts_with(|c: char| c.is_ascii_lowercase()) {
+            v.push(format!("--{name}"));
+        }
+    }
+    v
+}
+
+#[test]
+fn no_engine_message_names_a_cli_flag() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut bad = Vec::new();
+    for room in ROOMS {
+        let mut files = Vec::new();
+        rust_files(&src.join(room), &mut files);
+        assert!(!files.is_empty(), "{room}: no sources");
+        for f in &files {
+            let text = std::fs::read_to_string(f).unwrap();
+            for (i, line) in text.lines().enumerate() {
+                for flag in flags(line) {
+                    let rel = f.strip_prefix(&src).unwrap().display();
+                    bad.push(format!("{rel}:{}: {flag}", i + 1));
+                }
+            }
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "CLI flags named in the engine:\n{}",
+        bad.join("\n")
+    );
+}
+
+#[test]
+fn the_checker_sees_a_flag_in_a_string_and_not_in_a_comment() {
+    assert_eq!(
+        flags(r#"bail!("--max-corr-um must be positive"); // --drop-lag"#),
+        ["--max-corr-um"]
+    );
+    assert!(flags("/// give it with --temp-range-c").is_empty());
+    assert!(flags("let i = n - -1;").is_empty());
 }

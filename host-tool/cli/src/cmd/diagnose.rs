@@ -62,15 +62,10 @@ impl Args {
                 follow_path: true,
                 keep_outliers: self.keep_outliers,
             },
-            &|line: &str| eprintln!("{line}"),
+            &crate::cmd::progress::stderr(self.json),
         )
         .with_context(|| format!("{}: cannot diagnose", self.data.display()))?;
-        for (code, detail) in input::data_warnings(&data) {
-            d.warnings.push(diagnose::Warning {
-                code: code.into(),
-                detail,
-            });
-        }
+        d.warnings.extend(input::data_warnings(&data));
         let model_out = next_model_path(&self.model, &self.data);
         if let Some(dir) = &self.report {
             // A model file's history (MODEL.history.json beside it), when

@@ -14,7 +14,6 @@ use serde_json::json;
 use crate::cmd::out;
 use crate::cmd::probe::{plane, read_probe, side, AnyProbe};
 use crate::cmd::separate::{read_multi_step, read_run, AngleArgs};
-use crate::input::session_flag;
 use trueaxis_engine::import;
 use trueaxis_engine::onmachine::part_diagnosis::{
     self, Evidence, Input, KnownProbe, Scan, Source, Status,
@@ -82,7 +81,7 @@ impl Args {
         let mut pair = None;
         let text = if probe_csv::is_probe_csv(&raw) {
             let t = probe_csv::read(&raw, &name)?;
-            let rows = t.select(self.session).map_err(session_flag)?;
+            let rows = t.select(self.session)?;
             let has = |c: &str| rows.iter().any(|r| r.get(c).is_some());
             let a = self.axis.chars().next().unwrap_or('x');
             let kind = if has("d_um") && has("c_deg") {
@@ -92,16 +91,13 @@ impl Args {
                     r.get("orientation_deg")
                         .is_some_and(|o| o.rem_euclid(360.0) > 90.0)
                 }) {
-                    pair = Some(
-                        t.small(self.session, Small::Straightness(a, 180))
-                            .map_err(session_flag)?,
-                    );
+                    pair = Some(t.small(self.session, Small::Straightness(a, 180))?);
                 }
                 Small::Straightness(a, 0)
             } else {
                 Small::Positions
             };
-            t.small(self.session, kind).map_err(session_flag)?
+            t.small(self.session, kind)?
         } else {
             crate::input::scan_text(&self.scan, self.session, Small::Positions)?
         };

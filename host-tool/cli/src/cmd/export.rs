@@ -1,20 +1,29 @@
 //! `trueaxis export` — a fitted model as the firmware table (with the
-//! accuracy check of docs/cli.md) or as a controller's compensation file
-//! (LinuxCNC `COMP_FILE_TYPE = 1`, Sinumerik LEC). The formats, units, sign
-//! conventions and envelope defaults are in docs/export-formats.md.
+//! accuracy check of docs/cli.md), a controller's compensation file
+//! (LinuxCNC `COMP_FILE_TYPE = 1`, Sinumerik LEC) or a bed mesh. The
+//! formats, units, sign conventions and defaults are in
+//! docs/export-formats.md.
+//!
+//! This file parses the flags (and refuses one that does not apply to the
+//! format), turns them into the engine's options, and prints what the
+//! engine made; every decision — defaults, the checks and refusals, the
+//! formats' sign conventions — is the engine's (`trueaxis_engine::export`).
+//! The engine words its refusals in its options' terms; here they name the
+//! flags.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use serde_json::json;
 
 use crate::cmd::out::outln;
-use crate::workflow::{export_table, write_file};
+use crate::workflow::{export_table, max_corr_refusal, tiny_refusal, write_file};
 use trueaxis_engine::data::{AXES, TARGETS};
+use trueaxis_engine::export::checks::{axis_list, FileError};
+use trueaxis_engine::export::controller::{self, Controller, ControllerOptions};
+use trueaxis_engine::export::mesh::{self, MeshFormat, MeshOptions};
 use trueaxis_engine::export::table::TableOptions;
-use trueaxis_engine::export::{
-    bedmesh, crc32_hex, fmt_no_neg_zero, linuxcnc, sample_axis, sinumerik, Warning,
-};
+use trueaxis_engine::export::{fmt_no_neg_zero, Warning};
 use trueaxis_engine::model::ModelFile;
 
 /// Output format of `trueaxis export`.
@@ -144,13 +153,16 @@ fn format_name(f: Format) -> &'static str {
     }
 }
 
-/// `--mesh-points`: `N` or `NX,NY`, each 2…100.
+/// `--mesh-points`: `N` or `NX,NY`, each 2…[`mesh::MAX_NODES`].
 fn parse_mesh_points(s: &str) -> Result<[usize; 2]> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
     let n = |p: &str| -> Result<usize> {
         match p.parse::<usize>() {
-            Ok(v) if (2..=100).contains(&v) => Ok(v),
-            _ => bail!("--mesh-points `{s}`: expected N or NX,NY with whole numbers from 2 to 100"),
+            Ok(v) if (2..=mesh::MAX_NODES).contains(&v) => Ok(v),
+            _ => bail!(
+                "--mesh-points `{s}`: expected N or NX,NY with whole numbers from 2 to {}",
+                mesh::MAX_NODES
+            ),
         }
     };
     match parts.as_slice() {
@@ -303,49 +315,11 @@ impl Args {
         )?;
         let model = ModelFile::load(&self.model)?;
         let (doc, warnings, text) = match self.format {
-            Format::Table => {
-                let opts = TableOptions {
-                    max_corr_um: self.max_corr_um,
-                    max_slew_nm_per_ms: self.max_slew_nm_per_ms,
-                    max_feed_mm_per_min: self.max_feed_mm_per_min.unwrap_or(10_000.0),
-                    reversal_transition_um: self.reversal_transition_um.unwrap_or(20.0),
-                    temp_range_c: self
-                        .temp_range_c
-                        .as_deref()
-                        .map(|s| parse_range(s, "--temp-range-c"))
-                        .transpose()?,
-                    tool_range_mm: self
-                        .tool_range_mm
-                        .as_deref()
-                        .map(|s| parse_range(s, "--tool-range-mm"))
-                        .transpose()?,
-                    drop_lag: self.drop_lag,
-                    created_unix_s: created_unix_s()?,
-                    accept_tiny: self.accept_tiny_corrections,
-                };
-                let e = export_table(
-                    &model,
-                    &self.output,
-                    &opts,
-                    self.allow_error_nm.unwrap_or(1.0),
-                )?;
-                let text = format!(
-                    "{}: {} bytes, crc32 {}, {} terms; firmware vs model over {} points: f32 {:.3} nm, fixed {:.3} nm\n",
-                    self.output.display(),
-                    e.bytes,
-                    e.crc32,
-                    e.terms,
-                    e.sweep_points,
-                    e.max_f32_error_nm,
-                    e.max_fixed_error_nm
-                );
-                let mut doc = serde_json::to_value(&e)?;
-                doc["format"] = json!("table");
-                doc["output"] = json!(self.output.display().to_string());
-                (doc, e.warnings.clone(), text)
-            }
-            Format::Linuxcnc | Format::Sinumerik => self.controller(&model)?,
-            Format::RrfHeightmap | Format::KlipperMesh => self.mesh(&model)?,
+            Format::Table => self.table(&model)?,
+            Format::Linuxcnc => self.controller(&model, Controller::Linuxcnc)?,
+            Format::Sinumerik => self.controller(&model, Controller::Sinumerik)?,
+            Format::RrfHeightmap => self.mesh(&model, MeshFormat::RrfHeightmap)?,
+            Format::KlipperMesh => self.mesh(&model, MeshFormat::KlipperMesh)?,
         };
         for w in &warnings {
             eprintln!("warning ({}): {}", w.code, w.detail);
@@ -358,217 +332,162 @@ impl Args {
         Ok(())
     }
 
-    /// A bed mesh (docs/export-formats.md § Bed meshes): the model's ez on an
-    /// x–y grid, with the max-correction rule of the controller files.
-    fn mesh(&self, model: &ModelFile) -> Result<(serde_json::Value, Vec<Warning>, String)> {
-        let counts = match self.mesh_points.as_deref() {
-            Some(s) => parse_mesh_points(s)?,
-            None => [11, 11],
-        };
-        let m = bedmesh::sample_mesh(model, counts)?;
-        let name = format_name(self.format);
-        let ez_nm: Vec<f64> = m.height_mm.iter().flatten().map(|h| -1e6 * h).collect();
-        trueaxis_engine::export::refuse_tiny(
-            &[None, None, Some(ez_nm)],
-            self.accept_tiny_corrections,
-        )
-        .map_err(|e| anyhow::anyhow!("{e:#}; {} was not written", self.output.display()))?;
-        let largest_nm = m
-            .height_mm
-            .iter()
-            .flatten()
-            .fold(0.0f64, |a, h| a.max(1e6 * h.abs()));
-        let max_corr_nm =
-            trueaxis_engine::export::max_corr_limit_nm(2, largest_nm, self.max_corr_um)
-                .map_err(|e| anyhow::anyhow!("{e:#}; {} was not written", self.output.display()))?;
-        if largest_nm > max_corr_nm {
-            bail!(
-                "ez: the {name} file would hold corrections up to {:.3} µm, above --max-corr-um {}: a firmware's bed mesh cannot clamp, so {} was not written — check the model, or raise --max-corr-um",
-                largest_nm / 1000.0,
-                max_corr_nm / 1000.0,
-                self.output.display()
-            );
-        }
-        let body = if self.format == Format::RrfHeightmap {
-            bedmesh::write_rrf(
-                &m,
-                &format!("generated by trueaxis from {}", self.model.display()),
-            )
-        } else {
-            bedmesh::write_klipper(&m, self.profile.as_deref().unwrap_or("trueaxis"))?
-        };
-        write_file(&self.output, body.as_bytes())?;
-        let (nx, ny) = (m.x_mm.len(), m.y_mm.len());
-        let doc = json!({
-            "format": name,
-            "output": self.output.display().to_string(),
-            "nodes": [nx, ny],
-            "x_mm": [m.x_mm[0], m.x_mm[nx - 1]],
-            "y_mm": [m.y_mm[0], m.y_mm[ny - 1]],
-            "spacing_mm": [m.x_mm[1] - m.x_mm[0], m.y_mm[1] - m.y_mm[0]],
-            "z_mm": m.z_mm,
-            "bytes": body.len(),
-            "crc32": crc32_hex(body.as_bytes()),
-            "max_interp_error_um": m.max_interp_error_um,
-            "max_corr_um": max_corr_nm.ceil() / 1000.0,
-            "largest_height_um": largest_nm / 1000.0,
-            "warnings": m.warnings,
-        });
-        let text = format!(
-            "{}: {name}, {nx} × {ny} nodes over x {:.2}…{:.2} mm, y {:.2}…{:.2} mm; heights up to {:.3} µm; bilinear interpolation of the nodes differs from the model by at most {:.3} µm (height = −ez: the firmware lifts the tool where ez is negative)\n",
-            self.output.display(),
-            m.x_mm[0],
-            m.x_mm[nx - 1],
-            m.y_mm[0],
-            m.y_mm[ny - 1],
-            largest_nm / 1000.0,
-            m.max_interp_error_um
-        );
-        Ok((doc, m.warnings.clone(), text))
+    /// The JSON document (with `format` and `output`) of what the engine
+    /// made.
+    fn doc(&self, made: &impl serde::Serialize) -> Result<serde_json::Value> {
+        let mut doc = serde_json::to_value(made)?;
+        doc["format"] = json!(format_name(self.format));
+        doc["output"] = json!(self.output.display().to_string());
+        Ok(doc)
     }
 
-    fn controller(&self, model: &ModelFile) -> Result<(serde_json::Value, Vec<Warning>, String)> {
-        let axis = match self.axis.as_deref() {
-            Some(a) => AXES.iter().position(|x| *x == a).context("axis")?,
-            None => {
-                let used: Vec<usize> = (0..3)
-                    .filter(|&a| trueaxis_engine::export::axis_travel_mm(&model.model, a).is_some())
-                    .collect();
-                match used.as_slice() {
-                    [a] => *a,
-                    _ => bail!(
-                        "the model uses the axes {}: say which one with --axis",
-                        used.iter().map(|&a| AXES[a]).collect::<Vec<_>>().join(", ")
-                    ),
-                }
-            }
+    /// The firmware table, with the accuracy check.
+    fn table(&self, model: &ModelFile) -> Result<Printed> {
+        let d = TableOptions::default();
+        let opts = TableOptions {
+            max_corr_um: self.max_corr_um,
+            max_slew_nm_per_ms: self.max_slew_nm_per_ms,
+            max_feed_mm_per_min: self.max_feed_mm_per_min.unwrap_or(d.max_feed_mm_per_min),
+            reversal_transition_um: self
+                .reversal_transition_um
+                .unwrap_or(d.reversal_transition_um),
+            temp_range_c: self
+                .temp_range_c
+                .as_deref()
+                .map(|s| parse_range(s, "--temp-range-c"))
+                .transpose()?,
+            tool_range_mm: self
+                .tool_range_mm
+                .as_deref()
+                .map(|s| parse_range(s, "--tool-range-mm"))
+                .transpose()?,
+            drop_lag: self.drop_lag,
+            created_unix_s: created_unix_s()?,
+            accept_tiny: self.accept_tiny_corrections,
+            allow_error_nm: self.allow_error_nm.unwrap_or(d.allow_error_nm),
         };
-        let linux = self.format == Format::Linuxcnc;
-        let points = self.points.unwrap_or(if linux { 201 } else { 200 });
-        if linux && points > linuxcnc::MAX_ENTRIES {
-            bail!(
-                "--points {points}: LinuxCNC reads at most {} entries",
-                linuxcnc::MAX_ENTRIES
-            );
-        }
-        let s = sample_axis(model, axis, points)?;
-        let name = format_name(self.format);
-        let corr_nm: Vec<f64> = s
-            .err_fwd_um
-            .iter()
-            .chain(&s.err_rev_um)
-            .map(|v| 1000.0 * v)
-            .collect();
-        let mut host: [Option<Vec<f64>>; 3] = [None, None, None];
-        host[axis] = Some(corr_nm);
-        trueaxis_engine::export::refuse_tiny(&host, self.accept_tiny_corrections)
-            .map_err(|e| anyhow::anyhow!("{e:#}; {} was not written", self.output.display()))?;
-        // The same max-correction rule as the firmware table, on the values
-        // the file holds (the controller interpolates between them, so they
-        // bound what it applies). A controller file cannot clamp: above an
-        // explicit --max-corr-um it is refused, not written.
-        let largest_nm = s
-            .err_fwd_um
-            .iter()
-            .chain(&s.err_rev_um)
-            .fold(0.0f64, |m, v| m.max(1000.0 * v.abs()));
-        let max_corr_nm =
-            trueaxis_engine::export::max_corr_limit_nm(axis, largest_nm, self.max_corr_um)
-                .map_err(|e| anyhow::anyhow!("{e:#}; {} was not written", self.output.display()))?;
-        if largest_nm > max_corr_nm {
-            bail!(
-                "{}: the {name} file would hold corrections up to {:.3} µm, above --max-corr-um {}: a controller's compensation table cannot clamp, so {} was not written — check the model, or raise --max-corr-um",
-                TARGETS[axis],
-                largest_nm / 1000.0,
-                max_corr_nm / 1000.0,
-                self.output.display()
-            );
-        }
-        let body = if linux {
-            linuxcnc::write(&s.nominal_mm, &s.err_fwd_um, &s.err_rev_um)?
-        } else {
-            let mean: Vec<f64> = s
-                .err_fwd_um
-                .iter()
-                .zip(&s.err_rev_um)
-                .map(|(f, r)| 0.5 * (f + r))
-                .collect();
-            let step =
-                (s.nominal_mm[s.nominal_mm.len() - 1] - s.nominal_mm[0]) / (points - 1) as f64;
-            sinumerik::write(
-                self.sinumerik_axis.as_deref().unwrap_or("AX1"),
-                s.nominal_mm[0],
-                step,
-                &mean,
-            )?
-        };
-        write_file(&self.output, body.as_bytes())?;
-        // The reversal part (forward − reverse), which Sinumerik keeps in MD32450.
-        let backlash: Vec<f64> = s
-            .err_fwd_um
-            .iter()
-            .zip(&s.err_rev_um)
-            .map(|(f, r)| f - r)
-            .collect();
-        // + 0.0 turns a −0 into 0 (a −0.0 in JSON or text reads as a sign).
-        let backlash_mean_um = backlash.iter().sum::<f64>() / backlash.len() as f64 + 0.0;
-        let step_mm = (s.nominal_mm[points - 1] - s.nominal_mm[0]) / (points - 1) as f64;
-        // What the file says: Sinumerik's _MIN/_STEP are rounded to the
-        // written 1 nm and _MAX follows from them (see `sinumerik::write`).
-        let (min_mm, step_mm, max_mm) = if linux {
-            (s.nominal_mm[0], step_mm, s.nominal_mm[points - 1])
-        } else {
-            let (lo, st) = (
-                sinumerik::written_mm(s.nominal_mm[0]),
-                sinumerik::written_mm(step_mm),
-            );
-            (lo, st, lo + st * (points - 1) as f64)
-        };
-        // Siemens enters MD32450 positive when "the encoder is leading the
-        // machine part (normal situation)": the slide falls short in the
-        // direction of travel, e_fwd < 0 < e_rev. So the value is rev − fwd,
-        // the opposite sign of `backlash_um`, in mm.
-        // Rounded to the 1 nm the value is given in, without a −0.
-        let md32450_mm = sinumerik::written_mm(-backlash_mean_um * 1e-3) + 0.0;
-        let mut doc = json!({
-            "format": name,
-            "output": self.output.display().to_string(),
-            "axis": AXES[axis],
-            "points": points,
-            "min_mm": min_mm,
-            "max_mm": max_mm,
-            "step_mm": step_mm,
-            "at_mm": {"x": s.at_mm[0], "y": s.at_mm[1], "z": s.at_mm[2]},
-            "bytes": body.len(),
-            "crc32": crc32_hex(body.as_bytes()),
-            "max_interp_error_um": s.max_interp_error_um,
-            // Whole nm, rounded up as the table's.
-            "max_corr_um": max_corr_nm.ceil() / 1000.0,
-            "backlash_um": backlash_mean_um,
-            "warnings": s.warnings,
-        });
-        if !linux {
-            doc["md32450_backlash_mm"] = json!(md32450_mm);
-        }
+        let e = export_table(model, &self.output, &opts, opts.allow_error_nm)?;
         let text = format!(
-            "{}: {name} table for {}, {points} points {:.3}…{:.3} mm (step {step_mm:.4} mm); the controller's interpolation of it differs from the full model by at most {:.3} µm{}; mean reversal (fwd − rev) {} µm{}\n",
+            "{}: {} bytes, crc32 {}, {} terms; firmware vs model over {} points: f32 {:.3} nm, fixed {:.3} nm\n",
             self.output.display(),
-            AXES[axis],
-            min_mm,
-            max_mm,
-            s.max_interp_error_um,
-            if s.warnings.iter().any(|w| w.code.ends_with("_left_out")) {
+            e.bytes,
+            e.crc32,
+            e.terms,
+            e.sweep_points,
+            e.max_f32_error_nm,
+            e.max_fixed_error_nm
+        );
+        Ok((self.doc(&e)?, e.warnings.clone(), text))
+    }
+
+    /// A controller's one-axis compensation file (docs/export-formats.md).
+    fn controller(&self, model: &ModelFile, format: Controller) -> Result<Printed> {
+        let opts = ControllerOptions {
+            axis: self
+                .axis
+                .as_deref()
+                .map(|a| AXES.iter().position(|x| *x == a).context("axis"))
+                .transpose()?,
+            points: self.points,
+            axis_name: self.sinumerik_axis.clone(),
+            max_corr_um: self.max_corr_um,
+            accept_tiny: self.accept_tiny_corrections,
+        };
+        let e =
+            controller::export(model, format, &opts).map_err(|e| file_refusal(e, &self.output))?;
+        write_file(&self.output, e.body.as_bytes())?;
+        let text = format!(
+            "{}: {} table for {}, {} points {:.3}…{:.3} mm (step {:.4} mm); the controller's interpolation of it differs from the full model by at most {:.3} µm{}; mean reversal (fwd − rev) {} µm{}\n",
+            self.output.display(),
+            format_name(self.format),
+            AXES[e.axis],
+            e.points,
+            e.min_mm,
+            e.max_mm,
+            e.step_mm,
+            e.max_interp_error_um,
+            if e.terms_left_out() {
                 " (terms left out included)"
             } else {
                 ""
             },
-            fmt_no_neg_zero(backlash_mean_um, 3),
-            if linux {
-                String::new()
-            } else {
-                format!(" — the table holds the mean of both directions; set MD32450 $MA_BACKLASH = {} mm (rev − fwd: positive when the axis falls short in the direction of travel, Siemens' normal case)", fmt_no_neg_zero(md32450_mm, 6))
-            }
+            fmt_no_neg_zero(e.backlash_um, 3),
+            e.note
+                .as_deref()
+                .map_or(String::new(), |n| format!(" — {n}"))
         );
-        Ok((doc, s.warnings.clone(), text))
+        Ok((self.doc(&e)?, e.warnings.clone(), text))
     }
+
+    /// A bed mesh (docs/export-formats.md § Bed meshes).
+    fn mesh(&self, model: &ModelFile, format: MeshFormat) -> Result<Printed> {
+        let opts = MeshOptions {
+            nodes: self
+                .mesh_points
+                .as_deref()
+                .map(parse_mesh_points)
+                .transpose()?,
+            profile: self.profile.clone(),
+            source: self.model.display().to_string(),
+            max_corr_um: self.max_corr_um,
+            accept_tiny: self.accept_tiny_corrections,
+        };
+        let e = mesh::export(model, format, &opts).map_err(|e| file_refusal(e, &self.output))?;
+        write_file(&self.output, e.body.as_bytes())?;
+        let text = format!(
+            "{}: {}, {} × {} nodes over x {:.2}…{:.2} mm, y {:.2}…{:.2} mm; heights up to {:.3} µm; bilinear interpolation of the nodes differs from the model by at most {:.3} µm (height = −ez: the firmware lifts the tool where ez is negative)\n",
+            self.output.display(),
+            format_name(self.format),
+            e.nodes[0],
+            e.nodes[1],
+            e.x_mm[0],
+            e.x_mm[1],
+            e.y_mm[0],
+            e.y_mm[1],
+            e.largest_height_um,
+            e.max_interp_error_um
+        );
+        Ok((self.doc(&e)?, e.warnings.clone(), text))
+    }
+}
+
+/// What a format prints: the JSON document, the warnings, the text.
+type Printed = (serde_json::Value, Vec<Warning>, String);
+
+/// A refused controller file or bed mesh in the words of `trueaxis
+/// export` (flags named; `output` was not written).
+fn file_refusal(e: FileError, output: &Path) -> anyhow::Error {
+    let out = output.display();
+    let msg = match e {
+        FileError::AxisAmbiguous { used } => format!(
+            "the model uses the axes {}: say which one with --axis",
+            axis_list(&used)
+        ),
+        FileError::AxisNotUsed { axis, fitted } => format!(
+            "the model does not depend on {} (fitted axes: {}); choose --axis among them",
+            AXES[axis],
+            axis_list(&fitted)
+        ),
+        FileError::TooManyPoints {
+            controller,
+            points,
+            max,
+        } => format!("--points {points}: {controller} reads at most {max} entries"),
+        FileError::Tiny(t) => format!("{}; {out} was not written", tiny_refusal(&t)),
+        FileError::MaxCorr(m) => format!("{}; {out} was not written", max_corr_refusal(&m)),
+        FileError::AboveLimit {
+            target,
+            format,
+            holder,
+            largest_nm,
+            limit_nm,
+        } => format!(
+            "{}: the {format} file would hold corrections up to {:.3} µm, above --max-corr-um {}: {holder} cannot clamp, so {out} was not written — check the model, or raise --max-corr-um",
+            TARGETS[target],
+            largest_nm / 1000.0,
+            limit_nm / 1000.0
+        ),
+        FileError::Other(e) => return e,
+    };
+    anyhow!(msg)
 }

@@ -14,6 +14,7 @@ use crate::workflow::model_output;
 use trueaxis_engine::diagnose::outliers;
 use trueaxis_engine::effect::Effect;
 use trueaxis_engine::fit::{self, nn::NnOptions, FitOptions};
+use trueaxis_engine::warning::Warning;
 
 /// Arguments of `trueaxis fit`.
 #[derive(clap::Args, Debug)]
@@ -73,7 +74,7 @@ impl Args {
                 seed: self.seed,
                 ..NnOptions::default()
             },
-            progress: crate::cmd::progress::bar(!self.json),
+            progress: crate::cmd::progress::stderr(self.json),
         };
         // Outliers: a screen that cannot run (too few points for its
         // linear model) is said, and the fit below then names the problem
@@ -83,7 +84,10 @@ impl Args {
             Vec::new()
         } else {
             outliers::find(&data, &self.model, &adds).unwrap_or_else(|e| {
-                screen_warning = Some(format!("outliers: not screened ({e:#})"));
+                screen_warning = Some(Warning::new(
+                    "outliers_not_screened",
+                    format!("outliers: not screened ({e:#})"),
+                ));
                 Vec::new()
             })
         };
@@ -97,10 +101,12 @@ impl Args {
         })
         .with_context(|| format!("{}: cannot fit {}", self.data.display(), self.model))?;
         model.stats.warnings.extend(screen_warning);
-        // Fit's warnings are strings (MODEL.json `stats.warnings`); the
-        // code leads, as `warning (code): …` elsewhere.
-        for (code, detail) in input::data_warnings(&data) {
-            model.stats.warnings.push(format!("{code}: {detail}"));
+        // Fit's warnings are kept as text (MODEL.json `stats.warnings`): a
+        // data warning's text leads with its code, as `warning (code): …`
+        // elsewhere.
+        for w in input::data_warnings(&data) {
+            let text = format!("{}: {}", w.code, w.detail);
+            model.stats.warnings.push(Warning::new(&w.code, text));
         }
         trueaxis_engine::history::save_with_model(&out, &model)?;
         for w in &model.stats.warnings {

@@ -7,7 +7,6 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use trueaxis_engine::diagnose;
 use trueaxis_engine::improve::{improve_with, ImproveStep, Improvement};
 
 use crate::cmd::out::{self, outln};
@@ -44,13 +43,7 @@ impl Args {
         }
         let out = model_output(&self.data, self.output.clone())?;
         let data = input::load_data(&self.data, None)?;
-        let warnings: Vec<diagnose::Warning> = input::data_warnings(&data)
-            .into_iter()
-            .map(|(code, detail)| diagnose::Warning {
-                code: code.into(),
-                detail,
-            })
-            .collect();
+        let warnings = input::data_warnings(&data);
         // On stderr in both modes, before the steps (as fit's warnings).
         for w in &warnings {
             eprintln!("warning ({}): {}", w.code, w.detail);
@@ -61,7 +54,7 @@ impl Args {
         // and is returned once the loop is done.
         let mut write_err: Option<anyhow::Error> = None;
         // Progress on stderr in both modes (each step's fit and diagnosis).
-        let progress = |line: &str| eprintln!("{line}");
+        let progress = crate::cmd::progress::stderr(json);
         let r = improve_with(
             &data,
             &seed,

@@ -6,6 +6,7 @@ pub mod diagnose;
 pub mod diagnose_part;
 pub mod export;
 pub mod fit;
+pub mod flags;
 pub mod flash;
 pub mod history;
 pub mod import;

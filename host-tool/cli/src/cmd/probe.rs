@@ -119,7 +119,6 @@ fn nominal_normals(
     }
     trueaxis_engine::onmachine::probe_csv::read(&text, &path.display().to_string())?
         .normals(session, plane)
-        .map_err(crate::input::session_flag)
 }
 
 /// `trueaxis probe calibrate SCAN.csv --ball-diameter-mm D -o PROBE.json`.

@@ -59,19 +59,6 @@ impl AngleArgs {
     }
 }
 
-/// The engine's "the log needs …" with the flag that gives it.
-pub(crate) fn log_flags(name: &str) -> impl Fn(anyhow::Error) -> anyhow::Error + '_ {
-    move |e| match e.downcast_ref::<spindle_log::Missing>() {
-        Some(spindle_log::Missing::CountsPerTurn) => {
-            anyhow::anyhow!("{name}: {e}: give them with --counts-per-turn N")
-        }
-        Some(spindle_log::Missing::Speed) => {
-            anyhow::anyhow!("{name}: {e}: give the speed with --rpm R")
-        }
-        None => e,
-    }
-}
-
 /// The error motion (ISO 230-7) as the JSON and text show it.
 fn error_motion_json(e: &separate::ErrorMotion) -> serde_json::Value {
     json!({
@@ -151,8 +138,7 @@ impl ThreeProbe {
             &name,
             &["p1_um", "p2_um", "p3_um"],
             &self.angle.options(),
-        )
-        .map_err(log_flags(&name))?;
+        )?;
         let [t1, t2, t3]: [separate::Track; 3] = log
             .tracks
             .try_into()
@@ -299,7 +285,7 @@ pub(crate) fn read_multi_step(
 ) -> Result<(spindle_log::AngleFrom, Vec<separate::Step>)> {
     let text = crate::input::scan_text(path, session, Small::MultiStep)?;
     let name = path.display().to_string();
-    spindle_log::multi_step(&text, &name, "p_um", &angle.options()).map_err(log_flags(&name))
+    spindle_log::multi_step(&text, &name, "p_um", &angle.options())
 }
 
 /// Reads a straightness run: `<axis>_mm,d_um` (an analogue probe's

@@ -207,7 +207,7 @@ impl Args {
             .map(|s| s.parse::<Effect>())
             .collect::<Result<_>>()?;
         // Every number is range-checked by `cfg.check()` below, with the
-        // flag's name in the message.
+        // flag's name in the message (cmd/flags.rs).
         cfg.noise_um = self.noise_um;
         cfg.seed = self.seed;
         cfg.tool_mm = self.tool_mm;

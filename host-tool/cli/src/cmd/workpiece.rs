@@ -10,7 +10,7 @@ use serde_json::json;
 
 use crate::cmd::out;
 use trueaxis_engine::import;
-use trueaxis_engine::onmachine::workpiece::{self, Dialect, PassGridError, Point};
+use trueaxis_engine::onmachine::workpiece::{self, Dialect, Point};
 
 /// Arguments of `trueaxis workpiece`.
 #[derive(clap::Args, Debug)]
@@ -118,15 +118,12 @@ impl Args {
                 self.feed_mm_min,
                 self.c_step_deg,
                 self.z_steps,
-            )
-            .map_err(pass_flags)?;
+            )?;
             crate::workflow::write_file(path, g.as_bytes())?;
         }
         if let Some(path) = &self.pass_csv {
             let mut csv = String::from("c_deg,z_mm,fitted_um,offset_um\n");
-            for [c, z] in
-                workpiece::pass_points(&form, self.c_step_deg, self.z_steps).map_err(pass_flags)?
-            {
+            for [c, z] in workpiece::pass_points(&form, self.c_step_deg, self.z_steps)? {
                 let f = form.at(c, z);
                 let _ = writeln!(
                     csv,
@@ -233,14 +230,5 @@ impl Args {
             out::print(&s)?;
         }
         Ok(())
-    }
-}
-
-/// The engine's pass-grid refusal with the flag that sets the Z steps.
-fn pass_flags(e: anyhow::Error) -> anyhow::Error {
-    if e.downcast_ref::<PassGridError>().is_some() {
-        anyhow::anyhow!(PassGridError::text("--z-steps"))
-    } else {
-        e
     }
 }

@@ -47,7 +47,6 @@
 
 pub mod aliasing;
 mod candidates;
-pub mod linalg;
 pub mod noise;
 pub mod outliers;
 mod path;
@@ -69,6 +68,7 @@ use serde::Serialize;
 use crate::data::{Dataset, AXES, TARGETS};
 use crate::effect::{Effect, Family};
 use crate::features::Norm;
+use crate::progress::{DiagnoseStage, Event, Sink};
 
 pub use crate::effect::same_effect;
 pub use crate::regions::Region;
@@ -455,16 +455,11 @@ pub struct PathStep {
 }
 
 /// A measurement-design or identifiability warning, with the measurement
-/// that would fix it.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Warning {
-    /// `aliasing`, `one_direction`, `constant_temperature`, `in_model_span`,
-    /// `confounded`, `implausible_parameter`, `above_noise_floor`,
-    /// `no_temperature`.
-    pub code: String,
-    /// What is wrong and what to measure.
-    pub detail: String,
-}
+/// that would fix it (codes: `aliasing`, `one_direction`,
+/// `constant_temperature`, `in_model_span`, `confounded`,
+/// `implausible_parameter`, `above_noise_floor`, `no_temperature`, …): the
+/// engine's one warning type.
+pub use crate::warning::Warning;
 
 /// One periodogram of the periodic search.
 #[derive(Clone, Debug)]
@@ -571,11 +566,6 @@ impl Diagnosis {
     }
 }
 
-/// A progress hook: `diagnose` and `improve` call it with one line of what
-/// they are doing (`diagnose: ex: scoring 12 candidates (1/3)`), from any
-/// thread; the CLI prints the lines to stderr.
-pub type Progress<'a> = &'a (dyn Fn(&str) + Sync);
-
 /// What one target of [`diagnose_with`] found, before the targets are joined.
 struct TargetOut {
     t: usize,
@@ -599,7 +589,7 @@ fn one_target(
     norm: Norm,
     t: usize,
     opts: &Options,
-    progress: Progress,
+    progress: &Sink,
     of: (usize, usize),
 ) -> Result<TargetOut> {
     let mut warnings = Vec::new();
@@ -608,12 +598,13 @@ fn one_target(
     let (rows, y): (Vec<usize>, Vec<f64>) = data.measured(t).unzip();
     let (fold, nfolds, how) = hold_out_blocks(data, &rows, &norm);
     let tn = TARGETS[t].to_string();
-    progress(&format!(
-        "diagnose: {tn}: fitting the model to {} rows ({}/{})",
-        rows.len(),
-        of.0,
-        of.1
-    ));
+    progress.emit(&Event::Diagnose {
+        target: TARGETS[t],
+        stage: DiagnoseStage::Fitting {
+            rows: rows.len(),
+            of,
+        },
+    });
     let td = TargetData {
         data,
         norm,
@@ -675,7 +666,10 @@ fn one_target(
         }
     }
     ev.resid_after.push((t, td.rows.clone(), st.resid.clone()));
-    progress(&format!("diagnose: {tn}: done ({}/{})", of.0, of.1));
+    progress.emit(&Event::Diagnose {
+        target: TARGETS[t],
+        stage: DiagnoseStage::Done { of },
+    });
     Ok(TargetOut {
         t,
         hold_out: how,
@@ -695,11 +689,12 @@ fn one_target(
 
 /// Runs the diagnosis of `data` with the model of `opts`.
 pub fn diagnose(data: &Dataset, opts: &Options) -> Result<Diagnosis> {
-    diagnose_with(data, opts, &|_| {})
+    diagnose_with(data, opts, &Sink::none())
 }
 
-/// [`diagnose`], telling `progress` what it is doing.
-pub fn diagnose_with(data: &Dataset, opts: &Options, progress: Progress) -> Result<Diagnosis> {
+/// [`diagnose`], telling `progress` what it is doing (each target's
+/// stages, [`Event::Diagnose`]).
+pub fn diagnose_with(data: &Dataset, opts: &Options, progress: &Sink) -> Result<Diagnosis> {
     let effects = opts
         .adds
         .iter()
@@ -936,7 +931,7 @@ pub fn library(data: &Dataset, opts: &Options) -> Result<Vec<TargetLibrary>> {
             y,
             fold,
             nfolds,
-            progress: &|_| {},
+            progress: &Sink::none(),
             forward: Default::default(),
         };
         let st = State::new(&td, &opts.seed, &opts.adds)?;

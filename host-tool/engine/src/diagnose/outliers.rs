@@ -35,7 +35,7 @@ use crate::data::{Dataset, TARGETS};
 use crate::effect::Effect;
 use crate::features::Norm;
 use crate::fit::linear::Design;
-use crate::lsq::Gram;
+use crate::linalg::lsq::Gram;
 use crate::model::Seed;
 
 /// Residuals beyond this many robust σ from the median are outliers
@@ -179,7 +179,7 @@ pub fn without(data: &Dataset, outliers: &[Outlier]) -> Dataset {
 /// and a round takes its flagged readings out of it, so a round costs a
 /// prediction pass, not a refit of the whole data set. Where the normal
 /// equations are not to be trusted (an ill-conditioned or rank-deficient
-/// design, too few points: [`lsq::solve_gram`](crate::lsq::solve_gram))
+/// design, too few points: [`lsq::solve_gram`](crate::linalg::lsq::solve_gram))
 /// the screen refits the data set by QR every round, which also words
 /// the errors.
 pub fn find(data: &Dataset, seed: &str, adds: &[Effect]) -> Result<Vec<Outlier>> {

@@ -9,8 +9,6 @@ use crate::effect::{same_effect, Effect, EffectSpec, Family, Target};
 
 use super::aliasing;
 use super::candidates::{propose, Proposal};
-use super::linalg::small_fit;
-use super::linalg::Basis;
 use super::score::{score, Replacing, Scored};
 use super::smooth;
 use super::swap::swap_in;
@@ -21,6 +19,9 @@ use super::{
     Warning, COMPETING_OVERLAP, CONFOUNDED_OVERLAP, DBIC_SIGNIFICANT, MAX_PATH_STEPS, MIN_GAP_DBIC,
     MIN_HELD_OUT_GAIN,
 };
+use crate::linalg::basis::small_fit;
+use crate::linalg::basis::Basis;
+use crate::progress::{DiagnoseStage, Event};
 
 /// The evidence's ending of a held-back candidate.
 const HELD_BACK: &str = " — held back, not added: aliasing-suspect (see aliasing: the sampling along its axis cannot tell it from a lead's alias)";
@@ -95,11 +96,13 @@ pub(super) fn rank_target(
         })
         .collect();
     let tn = TARGETS[td.t];
-    (td.progress)(&format!(
-        "diagnose: {tn}: searching candidates (periodograms, lags) at {} + {} effect(s)",
-        seed_name,
-        st.adds.len()
-    ));
+    td.progress.emit(&Event::Diagnose {
+        target: tn,
+        stage: DiagnoseStage::Searching {
+            seed: seed_name.to_string(),
+            effects: st.adds.len(),
+        },
+    });
     let props: Vec<Proposal> = propose(td, st, ev, None)
         .into_iter()
         .filter(|p| {
@@ -109,10 +112,12 @@ pub(super) fn rank_target(
                 && only.is_none_or(|o| k.is_ok_and(|k| o.iter().any(|x| x.same_effect(&k))))
         })
         .collect();
-    (td.progress)(&format!(
-        "diagnose: {tn}: scoring {} candidates",
-        props.len()
-    ));
+    td.progress.emit(&Event::Diagnose {
+        target: tn,
+        stage: DiagnoseStage::Scoring {
+            candidates: props.len(),
+        },
+    });
     let mut sc = score(td, st, props, seed_name, warnings, None);
     for (old, key) in own.iter().filter(|_| only.is_none()) {
         let searchable = match key.family {
@@ -536,11 +541,14 @@ pub(super) fn follow(
                 }
             }
         }
-        (td.progress)(&format!(
-            "diagnose: {tn}: step {k}: {} (held-out RMS {:.3} µm)",
-            on_path.last().map_or("", |(_, a)| a.as_str()),
-            next.held_out_rms
-        ));
+        td.progress.emit(&Event::Diagnose {
+            target: TARGETS[t],
+            stage: DiagnoseStage::Added {
+                step: k,
+                add: on_path.last().map_or("", |(_, a)| a.as_str()).to_string(),
+                held_out_rms_um: next.held_out_rms,
+            },
+        });
         st = next;
         if !opts.follow_path {
             break;

@@ -7,9 +7,9 @@ use crate::effect::{Effect, Family};
 use crate::features::Feature;
 
 use super::candidates::Proposal;
-use super::linalg::small_fit;
 use super::target::{FwlFit, State, TargetData};
 use super::Physical;
+use crate::linalg::basis::small_fit;
 
 /// The `params` key of a physical parameter: its name and unit
 /// (`cte` in µm/m/K → `cte_um_per_m_k`).

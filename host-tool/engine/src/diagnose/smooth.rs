@@ -20,9 +20,9 @@
 use crate::effect::Effect;
 use crate::features::Feature;
 
-use super::linalg::{dot, small_fit};
 use super::target::{State, TargetData};
 use super::IN_SPAN_SHARE;
+use crate::linalg::basis::{dot, small_fit};
 
 /// The best generic smooth alternative found.
 pub(super) struct SmoothAlternative {

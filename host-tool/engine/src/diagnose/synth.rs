@@ -18,7 +18,7 @@ use trueaxis_test_support::SplitMix64;
 use crate::data::{Dataset, TempChannel};
 use crate::features::{kinematic, lagged, Norm, CUBIC19};
 
-use super::linalg::Basis;
+use crate::linalg::basis::Basis;
 
 /// A hidden effect family with a fixed physical size at amplitude 1.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -12,7 +12,7 @@ use crate::effect::Effect;
 use crate::features::{seed_monomials, Feature, Norm};
 use crate::regions::bin_index;
 
-use super::linalg::{self, small_fit, Basis, HoldOut};
+use crate::linalg::basis::{self, small_fit, Basis, HoldOut};
 
 /// One target's rows, values and hold-out blocks.
 pub(super) struct TargetData<'a> {
@@ -23,8 +23,8 @@ pub(super) struct TargetData<'a> {
     pub(super) y: Vec<f64>,
     pub(super) fold: Vec<usize>,
     pub(super) nfolds: usize,
-    /// Where progress lines go (`diagnose_with`).
-    pub(super) progress: super::Progress<'a>,
+    /// Where progress events go (`diagnose_with`).
+    pub(super) progress: &'a crate::progress::Sink,
     /// [`forward_blocks`], made once.
     pub(super) forward: std::sync::OnceLock<Option<Vec<Vec<usize>>>>,
 }
@@ -83,7 +83,7 @@ impl State {
             );
         }
         let resid = basis.residual(&td.y);
-        let rss = linalg::dot(&resid, &resid);
+        let rss = basis::dot(&resid, &resid);
         let cols = std::sync::Arc::new(cols);
         let holdout = HoldOut::new(cols.clone(), &td.y, &td.fold, td.nfolds);
         let held_out_rms = holdout.rms(&[]).unwrap_or(f64::NAN);
@@ -106,7 +106,7 @@ impl State {
     /// The fitted component of effect `add` in this model (its columns times
     /// their coefficients in `fit`, the model's full least-squares fit), per
     /// row.
-    pub(super) fn component(&self, fit: &linalg::SmallFit, add: &str) -> Option<Vec<f64>> {
+    pub(super) fn component(&self, fit: &basis::SmallFit, add: &str) -> Option<Vec<f64>> {
         let idx: Vec<usize> = (0..self.cols.len())
             .filter(|&i| self.owner[i].as_deref() == Some(add))
             .collect();
@@ -126,7 +126,7 @@ pub(super) struct FwlFit {
     pub(super) cols: Vec<Vec<f64>>,
     pub(super) partialled: Vec<Vec<f64>>,
     pub(super) share: f64,
-    pub(super) fit: linalg::SmallFit,
+    pub(super) fit: basis::SmallFit,
     pub(super) dbic: f64,
 }
 
@@ -162,9 +162,9 @@ pub(super) fn fwl_many(
                 .iter()
                 .zip(&partialled)
                 .map(|(c, p)| {
-                    let cc = linalg::dot(c, c);
+                    let cc = basis::dot(c, c);
                     if cc > 0.0 {
-                        linalg::dot(p, p) / cc
+                        basis::dot(p, p) / cc
                     } else {
                         0.0
                     }
@@ -412,7 +412,7 @@ pub(super) fn forward_rms(
     let (mut before, mut after, mut count) = (0.0, 0.0, 0usize);
     for (block, (gb, crb, rrb)) in blocks.iter().zip(&sums).skip(1) {
         if !block.is_empty() {
-            let beta = linalg::pinv_solve(&g, &cr);
+            let beta = basis::pinv_solve(&g, &cr);
             let err = rrb - 2.0 * beta.dot(crb) + beta.dot(&(gb * &beta));
             let m = block.len() as f64;
             before += rrb / m;
@@ -456,7 +456,7 @@ mod tests {
             y,
             fold,
             nfolds,
-            progress: &|_| {},
+            progress: &crate::progress::Sink::none(),
             forward: Default::default(),
         };
         let st = State::new(&td, "cubic19", &[]).unwrap();

@@ -1,50 +1,57 @@
-//! Export a fitted model (MODEL.json) to what a machine runs: the trueaxis
-//! firmware table ([`table`]), a LinuxCNC screw-compensation file
-//! ([`linuxcnc`]) or a Sinumerik leadscrew-error table ([`sinumerik`]).
+//! Export a fitted model (MODEL.json) to what a machine runs, with every
+//! decision that takes — defaults, sign conventions, what is left out,
+//! what is refused — made here, typed, and tested; the command line only
+//! turns flags into the options below and prints the result.
+//!
+//! - [`table`]: the trueaxis firmware table, with the accuracy check
+//!   ([`table::export`] → [`table::TableExport`] or a
+//!   [`table::TableError`]).
+//! - [`controller`]: a controller's compensation file — LinuxCNC screw
+//!   compensation, Sinumerik LEC — one file per format behind the
+//!   [`controller::ControllerFormat`] trait ([`controller::export`] →
+//!   [`controller::ControllerExport`] or a [`checks::FileError`]).
+//! - [`mesh`]: a 3-D printer's bed mesh, RepRapFirmware or Klipper
+//!   ([`mesh::export`] → [`mesh::MeshExport`] or a
+//!   [`checks::FileError`]).
+//! - [`checks`]: what every export checks before it writes (tiny
+//!   corrections, the max |correction| limit, a file that cannot clamp)
+//!   and the typed refusals.
 //!
 //! Sign conventions (docs/export-formats.md): the model predicts the
 //! *error* e = actual − nominal in µm. A compensation must move the axis by
 //! −e. The firmware table and LinuxCNC store that correction (−e, added to
 //! the commanded position); Sinumerik stores +e because its controller moves
-//! the axis in the negative direction for a positive value. Each writer
-//! converts once, here, from the model's error.
+//! the axis in the negative direction for a positive value; a bed mesh
+//! stores the height −ez. Each writer converts once, from the model's
+//! error.
 //!
-//! This module holds what the controller formats share: evaluating any
-//! model kind (linear, nn, grid) along one axis with the host's own f64
-//! code (`FittedModel::predict`) at a fixed state (other axes at the centre
-//! of the travel, temperatures at the reference, tool length 0, time 0).
+//! Messages name no command-line flag: they say what is wrong in the
+//! options' terms, and refusals carry their numbers, so that the CLI can
+//! word them with its flags.
+//!
+//! This module holds what the formats share: evaluating any model kind
+//! (linear, nn, grid, local) at given states with the host's own f64 code
+//! (`FittedModel::predict`), the travel a model was fitted on, and the
+//! number format of the files.
 
-pub mod bedmesh;
-pub mod linuxcnc;
-pub mod sinumerik;
+pub mod checks;
+pub mod controller;
+#[cfg(test)]
+mod fixtures;
+pub mod mesh;
 pub mod table;
 
 use anyhow::{bail, Result};
-use serde::Serialize;
 
-use crate::data::{Dataset, TempChannel, AXES, TARGETS};
+use crate::data::{Dataset, TempChannel, TARGETS};
 pub use crate::features::feature_uses_axis;
 use crate::features::Feature;
-use crate::model::{FittedModel, ModelFile};
+use crate::model::FittedModel;
 
-/// A warning in an export's `--json` output and on stderr.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Warning {
-    /// Stable code: `drift_left_out`, `lag_dropped`, `periodic_left_out`, …
-    pub code: String,
-    /// What happened and what it means for the machine.
-    pub detail: String,
-}
-
-impl Warning {
-    /// A warning with a code and a detail.
-    pub fn new(code: &str, detail: impl Into<String>) -> Warning {
-        Warning {
-            code: code.to_string(),
-            detail: detail.into(),
-        }
-    }
-}
+/// A warning in an export's `--json` output and on stderr (codes:
+/// `drift_left_out`, `lag_dropped`, `periodic_left_out`, …): the engine's
+/// one warning type.
+pub use crate::warning::Warning;
 
 /// The travel of `axis` (0 = x) that the model was fitted on, mm, or `None`
 /// when the model does not use the axis. Linear: the normalisation's span
@@ -113,6 +120,25 @@ pub fn thermal_channels(model: &FittedModel) -> Vec<(String, f64)> {
     out
 }
 
+/// The warning `thermal_at_reference` of a file evaluated at the reference
+/// temperatures `chans` (from [`thermal_channels`]; `None` without
+/// thermal terms): `holder` (`a bed mesh`) has no temperature input.
+pub(crate) fn at_reference(chans: &[(String, f64)], holder: &str) -> Option<Warning> {
+    (!chans.is_empty()).then(|| {
+        Warning::new(
+            "thermal_at_reference",
+            format!(
+                "evaluated at the reference temperature ({}): {holder} has no temperature input",
+                chans
+                    .iter()
+                    .map(|(c, t)| format!("T_{c}_C = {t} °C"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        )
+    })
+}
+
 /// One state of the machine at which a model is evaluated.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Point {
@@ -178,205 +204,6 @@ pub fn predict_points(
     Ok(pred)
 }
 
-/// The error of one axis sampled along its travel, for the controller
-/// formats: both approach directions, at the fixed state described in the
-/// module docs.
-#[derive(Clone, Debug, PartialEq)]
-pub struct AxisSamples {
-    /// Axis index (0 = x).
-    pub axis: usize,
-    /// Nominal positions, ascending, mm.
-    pub nominal_mm: Vec<f64>,
-    /// Predicted error after a positive approach, µm.
-    pub err_fwd_um: Vec<f64>,
-    /// Predicted error after a negative approach, µm.
-    pub err_rev_um: Vec<f64>,
-    /// Where the other axes stood, mm.
-    pub at_mm: [f64; 3],
-    /// What was left out of the model and why.
-    pub warnings: Vec<Warning>,
-    /// Largest difference between linear interpolation of the samples and
-    /// the full model (left-out periodic and drift terms included) at the
-    /// same state, on a sweep at least 16× finer than the table and fine
-    /// enough for the shortest period, µm — what the controller's table
-    /// loses against the model.
-    pub max_interp_error_um: f64,
-}
-
-/// Samples the error of `axis` along its travel at `points` evenly spaced
-/// nominal positions. Periodic terms along the axis whose period is shorter
-/// than 4 sample steps are left out with a warning: a controller table that
-/// coarse would alias them into a wrong, longer wave (worse than nothing).
-pub fn sample_axis(file: &ModelFile, axis: usize, points: usize) -> Result<AxisSamples> {
-    if points < 2 {
-        bail!("a compensation table needs at least 2 points, got {points}");
-    }
-    let target = axis; // the positioning error of an axis is along itself
-    let Some((lo, hi)) = axis_travel_mm(&file.model, axis) else {
-        bail!(
-            "the model does not depend on {} (fitted axes: {}); choose --axis among them",
-            AXES[axis],
-            (0..3)
-                .filter(|&a| axis_travel_mm(&file.model, a).is_some())
-                .map(|a| AXES[a])
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
-    };
-    if !file.model.targets().contains(&target) {
-        bail!(
-            "the model has no {} (the error along {}); a one-axis controller table needs it",
-            TARGETS[target],
-            AXES[axis]
-        );
-    }
-    if hi <= lo {
-        bail!(
-            "the model's travel on {} is a single position ({lo} mm)",
-            AXES[axis]
-        );
-    }
-    let step = (hi - lo) / (points - 1) as f64;
-    let mut warnings = Vec::new();
-    let mut model = file.model.clone();
-    if let FittedModel::Linear(m) = &mut model {
-        for o in &mut m.outputs {
-            for (f, c) in o.features.iter().zip(o.coef_um.iter_mut()) {
-                match f {
-                    Feature::Periodic {
-                        axis: a,
-                        period_mm,
-                        harmonic,
-                        ..
-                    } if *a == axis && period_mm / f64::from(*harmonic) < 4.0 * step => {
-                        if *c != 0.0 && o.target == target {
-                            warnings.push(Warning::new(
-                                "periodic_left_out",
-                                format!(
-                                    "{f} ({:.3} µm) left out: its period {:.3} mm is shorter than 4 table steps of {step:.3} mm; use more points or the firmware table",
-                                    c.abs(),
-                                    period_mm / f64::from(*harmonic)
-                                ),
-                            ));
-                        }
-                        *c = 0.0;
-                    }
-                    Feature::Drift { .. } if *c != 0.0 && o.target == target => {
-                        warnings.push(Warning::new(
-                            "drift_left_out",
-                            format!("{f} left out: drift describes the measurement session, not the machine"),
-                        ));
-                        *c = 0.0;
-                    }
-                    _ => {}
-                }
-            }
-        }
-    }
-    let mut at_mm = [0.0; 3];
-    for (a, at) in at_mm.iter_mut().enumerate() {
-        if a != axis {
-            if let Some((l, h)) = axis_travel_mm(&model, a) {
-                *at = 0.5 * (l + h);
-            }
-        }
-    }
-    let chans = thermal_channels(&model);
-    let names: Vec<String> = chans.iter().map(|c| c.0.clone()).collect();
-    if !chans.is_empty() {
-        warnings.push(Warning::new(
-            "thermal_at_reference",
-            format!(
-                "evaluated at the reference temperature ({}): a one-axis controller table has no temperature input",
-                chans
-                    .iter()
-                    .map(|(c, t)| format!("T_{c}_C = {t} °C"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
-        ));
-    }
-    // A reference outside the temperatures the data were measured at: the
-    // file holds the model extrapolated there.
-    if let Some(ranges) = &file.data.temp_range_c {
-        for (c, t) in &chans {
-            if let Some(&[lo, hi]) = ranges.get(c) {
-                if *t < lo || *t > hi {
-                    warnings.push(Warning::new(
-                        "thermal_reference_outside_data",
-                        format!(
-                            "T_{c}_C = {t} °C, where the file is evaluated, is outside the {lo}…{hi} °C the data were measured at: the values are the model extrapolated to it — measure at the reference temperature, or fit with t_ref_c inside the measured range"
-                        ),
-                    ));
-                }
-            }
-        }
-    }
-    // At least 16 sweep points per table step and 16 per shortest period
-    // (so a left-out short wave is seen at its full amplitude), at most
-    // about 200 000 points in all.
-    let shortest_mm = table::shortest_period_mm(&file.model, axis).unwrap_or(f64::INFINITY);
-    let fine =
-        ((16.0 * step / shortest_mm).ceil() as usize).clamp(16, (100_000 / (points - 1)).max(16));
-    let n_fine = (points - 1) * fine + 1;
-    let mut pts = Vec::with_capacity(2 * n_fine);
-    for dir in [1i8, -1] {
-        for i in 0..n_fine {
-            let mut pos = at_mm;
-            pos[axis] = if i + 1 == n_fine {
-                hi
-            } else {
-                lo + (hi - lo) * i as f64 / (n_fine - 1) as f64
-            };
-            pts.push(Point {
-                pos_mm: pos,
-                dir: [dir; 3],
-                temp_c: chans.iter().map(|c| c.1).collect(),
-                tool_mm: 0.0,
-            });
-        }
-    }
-    let pred = predict_points(&model, &names, &pts)?;
-    let Some(e) = &pred[target] else {
-        bail!("the model predicts no {}", TARGETS[target]);
-    };
-    // The full model at the same points (what was left out included).
-    let full = predict_points(&file.model, &names, &pts)?;
-    let Some(e_full) = &full[target] else {
-        bail!("the model predicts no {}", TARGETS[target]);
-    };
-    let (fwd_fine, rev_fine) = e.split_at(n_fine);
-    let (fwd_full, rev_full) = e_full.split_at(n_fine);
-    let take = |v: &[f64]| -> Vec<f64> { v.iter().step_by(fine).copied().collect() };
-    let nominal_mm: Vec<f64> = pts[..n_fine]
-        .iter()
-        .step_by(fine)
-        .map(|p| p.pos_mm[axis])
-        .collect();
-    let err_fwd_um = take(fwd_fine);
-    let err_rev_um = take(rev_fine);
-    // Interpolation loss: linear between the table's points vs the full
-    // model (`predict_points` has refused non-finite values).
-    let mut max_interp_error_um = 0.0f64;
-    for (fine_v, coarse) in [(fwd_full, &err_fwd_um), (rev_full, &err_rev_um)] {
-        for (i, v) in fine_v.iter().enumerate() {
-            let k = (i / fine).min(points - 2);
-            let t = (i - k * fine) as f64 / fine as f64;
-            let interp = coarse[k] + t * (coarse[k + 1] - coarse[k]);
-            max_interp_error_um = max_interp_error_um.max((interp - v).abs());
-        }
-    }
-    Ok(AxisSamples {
-        axis,
-        nominal_mm,
-        err_fwd_um,
-        err_rev_um,
-        at_mm,
-        warnings,
-        max_interp_error_um,
-    })
-}
-
 /// `v` with `decimals` decimals, never a "−0.000…" for a value that rounds
 /// to zero (a minus sign on a zero reads as a direction): the number format
 /// of every controller file, bed mesh and export message.
@@ -388,119 +215,7 @@ pub fn fmt_no_neg_zero(v: f64, decimals: usize) -> String {
     }
 }
 
-/// Refuses an export whose largest |correction| on every output is below
-/// [`crate::units::TINY_CORRECTION_UM`] unless `accept` (the flag
-/// `--accept-tiny-corrections`): such a file compensates nothing a machine
-/// notices, and the usual cause is errors in mm written into µm columns (a
-/// table 1000× too small). `host` holds each output's corrections, nm.
-pub fn refuse_tiny(host: &[Option<Vec<f64>>; 3], accept: bool) -> Result<()> {
-    let largest: Vec<(usize, f64)> = host
-        .iter()
-        .enumerate()
-        .filter_map(|(t, h)| {
-            h.as_ref()
-                .map(|h| (t, h.iter().fold(0.0f64, |m, v| m.max(v.abs()))))
-        })
-        .collect();
-    let tiny_nm = crate::units::TINY_CORRECTION_UM * 1000.0;
-    if accept || largest.is_empty() || largest.iter().any(|&(_, m)| m >= tiny_nm) {
-        return Ok(());
-    }
-    let list: Vec<String> = largest
-        .iter()
-        .map(|(t, m)| format!("{} {:.1} nm", TARGETS[*t], m))
-        .collect();
-    bail!(
-        "the largest correction is tiny ({}, below {} µm on every output): nothing a machine would notice, or errors in mm written into µm columns (a table 1000× too small) — check the data's units; --accept-tiny-corrections exports it anyway",
-        list.join(", "),
-        crate::units::TINY_CORRECTION_UM
-    )
-}
-
-/// The largest |correction| any export may hold, µm: the firmware table's
-/// limit (`model_core::table::MAX_CORR_LIMIT_NM`), applied to the
-/// controller files as well.
-pub const MAX_CORR_LIMIT_UM: f64 = model_core::table::MAX_CORR_LIMIT_NM as f64 / 1000.0;
-
-/// The max |correction| limit of output `target`, nm, shared by every
-/// format: `given_um` (`--max-corr-um`) when set, else 1.5 × `model_max_nm`
-/// (the largest |correction| the export holds), at least 1 µm. Refused
-/// (`Err`) when not positive and finite, or above [`MAX_CORR_LIMIT_UM`];
-/// the message says which number that is and what to do. Whether a
-/// `given_um` below the model's largest is a warning (the firmware table
-/// clamps) or a refusal (a controller file cannot) is the caller's.
-pub fn max_corr_limit_nm(target: usize, model_max_nm: f64, given_um: Option<f64>) -> Result<f64> {
-    let cap = MAX_CORR_LIMIT_UM;
-    let name = TARGETS[target];
-    match given_um {
-        Some(u) => {
-            if !(u.is_finite() && u > 0.0) {
-                bail!("--max-corr-um must be positive, got {u}");
-            }
-            if u > cap {
-                bail!("{name}: --max-corr-um {u} exceeds the table's limit of {cap} µm");
-            }
-            Ok(u * 1000.0)
-        }
-        None => {
-            let limit_nm = (1.5 * model_max_nm).max(1000.0);
-            if limit_nm > cap * 1000.0 {
-                // A wildly wrong model (1e300 µm) reads as 1.5e300, not as
-                // 300 digits.
-                let um = |x: f64| {
-                    if x < 1e6 {
-                        format!("{x:.1}")
-                    } else {
-                        format!("{x:.2e}")
-                    }
-                };
-                let m = um(model_max_nm / 1000.0);
-                let why = if model_max_nm / 1000.0 > cap {
-                    format!(
-                        "the model's own largest correction ({m} µm) is above it — check the model and the data's units (an error column in nm, a temperature in K) before anything else; --max-corr-um (at most {cap}) would clamp it"
-                    )
-                } else {
-                    format!(
-                        "give the limit yourself with --max-corr-um (at most {cap}; at or above the model's {m} µm nothing is clamped)"
-                    )
-                };
-                bail!(
-                    "{name}: the default max |correction| {} µm (1.5 × the model's largest correction, {m} µm) exceeds the table's limit of {cap} µm; {why}",
-                    um(limit_nm / 1000.0)
-                );
-            }
-            Ok(limit_nm)
-        }
-    }
-}
-
 /// Standard CRC-32 (IEEE, as zlib and the table format use), hex `0x…`.
 pub fn crc32_hex(bytes: &[u8]) -> String {
     format!("0x{:08x}", model_core::table::CRC32.checksum(bytes))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_wildly_wrong_model_is_named_in_exponent_form() {
-        // 1e300 µm, as a damaged or mis-scaled model file gives: the
-        // message stays a line, not 300 digits.
-        let e = max_corr_limit_nm(0, 1e303, None).unwrap_err().to_string();
-        assert!(
-            e.contains("default max |correction| 1.50e300 µm") && e.contains("(1.00e300 µm)"),
-            "{e}"
-        );
-        assert!(e.len() < 400, "{e}");
-        // Ordinary sizes keep one decimal.
-        let e = max_corr_limit_nm(1, 3_068_000.0, None)
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.starts_with("ey: the default max |correction| 4602.0 µm")
-                && e.contains("largest correction, 3068.0 µm"),
-            "{e}"
-        );
-    }
 }

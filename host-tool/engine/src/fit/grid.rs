@@ -27,6 +27,7 @@ use crate::data::{Dataset, AXES, TARGETS};
 use crate::holdout;
 use crate::model::grid::{point, stencil, Stencil, MAX_NODES};
 use crate::model::{FitStats, FittedModel, GridModel, GridOutput};
+use crate::warning::Warning;
 
 /// Relative weight of the bending penalty (see module docs).
 const LAMBDA_REL: f64 = 1e-3;
@@ -230,9 +231,9 @@ pub fn fit(data: &Dataset, step_mm: f64, blocks: usize) -> Result<(FittedModel, 
             resid.iter().fold(0.0, |m, e| f64::max(m, e.abs())),
         );
         if untouched > 0 {
-            stats.warnings.push(format!(
+            stats.warnings.push(Warning::new("unmeasured_nodes", format!(
                 "{name}: {untouched} of {n_nodes} grid nodes have no measurement in their cells; their values continue the neighbours linearly (a step finer than the measurement spacing adds nodes, not information)"
-            ));
+            )));
         }
         // Block hold-out: same grid, refitted without each block.
         let bl = holdout::blocks(data, &rows, blocks);
@@ -255,8 +256,9 @@ pub fn fit(data: &Dataset, step_mm: f64, blocks: usize) -> Result<(FittedModel, 
                 .held_out_rms_um
                 .insert(name.clone(), (ss / n.max(1) as f64).sqrt());
         } else {
-            stats.warnings.push(format!(
-                "{name}: no held-out RMS: a single position or pass"
+            stats.warnings.push(Warning::new(
+                "no_held_out",
+                format!("{name}: no held-out RMS: a single position or pass"),
             ));
         }
         if stats.holdout.is_empty() {
@@ -340,7 +342,9 @@ mod tests {
         };
         let (m, s) = fit(&d, 10.0, 5).unwrap();
         assert!(
-            s.warnings.iter().any(|w| w.contains("have no measurement")),
+            s.warnings
+                .iter()
+                .any(|w| w.code == "unmeasured_nodes" && w.detail.contains("have no measurement")),
             "{:?}",
             s.warnings
         );

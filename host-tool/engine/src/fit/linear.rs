@@ -15,8 +15,9 @@ use crate::data::{Dataset, AXES, TARGETS};
 use crate::effect::Effect;
 use crate::features::{feature_uses_axis, seed_monomials, Feature, Norm};
 use crate::holdout;
-use crate::lsq::{self, Gram, LsqError, LsqSolution, ILL_CONDITIONED};
+use crate::linalg::lsq::{self, Gram, LsqError, LsqSolution, ILL_CONDITIONED};
 use crate::model::{FitStats, FittedModel, LinearModel, LinearOutput};
+use crate::warning::Warning;
 
 /// The features of `seed` (+ the effects for `target`) for target `target`
 /// on data with the given axes.
@@ -532,16 +533,16 @@ pub fn fit(
         // position term can be fitted, so the seed leaves its constant per
         // target, and the `--add` effects (temperatures, time) carry what
         // changes.
-        stats.warnings.push(format!(
+        stats.warnings.push(Warning::new("no_travel", format!(
             "{}: every measured point lies at one position; {seed} is reduced to a constant per target (no travel to fit a polynomial to) — the --add effects (thermal, drift) model what changes over time",
             data.source
-        ));
+        )));
     }
     for t in data.targets() {
         if data.measured(t).next().is_none() {
-            stats.warnings.push(format!(
-                "{}: the column has no values; not modelled",
-                TARGETS[t]
+            stats.warnings.push(Warning::new(
+                "empty_target",
+                format!("{}: the column has no values; not modelled", TARGETS[t]),
             ));
         }
     }
@@ -586,10 +587,10 @@ pub fn fit(
                 .insert(name.clone(), tf.condition_number);
         }
         if tf.condition_number > ILL_CONDITIONED {
-            stats.warnings.push(format!(
+            stats.warnings.push(Warning::new("ill_conditioned", format!(
                 "{name}: ill-conditioned design (condition number {:.3e} > {ILL_CONDITIONED:.0e}): some terms nearly repeat each other on these points; coefficients are uncertain (see coef_sd_um) and extrapolation is unreliable",
                 tf.condition_number
-            ));
+            )));
         }
         // blocks = 0: the caller wants the fit only, not its held-out RMS.
         match held {
@@ -597,9 +598,10 @@ pub fn fit(
             Some(Ok(h)) => {
                 stats.held_out_rms_um.insert(name.clone(), h);
             }
-            Some(Err(e)) => stats
-                .warnings
-                .push(format!("{name}: no held-out RMS: {e:#}")),
+            Some(Err(e)) => stats.warnings.push(Warning::new(
+                "no_held_out",
+                format!("{name}: no held-out RMS: {e:#}"),
+            )),
         }
         if blocks > 0 && stats.holdout.is_empty() {
             stats.holdout = holdout_text;
@@ -769,7 +771,8 @@ mod tests {
             s.condition_number
         );
         assert!(
-            s.warnings.iter().any(|w| w.contains("ill-conditioned")),
+            s.warnings.iter().any(|w| w.code == "ill_conditioned"
+                && w.detail.starts_with("ex: ill-conditioned")),
             "{:?}",
             s.warnings
         );
@@ -868,9 +871,9 @@ mod tests {
         let mean = ex.iter().map(|v| v.unwrap()).sum::<f64>() / 3.0;
         assert!((m1.outputs[0].coef_um[0] - mean).abs() < 1e-9);
         assert!(
-            s1.warnings
-                .iter()
-                .any(|w| w.contains("every measured point lies at one position")),
+            s1.warnings.iter().any(|w| w.code == "no_travel"
+                && w.detail
+                    .contains("every measured point lies at one position")),
             "{:?}",
             s1.warnings
         );

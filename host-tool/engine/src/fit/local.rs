@@ -30,13 +30,14 @@
 
 use std::collections::BTreeMap;
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 
 use crate::data::{Dataset, AXES, TARGETS};
 use crate::features::{Feature, Norm, CUBIC19};
-use crate::fit::linear;
+use crate::fit::{linear, FitError, LocalRefusal};
 use crate::holdout;
 use crate::model::{FitStats, FittedModel, LocalModel, LocalPatch};
+use crate::warning::Warning;
 
 fn distinct_positions(data: &Dataset, axis: usize) -> Vec<f64> {
     let Some(col) = &data.pos_mm[axis] else {
@@ -109,12 +110,12 @@ pub fn fit_model(data: &Dataset) -> Result<LocalModel> {
                 .expect("three axes");
             let planes = distinct_positions(data, s);
             if planes.len() * 4 > data.len() {
-                bail!(
-                    "--local: the data is not on measured planes ({} distinct {} positions for {} points); the cuboid fit needs whole planes of points",
-                    planes.len(),
-                    AXES[s],
-                    data.len()
-                );
+                return Err(FitError::Local(LocalRefusal::NotOnPlanes {
+                    planes: planes.len(),
+                    axis: s,
+                    points: data.len(),
+                })
+                .into());
             }
             let others: Vec<usize> = varying.iter().copied().filter(|&a| a != s).collect();
             let base = cubic_in(&others);
@@ -150,7 +151,13 @@ pub fn fit_model(data: &Dataset) -> Result<LocalModel> {
             let shape = if varying.len() == 2 { "plane" } else { "line" };
             let features = mono(cubic_in(&varying));
             let names: Vec<&str> = varying.iter().map(|&a| AXES[a]).collect();
-            let patch = fit_patch(&features, &all_rows, &format!("{shape} ({})", names.join(", ")), 0.0, 0.0)?;
+            let patch = fit_patch(
+                &features,
+                &all_rows,
+                &format!("{shape} ({})", names.join(", ")),
+                0.0,
+                0.0,
+            )?;
             Ok(LocalModel {
                 shape: shape.into(),
                 norm,
@@ -159,7 +166,7 @@ pub fn fit_model(data: &Dataset) -> Result<LocalModel> {
                 patches: vec![patch],
             })
         }
-        _ => bail!("--local: every measured point lies at one position; a local fit needs travel on some axis"),
+        _ => Err(FitError::Local(LocalRefusal::NoTravel).into()),
     }
 }
 
@@ -206,19 +213,22 @@ pub fn fit(data: &Dataset, blocks: usize) -> Result<(FittedModel, FitStats)> {
                         .collect(),
                     None => data.measured(t).map(|x| x.0).collect(),
                 };
-                let a = crate::lsq::design_matrix(data, &lm.norm, &o.features, &rows)?;
+                let a = crate::linalg::lsq::design_matrix(data, &lm.norm, &o.features, &rows)?;
                 let b = nalgebra::DVector::zeros(rows.len());
                 let w = holdout::weights(data, &rows)?;
-                if let Ok(sol) = crate::lsq::solve(&a, &b, w.as_ref()) {
+                if let Ok(sol) = crate::linalg::lsq::solve(&a, &b, w.as_ref()) {
                     worst = worst.max(sol.condition_number);
                 }
             }
         }
         if worst.is_finite() && worst > 0.0 {
             stats.condition_number.insert(name.clone(), worst);
-            if worst > crate::lsq::ILL_CONDITIONED {
-                stats.warnings.push(format!(
-                    "{name}: a local patch is ill-conditioned (condition number {worst:.3e})"
+            if worst > crate::linalg::lsq::ILL_CONDITIONED {
+                stats.warnings.push(Warning::new(
+                    "ill_conditioned",
+                    format!(
+                        "{name}: a local patch is ill-conditioned (condition number {worst:.3e})"
+                    ),
                 ));
             }
         }
@@ -226,8 +236,9 @@ pub fn fit(data: &Dataset, blocks: usize) -> Result<(FittedModel, FitStats)> {
         let rows: Vec<usize> = data.measured(t).map(|x| x.0).collect();
         let bl = holdout::blocks(data, &rows, blocks);
         if bl.len() < 2 {
-            stats.warnings.push(format!(
-                "{name}: no held-out RMS: a single position or pass"
+            stats.warnings.push(Warning::new(
+                "no_held_out",
+                format!("{name}: no held-out RMS: a single position or pass"),
             ));
             continue;
         }
@@ -261,8 +272,9 @@ pub fn fit(data: &Dataset, blocks: usize) -> Result<(FittedModel, FitStats)> {
                     .held_out_rms_um
                     .insert(name.clone(), (ss / n.max(1) as f64).sqrt());
             }
-            Some(e) => stats.warnings.push(format!(
-                "{name}: no held-out RMS: the local fit without a block fails: {e:#}"
+            Some(e) => stats.warnings.push(Warning::new(
+                "no_held_out",
+                format!("{name}: no held-out RMS: the local fit without a block fails: {e:#}"),
             )),
         }
         if stats.holdout.is_empty() {
@@ -366,7 +378,22 @@ mod tests {
                 *v += (i * (a + 1)) as f64 * 0.01;
             }
         }
-        let e = fit(&d, 5).unwrap_err().to_string();
-        assert!(e.contains("not on measured planes"), "{e}");
+        let e = fit(&d, 5).unwrap_err();
+        assert!(
+            matches!(
+                e.downcast_ref::<FitError>(),
+                Some(FitError::Local(LocalRefusal::NotOnPlanes {
+                    points: 64,
+                    ..
+                }))
+            ),
+            "{e}"
+        );
+        // The engine's words name no flag of the command line.
+        assert!(
+            e.to_string()
+                .starts_with("local fit: the data is not on measured planes"),
+            "{e}"
+        );
     }
 }

@@ -21,6 +21,8 @@ use crate::data::{Dataset, AXES, TARGETS};
 use crate::effect::Effect;
 use crate::holdout;
 use crate::model::{DataRef, ModelFile, ModelSeed, Seed, MODEL_FORMAT};
+use crate::progress::Sink;
+use crate::warning::Warning;
 
 /// Options of a fit beyond the model spec.
 #[derive(Clone, Debug)]
@@ -32,7 +34,7 @@ pub struct FitOptions {
     /// Neural-network training options.
     pub nn: nn::NnOptions,
     /// Where progress events of long computations (network training) go.
-    pub progress: ProgressSink,
+    pub progress: Sink,
 }
 
 impl Default for FitOptions {
@@ -41,68 +43,61 @@ impl Default for FitOptions {
             blocks: holdout::DEFAULT_BLOCKS,
             local: false,
             nn: nn::NnOptions::default(),
-            progress: ProgressSink::none(),
+            progress: Sink::none(),
         }
     }
 }
 
-/// A step of a long computation, for a front end to show. The engine never
-/// draws: it emits these and the caller (the CLI's progress bar, a test, a
-/// GUI) renders them however it likes.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Progress {
-    /// Training `nn:<hidden>`: `done` of `total` epochs over all restarts.
-    Training {
-        /// Hidden neurons of the network.
-        hidden: usize,
-        /// The restart running (1-based).
-        restart: usize,
-        /// Restarts in all.
-        restarts: usize,
-        /// Epochs done over all restarts.
-        done: u64,
-        /// Epochs at most over all restarts.
-        total: u64,
-        /// Mean squared training error of the last epoch (scaled units).
-        train_mse: f64,
+/// What a fit refuses to do, in the engine's words; a caller names its
+/// own way of asking (the CLI: `--add`, `--local`, cmd/flags.rs).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum FitError {
+    /// Effects added to a local fit.
+    #[error("a local fit takes no added effects (the local patches use the seed's own terms)")]
+    LocalWithEffects,
+    /// A local fit or added effects asked of a seed that is no polynomial.
+    #[error("local fits and added effects apply to the polynomial seeds (cubic19, kinematic), not to {seed}")]
+    NotPolynomial {
+        /// The seed as given (`nn:8`, `grid:10`).
+        seed: String,
     },
-    /// The computation is over.
-    Finished,
+    /// Data a local fit cannot be made of.
+    #[error("local fit: {0}")]
+    Local(LocalRefusal),
 }
 
-/// Where [`Progress`] events go: a front end's callback, or nowhere.
-#[derive(Clone, Default)]
-pub struct ProgressSink(Option<std::sync::Arc<ProgressFn>>);
-
-/// A receiver of [`Progress`] events.
-pub type ProgressFn = dyn Fn(&Progress) + Send + Sync;
-
-impl ProgressSink {
-    /// Events go to `f`.
-    pub fn new(f: impl Fn(&Progress) + Send + Sync + 'static) -> Self {
-        ProgressSink(Some(std::sync::Arc::new(f)))
-    }
-
-    /// Events go nowhere.
-    pub fn none() -> Self {
-        ProgressSink(None)
-    }
-
-    /// Sends `p` to the receiver, if there is one.
-    pub fn emit(&self, p: &Progress) {
-        if let Some(f) = &self.0 {
-            f(p);
-        }
-    }
+/// Why data cannot have a local fit.
+#[derive(Clone, Debug, PartialEq)]
+pub enum LocalRefusal {
+    /// The points are not on whole planes (the cuboid fit's stack).
+    NotOnPlanes {
+        /// Distinct positions along the stacking axis.
+        planes: usize,
+        /// The stacking axis (0 = x).
+        axis: usize,
+        /// Points in all.
+        points: usize,
+    },
+    /// Every point at one position: nothing to fit a polynomial along.
+    NoTravel,
 }
 
-impl std::fmt::Debug for ProgressSink {
+impl std::fmt::Display for LocalRefusal {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(if self.0.is_some() {
-            "ProgressSink(callback)"
-        } else {
-            "ProgressSink(none)"
-        })
+        match self {
+            LocalRefusal::NotOnPlanes {
+                planes,
+                axis,
+                points,
+            } => write!(
+                f,
+                "the data is not on measured planes ({planes} distinct {} positions for {points} points); the cuboid fit needs whole planes of points",
+                AXES[*axis]
+            ),
+            LocalRefusal::NoTravel => f.write_str(
+                "every measured point lies at one position; a local fit needs travel on some axis",
+            ),
+        }
     }
 }
 
@@ -141,11 +136,18 @@ pub fn fit_recorded(
             );
         }
     }
+    let polynomial = matches!(parsed, Seed::Cubic19 | Seed::Kinematic);
+    if !polynomial && (opts.local || !adds.is_empty()) {
+        return Err(FitError::NotPolynomial {
+            seed: seed.to_string(),
+        }
+        .into());
+    }
     let blocks = opts.blocks.max(2);
     let (model, mut stats, seed_name) = match parsed {
         Seed::Cubic19 | Seed::Kinematic if opts.local => {
             if !adds.is_empty() {
-                bail!("--add is not supported with --local (the local patches use the seed's own terms)");
+                return Err(FitError::LocalWithEffects.into());
             }
             let (m, s) = local::fit(data, blocks)?;
             let name = ModelSeed {
@@ -159,16 +161,10 @@ pub fn fit_recorded(
             (m, s, parsed.to_string())
         }
         Seed::Nn { hidden } => {
-            if opts.local || !adds.is_empty() {
-                bail!("--local and --add apply to the polynomial seeds (cubic19, kinematic), not to {seed}");
-            }
             let (m, s) = nn::fit(data, hidden, &opts.nn, &opts.progress, blocks)?;
             (m, s, seed.to_string())
         }
         Seed::Grid { step_mm } => {
-            if opts.local || !adds.is_empty() {
-                bail!("--local and --add apply to the polynomial seeds (cubic19, kinematic), not to {seed}");
-            }
             let (m, s) = grid::fit(data, step_mm, blocks)?;
             (m, s, seed.to_string())
         }
@@ -177,10 +173,10 @@ pub fn fit_recorded(
     // grid nodes or network input along it): say so, with the position.
     for a in data.axes() {
         if let Some(p) = data.constant_position(a) {
-            stats.warnings.push(format!(
+            stats.warnings.push(Warning::new("axis_not_modelled", format!(
                 "{ax}: every measured point is at {ax} = {p} mm; {ax} is not modelled (the correction does not depend on {ax}, as for an axis absent from the data)",
                 ax = AXES[a]
-            ));
+            )));
         }
     }
     Ok(ModelFile {

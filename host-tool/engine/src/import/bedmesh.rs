@@ -32,7 +32,7 @@
 //! #*# min_x = 35.0 …  max_x, min_y, max_y (keys in any order)
 //! ```
 
-use super::ImportError;
+use super::{ImportError, Needs};
 use crate::data::{Dataset, SkippedRow, ERR_PLAUSIBLE_UM, POS_PLAUSIBLE_MM};
 
 /// First words of a RepRapFirmware height map file.
@@ -443,11 +443,14 @@ pub fn read_klipper_mesh(
                 1,
                 None,
                 format!(
-                    "{} bed mesh profiles ({}); choose one: trueaxis import FILE --profile NAME -o mesh.csv",
+                    "{} bed mesh profiles ({}); expected the one to read",
                     profiles.len(),
                     profiles.join(", ")
                 ),
-            ))
+            )
+            .needing(Needs::Profile {
+                profiles: profiles.clone(),
+            }))
         }
     };
     let lines: Vec<(usize, &str)> = text
@@ -687,7 +690,13 @@ xmin,xmax,ymin,ymax,radius,xspacing,yspacing,xnum,ynum\n\
         );
         assert_eq!(klipper_profiles(&two), ["default", "hot"]);
         let e = read_klipper_mesh(&two, "p.cfg", None).unwrap_err();
-        assert!(e.message.contains("--profile"), "{e}");
+        assert_eq!(
+            e.needs,
+            Some(Needs::Profile {
+                profiles: vec!["default".into(), "hot".into()]
+            }),
+            "{e}"
+        );
         let hot = read_klipper_mesh(&two, "p.cfg", Some("hot")).unwrap();
         assert_eq!(hot.len(), 4);
         assert!((hot.err_um[2].as_ref().unwrap()[3].unwrap() + 400.0).abs() < 1e-9);

@@ -22,7 +22,7 @@
 
 use std::collections::BTreeMap;
 
-use super::ImportError;
+use super::{ImportError, Needs};
 use crate::data::{Dataset, AXES, ERR_PLAUSIBLE_UM, POS_PLAUSIBLE_MM};
 
 /// True when `text` looks like an ecmc ISO 230-2 data file.
@@ -167,8 +167,9 @@ pub fn read_ecmc(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset,
         err(
             1,
             None,
-            "an ecmc ISO230 file does not name its machine axis; pass --axis x|y|z (convert once: trueaxis import FILE.dat --axis x -o run.csv)".into(),
+            "an ecmc ISO230 file does not name its machine axis; expected it from the reader (x, y or z)".into(),
         )
+        .needing(Needs::EcmcAxis)
     })?;
     if targets.is_empty() {
         return Err(err(
@@ -342,7 +343,8 @@ mod tests {
     fn a_damaged_ecmc_file_is_refused_with_its_line() {
         let t = file();
         let e = read_ecmc(&t, "a.dat", None).unwrap_err();
-        assert!(e.message.contains("--axis"), "{e}");
+        assert_eq!(e.needs, Some(Needs::EcmcAxis), "{e}");
+        assert!(!e.message.contains("--"), "{e}");
         let missing = t.replace("REF_DATA_BWD[1, 2] = 9.998\n", "");
         let e = read_ecmc(&missing, "a.dat", Some(0)).unwrap_err();
         assert!(e.message.contains("REF_DATA_BWD[1,2]"), "{e}");

@@ -52,15 +52,58 @@ pub struct ImportError {
     pub column: Option<usize>,
     /// What was wrong and what was expected.
     pub message: String,
+    /// The choice the file leaves to its reader's caller, when that is
+    /// what is missing (a caller names its own way of giving it: the CLI,
+    /// a flag).
+    pub needs: Option<Needs>,
+}
+
+/// What a file does not say and its reader must be told.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Needs {
+    /// The machine axis of an ecmc ISO230 file (it never names it).
+    EcmcAxis,
+    /// The machine axis of an .rtl file without an `Axis:` line.
+    RtlAxis,
+    /// Which of a Klipper config's bed mesh profiles to read.
+    Profile {
+        /// The profiles the file saves.
+        profiles: Vec<String>,
+    },
+}
+
+impl ImportError {
+    /// `file:line` or `file:line:column`, as the message is prefixed.
+    pub fn location(&self) -> String {
+        match self.column {
+            Some(c) => format!("{}:{}:{}", self.file, self.line, c),
+            None => format!("{}:{}", self.file, self.line),
+        }
+    }
+
+    /// The error, as one that the caller's choice `n` would avoid.
+    pub(crate) fn needing(mut self, n: Needs) -> Self {
+        self.needs = Some(n);
+        self
+    }
 }
 
 impl fmt::Display for ImportError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self.column {
-            Some(c) => write!(f, "{}:{}:{}: {}", self.file, self.line, c, self.message),
-            None => write!(f, "{}:{}: {}", self.file, self.line, self.message),
-        }
+        write!(f, "{}: {}", self.location(), self.message)
     }
+}
+
+/// A load option that does not fit the file (a caller names its own way
+/// of giving it: the CLI, a flag).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum LoadError {
+    /// A bed mesh profile named for a file that is no Klipper config.
+    #[error("{file}: a bed mesh profile is named, which only a Klipper config holds; expected a .cfg file")]
+    ProfileNotCfg {
+        /// The file as given.
+        file: String,
+    },
 }
 
 impl ImportError {
@@ -75,6 +118,7 @@ impl ImportError {
             line,
             column,
             message: msg.into(),
+            needs: None,
         }
     }
 }
@@ -120,7 +164,7 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> anyhow::Result<Dataset> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {name}"))?;
     let text = || String::from_utf8_lossy(&bytes);
     if opts.profile.is_some() && ext != "cfg" {
-        anyhow::bail!("{name}: --profile names a Klipper bed mesh; expected a .cfg file");
+        return Err(LoadError::ProfileNotCfg { file: name }.into());
     }
     let ds = match ext.as_str() {
         "csv" if bedmesh::is_rrf_heightmap(&text()) => read_rrf_heightmap(&text(), &name)?,

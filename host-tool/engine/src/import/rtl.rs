@@ -22,7 +22,7 @@
 //! file that breaks it has been misread, cut or edited, and the direction
 //! of each row depends on it. A leading UTF-8 byte order mark is skipped.
 
-use super::ImportError;
+use super::{ImportError, Needs};
 use crate::data::{Dataset, AXES, ERR_PLAUSIBLE_UM, POS_PLAUSIBLE_MM};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -400,8 +400,10 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
         err(
             last_line,
             None,
-            "no `Axis:` line in USER-TEXT:: (expected X, Y or Z; or pass --axis)".into(),
+            "no `Axis:` line in USER-TEXT:: (expected X, Y or Z, or the axis from the reader)"
+                .into(),
         )
+        .needing(Needs::RtlAxis)
     })?;
     metadata.push(("axis".into(), AXES[axis].into()));
 

@@ -109,9 +109,10 @@ pub struct FitStats {
     #[serde(default)]
     pub holdout: String,
     /// Things the user should know (ill-conditioning, grid nodes without
-    /// data, training stopped at the epoch limit, …).
-    #[serde(default)]
-    pub warnings: Vec<String>,
+    /// data, training stopped at the epoch limit, …); MODEL.json keeps
+    /// their text (a list of strings).
+    #[serde(default, with = "crate::warning::as_text")]
+    pub warnings: Vec<crate::warning::Warning>,
 }
 
 /// The model, by kind (`"kind": "linear" | "nn" | "grid" | "local"`).
@@ -319,7 +320,7 @@ impl ModelFile {
             "rows": s.rows,
             "condition_number": s.condition_number,
             "holdout": s.holdout,
-            "warnings": s.warnings,
+            "warnings": crate::warning::as_text::texts(&s.warnings),
             "data_sha256": self.data.sha256,
         });
         if let Some(p) = model_path {

@@ -35,7 +35,7 @@ use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-use crate::lsq;
+use crate::linalg::lsq;
 
 pub mod robust;
 pub mod sphere;

@@ -46,14 +46,20 @@ pub struct Options {
 
 /// Something a log needs that neither it nor the options give. The text
 /// names it in the engine's words; a command with a flag for it says so.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum Missing {
     /// An `encoder` column without the counts per turn.
-    #[error("the `encoder` column counts, but the counts per turn are not given")]
-    CountsPerTurn,
+    #[error("{file}: the `encoder` column counts, but the counts per turn are not given")]
+    CountsPerTurn {
+        /// The file.
+        file: String,
+    },
     /// Time stamps without an angle, an index or a speed.
-    #[error("the rows have time stamps but no angle (`c_deg`), encoder counts (`encoder`), index pulse (`index`) or spindle speed (an `rpm` column or the speed given)")]
-    Speed,
+    #[error("{file}: the rows have time stamps but no angle (`c_deg`), encoder counts (`encoder`), index pulse (`index`) or spindle speed (an `rpm` column or the speed given)")]
+    Speed {
+        /// The file.
+        file: String,
+    },
 }
 
 /// One log read: per channel asked for, its track; and the rows' steps.
@@ -164,7 +170,9 @@ pub fn read(text: &str, name: &str, channels: &[&str], opts: &Options) -> Result
             rows.iter().map(|r| r.angle.unwrap_or(0.0)).collect(),
         )
     } else if encoder.is_some() {
-        let cpt = opts.counts_per_turn.ok_or(Missing::CountsPerTurn)?;
+        let cpt = opts.counts_per_turn.ok_or_else(|| Missing::CountsPerTurn {
+            file: name.to_string(),
+        })?;
         if !(cpt.is_finite() && cpt > 0.0) {
             bail!("{cpt} counts per turn: expected a positive number");
         }
@@ -199,7 +207,10 @@ pub fn read(text: &str, name: &str, channels: &[&str], opts: &Options) -> Result
         }
         (AngleFrom::Speed, a)
     } else if times.is_some() {
-        return Err(Missing::Speed.into());
+        return Err(Missing::Speed {
+            file: name.to_string(),
+        }
+        .into());
     } else {
         bail!(
             "{name}:{hl}: the header needs the spindle angle: `c_deg`, `encoder` (counts), `index` (a once-per-turn pulse) or time stamps (`t_s` or `time`) with the spindle speed, found `{head_line}`"
@@ -358,13 +369,19 @@ mod tests {
             vec![0.0, 90.0, 360.0]
         );
         let e = read(enc, "e.csv", &["p_um"], &Options::default()).unwrap_err();
-        assert_eq!(e.downcast_ref::<Missing>(), Some(&Missing::CountsPerTurn));
+        assert!(matches!(
+            e.downcast_ref::<Missing>(),
+            Some(Missing::CountsPerTurn { .. })
+        ));
         let sp = "t_s,rpm,p1_um,p2_um\n0,60,1,\n0.25,60,,2\n0.5,60,3,4\n";
         let log = read(sp, "s.csv", &["p1_um", "p2_um"], &Options::default()).unwrap();
         assert_eq!(log.tracks[0].angle_deg, vec![0.0, 180.0]);
         assert_eq!(log.tracks[1].angle_deg, vec![90.0, 180.0]);
         let e = read("t_s,p_um\n0,1\n", "n.csv", &["p_um"], &Options::default()).unwrap_err();
-        assert_eq!(e.downcast_ref::<Missing>(), Some(&Missing::Speed));
+        assert!(matches!(
+            e.downcast_ref::<Missing>(),
+            Some(Missing::Speed { .. })
+        ));
         let e = read("c_deg,p_um\n0,x\n", "b.csv", &["p_um"], &Options::default()).unwrap_err();
         assert!(e.to_string().starts_with("b.csv:2:2: `p_um`"), "{e}");
     }

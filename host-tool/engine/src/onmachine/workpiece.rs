@@ -24,7 +24,7 @@ use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-use crate::lsq;
+use crate::linalg::lsq;
 
 /// One probed point.
 #[derive(Clone, Copy, Debug, PartialEq)]

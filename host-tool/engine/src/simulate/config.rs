@@ -225,30 +225,112 @@ impl Limit {
     /// Drift rate.
     pub const DRIFT_UM_PER_H: Limit = Limit::closed(-1000.0, 1000.0, "µm/h");
 
-    /// `Ok` when `v` is finite and inside; otherwise an error naming `what`.
-    pub fn check(&self, what: &str, v: f64) -> anyhow::Result<()> {
+    /// `Ok` when `v` is finite and inside; otherwise how it is not.
+    pub fn test(&self, v: f64) -> Result<(), OutOfRange> {
         let low_ok = if self.min_inclusive {
             v >= self.min
         } else {
             v > self.min
         };
         if v.is_finite() && low_ok && v <= self.max {
-            return Ok(());
+            Ok(())
+        } else {
+            Err(OutOfRange {
+                value: v,
+                limit: *self,
+            })
         }
-        let lo = if self.min_inclusive { "≥" } else { ">" };
-        let unit = if self.unit.is_empty() {
+    }
+
+    /// `Ok` when `v` is finite and inside; otherwise an error naming `what`.
+    pub fn check(&self, what: &str, v: f64) -> anyhow::Result<()> {
+        self.test(v).map_err(|e| anyhow::anyhow!("{what} = {e}"))
+    }
+}
+
+/// A number that is not finite or outside its [`Limit`]: `1e300: expected
+/// a finite value ≥ 0 µm and ≤ 100 µm` (the caller names the number).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OutOfRange {
+    /// The number given.
+    pub value: f64,
+    /// Its range.
+    pub limit: Limit,
+}
+
+impl std::fmt::Display for OutOfRange {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let l = &self.limit;
+        let lo = if l.min_inclusive { "≥" } else { ">" };
+        let unit = if l.unit.is_empty() {
             String::new()
         } else {
-            format!(" {}", self.unit)
+            format!(" {}", l.unit)
         };
         // `{:?}`: 1e300 prints as `1e300`, not as 301 digits.
-        anyhow::bail!(
-            "{what} = {v:?}: expected a finite value {lo} {}{unit} and ≤ {}{unit}",
-            self.min,
-            self.max
+        write!(
+            f,
+            "{:?}: expected a finite value {lo} {}{unit} and ≤ {}{unit}",
+            self.value, l.min, l.max
         )
     }
 }
+
+impl std::error::Error for OutOfRange {}
+
+/// One of [`SimConfig`]'s own numbers (beside the plans' and effects').
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Setting {
+    /// `noise_um`.
+    NoiseUm,
+    /// `tool_mm`.
+    ToolMm,
+    /// `timing.feed_mm_s`.
+    FeedMmS,
+    /// `timing.dwell_s`.
+    DwellS,
+    /// `spikes.frac`.
+    SpikeFrac,
+    /// `spikes.amp_um`.
+    SpikeAmpUm,
+}
+
+impl std::fmt::Display for Setting {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Setting::NoiseUm => "noise_um",
+            Setting::ToolMm => "tool_mm",
+            Setting::FeedMmS => "feed_mm_s",
+            Setting::DwellS => "dwell_s",
+            Setting::SpikeFrac => "spikes frac",
+            Setting::SpikeAmpUm => "spikes amp_um",
+        })
+    }
+}
+
+/// What [`SimConfig::check`] refuses that a caller names in its own words
+/// (the CLI: `--plan`, `--noise-um`, …, cmd/flags.rs); the plans' and
+/// effects' own numbers are refused with their spec's names.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ConfigError {
+    /// No measurement plan.
+    #[error("no measurement plan (expected at least one plan, e.g. grid:50)")]
+    NoPlan,
+    /// A setting outside its range.
+    #[error("{setting} = {range}")]
+    Setting {
+        /// Which.
+        setting: Setting,
+        /// The value and its range.
+        range: OutOfRange,
+    },
+}
+
+/// A `FRAC,AMP_UM` text that is not two numbers (the caller names what it
+/// parsed).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("`{0}`: expected FRAC,AMP_UM, e.g. 0.005,20")]
+pub struct BadSpikes(pub String);
 
 /// Everything `simulate` needs.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -287,18 +369,16 @@ pub struct Spikes {
 }
 
 impl std::str::FromStr for Spikes {
-    type Err = anyhow::Error;
+    type Err = BadSpikes;
     /// `FRAC,AMP_UM`, e.g. `0.005,20`.
-    fn from_str(s: &str) -> anyhow::Result<Spikes> {
+    fn from_str(s: &str) -> Result<Spikes, BadSpikes> {
         let v: Vec<f64> = s
             .split(',')
             .map(|p| p.trim().parse::<f64>())
             .collect::<Result<_, _>>()
             .ok()
             .filter(|v: &Vec<f64>| v.len() == 2)
-            .ok_or_else(|| {
-                anyhow::anyhow!("--spikes `{s}`: expected FRAC,AMP_UM, e.g. 0.005,20")
-            })?;
+            .ok_or_else(|| BadSpikes(s.to_string()))?;
         Ok(Spikes {
             frac: v[0],
             amp_um: v[1],
@@ -337,7 +417,7 @@ impl SimConfig {
     pub fn check(&self) -> anyhow::Result<()> {
         use anyhow::bail;
         if self.plans.is_empty() {
-            bail!("no measurement plan (expected at least one --plan, e.g. grid:50)");
+            return Err(ConfigError::NoPlan.into());
         }
         self.check_numbers()?;
         let tr = self.machine.travel_mm;
@@ -467,16 +547,21 @@ impl SimConfig {
     }
 
     /// The numeric half of [`SimConfig::check`]: every number finite and
-    /// inside its [`Limit`], named the way the command line and the
-    /// spec strings name it.
+    /// inside its [`Limit`], named as [`Setting`] and the spec strings name
+    /// it (the CLI names its flags instead).
     fn check_numbers(&self) -> anyhow::Result<()> {
-        Limit::NOISE_UM.check("--noise-um", self.noise_um)?;
-        Limit::TOOL_MM.check("--tool-mm", self.tool_mm)?;
-        Limit::FEED_MM_S.check("--feed-mm-s", self.timing.feed_mm_s)?;
-        Limit::DWELL_S.check("--dwell-s", self.timing.dwell_s)?;
+        let setting = |setting: Setting, limit: Limit, v: f64| {
+            limit
+                .test(v)
+                .map_err(|range| ConfigError::Setting { setting, range })
+        };
+        setting(Setting::NoiseUm, Limit::NOISE_UM, self.noise_um)?;
+        setting(Setting::ToolMm, Limit::TOOL_MM, self.tool_mm)?;
+        setting(Setting::FeedMmS, Limit::FEED_MM_S, self.timing.feed_mm_s)?;
+        setting(Setting::DwellS, Limit::DWELL_S, self.timing.dwell_s)?;
         if let Some(sp) = &self.spikes {
-            Limit::SPIKE_FRAC.check("--spikes FRAC", sp.frac)?;
-            Limit::SPIKE_UM.check("--spikes AMP_UM", sp.amp_um)?;
+            setting(Setting::SpikeFrac, Limit::SPIKE_FRAC, sp.frac)?;
+            setting(Setting::SpikeAmpUm, Limit::SPIKE_UM, sp.amp_um)?;
         }
         for p in &self.plans {
             // The kind only: the full spec would repeat the bad number.
@@ -562,5 +647,36 @@ impl SimConfig {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn settings_are_refused_by_name_in_the_engines_words() {
+        let mut cfg = SimConfig::preset("mill800").unwrap();
+        let e = cfg.check().unwrap_err();
+        assert_eq!(e.downcast_ref(), Some(&ConfigError::NoPlan));
+        cfg.plans = vec!["grid:100".parse().unwrap()];
+        cfg.check().unwrap();
+        cfg.noise_um = 1e9;
+        let e = cfg.check().unwrap_err();
+        match e.downcast_ref::<ConfigError>() {
+            Some(ConfigError::Setting { setting, range }) => {
+                assert_eq!(*setting, Setting::NoiseUm);
+                assert_eq!(range.value, 1e9);
+            }
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(
+            e.to_string(),
+            "noise_um = 1000000000.0: expected a finite value ≥ 0 µm and ≤ 100 µm"
+        );
+        assert_eq!(
+            "0.1".parse::<Spikes>().unwrap_err().to_string(),
+            "`0.1`: expected FRAC,AMP_UM, e.g. 0.005,20"
+        );
     }
 }

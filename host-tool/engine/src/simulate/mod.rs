@@ -26,7 +26,10 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::data::{Dataset, TempChannel, AXES};
 
-pub use config::{Effect, Limit, RefReturn, SimConfig, Spikes, Timing};
+pub use config::{
+    BadSpikes, ConfigError, Effect, Limit, OutOfRange, RefReturn, Setting, SimConfig, Spikes,
+    Timing,
+};
 pub use machine::{AxisErrors, ErrorFn, Machine, Realistic, Squareness, Wave, PRESETS, REALISTIC};
 pub use plan::{iso_targets, stations, Plan, Visit};
 pub use thermal_test::{scenario, SCENARIOS};

@@ -11,9 +11,10 @@ use serde::Serialize;
 use model_core::table::{Envelope, InputScaling, MAX_SLEW_LIMIT_NM_PER_MS};
 use model_core::MAX_TEMPS;
 
-use super::{mc, nm, TableOptions, Warning, UNBOUNDED_NM};
+use super::{mc, nm, Clamped, TableError, TableOptions, Warning, UNBOUNDED_NM};
 use crate::data::{AXES, TARGETS};
-use crate::export::{axis_travel_mm, max_corr_limit_nm, Point};
+use crate::export::checks::{max_corr_limit_nm, MaxCorrError};
+use crate::export::{axis_travel_mm, Point};
 use crate::features::Feature;
 use crate::model::{FittedModel, ModelFile};
 
@@ -124,7 +125,7 @@ pub(super) fn temp_ranges(
         warnings.push(Warning::new(
             "temp_range_unknown",
             format!(
-                "the model file does not record the temperatures measured on {} (written by an older trueaxis): the table accepts {lo}…{hi} °C there, which may extrapolate the thermal terms beyond the data — refit the model, or give the measured range with --temp-range-c",
+                "the model file does not record the temperatures measured on {} (written by an older trueaxis): the table accepts {lo}…{hi} °C there, which may extrapolate the thermal terms beyond the data — refit the model, or give the measured range",
                 unknown.join(", ")
             ),
         ));
@@ -143,13 +144,14 @@ pub(super) fn tool_range(given: Option<(f64, f64)>, has_abbe: bool) -> Result<(f
 
 /// Max |correction| per output, nm: 1.5 × the largest on the sweep
 /// (`host`, nm), or `given_um`; a limit below the model's is warned
-/// (`max_corr_below_model`).
+/// (`max_corr_below_model`) and returned as [`Clamped`].
 pub(super) fn max_corr_nm(
     host: &[Option<Vec<f64>>; 3],
     given_um: Option<f64>,
     warnings: &mut Vec<Warning>,
-) -> Result<[i32; 3]> {
+) -> Result<([i32; 3], Vec<Clamped>), MaxCorrError> {
     let mut max_corr_nm = [0i32; 3];
+    let mut clamped = Vec::new();
     for (t, h) in host.iter().enumerate() {
         let Some(h) = h else { continue };
         let m = h.iter().fold(0.0f64, |m, v| m.max(v.abs()));
@@ -158,16 +160,21 @@ pub(super) fn max_corr_nm(
             warnings.push(Warning::new(
                 "max_corr_below_model",
                 format!(
-                    "{}: --max-corr-um {} is below the model's {:.3} µm: the firmware will clamp",
+                    "{}: the max |correction| limit {} µm is below the model's {:.3} µm: the firmware will clamp",
                     TARGETS[t],
                     limit / 1000.0,
                     m / 1000.0
                 ),
             ));
+            clamped.push(Clamped {
+                target: t,
+                limit_nm: limit,
+                model_max_nm: m,
+            });
         }
         max_corr_nm[t] = limit.ceil() as i32;
     }
-    Ok(max_corr_nm)
+    Ok((max_corr_nm, clamped))
 }
 
 /// Max correction slew, nm/ms: `opts.max_slew_nm_per_ms`, else 1.5 × the
@@ -180,7 +187,7 @@ pub(super) fn max_slew_nm_per_ms(
     has_rev: bool,
     transition_nm: i32,
     opts: &TableOptions,
-) -> Result<i32> {
+) -> Result<i32, TableError> {
     // Gradient along each axis from neighbouring points on the dense lines
     // (consecutive points that differ on one axis only).
     let mut grad_nm_per_mm = 0.0f64;
@@ -216,18 +223,18 @@ pub(super) fn max_slew_nm_per_ms(
     let slew = match opts.max_slew_nm_per_ms {
         Some(s) => {
             if !(s.is_finite() && s >= 1.0) {
-                bail!("--max-slew-nm-per-ms must be ≥ 1");
+                return Err(TableError::SlewBelowOne { given_nm_per_ms: s });
             }
             if s > limit {
-                bail!(
-                    "--max-slew-nm-per-ms {s}: a table holds at most {MAX_SLEW_LIMIT_NM_PER_MS} nm/ms (10 m/s; the format's and the board's limit) — check the unit (nm per ms)"
-                );
+                return Err(TableError::SlewAboveTableLimit { given_nm_per_ms: s });
             }
             s
         }
         None => {
             if !(opts.max_feed_mm_per_min.is_finite() && opts.max_feed_mm_per_min > 0.0) {
-                bail!("--max-feed-mm-per-min must be positive");
+                return Err(TableError::BadFeed {
+                    given_mm_per_min: opts.max_feed_mm_per_min,
+                });
             }
             // Capped at the format's limit: the board reduces any slew to
             // what its pulses can follow anyway.

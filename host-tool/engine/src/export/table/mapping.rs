@@ -13,13 +13,15 @@ use model_core::spec::{
 use model_core::table::MAX_DEGREE;
 use model_core::MAX_TEMPS;
 
-use super::{mc, nm, Warning};
+use super::{mc, nm, TableError, Warning};
 use crate::data::{AXES, TARGETS};
 use crate::features::{Feature, Phase};
 use crate::model::FittedModel;
 
 /// The model as model-core terms, its channels, and warnings. Thermal lags
-/// are refused unless `drop_lag`.
+/// are refused unless `drop_lag`, local models always — as a
+/// [`TableError`] inside the `anyhow` error, which `export` gets back
+/// typed.
 pub(super) fn terms_of(
     model: &FittedModel,
     drop_lag: bool,
@@ -39,13 +41,16 @@ pub(super) fn terms_of(
                 // (channel, t_ref_c) → coefficients nm/K.
                 let mut thermal: Vec<(String, f64, Vec<PolyCoef>)> = Vec::new();
                 let mut reversal: Vec<(usize, f64)> = Vec::new();
-                let add = |v: &mut Vec<PolyCoef>, exp: [u8; 3], c: f64| {
-                    match v.iter_mut().find(|(e, _)| *e == exp) {
-                        Some((_, acc)) => *acc += c,
-                        None => v.push((exp, c)),
-                    }
+                let add = |v: &mut Vec<PolyCoef>, exp: [u8; 3], c: f64| match v
+                    .iter_mut()
+                    .find(|(e, _)| *e == exp)
+                {
+                    Some((_, acc)) => *acc += c,
+                    None => v.push((exp, c)),
                 };
-                let degree_ok = |exp: [u8; 3]| exp.iter().map(|&e| u32::from(e)).sum::<u32>() <= u32::from(MAX_DEGREE);
+                let degree_ok = |exp: [u8; 3]| {
+                    exp.iter().map(|&e| u32::from(e)).sum::<u32>() <= u32::from(MAX_DEGREE)
+                };
                 for (f, &c_um) in o.features.iter().zip(&o.coef_um) {
                     let c_nm = -1000.0 * c_um; // correction = −error
                     match f {
@@ -57,7 +62,10 @@ pub(super) fn terms_of(
                         }
                         Feature::Abbe { exp } => {
                             if !degree_ok(*exp) {
-                                bail!("{}: Abbe term {f} has degree above {MAX_DEGREE}", TARGETS[o.target]);
+                                bail!(
+                                    "{}: Abbe term {f} has degree above {MAX_DEGREE}",
+                                    TARGETS[o.target]
+                                );
                             }
                             // µm per mm of arm → nm per nm: ×1e-3 (and the sign).
                             add(&mut abbe, *exp, -1e-3 * c_um);
@@ -70,7 +78,10 @@ pub(super) fn terms_of(
                         } => {
                             let k = usize::from(*harmonic);
                             if k == 0 || k > model_core::table::MAX_HARMONICS {
-                                bail!("{f}: harmonic {k} outside 1..={}", model_core::table::MAX_HARMONICS);
+                                bail!(
+                                    "{f}: harmonic {k} outside 1..={}",
+                                    model_core::table::MAX_HARMONICS
+                                );
                             }
                             let idx = match periodic
                                 .iter()
@@ -100,10 +111,12 @@ pub(super) fn terms_of(
                         } => {
                             if *lag_s > 0.0 {
                                 if !drop_lag {
-                                    bail!(
-                                        "{}: the thermal term {f} has a lag of {lag_s} s, which the firmware table cannot represent (it applies the coefficient to the sensor reading at once); refit without lag_s, or export with --drop-lag to use its steady state",
-                                        TARGETS[o.target]
-                                    );
+                                    return Err(TableError::Lag {
+                                        target: o.target,
+                                        term: f.to_string(),
+                                        lag_s: *lag_s,
+                                    }
+                                    .into());
                                 }
                                 warnings.push(Warning::new(
                                     "lag_dropped",
@@ -111,7 +124,10 @@ pub(super) fn terms_of(
                                 ));
                             }
                             if !degree_ok(*exp) {
-                                bail!("{}: thermal term {f} has degree above {MAX_DEGREE}", TARGETS[o.target]);
+                                bail!(
+                                    "{}: thermal term {f} has degree above {MAX_DEGREE}",
+                                    TARGETS[o.target]
+                                );
                             }
                             if !channels.contains(channel) {
                                 channels.push(channel.clone());
@@ -146,12 +162,18 @@ pub(super) fn terms_of(
                     }
                 }
                 if !poly.is_empty() {
-                    terms.push(TermSpec::Poly { output: out, coefs: poly });
+                    terms.push(TermSpec::Poly {
+                        output: out,
+                        coefs: poly,
+                    });
                 }
                 for (axis, period_mm, sin_nm, cos_nm) in periodic {
                     let period_nm = nm(period_mm).context("periodic period")?;
                     if period_nm <= 0 {
-                        bail!("periodic term on {}: period {period_mm} mm rounds to 0 nm", AXES[axis]);
+                        bail!(
+                            "periodic term on {}: period {period_mm} mm rounds to 0 nm",
+                            AXES[axis]
+                        );
                     }
                     if ((period_nm as f64) * 1e-6 - period_mm).abs() > 1e-9 {
                         warnings.push(Warning::new(
@@ -185,7 +207,10 @@ pub(super) fn terms_of(
                     });
                 }
                 if !abbe.is_empty() {
-                    terms.push(TermSpec::Abbe { output: out, coefs: abbe });
+                    terms.push(TermSpec::Abbe {
+                        output: out,
+                        coefs: abbe,
+                    });
                 }
             }
         }
@@ -254,9 +279,7 @@ pub(super) fn terms_of(
                 }));
             }
         }
-        FittedModel::Local(_) => bail!(
-            "local (piecewise) models cannot be exported as a table: the firmware evaluates one global model; fit a global seed (cubic19 with --add …) or grid:<step_mm>"
-        ),
+        FittedModel::Local(_) => return Err(TableError::LocalModel.into()),
     }
     if channels.len() > MAX_TEMPS {
         bail!(

@@ -52,25 +52,33 @@
 //! the sweep's maximum and never bites; a smaller `max_corr_um` is warned
 //! (`max_corr_below_model`) and then does not fail the check.
 //!
+//! **Accuracy gate.** When the larger of the two errors is above
+//! `allow_error_nm` (default 1 nm) or NaN, the export is refused
+//! ([`TableError::Accuracy`]): nothing is to be written.
+//!
 //! The steps live in submodules: `mapping` (model → terms), `envelope`
 //! (travel, scaling, ranges, max |correction| and slew), `sweep` (the
 //! check's points) and `verify` (host against firmware); [`export`] runs
-//! them in order.
+//! them in order. Every refusal a caller may word in its own terms is a
+//! [`TableError`] variant with its numbers.
 
 mod envelope;
+mod error;
 mod mapping;
 mod sweep;
 mod verify;
 
-use anyhow::{bail, Result};
+use anyhow::{anyhow, bail, Result};
 use serde::Serialize;
 
 use model_core::spec::TableSpec;
 use model_core::Model;
 
 pub use envelope::EnvelopeJson;
+pub use error::{Clamped, TableError};
 pub(in crate::export) use mapping::shortest_period_mm;
 
+use super::checks::refuse_tiny;
 use super::Warning;
 use crate::features::Feature;
 use crate::model::{FittedModel, ModelFile};
@@ -99,6 +107,10 @@ pub struct TableOptions {
     /// `units::TINY_CORRECTION_UM` (refused otherwise: nothing worth
     /// compensating, or errors in mm written as µm).
     pub accept_tiny: bool,
+    /// Largest accepted difference between the firmware's evaluation (f32
+    /// and fixed point) and the host model, nm: above it the export is
+    /// refused ([`TableError::Accuracy`]).
+    pub allow_error_nm: f64,
 }
 
 impl Default for TableOptions {
@@ -113,6 +125,7 @@ impl Default for TableOptions {
             drop_lag: false,
             created_unix_s: 0,
             accept_tiny: false,
+            allow_error_nm: 1.0,
         }
     }
 }
@@ -143,6 +156,10 @@ pub struct TableExport {
     pub board: BoardFit,
     /// What was left out or changed, and why.
     pub warnings: Vec<Warning>,
+    /// The outputs the firmware clamps below the model's largest
+    /// correction, in the order of their `max_corr_below_model` warnings.
+    #[serde(skip)]
+    pub clamped: Vec<Clamped>,
     /// The encoded table.
     #[serde(skip)]
     pub table: Vec<u8>,
@@ -239,21 +256,30 @@ fn smaller_model_hint(model: &FittedModel) -> String {
     }
 }
 
-/// Exports `file` as a table and runs the accuracy check.
-pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
+/// Exports `file` as a table and runs the accuracy check; refused when
+/// the check finds more than `opts.allow_error_nm`. Nothing is written:
+/// the caller writes [`TableExport::table`].
+pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport, TableError> {
+    if !(opts.allow_error_nm.is_finite() && opts.allow_error_nm >= 0.0) {
+        return Err(TableError::BadAllowance {
+            allowed_nm: opts.allow_error_nm,
+        });
+    }
     let model = if opts.drop_lag {
         mapping::without_lag(&file.model)
     } else {
         file.model.clone()
     };
     if !(opts.reversal_transition_um.is_finite() && opts.reversal_transition_um >= 0.0) {
-        bail!("--reversal-transition-um must be ≥ 0");
+        return Err(TableError::BadReversalTransition {
+            transition_um: opts.reversal_transition_um,
+        });
     }
     let transition_nm = (opts.reversal_transition_um * 1000.0).round() as i32;
     let (terms, channels, mut warnings) =
         mapping::terms_of(&file.model, opts.drop_lag, transition_nm)?;
     if terms.is_empty() {
-        bail!("the model has no term the table can hold");
+        return Err(anyhow!("the model has no term the table can hold").into());
     }
 
     // The envelope's ranges, the sweep inside them and the host's
@@ -291,8 +317,8 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
     };
     let points = sweep::points(&model, &ranges, has_abbe, has_rev);
     let host = verify::host_corrections(&model, &channels, &points)?;
-    super::refuse_tiny(&host, opts.accept_tiny)?;
-    let max_corr_nm = envelope::max_corr_nm(&host, opts.max_corr_um, &mut warnings)?;
+    refuse_tiny(&host, opts.accept_tiny)?;
+    let (max_corr_nm, clamped) = envelope::max_corr_nm(&host, opts.max_corr_um, &mut warnings)?;
     let max_slew_nm_per_ms =
         envelope::max_slew_nm_per_ms(&model, &points, &host, has_rev, transition_nm, opts)?;
 
@@ -308,14 +334,14 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
     };
     let bytes = spec
         .encode()
-        .map_err(|e| anyhow::anyhow!("encoding the table: {e}"))?;
-    let table = model_core::parse(&bytes)
-        .map_err(|e| anyhow::anyhow!("the encoded table does not parse: {e}"))?;
+        .map_err(|e| anyhow!("encoding the table: {e}"))?;
+    let table =
+        model_core::parse(&bytes).map_err(|e| anyhow!("the encoded table does not parse: {e}"))?;
     let crc = table.crc32();
     // A table the firmware's model cannot even hold is refused (nothing is
     // written): no controller could run it, and the check below needs it.
     let fw = Model::load(&table).map_err(|e| {
-        anyhow::anyhow!(
+        anyhow!(
             "the firmware cannot load the table: {e}; nothing was written{}",
             smaller_model_hint(&model)
         )
@@ -334,6 +360,16 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
     }
 
     let (max_f32, max_fixed) = verify::max_errors_nm(&fw, &points, &host, &max_corr_nm)?;
+    let worst = max_f32.max(max_fixed);
+    if worst.is_nan() || worst > opts.allow_error_nm {
+        return Err(TableError::Accuracy {
+            worst_nm: worst,
+            f32_nm: max_f32,
+            fixed_nm: max_fixed,
+            sweep_points: points.len(),
+            allowed_nm: opts.allow_error_nm,
+        });
+    }
     Ok(TableExport {
         bytes: bytes.len(),
         crc32: format!("0x{crc:08x}"),
@@ -350,6 +386,7 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport> {
         ),
         board,
         warnings,
+        clamped,
         table: bytes,
         spec: Some(spec),
     })
@@ -376,26 +413,8 @@ mod tests {
     use crate::features::{Norm, Phase, CUBIC19};
     use model_core::Inputs;
 
-    use crate::model::{
-        DataRef, FitStats, GridModel, GridOutput, LinearModel, LinearOutput, NnModel, NnTraining,
-        MODEL_FORMAT,
-    };
-
-    fn file(model: FittedModel) -> ModelFile {
-        ModelFile {
-            format: MODEL_FORMAT.into(),
-            seed: "test".into(),
-            adds: vec![],
-            data: DataRef {
-                source: "test".into(),
-                sha256: "ab".repeat(32),
-                rows: 0,
-                temp_range_c: Some(Default::default()),
-            },
-            model,
-            stats: FitStats::default(),
-        }
-    }
+    use crate::export::fixtures::file;
+    use crate::model::{GridModel, GridOutput, LinearModel, LinearOutput, NnModel, NnTraining};
 
     /// A network's training record (export does not read it).
     fn training() -> NnTraining {
@@ -545,7 +564,11 @@ mod tests {
     #[test]
     fn lag_is_refused_unless_dropped() {
         let err = export(&file(full_model(600.0)), &TableOptions::default()).unwrap_err();
-        assert!(format!("{err:#}").contains("--drop-lag"), "{err:#}");
+        assert!(
+            matches!(&err, TableError::Lag { target: 0, lag_s, .. } if *lag_s == 600.0),
+            "{err:#}"
+        );
+        assert!(!err.to_string().contains("--"), "{err}");
         let e = export(
             &file(full_model(600.0)),
             &TableOptions {
@@ -642,5 +665,36 @@ mod tests {
         );
         assert_eq!(e.envelope.travel_mm[1], None);
         assert_eq!(e.envelope.travel_mm[2], Some([0.0, 50.0]));
+    }
+
+    #[test]
+    fn a_limit_below_the_model_is_warned_and_recorded_for_the_clamp() {
+        use super::error::tests::cubic_x;
+        let opts = TableOptions {
+            max_corr_um: Some(2.0),
+            ..TableOptions::default()
+        };
+        let e = export(&cubic_x(), &opts).unwrap();
+        assert_eq!(e.clamped.len(), 1);
+        let c = e.clamped[0];
+        assert_eq!((c.target, c.limit_nm), (0, 2000.0));
+        assert!((c.model_max_nm - 4700.0).abs() < 1.0, "{c:?}");
+        assert_eq!(e.envelope.max_corr_um[0], 2.0);
+        let w: Vec<&Warning> = e
+            .warnings
+            .iter()
+            .filter(|w| w.code == "max_corr_below_model")
+            .collect();
+        assert_eq!(w.len(), 1);
+        assert!(
+            w[0].detail
+                .starts_with("ex: the max |correction| limit 2 µm"),
+            "{w:?}"
+        );
+        // Without a limit nothing is clamped.
+        assert!(export(&cubic_x(), &TableOptions::default())
+            .unwrap()
+            .clamped
+            .is_empty());
     }
 }

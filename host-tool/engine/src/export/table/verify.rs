@@ -54,7 +54,7 @@ pub(super) fn max_errors_nm(
         for t in 0..3 {
             let Some(h) = &host[t] else { continue };
             // The firmware clamps to the envelope's max |correction| by
-            // design; with a `--max-corr-um` below the model's (warned by
+            // design; with a `max_corr_um` below the model's (warned by
             // `envelope::max_corr_nm`) the check must compare like with like, or every such
             // export would fail on the clamp rather than on the arithmetic.
             let lim = f64::from(max_corr_nm[t]);

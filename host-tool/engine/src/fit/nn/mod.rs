@@ -50,10 +50,11 @@ mod lm;
 use lm::{run_lm, Lm, Run, Samples};
 
 use crate::data::{Dataset, TARGETS};
-use crate::fit::{Progress, ProgressSink};
 use crate::holdout;
 use crate::model::nn::{predict, scale, Net};
 use crate::model::{FitStats, FittedModel, NnModel, NnTraining};
+use crate::progress::{Event, Sink};
+use crate::warning::Warning;
 
 /// Default number of restarts (see [`NnOptions::restarts`]). Three, not
 /// five: which restart wins is decided by differences of ~0.1 % in
@@ -298,7 +299,7 @@ pub fn train(
     hidden: usize,
     opts: &NnOptions,
     split: &Split,
-    progress: &ProgressSink,
+    progress: &Sink,
     on_epoch: &mut dyn FnMut(&Epoch, &NnModel),
 ) -> Result<NnModel> {
     Ok(train_restarts(data, hidden, opts, split, progress, on_epoch)?.model)
@@ -314,7 +315,7 @@ pub fn train_restarts(
     hidden: usize,
     opts: &NnOptions,
     split: &Split,
-    progress: &ProgressSink,
+    progress: &Sink,
     on_epoch: &mut dyn FnMut(&Epoch, &NnModel),
 ) -> Result<Trained> {
     if hidden == 0 {
@@ -333,7 +334,7 @@ pub fn train_restarts(
     }
     let restarts = opts.restarts.max(1);
     let total = (opts.max_epochs * restarts) as u64;
-    let event = |restart: usize, done: usize, train_mse: f64| Progress::Training {
+    let event = |restart: usize, done: usize, train_mse: f64| Event::Training {
         hidden,
         restart: restart + 1,
         restarts,
@@ -368,7 +369,7 @@ pub fn train_restarts(
         }
         progress.emit(&event(r, (r + 1) * opts.max_epochs, last_mse));
     }
-    progress.emit(&Progress::Finished);
+    progress.emit(&Event::Finished);
     let (kept, run) = kept.expect("at least one restart");
     let model = to_model(
         &run.net,
@@ -404,7 +405,7 @@ pub fn fit(
     data: &Dataset,
     hidden: usize,
     opts: &NnOptions,
-    progress: &ProgressSink,
+    progress: &Sink,
     blocks: usize,
 ) -> Result<(FittedModel, FitStats)> {
     let sp = split(data, blocks);
@@ -454,8 +455,9 @@ pub fn fit(
             .map(|x| x.1)
             .collect();
         if held.is_empty() {
-            stats.warnings.push(format!(
-                "{name}: no held-out RMS: too few blocks for a test set"
+            stats.warnings.push(Warning::new(
+                "no_held_out",
+                format!("{name}: no held-out RMS: too few blocks for a test set"),
             ));
         } else {
             stats
@@ -464,18 +466,19 @@ pub fn fit(
         }
     }
     if sp.val.is_empty() {
-        stats.warnings.push(
-            "nn: no validation block, so no early stopping; trained to the epoch limit".into(),
-        );
+        stats.warnings.push(Warning::new(
+            "no_early_stopping",
+            "nn: no validation block, so no early stopping; trained to the epoch limit",
+        ));
     }
     match nm.training.stop.as_str() {
-        "max_epochs" => stats.warnings.push(format!(
+        "max_epochs" => stats.warnings.push(Warning::new("epoch_limit", format!(
             "nn: training stopped at the epoch limit ({}) before the validation error stopped falling",
             opts.max_epochs
-        )),
+        ))),
         "mu_max" => stats
             .warnings
-            .push("nn: training stopped because no step reduced the error (μ reached its maximum)".into()),
+            .push(Warning::new("no_step_reduces_error", "nn: training stopped because no step reduced the error (μ reached its maximum)")),
         _ => {}
     }
     Ok((model, stats))
@@ -504,8 +507,8 @@ mod tests {
     fn lm_learns_a_sine_and_is_deterministic() {
         let d = sine_line(200);
         let opts = NnOptions::default();
-        let (m1, s1) = fit(&d, 4, &opts, &ProgressSink::none(), 5).unwrap();
-        let (m2, _) = fit(&d, 4, &opts, &ProgressSink::none(), 5).unwrap();
+        let (m1, s1) = fit(&d, 4, &opts, &Sink::none(), 5).unwrap();
+        let (m2, _) = fit(&d, 4, &opts, &Sink::none(), 5).unwrap();
         assert_eq!(m1, m2, "same seed, same data: same network");
         // Amplitude 3 µm; 4 tanh neurons learn one clean period to < 0.1 %
         // of it (measured: rms 0.00096 µm, held-out 0.0020 µm with seed 1).
@@ -513,14 +516,7 @@ mod tests {
         assert!(s1.held_out_rms_um["ex"] < 0.006, "{:?}", s1);
         let FittedModel::Nn(n) = &m1 else { panic!() };
         assert!(n.training.epochs >= 2);
-        let (m3, _) = fit(
-            &d,
-            4,
-            &NnOptions { seed: 7, ..opts },
-            &ProgressSink::none(),
-            5,
-        )
-        .unwrap();
+        let (m3, _) = fit(&d, 4, &NnOptions { seed: 7, ..opts }, &Sink::none(), 5).unwrap();
         assert_ne!(m1, m3, "another seed starts elsewhere");
     }
 
@@ -564,7 +560,7 @@ mod tests {
     #[test]
     fn too_many_weights_for_the_data() {
         let d = sine_line(20);
-        let e = fit(&d, 16, &NnOptions::default(), &ProgressSink::none(), 5)
+        let e = fit(&d, 16, &NnOptions::default(), &Sink::none(), 5)
             .unwrap_err()
             .to_string();
         assert!(e.contains("weights"), "{e}");
@@ -586,7 +582,7 @@ mod tests {
             abandon: false,
             ..one.clone()
         };
-        let t = train_restarts(&d, 6, &five, &sp, &ProgressSink::none(), &mut |_, _| {}).unwrap();
+        let t = train_restarts(&d, 6, &five, &sp, &Sink::none(), &mut |_, _| {}).unwrap();
         assert_eq!(t.scores.len(), 5);
         // Each restart on its own (from its derived seed) scores what the
         // restart loop recorded, so the loop trained what it claims.
@@ -595,8 +591,7 @@ mod tests {
                 seed: restart_seed(one.seed, r),
                 ..one.clone()
             };
-            let s =
-                train_restarts(&d, 6, &solo, &sp, &ProgressSink::none(), &mut |_, _| {}).unwrap();
+            let s = train_restarts(&d, 6, &solo, &sp, &Sink::none(), &mut |_, _| {}).unwrap();
             assert_eq!(s.scores, vec![score], "restart {r}");
             if r == t.kept {
                 assert_eq!(s.model.w1, t.model.w1, "kept restart {r}");
@@ -626,7 +621,7 @@ mod tests {
         };
         assert!((mse(&t.model) - t.scores[t.kept]).abs() < 1e-9 * t.scores[t.kept]);
         // One restart is the plain run from the user's seed.
-        let plain = train(&d, 6, &one, &sp, &ProgressSink::none(), &mut |_, _| {}).unwrap();
+        let plain = train(&d, 6, &one, &sp, &Sink::none(), &mut |_, _| {}).unwrap();
         assert_eq!(restart_seed(7, 0), 7);
         assert_ne!(restart_seed(7, 1), restart_seed(7, 2));
         assert_eq!(plain.training.seed, one.seed);
@@ -645,7 +640,7 @@ mod tests {
                 ..Default::default()
             };
             let mut epochs = vec![0; opts.restarts];
-            let t = train_restarts(&d, 16, &opts, &sp, &ProgressSink::none(), &mut |ep, _| {
+            let t = train_restarts(&d, 16, &opts, &sp, &Sink::none(), &mut |ep, _| {
                 epochs[ep.restart] += 1;
             })
             .unwrap();
@@ -717,7 +712,7 @@ mod tests {
             ..Default::default()
         };
         let mut seen: Vec<Epoch> = Vec::new();
-        let t = train_restarts(&d, 8, &opts, &sp, &ProgressSink::none(), &mut |ep, _| {
+        let t = train_restarts(&d, 8, &opts, &sp, &Sink::none(), &mut |ep, _| {
             seen.push(ep.clone())
         })
         .unwrap();

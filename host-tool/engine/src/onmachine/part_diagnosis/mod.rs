@@ -399,12 +399,12 @@ fn remove_fit(
     x: &[f64],
     y: &[f64],
     cols: impl Fn(f64) -> Vec<f64>,
-) -> Result<(Vec<f64>, crate::lsq::LsqSolution)> {
+) -> Result<(Vec<f64>, crate::linalg::lsq::LsqSolution)> {
     let rows: Vec<Vec<f64>> = x.iter().map(|&v| cols(v)).collect();
     let k = rows[0].len();
     let a = DMatrix::from_fn(x.len(), k, |i, j| rows[i][j]);
     let b = DVector::from_column_slice(y);
-    let s = crate::lsq::solve(&a, &b, None)?;
+    let s = crate::linalg::lsq::solve(&a, &b, None)?;
     let r = y
         .iter()
         .zip(&rows)

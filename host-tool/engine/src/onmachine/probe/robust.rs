@@ -202,7 +202,7 @@ mod tests {
                 th.iter()
                     .map(|t| 70.0 * (3.0 * t + 0.3).cos() + 25.0 * (6.0 * t).cos()),
             );
-            let s = crate::lsq::solve(&a, &f, None).unwrap();
+            let s = crate::linalg::lsq::solve(&a, &f, None).unwrap();
             let c = clean.probe.centre_mm;
             let (ex, ez) = (
                 c[0] - 30.0 - s.coef[1] * 1e-6,
@@ -328,7 +328,8 @@ mod tests {
             let y: Vec<f64> = th.iter().map(|&t| f(t)).collect();
             let a =
                 nalgebra::DMatrix::from_fn(th.len(), 3, |i, j| [1.0, th[i].cos(), th[i].sin()][j]);
-            let s = crate::lsq::solve(&a, &nalgebra::DVector::from_vec(y.clone()), None).unwrap();
+            let s = crate::linalg::lsq::solve(&a, &nalgebra::DVector::from_vec(y.clone()), None)
+                .unwrap();
             y.iter()
                 .zip(&th)
                 .map(|(v, t)| v - s.coef[0] - s.coef[1] * t.cos() - s.coef[2] * t.sin())

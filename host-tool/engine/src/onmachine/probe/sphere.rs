@@ -25,7 +25,7 @@ use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-use crate::lsq;
+use crate::linalg::lsq;
 
 /// Format tag of a 3-D probe file.
 pub const PROBE3D_FORMAT: &str = "trueaxis-probe3d/1";

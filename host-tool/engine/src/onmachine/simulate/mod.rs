@@ -188,7 +188,7 @@ fn grinder_points() -> Vec<[f64; 2]> {
 
 fn grinder_csv(dev: impl Fn(f64, f64) -> f64, rng: &mut ChaCha8Rng, what: &str) -> String {
     let mut s = format!(
-        "# generator: trueaxis simulate --scenario on-machine ({what})\nc_deg,z_mm,dev_um\n"
+        "# generator: trueaxis simulate, scenario on-machine ({what})\nc_deg,z_mm,dev_um\n"
     );
     for [c, z] in grinder_points() {
         let v = dev(c, z) + GAUGE_NOISE_UM * normal(rng);
@@ -202,7 +202,7 @@ pub fn campaign(seed: u64) -> Vec<(&'static str, String)> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let rb = BALL_DIAMETER_MM / 2.0;
     let head = |what: &str, cols: &str| {
-        format!("# generator: trueaxis simulate --scenario on-machine ({what})\n# seed: {seed}\n{cols}\n")
+        format!("# generator: trueaxis simulate, scenario on-machine ({what})\n# seed: {seed}\n{cols}\n")
     };
     // 2-D ball: 401 contacts over 10°…170° in XZ, ball at (100, 50).
     let mut ball = head("master ball, XZ arc, probe centre at contact", "x_mm,z_mm");

@@ -25,6 +25,69 @@ use std::fmt::Write as _;
 
 use anyhow::{bail, Result};
 
+use super::{AxisSamples, ControllerFile, ControllerFormat};
+use crate::export::fmt_no_neg_zero;
+
+/// The format: 200 points by default (the most a Sinumerik 808D takes),
+/// axis `AX1` unless named; the table holds the mean of both directions
+/// and the reversal goes to MD32450 (see the module docs).
+#[derive(Clone, Copy, Debug)]
+pub struct Sinumerik;
+
+/// The axis name when none is given.
+const DEFAULT_AXIS: &str = "AX1";
+
+impl ControllerFormat for Sinumerik {
+    fn name(&self) -> &'static str {
+        "sinumerik"
+    }
+
+    fn default_points(&self) -> usize {
+        200
+    }
+
+    fn default_axis_name(&self) -> Option<&'static str> {
+        Some(DEFAULT_AXIS)
+    }
+
+    fn write(&self, s: &AxisSamples, axis_name: Option<&str>) -> Result<ControllerFile> {
+        let n = s.nominal_mm.len();
+        let mean: Vec<f64> = s
+            .err_fwd_um
+            .iter()
+            .zip(&s.err_rev_um)
+            .map(|(f, r)| 0.5 * (f + r))
+            .collect();
+        let step_mm = s.step_mm();
+        let body = write(
+            axis_name.unwrap_or(DEFAULT_AXIS),
+            s.nominal_mm[0],
+            step_mm,
+            &mean,
+        )?;
+        // What the file says: _MIN/_STEP are rounded to the written 1 nm
+        // and _MAX follows from them (see `write`).
+        let (min_mm, step_mm) = (written_mm(s.nominal_mm[0]), written_mm(step_mm));
+        // Siemens enters MD32450 positive when "the encoder is leading the
+        // machine part (normal situation)": the slide falls short in the
+        // direction of travel, e_fwd < 0 < e_rev. So the value is rev − fwd,
+        // the opposite sign of the reversal fwd − rev, in mm; rounded to the
+        // 1 nm the value is given in, without a −0.
+        let md32450_mm = written_mm(-s.backlash_mean_um() * 1e-3) + 0.0;
+        Ok(ControllerFile {
+            body,
+            min_mm,
+            step_mm,
+            max_mm: min_mm + step_mm * (n - 1) as f64,
+            machine_data: [("md32450_backlash_mm", md32450_mm)].into(),
+            note: Some(format!(
+                "the table holds the mean of both directions; set MD32450 $MA_BACKLASH = {} mm (rev − fwd: positive when the axis falls short in the direction of travel, Siemens' normal case)",
+                fmt_no_neg_zero(md32450_mm, 6)
+            )),
+        })
+    }
+}
+
 /// A position as the file holds it: mm rounded to 6 decimals (1 nm).
 pub fn written_mm(v_mm: f64) -> f64 {
     (v_mm * 1e6).round() / 1e6
@@ -73,7 +136,7 @@ pub fn write(axis: &str, min_mm: f64, step_mm: f64, errors_um: &[f64]) -> Result
 }
 
 fn fmt_mm(v: f64) -> String {
-    super::fmt_no_neg_zero(v, 6)
+    fmt_no_neg_zero(v, 6)
 }
 
 #[cfg(test)]

@@ -17,8 +17,50 @@
 
 use anyhow::{bail, Result};
 
+use super::{AxisSamples, ControllerFile, ControllerFormat};
+use crate::export::checks::FileError;
+
 /// LinuxCNC's table size (`EMCMOT_COMP_SIZE`).
 pub const MAX_ENTRIES: usize = 256;
+
+/// The format: 201 points by default (a step of 1/200 of the travel), at
+/// most [`MAX_ENTRIES`]; both directions' trims, so the reversal is in the
+/// file and LinuxCNC needs no backlash setting beside it.
+#[derive(Clone, Copy, Debug)]
+pub struct Linuxcnc;
+
+impl ControllerFormat for Linuxcnc {
+    fn name(&self) -> &'static str {
+        "linuxcnc"
+    }
+
+    fn default_points(&self) -> usize {
+        201
+    }
+
+    fn check_points(&self, points: usize) -> Result<(), FileError> {
+        if points > MAX_ENTRIES {
+            return Err(FileError::TooManyPoints {
+                controller: "LinuxCNC",
+                points,
+                max: MAX_ENTRIES,
+            });
+        }
+        Ok(())
+    }
+
+    fn write(&self, s: &AxisSamples, _axis_name: Option<&str>) -> Result<ControllerFile> {
+        let n = s.nominal_mm.len();
+        Ok(ControllerFile {
+            body: write(&s.nominal_mm, &s.err_fwd_um, &s.err_rev_um)?,
+            min_mm: s.nominal_mm[0],
+            step_mm: s.step_mm(),
+            max_mm: s.nominal_mm[n - 1],
+            machine_data: Default::default(),
+            note: None,
+        })
+    }
+}
 
 /// Writes the file from nominal positions (mm, ascending) and the errors
 /// after a positive and a negative approach (µm). The trims written are
@@ -66,7 +108,7 @@ pub fn write(nominal_mm: &[f64], err_fwd_um: &[f64], err_rev_um: &[f64]) -> Resu
 
 /// A number in mm with 6 decimals, without a negative zero.
 fn fmt_mm(v: f64) -> String {
-    super::fmt_no_neg_zero(v, 6)
+    crate::export::fmt_no_neg_zero(v, 6)
 }
 
 /// Reads a file the way LinuxCNC does (three numbers per line, stop at the

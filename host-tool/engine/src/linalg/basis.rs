@@ -330,50 +330,53 @@ fn pinv_sym(g: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
     (inv, rank)
 }
 
+/// A column scale that is never zero: a column with no sum keeps 1.
+fn nonzero(s: f64) -> f64 {
+    if s > 0.0 {
+        s
+    } else {
+        1.0
+    }
+}
+
+/// The solve [`small_fit`] and [`pinv_solve`] share: the Gram matrix Σccᵀ
+/// and Σcy divided by a per-column `scale` (unit scale for every column,
+/// so the rank tolerance means the same for a column in K and one in mm),
+/// the pseudo-inverse of the scaled matrix with its rank, and the
+/// coefficients back in the columns' own units. Returns (β, (G_s)⁺, rank).
+fn scaled_pinv_solve(
+    g: &DMatrix<f64>,
+    cy: &DVector<f64>,
+    scale: &[f64],
+) -> (Vec<f64>, DMatrix<f64>, usize) {
+    let k = g.nrows();
+    let gs = DMatrix::from_fn(k, k, |i, j| g[(i, j)] / (scale[i] * scale[j]));
+    let b = DVector::from_fn(k, |i, _| cy[i] / scale[i]);
+    let (inv, rank) = pinv_sym(&gs);
+    let beta_s = &inv * b;
+    let beta = (0..k).map(|i| beta_s[i] / scale[i]).collect();
+    (beta, inv, rank)
+}
+
 /// The least-squares coefficients from a Gram matrix Σccᵀ and Σcy, as
 /// [`small_fit`] solves them: columns scaled to unit diagonal, the
 /// pseudo-inverse with its rank tolerance (zero for a column with no sum).
 /// Never refuses: a candidate's few columns are judged by their rank, not
-/// by a condition number (unlike `fit`'s [`crate::lsq::solve_gram`], which
+/// by a condition number (unlike `fit`'s [`super::lsq::solve_gram`], which
 /// refuses ill-conditioned sums and falls back to a QR of the rows).
 pub fn pinv_solve(g: &DMatrix<f64>, cy: &DVector<f64>) -> DVector<f64> {
-    let k = g.nrows();
-    let scale: Vec<f64> = (0..k)
-        .map(|i| {
-            let d = g[(i, i)].sqrt();
-            if d > 0.0 {
-                d
-            } else {
-                1.0
-            }
-        })
-        .collect();
-    let gs = DMatrix::from_fn(k, k, |i, j| g[(i, j)] / (scale[i] * scale[j]));
-    let (inv, _) = pinv_sym(&gs);
-    let b = DVector::from_fn(k, |i, _| cy[i] / scale[i]);
-    let beta = inv * b;
-    DVector::from_fn(k, |i, _| beta[i] / scale[i])
+    let scale: Vec<f64> = (0..g.nrows()).map(|i| nonzero(g[(i, i)].sqrt())).collect();
+    DVector::from_vec(scaled_pinv_solve(g, cy, &scale).0)
 }
 
-/// Least squares of `y` on `cols` (all of length `y.len()`).
+/// Least squares of `y` on `cols` (all of length `y.len()`), each column
+/// scaled to unit RMS.
 pub fn small_fit(cols: &[Vec<f64>], y: &[f64]) -> SmallFit {
     let k = cols.len();
-    let scale: Vec<f64> = cols
-        .iter()
-        .map(|c| {
-            let s = rms(c);
-            if s > 0.0 {
-                s
-            } else {
-                1.0
-            }
-        })
-        .collect();
-    let g = DMatrix::from_fn(k, k, |i, j| dot(&cols[i], &cols[j]) / (scale[i] * scale[j]));
-    let b = DVector::from_fn(k, |i, _| dot(&cols[i], y) / scale[i]);
-    let (inv, rank) = pinv_sym(&g);
-    let beta_s = &inv * b;
-    let beta: Vec<f64> = (0..k).map(|i| beta_s[i] / scale[i]).collect();
+    let scale: Vec<f64> = cols.iter().map(|c| nonzero(rms(c))).collect();
+    let g = DMatrix::from_fn(k, k, |i, j| dot(&cols[i], &cols[j]));
+    let cy = DVector::from_fn(k, |i, _| dot(&cols[i], y));
+    let (beta, inv, rank) = scaled_pinv_solve(&g, &cy, &scale);
     let mut rss = 0.0;
     for (r, yv) in y.iter().enumerate() {
         let f: f64 = (0..k).map(|i| beta[i] * cols[i][r]).sum();
