@@ -350,12 +350,7 @@ pub fn calibrate_with(
     let floor = q.map_or(0.0, |q| q / 12f64.sqrt());
     let start = kasa(p)?;
     // Each contact against its neighbours in angle (robust::flag).
-    let all: Vec<usize> = (0..p.len()).collect();
-    let rigid = fit_order(p, &all, 0, start)?;
-    let theta: Vec<f64> = p
-        .iter()
-        .map(|q| (q[1] - rigid.centre[1]).atan2(q[0] - rigid.centre[0]))
-        .collect();
+    let (rigid, theta) = rigid_fit(p, start)?;
     let near = robust::nearest(p.len(), |i, j| {
         let d = (theta[i] - theta[j]).rem_euclid(2.0 * PI);
         d.min(2.0 * PI - d)
@@ -379,16 +374,28 @@ pub fn calibrate_with(
             }
         })
         .collect();
-    if let Some(q) = q.filter(|&q| q > 1e-7) {
-        let pr = &mut cal.probe;
-        pr.quantum_mm = Some(q);
-        let raised = robust::floor_all([&mut pr.probe_radius_ci95_mm], q)
-            | robust::floor_all(pr.form_ci95_nm.iter_mut(), q * 1e6);
-        if let Some(w) = robust::quantum_warning(q, raised, pr.residual_rms_nm) {
-            cal.warnings.push(w);
-        }
+    let pr = &mut cal.probe;
+    let said = robust::Resolution {
+        quantum_mm: &mut pr.quantum_mm,
+        radius_ci95_mm: &mut pr.probe_radius_ci95_mm,
+        form_ci95_nm: &mut pr.form_ci95_nm,
+        residual_rms_nm: pr.residual_rms_nm,
     }
+    .apply(q);
+    cal.warnings.extend(said);
     Ok(cal)
+}
+
+/// The ball's centre and radius alone fitted to all of `p`, and each
+/// contact's angle from that centre.
+fn rigid_fit(p: &[[f64; 2]], start: ([f64; 2], f64)) -> Result<(Fit, Vec<f64>)> {
+    let all: Vec<usize> = (0..p.len()).collect();
+    let rigid = fit_order(p, &all, 0, start)?;
+    let theta = p
+        .iter()
+        .map(|q| (q[1] - rigid.centre[1]).atan2(q[0] - rigid.centre[0]))
+        .collect();
+    Ok((rigid, theta))
 }
 
 /// The calibration proper on the contacts `p` kept; `clip` (mm) bounds
@@ -402,11 +409,7 @@ fn calibrate_points(p: &[[f64; 2]], ball_radius_mm: f64, clip: f64) -> Result<Ca
     }
     let start = kasa(p)?;
     let all: Vec<usize> = (0..p.len()).collect();
-    let rigid = fit_order(p, &all, 0, start)?;
-    let theta: Vec<f64> = p
-        .iter()
-        .map(|q| (q[1] - rigid.centre[1]).atan2(q[0] - rigid.centre[0]))
-        .collect();
+    let (rigid, theta) = rigid_fit(p, start)?;
     // The arc, as the smallest interval of angles covering the points
     // (wrapped so that an arc through ±180° stays one interval).
     let mut deg: Vec<f64> = theta.iter().map(|t| t.to_degrees()).collect();

@@ -126,6 +126,33 @@ pub fn quantum(values: impl IntoIterator<Item = f64>) -> Option<f64> {
     })
 }
 
+/// What a calibration's coordinate quantum changes in its probe file:
+/// `quantum_mm` set, the radius's and each form coefficient's 95 %
+/// half-width raised to it, and a warning in `warnings` when it matters
+/// ([`quantum_warning`]). A quantum of 10⁻⁷ mm (coordinates written to
+/// 0.1 nm) changes nothing.
+pub(crate) struct Resolution<'a> {
+    /// The probe file's `quantum_mm`.
+    pub quantum_mm: &'a mut Option<f64>,
+    /// Its radius's 95 % half-width, mm.
+    pub radius_ci95_mm: &'a mut f64,
+    /// Its form coefficients' 95 % half-widths, nm.
+    pub form_ci95_nm: &'a mut [f64],
+    /// Its residual RMS, nm.
+    pub residual_rms_nm: f64,
+}
+
+impl Resolution<'_> {
+    /// Applies the quantum `q` (mm), if any; the warning, if one is due.
+    pub(crate) fn apply(self, q: Option<f64>) -> Option<String> {
+        let q = q.filter(|&q| q > 1e-7)?;
+        *self.quantum_mm = Some(q);
+        let raised =
+            floor_all([self.radius_ci95_mm], q) | floor_all(self.form_ci95_nm.iter_mut(), q * 1e6);
+        quantum_warning(q, raised, self.residual_rms_nm)
+    }
+}
+
 /// Raises each 95 % half-width in `ci` to at least `floor`; whether any
 /// was raised.
 pub(crate) fn floor_all<'a>(ci: impl IntoIterator<Item = &'a mut f64>, floor: f64) -> bool {

@@ -366,15 +366,15 @@ pub fn calibrate_with(
             }
         })
         .collect();
-    if let Some(q) = q.filter(|&q| q > 1e-7) {
-        let pr = &mut cal.probe;
-        pr.quantum_mm = Some(q);
-        let raised = super::robust::floor_all([&mut pr.probe_radius_ci95_mm], q)
-            | super::robust::floor_all(pr.form_ci95_nm.iter_mut(), q * 1e6);
-        if let Some(w) = super::robust::quantum_warning(q, raised, pr.residual_rms_nm) {
-            cal.warnings.push(w);
-        }
+    let pr = &mut cal.probe;
+    let said = super::robust::Resolution {
+        quantum_mm: &mut pr.quantum_mm,
+        radius_ci95_mm: &mut pr.probe_radius_ci95_mm,
+        form_ci95_nm: &mut pr.form_ci95_nm,
+        residual_rms_nm: pr.residual_rms_nm,
     }
+    .apply(q);
+    cal.warnings.extend(said);
     Ok(cal)
 }
 
