@@ -188,6 +188,30 @@ pub fn add_skipped_count(doc: &mut serde_json::Value, data: &Dataset) {
     }
 }
 
+/// The first line of a CSV that is neither blank nor a comment, split
+/// into cells.
+pub fn header(text: &str) -> Vec<String> {
+    text.trim_start_matches('\u{feff}')
+        .lines()
+        .map(|l| l.trim_end_matches('\r'))
+        .find(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#'))
+        .map(|l| l.split(',').map(|c| c.trim().to_string()).collect())
+        .unwrap_or_default()
+}
+
+/// The lines in `path` of the rows [`scan_text`] gives for a session of
+/// a measurement CSV with probe columns; `None` for a small scan file
+/// (its own lines are the rows').
+pub fn scan_lines(path: &Path, session: Option<i64>) -> Result<Option<Vec<usize>>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    if !trueaxis_engine::onmachine::probe_csv::is_probe_csv(&text) {
+        return Ok(None);
+    }
+    let t = trueaxis_engine::onmachine::probe_csv::read(&text, &path.display().to_string())?;
+    Ok(Some(t.select(session)?.iter().map(|r| r.line).collect()))
+}
+
 /// The text of an on-machine command's scan file: the file itself, or —
 /// for a measurement CSV with probe columns (`session_id`, `d_um`, …,
 /// docs/cli.md § Measurement CSV) — one session of it written as the small
@@ -196,12 +220,12 @@ pub fn add_skipped_count(doc: &mut serde_json::Value, data: &Dataset) {
 pub fn scan_text(
     path: &Path,
     session: Option<i64>,
-    kind: import::probe_csv::Small,
+    kind: trueaxis_engine::onmachine::probe_csv::Small,
 ) -> Result<String> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    if import::probe_csv::is_probe_csv(&text) {
-        let t = import::probe_csv::read(&text, &path.display().to_string())?;
+    if trueaxis_engine::onmachine::probe_csv::is_probe_csv(&text) {
+        let t = trueaxis_engine::onmachine::probe_csv::read(&text, &path.display().to_string())?;
         return t.small(session, kind);
     }
     if let Some(s) = session {

@@ -230,6 +230,15 @@ fn the_on_machine_commands_find_the_simulated_answers() {
         truth["roundness_pv_um"].as_f64().unwrap(),
     );
     assert!((g - w).abs() < 0.1 * w, "three-probe roundness {g} vs {w}");
+    // The spindle's error motion (ISO 230-7) inside its interval; with two
+    // turns of 0.05 µm gauge noise that interval is wide, the multi-step's
+    // below narrower — both hold the truth.
+    let em = truth["spindle_error_motion_um"].as_f64().unwrap();
+    let ci = &three["error_motion"]["synchronous_ci95_um"];
+    assert!(
+        ci[0].as_f64().unwrap() <= em && em <= ci[1].as_f64().unwrap(),
+        "three-probe error motion {ci} vs {em}"
+    );
 
     // Multi-step with 5 steps: the part's 10th lobe is a multiple of 5 —
     // named, and left out of the part (so the part is the rest of it).
@@ -243,6 +252,12 @@ fn the_on_machine_commands_find_the_simulated_answers() {
         s(&dir.join("ms-report")),
         "--json",
     ]));
+    let ci = &ms["error_motion"]["synchronous_ci95_um"];
+    let g = ms["error_motion"]["synchronous_um"].as_f64().unwrap();
+    assert!(
+        ci[0].as_f64().unwrap() <= em && em <= ci[1].as_f64().unwrap() && (g - em).abs() < 0.1 * em,
+        "multi-step error motion {g} {ci} vs {em}"
+    );
     // The page opens with the answer and what the steps cannot know, then
     // the part and the spindle as polar plots.
     let html = std::fs::read_to_string(dir.join("ms-report").join("index.html")).unwrap();

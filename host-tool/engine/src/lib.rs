@@ -11,6 +11,12 @@
 //! `simulate` makes data sets from the effect families' simulated forms
 //! and is imported by no engine module.
 //!
+//! Beside the pipeline stands the **on-machine wing**, `onmachine/`: parts
+//! and probes measured on the machine (probe calibration, error
+//! separation, workpiece form, the part-scan diagnosis, the simulated
+//! campaign). It uses the plumbing below it (`data`, `import`, `linalg`'s
+//! least squares, `simulate`'s normal deviates) and nothing of the pipeline imports it.
+//!
 //! - `data`: the measurement data set (docs/cli.md § Measurement CSV) every command works on.
 //! - `import`: measurement files in (the trueaxis CSV, Renishaw .rtl, ecmc ISO 230-2 .dat, RepRapFirmware and Klipper bed maps) and the CSV out.
 //! - `units`: `units_suspect` — errors in mm in µm columns, nm as µm, positions in metres.
@@ -30,11 +36,8 @@
 //! - `history`: the steps of the error falling, fit by fit.
 //! - `improve`: the loop fit → diagnose → add the missing effects → refit, to the noise floor.
 //! - `iso230`: ISO 230-2 evaluation of bidirectional positioning runs.
-//! - `workpiece`: a part's form from probed generatrices and the correction pass (G-code).
-//! - `separate`: error separation — the reversal method (part form vs slide straightness).
-//! - `probe`: on-machine probing — probe radius and form on a master ball, a scan corrected.
-//! - `part_diagnosis`: which error is in a part scan — probe, part, slide, spindle or drift — and what the data cannot tell.
 //! - `export`: the binary table for the board, controller compensation files and bed meshes.
+//! - `onmachine`: the on-machine wing — probe calibration, error separation (reversal, three-probe, multi-step), workpiece form and pass, part-scan diagnosis, the probe columns of the measurement CSV and the simulated campaign.
 
 pub mod compare;
 pub mod data;
@@ -51,12 +54,9 @@ pub mod iso230;
 pub mod linalg;
 pub mod lines;
 pub mod model;
-pub mod part_diagnosis;
-pub mod probe;
+pub mod onmachine;
 pub mod progress;
 pub mod regions;
-pub mod separate;
 pub mod simulate;
 pub mod units;
 pub mod warning;
-pub mod workpiece;

@@ -7,6 +7,10 @@
 //! a family's file names no other family (docs/host.md § Adding an effect
 //! family).
 //!
+//! The on-machine wing (`onmachine/`) stands beside that pipeline: it may
+//! use only the plumbing in [`WING_USES`], its own modules only downward
+//! ([`WING_LAYERS`]), and no module of the pipeline may name it.
+//!
 //! And the rule of docs/host.md § Messages: the engine says what is wrong
 //! in its own terms — its options, its numbers — and the CLI names the
 //! flag that changes it; no code in the folders that keep the rule
@@ -28,10 +32,6 @@ const LAYERS: &[(&str, u8)] = &[
     ("regions", 2),
     ("simulate", 3),
     ("holdout", 3),
-    ("probe", 3),
-    ("separate", 2),
-    ("workpiece", 3),
-    ("part_diagnosis", 4),
     ("model", 4),
     ("fit", 5),
     ("diagnose", 6),
@@ -59,8 +59,35 @@ const FAMILY_ROOMS: &[(&str, &[&str], &[&str])] = &[
     ),
 ];
 
+/// The wing's folder.
+const WING: &str = "onmachine";
+
+/// What of the engine the wing may use: the generic plumbing below the
+/// pipeline (the CSV line reader, the data set's plausible ranges, least
+/// squares, the simulator's seeded normal deviates).
+const WING_USES: &[&str] = &["data", "import", "linalg", "simulate"];
+
+/// Layer of each module of the wing, lowest first.
+const WING_LAYERS: &[(&str, u8)] = &[
+    ("clock", 0),
+    ("separate", 0),
+    ("probe_csv", 1),
+    ("spindle_log", 1),
+    ("probe", 1),
+    ("workpiece", 1),
+    ("simulate", 1),
+    ("part_diagnosis", 2),
+];
+
 fn layer(module: &str) -> Option<u8> {
     LAYERS.iter().find(|(m, _)| *m == module).map(|(_, l)| *l)
+}
+
+fn wing_layer(module: &str) -> Option<u8> {
+    WING_LAYERS
+        .iter()
+        .find(|(m, _)| *m == module)
+        .map(|(_, l)| *l)
 }
 
 fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
@@ -74,14 +101,14 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
-/// The `crate::<name>` paths a source names, outside comments.
-fn crate_paths(src: &str) -> Vec<String> {
+/// The `<prefix><name>` paths a source names, outside comments.
+fn paths_after(src: &str, prefix: &str) -> Vec<String> {
     let mut v = Vec::new();
     for line in src.lines() {
         let code = line.split("//").next().unwrap_or("");
         let mut rest = code;
-        while let Some(i) = rest.find("crate::") {
-            rest = &rest[i + "crate::".len()..];
+        while let Some(i) = rest.find(prefix) {
+            rest = &rest[i + prefix.len()..];
             let name: String = rest
                 .chars()
                 .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
@@ -90,6 +117,22 @@ fn crate_paths(src: &str) -> Vec<String> {
         }
     }
     v
+}
+
+/// The `crate::<name>` paths a source names, outside comments.
+fn crate_paths(src: &str) -> Vec<String> {
+    paths_after(src, "crate::")
+}
+
+/// The module a source file belongs to under `dir` (`a.rs` or `a/…` → `a`).
+fn top_module(rel: &Path) -> String {
+    rel.components()
+        .next()
+        .unwrap()
+        .as_os_str()
+        .to_string_lossy()
+        .trim_end_matches(".rs")
+        .to_string()
 }
 
 #[test]
@@ -101,15 +144,8 @@ fn no_engine_module_imports_from_its_own_layer_or_above() {
     let mut bad = Vec::new();
     for f in &files {
         let rel = f.strip_prefix(&src).unwrap();
-        let top = rel
-            .components()
-            .next()
-            .unwrap()
-            .as_os_str()
-            .to_string_lossy()
-            .trim_end_matches(".rs")
-            .to_string();
-        if top == "lib" {
+        let top = top_module(rel);
+        if top == "lib" || top == WING {
             continue;
         }
         let own = layer(&top).unwrap_or_else(|| panic!("{top}: give the module its layer"));
@@ -203,6 +239,60 @@ fn a_family_file_names_only_its_room_s_modules_and_no_other_family() {
 }
 
 #[test]
+fn the_wing_uses_only_the_plumbing_its_own_modules_downward_and_nothing_imports_it() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let wing = src.join(WING);
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut bad = Vec::new();
+    let mut in_wing = 0;
+    for f in &files {
+        let rel = f.strip_prefix(&src).unwrap();
+        let text = std::fs::read_to_string(f).unwrap();
+        let Ok(inner) = f.strip_prefix(&wing) else {
+            if crate_paths(&text).iter().any(|m| m == WING) {
+                bad.push(format!(
+                    "{}: crate::{WING} (the pipeline imports the wing)",
+                    rel.display()
+                ));
+            }
+            continue;
+        };
+        in_wing += 1;
+        let own = top_module(inner);
+        if own == "mod" {
+            continue;
+        }
+        let own_layer =
+            wing_layer(&own).unwrap_or_else(|| panic!("{WING}/{own}: give the module its layer"));
+        for m in crate_paths(&text) {
+            if m != WING && !WING_USES.contains(&m.as_str()) {
+                bad.push(format!("{}: crate::{m}", rel.display()));
+            }
+        }
+        // A module directly in the folder names its siblings as `super::`
+        // too.
+        let mut siblings = paths_after(&text, &format!("crate::{WING}::"));
+        if inner.components().count() == 1 {
+            siblings.extend(paths_after(&text, "super::"));
+        }
+        for m in siblings {
+            match wing_layer(&m) {
+                _ if m == own || m.is_empty() => {}
+                Some(l) if l < own_layer => {}
+                _ => bad.push(format!("{}: crate::{WING}::{m}", rel.display())),
+            }
+        }
+    }
+    assert!(in_wing >= 6, "found only {in_wing} files in {WING}/");
+    assert!(
+        bad.is_empty(),
+        "imports against the wing's rules:\n{}",
+        bad.join("\n")
+    );
+}
+
+#[test]
 fn the_checker_sees_an_upward_import() {
     assert_eq!(
         crate_paths("use crate::fit::Seed; // crate::history"),
@@ -219,10 +309,19 @@ fn the_checker_sees_an_upward_import() {
     );
     assert_eq!(v, ["crate::model", "thermal:: (another family)"]);
     assert!(room_violations("mod", "use super::thermal::Sim;", &[], &families).is_empty());
+    assert_eq!(
+        paths_after(
+            "use crate::onmachine::probe::{self, Contact};",
+            "crate::onmachine::"
+        ),
+        ["probe"]
+    );
+    assert!(wing_layer("separate") < wing_layer("part_diagnosis"));
+    assert_eq!(layer(WING), None);
 }
 
 /// Engine folders whose messages name no command-line flag.
-const ROOMS: &[&str] = &["export", "effect", "diagnose/search"];
+const ROOMS: &[&str] = &["export", "effect", "diagnose/search", "onmachine"];
 
 /// `--name` flags a source line names outside a comment.
 fn flags(line: &str) -> Vec<String> {

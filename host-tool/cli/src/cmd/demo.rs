@@ -464,8 +464,9 @@ impl Demo {
     /// ground and the part measured again. Returns the story and its
     /// numbers.
     pub fn on_machine(&self) -> Result<(String, serde_json::Value)> {
-        use trueaxis_engine::simulate::onmachine;
-        use trueaxis_engine::{import, probe, workpiece};
+        use trueaxis_engine::import;
+        use trueaxis_engine::onmachine::simulate as onmachine;
+        use trueaxis_engine::onmachine::{probe, workpiece};
         let dir = self.out.join("on-machine");
         let files = onmachine::campaign(SEED);
         for (f, content) in &files {
@@ -490,7 +491,7 @@ impl Demo {
         // and with its form too.
         let (t, n) = text("part.csv")?;
         let scan = probe::read_scan(&t, &n, ["x", "z"])?;
-        let contacts = probe::correct(pr, &scan, [0.0, 1.0])?;
+        let contacts = probe::correct(pr, &scan, probe::Side::Toward([0.0, 1.0]))?;
         let surf: Vec<[f64; 2]> = contacts.iter().map(|c| c.surface_mm).collect();
         let radius_only: Vec<[f64; 2]> = contacts
             .iter()

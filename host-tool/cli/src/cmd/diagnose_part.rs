@@ -13,9 +13,12 @@ use serde_json::json;
 
 use crate::cmd::out;
 use crate::cmd::probe::{plane, read_probe, side, AnyProbe};
-use crate::cmd::separate::{read_multi_step, read_run};
-use trueaxis_engine::import::{self, probe_csv, probe_csv::Small};
-use trueaxis_engine::part_diagnosis::{self, Evidence, KnownProbe, Scan, Source, Status};
+use crate::cmd::separate::{read_multi_step, read_run, AngleArgs};
+use trueaxis_engine::import;
+use trueaxis_engine::onmachine::part_diagnosis::{
+    self, Evidence, Input, KnownProbe, Scan, Source, Status,
+};
+use trueaxis_engine::onmachine::probe_csv::{self, Small};
 
 /// `trueaxis diagnose-part SCAN.csv [--probe P] [--reversal R] [--multi-step M]`.
 #[derive(clap::Args, Debug)]
@@ -58,19 +61,13 @@ pub struct Args {
     /// directory.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// How the multi-step set's spindle angle is known, when its file
+    /// alone does not say.
+    #[command(flatten)]
+    pub angle: AngleArgs,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
-}
-
-/// The first line that is neither blank nor a comment, split into cells.
-fn header(text: &str) -> Vec<String> {
-    text.trim_start_matches('\u{feff}')
-        .lines()
-        .map(|l| l.trim_end_matches('\r'))
-        .find(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#'))
-        .map(|l| l.split(',').map(|c| c.trim().to_string()).collect())
-        .unwrap_or_default()
 }
 
 impl Args {
@@ -104,23 +101,20 @@ impl Args {
         } else {
             crate::input::scan_text(&self.scan, self.session, Small::Positions)?
         };
-        let head = header(&text);
+        let head = crate::input::header(&text);
         let has = |c: &str| head.iter().any(|h| h == c);
         let pos = format!("{}_mm", self.axis);
         let pl = plane(&self.plane)?;
-        // The kind from the header; each read with the time stamps when
-        // there is a `t_s` column (the last value of a row is its line).
-        let mut cols: Vec<String> = if has("p_um") {
+        // The kind from the header; the time stamps from a `t_s` or a
+        // `time` column (clock times).
+        let cols: Vec<String> = if has("p_um") {
             vec!["c_deg".into(), "p_um".into()]
         } else if has("d_um") {
             vec![pos.clone(), "d_um".into()]
         } else {
             vec![format!("{}_mm", pl[0]), format!("{}_mm", pl[1])]
         };
-        let timed = has("t_s");
-        if timed {
-            cols.push("t_s".into());
-        }
+        let times = trueaxis_engine::onmachine::clock::times(&text, &name)?;
         let names: Vec<&str> = cols.iter().map(String::as_str).collect();
         let rows = import::read_table(
             &text,
@@ -184,27 +178,30 @@ impl Args {
         // variance σ²·p/N (the trace of the hat matrix over N).
         let ci = |rms: f64, p: usize, n: usize| 1.96 * rms * (p as f64 / n.max(1) as f64).sqrt();
         let known = probe.as_ref().map(|p| match p {
+            // Never below the resolution the ball was logged at.
             AnyProbe::Plane(p) => KnownProbe {
                 radius_mm: p.probe_radius_mm,
                 radius_ci95_mm: p.probe_radius_ci95_mm,
                 form_pv_nm: p.form_pv_nm,
-                form_ci95_nm: ci(p.residual_rms_nm, p.form_nm.len(), p.points),
+                form_ci95_nm: ci(p.residual_rms_nm, p.form_nm.len(), p.points)
+                    .max(p.quantum_mm.unwrap_or(0.0) * 1e6),
                 form: &form,
             },
             AnyProbe::Sphere(p) => KnownProbe {
                 radius_mm: p.probe_radius_mm,
                 radius_ci95_mm: p.probe_radius_ci95_mm,
                 form_pv_nm: p.form_pv_nm,
-                form_ci95_nm: ci(p.residual_rms_nm, p.form_nm.len(), p.points),
+                form_ci95_nm: ci(p.residual_rms_nm, p.form_nm.len(), p.points)
+                    .max(p.quantum_mm.unwrap_or(0.0) * 1e6),
                 form: &form,
             },
         });
         let ev = Evidence {
-            t_s: timed.then(|| col(2)),
+            t_s: times,
             probe: known,
             part_diameter_mm: self.part_diameter_mm,
             reversal: match (&self.reversal, &pair) {
-                (Some(p), _) => Some(read_run(p, &self.axis, None, 180)?),
+                (Some(p), _) => Some(read_run(p, &self.axis, None, 180, None)?),
                 (None, Some(text)) => Some(
                     import::read_columns(text, &name, [pos.as_str(), "d_um"], "the 180° run")?
                         .into_iter()
@@ -216,26 +213,57 @@ impl Args {
             multi_step: self
                 .multi_step
                 .as_ref()
-                .map(|p| read_multi_step(p, None).map(|r| r.1))
+                .map(|p| read_multi_step(p, None, &self.angle).map(|r| r.1))
                 .transpose()?,
+            upr: self.angle.upr,
         };
         let d = part_diagnosis::diagnose(&scan, &ev)
             .with_context(|| format!("{name}: cannot diagnose"))?;
         let verdict = verdict(&d);
+        let measures: Vec<Option<String>> = d
+            .findings
+            .iter()
+            .map(|f| f.measure.as_ref().map(|m| m.render(flag)))
+            .collect();
+        let sum_measures: Vec<Option<String>> = d
+            .combined
+            .iter()
+            .map(|c| c.measure.as_ref().map(|m| m.render(flag)))
+            .collect();
         let report = self
             .report
             .as_ref()
-            .map(|dir| crate::report::onmachine::part_diagnosis_page(&d, &verdict, dir))
+            .map(|dir| {
+                crate::report::onmachine::part_diagnosis_page(
+                    &d,
+                    &verdict,
+                    &measures,
+                    &sum_measures,
+                    dir,
+                )
+            })
             .transpose()?;
         if self.json {
+            // Each `measure` as this command words it (its flags).
+            let with_flags = |v: &mut serde_json::Value, m: &[Option<String>]| {
+                if let Some(a) = v.as_array_mut() {
+                    for (f, m) in a.iter_mut().zip(m) {
+                        f["measure"] = json!(m);
+                    }
+                }
+            };
+            let mut findings = serde_json::to_value(&d.findings)?;
+            with_flags(&mut findings, &measures);
+            let mut combined = serde_json::to_value(&d.combined)?;
+            with_flags(&mut combined, &sum_measures);
             let doc = json!({
                 "scan": name,
                 "kind": d.kind,
                 "points": d.points,
                 "noise_um": d.noise_um,
                 "verdict": verdict,
-                "findings": d.findings,
-                "combined": d.combined,
+                "findings": findings,
+                "combined": combined,
                 "report": report.as_ref().map(|p| p.display().to_string()),
             });
             return out::json_pretty(&doc);
@@ -252,7 +280,7 @@ impl Args {
                 .unwrap_or_default()
         );
         let _ = writeln!(s, "  {verdict}");
-        for f in &d.findings {
+        for (f, measure) in d.findings.iter().zip(&measures) {
             let head = match (f.status, f.value, f.ci95) {
                 (Status::Estimated, Some(v), Some([lo, hi])) => {
                     format!(
@@ -266,7 +294,15 @@ impl Args {
             };
             let _ = writeln!(s, "  {:<21} {head}", f.source.label());
             let _ = writeln!(s, "  {:<21}   {}", "", f.what);
-            if let Some(m) = &f.measure {
+            if let Some(m) = measure {
+                let _ = writeln!(s, "  {:<21}   measure: {m}", "");
+            }
+        }
+        for (c, m) in d.combined.iter().zip(&sum_measures) {
+            let labels: Vec<&str> = c.sources.iter().map(|s| s.label()).collect();
+            let _ = writeln!(s, "  sum: {}  {}", labels.join(" + "), sum_size(c));
+            let _ = writeln!(s, "  {:<21}   {}", "", c.what);
+            if let Some(m) = m {
                 let _ = writeln!(s, "  {:<21}   measure: {m}", "");
             }
         }
@@ -274,6 +310,30 @@ impl Args {
             let _ = writeln!(s, "  report: {}", r.display());
         }
         out::print(&s)
+    }
+}
+
+/// An input the diagnosis asks for, as the flag that gives it.
+fn flag(i: Input) -> String {
+    match i {
+        Input::Reversal => "--reversal RUN180.csv",
+        Input::MultiStep => "--multi-step STEPS.csv",
+        Input::Probe => "--probe PROBE.json",
+        Input::PartDiameter => "--part-diameter-mm D",
+    }
+    .into()
+}
+
+/// A sum's PV with its interval, as the text and the page show it.
+pub fn sum_size(c: &part_diagnosis::Combined) -> String {
+    let p = precision(c.unit);
+    match c.ci95 {
+        Some([lo, hi]) => format!(
+            "{:.p$} {u} PV (95 %: {lo:.p$} … {hi:.p$} {u})",
+            c.pv,
+            u = c.unit
+        ),
+        None => format!("{:.p$} {} PV", c.pv, c.unit),
     }
 }
 
@@ -303,16 +363,28 @@ pub fn verdict(d: &part_diagnosis::PartDiagnosis) -> String {
     };
     if !unknown.is_empty() {
         let _ = write!(v, "; cannot know from these data: {}", unknown.join(", "));
-        for c in &d.combined {
-            let labels: Vec<&str> = c.sources.iter().map(|s| s.label()).collect();
-            let _ = write!(
-                v,
-                " ({} together {:.3} {} PV)",
-                labels.join(" + "),
-                c.pv,
-                c.unit
-            );
-        }
+    }
+    // The sums the data read, each said as one (never split).
+    for c in &d.combined {
+        let labels: Vec<&str> = c.sources.iter().map(|s| s.label()).collect();
+        // A sum of sources each estimated apart is a part of them (the
+        // harmonics a method cannot split): say which.
+        let part = if c
+            .sources
+            .iter()
+            .all(|s| d.get(*s).status == Status::Estimated)
+        {
+            format!(": {}", c.what)
+        } else {
+            String::new()
+        };
+        let _ = write!(
+            v,
+            " ({} together {:.3} {} PV{part})",
+            labels.join(" + "),
+            c.pv,
+            c.unit
+        );
     }
     v
 }

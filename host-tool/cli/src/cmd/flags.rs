@@ -8,6 +8,9 @@
 use trueaxis_engine::fit::FitError;
 use trueaxis_engine::import::{ImportError, LoadError, Needs};
 use trueaxis_engine::iso230::{axis_names, AxisChoice};
+use trueaxis_engine::onmachine::probe_csv::SessionNeeded;
+use trueaxis_engine::onmachine::spindle_log::Missing;
+use trueaxis_engine::onmachine::workpiece::PassGridError;
 use trueaxis_engine::simulate::{BadSpikes, ConfigError, Setting};
 
 /// `e` with its causes, as `{e:#}` writes it (`outer: inner: root`), each
@@ -79,6 +82,19 @@ fn words(e: &(dyn std::error::Error + 'static)) -> Option<String> {
         return Some(format!(
             "{file}: --profile names a Klipper bed mesh; expected a .cfg file"
         ));
+    }
+    // The on-machine commands.
+    if let Some(n) = e.downcast_ref::<SessionNeeded>() {
+        return Some(n.text("--session"));
+    }
+    if e.downcast_ref::<PassGridError>().is_some() {
+        return Some(PassGridError::text("--z-steps"));
+    }
+    if let Some(m) = e.downcast_ref::<Missing>() {
+        return Some(match m {
+            Missing::CountsPerTurn { .. } => format!("{m}: give them with --counts-per-turn N"),
+            Missing::Speed { .. } => format!("{m}: give the speed with --rpm R"),
+        });
     }
     if let Some(AxisChoice::Several { file, axes }) = e.downcast_ref::<AxisChoice>() {
         return Some(format!(

@@ -9,9 +9,9 @@ use anyhow::{bail, Context, Result};
 use serde_json::json;
 
 use crate::cmd::out::{self, outln};
-use trueaxis_engine::import::probe_csv::Small;
-use trueaxis_engine::probe::sphere::{self, Probe3d};
-use trueaxis_engine::probe::{self, ProbeFile};
+use trueaxis_engine::onmachine::probe::sphere::{self, Probe3d};
+use trueaxis_engine::onmachine::probe::{self, ProbeFile, Side};
+use trueaxis_engine::onmachine::probe_csv::Small;
 
 /// Arguments of `trueaxis probe`.
 #[derive(clap::Args, Debug)]
@@ -43,6 +43,57 @@ pub(crate) fn plane(s: &str) -> Result<[&'static str; 2]> {
 fn read(path: &std::path::Path, pl: [&str; 2], session: Option<i64>) -> Result<Vec<[f64; 2]>> {
     let text = crate::input::scan_text(path, session, Small::Positions)?;
     probe::read_scan(&text, &path.display().to_string(), pl)
+}
+
+/// The lines of the scan's rows: the campaign file's for a session of a
+/// measurement CSV, else the small file's own.
+fn lines_of(path: &std::path::Path, session: Option<i64>, own: Vec<usize>) -> Result<Vec<usize>> {
+    Ok(crate::input::scan_lines(path, session)?.unwrap_or(own))
+}
+
+/// The outliers as the JSON shows them (each by its line), and the
+/// warning that names them.
+fn outliers_said(
+    outliers: &[probe::Outlier],
+    lines: &[usize],
+    name: &str,
+) -> (serde_json::Value, Option<String>) {
+    let doc = outliers
+        .iter()
+        .map(|o| {
+            json!({
+                "line": lines.get(o.index),
+                "residual_nm": o.residual_nm,
+                "left_out": o.left_out,
+            })
+        })
+        .collect::<Vec<_>>();
+    let warn = (!outliers.is_empty()).then(|| {
+        let list: Vec<String> = outliers
+            .iter()
+            .take(10)
+            .map(|o| {
+                format!(
+                    "line {} ({:+.1} nm)",
+                    lines.get(o.index).copied().unwrap_or(o.index + 1),
+                    o.residual_nm
+                )
+            })
+            .collect();
+        let kept = outliers.iter().any(|o| !o.left_out);
+        format!(
+            "{name}: {} contact(s) far off the ball against their neighbours (dirt, a chip, a false trigger): {}{} — {}",
+            outliers.len(),
+            list.join(", "),
+            if outliers.len() > 10 { ", …" } else { "" },
+            if kept {
+                "fitted with them (--keep-outliers)"
+            } else {
+                "left out of the calibration; clean the ball and the stylus and probe again if they repeat"
+            }
+        )
+    });
+    (json!(doc), warn)
 }
 
 /// The page's next step after a calibration written to `probe`.
@@ -96,10 +147,10 @@ fn nominal_normals(
 ) -> Result<Option<Vec<[f64; 2]>>> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    if !trueaxis_engine::import::probe_csv::is_probe_csv(&text) {
+    if !trueaxis_engine::onmachine::probe_csv::is_probe_csv(&text) {
         return Ok(None);
     }
-    trueaxis_engine::import::probe_csv::read(&text, &path.display().to_string())?
+    trueaxis_engine::onmachine::probe_csv::read(&text, &path.display().to_string())?
         .normals(session, plane)
 }
 
@@ -126,6 +177,10 @@ pub struct Calibrate {
     /// (docs/cli.md § Measurement CSV, probe data).
     #[arg(long)]
     pub session: Option<i64>,
+    /// Fit the contacts found far off the ball too (they are named either
+    /// way; by default they are left out).
+    #[arg(long)]
+    pub keep_outliers: bool,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -138,9 +193,14 @@ impl Calibrate {
             return self.run_3d();
         }
         let pl = plane(&self.plane).map_err(|e| anyhow::anyhow!("{e} (or xyz for a 3-D scan)"))?;
-        let p = read(&self.scan, pl, self.session)?;
-        let cal = probe::calibrate(&p, self.ball_diameter_mm / 2.0)
-            .with_context(|| format!("{}: cannot calibrate", self.scan.display()))?;
+        let text = crate::input::scan_text(&self.scan, self.session, Small::Positions)?;
+        let name = self.scan.display().to_string();
+        let (p, own) = probe::read_scan_lines(&text, &name, pl)?;
+        let lines = lines_of(&self.scan, self.session, own)?;
+        let mut cal = probe::calibrate_with(&p, self.ball_diameter_mm / 2.0, self.keep_outliers)
+            .with_context(|| format!("{name}: cannot calibrate"))?;
+        let (outliers, said) = outliers_said(&cal.outliers, &lines, &name);
+        cal.warnings.extend(said);
         let pr = &cal.probe;
         crate::workflow::write_file(
             &self.output,
@@ -180,6 +240,7 @@ impl Calibrate {
                 "probe": pr,
                 "pv_without_form_nm": cal.pv_without_form_nm,
                 "pv_with_form_nm": cal.pv_with_form_nm,
+                "outliers": outliers,
                 "warnings": cal.warnings,
             });
             out::json_pretty(&doc)?;
@@ -229,9 +290,13 @@ impl Calibrate {
     /// `--plane xyz`: the 3-D calibration (docs/on-machine.md).
     fn run_3d(self) -> Result<()> {
         let text = crate::input::scan_text(&self.scan, self.session, Small::Positions)?;
-        let p = sphere::read_scan(&text, &self.scan.display().to_string())?;
-        let cal = sphere::calibrate(&p, self.ball_diameter_mm / 2.0)
-            .with_context(|| format!("{}: cannot calibrate", self.scan.display()))?;
+        let name = self.scan.display().to_string();
+        let (p, own) = sphere::read_scan_lines(&text, &name)?;
+        let lines = lines_of(&self.scan, self.session, own)?;
+        let mut cal = sphere::calibrate_with(&p, self.ball_diameter_mm / 2.0, self.keep_outliers)
+            .with_context(|| format!("{name}: cannot calibrate"))?;
+        let (outliers, said) = outliers_said(&cal.outliers, &lines, &name);
+        cal.warnings.extend(said);
         let pr = &cal.probe;
         crate::workflow::write_file(
             &self.output,
@@ -247,7 +312,16 @@ impl Calibrate {
                 crate::report::onmachine::probe3d_page(
                     &crate::report::onmachine::Probe3dPage {
                         probe: pr,
-                        points: &p,
+                        // The contacts fitted (the page's residuals are
+                        // theirs).
+                        points: &p
+                            .iter()
+                            .enumerate()
+                            .filter(|(i, _)| {
+                                !cal.outliers.iter().any(|o| o.index == *i && o.left_out)
+                            })
+                            .map(|(_, q)| *q)
+                            .collect::<Vec<_>>(),
                         residual_nm: &cal.residual_nm,
                         ball_pv_nm: [cal.pv_without_form_nm, cal.pv_with_form_nm],
                         warnings: &cal.warnings,
@@ -265,6 +339,7 @@ impl Calibrate {
                 "probe": pr,
                 "pv_without_form_nm": cal.pv_without_form_nm,
                 "pv_with_form_nm": cal.pv_with_form_nm,
+                "outliers": outliers,
                 "warnings": cal.warnings,
             });
             return out::json_pretty(&doc);
@@ -331,15 +406,19 @@ pub(crate) fn read_probe(path: &PathBuf) -> Result<AnyProbe> {
     }
 }
 
-/// `--side`: the outward direction of the surface, ± an axis of the plane.
-pub(crate) fn side(s: &str, pl: [&str; 2]) -> Result<[f64; 2]> {
+/// `--side`: the outward direction of the surface, ± an axis of the plane,
+/// or `out` / `in` for a circle probed from outside (a boss) or inside (a
+/// bore), the normals along its radii.
+pub(crate) fn side(s: &str, pl: [&str; 2]) -> Result<Side> {
     Ok(match s {
+        "out" => Side::Out,
+        "in" => Side::In,
         s if s.len() == 2 && (s.starts_with('+') || s.starts_with('-')) => {
             let sign = if s.starts_with('-') { -1.0 } else { 1.0 };
             let axis = &s[1..];
             match pl.iter().position(|a| *a == axis) {
-                Some(0) => [sign, 0.0],
-                Some(_) => [0.0, sign],
+                Some(0) => Side::Toward([sign, 0.0]),
+                Some(_) => Side::Toward([0.0, sign]),
                 None => bail!(
                     "--side `{s}`: expected ± one of the plane's axes {} and {}",
                     pl[0],
@@ -348,7 +427,7 @@ pub(crate) fn side(s: &str, pl: [&str; 2]) -> Result<[f64; 2]> {
             }
         }
         s => bail!(
-            "--side `{s}`: expected +{0}, -{0}, +{1} or -{1}",
+            "--side `{s}`: expected +{0}, -{0}, +{1} or -{1} (or out / in for a circle probed from outside / inside)",
             pl[0],
             pl[1]
         ),
@@ -367,7 +446,9 @@ pub struct Correct {
     #[arg(long, default_value = "xz")]
     pub plane: String,
     /// Which side of the part the probe touches: the outward direction of
-    /// the surface, `+z`, `-z`, `+x`, `-x`, `+y`, `-y`.
+    /// the surface, `+z`, `-z`, `+x`, `-x`, `+y`, `-y`, or `out` / `in` for
+    /// a boss / a bore (all round or an arc: normals along the radii of the
+    /// circle through the centres) [default: +z].
     #[arg(long, default_value = "+z", allow_hyphen_values = true)]
     pub side: String,
     /// The nominal shape the form error is taken against: `circle` or
@@ -434,10 +515,10 @@ impl Correct {
                 ),
             ),
         };
-        let normals_from = if from_nominal {
-            "nominal"
-        } else {
-            "centre_path"
+        let normals_from = match (from_nominal, side) {
+            (true, _) => "nominal",
+            (false, Side::Toward(_)) => "centre_path",
+            (false, _) => "circle",
         };
         let outside = contacts.iter().filter(|c| !c.calibrated).count();
         let surf: Vec<[f64; 2]> = contacts.iter().map(|c| c.surface_mm).collect();
@@ -496,10 +577,10 @@ impl Correct {
                 "{}: {} contacts along the {} normals; part form vs a least-squares {}: {:.1} nm PV ({:.1} nm PV with the probe radius only); written to {}",
                 self.scan.display(),
                 contacts.len(),
-                if from_nominal {
-                    "nominal surface's"
-                } else {
-                    "centre path's"
+                match normals_from {
+                    "nominal" => "nominal surface's",
+                    "circle" => "circle's radial",
+                    _ => "centre path's",
                 },
                 self.nominal,
                 probe::pv(&dev),

@@ -9,8 +9,9 @@ use anyhow::{bail, Context, Result};
 use serde_json::json;
 
 use crate::cmd::out;
-use trueaxis_engine::import::probe_csv::Small;
-use trueaxis_engine::{import, separate};
+use trueaxis_engine::import;
+use trueaxis_engine::onmachine::probe_csv::Small;
+use trueaxis_engine::onmachine::{separate, spindle_log};
 
 /// Arguments of `trueaxis separate`.
 #[derive(clap::Args, Debug)]
@@ -31,16 +32,74 @@ pub enum Sub {
     MultiStep(MultiStep),
 }
 
+/// How the spindle angle of a log's rows is known when the file alone
+/// does not say (docs/on-machine.md § Spindle logs).
+#[derive(clap::Args, Debug, Clone, Copy, Default)]
+pub struct AngleArgs {
+    /// Encoder counts per turn, for a log with an `encoder` column.
+    #[arg(long)]
+    pub counts_per_turn: Option<f64>,
+    /// The spindle speed, rev/min, for a log with time stamps but no angle,
+    /// encoder, index or `rpm` column.
+    #[arg(long)]
+    pub rpm: Option<f64>,
+    /// Keep harmonics up to this many undulations per revolution (a
+    /// roundness instrument's filter: 15, 50, 150, 500, …) in the roundness
+    /// and the error motion [default: all the angles resolve].
+    #[arg(long)]
+    pub upr: Option<usize>,
+}
+
+impl AngleArgs {
+    pub(crate) fn options(&self) -> spindle_log::Options {
+        spindle_log::Options {
+            counts_per_turn: self.counts_per_turn,
+            rpm: self.rpm,
+        }
+    }
+}
+
+/// The error motion (ISO 230-7) as the JSON and text show it.
+fn error_motion_json(e: &separate::ErrorMotion) -> serde_json::Value {
+    json!({
+        "synchronous_um": e.synchronous_um,
+        "synchronous_ci95_um": e.synchronous_ci95_um,
+        "asynchronous_um": e.asynchronous_um,
+        "total_um": e.total_um,
+        "centring_um": e.centring_um,
+        "excluded_harmonics": e.excluded_harmonics,
+        "excluded_pv_um": e.excluded_pv_um,
+        "turns": e.turns,
+    })
+}
+
+/// The error motion in one line of text.
+fn error_motion_text(e: &separate::ErrorMotion) -> String {
+    format!(
+        "synchronous {:.3} µm (95 %: {:.3} … {:.3}){}, total {:.3} µm; centring {:.3} µm left out",
+        e.synchronous_um,
+        e.synchronous_ci95_um[0],
+        e.synchronous_ci95_um[1],
+        e.asynchronous_um
+            .map(|a| format!(", asynchronous {a:.3} µm"))
+            .unwrap_or_default(),
+        e.total_um,
+        e.centring_um
+    )
+}
+
 /// `trueaxis separate three-probe SCAN.csv --angles-deg 0,A,B -o OUT.csv`.
 #[derive(clap::Args, Debug)]
 pub struct ThreeProbe {
-    /// `c_deg,p1_um,p2_um,p3_um`: the three probes' readings at equally
-    /// spaced rotation angles over one or more whole turns.
+    /// The three probes' readings round the turn: `p1_um,p2_um,p3_um` (on
+    /// one row or each on rows of its own) and the spindle angle (`c_deg`,
+    /// `encoder`, `index` or time stamps with the speed), any number of
+    /// samples per turn and turns.
     pub scan: PathBuf,
     /// The probes' angular positions around the part, degrees: `0,A,B`.
     #[arg(long, allow_hyphen_values = true)]
     pub angles_deg: String,
-    /// Where to write `c_deg,part_um,spindle_x_um,spindle_y_um`.
+    /// Where to write `c_deg,part_um,spindle_x_um,spindle_y_um,unseen_um`.
     #[arg(short, long)]
     pub output: PathBuf,
     /// Write an HTML page (verdict, plots) into this directory.
@@ -50,6 +109,8 @@ pub struct ThreeProbe {
     /// (docs/cli.md § Measurement CSV, probe data).
     #[arg(long)]
     pub session: Option<i64>,
+    #[command(flatten)]
+    pub angle: AngleArgs,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -72,23 +133,29 @@ impl ThreeProbe {
             })?;
         let text = crate::input::scan_text(&self.scan, self.session, Small::ThreeProbe)?;
         let name = self.scan.display().to_string();
-        let rows = import::read_table(
+        let log = spindle_log::read(
             &text,
             &name,
-            &["c_deg", "p1_um", "p2_um", "p3_um"],
-            "the rotation angle and the three probes' readings",
+            &["p1_um", "p2_um", "p3_um"],
+            &self.angle.options(),
         )?;
-        let (keys, readings) = turn_bins(&rows, &name, "three-probe")?;
-        let n = keys.len();
-        let readings: Vec<[f64; 3]> = readings.iter().map(|v| [v[0], v[1], v[2]]).collect();
-        let r = separate::three_probe(&readings, [angles[0], angles[1], angles[2]])
-            .with_context(|| format!("{name}: cannot separate"))?;
-        let mut csv = String::from("c_deg,part_um,spindle_x_um,spindle_y_um\n");
-        for (i, k) in keys.iter().enumerate() {
+        let [t1, t2, t3]: [separate::Track; 3] = log
+            .tracks
+            .try_into()
+            .map_err(|_| anyhow::anyhow!("three probes expected"))?;
+        let r = separate::three_probe(
+            &[t1, t2, t3],
+            [angles[0], angles[1], angles[2]],
+            self.angle.upr,
+        )
+        .with_context(|| format!("{name}: cannot separate"))?;
+        let n = r.samples;
+        let mut csv = String::from("c_deg,part_um,spindle_x_um,spindle_y_um,unseen_um\n");
+        for (i, k) in r.angle_deg.iter().enumerate() {
             let _ = writeln!(
                 csv,
-                "{:.3},{:.5},{:.5},{:.5}",
-                k, r.part_um[i], r.spindle_x_um[i], r.spindle_y_um[i]
+                "{:.3},{:.5},{:.5},{:.5},{:.5}",
+                k, r.part_um[i], r.spindle_x_um[i], r.spindle_y_um[i], r.unseen_um[i]
             );
         }
         crate::workflow::write_file(&self.output, csv.as_bytes())?;
@@ -110,13 +177,15 @@ impl ThreeProbe {
                 "change the angles (e.g. 0, 99.84, 202.5, blind only from harmonic 111 up) or add a probe"
             };
             warnings.push(format!(
-                "probes at {}° cannot see {} harmonic(s) of the part ({}{}): lobes of those orders are left out of the roundness — {remedy}",
+                "probes at {}° cannot see {} harmonic(s) of the part ({}{}): lobes of those orders are left out of the roundness and the error motion (part and spindle together there: {:.3} µm PV) — {remedy}",
                 self.angles_deg,
                 r.unseen_harmonics.len(),
                 list.join(", "),
-                if r.unseen_harmonics.len() > 12 { ", …" } else { "" }
+                if r.unseen_harmonics.len() > 12 { ", …" } else { "" },
+                r.error_motion.excluded_pv_um
             ));
         }
+        warnings.extend(r.lost.iter().cloned());
         for w in &warnings {
             eprintln!("warning: {w}");
         }
@@ -137,14 +206,15 @@ impl ThreeProbe {
                             }
                         ),
                         part_um: &r.part_um,
+                        part_ci95_um: r.part_ci95_um,
                         spindle: vec![
                             ("along probe 1", r.spindle_x_um.as_slice()),
                             ("perpendicular", r.spindle_y_um.as_slice()),
                         ],
                         part_pv_um: r.part_pv_um,
-                        spindle_pv_um: r.spindle_x_pv_um,
+                        error_motion: &r.error_motion,
                         blind: &r.unseen_harmonics,
-                        blind_meaning: "of the part: the probe spacing cannot see them (left out of the roundness)",
+                        blind_meaning: "of the part: the probe spacing cannot see them (left out of the roundness and the error motion)",
                         ci95_um: None,
                     },
                     dir,
@@ -156,17 +226,21 @@ impl ThreeProbe {
                 "output": self.output.display().to_string(),
                 "report": report.as_ref().map(|p| p.display().to_string()),
                 "samples": r.samples,
+                "upr": self.angle.upr,
+                "angle_from": log.angle_from,
                 "part_pv_um": r.part_pv_um,
+                "part_ci95_um": r.part_ci95_um,
                 "spindle_x_pv_um": r.spindle_x_pv_um,
+                "error_motion": error_motion_json(&r.error_motion),
                 "unseen_harmonics": r.unseen_harmonics,
                 "noise_gain": r.noise_gain,
                 "warnings": warnings,
             }))?;
         } else {
             out::print(&format!(
-                "{n} samples per turn: part roundness {:.3} µm PV, spindle error motion {:.3} µm PV along probe 1; {} harmonic(s) unseen; written to {}\n",
+                "{n} samples per turn: part roundness {:.3} µm PV; spindle error motion along probe 1 (ISO 230-7): {}; {} harmonic(s) unseen; written to {}\n",
                 r.part_pv_um,
-                r.spindle_x_pv_um,
+                error_motion_text(&r.error_motion),
                 r.unseen_harmonics.len(),
                 self.output.display()
             ))?;
@@ -178,52 +252,14 @@ impl ThreeProbe {
     }
 }
 
-/// One turn of readings from rows `[angle_deg, values…]`: the distinct
-/// angles (to 0.001°, wrapped to 0…360) in order and each one's values
-/// averaged over the turns that read it. The angles must be evenly spaced
-/// over the turn (`method` names the separation in the message).
-fn turn_bins(rows: &[Vec<f64>], name: &str, method: &str) -> Result<(Vec<f64>, Vec<Vec<f64>>)> {
-    let key = |c: f64| (c.rem_euclid(360.0) * 1000.0).round() as i64 % 360_000;
-    let width = rows.first().map_or(1, |r| r.len()) - 1;
-    let mut bins: std::collections::BTreeMap<i64, (Vec<f64>, usize)> = Default::default();
-    for r in rows {
-        let e = bins.entry(key(r[0])).or_insert((vec![0.0; width], 0));
-        for k in 0..width {
-            e.0[k] += r[k + 1];
-        }
-        e.1 += 1;
-    }
-    let n = bins.len();
-    let step = 360_000 / n.max(1) as i64;
-    let first = *bins.keys().next().context("no readings")?;
-    if let Some((i, (&k, _))) = bins
-        .iter()
-        .enumerate()
-        .find(|(i, (&k, _))| (k - first - *i as i64 * step).abs() > 1)
-    {
-        bail!(
-            "{name}: the angles are not evenly spaced over the turn: the {}th distinct angle is {:.3}°, expected {:.3}° ({n} per turn); {method} separation needs equal steps",
-            i + 1,
-            k as f64 / 1000.0,
-            (first + i as i64 * step) as f64 / 1000.0
-        );
-    }
-    Ok((
-        bins.keys().map(|k| *k as f64 / 1000.0).collect(),
-        bins.values()
-            .map(|(v, c)| v.iter().map(|x| x / *c as f64).collect())
-            .collect(),
-    ))
-}
-
 /// `trueaxis separate multi-step SCAN.csv -o OUT.csv`.
 #[derive(clap::Args, Debug)]
 pub struct MultiStep {
-    /// `c_deg,step_deg,p_um`: the spindle angle, the part's angular position
-    /// on the spindle (equally spaced steps over 360°) and the probe's
-    /// reading, one or more whole turns per step.
+    /// `step_deg` (the part's angular position on the spindle), `p_um` (the
+    /// probe's reading) and the spindle angle (`c_deg`, `encoder` or
+    /// `index`): any number of steps, samples per turn and turns.
     pub scan: PathBuf,
-    /// Where to write `angle_deg,part_um,spindle_um`.
+    /// Where to write `angle_deg,part_um,spindle_um,inseparable_um`.
     #[arg(short, long)]
     pub output: PathBuf,
     /// Write an HTML page (verdict, plots) into this directory.
@@ -233,88 +269,107 @@ pub struct MultiStep {
     /// (docs/cli.md § Measurement CSV, probe data).
     #[arg(long)]
     pub session: Option<i64>,
+    #[command(flatten)]
+    pub angle: AngleArgs,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
 }
 
-/// Reads a multi-step file (`c_deg,step_deg,p_um`, docs/on-machine.md):
-/// the spindle angles and one turn of readings per step, each step read at
-/// the same evenly spaced angles (several turns averaged).
+/// Reads a multi-step set (`step_deg`, `p_um` and the spindle angle,
+/// docs/on-machine.md): each step's readings at their spindle angles.
 pub(crate) fn read_multi_step(
     path: &std::path::Path,
     session: Option<i64>,
-) -> Result<(Vec<f64>, Vec<Vec<f64>>)> {
+    angle: &AngleArgs,
+) -> Result<(spindle_log::AngleFrom, Vec<separate::Step>)> {
     let text = crate::input::scan_text(path, session, Small::MultiStep)?;
     let name = path.display().to_string();
-    let rows = import::read_table(
-        &text,
-        &name,
-        &["c_deg", "step_deg", "p_um"],
-        "the spindle angle, the part's step and the probe reading",
-    )?;
-    // Steps: the distinct part positions, evenly spaced over the turn.
-    let step_rows: Vec<Vec<f64>> = rows.iter().map(|r| vec![r[1], 0.0]).collect();
-    let (steps, _) = turn_bins(&step_rows, &format!("{name}: step_deg"), "multi-step")?;
-    let key = |c: f64| (c.rem_euclid(360.0) * 1000.0).round() as i64 % 360_000;
-    let mut runs = Vec::new();
-    let mut angles: Option<Vec<f64>> = None;
-    for &st in &steps {
-        let mine: Vec<Vec<f64>> = rows
-            .iter()
-            .filter(|r| key(r[1]) == key(st))
-            .map(|r| vec![r[0], r[2]])
-            .collect();
-        let (a, v) = turn_bins(&mine, &format!("{name}: step {st}°"), "multi-step")?;
-        match &angles {
-                None => angles = Some(a),
-                Some(a0) if a0 != &a => bail!(
-                    "{name}: step {st}° is read at {} spindle angles from {:.3}°, step {}° at {} from {:.3}°: every step must be read at the same spindle angles",
-                    a.len(),
-                    a[0],
-                    steps[0],
-                    a0.len(),
-                    a0[0]
-                ),
-                Some(_) => {}
-            }
-        runs.push(v.into_iter().map(|x| x[0]).collect::<Vec<f64>>());
-    }
-    Ok((angles.context("no readings")?, runs))
+    spindle_log::multi_step(&text, &name, "p_um", &angle.options())
 }
 
-/// Reads a straightness run: `<axis>_mm,d_um` (docs/on-machine.md), or
-/// from a measurement CSV with probe columns the rows of `session` at
-/// `orientation` (0 or 180°).
+/// Reads a straightness run: `<axis>_mm,d_um` (an analogue probe's
+/// reading, docs/on-machine.md), or a touch-trigger probe's positions
+/// `<axis>_mm,<b>_mm` (`b` the axis it touches along: `side`'s, or the one
+/// other position column) — or from a measurement CSV with probe columns
+/// the rows of `session` at `orientation` (0 or 180°). `side` is the
+/// surface's outward direction in the 0° run (`+z`: touched from above);
+/// the 180° run is touched from the other side.
 pub(crate) fn read_run(
     p: &std::path::Path,
     axis: &str,
     session: Option<i64>,
     orientation: u16,
+    side: Option<&str>,
 ) -> Result<Vec<(f64, f64)>> {
     let pos = format!("{axis}_mm");
     let a = axis.chars().next().unwrap_or('x');
     let text = crate::input::scan_text(p, session, Small::Straightness(a, orientation))?;
-    Ok(import::read_columns(
+    let name = p.display().to_string();
+    let head: Vec<String> = crate::input::header(&text);
+    if head.iter().any(|h| h == "d_um") || !head.iter().any(|h| h.ends_with("_mm") && *h != pos) {
+        return Ok(import::read_columns(
+            &text,
+            &name,
+            [&pos, "d_um"],
+            "the position and the probe reading",
+        )?
+        .into_iter()
+        .map(|v| (v[0], v[1]))
+        .collect());
+    }
+    // Touch positions: along `side`'s axis, or the one other position
+    // column.
+    let (sign, b) = match side {
+        Some(s)
+            if s.len() == 2 && (s.starts_with('+') || s.starts_with('-')) && &s[1..] != axis =>
+        {
+            (
+                if s.starts_with('-') { -1.0 } else { 1.0 },
+                format!("{}_mm", &s[1..]),
+            )
+        }
+        Some(s) => {
+            bail!("--side `{s}`: expected + or − an axis other than the travel `{axis}` (e.g. +z)")
+        }
+        None => {
+            let others: Vec<&String> = head
+                .iter()
+                .filter(|h| h.ends_with("_mm") && **h != pos)
+                .collect();
+            match others.as_slice() {
+                [one] => (1.0, one.to_string()),
+                _ => bail!(
+                    "{name}: touch positions in {}: say which axis the probe touches along with --side (e.g. +z)",
+                    others.iter().map(|c| format!("`{c}`")).collect::<Vec<_>>().join(" and ")
+                ),
+            }
+        }
+    };
+    let sign = if orientation == 180 { -sign } else { sign };
+    let rows = import::read_columns(
         &text,
-        &p.display().to_string(),
-        [&pos, "d_um"],
-        "the position and the probe reading",
-    )?
-    .into_iter()
-    .map(|v| (v[0], v[1]))
-    .collect())
+        &name,
+        [&pos, &b],
+        "the position along the travel and the touch position",
+    )?;
+    Ok(separate::touch_readings(&rows, sign))
 }
 
 impl MultiStep {
     fn run(self) -> Result<()> {
         crate::input::refuse_overwrite(&[("the scan", &self.scan)], &[("-o", &self.output)])?;
         let name = self.scan.display().to_string();
-        let (angles, runs) = read_multi_step(&self.scan, self.session)?;
-        let r = separate::multi_step(&runs).with_context(|| format!("{name}: cannot separate"))?;
-        let mut csv = String::from("angle_deg,part_um,spindle_um\n");
-        for (i, a) in angles.iter().enumerate() {
-            let _ = writeln!(csv, "{a:.3},{:.5},{:.5}", r.part_um[i], r.spindle_um[i]);
+        let (angle_from, steps) = read_multi_step(&self.scan, self.session, &self.angle)?;
+        let r = separate::multi_step(&steps, self.angle.upr)
+            .with_context(|| format!("{name}: cannot separate"))?;
+        let mut csv = String::from("angle_deg,part_um,spindle_um,inseparable_um\n");
+        for (i, a) in r.angle_deg.iter().enumerate() {
+            let _ = writeln!(
+                csv,
+                "{a:.3},{:.5},{:.5},{:.5}",
+                r.part_um[i], r.spindle_um[i], r.inseparable_um[i]
+            );
         }
         crate::workflow::write_file(&self.output, csv.as_bytes())?;
         let list: Vec<String> = r
@@ -323,13 +378,15 @@ impl MultiStep {
             .take(8)
             .map(|k| k.to_string())
             .collect();
-        let warnings = vec![format!(
-            "with {} steps the part's harmonics {}{} cannot be told from the spindle's: they are left in spindle_um, not in part_um — measure again with a number of steps that is not a divisor of the lobes you look for (e.g. {} steps)",
+        let mut warnings = vec![format!(
+            "with {} steps the part's harmonics {}{} cannot be told from the spindle's: they are left out of part_um and spindle_um, their sum is inseparable_um ({:.3} µm PV) — measure again with a number of steps that is not a divisor of the lobes you look for (e.g. {} steps)",
             r.steps,
             list.join(", "),
             if r.inseparable_harmonics.len() > 8 { ", …" } else { "" },
+            r.error_motion.excluded_pv_um,
             r.steps + 1
         )];
+        warnings.extend(r.lost.iter().cloned());
         for w in &warnings {
             eprintln!("warning: {w}");
         }
@@ -348,11 +405,12 @@ impl MultiStep {
                             r.steps + 1
                         ),
                         part_um: &r.part_um,
+                        part_ci95_um: r.part_ci95_um,
                         spindle: vec![("along the probe", r.spindle_um.as_slice())],
                         part_pv_um: r.part_pv_um,
-                        spindle_pv_um: r.spindle_pv_um,
+                        error_motion: &r.error_motion,
                         blind: &r.inseparable_harmonics,
-                        blind_meaning: "of the part cannot be told from the spindle's (they are in the spindle's profile)",
+                        blind_meaning: "of the part cannot be told from the spindle's (left out of both; their sum is given)",
                         ci95_um: ci.is_finite().then_some(ci),
                     },
                     dir,
@@ -365,8 +423,12 @@ impl MultiStep {
                 "report": report.as_ref().map(|p| p.display().to_string()),
                 "samples": r.samples,
                 "steps": r.steps,
+                "upr": self.angle.upr,
+                "angle_from": angle_from,
                 "part_pv_um": r.part_pv_um,
+                "part_ci95_um": r.part_ci95_um,
                 "spindle_pv_um": r.spindle_pv_um,
+                "error_motion": error_motion_json(&r.error_motion),
                 "inseparable_harmonics": r.inseparable_harmonics,
                 "residual_rms_um": r.residual_rms_um,
                 "point_ci95_um": if ci.is_finite() { json!(ci) } else { json!(null) },
@@ -374,11 +436,11 @@ impl MultiStep {
             }))?;
         } else {
             out::print(&format!(
-                "{} steps × {} samples per turn: part roundness {:.3} µm PV, spindle error motion {:.3} µm PV (± {:.3} µm per point, 95 %); written to {}\n",
+                "{} steps × {} samples per turn: part roundness {:.3} µm PV; spindle error motion (ISO 230-7): {} (± {:.3} µm per point, 95 %); written to {}\n",
                 r.steps,
                 r.samples,
                 r.part_pv_um,
-                r.spindle_pv_um,
+                error_motion_text(&r.error_motion),
                 ci,
                 self.output.display()
             ))?;
@@ -393,7 +455,8 @@ impl MultiStep {
 /// `trueaxis separate reversal RUN0.csv RUN180.csv -o OUT.csv`.
 #[derive(clap::Args, Debug)]
 pub struct Reversal {
-    /// The run with the part at 0°: `<axis>_mm,d_um` (probe reading, µm).
+    /// The run with the part at 0°: `<axis>_mm,d_um` (probe reading, µm),
+    /// or a touch-trigger probe's positions `<axis>_mm,<b>_mm`.
     pub run0: PathBuf,
     /// The run with the part turned 180° and the probe reversed (left out
     /// when RUN0 is a measurement CSV whose session holds both
@@ -402,6 +465,11 @@ pub struct Reversal {
     /// The travel axis.
     #[arg(long, default_value = "x", value_parser = ["x", "y", "z"])]
     pub axis: String,
+    /// Touch-trigger positions: the surface's outward direction in the 0°
+    /// run, `+z`, `-y`, … (the 180° run is touched from the other side)
+    /// [default: + the one other position column].
+    #[arg(long, allow_hyphen_values = true)]
+    pub side: Option<String>,
     /// Where to write `<axis>_mm,part_um,slide_um`.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -426,7 +494,7 @@ impl Reversal {
                 // nothing and say the slide is straight: refused.
                 let text = std::fs::read_to_string(&self.run0)
                     .with_context(|| format!("cannot read {}", self.run0.display()))?;
-                if !import::probe_csv::is_probe_csv(&text) {
+                if !trueaxis_engine::onmachine::probe_csv::is_probe_csv(&text) {
                     bail!(
                         "{}: give the 180° run as RUN180.csv (or a measurement CSV whose session holds both orientations)",
                         self.run0.display()
@@ -440,7 +508,8 @@ impl Reversal {
             &[("-o", &self.output)],
         )?;
         let pos = format!("{}_mm", self.axis);
-        let read = |p: &PathBuf, o: u16| read_run(p, &self.axis, self.session, o);
+        let read =
+            |p: &PathBuf, o: u16| read_run(p, &self.axis, self.session, o, self.side.as_deref());
         let r =
             separate::reversal(&read(&self.run0, 0)?, &read(&run180, 180)?).with_context(|| {
                 format!(

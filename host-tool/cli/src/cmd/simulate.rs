@@ -11,7 +11,8 @@ use serde_json::json;
 
 use crate::cmd::out::outln;
 use trueaxis_engine::import;
-use trueaxis_engine::simulate::{self, onmachine, Effect, Plan, RefReturn, SimConfig};
+use trueaxis_engine::onmachine::simulate as onmachine;
+use trueaxis_engine::simulate::{self, Effect, Plan, RefReturn, SimConfig};
 
 /// Arguments of `trueaxis simulate`.
 #[derive(clap::Args, Debug)]

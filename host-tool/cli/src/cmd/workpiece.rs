@@ -10,7 +10,7 @@ use serde_json::json;
 
 use crate::cmd::out;
 use trueaxis_engine::import;
-use trueaxis_engine::workpiece::{self, Dialect, Point};
+use trueaxis_engine::onmachine::workpiece::{self, Dialect, Point};
 
 /// Arguments of `trueaxis workpiece`.
 #[derive(clap::Args, Debug)]
@@ -80,7 +80,7 @@ impl Args {
         let text = crate::input::scan_text(
             &self.scan,
             self.session,
-            trueaxis_engine::import::probe_csv::Small::Workpiece,
+            trueaxis_engine::onmachine::probe_csv::Small::Workpiece,
         )?;
         let rows = import::read_table(
             &text,

@@ -126,12 +126,14 @@ pub struct Roundness<'a> {
     pub command: String,
     /// Part roundness, µm, at equally spaced angles.
     pub part_um: &'a [f64],
+    /// Its PV's 95 % interval, µm.
+    pub part_ci95_um: [f64; 2],
     /// Spindle error motion profiles `(name, µm)`.
     pub spindle: Vec<(&'a str, &'a [f64])>,
-    /// Part and spindle PV, µm.
+    /// Part PV, µm.
     pub part_pv_um: f64,
-    /// See above.
-    pub spindle_pv_um: f64,
+    /// The error motion along the sensitive direction (ISO 230-7).
+    pub error_motion: &'a trueaxis_engine::onmachine::separate::ErrorMotion,
     /// Harmonics the method cannot see or separate.
     pub blind: &'a [usize],
     /// What the blind harmonics mean, in words.
@@ -154,17 +156,37 @@ pub fn roundness_page(r: &Roundness, dir: &Path) -> Result<PathBuf> {
             r.blind_meaning
         )
     };
+    let e = r.error_motion;
     let mut details = vec![
-        format!("spindle error motion {:.3} µm PV", r.spindle_pv_um),
+        format!(
+            "spindle error motion (ISO 230-7, along the sensitive direction): synchronous {:.3} µm (95 %: {:.3} … {:.3} µm){}, total {:.3} µm",
+            e.synchronous_um,
+            e.synchronous_ci95_um[0],
+            e.synchronous_ci95_um[1],
+            e.asynchronous_um
+                .map(|a| format!(", asynchronous {a:.3} µm (reading noise included)"))
+                .unwrap_or_else(|| ", asynchronous unknown (one turn read)".into()),
+            e.total_um
+        ),
+        format!(
+            "the once-per-turn term — the part's centring, {:.3} µm, with any once-per-turn motion of the spindle, which no measurement tells from it — is left out of both",
+            e.centring_um
+        ),
         format!("cannot know: {blind}"),
     ];
+    if !r.blind.is_empty() {
+        details.push(format!(
+            "at those harmonics part and spindle together: {:.3} µm PV (a sum, not split)",
+            e.excluded_pv_um
+        ));
+    }
     if let Some(ci) = r.ci95_um {
         details.push(format!("each point ± {ci:.3} µm (95 %)"));
     }
     page.verdict(Verdict {
         headline: format!(
-            "The part is {:.3} µm out of round (PV, harmonics 0 and 1 — size and centring — removed).",
-            r.part_pv_um
+            "The part is {:.3} µm out of round (PV, 95 %: {:.3} … {:.3} µm; harmonics 0 and 1 — size and centring — removed).",
+            r.part_pv_um, r.part_ci95_um[0], r.part_ci95_um[1]
         ),
         details,
         // What the method cannot see is in `details`; the command's warning
@@ -182,7 +204,7 @@ pub fn roundness_page(r: &Roundness, dir: &Path) -> Result<PathBuf> {
         },
         super::Figure {
             name: "spindle".into(),
-            caption: "the spindle's radial error motion (deviations magnified)".into(),
+            caption: "the spindle's synchronous radial error motion, centring left out (deviations magnified)".into(),
             svg: polar_svg("spindle error motion (µm)", &r.spindle),
         },
     ]);
@@ -310,7 +332,7 @@ pub fn probe_page(p: &ProbePage, dir: &Path) -> Result<PathBuf> {
 #[derive(Debug)]
 pub struct Probe3dPage<'a> {
     /// The probe file.
-    pub probe: &'a trueaxis_engine::probe::sphere::Probe3d,
+    pub probe: &'a trueaxis_engine::onmachine::probe::sphere::Probe3d,
     /// The probe-centre positions of the scan, mm.
     pub points: &'a [[f64; 3]],
     /// Residual per point with the form, nm.
@@ -444,22 +466,26 @@ pub fn probe3d_page(p: &Probe3dPage, dir: &Path) -> Result<PathBuf> {
 
 /// The `diagnose-part` page: the verdict (what is identified, what these
 /// data cannot know and the sums they read), one row per source with its
-/// size or the measurement that would tell it, and the scan's profile.
+/// size or the measurement that would tell it (`measures`: each finding's,
+/// as the command words it), and the scan's profile.
 pub fn part_diagnosis_page(
-    d: &trueaxis_engine::part_diagnosis::PartDiagnosis,
+    d: &trueaxis_engine::onmachine::part_diagnosis::PartDiagnosis,
     verdict: &str,
+    measures: &[Option<String>],
+    sum_measures: &[Option<String>],
     dir: &Path,
 ) -> Result<PathBuf> {
-    use trueaxis_engine::part_diagnosis::Status;
+    use trueaxis_engine::onmachine::part_diagnosis::Status;
     let mut page = Page::new("Which error is in this part scan");
     // Every measurement that would tell more: for what cannot be known,
     // and for what an estimate leaves out (a multi-step's inseparable
     // harmonics, the slides in a corrected arc).
-    let measures: Vec<String> = d
+    let wanted: Vec<String> = d
         .findings
         .iter()
-        .filter_map(|f| {
-            let m = f.measure.as_ref()?;
+        .zip(measures)
+        .filter_map(|(f, m)| {
+            let m = m.as_ref()?;
             Some(match f.status {
                 Status::CannotKnow => {
                     format!("cannot know from these data — {}: {m}", f.source.label())
@@ -468,7 +494,7 @@ pub fn part_diagnosis_page(
             })
         })
         .collect();
-    let unknown = !measures.is_empty();
+    let unknown = !wanted.is_empty();
     let mut details = vec![format!(
         "{} scan, {}{}",
         crate::report::a_or_an(d.kind),
@@ -477,7 +503,7 @@ pub fn part_diagnosis_page(
             .map(|n| format!(", reading noise {n:.3} µm"))
             .unwrap_or_default()
     )];
-    details.extend(measures);
+    details.extend(wanted);
     page.verdict(Verdict {
         headline: {
             let mut c = verdict.chars();
@@ -493,7 +519,8 @@ pub fn part_diagnosis_page(
     let rows = d
         .findings
         .iter()
-        .map(|f| {
+        .zip(measures)
+        .map(|(f, m)| {
             let size = match (f.value, f.ci95) {
                 (Some(v), Some([lo, hi])) => {
                     let p = if f.unit == "mm" { 6 } else { 3 };
@@ -511,11 +538,39 @@ pub fn part_diagnosis_page(
                 status.to_string(),
                 size,
                 f.what.clone(),
-                f.measure.clone().unwrap_or_default(),
+                m.clone().unwrap_or_default(),
             ]
         })
         .collect();
     page.table(&["source", "status", "size", "what", "measure"], rows);
+    if !d.combined.is_empty() {
+        // The sums the scan reads: sized as sums, never split.
+        page.heading("Read only as sums");
+        let rows = d
+            .combined
+            .iter()
+            .zip(sum_measures)
+            .map(|(c, m)| {
+                let p = if c.unit == "nm" { 1 } else { 3 };
+                let size = match c.ci95 {
+                    Some([lo, hi]) => format!(
+                        "{:.p$} {u} PV (95 %: {lo:.p$} … {hi:.p$})",
+                        c.pv,
+                        u = c.unit
+                    ),
+                    None => format!("{:.p$} {} PV", c.pv, c.unit),
+                };
+                let labels: Vec<&str> = c.sources.iter().map(|s| s.label()).collect();
+                vec![
+                    labels.join(" + "),
+                    size,
+                    c.what.clone(),
+                    m.clone().unwrap_or_default(),
+                ]
+            })
+            .collect();
+        page.table(&["together", "size", "what", "measure"], rows);
+    }
     if !d.profile.is_empty() {
         let (x, what) = match d.kind {
             "straightness" => ("position (mm)", "the readings, line removed"),
@@ -550,7 +605,7 @@ pub struct WorkpiecePage<'a> {
     /// `(c_deg, z_mm, dev_um)` of the scan.
     pub points: &'a [[f64; 3]],
     /// The fitted form (its deviation at `(c_deg, z_mm)`, µm: `at`).
-    pub form: &'a trueaxis_engine::workpiece::Form,
+    pub form: &'a trueaxis_engine::onmachine::workpiece::Form,
     /// The measured length, mm.
     pub z_range_mm: [f64; 2],
     /// Form PV, RMS and eccentricity, µm.

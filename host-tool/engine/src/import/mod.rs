@@ -12,7 +12,6 @@ mod bedmesh;
 mod csv_io;
 mod dialect;
 mod ecmc;
-pub mod probe_csv;
 mod rtl;
 
 use std::fmt;

@@ -18,7 +18,6 @@
 mod bump;
 mod config;
 mod machine;
-pub mod onmachine;
 mod plan;
 mod spec;
 pub mod thermal_test;
@@ -54,7 +53,7 @@ pub struct SimOutput {
 /// Standard normal from two uniforms (Box–Muller). Hand-written rather than
 /// rand_distr so that the stream a seed gives never changes with a crate
 /// version: the byte-identical-file promise depends on it.
-fn normal(rng: &mut impl RngCore) -> f64 {
+pub(crate) fn normal(rng: &mut impl RngCore) -> f64 {
     let u1 = 1.0 - plan::unit(rng); // (0, 1]: ln is finite
     let u2 = plan::unit(rng);
     (-2.0 * u1.ln()).sqrt() * (TAU * u2).cos()

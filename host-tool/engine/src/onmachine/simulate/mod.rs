@@ -16,7 +16,9 @@ use rand_chacha::rand_core::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use super::normal;
+use crate::simulate::normal;
+
+pub mod cases;
 
 /// The scenario's name.
 pub const ON_MACHINE: &str = "on-machine";
@@ -138,6 +140,9 @@ pub struct Truth {
     pub three_probe_angles_deg: [f64; 3],
     /// Peak to valley of the roundness, µm.
     pub roundness_pv_um: f64,
+    /// The spindle's synchronous radial error motion along probe 1 (x),
+    /// ISO 230-7 (once-per-turn term left out; it has none), µm.
+    pub spindle_error_motion_um: f64,
     /// Multi-step steps.
     pub multi_step_steps: usize,
     /// The grinder's removal efficiency.
@@ -183,7 +188,7 @@ fn grinder_points() -> Vec<[f64; 2]> {
 
 fn grinder_csv(dev: impl Fn(f64, f64) -> f64, rng: &mut ChaCha8Rng, what: &str) -> String {
     let mut s = format!(
-        "# generator: trueaxis simulate --scenario on-machine ({what})\nc_deg,z_mm,dev_um\n"
+        "# generator: trueaxis simulate, scenario on-machine ({what})\nc_deg,z_mm,dev_um\n"
     );
     for [c, z] in grinder_points() {
         let v = dev(c, z) + GAUGE_NOISE_UM * normal(rng);
@@ -197,7 +202,7 @@ pub fn campaign(seed: u64) -> Vec<(&'static str, String)> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let rb = BALL_DIAMETER_MM / 2.0;
     let head = |what: &str, cols: &str| {
-        format!("# generator: trueaxis simulate --scenario on-machine ({what})\n# seed: {seed}\n{cols}\n")
+        format!("# generator: trueaxis simulate, scenario on-machine ({what})\n# seed: {seed}\n{cols}\n")
     };
     // 2-D ball: 401 contacts over 10°…170° in XZ, ball at (100, 50).
     let mut ball = head("master ball, XZ arc, probe centre at contact", "x_mm,z_mm");
@@ -347,6 +352,9 @@ pub fn truth(seed: u64) -> Truth {
         reversal_slide_pv_um: pv(detrend(&xs, &s).into_iter()),
         three_probe_angles_deg: THREE_PROBE_ANGLES_DEG,
         roundness_pv_um: pv((0..3600).map(|i| roundness_um((i as f64 / 10.0).to_radians()))),
+        spindle_error_motion_um: pv(
+            (0..3600).map(|i| spindle_xy_um((i as f64 / 10.0).to_radians())[0])
+        ),
         multi_step_steps: STEPS,
         removal_efficiency: REMOVAL_EFFICIENCY,
         grinder_form_pv_um: pv(g.iter().map(|q| grinder_form_um(q[0], q[1]) - mean)),

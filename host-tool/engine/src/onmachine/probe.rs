@@ -37,7 +37,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::linalg::lsq;
 
+pub mod robust;
 pub mod sphere;
+
+pub use robust::Outlier;
 
 /// Format tag of a probe file.
 pub const PROBE_FORMAT: &str = "trueaxis-probe/1";
@@ -79,6 +82,10 @@ pub struct ProbeFile {
     pub held_out_rms_nm: Vec<[f64; 2]>,
     /// Points in the calibration.
     pub points: usize,
+    /// The resolution the ball scan's coordinates were written at, mm,
+    /// when coarser than 10⁻⁷ mm: no interval above is below it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quantum_mm: Option<f64>,
 }
 
 impl ProbeFile {
@@ -152,12 +159,15 @@ fn wrap_deg(d: f64) -> f64 {
 /// The form order chosen by held-out RMS, shared by the 2-D and 3-D
 /// calibrations: each order of `orders` is fitted (`fit(train rows,
 /// order)` → the residual of every point, mm) on 4 of the 5 folds
-/// (`fold[i]` ∈ 0…4) and scored on the fifth; an order whose fit fails on a
-/// fold is not scored. Returns the held-out RMS per order, nm, and the
-/// smallest order within 2 % of the best (0 when none was scored).
+/// (`fold[i]` ∈ 0…4) and scored on the fifth, each held-out residual's
+/// square at most `clip`² (mm: one contact cannot decide); an order whose
+/// fit fails on a fold is not scored. Returns the held-out RMS per order,
+/// nm, and the smallest order within 2 % of the best (0 when none was
+/// scored).
 pub(crate) fn choose_order(
     orders: impl Iterator<Item = usize>,
     fold: &[usize],
+    clip: f64,
     fit: impl Fn(&[usize], usize) -> Result<Vec<f64>>,
 ) -> (Vec<(usize, f64)>, usize) {
     let mut held: Vec<(usize, f64)> = Vec::new();
@@ -169,7 +179,7 @@ pub(crate) fn choose_order(
                 continue 'orders;
             };
             for i in (0..fold.len()).filter(|&i| fold[i] == k) {
-                ss += resid[i] * resid[i];
+                ss += (resid[i] * resid[i]).min(clip * clip);
                 n += 1;
             }
         }
@@ -305,24 +315,101 @@ pub struct Calibration {
     pub pv_with_form_nm: f64,
     /// Problems with the calibration data.
     pub warnings: Vec<String>,
+    /// Contacts far off the ball (robust/outliers), named.
+    pub outliers: Vec<Outlier>,
+}
+
+/// The highest form order `n` contacts support.
+fn max_order(n: usize) -> usize {
+    MAX_ORDER.min((n / 10).saturating_sub(3) / 2 + 1)
 }
 
 /// Calibrates a probe on a master ball of radius `ball_radius_mm` from the
-/// probe-centre positions `p` (mm) of a 2-D scan in one plane.
+/// probe-centre positions `p` (mm) of a 2-D scan in one plane, outlier
+/// contacts left out ([`calibrate_with`]).
 pub fn calibrate(p: &[[f64; 2]], ball_radius_mm: f64) -> Result<Calibration> {
+    calibrate_with(p, ball_radius_mm, false)
+}
+
+/// [`calibrate`], the outlier contacts found against the most flexible
+/// form ([`robust::flag`]) named and — unless `keep_outliers` — left out
+/// before anything else is fitted; a coordinate quantum found in the scan
+/// is the floor of every interval.
+pub fn calibrate_with(
+    p: &[[f64; 2]],
+    ball_radius_mm: f64,
+    keep_outliers: bool,
+) -> Result<Calibration> {
     if !(ball_radius_mm.is_finite() && ball_radius_mm > 0.0) {
         bail!("the master ball radius must be a positive number of mm, got {ball_radius_mm}");
     }
     if p.len() < 12 {
         bail!("{} points on the ball; a calibration needs at least 12 (a few hundred along the arc for a form error)", p.len());
     }
+    let q = robust::quantum(p.iter().flatten().copied());
+    let floor = q.map_or(0.0, |q| q / 12f64.sqrt());
     let start = kasa(p)?;
+    // Each contact against its neighbours in angle (robust::flag).
+    let (rigid, theta) = rigid_fit(p, start)?;
+    let near = robust::nearest(p.len(), |i, j| {
+        let d = (theta[i] - theta[j]).rem_euclid(2.0 * PI);
+        d.min(2.0 * PI - d)
+    });
+    let (flagged, cut) = robust::flag(&rigid.resid, &near, floor);
+    let used: Vec<[f64; 2]> = (0..p.len())
+        .filter(|i| keep_outliers || !flagged.contains(i))
+        .map(|i| p[i])
+        .collect();
+    let mut cal = calibrate_points(&used, ball_radius_mm, cut)?;
+    let pr = &cal.probe;
+    cal.outliers = flagged
+        .iter()
+        .map(|&i| {
+            let (dx, dz) = (p[i][0] - pr.centre_mm[0], p[i][1] - pr.centre_mm[1]);
+            let d = dx.hypot(dz) - pr.ball_radius_mm - pr.probe_radius_mm;
+            Outlier {
+                index: i,
+                residual_nm: d * 1e6 - pr.form_nm_at(dz.atan2(dx)),
+                left_out: !keep_outliers,
+            }
+        })
+        .collect();
+    let pr = &mut cal.probe;
+    let said = robust::Resolution {
+        quantum_mm: &mut pr.quantum_mm,
+        radius_ci95_mm: &mut pr.probe_radius_ci95_mm,
+        form_ci95_nm: &mut pr.form_ci95_nm,
+        residual_rms_nm: pr.residual_rms_nm,
+    }
+    .apply(q);
+    cal.warnings.extend(said);
+    Ok(cal)
+}
+
+/// The ball's centre and radius alone fitted to all of `p`, and each
+/// contact's angle from that centre.
+fn rigid_fit(p: &[[f64; 2]], start: ([f64; 2], f64)) -> Result<(Fit, Vec<f64>)> {
     let all: Vec<usize> = (0..p.len()).collect();
     let rigid = fit_order(p, &all, 0, start)?;
-    let theta: Vec<f64> = p
+    let theta = p
         .iter()
         .map(|q| (q[1] - rigid.centre[1]).atan2(q[0] - rigid.centre[0]))
         .collect();
+    Ok((rigid, theta))
+}
+
+/// The calibration proper on the contacts `p` kept; `clip` (mm) bounds
+/// one held-out residual's say in the order.
+fn calibrate_points(p: &[[f64; 2]], ball_radius_mm: f64, clip: f64) -> Result<Calibration> {
+    if p.len() < 12 {
+        bail!(
+            "{} points on the ball besides the outliers; a calibration needs at least 12",
+            p.len()
+        );
+    }
+    let start = kasa(p)?;
+    let all: Vec<usize> = (0..p.len()).collect();
+    let (rigid, theta) = rigid_fit(p, start)?;
     // The arc, as the smallest interval of angles covering the points
     // (wrapped so that an arc through ±180° stays one interval).
     let mut deg: Vec<f64> = theta.iter().map(|t| t.to_degrees()).collect();
@@ -352,11 +439,11 @@ pub fn calibrate(p: &[[f64; 2]], ball_radius_mm: f64) -> Result<Calibration> {
         let block = ((d / arc.max(1e-9)) * 20.0).floor().clamp(0.0, 19.0) as usize;
         block % 5
     };
-    let max_order = MAX_ORDER.min((p.len() / 10).saturating_sub(3) / 2 + 1);
     let folds: Vec<usize> = (0..p.len()).map(fold_of).collect();
     let (held, order) = choose_order(
-        std::iter::once(0).chain(2..=max_order),
+        std::iter::once(0).chain(2..=max_order(p.len())),
         &folds,
+        clip,
         |train, order| Ok(fit_order(p, train, order, start)?.resid),
     );
     let fit = fit_order(p, &all, order, start)?;
@@ -384,11 +471,14 @@ pub fn calibrate(p: &[[f64; 2]], ball_radius_mm: f64) -> Result<Calibration> {
     });
     let proj = lsq::solve(&rig, &DVector::from_vec(raw.clone()), None)?;
     let form_rigid_nm = [proj.coef[0], proj.coef[1], proj.coef[2]];
-    // Radius and centre take the removed part (nm → mm).
+    // Radius and centre take the removed part (nm → mm): moving the
+    // centre by δ changes each distance by −δ·n, so the first harmonic
+    // `c1 cos θ + s1 sin θ` left out of the form is a centre further by
+    // (c1, s1).
     let total_radius = fit.total_radius + form_rigid_nm[0] * 1e-6;
     let centre = [
-        fit.centre[0] - form_rigid_nm[1] * 1e-6,
-        fit.centre[1] - form_rigid_nm[2] * 1e-6,
+        fit.centre[0] + form_rigid_nm[1] * 1e-6,
+        fit.centre[1] + form_rigid_nm[2] * 1e-6,
     ];
     // The radius's interval in this parameterisation (form orthogonal to
     // radius and centre): the rigid columns alone at the final centre,
@@ -414,6 +504,7 @@ pub fn calibrate(p: &[[f64; 2]], ball_radius_mm: f64) -> Result<Calibration> {
         residual_rms_nm: 0.0,
         held_out_rms_nm: held.iter().map(|&(o, v)| [o as f64, v]).collect(),
         points: p.len(),
+        quantum_mm: None,
     };
     if probe.probe_radius_mm <= 0.0 {
         bail!(
@@ -444,7 +535,22 @@ pub fn calibrate(p: &[[f64; 2]], ball_radius_mm: f64) -> Result<Calibration> {
         theta_deg: thetas.iter().map(|t| t.to_degrees()).collect(),
         probe,
         warnings,
+        outliers: Vec::new(),
     })
+}
+
+/// Which way the part's surface faces where the probe touches it — the
+/// outward normal, from the material toward the probe.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Side {
+    /// Roughly this direction in the plane (`[0, 1]`: probed from above,
+    /// +z); each normal is the centre path's, turned toward it.
+    Toward([f64; 2]),
+    /// Away from the centre of the circle the scan lies on: a boss or a
+    /// shaft probed from outside, all round or along an arc.
+    Out,
+    /// Toward that centre: a bore probed from inside.
+    In,
 }
 
 /// One corrected contact of a workpiece scan.
@@ -461,10 +567,9 @@ pub struct Contact {
 }
 
 /// Corrects a workpiece scan (probe-centre positions `p`, mm, in scan
-/// order) with `probe`. `side` is the outward direction of the part's
-/// surface where the probe touches it, roughly (`[0, 1]`: the probe is
-/// above, +z): it orients the normals.
-pub fn correct(probe: &ProbeFile, p: &[[f64; 2]], side: [f64; 2]) -> Result<Vec<Contact>> {
+/// order) with `probe`. `side` says which way the part's surface faces
+/// where the probe touches it: it orients the normals.
+pub fn correct(probe: &ProbeFile, p: &[[f64; 2]], side: Side) -> Result<Vec<Contact>> {
     correct_with(p, side, probe.probe_radius_mm, |t| {
         probe.covers(t).then(|| probe.form_nm_at(t))
     })
@@ -477,7 +582,7 @@ pub fn correct(probe: &ProbeFile, p: &[[f64; 2]], side: [f64; 2]) -> Result<Vec<
 /// [`sphere::Probe3d::in_plane`].
 pub fn correct_with(
     p: &[[f64; 2]],
-    side: [f64; 2],
+    side: Side,
     r: f64,
     form: impl Fn(f64) -> Option<f64>,
 ) -> Result<Vec<Contact>> {
@@ -485,15 +590,38 @@ pub fn correct_with(
 }
 
 /// The outward normals of the probe-centre path `p` (the tangency
-/// relation: the part's normal at the contact is the centre path's),
-/// oriented towards `side`, from each point's neighbours.
-pub fn path_normals(p: &[[f64; 2]], side: [f64; 2]) -> Result<Vec<[f64; 2]>> {
+/// relation: the part's normal at the contact is the centre path's):
+/// toward [`Side::Toward`]'s direction from each point's neighbours, or —
+/// a circle probed from outside or inside ([`Side::Out`], [`Side::In`]) —
+/// along the radius of the least-squares circle through the centres,
+/// exact at every point of a full circle, where no one direction could
+/// orient them.
+pub fn path_normals(p: &[[f64; 2]], side: Side) -> Result<Vec<[f64; 2]>> {
     if p.len() < 3 {
         bail!(
             "{} points; a scan needs at least 3 to take normals from",
             p.len()
         );
     }
+    let side = match side {
+        Side::Toward(d) => d,
+        Side::Out | Side::In => {
+            let (c, _) = kasa(p)?;
+            let s = if side == Side::Out { 1.0 } else { -1.0 };
+            return p
+                .iter()
+                .enumerate()
+                .map(|(i, q)| {
+                    let (dx, dz) = (q[0] - c[0], q[1] - c[1]);
+                    let l = dx.hypot(dz);
+                    if l.is_nan() || l <= 0.0 {
+                        bail!("point {} of the scan is the centre of its circle", i + 1);
+                    }
+                    Ok([s * dx / l, s * dz / l])
+                })
+                .collect();
+        }
+    };
     let mut out = Vec::with_capacity(p.len());
     for i in 0..p.len() {
         let (a, b) = (p[i.saturating_sub(1)], p[(i + 1).min(p.len() - 1)]);
@@ -565,7 +693,7 @@ pub fn form_deviation_nm(s: &[[f64; 2]], circle: bool) -> Result<Vec<f64>> {
     }
 }
 
-pub use crate::separate::pv;
+pub use crate::onmachine::separate::pv;
 
 /// `theta` in the convention of the module, from degrees.
 pub fn rad(deg: f64) -> f64 {
@@ -577,199 +705,27 @@ pub fn rad(deg: f64) -> f64 {
 /// probe-centre position per row (docs/on-machine.md). Other columns are
 /// ignored. Errors name the file, line and column.
 pub fn read_scan(text: &str, name: &str, plane: [&str; 2]) -> Result<Vec<[f64; 2]>> {
+    Ok(read_scan_lines(text, name, plane)?.0)
+}
+
+/// [`read_scan`], and each point's line in the text.
+pub fn read_scan_lines(
+    text: &str,
+    name: &str,
+    plane: [&str; 2],
+) -> Result<(Vec<[f64; 2]>, Vec<usize>)> {
     let cols = [format!("{}_mm", plane[0]), format!("{}_mm", plane[1])];
-    crate::import::read_columns(
+    let rows = crate::import::read_table(
         text,
         name,
-        [cols[0].as_str(), cols[1].as_str()],
+        &[cols[0].as_str(), cols[1].as_str()],
         &format!("the probe centre in the {}{} plane", plane[0], plane[1]),
-    )
+    )?;
+    Ok((
+        rows.iter().map(|r| [r[0], r[1]]).collect(),
+        rows.iter().map(|r| r[2] as usize).collect(),
+    ))
 }
 
 #[cfg(test)]
-mod tests {
-    /// Issue 16: the nominal surface's normals, when the scan gives them,
-    /// place the contacts exactly where the centre path's chord normals
-    /// cannot: 7 contacts 30° apart on a 2 mm part (probe 0.5 mm) — the end
-    /// points' one-sided chords tilt their normals by 15°, 17 µm off the
-    /// part; along the nominal normals every contact is on it (< 1 nm).
-    #[test]
-    fn nominal_normals_place_a_coarse_scans_contacts_exactly() {
-        let (rp, rb) = (2.0, 0.5);
-        let angles: Vec<f64> = (0..7).map(|k| (30.0 * k as f64).to_radians()).collect();
-        let centres: Vec<[f64; 2]> = angles
-            .iter()
-            .map(|t| [(rp + rb) * t.cos(), (rp + rb) * t.sin()])
-            .collect();
-        let nominal: Vec<[f64; 2]> = angles.iter().map(|t| [t.cos(), t.sin()]).collect();
-        let off = |c: &[Contact]| {
-            c.iter()
-                .map(|c| ((c.surface_mm[0].hypot(c.surface_mm[1]) - rp) * 1e6).abs())
-                .fold(0.0, f64::max)
-        };
-        let exact = contacts_along(&centres, &nominal, rb, |_| Some(0.0)).unwrap();
-        assert!(off(&exact) < 1.0, "{} nm", off(&exact));
-        let chord = correct_with(&centres, [0.0, 1.0], rb, |_| Some(0.0)).unwrap();
-        assert!(off(&chord) > 10_000.0, "{} nm", off(&chord));
-        // Fewer than three points: only given normals can place them.
-        assert!(contacts_along(&centres[..2], &nominal[..2], rb, |_| None).is_ok());
-        assert!(correct_with(&centres[..2], [0.0, 1.0], rb, |_| None).is_err());
-        assert!(contacts_along(&centres, &nominal[..2], rb, |_| None).is_err());
-    }
-
-    use super::*;
-    use trueaxis_test_support::SplitMix64;
-
-    /// The seed's case: a 0.49715 mm probe with ~175 nm PV of form error
-    /// on a 2 mm master ball, 401 contacts over 10°…170°, 5 nm noise.
-    fn ball_scan(seed: u64) -> (Vec<[f64; 2]>, impl Fn(f64) -> f64) {
-        let form =
-            |t: f64| 60.0 * (3.0 * t).cos() + 35.0 * (5.0 * t).sin() - 20.0 * (2.0 * t).cos();
-        let mut rng = SplitMix64(seed);
-        let (r_ball, r_probe, c) = (2.0, 0.49715, [12.5, -3.0]);
-        let p = (0..=400)
-            .map(|i| {
-                let t = rad(10.0 + 160.0 * i as f64 / 400.0);
-                let d = r_ball + r_probe + (form(t) + 5.0 * rng.normal()) * 1e-6;
-                [c[0] + d * t.cos(), c[1] + d * t.sin()]
-            })
-            .collect();
-        (p, form)
-    }
-
-    #[test]
-    fn a_master_ball_scan_gives_the_probe_radius_and_its_form() {
-        let (p, form) = ball_scan(1);
-        let cal = calibrate(&p, 2.0).unwrap();
-        let pr = &cal.probe;
-        assert!(
-            (pr.probe_radius_mm - 0.49715).abs() < 3e-6,
-            "{}",
-            pr.probe_radius_mm
-        );
-        assert!(
-            pr.probe_radius_ci95_mm < 3e-6,
-            "{}",
-            pr.probe_radius_ci95_mm
-        );
-        assert!(
-            pr.order >= 4 && pr.order < MAX_ORDER,
-            "order {} {:?}",
-            pr.order,
-            pr.held_out_rms_nm
-        );
-        assert!(
-            (pr.residual_rms_nm - 5.0).abs() < 1.0,
-            "{}",
-            pr.residual_rms_nm
-        );
-        // The recovered form matches the true one once both are made
-        // orthogonal to radius and centre over the arc.
-        let t: Vec<f64> = (0..=160).map(|d| rad(10.0 + d as f64)).collect();
-        let truth: Vec<f64> = t.iter().map(|&x| form(x)).collect();
-        let rig = DMatrix::from_fn(t.len(), 3, |i, j| [1.0, t[i].cos(), t[i].sin()][j]);
-        let proj = lsq::solve(&rig, &DVector::from_vec(truth.clone()), None).unwrap();
-        // The radius in the same convention: the true one plus the mean
-        // part of the form.
-        let r_true = 0.49715 + proj.coef[0] * 1e-6;
-        assert!(
-            (pr.probe_radius_mm - r_true).abs() < 2e-6,
-            "{} vs {r_true}",
-            pr.probe_radius_mm
-        );
-        let worst = t
-            .iter()
-            .zip(&truth)
-            .map(|(&x, &f)| {
-                let true_perp = f - proj.coef[0] - proj.coef[1] * x.cos() - proj.coef[2] * x.sin();
-                (pr.form_nm_at(x) - true_perp).abs()
-            })
-            .fold(0.0f64, f64::max);
-        assert!(worst < 6.0, "form recovered to {worst} nm");
-        // 175 → ~noise PV on the ball, as in the seed (175 → 27 nm).
-        assert!(cal.pv_without_form_nm > 150.0, "{}", cal.pv_without_form_nm);
-        assert!(cal.pv_with_form_nm < 40.0, "{}", cal.pv_with_form_nm);
-    }
-
-    #[test]
-    fn a_ball_without_form_error_gets_no_form_term() {
-        let mut rng = SplitMix64(7);
-        let p: Vec<[f64; 2]> = (0..=300)
-            .map(|i| {
-                let t = rad(20.0 + 140.0 * i as f64 / 300.0);
-                let d = 2.5 + 0.5 + 5.0 * rng.normal() * 1e-6;
-                [d * t.cos(), d * t.sin()]
-            })
-            .collect();
-        let cal = calibrate(&p, 2.5).unwrap();
-        assert!(
-            cal.probe.order <= 3,
-            "order {} chosen for pure noise",
-            cal.probe.order
-        );
-        assert!(cal.probe.form_pv_nm < 15.0, "{}", cal.probe.form_pv_nm);
-    }
-
-    #[test]
-    fn a_short_arc_is_warned_and_a_wrong_ball_refused() {
-        let (p, _) = ball_scan(2);
-        let short: Vec<[f64; 2]> = p[..150].to_vec(); // 10°…70°
-        let cal = calibrate(&short, 2.0).unwrap();
-        assert!(
-            cal.warnings
-                .iter()
-                .any(|w| w.contains("scan at least 120°")),
-            "{:?}",
-            cal.warnings
-        );
-        let e = calibrate(&p, 3.0).unwrap_err();
-        assert!(format!("{e}").contains("not above the master ball"), "{e}");
-    }
-
-    #[test]
-    fn a_workpiece_scan_is_corrected_to_its_true_form() {
-        let (p, form) = ball_scan(3);
-        let probe = calibrate(&p, 2.0).unwrap().probe;
-        // A part: a 20 mm radius arc with a 4-lobe form of 150 nm, scanned
-        // over its top 30°…150° by the same probe (no noise).
-        let lobes = |t: f64| 150.0 * (4.0 * t).cos();
-        let mut centres = Vec::new();
-        let mut truth = Vec::new();
-        for i in 0..=600 {
-            let t = rad(30.0 + 120.0 * i as f64 / 600.0);
-            let surf = 20.0 + lobes(t) * 1e-6;
-            truth.push([surf * t.cos(), surf * t.sin()]);
-            // The lobes tilt the normal by < 1e-7 rad: the contact angle is
-            // t to far below a nm of form.
-            let d = surf + 0.49715 + form(t) * 1e-6;
-            centres.push([d * t.cos(), d * t.sin()]);
-        }
-        let c = correct(&probe, &centres, [0.0, 1.0]).unwrap();
-        let s: Vec<[f64; 2]> = c.iter().map(|k| k.surface_mm).collect();
-        let pv_true = pv(&form_deviation_nm(&truth, true).unwrap());
-        let pv_corr = pv(&form_deviation_nm(&s, true).unwrap());
-        // Radius only (no form correction): the probe's lobing shows up.
-        let radius_only: Vec<[f64; 2]> = centres
-            .iter()
-            .zip(&c)
-            .map(|(q, k)| {
-                let t = rad(k.theta_deg);
-                [q[0] - 0.49715 * t.cos(), q[1] - 0.49715 * t.sin()]
-            })
-            .collect();
-        let pv_raw = pv(&form_deviation_nm(&radius_only, true).unwrap());
-        assert!(
-            (pv_corr - pv_true).abs() < 15.0,
-            "true {pv_true}, corrected {pv_corr}"
-        );
-        assert!(
-            (pv_raw - pv_true).abs() > 40.0,
-            "true {pv_true}, uncorrected {pv_raw}"
-        );
-        assert!(c.iter().all(|k| k.calibrated));
-        // Beyond the calibrated arc the form is not extrapolated.
-        let below: Vec<[f64; 2]> = (0..10).map(|i| [i as f64, 0.0]).collect();
-        let c = correct(&probe, &below, [0.0, -1.0]).unwrap();
-        assert!(c.iter().all(|k| !k.calibrated && k.form_nm == 0.0));
-    }
-}
+mod tests;

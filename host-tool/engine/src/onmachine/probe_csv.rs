@@ -4,11 +4,13 @@
 //! columns that say how each reading was taken: `c_deg` (rotation angle of
 //! a turned part), `orientation_deg` (0 or 180 for a reversal run),
 //! `step_deg` (a multi-step position), `probe_no` (multi-probe runs),
-//! `probe_id`, the surface normal `normal_x/y/z` and `contact_deg`. The
+//! `probe_id`, the surface normal `normal_x/y/z` and `contact_deg`; time
+//! as `t_s` seconds or a `time` column of clock times. The
 //! on-machine commands read one session of it as the small scan file they
 //! read otherwise ([`ProbeTable::small`] writes that file's text), so both
 //! ways give the same numbers. Values are checked here, where the line and
-//! column are known.
+//! column are known. The file is recognised by its columns
+//! ([`is_probe_csv`]); without `session_id` it is one session.
 
 use anyhow::{bail, Result};
 
@@ -31,8 +33,24 @@ pub const COLUMNS: [&str; 15] = [
     "contact_deg",
 ];
 
-/// Whether `text` is a measurement CSV with probe data: its header names
-/// `session_id` and `d_um` (the small scan files have neither).
+/// Columns no small scan file has: any one of them makes a file a probe
+/// measurement CSV.
+const CAMPAIGN_ONLY: [&str; 8] = [
+    "session_id",
+    "orientation_deg",
+    "probe_no",
+    "probe_id",
+    "normal_x",
+    "normal_y",
+    "normal_z",
+    "contact_deg",
+];
+
+/// Whether `text` is a measurement CSV with probe data, by its columns: a
+/// header with any of `session_id`, `orientation_deg`, `probe_no`,
+/// `probe_id`, `normal_x/y/z`, `contact_deg`, or with the reading `d_um`
+/// beside a rotation (`c_deg`, `step_deg`) — columns the small scan files
+/// never hold together.
 pub fn is_probe_csv(text: &str) -> bool {
     let head: Vec<&str> = text
         .trim_start_matches('\u{feff}')
@@ -40,7 +58,8 @@ pub fn is_probe_csv(text: &str) -> bool {
         .find(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#'))
         .map(|l| l.split(',').map(str::trim).collect())
         .unwrap_or_default();
-    head.contains(&"session_id") && head.contains(&"d_um")
+    let has = |c: &str| head.contains(&c);
+    CAMPAIGN_ONLY.iter().any(|c| has(c)) || (has("d_um") && (has("c_deg") || has("step_deg")))
 }
 
 /// One row: the value of each of [`COLUMNS`] (`None`: no such column or an
@@ -94,7 +113,11 @@ fn limit(c: &str) -> (f64, &'static str) {
 pub fn read(text: &str, name: &str) -> Result<ProbeTable> {
     let mut cols: Option<Vec<Option<usize>>> = None;
     let mut rows = Vec::new();
-    for (ln, _, cells) in super::data_lines(text) {
+    // A `time` column of clock times (when there is no `t_s`): each row's
+    // cell, turned into seconds from the first once all are read.
+    let mut time_col: Option<usize> = None;
+    let mut clock_cells: Vec<(usize, usize, String)> = Vec::new();
+    for (ln, _, cells) in crate::import::data_lines(text) {
         let Some(c) = &cols else {
             let mut map = vec![None; COLUMNS.len()];
             for (j, cell) in cells.iter().enumerate() {
@@ -105,9 +128,18 @@ pub fn read(text: &str, name: &str) -> Result<ProbeTable> {
                     map[k] = Some(j);
                 }
             }
+            if map[4].is_none() {
+                time_col = cells.iter().position(|c| *c == "time");
+            }
             cols = Some(map);
             continue;
         };
+        if let Some(j) = time_col {
+            let cell = cells.get(j).copied().unwrap_or("");
+            if !cell.is_empty() {
+                clock_cells.push((rows.len(), ln, cell.to_string()));
+            }
+        }
         let mut v = [None; 15];
         let mut probe_id = None;
         for (k, col) in COLUMNS.iter().enumerate() {
@@ -178,10 +210,48 @@ pub fn read(text: &str, name: &str) -> Result<ProbeTable> {
     if cols.is_none() {
         bail!("{name}: no header line");
     }
+    if let Some(j) = time_col {
+        let refs: Vec<(usize, &str)> = clock_cells
+            .iter()
+            .map(|(_, l, c)| (*l, c.as_str()))
+            .collect();
+        let secs = crate::onmachine::clock::seconds(&refs, name, j + 1)?;
+        for ((i, _, _), t) in clock_cells.iter().zip(secs) {
+            rows[*i].v[4] = Some(t);
+        }
+    }
     Ok(ProbeTable {
         name: name.to_string(),
         rows,
     })
+}
+
+/// A file of several sessions read without saying which. Its text names
+/// the choice in the engine's words; a caller with a flag for it writes
+/// [`SessionNeeded::text`] with the flag.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{}", self.text("the session's number"))]
+pub struct SessionNeeded {
+    /// The file's name in messages.
+    pub file: String,
+    /// Its sessions, in order of appearance.
+    pub sessions: Vec<i64>,
+}
+
+impl SessionNeeded {
+    /// The message, the choice of session called `how`.
+    pub fn text(&self, how: &str) -> String {
+        format!(
+            "{}: {} sessions ({}): say which with {how}",
+            self.file,
+            self.sessions.len(),
+            self.sessions
+                .iter()
+                .map(|v| v.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    }
 }
 
 /// Which small scan file a session is read as.
@@ -222,9 +292,19 @@ impl ProbeTable {
         s
     }
 
-    /// The rows of `session`; `None` when the file holds one session.
+    /// The rows of `session`; `None` when the file holds one session (a
+    /// file without `session_id` is one).
     pub fn select(&self, session: Option<i64>) -> Result<Vec<&ProbeRow>> {
         let all = self.sessions();
+        if all.is_empty() {
+            return match session {
+                None => Ok(self.rows.iter().collect()),
+                Some(s) => bail!(
+                    "{}: no session {s} (the file has no `session_id` column: it is one session)",
+                    self.name
+                ),
+            };
+        }
         let s = match session {
             Some(s) if all.contains(&s) => s,
             Some(s) => bail!(
@@ -236,15 +316,13 @@ impl ProbeTable {
                     .join(", ")
             ),
             None if all.len() == 1 => all[0],
-            None => bail!(
-                "{}: {} sessions ({}): say which with --session",
-                self.name,
-                all.len(),
-                all.iter()
-                    .map(|v| v.to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
+            None => {
+                return Err(SessionNeeded {
+                    file: self.name.clone(),
+                    sessions: all,
+                }
+                .into())
+            }
         };
         Ok(self
             .rows
@@ -341,19 +419,41 @@ impl ProbeTable {
             }
             Small::Straightness(axis, o) => {
                 let pos = format!("{axis}_mm");
-                out.push_str(&format!("{pos},d_um{}\n", if timed { ",t_s" } else { "" }));
-                for r in &rows {
-                    let ori = r
-                        .get("orientation_deg")
-                        .map_or(0, |v| v.rem_euclid(360.0).round() as u16);
-                    if ori != o {
-                        continue;
+                let mine: Vec<&&ProbeRow> = rows
+                    .iter()
+                    .filter(|r| {
+                        r.get("orientation_deg")
+                            .map_or(0, |v| v.rem_euclid(360.0).round() as u16)
+                            == o
+                    })
+                    .collect();
+                // A touch-trigger probe gives positions, not readings: the
+                // other position columns the rows hold take `d_um`'s place.
+                let reading: Vec<String> = if mine.iter().all(|r| r.get("d_um").is_some()) {
+                    vec!["d_um".into()]
+                } else {
+                    ["x_mm", "y_mm", "z_mm"]
+                        .into_iter()
+                        .filter(|c| *c != pos && mine.iter().any(|r| r.get(c).is_some()))
+                        .map(String::from)
+                        .collect()
+                };
+                if reading.is_empty() {
+                    bail!(
+                        "{}: no `d_um` reading and no touch position besides `{pos}` in the {o}° run",
+                        self.name
+                    );
+                }
+                out.push_str(&format!(
+                    "{pos},{}{}\n",
+                    reading.join(","),
+                    if timed { ",t_s" } else { "" }
+                ));
+                for r in mine {
+                    out.push_str(&num(need(r, &pos)?));
+                    for c in &reading {
+                        out.push_str(&format!(",{}", num(need(r, c)?)));
                     }
-                    out.push_str(&format!(
-                        "{},{}",
-                        num(need(r, &pos)?),
-                        num(need(r, "d_um")?)
-                    ));
                     if timed {
                         out.push_str(&format!(",{}", num(need(r, "t_s")?)));
                     }
@@ -373,34 +473,32 @@ impl ProbeTable {
                     }
                     per[k - 1].push((need(r, "c_deg")?, need(r, "d_um")?));
                 }
-                if per[1].len() != per[0].len() || per[2].len() != per[0].len() {
-                    bail!(
-                        "{}: probes 1, 2, 3 have {}, {} and {} readings: each must read the same angles",
-                        self.name,
-                        per[0].len(),
-                        per[1].len(),
-                        per[2].len()
-                    );
-                }
                 out.push_str("c_deg,p1_um,p2_um,p3_um\n");
-                for (i, ((a, b), d)) in per[0].iter().zip(&per[1]).zip(&per[2]).enumerate() {
-                    if b.0 != a.0 || d.0 != a.0 {
-                        bail!(
-                            "{}: reading {} of probes 1, 2, 3 is at different angles ({}, {}, {}°)",
-                            self.name,
-                            i + 1,
-                            a.0,
-                            b.0,
-                            d.0
-                        );
+                let same = per[1].len() == per[0].len()
+                    && per[2].len() == per[0].len()
+                    && (0..per[0].len())
+                        .all(|i| per[1][i].0 == per[0][i].0 && per[2][i].0 == per[0][i].0);
+                if same {
+                    // The three probes side by side, as a spindle
+                    // analyser's row holds them.
+                    for ((a, b), d) in per[0].iter().zip(&per[1]).zip(&per[2]) {
+                        out.push_str(&format!(
+                            "{},{},{},{}\n",
+                            num(a.0),
+                            num(a.1),
+                            num(b.1),
+                            num(d.1)
+                        ));
                     }
-                    out.push_str(&format!(
-                        "{},{},{},{}\n",
-                        num(a.0),
-                        num(a.1),
-                        num(b.1),
-                        num(d.1)
-                    ));
+                } else {
+                    // Each probe at its own angles: a row per reading, the
+                    // other probes' cells empty (resampled by angle).
+                    for r in &rows {
+                        let k = need(r, "probe_no")? as usize;
+                        let mut cells = vec![String::new(); 3];
+                        cells[k - 1] = num(need(r, "d_um")?);
+                        out.push_str(&format!("{},{}\n", num(need(r, "c_deg")?), cells.join(",")));
+                    }
                 }
             }
             Small::MultiStep => {
@@ -468,11 +566,11 @@ mod tests {
             t.small(Some(2), Small::Positions).unwrap(),
             "x_mm,z_mm\n1.5,2.5\n"
         );
-        assert!(t
-            .small(None, Small::Positions)
-            .unwrap_err()
-            .to_string()
-            .contains("--session"));
+        let e = t.small(None, Small::Positions).unwrap_err();
+        assert_eq!(
+            e.downcast_ref::<SessionNeeded>().unwrap().sessions,
+            vec![1, 2]
+        );
         // Session 1 has no z: named by its line.
         let e = t.small(Some(1), Small::Workpiece).unwrap_err().to_string();
         assert!(e.contains("c.csv:3: no `c_deg`"), "{e}");

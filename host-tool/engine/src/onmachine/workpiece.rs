@@ -275,7 +275,7 @@ pub fn fit(p: &[Point], warnings: &mut Vec<String>) -> Result<Form> {
         .map(|(c, z)| form.at(c, z))
         .collect();
     let mean = grid.iter().sum::<f64>() / grid.len() as f64;
-    form.form_pv_um = crate::separate::pv(&grid);
+    form.form_pv_um = crate::onmachine::separate::pv(&grid);
     form.form_rms_um =
         (grid.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / grid.len() as f64).sqrt();
     if h >= 1 {
@@ -301,13 +301,27 @@ pub enum Dialect {
     Siemens,
 }
 
+/// A pass grid that cannot be walked: a C step outside (0, 90]° or no Z
+/// step. Its text names the Z step count in the engine's words; a caller
+/// with a flag for it writes [`PassGridError::text`] with the flag.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{}", PassGridError::text("a Z step count"))]
+pub struct PassGridError;
+
+impl PassGridError {
+    /// The message, the Z step count called `z_steps`.
+    pub fn text(z_steps: &str) -> String {
+        format!("the C step must be in (0, 90]° and the Z stations at least 2 ({z_steps} ≥ 1)")
+    }
+}
+
 /// The points of the correction pass `[c_deg, z_mm]`: at each of
 /// `z_steps + 1` stations along the measured length, a closed turn (0° …
 /// 360°) in steps of about `c_step_deg` (360° divided evenly). The G-code
 /// and the CSV of the pass both walk it.
 pub fn pass_points(form: &Form, c_step_deg: f64, z_steps: usize) -> Result<Vec<[f64; 2]>> {
     if !(c_step_deg > 0.0 && c_step_deg <= 90.0) || z_steps == 0 {
-        bail!("the C step must be in (0, 90]° and the Z stations at least 2 (--z-steps ≥ 1)");
+        return Err(PassGridError.into());
     }
     let [z0, z1] = form.z_range_mm;
     let steps = (360.0 / c_step_deg).round() as usize;
@@ -422,7 +436,7 @@ mod tests {
             .iter()
             .map(|q| q.dev_um + correction_um(&f, q.c_deg, q.z_mm))
             .collect();
-        let pv = crate::separate::pv;
+        let pv = crate::onmachine::separate::pv;
         let before: Vec<f64> = p.iter().map(|q| q.dev_um).collect();
         assert!(
             pv(&before) > 10.0 && pv(&after) < 0.01,

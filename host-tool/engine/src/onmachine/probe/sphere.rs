@@ -87,6 +87,10 @@ pub struct Probe3d {
     pub held_out_rms_nm: Vec<[f64; 2]>,
     /// Points in the calibration.
     pub points: usize,
+    /// The resolution the ball scan's coordinates were written at, mm,
+    /// when coarser than 10⁻⁷ mm: no interval above is below it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quantum_mm: Option<f64>,
 }
 
 impl Probe3d {
@@ -196,6 +200,12 @@ fn algebraic(p: &[[f64; 3]]) -> Result<([f64; 3], f64)> {
     Ok((c, r2.sqrt()))
 }
 
+/// [`dir`] for the wing's tests.
+#[cfg(test)]
+pub(crate) fn tests_dir(p: [f64; 3], c: [f64; 3]) -> ([f64; 3], f64) {
+    dir(p, c)
+}
+
 fn dir(p: [f64; 3], c: [f64; 3]) -> ([f64; 3], f64) {
     let d = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
     let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
@@ -290,17 +300,90 @@ pub struct Calibration3d {
     pub pv_with_form_nm: f64,
     /// Problems with the calibration data.
     pub warnings: Vec<String>,
+    /// Contacts far off the ball, named (`super::robust`).
+    pub outliers: Vec<super::Outlier>,
+}
+
+/// The degrees `n` contacts support: 0, then 2… while every coefficient
+/// has at least 10 contacts.
+fn degrees(n: usize) -> impl Iterator<Item = usize> {
+    std::iter::once(0)
+        .chain(2..=MAX_DEGREE)
+        .take_while(move |&d| (4 + form_terms(d.max(1)).len()) * 10 <= n)
 }
 
 /// Calibrates a probe on a master ball of radius `ball_radius_mm` from the
-/// probe-centre positions `p` (mm) of a 3-D scan over the ball.
+/// probe-centre positions `p` (mm) of a 3-D scan over the ball, outlier
+/// contacts left out ([`calibrate_with`]).
 pub fn calibrate(p: &[[f64; 3]], ball_radius_mm: f64) -> Result<Calibration3d> {
+    calibrate_with(p, ball_radius_mm, false)
+}
+
+/// [`calibrate`], the outlier contacts found against the most flexible
+/// form named and — unless `keep_outliers` — left out before anything
+/// else is fitted; a coordinate quantum is the floor of every interval (as
+/// the 2-D calibration, `super::calibrate_with`).
+pub fn calibrate_with(
+    p: &[[f64; 3]],
+    ball_radius_mm: f64,
+    keep_outliers: bool,
+) -> Result<Calibration3d> {
     if !(ball_radius_mm.is_finite() && ball_radius_mm > 0.0) {
         bail!("the master ball radius must be a positive number of mm, got {ball_radius_mm}");
     }
     if p.len() < 20 {
         bail!(
             "{} points on the ball; a 3-D calibration needs at least 20 (a few hundred over the ball for a form error)",
+            p.len()
+        );
+    }
+    let q = super::robust::quantum(p.iter().flatten().copied());
+    let floor = q.map_or(0.0, |q| q / 12f64.sqrt());
+    let start = algebraic(p)?;
+    // Each contact against its neighbours in direction (robust::flag).
+    let all: Vec<usize> = (0..p.len()).collect();
+    let rigid = fit_degree(p, &all, 0, start)?;
+    let dirs: Vec<[f64; 3]> = p.iter().map(|&q| dir(q, rigid.centre).0).collect();
+    let near = super::robust::nearest(p.len(), |i, j| {
+        let (a, b) = (dirs[i], dirs[j]);
+        (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
+    });
+    let (flagged, cut) = super::robust::flag(&rigid.resid, &near, floor);
+    let used: Vec<[f64; 3]> = (0..p.len())
+        .filter(|i| keep_outliers || !flagged.contains(i))
+        .map(|i| p[i])
+        .collect();
+    let mut cal = calibrate_points(&used, ball_radius_mm, cut)?;
+    let pr = &cal.probe;
+    cal.outliers = flagged
+        .iter()
+        .map(|&i| {
+            let (n, d) = dir(p[i], pr.centre_mm);
+            super::Outlier {
+                index: i,
+                residual_nm: (d - pr.ball_radius_mm - pr.probe_radius_mm) * 1e6 - pr.form_nm_at(n),
+                left_out: !keep_outliers,
+            }
+        })
+        .collect();
+    let pr = &mut cal.probe;
+    let said = super::robust::Resolution {
+        quantum_mm: &mut pr.quantum_mm,
+        radius_ci95_mm: &mut pr.probe_radius_ci95_mm,
+        form_ci95_nm: &mut pr.form_ci95_nm,
+        residual_rms_nm: pr.residual_rms_nm,
+    }
+    .apply(q);
+    cal.warnings.extend(said);
+    Ok(cal)
+}
+
+/// The calibration proper on the contacts `p` kept; `clip` (mm) bounds
+/// one held-out residual's say in the degree.
+fn calibrate_points(p: &[[f64; 3]], ball_radius_mm: f64, clip: f64) -> Result<Calibration3d> {
+    if p.len() < 20 {
+        bail!(
+            "{} points on the ball besides the outliers; a 3-D calibration needs at least 20",
             p.len()
         );
     }
@@ -360,10 +443,7 @@ pub fn calibrate(p: &[[f64; 3]], ball_radius_mm: f64) -> Result<Calibration3d> {
             (ring + sector) % 5
         })
         .collect();
-    let degrees = std::iter::once(0)
-        .chain(2..=MAX_DEGREE)
-        .take_while(|&d| (4 + form_terms(d.max(1)).len()) * 10 <= p.len());
-    let (held, degree) = super::choose_order(degrees, &fold, |train, d| {
+    let (held, degree) = super::choose_order(degrees(p.len()), &fold, clip, |train, d| {
         Ok(fit_degree(p, train, d, start)?.resid)
     });
     let fit = fit_degree(p, &all, degree, start)?;
@@ -391,9 +471,11 @@ pub fn calibrate(p: &[[f64; 3]], ball_radius_mm: f64) -> Result<Calibration3d> {
     let form_rigid_nm = [proj.coef[0], proj.coef[1], proj.coef[2], proj.coef[3]];
     let total_radius = fit.total_radius + form_rigid_nm[0] * 1e-6;
     let centre = [
-        fit.centre[0] - form_rigid_nm[1] * 1e-6,
-        fit.centre[1] - form_rigid_nm[2] * 1e-6,
-        fit.centre[2] - form_rigid_nm[3] * 1e-6,
+        // As in 2-D: the degree-1 part left out of the form is a centre
+        // further by (cx, cy, cz).
+        fit.centre[0] + form_rigid_nm[1] * 1e-6,
+        fit.centre[1] + form_rigid_nm[2] * 1e-6,
+        fit.centre[2] + form_rigid_nm[3] * 1e-6,
     ];
     // The radius's interval with the form orthogonal to it: the rigid
     // columns at the final centre, the full model's residual as the noise.
@@ -420,10 +502,11 @@ pub fn calibrate(p: &[[f64; 3]], ball_radius_mm: f64) -> Result<Calibration3d> {
         residual_rms_nm: 0.0,
         held_out_rms_nm: held.iter().map(|&(d, v)| [d as f64, v]).collect(),
         points: p.len(),
+        quantum_mm: None,
     };
     if degree >= 2 {
         let f: Vec<f64> = dirs.iter().map(|&n| probe.form_nm_at(n)).collect();
-        probe.form_pv_nm = crate::separate::pv(&f);
+        probe.form_pv_nm = crate::onmachine::separate::pv(&f);
     } else {
         warnings.push(
             "no form error term is supported by held-out data: the probe is calibrated as a sphere of the fitted radius".into(),
@@ -434,26 +517,33 @@ pub fn calibrate(p: &[[f64; 3]], ball_radius_mm: f64) -> Result<Calibration3d> {
         (resid_nm.iter().map(|v| v * v).sum::<f64>() / resid_nm.len() as f64).sqrt();
     let without: Vec<f64> = rigid.resid.iter().map(|v| v * 1e6).collect();
     Ok(Calibration3d {
-        pv_without_form_nm: crate::separate::pv(&without),
-        pv_with_form_nm: crate::separate::pv(&resid_nm),
+        pv_without_form_nm: crate::onmachine::separate::pv(&without),
+        pv_with_form_nm: crate::onmachine::separate::pv(&resid_nm),
         residual_nm: resid_nm,
         probe,
         warnings,
+        outliers: Vec::new(),
     })
 }
 
 /// Reads a 3-D probe scan: `x_mm,y_mm,z_mm` columns (others ignored), `#`
 /// comments; errors name the file, line and column.
 pub fn read_scan(text: &str, name: &str) -> Result<Vec<[f64; 3]>> {
-    Ok(crate::import::read_table(
+    Ok(read_scan_lines(text, name)?.0)
+}
+
+/// [`read_scan`], and each point's line in the text.
+pub fn read_scan_lines(text: &str, name: &str) -> Result<(Vec<[f64; 3]>, Vec<usize>)> {
+    let rows = crate::import::read_table(
         text,
         name,
         &["x_mm", "y_mm", "z_mm"],
         "the probe centre in 3-D",
-    )?
-    .into_iter()
-    .map(|r| [r[0], r[1], r[2]])
-    .collect())
+    )?;
+    Ok((
+        rows.iter().map(|r| [r[0], r[1], r[2]]).collect(),
+        rows.iter().map(|r| r[3] as usize).collect(),
+    ))
 }
 
 #[cfg(test)]
@@ -527,7 +617,7 @@ mod tests {
             })
             .collect();
         let fitted: Vec<f64> = dirs.iter().map(|&n| pr.form_nm_at(n)).collect();
-        let pv_true = crate::separate::pv(&true_perp);
+        let pv_true = crate::onmachine::separate::pv(&true_perp);
         assert!(
             (pr.form_pv_nm - pv_true).abs() < 10.0,
             "form PV {} vs {pv_true}",
@@ -607,14 +697,17 @@ mod tests {
             let d = surf + 0.49715 + form([t.cos(), 0.0, t.sin()]) * 1e-6;
             centres.push([d * t.cos(), d * t.sin()]);
         }
-        let c = crate::probe::correct_with(&centres, [0.0, 1.0], pr.probe_radius_mm, |t| {
-            pr.in_plane([0, 2], t)
-        })
+        let c = crate::onmachine::probe::correct_with(
+            &centres,
+            crate::onmachine::probe::Side::Toward([0.0, 1.0]),
+            pr.probe_radius_mm,
+            |t| pr.in_plane([0, 2], t),
+        )
         .unwrap();
         assert!(c.iter().all(|k| k.calibrated));
         let s: Vec<[f64; 2]> = c.iter().map(|k| k.surface_mm).collect();
-        let dev = crate::probe::form_deviation_nm(&s, true).unwrap();
-        let dev_true = crate::probe::form_deviation_nm(&truth, true).unwrap();
+        let dev = crate::onmachine::probe::form_deviation_nm(&s, true).unwrap();
+        let dev_true = crate::onmachine::probe::form_deviation_nm(&truth, true).unwrap();
         let worst = dev
             .iter()
             .zip(&dev_true)
@@ -631,7 +724,7 @@ mod tests {
                 [q[0] - 0.49715 * t.cos(), q[1] - 0.49715 * t.sin()]
             })
             .collect();
-        let dev0 = crate::probe::form_deviation_nm(&radius_only, true).unwrap();
+        let dev0 = crate::onmachine::probe::form_deviation_nm(&radius_only, true).unwrap();
         let worst0 = dev0
             .iter()
             .zip(&dev_true)
