@@ -3,11 +3,11 @@
 //! `trueaxis` binary crate). Layered bottom-up — a module imports only from
 //! the layers below it:
 //!
-//! data → features → effect / linalg / lines / regions → holdout → model →
+//! data → features → effect / linalg / lines / regions → holdout / travel → model →
 //! fit → diagnose / compare / export / history / iso230 → improve → (the
 //! CLI's commands). `import` (files ↔ data sets) and `units` (units the
-//! data probably do not have) sit beside `data`, and so do `warning` and
-//! `progress`, which import nothing;
+//! data probably do not have) sit beside `data`, and so do `warning`,
+//! `progress` and `files`, which import nothing;
 //! `simulate` makes data sets from `features`' thermal lag and is imported
 //! by no engine module.
 //!
@@ -19,8 +19,10 @@
 //! - `effect`: the `--add` grammar as types — Family, Target, Axis, EffectSpec, Effect.
 //! - `warning`: the one warning type (code + detail) every result carries.
 //! - `progress`: the one progress event type long computations emit; the caller renders it.
+//! - `files`: every output file written whole or not at all (temporary file, sync, rename) and one writer at a time (a lock file).
 //! - `linalg`: the linear algebra — least squares with rank and conditioning checks (`lsq`), diagnose's basis and small fits (`basis`), Brent's minimisation (`brent`).
 //! - `holdout`: block-held-out validation (spatial blocks, not random rows).
+//! - `travel`: the travel a model is fitted on — the user's, or the data's bulk — and the rows outside it.
 //! - `lines`: lines and planes of a measurement plan (compare's plots, diagnose's periodic search).
 //! - `regions`: where a residual concentrates — one region type and binning for compare and diagnose.
 //! - `model`: the saved model file and its evaluation.
@@ -42,6 +44,7 @@ pub mod diagnose;
 pub mod effect;
 pub mod export;
 pub mod features;
+pub mod files;
 pub mod fit;
 pub mod history;
 pub mod holdout;
@@ -57,6 +60,7 @@ pub mod progress;
 pub mod regions;
 pub mod separate;
 pub mod simulate;
+pub mod travel;
 pub mod units;
 pub mod warning;
 pub mod workpiece;

@@ -9,6 +9,7 @@ use trueaxis_engine::fit::FitError;
 use trueaxis_engine::import::{ImportError, LoadError, Needs};
 use trueaxis_engine::iso230::{axis_names, AxisChoice};
 use trueaxis_engine::simulate::{BadSpikes, ConfigError, Setting};
+use trueaxis_engine::travel::TravelError;
 
 /// `e` with its causes, as `{e:#}` writes it (`outer: inner: root`), each
 /// typed engine error in the command line's words.
@@ -53,6 +54,19 @@ fn words(e: &(dyn std::error::Error + 'static)) -> Option<String> {
             }
             ConfigError::Setting { setting, range } => {
                 format!("{} = {range}", setting_flag(*setting))
+            }
+        });
+    }
+    if let Some(t) = e.downcast_ref::<TravelError>() {
+        return Some(match t {
+            TravelError::Empty { axis, lo, hi } => {
+                format!("--travel {axis}={lo}..{hi}: empty (expected finite LO ≤ HI)")
+            }
+            TravelError::NoAxis { axis } => {
+                format!("--travel {axis}: the data has no {axis}_mm column")
+            }
+            TravelError::NothingInside { axis, lo, hi } => {
+                format!("every row lies outside --travel {axis}={lo}..{hi}")
             }
         });
     }
