@@ -16,6 +16,7 @@ use anyhow::{Context, Result};
 
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::import;
+use trueaxis_engine::model::ModelFile;
 use trueaxis_engine::warning::Warning;
 
 /// The JSON key with the number of rows left out on load.
@@ -72,6 +73,17 @@ pub fn skipped_note(data: &Dataset) -> Option<String> {
     ))
 }
 
+/// Reads a MODEL.json as every command does (`ModelFile::load_noting`):
+/// checked whole, its checksum included; a file without one loads with a
+/// note on stderr (docs/cli.md § fit, MODEL.json).
+pub fn load_model(path: &Path) -> Result<ModelFile> {
+    let (model, note) = ModelFile::load_noting(path)?;
+    if let Some(note) = note {
+        eprintln!("{note}");
+    }
+    Ok(model)
+}
+
 /// Reads the table file at `path` for the board: a valid table
 /// (model-core's parser) that the board's own limits admit
 /// (`model_core::board`: staging buffer, model capacity, loop budget) —
@@ -105,8 +117,8 @@ pub fn aux_warnings(data: &Dataset) -> Vec<Warning> {
     let mut other = Vec::new();
     for c in &data.aux {
         match import::probable_column(&c.name) {
-            Some(known) => meant.push(format!("`{}` (probably `{known}`)", c.name)),
-            None => other.push(format!("`{}`", c.name)),
+            Some(known) => meant.push(format!("`{}` (probably `{known}`)", import::shown(&c.name))),
+            None => other.push(format!("`{}`", import::shown(&c.name))),
         }
     }
     let mut w = Vec::new();

@@ -99,7 +99,10 @@ fn main() -> ExitCode {
         // more output, which is not a failure (cmd/out.rs).
         Err(e) if cmd::out::is_stdout_closed(&e) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", cmd::flags::render(&e));
+            // Whatever an input slipped into the message, no control
+            // character reaches the terminal (docs/cli.md).
+            let msg = trueaxis_engine::import::escape_controls(&cmd::flags::render(&e));
+            eprintln!("error: {msg}");
             // Under --json stdout carries one document, an error too.
             if json {
                 cmd::out::json_error(&e, 1);

@@ -47,7 +47,7 @@ pub fn model_spec(model: &str) -> Result<(Seed, Vec<EffectSpec>)> {
     let (seed, adds) = if model.ends_with(".json") || Path::new(model).is_file() {
         // Read and checked as every command reads a MODEL.json: a damaged
         // file is refused here too, not half-used.
-        let m = ModelFile::load(model)?;
+        let m = input::load_model(Path::new(model))?;
         (m.seed, m.adds)
     } else {
         (model.to_string(), Vec::new())
@@ -210,11 +210,12 @@ pub fn max_corr_refusal(e: &MaxCorrError) -> String {
     }
 }
 
+/// Writes an output file whole or not at all (`files::write`: a
+/// temporary file beside it, synced, then renamed; the directory made when
+/// missing) — every command's `-o` and report goes through here or
+/// `files::write_with`.
 pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    }
-    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
+    trueaxis_engine::files::write(path, bytes)
 }
 
 /// What to run on a data file just written (`simulate`, `import`), as it

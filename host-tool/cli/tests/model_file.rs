@@ -8,6 +8,11 @@
 //!
 //! And what `fit` writes still loads: every kind, on 3-D grid data, on data
 //! where only x varies (y, z constant), and on data without y_mm/z_mm.
+//!
+//! A file whose content is not what `fit` wrote — a flipped bit that
+//! leaves every field valid — is refused by its checksum (16 of 300
+//! single-bit flips used to export a different table with exit 0); a file
+//! without one (an older trueaxis) loads with a note.
 
 mod common;
 
@@ -32,9 +37,12 @@ fn fit(csv: &Path, spec: &str, extra: &[&str], model: &Path) -> PathBuf {
     model.to_path_buf()
 }
 
-/// Writes `model`, changed by `edit`, to `dst`.
+/// Writes `model`, changed by `edit`, to `dst` — as a deliberate edit
+/// does, without the checksum (docs/cli.md § fit, MODEL.json), so that
+/// what is checked is the edited field.
 fn damaged(model: &Path, dst: &Path, edit: impl FnOnce(&mut Value)) -> PathBuf {
     let mut v: Value = serde_json::from_str(&std::fs::read_to_string(model).unwrap()).unwrap();
+    v.as_object_mut().unwrap().remove("checksum_sha256");
     edit(&mut v);
     std::fs::write(dst, serde_json::to_string_pretty(&v).unwrap()).unwrap();
     dst.to_path_buf()
@@ -413,4 +421,100 @@ fn a_non_finite_prediction_fails_export() {
         ],
     );
     assert!(!bin.exists());
+}
+
+#[test]
+fn every_single_bit_flip_is_refused_or_changes_nothing() {
+    let dir = tmp_dir("model-file", "flips");
+    let csv = simulate_grid(&dir, "g.csv", 5);
+    let model = fit(
+        &csv,
+        "cubic19",
+        &["--add", "periodic:target=ey,axis=y,period_mm=7.3"],
+        &dir.join("m.json"),
+    );
+    let original = ModelFile::load(&model).unwrap();
+    let bytes = std::fs::read(&model).unwrap();
+    let flipped = dir.join("flipped.json");
+    let mut rng = trueaxis_test_support::SplitMix64(25);
+    let (mut refused, mut same) = (0, 0);
+    for _ in 0..600 {
+        let mut b = bytes.clone();
+        let at = rng.int(0, b.len() as i64 - 1) as usize;
+        b[at] ^= 1 << rng.int(0, 7);
+        std::fs::write(&flipped, &b).unwrap();
+        match ModelFile::load(&flipped) {
+            Err(e) => {
+                let e = format!("{e:#}");
+                assert!(e.contains(s(&flipped)), "the file is named: {e}");
+                refused += 1;
+            }
+            // What still loads is the model that was written (`1e5` →
+            // `1E5`, a flip in the checksum's own key), never another.
+            Ok(m) => {
+                assert_eq!(m, original, "byte {at} flipped: a different model loaded");
+                same += 1;
+            }
+        }
+    }
+    assert_eq!(refused + same, 600);
+    assert!(refused > same, "{refused} refused, {same} unchanged");
+    // The words, through every reader, for a flip in a number that leaves
+    // the file valid JSON with every field valid.
+    let text = std::fs::read_to_string(&model).unwrap();
+    let at = text.find("\"coef_um\": [").unwrap() + 20;
+    let digit = text[at..].find(|c: char| c.is_ascii_digit() && c != '9').unwrap() + at;
+    let mut b = text.into_bytes();
+    b[digit] += 1;
+    std::fs::write(&flipped, &b).unwrap();
+    let msg = format!(
+        "{}: damaged: its content does not match its checksum",
+        flipped.display()
+    );
+    let bin = dir.join("t.bin");
+    expect_exit(&["export", s(&flipped), "-o", s(&bin)], 1, &[&msg]);
+    assert!(!bin.exists());
+    expect_exit(&["compare", s(&csv), "--model", s(&flipped)], 1, &[&msg]);
+    expect_exit(&["diagnose", s(&csv), "--model", s(&flipped)], 1, &[&msg]);
+}
+
+#[test]
+fn a_model_file_without_a_checksum_loads_with_a_note() {
+    let dir = tmp_dir("model-file", "old");
+    let csv = simulate_grid(&dir, "g.csv", 6);
+    let model = dir.join("m.json");
+    fit_cubic19(&csv, &model);
+    let text = std::fs::read_to_string(&model).unwrap();
+    assert!(text.trim_end().ends_with('}'));
+    let last = text.rfind(",\n  \"checksum_sha256\"").expect("the checksum is the last field");
+    let old = dir.join("old.json");
+    std::fs::write(&old, format!("{}\n}}\n", &text[..last])).unwrap();
+    assert_eq!(ModelFile::load(&old).unwrap(), ModelFile::load(&model).unwrap());
+    let out = run(&["export", s(&old), "-o", s(&dir.join("t.bin")), "--json"]);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    json(&out);
+    assert!(
+        err.contains(&format!(
+            "note: {} has no checksum (written by an older trueaxis, or edited by hand): it loads unchecked — refit it to have one",
+            old.display()
+        )),
+        "{err}"
+    );
+    // The table is the same as from the checked file.
+    let checked = dir.join("c.bin");
+    json(&run_env_export(&model, &checked));
+    json(&run_env_export(&old, &dir.join("o.bin")));
+    assert_eq!(
+        std::fs::read(&checked).unwrap(),
+        std::fs::read(dir.join("o.bin")).unwrap()
+    );
+}
+
+/// `export MODEL -o OUT --json` at a fixed creation time (the same model
+/// gives the same bytes).
+fn run_env_export(model: &Path, out: &Path) -> std::process::Output {
+    common::run_env(
+        &["export", s(model), "-o", s(out), "--json"],
+        &[("SOURCE_DATE_EPOCH", "1700000000")],
+    )
 }

@@ -18,6 +18,7 @@ use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
 use crate::effect::EffectSpec;
+use crate::files::{self, Lock, LOCK_WAIT};
 
 /// Format tag of a history file.
 pub const HISTORY_FORMAT: &str = "trueaxis-history/1";
@@ -101,10 +102,10 @@ pub fn load(model_path: &Path) -> Result<History> {
 /// history of `model_path` by the rules at the top of this module, writes
 /// it, and returns it.
 pub fn record_step(model_path: &Path, step: Step) -> Result<History> {
+    let _lock = Lock::acquire(model_path, LOCK_WAIT)?;
     let h = next(model_path, step)?;
-    let p = history_path(model_path);
     let text = serde_json::to_string_pretty(&h)?;
-    std::fs::write(&p, text + "\n").with_context(|| format!("cannot write {}", p.display()))?;
+    files::write(&history_path(model_path), (text + "\n").as_bytes())?;
     Ok(h)
 }
 
@@ -172,8 +173,12 @@ fn next(model_path: &Path, mut step: Step) -> Result<History> {
 /// history is worked out first (a damaged history file stops here, before
 /// anything is written), both files are written in full to temporary files
 /// beside them, and only then renamed over the old ones, so a failed write
-/// leaves the old model and history as they were.
+/// leaves the old model and history as they were (`files::write_all`).
+/// One writer at a time: the model's lock (`files::Lock`) is held from
+/// reading the history to the last rename, so two fits to one model at
+/// once record both their steps, one after the other.
 pub fn save_with_model(model_path: &Path, model: &crate::model::ModelFile) -> Result<History> {
+    let _lock = Lock::acquire(model_path, LOCK_WAIT)?;
     let h = next(
         model_path,
         Step {
@@ -187,38 +192,12 @@ pub fn save_with_model(model_path: &Path, model: &crate::model::ModelFile) -> Re
             data_sha256: model.data.sha256.clone(),
         },
     )?;
-    let hist = history_path(model_path);
-    let files = [
-        (
-            model_path.to_path_buf(),
-            serde_json::to_string_pretty(model)?,
-        ),
-        (hist, serde_json::to_string_pretty(&h)?),
-    ];
-    let tmp = |p: &Path| {
-        let mut name = p.file_name().unwrap_or_default().to_os_string();
-        name.push(format!(".tmp-{}", std::process::id()));
-        p.with_file_name(name)
-    };
-    let mut written = Vec::new();
-    for (p, text) in &files {
-        let t = tmp(p);
-        if let Err(e) = std::fs::write(&t, format!("{text}\n")) {
-            let _ = std::fs::remove_file(&t);
-            for w in &written {
-                let _ = std::fs::remove_file(w);
-            }
-            return Err(anyhow::Error::new(e).context(format!(
-                "cannot write {} — nothing was written",
-                p.display()
-            )));
-        }
-        written.push(t);
-    }
-    for ((p, _), t) in files.iter().zip(&written) {
-        std::fs::rename(t, p)
-            .with_context(|| format!("cannot write {} (renaming {})", p.display(), t.display()))?;
-    }
+    let model_text = model.to_json()?;
+    let history_text = serde_json::to_string_pretty(&h)? + "\n";
+    files::write_all(&[
+        (model_path, model_text.as_bytes()),
+        (&history_path(model_path), history_text.as_bytes()),
+    ])?;
     Ok(h)
 }
 
@@ -276,6 +255,69 @@ mod tests {
             held_out_rms_um: [("ex".to_string(), rms * 1.1)].into(),
             data_sha256: sha.into(),
         }
+    }
+
+    /// A small fitted model (cubic19 on a line).
+    fn model() -> crate::model::ModelFile {
+        let n = 20;
+        let data = crate::data::Dataset {
+            source: "line.csv".into(),
+            pos_mm: [Some((0..n).map(|i| i as f64 * 10.0).collect()), None, None],
+            err_um: [
+                Some((0..n).map(|i| Some((i as f64 * 0.3).sin())).collect()),
+                None,
+                None,
+            ],
+            ..Default::default()
+        };
+        crate::fit::fit(&data, "cubic19", &[], &Default::default()).unwrap()
+    }
+
+    #[test]
+    fn concurrent_saves_to_one_model_lose_no_step() {
+        // Every save keeps all effects of any other (the same eight, each
+        // in its own order), so each appends a step whatever the order:
+        // one writer at a time, 8 threads × 6 saves give 48 steps. Without
+        // the lock two saves read the same history and the later rename
+        // loses the earlier's step (1 of 40 `fit -o` pairs in the issue).
+        let dir =
+            std::env::temp_dir().join(format!("trueaxis-history-race-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let m = dir.join("model.json");
+        let base = model();
+        let effects: Vec<String> = (1..=8)
+            .map(|p| format!("periodic:target=ex,axis=x,period_mm={p}"))
+            .collect();
+        let (threads, saves) = (8, 6);
+        std::thread::scope(|s| {
+            for t in 0..threads {
+                let (m, base, effects) = (&m, &base, &effects);
+                s.spawn(move || {
+                    for j in 0..saves {
+                        let mut mf = base.clone();
+                        // A distinct order per save: rotate by t, swap j.
+                        let mut adds = effects.clone();
+                        adds.rotate_left(t);
+                        adds.swap(0, 1 + j);
+                        mf.adds = adds;
+                        save_with_model(m, &mf).unwrap();
+                    }
+                });
+            }
+        });
+        let h = load(&m).unwrap();
+        assert_eq!(h.steps.len(), threads * saves);
+        let saved = crate::model::ModelFile::load(&m).unwrap();
+        assert_eq!(saved.adds, h.steps.last().unwrap().adds);
+        // Nothing left behind: no temporary file, no lock.
+        let mut left: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(left, ["model.history.json", "model.json"]);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -215,6 +215,9 @@ pub struct Improvement {
     /// Readings left out of every fit as outliers, found with the final
     /// model (empty with `keep_outliers`).
     pub outliers: Vec<Outlier>,
+    /// Rows left out of every fit because they lie outside the travel
+    /// (`crate::travel`), with the final model's miss at each.
+    pub outside_travel: Vec<crate::travel::OutsideRow>,
     /// What the last diagnosis held back as aliasing-suspect (the last
     /// step's `held_back`): why the loop stopped short of it and the dense
     /// line to measure.
@@ -224,7 +227,8 @@ pub struct Improvement {
 /// Runs the loop on `data`, writing each fit to `out` (and its history);
 /// `on_step` sees each step as it completes (for printing). Outliers are
 /// found with each step's model and left out of its fit and diagnosis
-/// (`diagnose::outliers`) unless `keep_outliers`.
+/// (`diagnose::outliers`) unless `keep_outliers`; rows outside the data's
+/// bulk (`crate::travel`) are left out of everything.
 pub fn improve(
     data: &Dataset,
     seed: Seed,
@@ -232,28 +236,41 @@ pub fn improve(
     keep_outliers: bool,
     on_step: impl FnMut(&ImproveStep),
 ) -> Result<Improvement> {
-    improve_with(data, seed, out, keep_outliers, on_step, &Sink::none())
+    improve_with(
+        data,
+        seed,
+        out,
+        keep_outliers,
+        &[None; 3],
+        on_step,
+        &Sink::none(),
+    )
 }
 
 /// [`improve`], telling `progress` what it is doing (each step's fit and
 /// diagnosis, [`Event::Improve`], and the diagnosis' own events, as
 /// [`diagnose::diagnose_with`] sends them). `on_step` is no progress: it
-/// gets each step's result.
+/// gets each step's result. `travel` is the travel given per axis (else
+/// the data's bulk, `crate::travel`): rows outside it are left out of
+/// every fit and diagnosis and recorded in each model.
 pub fn improve_with(
-    data: &Dataset,
+    file_data: &Dataset,
     seed: Seed,
     out: &std::path::Path,
     keep_outliers: bool,
+    travel: &crate::travel::Limits,
     mut on_step: impl FnMut(&ImproveStep),
     progress: &Sink,
 ) -> Result<Improvement> {
+    let screen = crate::travel::screen(file_data, travel)?;
+    let data = &*screen.inside(file_data);
     let mut adds: Vec<EffectSpec> = Vec::new();
     let mut steps = Vec::new();
     let mut added: Vec<AddedEffect> = Vec::new();
     // Every step's model was fitted to the measurement file, whichever
     // readings the screen left out at that step: the history follows the
     // file, whose hash is the same at every step.
-    let sha256 = crate::import::content_hash(data);
+    let sha256 = crate::import::content_hash(file_data);
     loop {
         let effects: Vec<Effect> = adds.iter().cloned().map(Effect::new).collect();
         let k = steps.len() + 1;
@@ -272,13 +289,14 @@ pub fn improve_with(
         };
         let clean = outliers::without(data, &found);
         // `fit` takes the `--model` text (it records it as given).
-        let model = fit::fit_recorded(
+        let mut model = fit::fit_recorded(
             &clean,
             &seed.to_string(),
             &effects,
             &FitOptions::default(),
             || sha256.clone(),
         )?;
+        fit::record_outside(&mut model, file_data, &screen);
         history::save_with_model(out, &model)?;
         progress.emit(&Event::Improve {
             step: k,
@@ -371,7 +389,14 @@ pub fn improve_with(
                     .filter(|w| DESIGN_WARNINGS.contains(&w.code.as_str()))
                     .cloned()
                     .collect(),
-                outliers: found,
+                outliers: found
+                    .into_iter()
+                    .map(|o| Outlier {
+                        row: screen.file_row(o.row),
+                        ..o
+                    })
+                    .collect(),
+                outside_travel: model.data.outside_travel.clone(),
             });
         }
     }

@@ -3,11 +3,11 @@
 //! `trueaxis` binary crate). Layered bottom-up — a module imports only from
 //! the layers below it:
 //!
-//! data → features → effect / linalg / lines / regions → holdout → model →
+//! data → features → effect / linalg / lines / regions → holdout / travel → model →
 //! fit → diagnose / compare / export / history / iso230 → improve → (the
 //! CLI's commands). `import` (files ↔ data sets) and `units` (units the
-//! data probably do not have) sit beside `data`, and so do `warning` and
-//! `progress`, which import nothing;
+//! data probably do not have) sit beside `data`, and so do `warning`,
+//! `progress` and `files`, which import nothing;
 //! `simulate` makes data sets from the effect families' simulated forms
 //! and is imported by no engine module.
 //!
@@ -25,8 +25,10 @@
 //! - `effect`: effects as types, one file per family (keys, columns, words, physical parameter, simulated form) — Family, Target, Axis, EffectSpec, Effect, and the one `key=value` grammar.
 //! - `warning`: the one warning type (code + detail) every result carries.
 //! - `progress`: the one progress event type long computations emit; the caller renders it.
+//! - `files`: every output file written whole or not at all (temporary file, sync, rename) and one writer at a time (a lock file).
 //! - `linalg`: the linear algebra — least squares with rank and conditioning checks (`lsq`), diagnose's basis and small fits (`basis`), Brent's minimisation (`brent`).
 //! - `holdout`: block-held-out validation (spatial blocks, not random rows).
+//! - `travel`: the travel a model is fitted on — the user's, or the data's bulk — and the rows outside it.
 //! - `lines`: lines and planes of a measurement plan (compare's plots, diagnose's periodic search).
 //! - `regions`: where a residual concentrates — one region type and binning for compare and diagnose.
 //! - `model`: the saved model file and its evaluation.
@@ -45,6 +47,7 @@ pub mod diagnose;
 pub mod effect;
 pub mod export;
 pub mod features;
+pub mod files;
 pub mod fit;
 pub mod history;
 pub mod holdout;
@@ -58,5 +61,6 @@ pub mod onmachine;
 pub mod progress;
 pub mod regions;
 pub mod simulate;
+pub mod travel;
 pub mod units;
 pub mod warning;

@@ -12,7 +12,6 @@ use crate::cmd::out::{self, outln};
 use crate::input;
 use crate::workflow::run_compare;
 use trueaxis_engine::compare::{self, Comparison};
-use trueaxis_engine::model::ModelFile;
 
 /// Arguments of `trueaxis compare`.
 #[derive(clap::Args, Debug)]
@@ -139,7 +138,7 @@ pub fn text(c: &Comparison) -> String {
 impl Args {
     pub fn run(self) -> Result<()> {
         let data = input::load_data(&self.data, None)?;
-        let model = ModelFile::load(&self.model)?;
+        let model = crate::input::load_model(&self.model)?;
         let sources = crate::report::compare::Sources {
             data: &self.data,
             model: &self.model,

@@ -168,9 +168,9 @@ impl Demo {
         cfg.check()?;
         let data = simulate::simulate(&cfg);
         let path = self.data_csv();
-        let file = std::fs::File::create(&path)
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        trueaxis_engine::import::write_csv(&data, std::io::BufWriter::new(file))?;
+        trueaxis_engine::files::write_with(&path, |w| {
+            trueaxis_engine::import::write_csv(&data, w)
+        })?;
         Ok(data)
     }
 
@@ -205,8 +205,7 @@ impl Demo {
             model: &mj,
         };
         let c = crate::workflow::run_compare(data, model, Some(report), Some(sources))?;
-        std::fs::write(json, serde_json::to_string_pretty(&c)? + "\n")
-            .with_context(|| format!("cannot write {}", json.display()))?;
+        crate::workflow::write_file(json, (serde_json::to_string_pretty(&c)? + "\n").as_bytes())?;
         Ok(c)
     }
 
@@ -231,8 +230,10 @@ impl Demo {
             ..TableOptions::default()
         };
         let e = crate::workflow::export_table(model, &self.table_bin(), &opts, 1.0)?;
-        std::fs::write(self.table_json(), serde_json::to_string_pretty(&e)? + "\n")
-            .with_context(|| format!("cannot write {}", self.table_json().display()))?;
+        crate::workflow::write_file(
+            &self.table_json(),
+            (serde_json::to_string_pretty(&e)? + "\n").as_bytes(),
+        )?;
         Ok(e)
     }
 

@@ -172,24 +172,6 @@ fn parse_mesh_points(s: &str) -> Result<[usize; 2]> {
     }
 }
 
-fn parse_range(s: &str, what: &str) -> Result<(f64, f64)> {
-    let (a, b) = s
-        .split_once("..")
-        .with_context(|| format!("{what} `{s}`: expected LO..HI"))?;
-    let lo: f64 = a
-        .trim()
-        .parse()
-        .with_context(|| format!("{what} `{s}`: `{a}` is not a number"))?;
-    let hi: f64 = b
-        .trim()
-        .parse()
-        .with_context(|| format!("{what} `{s}`: `{b}` is not a number"))?;
-    if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
-        bail!("{what} `{s}`: expected finite LO ≤ HI");
-    }
-    Ok((lo, hi))
-}
-
 /// The table's creation time: `SOURCE_DATE_EPOCH` when set (the
 /// reproducible-builds convention: the same model then gives the same bytes
 /// and CRC), else now.
@@ -315,14 +297,22 @@ impl Args {
             &[("the model file", &self.model)],
             &[("-o", &self.output)],
         )?;
-        let model = ModelFile::load(&self.model)?;
-        let (doc, warnings, text) = match self.format {
+        let model = crate::input::load_model(&self.model)?;
+        let (mut doc, mut warnings, text) = match self.format {
             Format::Table => self.table(&model)?,
             Format::Linuxcnc => self.controller(&model, Controller::Linuxcnc)?,
             Format::Sinumerik => self.controller(&model, Controller::Sinumerik)?,
             Format::RrfHeightmap => self.mesh(&model, MeshFormat::RrfHeightmap)?,
             Format::KlipperMesh => self.mesh(&model, MeshFormat::KlipperMesh)?,
         };
+        // Rows the model was fitted without (outside its travel): every
+        // format says so, first.
+        if let Some(w) = trueaxis_engine::export::outside_travel(&model) {
+            if let Some(list) = doc["warnings"].as_array_mut() {
+                list.insert(0, serde_json::to_value(&w)?);
+            }
+            warnings.insert(0, w);
+        }
         for w in &warnings {
             eprintln!("warning ({}): {}", w.code, w.detail);
         }
@@ -356,12 +346,12 @@ impl Args {
             temp_range_c: self
                 .temp_range_c
                 .as_deref()
-                .map(|s| parse_range(s, "--temp-range-c"))
+                .map(|s| crate::cmd::parse_range(s, "--temp-range-c"))
                 .transpose()?,
             tool_range_mm: self
                 .tool_range_mm
                 .as_deref()
-                .map(|s| parse_range(s, "--tool-range-mm"))
+                .map(|s| crate::cmd::parse_range(s, "--tool-range-mm"))
                 .transpose()?,
             drop_lag: self.drop_lag,
             created_unix_s: created_unix_s()?,

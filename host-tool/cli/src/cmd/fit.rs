@@ -15,6 +15,7 @@ use crate::workflow::model_output;
 use trueaxis_engine::diagnose::outliers;
 use trueaxis_engine::effect::Effect;
 use trueaxis_engine::fit::{self, nn::NnOptions, FitOptions};
+use trueaxis_engine::travel;
 use trueaxis_engine::warning::Warning;
 
 /// Arguments of `trueaxis fit`.
@@ -51,6 +52,8 @@ pub struct Args {
     /// grid), listed with their file line and left out of the fit.
     #[arg(long)]
     pub keep_outliers: bool,
+    #[command(flatten)]
+    pub travel: crate::cmd::TravelArgs,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -65,8 +68,14 @@ impl Args {
             .iter()
             .map(|s| Effect::parse(s))
             .collect::<Result<Vec<_>>>()?;
+        let limits = self.travel.limits()?;
         let out = model_output(&self.data, self.output.clone())?;
         let data = input::load_data(&self.data, None)?;
+        // The travel (given, or the data's bulk): rows outside it are left
+        // out of the screen and the fit, and named below.
+        let screen = travel::screen(&data, &limits)
+            .with_context(|| format!("{}: cannot fit {}", self.data.display(), self.model))?;
+        let inside = screen.inside(&data);
         let opts = FitOptions {
             blocks: usize::from(self.blocks),
             local: self.local,
@@ -81,10 +90,10 @@ impl Args {
         // linear model) is said, and the fit below then names the problem
         // itself when it has the same one.
         let mut screen_warning = None;
-        let found = if self.keep_outliers {
+        let mut found = if self.keep_outliers {
             Vec::new()
         } else {
-            outliers::find(&data, &seed, &adds).unwrap_or_else(|e| {
+            outliers::find(&inside, &seed, &adds).unwrap_or_else(|e| {
                 screen_warning = Some(Warning::new(
                     "outliers_not_screened",
                     format!("outliers: not screened ({e:#})"),
@@ -92,7 +101,12 @@ impl Args {
                 Vec::new()
             })
         };
-        let clean = outliers::without(&data, &found);
+        let clean = outliers::without(&inside, &found);
+        // Rows as the file numbers them (the fitted data lacks the rows
+        // outside the travel).
+        for o in &mut found {
+            o.row = screen.file_row(o.row);
+        }
         // The fit's own messages name the target (`ex: 3 distinct points
         // but the model has 4 terms`); the file is named here.
         // Fitted to the file (less its outliers): the history follows the
@@ -102,6 +116,21 @@ impl Args {
         })
         .with_context(|| format!("{}: cannot fit {}", self.data.display(), self.model))?;
         model.stats.warnings.extend(screen_warning);
+        fit::record_outside(&mut model, &data, &screen);
+        if let Some(s) =
+            travel::summary(&self.data.display().to_string(), &model.data.outside_travel)
+        {
+            let keep = crate::cmd::travel_keeping(&model.data.outside_travel);
+            let them = if screen.outside_rows().len() == 1 {
+                "it"
+            } else {
+                "them"
+            };
+            model.stats.warnings.push(Warning::new(
+                "outside_travel",
+                format!("outside_travel: {s} — {keep} keeps {them}"),
+            ));
+        }
         // Fit's warnings are kept as text (MODEL.json `stats.warnings`): a
         // data warning's text leads with its code, as `warning (code): …`
         // elsewhere.
@@ -117,6 +146,7 @@ impl Args {
             let mut doc = model.summary_json(Some(&out));
             input::add_skipped_count(&mut doc, &data);
             doc["outliers"] = serde_json::to_value(&found)?;
+            doc["outside_travel"] = serde_json::to_value(&model.data.outside_travel)?;
             out::json(&doc)?;
             return Ok(());
         }

@@ -12,6 +12,7 @@ use trueaxis_engine::onmachine::probe_csv::SessionNeeded;
 use trueaxis_engine::onmachine::spindle_log::Missing;
 use trueaxis_engine::onmachine::workpiece::PassGridError;
 use trueaxis_engine::simulate::{BadSpikes, ConfigError, Setting};
+use trueaxis_engine::travel::TravelError;
 
 /// `e` with its causes, as `{e:#}` writes it (`outer: inner: root`), each
 /// typed engine error in the command line's words.
@@ -56,6 +57,19 @@ fn words(e: &(dyn std::error::Error + 'static)) -> Option<String> {
             }
             ConfigError::Setting { setting, range } => {
                 format!("{} = {range}", setting_flag(*setting))
+            }
+        });
+    }
+    if let Some(t) = e.downcast_ref::<TravelError>() {
+        return Some(match t {
+            TravelError::Empty { axis, lo, hi } => {
+                format!("--travel {axis}={lo}..{hi}: empty (expected finite LO ≤ HI)")
+            }
+            TravelError::NoAxis { axis } => {
+                format!("--travel {axis}: the data has no {axis}_mm column")
+            }
+            TravelError::NothingInside { axis, lo, hi } => {
+                format!("every row lies outside --travel {axis}={lo}..{hi}")
             }
         });
     }

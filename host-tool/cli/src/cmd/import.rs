@@ -4,10 +4,9 @@
 //! exits 1 with `file:line:column: what was expected`; rows left out are
 //! listed, never dropped silently.
 
-use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use serde_json::json;
 
 use crate::cmd::out::outln;
@@ -56,12 +55,7 @@ impl Args {
             eprintln!("{note}");
         }
         if let Some(out) = &self.output {
-            let f = std::fs::File::create(out)
-                .with_context(|| format!("cannot create {}", out.display()))?;
-            let mut w = std::io::BufWriter::new(f);
-            import::write_csv(&data, &mut w)?;
-            w.flush()
-                .with_context(|| format!("cannot write {}", out.display()))?;
+            trueaxis_engine::files::write_with(out, |w| import::write_csv(&data, w))?;
         }
         let columns = import::column_names(&data);
         if self.json {
@@ -84,11 +78,12 @@ impl Args {
                 crate::report::count(data.len(), "row"),
                 columns.join(", ")
             )?;
+            // Input echoed on the terminal: escaped and cut (import::shown).
             for (k, v) in &data.metadata {
-                outln!("  # {k}: {v}")?;
+                outln!("  # {}: {}", import::shown(k), import::shown(v))?;
             }
             if !data.aux.is_empty() {
-                let names: Vec<&str> = data.aux.iter().map(|c| c.name.as_str()).collect();
+                let names: Vec<String> = data.aux.iter().map(|c| import::shown(&c.name)).collect();
                 outln!("  auxiliary channels kept: {}", names.join(", "))?;
             }
             if !data.skipped.is_empty() {

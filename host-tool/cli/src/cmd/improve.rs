@@ -28,6 +28,8 @@ pub struct Args {
     /// they are found, listed with their file line and left out of every fit.
     #[arg(long)]
     pub keep_outliers: bool,
+    #[command(flatten)]
+    pub travel: crate::cmd::TravelArgs,
     /// Write one JSON document to stdout instead of text.
     #[arg(long)]
     pub json: bool,
@@ -41,9 +43,10 @@ impl Args {
                 "improve starts from a seed (cubic19 or kinematic), not from a model with effects"
             );
         }
+        let limits = self.travel.limits()?;
         let out = model_output(&self.data, self.output.clone())?;
         let data = input::load_data(&self.data, None)?;
-        let warnings = input::data_warnings(&data);
+        let mut warnings = input::data_warnings(&data);
         // On stderr in both modes, before the steps (as fit's warnings).
         for w in &warnings {
             eprintln!("warning ({}): {}", w.code, w.detail);
@@ -60,6 +63,7 @@ impl Args {
             seed,
             &out,
             self.keep_outliers,
+            &limits,
             |s| {
                 if json || write_err.is_some() {
                     return;
@@ -101,9 +105,25 @@ impl Args {
             &progress,
         )
         .with_context(|| format!("{}: cannot improve {seed}", self.data.display()))?;
-        // The data's warnings first, then the last diagnosis' design
-        // warnings the engine carried.
+        // The data's warnings first, then the rows outside the travel,
+        // then the last diagnosis' design warnings the engine carried.
         let design = r.warnings.clone();
+        // Rows outside the travel, with the final model's miss at each:
+        // said once the loop is done (on stderr, and in the JSON's
+        // `warnings` and `outside_travel`).
+        if let Some(s) =
+            trueaxis_engine::travel::summary(&self.data.display().to_string(), &r.outside_travel)
+        {
+            let w = trueaxis_engine::warning::Warning::new(
+                "outside_travel",
+                format!(
+                    "{s} — {} keeps them",
+                    crate::cmd::travel_keeping(&r.outside_travel)
+                ),
+            );
+            eprintln!("warning ({}): {}", w.code, w.detail);
+            warnings.push(w);
+        }
         let r = Improvement {
             warnings: warnings.into_iter().chain(design.iter().cloned()).collect(),
             ..r

@@ -24,6 +24,83 @@ pub mod status;
 pub mod upload;
 pub mod workpiece;
 
+/// A range `LO..HI` of a flag (`--temp-range-c -10..40`): finite numbers,
+/// LO ≤ HI; `what` names the flag in the message.
+pub fn parse_range(s: &str, what: &str) -> anyhow::Result<(f64, f64)> {
+    use anyhow::Context;
+    let (a, b) = s
+        .split_once("..")
+        .with_context(|| format!("{what} `{s}`: expected LO..HI"))?;
+    let lo: f64 = a
+        .trim()
+        .parse()
+        .with_context(|| format!("{what} `{s}`: `{a}` is not a number"))?;
+    let hi: f64 = b
+        .trim()
+        .parse()
+        .with_context(|| format!("{what} `{s}`: `{b}` is not a number"))?;
+    if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+        anyhow::bail!("{what} `{s}`: expected finite LO ≤ HI");
+    }
+    Ok((lo, hi))
+}
+
+/// `--travel AXIS=LO..HI`: the machine's travel the model is fitted on
+/// (`fit`, `improve`; docs/cli.md § fit, "Travel").
+#[derive(clap::Args, Debug, Default)]
+pub struct TravelArgs {
+    /// The travel of an axis, mm, as `x=0..800` (repeatable, one per axis):
+    /// rows outside it are left out of the fit and named. Without it an
+    /// axis' travel is the data's bulk (a stray row far beyond the rest is
+    /// left out and named).
+    #[arg(
+        long = "travel",
+        value_name = "AXIS=LO..HI",
+        allow_hyphen_values = true
+    )]
+    pub travel: Vec<String>,
+}
+
+impl TravelArgs {
+    /// The travel per axis, as the engine takes it (`travel::Limits`).
+    pub fn limits(&self) -> anyhow::Result<trueaxis_engine::travel::Limits> {
+        let mut limits: trueaxis_engine::travel::Limits = [None; 3];
+        for t in &self.travel {
+            let axis = t.split_once('=').and_then(|(a, _)| {
+                trueaxis_engine::data::AXES
+                    .iter()
+                    .position(|x| *x == a.trim())
+            });
+            let (Some(a), Some((_, range))) = (axis, t.split_once('=')) else {
+                anyhow::bail!(
+                    "--travel `{t}`: expected AXIS=LO..HI with AXIS x, y or z (e.g. x=0..800)"
+                );
+            };
+            if limits[a].is_some() {
+                anyhow::bail!(
+                    "--travel: {} is given twice",
+                    trueaxis_engine::data::AXES[a]
+                );
+            }
+            limits[a] = Some(parse_range(
+                range,
+                &format!("--travel {}", trueaxis_engine::data::AXES[a]),
+            )?);
+        }
+        Ok(limits)
+    }
+}
+
+/// The `--travel` that would keep the rows outside the travel too, as
+/// flags: `--travel x=0..1999`.
+pub fn travel_keeping(outside: &[trueaxis_engine::travel::OutsideRow]) -> String {
+    trueaxis_engine::travel::widened(outside)
+        .iter()
+        .map(|(a, lo, hi)| format!("--travel {a}={lo}..{hi}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 /// `--port`: the board a link command (`upload`, `rollback`, `status`,
 /// `monitor`, `reference`) talks to.
 #[derive(clap::Args, Debug)]

@@ -3,7 +3,6 @@
 //! noise and a seed. The same arguments and seed give a byte-identical CSV.
 //! Spec syntax: docs/cli.md ("simulate"); parsing lives in `simulate::spec`.
 
-use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
@@ -78,13 +77,9 @@ pub struct Args {
 }
 
 /// Writes `data` to `path` as the measurement CSV.
+/// Atomically (`files::write_with`): a failed write leaves no cut file.
 fn write_data(data: &trueaxis_engine::data::Dataset, path: &std::path::Path) -> Result<()> {
-    let f =
-        std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
-    let mut w = std::io::BufWriter::new(f);
-    import::write_csv(data, &mut w)?;
-    w.flush()
-        .with_context(|| format!("cannot write {}", path.display()))
+    trueaxis_engine::files::write_with(path, |w| import::write_csv(data, w))
 }
 
 impl Args {
@@ -250,12 +245,7 @@ impl Args {
         }
         let cfg = self.config()?;
         let data = simulate::simulate(&cfg);
-        let f = std::fs::File::create(&self.output)
-            .with_context(|| format!("cannot create {}", self.output.display()))?;
-        let mut w = std::io::BufWriter::new(f);
-        import::write_csv(&data, &mut w)?;
-        w.flush()
-            .with_context(|| format!("cannot write {}", self.output.display()))?;
+        write_data(&data, &self.output)?;
         let passes = data
             .pass_id
             .as_ref()

@@ -261,8 +261,7 @@ pub fn write_page(res: &Iso230, data: &Dataset, data_path: &str, dir: &Path) -> 
 /// bands to `path`. Text is plain SVG `<text>` (plotters without a font
 /// library), so the file renders in any browser with no network.
 pub fn plot_svg(res: &Iso230, path: &Path) -> Result<()> {
-    std::fs::write(path, svg(res)?)
-        .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))
+    trueaxis_engine::files::write(path, svg(res)?.as_bytes())
 }
 
 /// The plot of [`plot_svg`] as an SVG document (the means and bands only).

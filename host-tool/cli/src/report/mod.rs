@@ -300,13 +300,11 @@ impl Page {
                 }
                 names.push(name);
                 let path = dir.join(format!("{name}.svg"));
-                std::fs::write(&path, svg)
-                    .with_context(|| format!("writing {}", path.display()))?;
+                trueaxis_engine::files::write(&path, svg.as_bytes())?;
             }
         }
         let index = dir.join("index.html");
-        std::fs::write(&index, self.to_html())
-            .with_context(|| format!("writing {}", index.display()))?;
+        trueaxis_engine::files::write(&index, self.to_html().as_bytes())?;
         Ok(index)
     }
 }

@@ -17,6 +17,7 @@ pub(crate) fn file(model: FittedModel) -> ModelFile {
             sha256: "ab".repeat(32),
             rows: 0,
             temp_range_c: Some(Default::default()),
+            outside_travel: Vec::new(),
         },
         model,
         stats: FitStats::default(),

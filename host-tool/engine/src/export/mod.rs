@@ -101,6 +101,19 @@ pub fn axis_travel_mm(model: &FittedModel, axis: usize) -> Option<(f64, f64)> {
     }
 }
 
+/// The warning `outside_travel` of every export of a model fitted without
+/// rows outside its travel (MODEL.json `data.outside_travel`,
+/// `crate::travel`): the rows named again, and that the export covers the
+/// travel the model was fitted on, not those rows.
+pub fn outside_travel(file: &crate::model::ModelFile) -> Option<Warning> {
+    crate::travel::summary(&file.data.source, &file.data.outside_travel).map(|s| {
+        Warning::new(
+            "outside_travel",
+            format!("{s}; the export covers the travel the model was fitted on, not these rows"),
+        )
+    })
+}
+
 /// Temperature channels a linear model reads, with the reference
 /// temperature of the first feature that names each.
 pub fn thermal_channels(model: &FittedModel) -> Vec<(String, f64)> {

@@ -17,7 +17,7 @@ pub mod nn;
 
 use anyhow::{bail, Result};
 
-use crate::data::{Dataset, AXES};
+use crate::data::{Dataset, AXES, TARGETS};
 use crate::effect::Effect;
 use crate::holdout;
 use crate::model::{DataRef, ModelFile, ModelSeed, Seed, MODEL_FORMAT};
@@ -197,8 +197,33 @@ pub fn fit_recorded(
                     })
                     .collect(),
             ),
+            outside_travel: Vec::new(),
         },
         model,
         stats,
     })
+}
+
+/// Records in `model` (fitted to `screen.inside(data)`) the rows of `data`
+/// outside the travel (`crate::travel`), each with the model's miss there:
+/// measured − model per target measured on the row, µm — the row held out
+/// from the fit, evaluated outside the fitted travel. A model that cannot
+/// be evaluated there records the rows without their misses.
+pub fn record_outside(model: &mut ModelFile, data: &Dataset, screen: &crate::travel::Screen) {
+    let mut outside = screen.outside.clone();
+    let rows = screen.outside_rows();
+    if !rows.is_empty() {
+        if let Ok(pred) = model.model.predict(&holdout::subset(data, &rows)) {
+            for o in &mut outside {
+                let k = rows.partition_point(|&r| r < o.row);
+                for (t, p) in pred.iter().enumerate() {
+                    let measured = data.err_um[t].as_ref().and_then(|c| c[o.row]);
+                    if let (Some(p), Some(m)) = (p, measured) {
+                        o.resid_um.insert(TARGETS[t].to_string(), m - p[k]);
+                    }
+                }
+            }
+        }
+    }
+    model.data.outside_travel = outside;
 }

@@ -32,7 +32,7 @@
 //! #*# min_x = 35.0 …  max_x, min_y, max_y (keys in any order)
 //! ```
 
-use super::{ImportError, Needs};
+use super::{shown, ImportError, Needs};
 use crate::data::{Dataset, SkippedRow, ERR_PLAUSIBLE_UM, POS_PLAUSIBLE_MM};
 
 /// First words of a RepRapFirmware height map file.
@@ -84,13 +84,13 @@ fn parse_num(
             file,
             line,
             Some(column),
-            format!("{what}: expected a finite number, found `{s}`"),
+            format!("{what}: expected a finite number, found `{}`", shown(s)),
         )),
         Err(_) => Err(ImportError::at(
             file,
             line,
             Some(column),
-            format!("{what}: expected a number, found `{s}`"),
+            format!("{what}: expected a number, found `{}`", shown(s)),
         )),
     }
 }
@@ -111,7 +111,10 @@ fn parse_count(
             file,
             line,
             Some(column),
-            format!("{what}: expected a whole number of nodes from 2 to 10000, found `{s}`"),
+            format!(
+                "{what}: expected a whole number of nodes from 2 to 10000, found `{}`",
+                shown(s)
+            ),
         )),
     }
 }
@@ -495,7 +498,7 @@ pub fn read_klipper_mesh(
                 None,
                 format!(
                     "expected `key = value` in profile `{want}`, found `{}`",
-                    body.trim()
+                    shown(body.trim())
                 ),
             ));
         }

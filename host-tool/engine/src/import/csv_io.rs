@@ -11,7 +11,7 @@ use std::io::{Read, Write};
 use anyhow::Context;
 
 use super::dialect::{dialect, utf16_text};
-use super::ImportError;
+use super::{shown, ImportError};
 use crate::data::{
     AuxChannel, Dataset, SkippedRow, TempChannel, AXES, ERR_PLAUSIBLE_UM, POS_PLAUSIBLE_MM,
     TARGETS, TEMP_PLAUSIBLE_C,
@@ -78,14 +78,18 @@ fn classify(name: &str) -> Result<Col, String> {
         if let Some(sensor) = rest.strip_suffix("_C") {
             if sensor.is_empty() {
                 return Err(format!(
-                    "column `{name}`: expected a sensor name, as in `T_bed_C`"
+                    "column `{}`: expected a sensor name, as in `T_bed_C`",
+                    shown(name)
                 ));
             }
             return Ok(Col::Temp(sensor.to_string()));
         }
         if let Some((sensor, unit)) = rest.rsplit_once('_') {
             return Err(format!(
-                "column `{name}`: unknown unit suffix `_{unit}` for a temperature; expected `T_{sensor}_C` (°C)"
+                "column `{}`: unknown unit suffix `_{}` for a temperature; expected `T_{}_C` (°C)",
+                shown(name),
+                shown(unit),
+                shown(sensor)
             ));
         }
     }
@@ -94,12 +98,14 @@ fn classify(name: &str) -> Result<Col, String> {
         let canonical = format!("{stem}_{unit}");
         if lower == canonical {
             return Err(format!(
-                "column `{name}`: expected `{canonical}` (column names are case-sensitive)"
+                "column `{}`: expected `{canonical}` (column names are case-sensitive)",
+                shown(name)
             ));
         }
         if name == stem {
             return Err(format!(
-                "column `{name}` has no unit suffix; expected `{canonical}`"
+                "column `{}` has no unit suffix; expected `{canonical}`",
+                shown(name)
             ));
         }
         if let Some(unit_found) = name.strip_prefix(stem).and_then(|r| r.strip_prefix('_')) {
@@ -109,7 +115,9 @@ fn classify(name: &str) -> Result<Col, String> {
             let strict = matches!(stem, "x" | "y" | "z" | "ex" | "ey" | "ez");
             if strict || UNITS.contains(&unit_found.to_ascii_lowercase().as_str()) {
                 return Err(format!(
-                    "column `{name}`: unknown unit suffix `_{unit_found}`; expected `{canonical}`"
+                    "column `{}`: unknown unit suffix `_{}`; expected `{canonical}`",
+                    shown(name),
+                    shown(unit_found)
                 ));
             }
         }
@@ -120,14 +128,16 @@ fn classify(name: &str) -> Result<Col, String> {
     for fixed in ["dir_x", "dir_y", "dir_z", "pass_id", "session_id"] {
         if lower == fixed {
             return Err(format!(
-                "column `{name}`: expected `{fixed}` (column names are case-sensitive)"
+                "column `{}`: expected `{fixed}` (column names are case-sensitive)",
+                shown(name)
             ));
         }
     }
     if lower.len() > 4 && lower.starts_with("t_") && lower.ends_with("_c") {
         return Err(format!(
-            "column `{name}`: expected `T_{}_C` (column names are case-sensitive)",
-            &name[2..name.len() - 2]
+            "column `{}`: expected `T_{}_C` (column names are case-sensitive)",
+            shown(name),
+            shown(&name[2..name.len() - 2])
         ));
     }
     Ok(Col::Aux)
@@ -211,12 +221,18 @@ fn parse_num(cell: &str, col_name: &str, decimal_comma: bool) -> Result<f64, Str
     } else {
         t
     };
-    let v: f64 = t
-        .parse()
-        .map_err(|_| format!("column `{col_name}`: expected a number, found `{cell}`"))?;
+    let v: f64 = t.parse().map_err(|_| {
+        format!(
+            "column `{}`: expected a number, found `{}`",
+            shown(col_name),
+            shown(cell)
+        )
+    })?;
     if !v.is_finite() {
         return Err(format!(
-            "column `{col_name}`: expected a finite number, found `{cell}`"
+            "column `{}`: expected a finite number, found `{}`",
+            shown(col_name),
+            shown(cell)
         ));
     }
     Ok(v)
@@ -234,7 +250,9 @@ fn parse_bounded(
     let v = parse_num(cell, col_name, decimal_comma)?;
     if v.abs() > limit {
         return Err(format!(
-            "column `{col_name}`: expected {what} between -{limit} and {limit}, found `{cell}` — check the column's unit (and the instrument's reading at this line)"
+            "column `{}`: expected {what} between -{limit} and {limit}, found `{}` — check the column's unit (and the instrument's reading at this line)",
+            shown(col_name),
+            shown(cell)
         ));
     }
     Ok(v)
@@ -255,7 +273,9 @@ fn parse_temp(cell: &str, col_name: &str, decimal_comma: bool) -> Result<f64, St
             String::new()
         };
         return Err(format!(
-            "column `{col_name}`: expected a temperature in °C between {lo} and {hi}, found `{cell}`{hint}"
+            "column `{}`: expected a temperature in °C between {lo} and {hi}, found `{}`{hint}",
+            shown(col_name),
+            shown(cell)
         ));
     }
     Ok(v)
@@ -412,7 +432,11 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
                 name,
                 header_line,
                 Some(i + 1),
-                format!("duplicate column `{h}` (first at column {})", first + 1),
+                format!(
+                    "duplicate column `{}` (first at column {})",
+                    shown(h),
+                    first + 1
+                ),
             ));
         }
         if h.is_empty() {
@@ -536,7 +560,7 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
             let empty = cell.trim().is_empty();
             let needs_value = !matches!(c, Col::Err(_) | Col::Aux);
             if empty && needs_value {
-                skip_reason.get_or_insert_with(|| format!("empty `{h}` cell"));
+                skip_reason.get_or_insert_with(|| format!("empty `{}` cell", shown(h)));
                 row_cells.push(Cell::F(0.0));
                 continue;
             }
@@ -552,19 +576,27 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
                         "-1" | "-1.0" => Cell::D(-1),
                         _ => {
                             return Err(at(format!(
-                                "column `{h}`: expected -1 or +1, found `{cell}`"
+                                "column `{}`: expected -1 or +1, found `{}`",
+                                shown(h),
+                                shown(cell)
                             )))
                         }
                     }
                 }
                 Col::Pass | Col::Session => Cell::I(cell.trim().parse().map_err(|_| {
-                    at(format!("column `{h}`: expected an integer, found `{cell}`"))
+                    at(format!(
+                        "column `{}`: expected an integer, found `{}`",
+                        shown(h),
+                        shown(cell)
+                    ))
                 })?),
                 Col::U => {
                     let v = parse_num(cell, h, dc).map_err(at)?;
                     if v <= 0.0 {
                         return Err(at(format!(
-                            "column `{h}`: expected a positive uncertainty, found `{cell}`"
+                            "column `{}`: expected a positive uncertainty, found `{}`",
+                            shown(h),
+                            shown(cell)
                         )));
                     }
                     Cell::F(v)
@@ -615,6 +647,23 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
             };
         }
         ds.line.push(line);
+    }
+    // Every writer of this format ends each row with a line end (trueaxis
+    // always does; spreadsheets do). A last row without one is where a
+    // write or copy that did not finish cut the file: its last cell may be
+    // a number cut short (`35` → `3`), which reads as a valid value. It is
+    // refused, never fitted (docs/cli.md § Measurement CSV).
+    if !body.ends_with(['\n', '\r']) {
+        let tail = body[body.rfind('\n').map_or(0, |i| i + 1)..].trim();
+        let line = header_line + newlines.len();
+        if line > header_line && !tail.is_empty() && !tail.starts_with('#') {
+            return Err(ImportError::at(
+                name,
+                line,
+                None,
+                "the last row has no line end: the file looks cut off in this row (a write or copy that did not finish), so its last cell may be cut short — if the row is whole, end the file with a line break",
+            ));
+        }
     }
     if ds.line.is_empty() {
         let last = text.lines().count().max(header_line);

@@ -22,7 +22,7 @@
 
 use std::collections::BTreeMap;
 
-use super::{ImportError, Needs};
+use super::{shown, ImportError, Needs};
 use crate::data::{Dataset, AXES, ERR_PLAUSIBLE_UM, POS_PLAUSIBLE_MM};
 
 /// True when `text` looks like an ecmc ISO 230-2 data file.
@@ -72,7 +72,11 @@ pub fn read_ecmc(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset,
             continue;
         }
         let Some((k, v)) = l.split_once('=') else {
-            return Err(err(ln, None, format!("expected `KEY=VALUE`, found `{l}`")));
+            return Err(err(
+                ln,
+                None,
+                format!("expected `KEY=VALUE`, found `{}`", shown(l)),
+            ));
         };
         let (k, v) = (k.trim(), v.trim());
         let value_col = Some(2);
@@ -82,7 +86,7 @@ pub fn read_ecmc(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset,
                 _ => Err(err(
                     ln,
                     value_col,
-                    format!("{what}: expected a finite number, found `{v}`"),
+                    format!("{what}: expected a finite number, found `{}`", shown(v)),
                 )),
             }
         };
@@ -92,7 +96,11 @@ pub fn read_ecmc(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset,
                 _ => Err(err(
                     ln,
                     Some(1),
-                    format!("`{k}`: expected a positive whole index, found `{s}`"),
+                    format!(
+                        "`{}`: expected a positive whole index, found `{}`",
+                        shown(k),
+                        shown(s)
+                    ),
                 )),
             }
         };
@@ -101,7 +109,7 @@ pub fn read_ecmc(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset,
                 return Err(err(
                     ln,
                     value_col,
-                    format!("UNIT `{v}` is not a length; expected mm, um, nm or m (a rotary axis cannot be compensated as a linear one)"),
+                    format!("UNIT `{}` is not a length; expected mm, um, nm or m (a rotary axis cannot be compensated as a linear one)", shown(v)),
                 ));
             }
             unit = Some((ln, v.to_string()));
@@ -111,7 +119,10 @@ pub fn read_ecmc(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset,
                 return Err(err(
                     ln,
                     value_col,
-                    format!("{k}: expected a positive whole number, found `{v}`"),
+                    format!(
+                        "{k}: expected a positive whole number, found `{}`",
+                        shown(v)
+                    ),
                 ));
             }
             declared.insert(
@@ -123,7 +134,7 @@ pub fn read_ecmc(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset,
                 return Err(err(
                     ln,
                     Some(1),
-                    format!("`{k}`: expected TGT_DATA[position]"),
+                    format!("`{}`: expected TGT_DATA[position]", shown(k)),
                 ));
             }
             let p = index(&ix[0])?;
@@ -144,7 +155,8 @@ pub fn read_ecmc(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset,
                     ln,
                     Some(1),
                     format!(
-                        "`{k}`: expected REF_DATA_{}[position,cycle]",
+                        "`{}`: expected REF_DATA_{}[position,cycle]",
+                        shown(k),
                         ["FWD", "BWD"][d]
                     ),
                 ));
@@ -155,7 +167,7 @@ pub fn read_ecmc(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset,
                 return Err(err(
                     ln,
                     Some(1),
-                    format!("`{k}` given twice (first on line {first})"),
+                    format!("`{}` given twice (first on line {first})", shown(k)),
                 ));
             }
         } else {

@@ -40,6 +40,54 @@ pub fn content_hash(data: &Dataset) -> String {
         .collect()
 }
 
+/// The most characters of an input cell, header or line a message quotes.
+pub const SHOWN_CHARS: usize = 80;
+
+/// An input cell, header or line as a message quotes it — every import
+/// error and every warning or note that echoes input goes through here:
+/// control characters (an escape sequence that would reach the terminal, a
+/// NUL, a carriage return) and the invisible bidirectional controls
+/// escaped as `\u{1b}`, and a text of more than [`SHOWN_CHARS`]
+/// characters cut there with `… (N bytes)` (N its whole length), so a
+/// 50 MB cell is not echoed whole (docs/cli.md § Measurement CSV).
+pub fn shown(s: &str) -> String {
+    let mut out = String::new();
+    let mut chars = s.chars();
+    for c in chars.by_ref().take(SHOWN_CHARS) {
+        push_escaped(&mut out, c);
+    }
+    if chars.next().is_some() {
+        out.push_str(&format!("… ({} bytes)", s.len()));
+    }
+    out
+}
+
+/// `text` (a whole message) with its control characters escaped as in
+/// [`shown`], line ends and tabs kept: what the CLI prints on the
+/// terminal, whatever an input slipped into it.
+pub fn escape_controls(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        if c == '\n' || c == '\t' {
+            out.push(c);
+        } else {
+            push_escaped(&mut out, c);
+        }
+    }
+    out
+}
+
+/// `c`, or its `\u{…}` escape when it is a control character or a
+/// bidirectional control (which reorder the text a terminal shows).
+fn push_escaped(out: &mut String, c: char) {
+    let bidi = matches!(c, '\u{200e}' | '\u{200f}' | '\u{061c}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}');
+    if c.is_control() || bidi {
+        out.extend(c.escape_unicode());
+    } else {
+        out.push(c);
+    }
+}
+
 /// A problem in an input file, located as precisely as the format allows.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub struct ImportError {
@@ -240,12 +288,13 @@ pub fn read_table(
             match found {
                 Some(f) => cols = Some(f),
                 None => anyhow::bail!(
-                    "{name}:{ln}: the header needs {} ({what}), found `{line}`",
+                    "{name}:{ln}: the header needs {} ({what}), found `{}`",
                     columns
                         .iter()
                         .map(|c| format!("`{c}`"))
                         .collect::<Vec<_>>()
-                        .join(" and ")
+                        .join(" and "),
+                    shown(line)
                 ),
             }
             continue;
@@ -266,9 +315,10 @@ pub fn read_table(
             v.push(match cell.parse::<f64>() {
                 Ok(x) if x.is_finite() && x.abs() <= limit => x,
                 _ => anyhow::bail!(
-                    "{name}:{ln}:{}: `{}`: expected a finite number within ±{limit} {unit}, found `{cell}`",
+                    "{name}:{ln}:{}: `{}`: expected a finite number within ±{limit} {unit}, found `{}`",
                     j + 1,
-                    columns[k]
+                    columns[k],
+                    shown(cell)
                 ),
             });
         }

@@ -22,7 +22,7 @@
 //! file that breaks it has been misread, cut or edited, and the direction
 //! of each row depends on it. A leading UTF-8 byte order mark is skipped.
 
-use super::{ImportError, Needs};
+use super::{shown, ImportError, Needs};
 use crate::data::{Dataset, AXES, ERR_PLAUSIBLE_UM, POS_PLAUSIBLE_MM};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -67,7 +67,10 @@ fn parse_count(v: &str, file: &str, line: usize, key: &str) -> Result<usize, Imp
             file,
             line,
             None,
-            format!("`{key}`: expected a positive integer, found `{}`", v.trim()),
+            format!(
+                "`{key}`: expected a positive integer, found `{}`",
+                shown(v.trim())
+            ),
         )),
     }
 }
@@ -103,7 +106,7 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
             return Err(err(
                 ln,
                 None,
-                format!("expected nothing after EOF::, found `{line}`"),
+                format!("expected nothing after EOF::, found `{}`", shown(line)),
             ));
         }
         if let Some(sec) = line.strip_suffix("::") {
@@ -112,7 +115,8 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                     ln,
                     None,
                     format!(
-                        "unknown section `{line}`; expected HEADER::, TARGET DATA::, USER-TEXT::, RUNS::, DEVIATIONS::, EQUIPMENT::, ENVIRONMENT:: or EOF::"
+                        "unknown section `{}`; expected HEADER::, TARGET DATA::, USER-TEXT::, RUNS::, DEVIATIONS::, EQUIPMENT::, ENVIRONMENT:: or EOF::",
+                        shown(line)
                     ),
                 )
             })?;
@@ -124,7 +128,10 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                 return Err(err(
                     ln,
                     None,
-                    format!("expected a section such as HEADER::, found `{line}`"),
+                    format!(
+                        "expected a section such as HEADER::, found `{}`",
+                        shown(line)
+                    ),
                 ))
             }
             Section::Eof => unreachable!("handled above"),
@@ -149,7 +156,11 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                         AXES.iter()
                             .position(|a| first == a.chars().next())
                             .ok_or_else(|| {
-                                err(ln, None, format!("`Axis: {v}`: expected X, Y or Z"))
+                                err(
+                                    ln,
+                                    None,
+                                    format!("`Axis: {}`: expected X, Y or Z", shown(v)),
+                                )
                             })?,
                     );
                 }
@@ -181,11 +192,22 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                 match list {
                     List::Targets => {
                         for (field, tok) in values.split_whitespace().enumerate() {
-                            let v: f64 = tok.parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| {
-                                err(ln, Some(field + 1), format!("Targets: expected a finite position in mm, found `{tok}`"))
-                            })?;
+                            let v: f64 = tok
+                                .parse()
+                                .ok()
+                                .filter(|v: &f64| v.is_finite())
+                                .ok_or_else(|| {
+                                    err(
+                                        ln,
+                                        Some(field + 1),
+                                        format!(
+                                            "Targets: expected a finite position in mm, found `{}`",
+                                            shown(tok)
+                                        ),
+                                    )
+                                })?;
                             if v.abs() > POS_PLAUSIBLE_MM {
-                                return Err(err(ln, Some(field + 1), format!("Targets: expected a position in mm between -{POS_PLAUSIBLE_MM} and {POS_PLAUSIBLE_MM}, found `{tok}` — check the file's unit")));
+                                return Err(err(ln, Some(field + 1), format!("Targets: expected a position in mm between -{POS_PLAUSIBLE_MM} and {POS_PLAUSIBLE_MM}, found `{}` — check the file's unit", shown(tok))));
                             }
                             // Forward (odd) runs get dir +1 because they
                             // move up the list: a list that is not
@@ -196,7 +218,7 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                                     return Err(err(
                                         ln,
                                         Some(field + 1),
-                                        format!("Targets: expected positions in ascending order (forward runs approach them in list order), found `{tok}` after {prev}"),
+                                        format!("Targets: expected positions in ascending order (forward runs approach them in list order), found `{}` after {prev}", shown(tok)),
                                     ));
                                 }
                             }
@@ -210,7 +232,8 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                             ln,
                             None,
                             format!(
-                                "expected `Target-count:`, `Targets :` or `Flags:`, found `{line}`"
+                                "expected `Target-count:`, `Targets :` or `Flags:`, found `{}`",
+                                shown(line)
                             ),
                         ))
                     }
@@ -244,7 +267,7 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                     return Err(err(
                         ln,
                         None,
-                        format!("expected `Run Target Data:`, found `{line}`"),
+                        format!("expected `Run Target Data:`, found `{}`", shown(line)),
                     ));
                 }
                 let toks: Vec<&str> = line.split_whitespace().collect();
@@ -272,7 +295,7 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                             format!(
                                 "expected a run number 1..={}, found `{}`",
                                 runs.unwrap_or(usize::MAX),
-                                toks[0]
+                                shown(toks[0])
                             ),
                         )
                     })?;
@@ -284,7 +307,10 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                         err(
                             ln,
                             Some(2),
-                            format!("expected a target number 1..={count}, found `{}`", toks[1]),
+                            format!(
+                                "expected a target number 1..={count}, found `{}`",
+                                shown(toks[1])
+                            ),
                         )
                     })?;
                 let dev: f64 = toks[2]
@@ -295,7 +321,10 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                         err(
                             ln,
                             Some(3),
-                            format!("expected a finite deviation in µm, found `{}`", toks[2]),
+                            format!(
+                                "expected a finite deviation in µm, found `{}`",
+                                shown(toks[2])
+                            ),
                         )
                     })?;
                 if dev.abs() > ERR_PLAUSIBLE_UM {
@@ -304,7 +333,7 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                         Some(3),
                         format!(
                             "expected a deviation in µm between -{ERR_PLAUSIBLE_UM} and {ERR_PLAUSIBLE_UM}, found `{}` — a broken beam or another unit",
-                            toks[2]
+                            shown(toks[2])
                         ),
                     ));
                 }

@@ -41,6 +41,10 @@ use nn::check_nn;
 /// Format tag written into every MODEL.json; readers refuse other values.
 pub const MODEL_FORMAT: &str = "trueaxis-model/1";
 
+/// The key of MODEL.json's checksum, its last field: the SHA-256 of the
+/// rest of the content ([`ModelFile::checksum`]), checked on every read.
+pub const CHECKSUM_KEY: &str = "checksum_sha256";
+
 /// Format tag of MODEL.history.json (the `history` module's file): known
 /// here so that a history given where a model belongs is named as such.
 pub const HISTORY_FORMAT: &str = "trueaxis-history/1";
@@ -79,6 +83,12 @@ pub struct DataRef {
     /// with the warning `temp_range_unknown`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub temp_range_c: Option<BTreeMap<String, [f64; 2]>>,
+    /// Rows of the file left out of the fit because they lie outside the
+    /// travel (`crate::travel`: the travel given, or the data's bulk), each
+    /// with the model's miss there; `export` names them again. Absent
+    /// (empty) when every row was inside.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub outside_travel: Vec<crate::travel::OutsideRow>,
 }
 
 /// Statistics of a fit. Maps are keyed by target name (`ex`, `ey`, `ez`) and
@@ -196,8 +206,20 @@ impl ModelFile {
         s
     }
 
-    /// Reads and checks a MODEL.json.
+    /// Reads and checks a MODEL.json ([`ModelFile::load_noting`] without
+    /// its note).
     pub fn load(path: impl AsRef<Path>) -> Result<ModelFile> {
+        Ok(Self::load_noting(path)?.0)
+    }
+
+    /// Reads and checks a MODEL.json: its format, every field
+    /// ([`ModelFile::validate`]), then its checksum ([`CHECKSUM_KEY`]: a
+    /// file whose content is not what trueaxis wrote — a flipped bit, a
+    /// hand edit — is refused, naming the file). A file without a checksum
+    /// (written before files had one, or with the line removed on purpose)
+    /// loads, with the note returned beside the model for the caller to
+    /// show.
+    pub fn load_noting(path: impl AsRef<Path>) -> Result<(ModelFile, Option<String>)> {
         let path = path.as_ref();
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read model file {}", path.display()))?;
@@ -236,7 +258,57 @@ impl ModelFile {
         m.validate().map_err(|e| {
             anyhow::anyhow!("{}: not a valid trueaxis model file: {e}", path.display())
         })?;
-        Ok(m)
+        // Checked after the fields, so that a damaged field is named by its
+        // JSON path; what passes them and still differs is named here.
+        let note = match value.get(CHECKSUM_KEY) {
+            None => Some(format!(
+                "note: {} has no checksum (written by an older trueaxis, or edited by hand): it loads unchecked — refit it to have one",
+                path.display()
+            )),
+            Some(given) => {
+                let content = m.checksum()?;
+                if given.as_str() != Some(content.as_str()) {
+                    bail!(
+                        "{}: damaged: its content does not match its checksum ({CHECKSUM_KEY} {}, the content's {}) — the file was changed after trueaxis wrote it (a disk or copy error, or an edit); refit the model, or, for a deliberate edit, delete the `{CHECKSUM_KEY}` line to load it unchecked",
+                        path.display(),
+                        crate::import::shown(&given.to_string()),
+                        &content[..16]
+                    );
+                }
+                None
+            }
+        };
+        Ok((m, note))
+    }
+
+    /// SHA-256 (hex) of the model's content: its compact JSON (serde_json,
+    /// the fields in the file's order, no whitespace) without
+    /// [`CHECKSUM_KEY`]. Floats are written in their shortest round-trip
+    /// form and read back exactly, so a file read and checked gives the
+    /// content it was written from, bit for bit.
+    pub fn checksum(&self) -> Result<String> {
+        use sha2::{Digest, Sha256};
+        let bytes = serde_json::to_vec(self)?;
+        Ok(Sha256::digest(&bytes)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect())
+    }
+
+    /// The text of MODEL.json: the model pretty-printed, with its
+    /// checksum as the last field ([`CHECKSUM_KEY`]).
+    pub fn to_json(&self) -> Result<String> {
+        #[derive(Serialize)]
+        struct Sealed<'a> {
+            #[serde(flatten)]
+            model: &'a ModelFile,
+            checksum_sha256: String,
+        }
+        let sealed = Sealed {
+            model: self,
+            checksum_sha256: self.checksum()?,
+        };
+        Ok(serde_json::to_string_pretty(&sealed)? + "\n")
     }
 
     /// Checks everything the file's types do not: indices in range, every
@@ -259,6 +331,21 @@ impl ModelFile {
                 lo.is_finite() && hi.is_finite() && lo <= hi,
                 || format!("data.temp_range_c.{name}"),
                 || format!("[{lo}, {hi}], expected finite °C, low ≤ high"),
+            )?;
+        }
+        for (i, o) in self.data.outside_travel.iter().enumerate() {
+            let [lo, hi] = o.travel_mm;
+            need(
+                crate::data::AXES.contains(&o.axis.as_str())
+                    && o.position_mm.is_finite()
+                    && lo.is_finite()
+                    && hi.is_finite()
+                    && lo <= hi
+                    && o.resid_um.values().all(|r| r.is_finite()),
+                || format!("data.outside_travel[{i}]"),
+                || {
+                    "expected an axis x, y or z, finite positions in mm (travel low ≤ high) and finite residuals".into()
+                },
             )?;
         }
         let kind_ok = match (&self.model, &seed.seed) {
@@ -297,12 +384,10 @@ impl ModelFile {
         }
     }
 
-    /// Writes MODEL.json (pretty-printed).
+    /// Writes MODEL.json ([`ModelFile::to_json`]), atomically
+    /// (`files::write`).
     pub fn save(&self, path: impl AsRef<Path>) -> Result<()> {
-        let path = path.as_ref();
-        let text = serde_json::to_string_pretty(self)?;
-        std::fs::write(path, text + "\n")
-            .with_context(|| format!("cannot write model file {}", path.display()))
+        crate::files::write(path.as_ref(), self.to_json()?.as_bytes())
     }
 
     /// The `fit --json` document (docs/cli.md): model, terms, rms_um,

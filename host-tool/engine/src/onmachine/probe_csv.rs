@@ -149,7 +149,11 @@ pub fn read(text: &str, name: &str) -> Result<ProbeTable> {
                 continue;
             }
             let at = |msg: String| {
-                anyhow::anyhow!("{name}:{ln}:{}: `{col}`: {msg}, found `{cell}`", j + 1)
+                anyhow::anyhow!(
+                    "{name}:{ln}:{}: `{col}`: {msg}, found `{}`",
+                    j + 1,
+                    crate::import::shown(cell)
+                )
             };
             if *col == "probe_id" {
                 probe_id = Some(cell.to_string());
