@@ -26,7 +26,10 @@ fn an_escape_sequence_in_a_cell_or_header_is_shown_escaped() {
     let dir = tmp_dir("echoed", "escape");
     let cell = dir.join("cell.csv");
     std::fs::write(&cell, "x_mm,ex_um\n0,1\n100,\x1b[2J\x1b[31mred\n").unwrap();
-    for cmd in [vec!["import", s(&cell)], vec!["fit", s(&cell), "--model", "cubic19"]] {
+    for cmd in [
+        vec!["import", s(&cell)],
+        vec!["fit", s(&cell), "--model", "cubic19"],
+    ] {
         let err = refused(&cmd);
         assert!(
             err.contains(&format!(
@@ -51,7 +54,14 @@ fn an_escape_sequence_in_a_cell_or_header_is_shown_escaped() {
         text.push_str(&format!("{},{},a\n", i * 100, (i as f64 * 0.7).sin()));
     }
     std::fs::write(&aux, text).unwrap();
-    let out = run(&["fit", s(&aux), "--model", "cubic19", "-o", s(&dir.join("m.json"))]);
+    let out = run(&[
+        "fit",
+        s(&aux),
+        "--model",
+        "cubic19",
+        "-o",
+        s(&dir.join("m.json")),
+    ]);
     common::assert_success(&out);
     let err = String::from_utf8(out.stderr).unwrap();
     assert!(err.contains("`no\\u{1b}[8mte`"), "{err}");

@@ -463,7 +463,10 @@ fn every_single_bit_flip_is_refused_or_changes_nothing() {
     // the file valid JSON with every field valid.
     let text = std::fs::read_to_string(&model).unwrap();
     let at = text.find("\"coef_um\": [").unwrap() + 20;
-    let digit = text[at..].find(|c: char| c.is_ascii_digit() && c != '9').unwrap() + at;
+    let digit = text[at..]
+        .find(|c: char| c.is_ascii_digit() && c != '9')
+        .unwrap()
+        + at;
     let mut b = text.into_bytes();
     b[digit] += 1;
     std::fs::write(&flipped, &b).unwrap();
@@ -486,10 +489,15 @@ fn a_model_file_without_a_checksum_loads_with_a_note() {
     fit_cubic19(&csv, &model);
     let text = std::fs::read_to_string(&model).unwrap();
     assert!(text.trim_end().ends_with('}'));
-    let last = text.rfind(",\n  \"checksum_sha256\"").expect("the checksum is the last field");
+    let last = text
+        .rfind(",\n  \"checksum_sha256\"")
+        .expect("the checksum is the last field");
     let old = dir.join("old.json");
     std::fs::write(&old, format!("{}\n}}\n", &text[..last])).unwrap();
-    assert_eq!(ModelFile::load(&old).unwrap(), ModelFile::load(&model).unwrap());
+    assert_eq!(
+        ModelFile::load(&old).unwrap(),
+        ModelFile::load(&model).unwrap()
+    );
     let out = run(&["export", s(&old), "-o", s(&dir.join("t.bin")), "--json"]);
     let err = String::from_utf8_lossy(&out.stderr).into_owned();
     json(&out);

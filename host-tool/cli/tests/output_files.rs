@@ -19,7 +19,9 @@ use common::{expect_exit, fit_cubic19, json, run, s, simulate_grid, tmp_dir};
 fn run_limited(blocks: u32, args: &[&str]) -> Output {
     Command::new("sh")
         .arg("-c")
-        .arg(format!("trap '' XFSZ; ulimit -f {blocks}; exec \"$0\" \"$@\""))
+        .arg(format!(
+            "trap '' XFSZ; ulimit -f {blocks}; exec \"$0\" \"$@\""
+        ))
         .arg(env!("CARGO_BIN_EXE_trueaxis"))
         .args(args)
         .output()
@@ -49,12 +51,24 @@ fn a_write_that_fails_half_way_leaves_the_old_file_and_no_temporary() {
     let cases: Vec<(&str, Vec<String>)> = vec![
         (
             "sim.csv",
-            vec!["simulate", "--plan", "grid:100", "-o"].into_iter().map(String::from).collect(),
+            vec!["simulate", "--plan", "grid:100", "-o"]
+                .into_iter()
+                .map(String::from)
+                .collect(),
         ),
-        ("copy.csv", vec!["import".into(), s(&csv).into(), "-o".into()]),
+        (
+            "copy.csv",
+            vec!["import".into(), s(&csv).into(), "-o".into()],
+        ),
         (
             "fit.json",
-            vec!["fit".into(), s(&csv).into(), "--model".into(), "cubic19".into(), "-o".into()],
+            vec![
+                "fit".into(),
+                s(&csv).into(),
+                "--model".into(),
+                "cubic19".into(),
+                "-o".into(),
+            ],
         ),
         (
             "y.comp",
@@ -84,10 +98,7 @@ fn a_write_that_fails_half_way_leaves_the_old_file_and_no_temporary() {
         assert_eq!(std::fs::read_to_string(&target).unwrap(), old, "{a:?}");
     }
     // No temporary file left, no lock: only the old files.
-    assert_eq!(
-        names(&out),
-        ["copy.csv", "fit.json", "sim.csv", "y.comp"]
-    );
+    assert_eq!(names(&out), ["copy.csv", "fit.json", "sim.csv", "y.comp"]);
     // Unlimited, the same commands replace them whole.
     for (name, args) in &cases {
         let target = out.join(name);
@@ -125,9 +136,12 @@ fn a_csv_cut_in_its_last_row_is_refused_with_its_line() {
     // Cut one byte into the last row's last cell (`pass_id` 35 → 3), and
     // right after its last comma (the cell empty): both read as a row.
     let whole = text.trim_end();
-    for (i, cut) in [&whole[..whole.len() - 1], &whole[..whole.rfind(',').unwrap() + 1]]
-        .into_iter()
-        .enumerate()
+    for (i, cut) in [
+        &whole[..whole.len() - 1],
+        &whole[..whole.rfind(',').unwrap() + 1],
+    ]
+    .into_iter()
+    .enumerate()
     {
         let p = dir.join(format!("cut{i}.csv"));
         std::fs::write(&p, cut).unwrap();
@@ -168,7 +182,14 @@ fn orders() -> Vec<Vec<&'static str>> {
         "reversal:target=ez,axis=x",
     ];
     let mut v = Vec::new();
-    for (a, b, c) in [(0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)] {
+    for (a, b, c) in [
+        (0, 1, 2),
+        (0, 2, 1),
+        (1, 0, 2),
+        (1, 2, 0),
+        (2, 0, 1),
+        (2, 1, 0),
+    ] {
         v.push(vec![e[a], e[b], e[c]]);
     }
     v
@@ -184,7 +205,15 @@ fn parallel_fits_to_one_model_record_every_step() {
             .into_iter()
             .map(|adds| {
                 let mut c = Command::new(env!("CARGO_BIN_EXE_trueaxis"));
-                c.args(["fit", s(&csv), "--model", "cubic19", "-o", s(&model), "--json"]);
+                c.args([
+                    "fit",
+                    s(&csv),
+                    "--model",
+                    "cubic19",
+                    "-o",
+                    s(&model),
+                    "--json",
+                ]);
                 for a in adds {
                     c.args(["--add", a]);
                 }
@@ -196,7 +225,11 @@ fn parallel_fits_to_one_model_record_every_step() {
             .collect();
         for c in children {
             let out = c.wait_with_output().unwrap();
-            assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
         }
         let h = json(&run(&["history", s(&model), "--json"]));
         let steps = h["steps"].as_array().unwrap();

@@ -20,7 +20,7 @@ use trueaxis_engine::fit::{bench_data, nn};
 use trueaxis_engine::model::{FittedModel, NnModel};
 
 fn rms_on(m: &NnModel, data: &Dataset, rows: &[usize]) -> f64 {
-    let sub = trueaxis_engine::holdout::subset(data, rows);
+    let sub = trueaxis_engine::data::subset(data, rows);
     let pred = FittedModel::Nn(m.clone())
         .predict(&sub)
         .expect("prediction");

@@ -361,37 +361,10 @@ pub fn rms(values: impl Iterator<Item = f64>) -> f64 {
     }
 }
 
-/// The rows of `data` listed in `rows`, as a data set of their own (every
-/// per-row column sliced; metadata and channel names kept). Used to refit
-/// non-linear models (grid, local) without a block.
-pub fn subset(data: &Dataset, rows: &[usize]) -> Dataset {
-    fn pick<T: Clone>(v: &[T], rows: &[usize]) -> Vec<T> {
-        rows.iter().map(|&r| v[r].clone()).collect()
-    }
-    let mut out = data.clone();
-    out.pos_mm = data.pos_mm.clone().map(|c| c.map(|v| pick(&v, rows)));
-    out.err_um = data.err_um.clone().map(|c| c.map(|v| pick(&v, rows)));
-    out.dir = data.dir.clone().map(|c| c.map(|v| pick(&v, rows)));
-    out.t_s = data.t_s.as_ref().map(|v| pick(v, rows));
-    out.tool_mm = data.tool_mm.as_ref().map(|v| pick(v, rows));
-    out.pass_id = data.pass_id.as_ref().map(|v| pick(v, rows));
-    out.session_id = data.session_id.as_ref().map(|v| pick(v, rows));
-    out.u_um = data.u_um.as_ref().map(|v| pick(v, rows));
-    for t in &mut out.temps {
-        t.temp_c = pick(&t.temp_c, rows);
-    }
-    for c in &mut out.aux {
-        c.cells = pick(&c.cells, rows);
-    }
-    if !data.line.is_empty() {
-        out.line = pick(&data.line, rows);
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::data::subset;
 
     fn line(n: usize, pass: Option<Vec<i64>>) -> Dataset {
         Dataset {

@@ -231,7 +231,7 @@ impl Screen {
         if self.outside.is_empty() {
             std::borrow::Cow::Borrowed(data)
         } else {
-            std::borrow::Cow::Owned(crate::holdout::subset(data, &self.kept))
+            std::borrow::Cow::Owned(crate::data::subset(data, &self.kept))
         }
     }
 

@@ -452,7 +452,7 @@ mod tests {
         // steady state, 7 h of cool-down — one smooth hump.
         let full = spindle_thermal(1).data;
         let day: Vec<usize> = (0..=16 * 60).collect();
-        let data = crate::holdout::subset(&full, &day);
+        let data = crate::data::subset(&full, &day);
         let norm = Norm::from_data(&data);
         let (rows, y): (Vec<usize>, Vec<f64>) = data.measured(2).unzip();
         let (fold, nfolds, how) = hold_out_blocks(&data, &rows, &norm);

@@ -788,7 +788,7 @@ mod tests {
             .collect();
         let mut keep2 = keep.clone();
         keep2.extend(&keep);
-        let mut d = holdout::subset(&d, &keep2);
+        let mut d = crate::data::subset(&d, &keep2);
         // z is held at 0 mm: treated like an absent axis, so cubic19 keeps
         // its 10 terms in x and y — still more than the 9 points.
         set_target(&mut d, 0, |_, u| u[0]);
@@ -810,7 +810,7 @@ mod tests {
         let keep: Vec<usize> = (0..d.len())
             .filter(|&r| d.pos(0, r) <= 100.0 && d.pos(1, r) <= 100.0 && d.pos(2, r) == 0.0)
             .collect();
-        let mut d = holdout::subset(&d, &keep);
+        let mut d = crate::data::subset(&d, &keep);
         for t in 0..3 {
             set_target(&mut d, t, |_, u| u[0] + u[1]);
         }
@@ -830,7 +830,7 @@ mod tests {
         let keep: Vec<usize> = (0..g.len())
             .filter(|&r| g.pos(1, r) == 250.0 && g.pos(2, r) == 250.0)
             .collect();
-        let mut d = holdout::subset(&g, &keep);
+        let mut d = crate::data::subset(&g, &keep);
         set_target(&mut d, 0, |_, u| 1.0 + 2.0 * u[0] - 0.5 * u[0].powi(3));
         d.err_um[1] = None;
         d.err_um[2] = None;
@@ -855,7 +855,7 @@ mod tests {
         assert!(m.norm.half_span_mm[1] > 0.0);
         // A data set at one position (a time series at one point) is fitted
         // by the seed's constant per target, and says so.
-        let one = holdout::subset(&d, &[3, 3, 5]);
+        let one = crate::data::subset(&d, &[3, 3, 5]);
         let mut one = one;
         for a in 0..3 {
             if let Some(c) = one.pos_mm[a].as_mut() {

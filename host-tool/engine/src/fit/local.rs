@@ -248,10 +248,10 @@ pub fn fit(data: &Dataset, blocks: usize) -> Result<(FittedModel, FitStats)> {
         for block in &bl {
             let held: std::collections::HashSet<usize> = block.iter().copied().collect();
             let train: Vec<usize> = (0..data.len()).filter(|r| !held.contains(r)).collect();
-            let train_data = holdout::subset(data, &train);
+            let train_data = crate::data::subset(data, &train);
             match fit_model(&train_data) {
                 Ok(lm) => {
-                    let test = holdout::subset(data, block);
+                    let test = crate::data::subset(data, block);
                     let p = FittedModel::Local(lm).predict(&test)?;
                     let p = p[t].as_ref().expect("target present");
                     for (i, &r) in block.iter().enumerate() {

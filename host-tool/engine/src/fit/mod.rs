@@ -213,7 +213,7 @@ pub fn record_outside(model: &mut ModelFile, data: &Dataset, screen: &crate::tra
     let mut outside = screen.outside.clone();
     let rows = screen.outside_rows();
     if !rows.is_empty() {
-        if let Ok(pred) = model.model.predict(&holdout::subset(data, &rows)) {
+        if let Ok(pred) = model.model.predict(&crate::data::subset(data, &rows)) {
             for o in &mut outside {
                 let k = rows.partition_point(|&r| r < o.row);
                 for (t, p) in pred.iter().enumerate() {

@@ -80,7 +80,7 @@ impl LocalModel {
                     continue;
                 }
                 // Evaluate only the rows of this patch.
-                let sub = crate::holdout::subset(data, &rows);
+                let sub = crate::data::subset(data, &rows);
                 let pv = o.predict(&sub, &m.norm)?;
                 for (r, p) in rows.iter().zip(pv) {
                     v[*r] = p;
