@@ -357,35 +357,37 @@ mod tests {
         }
     }
 
+    /// The worst error of a sin/cos `f` (values as f64) over 2 million
+    /// turns from `start`, a dense sweep with a stride co-prime to the
+    /// table spacing.
+    fn worst_sincos_error(start: u32, f: impl Fn(u32) -> (f64, f64)) -> f64 {
+        let mut worst = 0.0f64;
+        let mut turn = start;
+        for _ in 0..2_000_000 {
+            let (s, c) = f(turn);
+            let a = turn as f64 / 4_294_967_296.0 * 2.0 * core::f64::consts::PI;
+            worst = worst.max((s - a.sin()).abs()).max((c - a.cos()).abs());
+            turn = turn.wrapping_add(2_147_483_647 / 1_000_000 * 2 + 1);
+        }
+        worst
+    }
+
     #[test]
     fn sincos_error_bound() {
         let q = (1u64 << 30) as f64;
-        let mut worst = 0.0f64;
-        // Dense sweep with a stride co-prime to the table spacing.
-        let mut turn: u32 = 0;
-        for _ in 0..2_000_000 {
+        let worst = worst_sincos_error(0, |turn| {
             let (s, c) = sincos_q30(turn);
-            let a = turn as f64 / 4_294_967_296.0 * 2.0 * core::f64::consts::PI;
-            worst = worst
-                .max((s as f64 / q - a.sin()).abs())
-                .max((c as f64 / q - a.cos()).abs());
-            turn = turn.wrapping_add(2_147_483_647 / 1_000_000 * 2 + 1);
-        }
+            (s as f64 / q, c as f64 / q)
+        });
         assert!(worst <= 4e-9, "sincos worst error {worst:e}");
     }
 
     #[test]
     fn sincos_f32_error_bound() {
-        let mut worst = 0.0f64;
-        let mut turn: u32 = 12345;
-        for _ in 0..2_000_000 {
+        let worst = worst_sincos_error(12345, |turn| {
             let (s, c) = sincos_f32(turn);
-            let a = turn as f64 / 4_294_967_296.0 * 2.0 * core::f64::consts::PI;
-            worst = worst
-                .max((s as f64 - a.sin()).abs())
-                .max((c as f64 - a.cos()).abs());
-            turn = turn.wrapping_add(2_147_483_647 / 1_000_000 * 2 + 1);
-        }
+            (s as f64, c as f64)
+        });
         assert!(worst <= 2e-7, "sincos_f32 worst error {worst:e}");
     }
 
@@ -407,13 +409,13 @@ mod tests {
         assert!(worst <= 5e-9, "tanh_q30 worst error {worst:e}");
     }
 
-    #[test]
-    fn tanh_f32_error_bound() {
+    /// The worst |f(x) − tanh x| of an f32 tanh `f` over a dense sweep of
+    /// ±12 and the extremes (±max, ±∞, ±0, a denormal-sized input).
+    fn worst_f32_tanh_error(f: impl Fn(f32) -> f64) -> f64 {
         let mut worst = 0.0f64;
         let mut x = -12.0f64;
         while x <= 12.0 {
-            let y = tanh_f32(x as f32) as f64;
-            worst = worst.max((y - (x as f32 as f64).tanh()).abs());
+            worst = worst.max((f(x as f32) - (x as f32 as f64).tanh()).abs());
             x += 1.37e-4;
         }
         for x in [
@@ -425,9 +427,14 @@ mod tests {
             -0.0,
             1e-30,
         ] {
-            let y = tanh_f32(x) as f64;
-            worst = worst.max((y - (x as f64).tanh()).abs());
+            worst = worst.max((f(x) - (x as f64).tanh()).abs());
         }
+        worst
+    }
+
+    #[test]
+    fn tanh_f32_error_bound() {
+        let worst = worst_f32_tanh_error(|x| tanh_f32(x) as f64);
         assert!(worst <= 5e-7, "tanh_f32 worst error {worst:e}");
         assert!(tanh_f32(f32::NAN).is_nan());
     }
@@ -435,25 +442,7 @@ mod tests {
     #[test]
     fn tanh_over_lead_f32_error_bound() {
         let lead = TANH_F32_LEAD as f64;
-        let mut worst = 0.0f64;
-        let mut x = -12.0f64;
-        while x <= 12.0 {
-            let y = tanh_over_lead_f32(x as f32) as f64 * lead;
-            worst = worst.max((y - (x as f32 as f64).tanh()).abs());
-            x += 1.37e-4;
-        }
-        for x in [
-            f32::MAX,
-            f32::MIN,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            0.0,
-            -0.0,
-            1e-30,
-        ] {
-            let y = tanh_over_lead_f32(x) as f64 * lead;
-            worst = worst.max((y - (x as f64).tanh()).abs());
-        }
+        let worst = worst_f32_tanh_error(|x| tanh_over_lead_f32(x) as f64 * lead);
         assert!(worst <= 5e-7, "tanh_over_lead_f32 worst error {worst:e}");
         assert!(tanh_over_lead_f32(f32::NAN).is_nan());
     }
