@@ -17,7 +17,7 @@ use trueaxis_app::engine::{AxisConfig, Engine, EngineConfig};
 use trueaxis_app::hw::Clock;
 use trueaxis_app::memflash::MemFlash;
 use trueaxis_app::server::Server;
-use trueaxis_protocol::{table_id, Request, Response, MAX_CHUNK_BYTES};
+use trueaxis_protocol::{table_id, Request, Response, Slot, SlotInfo, MAX_CHUNK_BYTES};
 
 use trueaxis_qemu::FaultKind;
 
@@ -52,6 +52,16 @@ pub struct FakeClock(pub Cell<u64>);
 impl Clock for FakeClock {
     fn now_us(&self) -> u64 {
         self.0.get()
+    }
+}
+
+/// Where the suites say `table` runs: slot A, sequence 1.
+pub fn info(table: &[u8]) -> SlotInfo {
+    SlotInfo {
+        slot: Slot::A,
+        seq: 1,
+        len: table.len() as u32,
+        crc32: table_id(table),
     }
 }
 

@@ -13,13 +13,13 @@ mod rig;
 
 use core::cell::Cell;
 
-use rig::{engine_config, FakeClock};
+use rig::{engine_config, info, FakeClock};
 use trueaxis_app::engine::{round_div, Engine, EngineConfig};
 use trueaxis_app::hw::{Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::memflash::MemFlash;
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::store::{Layout, TableStore};
-use trueaxis_protocol::{table_id, Injection, Slot, SlotInfo, LINK_TEMPS};
+use trueaxis_protocol::{table_id, Injection, LINK_TEMPS};
 // xorshift64 with a fixed seed.
 use trueaxis_test_support::XorShift64 as Rng;
 
@@ -107,15 +107,6 @@ fn tick(e: &mut Engine<'static>, clock: &FakeClock, io: &mut Io) {
     let mut enc = Io { ..*io };
     let mut temps = Io { ..*io };
     e.tick(clock, &mut enc, &mut temps, &mut Pulses(&mut io.pulses));
-}
-
-fn info(table: &[u8]) -> SlotInfo {
-    SlotInfo {
-        slot: Slot::A,
-        seq: 1,
-        len: table.len() as u32,
-        crc32: table_id(table),
-    }
 }
 
 struct State {

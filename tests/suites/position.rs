@@ -19,16 +19,14 @@ mod rig;
 
 use core::cell::{Cell, RefCell};
 
-use rig::{engine_config, upload_and_commit, FakeClock, Flash, SLOT};
+use rig::{engine_config, info, upload_and_commit, FakeClock, Flash, SLOT};
 use trueaxis_app::engine::{Approach, Engine, EngineConfig, HomeSwitch};
 use trueaxis_app::hw::{Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::sensors::Widen16;
 use trueaxis_app::server::{Server, ServerConfig};
 use trueaxis_app::store::{Layout, TableStore};
-use trueaxis_protocol::{
-    table_id, Faults, LinkError, Request, Response, Slot, SlotInfo, LINK_TEMPS,
-};
+use trueaxis_protocol::{table_id, Faults, LinkError, Request, Response, LINK_TEMPS};
 
 static FULL: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/full.bin"));
 static CUBIC19: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/cubic19.bin"));
@@ -108,15 +106,6 @@ impl Rig {
     fn tick(&mut self, e: &mut Engine<'_>, dt_us: u64) {
         self.clock.0.set(self.clock.0.get() + dt_us);
         e.tick(&self.clock, &mut self.enc, &mut Room, &mut Pulses);
-    }
-}
-
-fn info(table: &[u8]) -> SlotInfo {
-    SlotInfo {
-        slot: Slot::A,
-        seq: 1,
-        len: table.len() as u32,
-        crc32: table_id(table),
     }
 }
 
