@@ -52,6 +52,20 @@ fn poly(rng: &mut Rng, deg: u8, scale: f64) -> Vec<PolyCoef> {
     v
 }
 
+/// A cubic19 polynomial on each output, ±3 µm coefficients (drawn output
+/// by output, monomial by monomial).
+fn cubic19_on_each_output(rng: &mut Rng) -> Vec<TermSpec> {
+    (0..3)
+        .map(|o| TermSpec::Poly {
+            output: o,
+            coefs: CUBIC19
+                .iter()
+                .map(|&m| (m, 3_000.0 * rng.signed_unit()))
+                .collect(),
+        })
+        .collect()
+}
+
 fn periodic(rng: &mut Rng, output: u8, axis: u8, harmonics: usize) -> TermSpec {
     TermSpec::Periodic {
         output,
@@ -153,15 +167,7 @@ pub fn all() -> Result<Vec<(&'static str, Vec<u8>)>, EncodeError> {
     // Thermal and Abbe of degree ≤ 1 with cubic19 (f32 fast path), then
     // degree 3 (general term loop, monomials handed over).
     let mut s = base(6);
-    s.terms = (0..3)
-        .map(|o| TermSpec::Poly {
-            output: o,
-            coefs: CUBIC19
-                .iter()
-                .map(|&m| (m, 3_000.0 * rng.signed_unit()))
-                .collect(),
-        })
-        .collect();
+    s.terms = cubic19_on_each_output(&mut rng);
     for ch in 0..2u8 {
         for output in 0..3u8 {
             s.terms.push(TermSpec::Thermal {
@@ -224,15 +230,7 @@ pub fn all() -> Result<Vec<(&'static str, Vec<u8>)>, EncodeError> {
     // Everything at once off the fast path: cubic19, periodic, thermal of
     // degree 3, reversal, a grid and a network.
     let mut s = base(11);
-    s.terms = (0..3)
-        .map(|o| TermSpec::Poly {
-            output: o,
-            coefs: CUBIC19
-                .iter()
-                .map(|&m| (m, 3_000.0 * rng.signed_unit()))
-                .collect(),
-        })
-        .collect();
+    s.terms = cubic19_on_each_output(&mut rng);
     s.terms.push(periodic(&mut rng, 1, 1, 2));
     s.terms.push(TermSpec::Thermal {
         output: 0,

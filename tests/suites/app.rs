@@ -7,15 +7,19 @@
 #![no_std]
 #![no_main]
 
+#[path = "../src/rig.rs"]
+#[allow(dead_code)] // each suite uses part of it
+mod rig;
+
 use core::cell::Cell;
 
-use trueaxis_app::engine::{round_div, AxisConfig, Engine, EngineConfig};
-use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
+use rig::{engine_config, info, FakeClock};
+use trueaxis_app::engine::{round_div, Engine, EngineConfig};
+use trueaxis_app::hw::{Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::memflash::MemFlash;
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::store::{Layout, TableStore};
-use trueaxis_protocol::{table_id, Injection, Slot, SlotInfo, LINK_TEMPS};
-use trueaxis_qemu as _;
+use trueaxis_protocol::{table_id, Injection, LINK_TEMPS};
 // xorshift64 with a fixed seed.
 use trueaxis_test_support::XorShift64 as Rng;
 
@@ -82,32 +86,19 @@ impl StepOutput for Pulses<'_> {
     }
 }
 
-struct FakeClock(Cell<u64>);
-impl Clock for FakeClock {
-    fn now_us(&self) -> u64 {
-        self.0.get()
-    }
-}
-
+/// The images' configuration (rig.rs) at 1 kHz with 0.1 µm
+/// per count, one thermistor, a 1 µm/ms fault ramp and a 100 mm tool.
 fn config() -> EngineConfig {
-    let axis = AxisConfig {
-        pm_per_count: 100_000, // 0.1 µm per count
-        origin_nm: 0,
-        pulse_nm: 100,
-        max_speed_nm_per_ms: 0,
-        counter_bits: 32,
-        home: None,
-    };
-    EngineConfig {
-        axes: [axis; 3],
-        period_us: 1000,
-        max_steps_per_tick: 64,
+    let mut c = EngineConfig {
         temps_used: 1,
-        temp_min_mc: -20_000,
-        temp_max_mc: 80_000,
         fault_ramp_nm_per_ms: 1000,
         tool_nm: 100_000_000,
+        ..engine_config(1000)
+    };
+    for axis in &mut c.axes {
+        axis.pm_per_count = 100_000; // 0.1 µm per count
     }
+    c
 }
 
 /// One tick at the nominal period.
@@ -116,15 +107,6 @@ fn tick(e: &mut Engine<'static>, clock: &FakeClock, io: &mut Io) {
     let mut enc = Io { ..*io };
     let mut temps = Io { ..*io };
     e.tick(clock, &mut enc, &mut temps, &mut Pulses(&mut io.pulses));
-}
-
-fn info(table: &[u8]) -> SlotInfo {
-    SlotInfo {
-        slot: Slot::A,
-        seq: 1,
-        len: table.len() as u32,
-        crc32: table_id(table),
-    }
 }
 
 struct State {

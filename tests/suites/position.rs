@@ -13,26 +13,25 @@
 #![no_std]
 #![no_main]
 
+#[path = "../src/rig.rs"]
+#[allow(dead_code)] // each suite uses part of it
+mod rig;
+
 use core::cell::{Cell, RefCell};
 
-use trueaxis_app::engine::{Approach, AxisConfig, Engine, EngineConfig, HomeSwitch};
-use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
-use trueaxis_app::memflash::MemFlash;
+use rig::{engine_config, info, upload_and_commit, FakeClock, Flash, SLOT};
+use trueaxis_app::engine::{Approach, Engine, EngineConfig, HomeSwitch};
+use trueaxis_app::hw::{Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::model::{load_into, ModelBuf};
 use trueaxis_app::sensors::Widen16;
 use trueaxis_app::server::{Server, ServerConfig};
 use trueaxis_app::store::{Layout, TableStore};
-use trueaxis_protocol::{
-    table_id, Faults, LinkError, Request, Response, Slot, SlotInfo, LINK_TEMPS, MAX_CHUNK_BYTES,
-};
-use trueaxis_qemu as _;
+use trueaxis_protocol::{table_id, Faults, LinkError, Request, Response, LINK_TEMPS};
 
 static FULL: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/full.bin"));
 static CUBIC19: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/cubic19.bin"));
 static OFF_DEFINITION: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/off_definition.bin"));
 
-const SLOT: usize = 6 * 1024;
-type Flash = MemFlash<&'static mut [u8; 2 * SLOT], 4, 2048>;
 const PERIOD_US: u64 = 50;
 
 /// The board's encoders: 16-bit counters (the true count modulo 2^16)
@@ -64,41 +63,26 @@ impl StepOutput for Pulses {
     fn pulses(&mut self, _axis: usize, _steps: i32) {}
 }
 
-struct FakeClock(Cell<u64>);
-impl Clock for FakeClock {
-    fn now_us(&self) -> u64 {
-        self.0.get()
-    }
-}
-
 /// The board's engine configuration (board/src/board.rs), X's home switch
 /// at 0.
 fn config() -> EngineConfig {
-    let axis = AxisConfig {
-        pm_per_count: 25_000,
-        origin_nm: 0,
-        pulse_nm: 100,
-        max_speed_nm_per_ms: 500_000,
-        counter_bits: 16,
-        home: None,
+    let mut c = EngineConfig {
+        max_steps_per_tick: 2,
+        temps_used: 1,
+        fault_ramp_nm_per_ms: 1000,
+        ..engine_config(PERIOD_US as u32)
     };
-    let mut axes = [axis; 3];
-    axes[0].home = Some(HomeSwitch {
+    for axis in &mut c.axes {
+        axis.max_speed_nm_per_ms = 500_000;
+        axis.counter_bits = 16;
+    }
+    c.axes[0].home = Some(HomeSwitch {
         pos_nm: 0,
         approach: Approach::Negative,
         debounce_ticks: 4,
         tolerance_nm: 100_000,
     });
-    EngineConfig {
-        axes,
-        period_us: PERIOD_US as u32,
-        max_steps_per_tick: 2,
-        temps_used: 1,
-        temp_min_mc: -20_000,
-        temp_max_mc: 80_000,
-        fault_ramp_nm_per_ms: 1000,
-        tool_nm: 0,
-    }
+    c
 }
 
 struct Rig {
@@ -125,15 +109,6 @@ impl Rig {
     }
 }
 
-fn info(table: &[u8]) -> SlotInfo {
-    SlotInfo {
-        slot: Slot::A,
-        seq: 1,
-        len: table.len() as u32,
-        crc32: table_id(table),
-    }
-}
-
 fn engine<'m>() -> Engine<'m> {
     match Engine::new(config()) {
         Ok(e) => e,
@@ -141,26 +116,17 @@ fn engine<'m>() -> Engine<'m> {
     }
 }
 
-type TestServer = Server<'static, 'static, Flash>;
-
-/// Uploads `table` and commits it through the server's request handler.
-fn upload_and_commit(
-    server: &mut TestServer,
-    engine: &RefCell<Engine<'static>>,
-    now: u64,
-    table: &[u8],
-) -> Response {
-    let size = table.len() as u32;
-    let crc32 = table_id(table);
-    let r = server.handle(Request::UploadBegin { size, crc32 }, now, engine);
-    defmt::assert!(matches!(r, Response::UploadAck { .. }));
-    for (i, data) in table.chunks(MAX_CHUNK_BYTES).enumerate() {
-        let offset = (i * MAX_CHUNK_BYTES) as u32;
-        let r = server.handle(Request::UploadChunk { offset, data }, now, engine);
-        defmt::assert!(matches!(r, Response::UploadAck { .. }));
+/// An engine running `table`, loaded into `buf`.
+fn engine_running<'m>(buf: &'m mut ModelBuf, table: &[u8]) -> Engine<'m> {
+    if load_into(table, buf).is_err() {
+        defmt::panic!("load");
     }
-    server.handle(Request::Commit, now, engine)
+    let mut e = engine();
+    let _ = e.set_model(buf, info(table));
+    e
 }
+
+type TestServer = Server<'static, 'static, Flash>;
 
 struct State {
     server: Option<TestServer>,
@@ -212,12 +178,7 @@ mod tests {
     fn a_home_switch_glitch_or_pass_never_moves_a_referenced_axis() {
         // On the stack (the statics' RAM holds the server's two).
         let mut buf = ModelBuf::new();
-        let model = &mut buf;
-        if load_into(CUBIC19, model).is_err() {
-            defmt::panic!("load");
-        }
-        let mut e = engine();
-        let _ = e.set_model(model, info(CUBIC19));
+        let mut e = engine_running(&mut buf, CUBIC19);
         let mut rig = Rig::new();
         defmt::assert!(e.reference(0, 300_000_000) && e.reference(1, 0) && e.reference(2, 0));
         for _ in 0..100 {
@@ -260,12 +221,7 @@ mod tests {
     #[test]
     fn motion_during_a_stall_is_not_a_silent_position_error() {
         let mut buf = ModelBuf::new();
-        let model = &mut buf;
-        if load_into(CUBIC19, model).is_err() {
-            defmt::panic!("load");
-        }
-        let mut e = engine();
-        let _ = e.set_model(model, info(CUBIC19));
+        let mut e = engine_running(&mut buf, CUBIC19);
         let mut rig = Rig::new();
         for axis in 0..3 {
             defmt::assert!(e.reference(axis, 0));

@@ -22,7 +22,7 @@ use std::vec::Vec;
 
 use core::cell::{Cell, RefCell};
 
-use model_core::spec::{PolyCoef, TableSpec, TermSpec};
+use model_core::spec::{GridAxisSpec, GridSpec, PolyCoef, TableSpec, TermSpec};
 use model_core::{Envelope, InputScaling};
 use trueaxis_protocol::LINK_TEMPS;
 
@@ -77,6 +77,31 @@ pub fn sim_engine_config() -> EngineConfig {
 /// slew 500 nm/ms.
 pub fn sample_table(variant: u32) -> Vec<u8> {
     sample_spec(variant).encode().expect("sample table encodes")
+}
+
+/// [`sample_spec`]`(0)` with one `n` × `n` grid on ex over the travel
+/// (x and y, values `(i mod 97) · 10` nm) for its terms: the table the
+/// limit tests grow past the board's capacity.
+pub fn sample_grid_spec(n: u16) -> TableSpec {
+    let mut spec = sample_spec(0);
+    let ax = GridAxisSpec {
+        nodes: n,
+        origin_nm: -400_000_000,
+        step_nm: 800_000_000 / (i32::from(n) - 1),
+    };
+    let one = GridAxisSpec {
+        nodes: 1,
+        origin_nm: 0,
+        step_nm: 1,
+    };
+    spec.terms = vec![TermSpec::Grid(GridSpec {
+        output: 0,
+        axes: [ax, ax, one],
+        values_nm: (0..usize::from(n) * usize::from(n))
+            .map(|i| (i % 97) as f64 * 10.0)
+            .collect(),
+    })];
+    spec
 }
 
 /// The [`TableSpec`] behind [`sample_table`].

@@ -567,28 +567,7 @@ fn refusals() {
 /// grid: 1600 values > `FW_GRID`) is refused at commit, not half loaded.
 #[test]
 fn tables_beyond_the_firmware_capacity_are_refused_at_commit() {
-    use model_core::spec::{GridAxisSpec, GridSpec, TermSpec};
-    let mut spec = trueaxis_app::sim::sample_spec(0);
-    let n = 40u16;
-    let step = 800_000_000 / (n as i32 - 1);
-    let ax = GridAxisSpec {
-        nodes: n,
-        origin_nm: -400_000_000,
-        step_nm: step,
-    };
-    let one = GridAxisSpec {
-        nodes: 1,
-        origin_nm: 0,
-        step_nm: 1,
-    };
-    spec.terms = vec![TermSpec::Grid(GridSpec {
-        output: 0,
-        axes: [ax, ax, one],
-        values_nm: (0..n as usize * n as usize)
-            .map(|i| (i % 97) as f64 * 10.0)
-            .collect(),
-    })];
-    let table = spec.encode().unwrap();
+    let table = trueaxis_app::sim::sample_grid_spec(40).encode().unwrap();
     const { assert!(trueaxis_app::model::FW_GRID < 1600) };
     // Valid, and model-core's default capacity would take it.
     assert!(Model::load(&parse(&table).unwrap()).is_ok());
@@ -943,36 +922,14 @@ fn a_table_that_faults_during_its_trial_falls_back_to_the_previous_one() {
 #[test]
 fn the_board_refuses_exactly_what_board_check_refuses() {
     use model_core::board::{check, LimitError, MODEL_BUDGET_INSTR, MODEL_GRID, STAGE_BYTES};
-    use model_core::spec::{
-        GridAxisSpec, GridSpec, LayerSpec, MlpInputSpec, MlpSource, MlpSpec, TermSpec,
-    };
+    use model_core::spec::{LayerSpec, MlpInputSpec, MlpSource, MlpSpec, TermSpec};
     use model_core::LoadError;
 
     let grid = |n: u16, value_nm: f64| {
-        let mut spec = trueaxis_app::sim::sample_spec(0);
-        let ax = GridAxisSpec {
-            nodes: n,
-            origin_nm: -400_000_000,
-            step_nm: 800_000_000 / (i32::from(n) - 1),
-        };
-        let one = GridAxisSpec {
-            nodes: 1,
-            origin_nm: 0,
-            step_nm: 1,
-        };
-        spec.terms = vec![TermSpec::Grid(GridSpec {
-            output: 0,
-            axes: [ax, ax, one],
-            values_nm: (0..usize::from(n) * usize::from(n))
-                .map(|i| {
-                    if i == 5 {
-                        value_nm
-                    } else {
-                        (i % 97) as f64 * 10.0
-                    }
-                })
-                .collect(),
-        })];
+        let mut spec = trueaxis_app::sim::sample_grid_spec(n);
+        if let TermSpec::Grid(g) = &mut spec.terms[0] {
+            g.values_nm[5] = value_nm;
+        }
         spec.encode().unwrap()
     };
     // A two-layer network of 32 units: 3·32+32 + 32·32+32 + 32·3+3 = 1283

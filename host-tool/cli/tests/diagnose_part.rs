@@ -7,12 +7,9 @@
 
 mod common;
 
+use common::onmachine::{calibrate_on_4mm_ball, pv, rigid_fit, without_rigid};
 use common::{json, on_machine_campaign, run, s, tmp_dir};
 use serde_json::Value;
-
-fn pv(v: &[f64]) -> f64 {
-    v.iter().copied().fold(f64::MIN, f64::max) - v.iter().copied().fold(f64::MAX, f64::min)
-}
 
 fn finding<'a>(d: &'a Value, source: &str) -> &'a Value {
     d["findings"]
@@ -231,16 +228,7 @@ fn an_arc_needs_the_ball_calibration_or_a_known_diameter_for_the_probe() {
     // form after the correction — 6 lobes of ±100 nm less what a circle
     // absorbs over 20°…160°, within the noise's extremes.
     let probe = dir.join("probe.json");
-    let cal = json(&run(&[
-        "probe",
-        "calibrate",
-        s(&camp.join("ball.csv")),
-        "--ball-diameter-mm",
-        "4",
-        "-o",
-        s(&probe),
-        "--json",
-    ]));
+    let cal = calibrate_on_4mm_ball(&camp.join("ball.csv"), false, &probe, &[]);
     let d = diagnose(&[s(&part), "--probe", s(&probe)]);
     let r_cal = cal["probe"]["probe_radius_mm"].as_f64().unwrap();
     let r_true = truth["probe_radius_mm"].as_f64().unwrap();
@@ -255,13 +243,13 @@ fn an_arc_needs_the_ball_calibration_or_a_known_diameter_for_the_probe() {
     let theta: Vec<f64> = (0..=500)
         .map(|i| (20.0 + 140.0 * i as f64 / 500.0f64).to_radians())
         .collect();
-    let probe_here = lsq_rest(&theta, probe_form_xz);
+    let probe_here = without_rigid(&theta, probe_form_xz);
     within(&d, "probe_form", pv(&probe_here), 10.0);
     // The part: the corrected arc still holds the slides' straightness
     // (straight in this campaign): said as the sum part + slides, within
     // 10 % of the part's PV and its interval holding it — never claimed as
     // the part.
-    let lobes = lsq_rest(&theta, |t| 100.0 * (6.0 * t).cos());
+    let lobes = without_rigid(&theta, |t| 100.0 * (6.0 * t).cos());
     unknown(&d, "part_form", "reversal");
     sum_within(
         &d,
@@ -270,18 +258,7 @@ fn an_arc_needs_the_ball_calibration_or_a_known_diameter_for_the_probe() {
         0.1 * pv(&lobes),
     );
     let probe3 = dir.join("probe3d.json");
-    run(&[
-        "probe",
-        "calibrate",
-        s(&camp.join("ball3d.csv")),
-        "--ball-diameter-mm",
-        "4",
-        "--plane",
-        "xyz",
-        "-o",
-        s(&probe3),
-        "--json",
-    ]);
+    calibrate_on_4mm_ball(&camp.join("ball3d.csv"), true, &probe3, &[]);
     let d3 = diagnose(&[s(&part), "--probe", s(&probe3)]);
     within(&d3, "probe_form", pv(&probe_here), 10.0);
     sum_within(
@@ -297,7 +274,7 @@ fn an_arc_needs_the_ball_calibration_or_a_known_diameter_for_the_probe() {
     // radius plus the projection of the probe's and the part's form on
     // 1, cos θ, sin θ.
     let k = diagnose(&[s(&part), "--part-diameter-mm", "50"]);
-    let c0 = lsq_constant(&theta, |t| probe_form_xz(t) + 100.0 * (6.0 * t).cos());
+    let c0 = rigid_fit(&theta, |t| probe_form_xz(t) + 100.0 * (6.0 * t).cos())[0];
     within(&k, "probe_radius", r_true + c0 * 1e-6, 5e-6);
     unknown(&k, "probe_form", "master ball");
 }
@@ -309,50 +286,6 @@ fn probe_form_xz(t: f64) -> f64 {
     let s3 = (1.0 - n[2] * n[2]).max(0.0).sqrt();
     let az = n[1].atan2(n[0]);
     60.0 * s3.powi(3) * (3.0 * az).cos() + 40.0 * n[2] * n[2] - 25.0 * s3 * s3 * (2.0 * az).sin()
-}
-
-/// Least squares of `f(θ)` on `1, cos θ, sin θ` (3×3 normal equations,
-/// Cramer's rule): the coefficients.
-fn lsq3(theta: &[f64], f: &impl Fn(f64) -> f64) -> [f64; 3] {
-    let mut m = [[0.0; 3]; 3];
-    let mut b = [0.0; 3];
-    for &t in theta {
-        let x = [1.0, t.cos(), t.sin()];
-        for i in 0..3 {
-            for j in 0..3 {
-                m[i][j] += x[i] * x[j];
-            }
-            b[i] += x[i] * f(t);
-        }
-    }
-    let det = |m: &[[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let d = det(&m);
-    let mut c = [0.0; 3];
-    for (k, ck) in c.iter_mut().enumerate() {
-        let mut mk = m;
-        for i in 0..3 {
-            mk[i][k] = b[i];
-        }
-        *ck = det(&mk) / d;
-    }
-    c
-}
-
-fn lsq_constant(theta: &[f64], f: impl Fn(f64) -> f64) -> f64 {
-    lsq3(theta, &f)[0]
-}
-
-/// `f` less its least-squares `1, cos θ, sin θ` part.
-fn lsq_rest(theta: &[f64], f: impl Fn(f64) -> f64) -> Vec<f64> {
-    let c = lsq3(theta, &f);
-    theta
-        .iter()
-        .map(|&t| f(t) - c[0] - c[1] * t.cos() - c[2] * t.sin())
-        .collect()
 }
 
 #[test]

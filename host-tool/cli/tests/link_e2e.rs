@@ -560,26 +560,7 @@ fn invalid_tables_are_refused_before_anything_is_sent() {
 /// A valid table with one `n` × `n` grid on ex (model-core's default
 /// capacity loads it; the board's may not).
 fn grid_table(n: u16) -> Vec<u8> {
-    use model_core::spec::{GridAxisSpec, GridSpec, TermSpec};
-    let mut spec = trueaxis_app::sim::sample_spec(0);
-    let ax = GridAxisSpec {
-        nodes: n,
-        origin_nm: -400_000_000,
-        step_nm: 800_000_000 / (i32::from(n) - 1),
-    };
-    let one = GridAxisSpec {
-        nodes: 1,
-        origin_nm: 0,
-        step_nm: 1,
-    };
-    spec.terms = vec![TermSpec::Grid(GridSpec {
-        output: 0,
-        axes: [ax, ax, one],
-        values_nm: (0..usize::from(n) * usize::from(n))
-            .map(|i| (i % 97) as f64 * 10.0)
-            .collect(),
-    })];
-    spec.encode().unwrap()
+    trueaxis_app::sim::sample_grid_spec(n).encode().unwrap()
 }
 
 #[test]

@@ -14,6 +14,7 @@ mod common;
 
 use std::path::Path;
 
+use common::onmachine::pv_line_removed;
 use common::{json, run, s, tmp_dir};
 use serde_json::Value;
 use trueaxis_engine::onmachine::probe;
@@ -531,18 +532,8 @@ fn touch_trigger_positions_campaign_columns_and_clock_times_are_read() {
         &write(&dir, "rev.out", ""),
         "--json",
     ]));
-    let pv = |g: &dyn Fn(f64) -> f64| {
-        let xs: Vec<f64> = (0..=200).map(|i| i as f64).collect();
-        let n = xs.len() as f64;
-        let (mx, my) = (
-            xs.iter().sum::<f64>() / n,
-            xs.iter().map(|&x| g(x)).sum::<f64>() / n,
-        );
-        let k = xs.iter().map(|&x| (x - mx) * (g(x) - my)).sum::<f64>()
-            / xs.iter().map(|&x| (x - mx).powi(2)).sum::<f64>();
-        let d: Vec<f64> = xs.iter().map(|&x| g(x) - my - k * (x - mx)).collect();
-        trueaxis_engine::onmachine::separate::pv(&d)
-    };
+    let xs: Vec<f64> = (0..=200).map(|i| i as f64).collect();
+    let pv = |g: &dyn Fn(f64) -> f64| pv_line_removed(&xs, g);
     assert!(
         (f(&rev["part_pv_um"]) - pv(&part)).abs() < 0.02,
         "{rev} vs {}",

@@ -7,6 +7,7 @@
 
 mod common;
 
+use common::onmachine::{ball_scan_dirs, calibrate_on_4mm_ball, correct_scan, pv};
 use common::{json, on_machine_campaign, run, s, tmp_dir};
 
 /// Least squares of `y` on the columns `x[i]` (rows of basis values), by
@@ -57,10 +58,6 @@ fn without_rigid(angles: &[f64], f: impl Fn(f64) -> f64) -> (Vec<f64>, f64) {
     (r, c[0])
 }
 
-fn pv(v: &[f64]) -> f64 {
-    v.iter().copied().fold(f64::MIN, f64::max) - v.iter().copied().fold(f64::MAX, f64::min)
-}
-
 fn probe_form(n: [f64; 3]) -> f64 {
     let s = (1.0 - n[2] * n[2]).max(0.0).sqrt();
     let az = n[1].atan2(n[0]);
@@ -83,16 +80,7 @@ fn the_on_machine_commands_find_the_simulated_answers() {
     );
 
     // Probe on the ball, 2-D: radius within 5 nm, form within 10 nm PV.
-    let cal = json(&run(&[
-        "probe",
-        "calibrate",
-        s(&f("ball.csv")),
-        "--ball-diameter-mm",
-        "4",
-        "-o",
-        s(&dir.join("probe.json")),
-        "--json",
-    ]));
+    let cal = calibrate_on_4mm_ball(&f("ball.csv"), false, &dir.join("probe.json"), &[]);
     let arc: Vec<f64> = (0..=400)
         .map(|i| (10.0 + 160.0 * i as f64 / 400.0f64).to_radians())
         .collect();
@@ -109,26 +97,8 @@ fn the_on_machine_commands_find_the_simulated_answers() {
 
     // 3-D: the radius within 5 nm (the mean of the form over the contacts
     // in the radius: a symmetric scan, so a 1, nz fit gives it).
-    let cal3 = json(&run(&[
-        "probe",
-        "calibrate",
-        s(&f("ball3d.csv")),
-        "--ball-diameter-mm",
-        "4",
-        "--plane",
-        "xyz",
-        "-o",
-        s(&dir.join("probe3d.json")),
-        "--json",
-    ]));
-    let mut dirs = vec![[0.0, 0.0, 1.0]];
-    for ring in 1..=10 {
-        let pol = (8.5 * ring as f64).to_radians();
-        for j in 0..36 {
-            let az = (10.0 * j as f64).to_radians();
-            dirs.push([pol.sin() * az.cos(), pol.sin() * az.sin(), pol.cos()]);
-        }
-    }
+    let cal3 = calibrate_on_4mm_ball(&f("ball3d.csv"), true, &dir.join("probe3d.json"), &[]);
+    let dirs = ball_scan_dirs();
     let x: Vec<Vec<f64>> = dirs.iter().map(|n| vec![1.0, n[0], n[1], n[2]]).collect();
     let y: Vec<f64> = dirs.iter().map(|&n| probe_form(n)).collect();
     let (c, perp) = lsq(&x, &y);
@@ -146,31 +116,14 @@ fn the_on_machine_commands_find_the_simulated_answers() {
     // what a circle absorbs over 20°…160°), point by point to the scan's
     // 5 nm noise (a PV would add the noise's extremes: ±15 nm on 501
     // points); with the radius only it is off by the probe's form.
-    let cor = json(&run(&[
-        "probe",
-        "correct",
-        s(&f("part.csv")),
-        "--probe",
-        s(&dir.join("probe.json")),
-        "-o",
-        s(&dir.join("surface.csv")),
-        "--json",
-    ]));
+    let (cor, rows, theta) = correct_scan(
+        &f("part.csv"),
+        &dir.join("probe.json"),
+        &dir.join("surface.csv"),
+        &[],
+    );
     // The 2-D probe file was calibrated over 10°…170°: every contact is in.
     assert_eq!(cor["outside_calibration"], 0, "{cor}");
-    let text = std::fs::read_to_string(dir.join("surface.csv")).unwrap();
-    // x_mm, z_mm, theta_deg, probe_form_nm, calibrated, deviation_nm
-    let rows: Vec<Vec<f64>> = text
-        .lines()
-        .filter(|l| !l.starts_with('#'))
-        .skip(1)
-        .map(|l| {
-            l.split(',')
-                .map(|c| if c == "true" { 1.0 } else { c.parse().unwrap() })
-                .collect()
-        })
-        .collect();
-    let theta: Vec<f64> = rows.iter().map(|r| r[2].to_radians()).collect();
     let (part_perp, _) = without_rigid(&theta, |t| 100.0 * (6.0 * t).cos());
     let (probe_perp, _) = without_rigid(&theta, |t| probe_form([t.cos(), 0.0, t.sin()]));
     let rms = |v: Vec<f64>| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
@@ -393,20 +346,12 @@ fn a_3d_calibration_has_a_page_with_its_cone_and_the_form_over_the_ball() {
     let dir = tmp_dir("onmachine", "probe3d-page");
     let (camp, _) = on_machine_campaign(&dir);
     let rep = dir.join("rep");
-    let cal = json(&run(&[
-        "probe",
-        "calibrate",
-        s(&camp.join("ball3d.csv")),
-        "--ball-diameter-mm",
-        "4",
-        "--plane",
-        "xyz",
-        "-o",
-        s(&dir.join("p3.json")),
-        "--report",
-        s(&rep),
-        "--json",
-    ]));
+    let cal = calibrate_on_4mm_ball(
+        &camp.join("ball3d.csv"),
+        true,
+        &dir.join("p3.json"),
+        &["--report", s(&rep)],
+    );
     assert_eq!(
         cal["report"].as_str().unwrap(),
         s(&rep.join("index.html")),

@@ -4,6 +4,9 @@
 
 mod common;
 
+use common::onmachine::{
+    ball_scan_dirs, calibrate_on_4mm_ball, correct_scan, pv_line_removed, rigid_fit, without_rigid,
+};
 use common::{json, run, s, tmp_dir};
 
 /// Uniform in ±0.5 from an index (a fixed, reproducible "noise").
@@ -25,45 +28,6 @@ fn probe_form_nm(t: f64) -> f64 {
 /// over `angles`.
 fn rigid_mean_nm(angles: &[f64], f: impl Fn(f64) -> f64) -> f64 {
     rigid_fit(angles, f)[0]
-}
-
-/// `f` minus its least-squares fit by `c0 + c1 cos θ + s1 sin θ` over
-/// `angles`, at each angle: what is left once radius and centre are fitted.
-fn without_rigid(angles: &[f64], f: impl Fn(f64) -> f64 + Copy) -> Vec<f64> {
-    let c = rigid_fit(angles, f);
-    angles
-        .iter()
-        .map(|&t| f(t) - c[0] - c[1] * t.cos() - c[2] * t.sin())
-        .collect()
-}
-
-/// The least-squares fit of `f` by `c0 + c1 cos θ + s1 sin θ` over
-/// `angles` (normal equations, 3 × 3, Cramer's rule).
-fn rigid_fit(angles: &[f64], f: impl Fn(f64) -> f64) -> [f64; 3] {
-    let mut m = [[0.0; 3]; 3];
-    let mut v = [0.0; 3];
-    for &t in angles {
-        let b = [1.0, t.cos(), t.sin()];
-        for i in 0..3 {
-            for j in 0..3 {
-                m[i][j] += b[i] * b[j];
-            }
-            v[i] += b[i] * f(t);
-        }
-    }
-    let det = |m: [[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let d = det(m);
-    [0, 1, 2].map(|k| {
-        let mut mk = m;
-        for i in 0..3 {
-            mk[i][k] = v[i];
-        }
-        det(mk) / d
-    })
 }
 
 fn write_scan(path: &std::path::Path, pts: &[[f64; 2]]) {
@@ -89,16 +53,7 @@ fn a_probe_calibrated_on_a_master_ball_corrects_a_part_scan() {
     let scan = dir.join("ball.csv");
     write_scan(&scan, &ball);
     let probe = dir.join("probe.json");
-    let doc = json(&run(&[
-        "probe",
-        "calibrate",
-        s(&scan),
-        "--ball-diameter-mm",
-        "4",
-        "-o",
-        s(&probe),
-        "--json",
-    ]));
+    let doc = calibrate_on_4mm_ball(&scan, false, &probe, &[]);
     let r = doc["probe"]["probe_radius_mm"].as_f64().unwrap();
     // The radius is reported with a form error of zero mean and no tilt
     // over the calibrated arc (docs/on-machine.md): the true probe's in that
@@ -129,42 +84,12 @@ fn a_probe_calibrated_on_a_master_ball_corrects_a_part_scan() {
     let pscan = dir.join("part.csv");
     write_scan(&pscan, &part);
     let surface = dir.join("surface.csv");
-    let c = json(&run(&[
-        "probe",
-        "correct",
-        s(&pscan),
-        "--probe",
-        s(&probe),
-        "--side",
-        "+z",
-        "-o",
-        s(&surface),
-        "--json",
-    ]));
+    let (c, rows, theta) = correct_scan(&pscan, &probe, &surface, &["--side", "+z"]);
     let pv = c["form_pv_nm"].as_f64().unwrap();
     assert!((pv - 200.0).abs() < 15.0, "{c}");
     // Point by point: the corrected deviation is the part's 6 lobes (less
     // what a fitted circle absorbs); with the probe's form left in, it is
     // off by the probe's lobing.
-    let text = std::fs::read_to_string(&surface).unwrap();
-    // x_mm, z_mm, theta_deg, probe_form_nm, calibrated, deviation_nm
-    let rows: Vec<Vec<f64>> = text
-        .lines()
-        .filter(|l| !l.starts_with('#'))
-        .skip(1)
-        .map(|l| {
-            l.split(',')
-                .map(|c| {
-                    if c == "true" {
-                        1.0
-                    } else {
-                        c.parse::<f64>().unwrap()
-                    }
-                })
-                .collect()
-        })
-        .collect();
-    let theta: Vec<f64> = rows.iter().map(|r| r[2].to_radians()).collect();
     let truth = without_rigid(&theta, |t| 100.0 * (6.0 * t).cos());
     let probe_form = without_rigid(&theta, probe_form_nm);
     let (mut worst, mut worst_uncorrected) = (0.0f64, 0.0f64);
@@ -281,21 +206,16 @@ fn a_reversal_gives_part_form_and_slide_straightness() {
     ]));
     // True PVs once the least-squares lines are removed.
     let xs: Vec<f64> = (0..=200).map(f64::from).collect();
-    let pv_line_removed = |f: &dyn Fn(f64) -> f64| {
-        let n = xs.len() as f64;
-        let (mx, my) = (
-            xs.iter().sum::<f64>() / n,
-            xs.iter().map(|&x| f(x)).sum::<f64>() / n,
-        );
-        let k = xs.iter().map(|&x| (x - mx) * (f(x) - my)).sum::<f64>()
-            / xs.iter().map(|&x| (x - mx).powi(2)).sum::<f64>();
-        let r: Vec<f64> = xs.iter().map(|&x| f(x) - my - k * (x - mx)).collect();
-        r.iter().copied().fold(f64::MIN, f64::max) - r.iter().copied().fold(f64::MAX, f64::min)
-    };
     let part_pv = doc["part_pv_um"].as_f64().unwrap();
     let slide_pv = doc["slide_pv_um"].as_f64().unwrap();
-    assert!((part_pv - pv_line_removed(&part)).abs() < 0.05, "{doc}");
-    assert!((slide_pv - pv_line_removed(&slide)).abs() < 0.05, "{doc}");
+    assert!(
+        (part_pv - pv_line_removed(&xs, &part)).abs() < 0.05,
+        "{doc}"
+    );
+    assert!(
+        (slide_pv - pv_line_removed(&xs, &slide)).abs() < 0.05,
+        "{doc}"
+    );
     let ci = doc["point_ci95_um"].as_f64().unwrap();
     assert!(ci > 0.005 && ci < 0.05, "{doc}");
     let text = std::fs::read_to_string(&out).unwrap();
@@ -517,37 +437,19 @@ fn a_probe_calibrated_in_3d_on_the_ball_corrects_a_scan_in_a_plane() {
     // the pole to 85°, 36 contacts each, ±7 nm noise, written to 0.1 nm.
     let c = [100.0, 20.0, 50.0];
     let mut csv = String::from("# master ball, 3-D scan\nx_mm,y_mm,z_mm,probe_id\n");
-    let mut k = 0u64;
-    for ring in 0..=10 {
-        let pol = (8.5 * ring as f64).to_radians();
-        for j in 0..(if ring == 0 { 1 } else { 36 }) {
-            let az = (10.0 * j as f64).to_radians();
-            let n = [pol.sin() * az.cos(), pol.sin() * az.sin(), pol.cos()];
-            let d = 2.0 + 0.49715 + (probe_form_3d_nm(n) + 14.0 * noise(k)) * 1e-6;
-            k += 1;
-            csv.push_str(&format!(
-                "{:.7},{:.7},{:.7},1\n",
-                c[0] + d * n[0],
-                c[1] + d * n[1],
-                c[2] + d * n[2]
-            ));
-        }
+    for (k, n) in (0u64..).zip(ball_scan_dirs()) {
+        let d = 2.0 + 0.49715 + (probe_form_3d_nm(n) + 14.0 * noise(k)) * 1e-6;
+        csv.push_str(&format!(
+            "{:.7},{:.7},{:.7},1\n",
+            c[0] + d * n[0],
+            c[1] + d * n[1],
+            c[2] + d * n[2]
+        ));
     }
     let scan = dir.join("ball3d.csv");
     std::fs::write(&scan, csv).unwrap();
     let probe = dir.join("probe3d.json");
-    let doc = json(&run(&[
-        "probe",
-        "calibrate",
-        s(&scan),
-        "--ball-diameter-mm",
-        "4",
-        "--plane",
-        "xyz",
-        "-o",
-        s(&probe),
-        "--json",
-    ]));
+    let doc = calibrate_on_4mm_ball(&scan, true, &probe, &[]);
     let pr = &doc["probe"];
     assert_eq!(pr["format"], "trueaxis-probe3d/1", "{doc}");
     let centre: Vec<f64> = pr["centre_mm"]
@@ -562,14 +464,7 @@ fn a_probe_calibrated_in_3d_on_the_ball_corrects_a_scan_in_a_plane() {
     // The radius carries the mean of the form over the contacts (the file's
     // convention, docs/on-machine.md): within 5 nm of 0.49715 mm plus it.
     // The mean over this scan (equal weight per contact) is computed here.
-    let mut dirs = vec![[0.0, 0.0, 1.0]];
-    for ring in 1..=10 {
-        let pol = (8.5 * ring as f64).to_radians();
-        for j in 0..36 {
-            let az = (10.0 * j as f64).to_radians();
-            dirs.push([pol.sin() * az.cos(), pol.sin() * az.sin(), pol.cos()]);
-        }
-    }
+    let dirs = ball_scan_dirs();
     let r = pr["probe_radius_mm"].as_f64().unwrap();
     // Mean of the form's projection on 1, nx, ny, nz: by symmetry of the
     // scan (full rings) the nx, ny parts vanish; the nz part is fitted
@@ -603,32 +498,11 @@ fn a_probe_calibrated_in_3d_on_the_ball_corrects_a_scan_in_a_plane() {
     }
     let pscan = dir.join("part.csv");
     write_scan(&pscan, &part);
-    let out = json(&run(&[
-        "probe",
-        "correct",
-        s(&pscan),
-        "--probe",
-        s(&probe),
-        "-o",
-        s(&dir.join("surface.csv")),
-        "--json",
-    ]));
+    let (out, rows, theta) = correct_scan(&pscan, &probe, &dir.join("surface.csv"), &[]);
     assert_eq!(out["outside_calibration"], 0, "{out}");
     // Point by point, as in the 2-D test: the corrected deviation is the
     // part's lobes; with the probe's form left in it would be off by what a
     // circle does not absorb of the probe's form along this arc.
-    let text = std::fs::read_to_string(dir.join("surface.csv")).unwrap();
-    let rows: Vec<Vec<f64>> = text
-        .lines()
-        .filter(|l| !l.starts_with('#'))
-        .skip(1)
-        .map(|l| {
-            l.split(',')
-                .map(|c| if c == "true" { 1.0 } else { c.parse().unwrap() })
-                .collect()
-        })
-        .collect();
-    let theta: Vec<f64> = rows.iter().map(|r| r[2].to_radians()).collect();
     let truth = without_rigid(&theta, |t| 100.0 * (6.0 * t).cos());
     let probe_form = without_rigid(&theta, |t| probe_form_3d_nm([t.cos(), 0.0, t.sin()]));
     let (mut worst, mut worst_uncorrected) = (0.0f64, 0.0f64);

@@ -9,6 +9,7 @@ mod common;
 
 use std::path::Path;
 
+use common::onmachine::calibrate_on_4mm_ball;
 use common::{expect_exit, json, on_machine_campaign, run, s, tmp_dir};
 use serde_json::Value;
 
@@ -122,7 +123,12 @@ fn one_csv(camp: &Path) -> String {
 fn doc(args: &[&str]) -> Value {
     let mut a = args.to_vec();
     a.push("--json");
-    let mut v = json(&run(&a));
+    without_paths(json(&run(&a)))
+}
+
+/// A document less the paths it names (which differ between the runs
+/// compared).
+fn without_paths(mut v: Value) -> Value {
     for k in ["scan", "output", "report", "history"] {
         if let Some(o) = v.as_object_mut() {
             o.remove(k);
@@ -145,52 +151,15 @@ fn the_campaign_as_one_measurement_csv_gives_the_same_results_as_its_files() {
     let o1 = s(&one);
 
     // Probe calibration, 2-D and 3-D; the part corrected with the probe.
-    let a = doc(&[
-        "probe",
-        "calibrate",
-        s(&f("ball.csv")),
-        "--ball-diameter-mm",
-        "4",
-        "-o",
-        s(&o("p-a.json")),
-    ]);
-    let b = doc(&[
-        "probe",
-        "calibrate",
-        o1,
-        "--session",
-        "1",
-        "--ball-diameter-mm",
-        "4",
-        "-o",
-        s(&o("p-b.json")),
-    ]);
+    let calibrate = |scan: &Path, xyz: bool, out: &str, more: &[&str]| {
+        without_paths(calibrate_on_4mm_ball(scan, xyz, &o(out), more))
+    };
+    let a = calibrate(&f("ball.csv"), false, "p-a.json", &[]);
+    let b = calibrate(&one, false, "p-b.json", &["--session", "1"]);
     assert_eq!(a, b);
     assert!(a["probe"]["probe_radius_mm"].as_f64().unwrap() > 0.49);
-    let a = doc(&[
-        "probe",
-        "calibrate",
-        s(&f("ball3d.csv")),
-        "--ball-diameter-mm",
-        "4",
-        "--plane",
-        "xyz",
-        "-o",
-        s(&o("p3-a.json")),
-    ]);
-    let b = doc(&[
-        "probe",
-        "calibrate",
-        o1,
-        "--session",
-        "2",
-        "--ball-diameter-mm",
-        "4",
-        "--plane",
-        "xyz",
-        "-o",
-        s(&o("p3-b.json")),
-    ]);
+    let a = calibrate(&f("ball3d.csv"), true, "p3-a.json", &[]);
+    let b = calibrate(&one, true, "p3-b.json", &["--session", "2"]);
     assert_eq!(a, b);
     let a = doc(&[
         "probe",
@@ -392,15 +361,7 @@ fn a_bad_probe_value_is_placed_and_a_session_must_be_named() {
     part[k] = c.join(",");
     let partf = dir.join("normals.csv");
     std::fs::write(&partf, part.join("\n") + "\n").unwrap();
-    run(&[
-        "probe",
-        "calibrate",
-        s(&camp.join("ball.csv")),
-        "--ball-diameter-mm",
-        "4",
-        "-o",
-        s(&dir.join("p.json")),
-    ]);
+    calibrate_on_4mm_ball(&camp.join("ball.csv"), false, &dir.join("p.json"), &[]);
     expect_exit(
         &[
             "probe",

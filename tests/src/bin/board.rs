@@ -12,11 +12,15 @@
 #![no_std]
 #![no_main]
 
+#[path = "../rig.rs"]
+#[allow(dead_code)] // each image uses part of it
+mod rig;
+
 use core::cell::RefCell;
 
 use critical_section::Mutex;
 use embassy_time::{Duration, Instant, Ticker};
-use trueaxis_app::engine::{AxisConfig, Engine, EngineConfig};
+use trueaxis_app::engine::Engine;
 use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::memflash::MemFlash;
 use trueaxis_app::model::ModelBuf;
@@ -101,29 +105,6 @@ impl StepOutput for CountingSteps {
     }
 }
 
-fn engine_config() -> EngineConfig {
-    let axis = AxisConfig {
-        // 0.1 µm scale in quadrature.
-        pm_per_count: 25_000,
-        origin_nm: 0,
-        pulse_nm: 100,
-        // Injected positions jump along the trajectory: no jump check.
-        max_speed_nm_per_ms: 0,
-        counter_bits: 32,
-        home: None,
-    };
-    EngineConfig {
-        axes: [axis; 3],
-        period_us: PERIOD_US,
-        max_steps_per_tick: 64,
-        temps_used: 0,
-        temp_min_mc: -20_000,
-        temp_max_mc: 80_000,
-        fault_ramp_nm_per_ms: 50,
-        tool_nm: 0,
-    }
-}
-
 #[embassy_executor::task]
 async fn correction_loop() {
     let mut ticker = Ticker::every(Duration::from_micros(u64::from(PERIOD_US)));
@@ -154,7 +135,7 @@ fn main() -> ! {
     let core = cortex_m::Peripherals::take().expect("first take");
     time_driver::start(core.SYST);
 
-    let engine = match Engine::new(engine_config()) {
+    let engine = match Engine::new(rig::engine_config(PERIOD_US)) {
         Ok(e) => e,
         Err(e) => defmt::panic!("engine config refused: {}", defmt::Debug2Format(&e)),
     };

@@ -27,25 +27,27 @@
 #![no_main]
 #![allow(unsafe_code)] // `.uninit` statics: RAM that survives the reset
 
+#[path = "../rig.rs"]
+#[allow(dead_code)] // each image uses part of it
+mod rig;
+
 use core::cell::{Cell, RefCell};
 use core::mem::MaybeUninit;
 use core::ptr::{addr_of_mut, read_volatile, write_volatile};
 
+use rig::{FakeClock, Flash, SLOT};
 use trueaxis_app::boot::{BootRecord, Fault, ResetCause, RECORD_WORDS};
-use trueaxis_app::engine::{AxisConfig, Engine, EngineConfig};
-use trueaxis_app::hw::{Clock, Encoders, StepOutput, TemperatureSource};
-use trueaxis_app::memflash::MemFlash;
+use trueaxis_app::engine::Engine;
+use trueaxis_app::hw::{Encoders, StepOutput, TemperatureSource};
 use trueaxis_app::model::ModelBuf;
 use trueaxis_app::server::{ResetRecord, Server, ServerConfig};
 use trueaxis_app::store::{Layout, TableStore};
-use trueaxis_protocol::{table_id, Faults, Request, Response, LINK_TEMPS, MAX_CHUNK_BYTES};
+use trueaxis_protocol::{table_id, Faults, Response, LINK_TEMPS};
 use trueaxis_qemu::{exit, set_fault_hook, FaultKind};
 
 static TABLE_A: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/cubic19.bin"));
 static TABLE_B: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/full.bin"));
 
-const SLOT: usize = 6 * 1024;
-type Flash = MemFlash<&'static mut [u8; 2 * SLOT], 4, 2048>;
 const PERIOD_US: u32 = 10_000;
 /// Ticks into table B at which the image injects its fault.
 const FAULT_AT_TICK: u32 = 50;
@@ -80,24 +82,8 @@ impl ResetRecord for RecordRam {
 
 /// The board's fault handlers: record the fault, reset.
 fn record_and_reset(kind: FaultKind) -> ! {
-    let fault = match kind {
-        FaultKind::Panic => Fault::Panic,
-        FaultKind::HardFault => Fault::HardFault,
-    };
     // SAFETY: as in `RecordRam`; nothing runs after this.
-    let mut w = unsafe { read_volatile(record_ptr()) };
-    BootRecord::record_fault(&mut w, fault);
-    unsafe { write_volatile(record_ptr(), w) };
-    defmt::info!("fallback: {} recorded, resetting", kind);
-    cortex_m::peripheral::SCB::sys_reset()
-}
-
-struct SimClock(Cell<u64>);
-
-impl Clock for SimClock {
-    fn now_us(&self) -> u64 {
-        self.0.get()
-    }
+    unsafe { rig::record_and_reset(record_ptr(), "fallback", kind) }
 }
 
 struct Resting;
@@ -118,41 +104,11 @@ impl StepOutput for Resting {
     fn pulses(&mut self, _axis: usize, _steps: i32) {}
 }
 
-fn engine_config() -> EngineConfig {
-    let axis = AxisConfig {
-        pm_per_count: 25_000,
-        origin_nm: 0,
-        pulse_nm: 100,
-        max_speed_nm_per_ms: 0,
-        counter_bits: 32,
-        home: None,
-    };
-    EngineConfig {
-        axes: [axis; 3],
-        period_us: PERIOD_US,
-        max_steps_per_tick: 64,
-        temps_used: 0,
-        temp_min_mc: -20_000,
-        temp_max_mc: 80_000,
-        fault_ramp_nm_per_ms: 50,
-        tool_nm: 0,
-    }
-}
-
 type BoardServer = Server<'static, 'static, Flash>;
 
 /// Uploads and commits `table` through the server's request handler.
 fn install(server: &mut BoardServer, engine: &RefCell<Engine<'static>>, now: u64, table: &[u8]) {
-    let size = table.len() as u32;
-    let crc32 = table_id(table);
-    let r = server.handle(Request::UploadBegin { size, crc32 }, now, engine);
-    defmt::assert!(matches!(r, Response::UploadAck { .. }));
-    for (i, data) in table.chunks(MAX_CHUNK_BYTES).enumerate() {
-        let offset = (i * MAX_CHUNK_BYTES) as u32;
-        let r = server.handle(Request::UploadChunk { offset, data }, now, engine);
-        defmt::assert!(matches!(r, Response::UploadAck { .. }));
-    }
-    match server.handle(Request::Commit, now, engine) {
+    match rig::upload_and_commit(server, engine, now, table) {
         Response::Committed(info) => defmt::info!("fallback: committed seq {}", info.seq),
         r => defmt::panic!("commit refused: {}", defmt::Debug2Format(&r)),
     }
@@ -181,7 +137,7 @@ fn main() -> ! {
     unsafe { write_volatile(step_ptr(), [MAGIC, boot + 1]) };
     defmt::info!("fallback: boot {} ({})", boot, cause);
 
-    let engine = RefCell::new(Engine::new(engine_config()).expect("valid config"));
+    let engine = RefCell::new(Engine::new(rig::engine_config(PERIOD_US)).expect("valid config"));
     let layout = Layout {
         slot_offset: [0, SLOT as u32],
         slot_bytes: SLOT as u32,
@@ -206,7 +162,7 @@ fn main() -> ! {
     let record = BootRecord::decode(&unsafe { read_volatile(record_ptr()) });
     let report = server.boot_after_reset(&engine, cause, record);
 
-    let clock = SimClock(Cell::new(0));
+    let clock = FakeClock(Cell::new(0));
     let mut io = (Resting, Resting, Resting);
     let mut tick = |server: &mut BoardServer| {
         clock.0.set(clock.0.get() + u64::from(PERIOD_US));

@@ -7,15 +7,11 @@
 #![no_std]
 #![no_main]
 
-use trueaxis_qemu as _;
+#[path = "../rig.rs"]
+#[allow(dead_code)] // each image uses part of it
+mod rig;
 
-/// Recurses with 1 KiB frames until the stack runs out.
-#[inline(never)]
-#[allow(unconditional_recursion)] // the point of this image
-fn deeper(depth: u32) -> u32 {
-    let frame = core::hint::black_box([depth as u8; 1024]);
-    deeper(depth + 1).wrapping_add(u32::from(frame[1000]))
-}
+use rig::deeper;
 
 #[cortex_m_rt::entry]
 fn main() -> ! {

@@ -22,9 +22,14 @@
 #![no_main]
 #![allow(unsafe_code)] // `.uninit` statics: RAM that survives the reset
 
+#[path = "../rig.rs"]
+#[allow(dead_code)] // each image uses part of it
+mod rig;
+
 use core::mem::MaybeUninit;
 use core::ptr::{addr_of_mut, read_volatile, write_volatile};
 
+use rig::deeper;
 use trueaxis_app::boot::{failed_trial, BootRecord, Fault, ResetCause, RECORD_WORDS};
 use trueaxis_protocol::{Slot, SlotInfo};
 use trueaxis_qemu::{exit, set_fault_hook, FaultKind};
@@ -68,24 +73,8 @@ fn canary(i: usize) -> u32 {
 
 /// The board's fault handlers: record the fault, reset.
 fn record_and_reset(kind: FaultKind) -> ! {
-    let fault = match kind {
-        FaultKind::Panic => Fault::Panic,
-        FaultKind::HardFault => Fault::HardFault,
-    };
     // SAFETY: single-threaded, volatile; nothing runs after this.
-    let mut w = unsafe { read_volatile(record_ptr()) };
-    BootRecord::record_fault(&mut w, fault);
-    unsafe { write_volatile(record_ptr(), w) };
-    defmt::info!("stack_guard: {} recorded, resetting", kind);
-    cortex_m::peripheral::SCB::sys_reset()
-}
-
-/// Recurses with 1 KiB frames until the stack runs out.
-#[inline(never)]
-#[allow(unconditional_recursion)] // the point of this image
-fn deeper(depth: u32) -> u32 {
-    let frame = core::hint::black_box([depth as u8; 1024]);
-    deeper(depth + 1).wrapping_add(u32::from(frame[1000]))
+    unsafe { rig::record_and_reset(record_ptr(), "stack_guard", kind) }
 }
 
 #[cortex_m_rt::entry]

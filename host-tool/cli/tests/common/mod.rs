@@ -7,6 +7,7 @@
 #![allow(dead_code)]
 
 pub mod export;
+pub mod onmachine;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
