@@ -818,7 +818,7 @@ fn a_home_switch_references_only_from_its_side_and_debounced() {
     run(&mut e, &clock, &mut io, 5);
     io.home = 0;
     run(&mut e, &clock, &mut io, 5);
-    assert_eq!(e.referenced()[0], false);
+    assert!(!e.referenced()[0]);
     // Reached moving towards positive counts: the wrong side.
     for c in 1..=10 {
         io.counts[0] = c;
@@ -827,7 +827,7 @@ fn a_home_switch_references_only_from_its_side_and_debounced() {
     }
     io.home = 0;
     run(&mut e, &clock, &mut io, 5);
-    assert_eq!(e.referenced()[0], false);
+    assert!(!e.referenced()[0]);
     // From the right side, but on for 2 ticks of the 3 the debounce
     // wants (a glitch), twice: nothing.
     for _ in 0..2 {
@@ -837,14 +837,14 @@ fn a_home_switch_references_only_from_its_side_and_debounced() {
             run(&mut e, &clock, &mut io, 1);
         }
     }
-    assert_eq!(e.referenced()[0], false);
+    assert!(!e.referenced()[0]);
     // Three ticks on: referenced.
     for k in 0..6 {
         io.counts[0] -= 1;
         io.home = u8::from(k >= 2);
         run(&mut e, &clock, &mut io, 1);
     }
-    assert_eq!(e.referenced()[0], true);
+    assert!(e.referenced()[0]);
 }
 
 /// The plausible temperature range at its ends (the tick compares with a
