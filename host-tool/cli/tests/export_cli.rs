@@ -564,6 +564,8 @@ fn temperature_envelope_defaults_to_the_measured_range() {
     // falls back to 10…40 °C and says so.
     let mut old = mj.clone();
     old["data"].as_object_mut().unwrap().remove("temp_range_c");
+    // … and before the checksum was written (docs/cli.md § MODEL.json).
+    old.as_object_mut().unwrap().remove("checksum_sha256");
     let old_model = dir.join("old.model.json");
     std::fs::write(&old_model, serde_json::to_string_pretty(&old).unwrap()).unwrap();
     let out = run(&["export", s(&old_model), "-o", s(&bin), "--json"]);

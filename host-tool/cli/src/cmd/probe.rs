@@ -448,7 +448,7 @@ pub struct Correct {
     /// Which side of the part the probe touches: the outward direction of
     /// the surface, `+z`, `-z`, `+x`, `-x`, `+y`, `-y`, or `out` / `in` for
     /// a boss / a bore (all round or an arc: normals along the radii of the
-    /// circle through the centres) [default: +z].
+    /// circle through the centres).
     #[arg(long, default_value = "+z", allow_hyphen_values = true)]
     pub side: String,
     /// The nominal shape the form error is taken against: `circle` or
