@@ -190,6 +190,12 @@ pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path, verbose: bool) ->
         Verdict::AboveNoiseFloor => {
             s.push_str("verdict: above_noise_floor — no candidate is significant, but systematic error is left:\n")
         }
+        Verdict::NoiseFloorUnknown => {
+            s.push_str("verdict: noise_floor_unknown — no candidate is significant, and these data cannot say how small the residual can get:\n");
+            for w in d.warnings.iter().filter(|w| w.code == "noise_floor_unknown") {
+                s.push_str(&format!("  {}\n", w.detail));
+            }
+        }
     }
     if d.verdict == Verdict::MissingEffect && !d.unexplained.is_empty() {
         s.push_str("left above the noise floor after the path:\n");

@@ -25,7 +25,7 @@ use crate::report::{Figure, Page, Tone, Verdict};
 
 /// Warning codes that undermine a verdict (shown on the card); the rest
 /// (`in_model_span`, `aux_columns`, …) stay in the Warnings section.
-pub const UNDERMINING: [&str; 8] = [
+pub const UNDERMINING: [&str; 10] = [
     "aliasing",
     "one_direction",
     "constant_temperature",
@@ -34,6 +34,8 @@ pub const UNDERMINING: [&str; 8] = [
     "implausible_parameter",
     "aux_misspelled",
     "noise_floor_upper_bound",
+    "noise_floor_unknown",
+    "duplicate_rows",
 ];
 
 /// The `fit` command that adds every effect the path found (one that
