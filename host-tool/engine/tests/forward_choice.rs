@@ -62,3 +62,29 @@ fn trained_on_the_first_day_the_first_effect_is_thermal() {
         "ez path {path:?}"
     );
 }
+
+/// Where a one-position time series is worst is a time window, not "x
+/// 400…400, y 250…250, z 250…250" (issue 24).
+#[test]
+fn a_time_series_is_located_by_time() {
+    let sim = spindle_warmup(1);
+    let d = diagnose(&sim.data, &Options::seed(Seed::Cubic19)).unwrap();
+    let r = &d.worst_regions[0];
+    let [lo, hi] = r.time_s.expect("a time window");
+    assert!(
+        hi - lo > 3.0 * 3600.0 - 120.0 && hi - lo < 3.0 * 3600.0,
+        "{lo} {hi}"
+    );
+    assert!(
+        r.place().starts_with("t ") && r.place().ends_with(" h"),
+        "{}",
+        r.place()
+    );
+    for u in &d.unexplained {
+        let text = u.text();
+        assert!(text.contains("worst in t "), "{text}");
+        assert!(!text.contains("x 400…400"), "{text}");
+    }
+    let json = serde_json::to_value(&d).unwrap();
+    assert!(json["worst_regions"][0]["time_s"].is_array());
+}

@@ -257,15 +257,10 @@ pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path, verbose: bool) ->
     if !d.worst_regions.is_empty() {
         s.push_str("worst regions:\n");
         for r in &d.worst_regions {
-            let bbox: Vec<String> = r
-                .bbox_mm
-                .iter()
-                .map(|(a, [lo, hi])| format!("{a} {lo:.0}…{hi:.0}"))
-                .collect();
             s.push_str(&format!(
                 "  {} {}: rms {:.3} µm ({} points)\n",
                 r.target,
-                bbox.join(", "),
+                r.place(),
                 r.rms_um,
                 r.points
             ));

@@ -202,7 +202,7 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
             .iter()
             .filter(|r| r.target == t)
             .max_by(|a, b| a.rms_um.total_cmp(&b.rms_um))
-            .map(|r| trueaxis_engine::regions::bbox_text(&r.bbox_mm))
+            .map(|r| r.place())
     };
     let mut left_words: Vec<String> = left
         .iter()
@@ -1314,6 +1314,7 @@ mod tests {
                 ratio: None,
                 points: 40,
                 share: None,
+                time_s: None,
             }],
             warnings: Vec::new(),
             hold_out: "spatial cells".into(),

@@ -221,7 +221,7 @@ impl Unexplained {
                     self.ratio,
                     self.rms_um,
                     self.noise_floor_um,
-                    crate::regions::bbox_text(&r.bbox_mm),
+                    r.place(),
                     r.rms_um,
                     r.points
                 );
@@ -232,11 +232,7 @@ impl Unexplained {
             self.target, self.ratio, self.rms_um, self.noise_floor_um
         );
         if let Some(r) = &self.region {
-            s.push_str(&format!(
-                ", worst in {} ({:.3} µm)",
-                crate::regions::bbox_text(&r.bbox_mm),
-                r.rms_um
-            ));
+            s.push_str(&format!(", worst in {} ({:.3} µm)", r.place(), r.rms_um));
         }
         s
     }
