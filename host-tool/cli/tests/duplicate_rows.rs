@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{find_warning, json, run, s, simulate_grid, tmp_dir};
+use common::{find_warning, fit_cubic19, json, run, s, simulate_grid, tmp_dir};
 
 /// The simulated grid with every data row written twice.
 fn twice(dir: &std::path::Path) -> std::path::PathBuf {
@@ -75,16 +75,7 @@ fn rows_written_twice_are_named_and_not_taken_for_repeats() {
     }
 
     let model = dir.join("m.json");
-    let out = run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&model),
-        "--json",
-    ]);
-    let v = json(&out);
+    let v = fit_cubic19(&csv, &model);
     let texts: Vec<&str> = v["warnings"]
         .as_array()
         .unwrap()

@@ -242,15 +242,21 @@ pub fn evaluate(data: &Dataset, axis: usize) -> Result<Iso230> {
     Ok(res)
 }
 
+/// The columns an ISO 230-2 evaluation of `axis` reads: its positions, its
+/// error and its approach directions; `None` when one is missing.
+pub fn readings_of(data: &Dataset, axis: usize) -> Option<(&[f64], &[Option<f64>], &[i8])> {
+    Some((
+        data.pos_mm[axis].as_deref()?,
+        data.err_um[axis].as_deref()?,
+        data.dir[axis].as_deref()?,
+    ))
+}
+
 /// The readings far outside the others at their target and direction
 /// ([`BAD_READING_K`]), each with A and R evaluated without it; a group
 /// needs 3 readings (2 others to have an s).
 pub fn bad_readings(data: &Dataset, axis: usize, res: &Iso230) -> Vec<BadReading> {
-    let (Some(pos), Some(err), Some(dir)) = (
-        data.pos_mm[axis].as_ref(),
-        data.err_um[axis].as_ref(),
-        data.dir[axis].as_ref(),
-    ) else {
+    let Some((pos, err, dir)) = readings_of(data, axis) else {
         return Vec::new();
     };
     let mut s: Vec<f64> = res

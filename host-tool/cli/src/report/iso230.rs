@@ -167,11 +167,7 @@ pub fn flagged_readings(data: &Dataset, axis: usize, res: &Iso230) -> Vec<Readin
 
 /// Every reading of `axis`'s error along `axis` with its direction and run.
 pub fn readings(data: &Dataset, axis: usize) -> Vec<Reading> {
-    let (Some(pos), Some(err), Some(dir)) = (
-        data.pos_mm[axis].as_ref(),
-        data.err_um[axis].as_ref(),
-        data.dir[axis].as_ref(),
-    ) else {
+    let Some((pos, err, dir)) = trueaxis_engine::iso230::readings_of(data, axis) else {
         return Vec::new();
     };
     (0..data.len())
