@@ -242,9 +242,13 @@ pub fn evaluate(data: &Dataset, axis: usize) -> Result<Iso230> {
     Ok(res)
 }
 
+/// The columns an ISO 230-2 evaluation reads: positions (mm), errors (µm,
+/// `None` where not measured) and approach directions.
+pub type Columns<'a> = (&'a [f64], &'a [Option<f64>], &'a [i8]);
+
 /// The columns an ISO 230-2 evaluation of `axis` reads: its positions, its
 /// error and its approach directions; `None` when one is missing.
-pub fn readings_of(data: &Dataset, axis: usize) -> Option<(&[f64], &[Option<f64>], &[i8])> {
+pub fn readings_of(data: &Dataset, axis: usize) -> Option<Columns<'_>> {
     Some((
         data.pos_mm[axis].as_deref()?,
         data.err_um[axis].as_deref()?,
