@@ -102,8 +102,51 @@ pub fn load_board_table(path: &Path) -> Result<Vec<u8>> {
 /// do not have (`units_suspect`, trueaxis_engine::units).
 pub fn data_warnings(data: &Dataset) -> Vec<Warning> {
     let mut w = aux_warnings(data);
+    w.extend(duplicate_warning(data));
     w.extend(trueaxis_engine::units::suspect(data));
     w
+}
+
+/// Most pairs of lines a `duplicate_rows` warning names (the count says
+/// how many there are).
+const DUPLICATES_NAMED: usize = 8;
+
+/// The source line of row `r` (the row number when the data did not come
+/// from a file).
+fn line_of(data: &Dataset, r: usize) -> String {
+    data.line
+        .get(r)
+        .map_or_else(|| format!("row {}", r + 1), |l| format!("line {l}"))
+}
+
+/// `duplicate_rows`: rows that repeat an earlier row exactly (every column
+/// equal, [`Dataset::duplicate_rows`]), with their lines — a file written
+/// twice is not a second reading, and the noise floor does not count them
+/// as repeats.
+pub fn duplicate_warning(data: &Dataset) -> Option<Warning> {
+    let d = data.duplicate_rows();
+    if d.is_empty() {
+        return None;
+    }
+    let named: Vec<String> = d
+        .iter()
+        .take(DUPLICATES_NAMED)
+        .map(|&(r, of)| format!("{} = {}", line_of(data, r), line_of(data, of)))
+        .collect();
+    Some(Warning::new(
+        "duplicate_rows",
+        format!(
+            "{}: {} exactly (every column equal): {}{} — a file written twice or a logger that wrote a reading again; they are kept in the fit but not counted as repeated readings in the noise floor (if they are readings taken again, add a t_s or pass_id column that tells them apart)",
+            data.source,
+            if d.len() == 1 {
+                "1 row repeats an earlier row".to_string()
+            } else {
+                format!("{} rows repeat an earlier row", d.len())
+            },
+            named.join(", "),
+            if d.len() > DUPLICATES_NAMED { ", …" } else { "" }
+        ),
+    ))
 }
 
 /// What `fit`, `improve` and `diagnose` say about the data's auxiliary

@@ -255,3 +255,37 @@ fn incomplete_run_names_its_last_line() {
         "{e}"
     );
 }
+
+/// A run whose reading is the laser's "no reading" placeholder (−1e20) is
+/// left out with its lines and why; the other runs are used (issue 24:
+/// the whole file was refused as "a broken beam or another unit").
+#[test]
+fn a_placeholder_run_is_left_out_and_the_others_used() {
+    // Run 3 (lines 27–29), target 2 (line 28) lost the beam.
+    let text = edited("3 2 5.0", "3 2 -1e20");
+    let d = import::read_rtl(&text, "d.rtl", None).unwrap();
+    assert_eq!(d.len(), 9, "three of the four runs");
+    assert!(d.pass_id.as_ref().unwrap().iter().all(|&p| p != 3));
+    let lines: Vec<usize> = d.skipped.iter().map(|s| s.line).collect();
+    assert_eq!(lines, vec![27, 28, 29]);
+    assert_eq!(
+        d.skipped[1].reason,
+        "run 3, target 2: no reading (`-1e20`, the laser's placeholder) — run 3 left out"
+    );
+    // Every run a placeholder: refused, with the line.
+    let mut text = text;
+    for (from, to) in [
+        ("1 1 1.0", "1 1 -1e20"),
+        ("2 3 -3.0", "2 3 -1e20"),
+        ("4 3 -2.0", "4 3 1e20"),
+    ] {
+        text = text.replacen(from, to, 1);
+    }
+    let e = import::read_rtl(&text, "d.rtl", None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("d.rtl:21:3: every run has a placeholder"),
+        "{e}"
+    );
+}

@@ -309,3 +309,77 @@ fn the_page_shows_every_run_and_the_test_conditions() {
     assert!(x_of("x̄↑ ± 2s (from below)") > x_of("200.0\n</text>") + 10.0);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// An ISO 230-2 run of 10 targets, 5 runs per direction, with a 1 µm
+/// scatter; `bad` replaces one reading (run 1, the 4th target, ↑) with
+/// +93 µm against its neighbours' ~−21 µm, as on a public ecmc run.
+fn iso_with(bad: bool) -> trueaxis_engine::data::Dataset {
+    let (mut x, mut e, mut dir, mut pass) = (vec![], vec![], vec![], vec![]);
+    let mut rng = trueaxis_test_support::SplitMix64::new(24);
+    for run in 1..=10i64 {
+        let up = run % 2 == 1;
+        for i in 0..10 {
+            let i = if up { i } else { 9 - i };
+            let scatter = rng.normal();
+            let mut v = -21.0 + 0.5 * i as f64 + if up { 0.0 } else { 3.0 } + scatter;
+            if bad && run == 1 && i == 3 {
+                v = 93.0;
+            }
+            x.push(i as f64 * 50.0);
+            e.push(Some(v));
+            dir.push(if up { 1 } else { -1 });
+            pass.push(run);
+        }
+    }
+    let n = x.len();
+    trueaxis_engine::data::Dataset {
+        source: "run.csv".into(),
+        pos_mm: [Some(x), None, None],
+        err_um: [Some(e), None, None],
+        dir: [Some(dir), None, None],
+        pass_id: Some(pass),
+        line: (2..n + 2).collect(),
+        ..Default::default()
+    }
+}
+
+/// One bad reading (issue 24): the standard's figures keep it, the reading
+/// is flagged with its run, target, value and A and R without it, and the
+/// card does not turn green because of it.
+#[test]
+fn one_bad_reading_is_flagged_and_the_figures_kept() {
+    let clean = iso230::evaluate(&iso_with(false), 0).unwrap();
+    assert!(clean.flags.is_empty(), "{:?}", clean.flags);
+    let r = iso230::evaluate(&iso_with(true), 0).unwrap();
+    assert_eq!(r.flags.len(), 1, "{:?}", r.flags);
+    let f = &r.flags[0];
+    assert_eq!((f.row, f.line, f.run, f.dir), (3, Some(5), Some(1), 1));
+    assert_eq!((f.target_mm, f.value_um), (150.0, 93.0));
+    // The standard's figures keep the reading: A is set by it.
+    assert!(r.a_um > 100.0 && r.r_um > 100.0, "{} {}", r.a_um, r.r_um);
+    assert!(f.a_without_um < 15.0 && f.r_without_um < 10.0, "{f:?}");
+    assert!(
+        (f.a_without_um - clean.a_um).abs() < 2.0,
+        "{f:?} {}",
+        clean.a_um
+    );
+    let text = r.table();
+    assert!(
+        text.contains("flagged: run 1, target 150 mm ↑: +93.000 µm"),
+        "{text}"
+    );
+    let v = trueaxis::report::iso230::verdict(&r, "run.csv");
+    assert!(
+        v.warnings
+            .iter()
+            .any(|w| w.starts_with("flagged reading: run 1, target 150 mm")),
+        "{:?}",
+        v.warnings
+    );
+    assert_ne!(v.tone, trueaxis::report::Tone::Good);
+    let reads = trueaxis::report::iso230::flagged_readings(&iso_with(true), 0, &r);
+    assert_eq!(reads.iter().filter(|x| x.flag.is_some()).count(), 1);
+    let json = serde_json::to_value(&r).unwrap();
+    assert_eq!(json["flags"][0]["run"], 1);
+    assert!(json["flags"][0]["A_without_um"].as_f64().unwrap() < 15.0);
+}

@@ -175,6 +175,59 @@ impl Dataset {
             && self.dir.iter().all(Option::is_none)
     }
 
+    /// Rows that repeat an earlier row exactly — every column equal,
+    /// auxiliary cells too — as `(row, earlier row)`, in row order (each
+    /// paired with the first row it repeats). A file written twice, or a
+    /// logger that wrote one reading again: not a second reading, so the
+    /// noise floor never counts them as repeats (docs/diagnose.md § Noise
+    /// floor), and `import`, `fit`, `diagnose` and `improve` name their
+    /// lines (`duplicate_rows`, docs/cli.md § Measurement CSV).
+    pub fn duplicate_rows(&self) -> Vec<(usize, usize)> {
+        // −0.0 and 0.0 are one value.
+        let bits = |v: f64| (v + 0.0).to_bits();
+        let mut first: std::collections::HashMap<(Vec<u64>, Vec<&str>), usize> =
+            std::collections::HashMap::new();
+        let mut out = Vec::new();
+        for r in 0..self.len() {
+            let mut k: Vec<u64> = Vec::new();
+            k.extend(
+                self.pos_mm
+                    .iter()
+                    .map(|c| c.as_ref().map_or(0, |c| bits(c[r]))),
+            );
+            for c in &self.err_um {
+                // A missing cell differs from every value (NaN's bits).
+                k.push(
+                    c.as_ref()
+                        .map_or(0, |c| c[r].map_or(f64::NAN.to_bits(), bits)),
+                );
+            }
+            k.push(self.t_s.as_ref().map_or(0, |c| bits(c[r])));
+            k.extend(
+                self.dir
+                    .iter()
+                    .map(|c| c.as_ref().map_or(0, |c| c[r] as u64)),
+            );
+            k.extend(self.temps.iter().map(|c| bits(c.temp_c[r])));
+            k.push(self.tool_mm.as_ref().map_or(0, |c| bits(c[r])));
+            k.push(self.pass_id.as_ref().map_or(0, |c| c[r] as u64));
+            k.push(self.session_id.as_ref().map_or(0, |c| c[r] as u64));
+            k.push(self.u_um.as_ref().map_or(0, |c| bits(c[r])));
+            let cells: Vec<&str> = self
+                .aux
+                .iter()
+                .map(|c| c.cells.get(r).map_or("", String::as_str))
+                .collect();
+            match first.entry((k, cells)) {
+                std::collections::hash_map::Entry::Occupied(e) => out.push((r, *e.get())),
+                std::collections::hash_map::Entry::Vacant(e) => {
+                    e.insert(r);
+                }
+            }
+        }
+        out
+    }
+
     /// Indices (0 = ex, 1 = ey, 2 = ez) of the targets present.
     pub fn targets(&self) -> Vec<usize> {
         (0..3).filter(|&t| self.err_um[t].is_some()).collect()

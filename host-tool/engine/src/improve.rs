@@ -163,6 +163,15 @@ impl ImproveStep {
                     )
                 }
             }
+            Verdict::NoiseFloorUnknown => format!(
+                "no significant candidate left; the noise floor of {} cannot be known from these data (see noise_floor_unknown: what to measure)",
+                self.noise_method
+                    .iter()
+                    .filter(|(_, m)| m.is_none())
+                    .map(|(t, _)| t.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
             Verdict::AboveNoiseFloor
                 if self.unexplained.is_empty() && self.unresolved.is_empty() =>
             {
@@ -188,12 +197,14 @@ impl ImproveStep {
 
 /// The diagnosis' warnings about the measurement's design (what the data
 /// cannot show, whatever the model), carried into [`Improvement::warnings`].
-pub const DESIGN_WARNINGS: [&str; 5] = [
+pub const DESIGN_WARNINGS: [&str; 7] = [
     "aliasing",
     "one_direction",
     "constant_temperature",
     "no_temperature",
     "noise_floor_upper_bound",
+    "noise_floor_unknown",
+    "reading_quantum",
 ];
 
 /// The whole run.

@@ -109,7 +109,61 @@ pub struct Iso230 {
     /// Rows of the file left out on load, before any of this (an empty
     /// row, a row with no error value at all).
     pub skipped_count: usize,
+    /// Readings far outside the others at their target and direction
+    /// ([`bad_readings`]): kept in every figure above — the standard's
+    /// figures are right with them — and named, with what A and R would be
+    /// without each (issue 24).
+    pub flags: Vec<BadReading>,
 }
+
+/// A reading far outside the others at its target and direction.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BadReading {
+    /// Data row (0-based).
+    pub row: usize,
+    /// Its line in the source file, when it came from one.
+    pub line: Option<usize>,
+    /// Its run (`pass_id`), when the file tells.
+    pub run: Option<i64>,
+    /// The target position, mm.
+    pub target_mm: f64,
+    /// +1 approached from below, −1 from above.
+    pub dir: i8,
+    /// The reading, µm.
+    pub value_um: f64,
+    /// The mean of the other readings at that target and direction, µm.
+    pub others_mean_um: f64,
+    /// A without this reading, µm.
+    #[serde(rename = "A_without_um")]
+    pub a_without_um: f64,
+    /// R without this reading, µm.
+    #[serde(rename = "R_without_um")]
+    pub r_without_um: f64,
+}
+
+impl BadReading {
+    /// `run 1, target 250 mm ↑: +93.000 µm against a mean of -21.000 µm of the other readings there; without it A would be 35.2 µm (not 205.0) and R 8.1 µm (not 205.0)`.
+    pub fn text(&self, res: &Iso230) -> String {
+        format!(
+            "{}target {} mm {}: {:+.3} µm against a mean of {:+.3} µm of the other readings there; the standard's figures keep it, without it A would be {:.3} µm (not {:.3}) and R {:.3} µm (not {:.3})",
+            self.run.map_or(String::new(), |r| format!("run {r}, ")),
+            self.target_mm,
+            if self.dir > 0 { "↑" } else { "↓" },
+            self.value_um,
+            self.others_mean_um,
+            self.a_without_um,
+            res.a_um,
+            self.r_without_um,
+            res.r_um
+        )
+    }
+}
+
+/// A reading is flagged when it lies more than this many standard
+/// deviations from the mean of the others at its target and direction —
+/// both their own s and the typical s of the run's target-directions (the
+/// median): ~8·10⁻⁶ for a normal reading among four others.
+pub const BAD_READING_K: f64 = 5.0;
 
 fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len() as f64
@@ -183,6 +237,98 @@ pub fn axis_names(axes: &[usize]) -> String {
 
 /// Evaluates `axis` (0 = x) of `data`.
 pub fn evaluate(data: &Dataset, axis: usize) -> Result<Iso230> {
+    let mut res = figures(data, axis)?;
+    res.flags = bad_readings(data, axis, &res);
+    Ok(res)
+}
+
+/// The columns an ISO 230-2 evaluation reads: positions (mm), errors (µm,
+/// `None` where not measured) and approach directions.
+pub type Columns<'a> = (&'a [f64], &'a [Option<f64>], &'a [i8]);
+
+/// The columns an ISO 230-2 evaluation of `axis` reads: its positions, its
+/// error and its approach directions; `None` when one is missing.
+pub fn readings_of(data: &Dataset, axis: usize) -> Option<Columns<'_>> {
+    Some((
+        data.pos_mm[axis].as_deref()?,
+        data.err_um[axis].as_deref()?,
+        data.dir[axis].as_deref()?,
+    ))
+}
+
+/// The readings far outside the others at their target and direction
+/// ([`BAD_READING_K`]), each with A and R evaluated without it; a group
+/// needs 3 readings (2 others to have an s).
+pub fn bad_readings(data: &Dataset, axis: usize, res: &Iso230) -> Vec<BadReading> {
+    let Some((pos, err, dir)) = readings_of(data, axis) else {
+        return Vec::new();
+    };
+    let mut s: Vec<f64> = res
+        .per_target
+        .iter()
+        .flat_map(|t| [t.s_up_um, t.s_down_um])
+        .collect();
+    s.sort_by(f64::total_cmp);
+    // Never below the finest step between two readings (a reading quantum:
+    // on coarse readings most groups repeat one value and their s is 0).
+    let mut vals: Vec<f64> = err.iter().flatten().copied().collect();
+    vals.sort_by(f64::total_cmp);
+    let step = vals
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| *d > 1e-9)
+        .fold(f64::INFINITY, f64::min);
+    let typical = s
+        .get(s.len() / 2)
+        .copied()
+        .unwrap_or(0.0)
+        .max(if step.is_finite() { step } else { 0.0 });
+    let mut out = Vec::new();
+    for t in &res.per_target {
+        for d in [1i8, -1] {
+            let group: Vec<usize> = (0..data.len())
+                .filter(|&r| err[r].is_some() && dir[r] == d && (pos[r] - t.pos_mm).abs() <= 1e-3)
+                .collect();
+            if group.len() < 3 {
+                continue;
+            }
+            for &r in &group {
+                let others: Vec<f64> = group
+                    .iter()
+                    .filter(|&&o| o != r)
+                    .filter_map(|&o| err[o])
+                    .collect();
+                let (m, so) = (mean(&others), std_n1(&others));
+                let v = err[r].unwrap_or(m);
+                if (v - m).abs() <= BAD_READING_K * so.max(typical) || so.max(typical) <= 0.0 {
+                    continue;
+                }
+                let mut without = data.clone();
+                if let Some(c) = without.err_um[axis].as_mut() {
+                    c[r] = None;
+                }
+                let Ok(w) = figures(&without, axis) else {
+                    continue;
+                };
+                out.push(BadReading {
+                    row: r,
+                    line: data.line.get(r).copied(),
+                    run: data.pass_id.as_ref().map(|p| p[r]),
+                    target_mm: t.pos_mm,
+                    dir: d,
+                    value_um: v,
+                    others_mean_um: m,
+                    a_without_um: w.a_um,
+                    r_without_um: w.r_um,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// The standard's figures of `axis` (every reading kept), without flags.
+fn figures(data: &Dataset, axis: usize) -> Result<Iso230> {
     let name = AXES[axis];
     let pos = data.pos_mm[axis]
         .as_ref()
@@ -314,6 +460,7 @@ pub fn evaluate(data: &Dataset, axis: usize) -> Result<Iso230> {
         rows_used: rows.len(),
         rows_ignored,
         skipped_count: data.skipped.len(),
+        flags: Vec::new(),
     })
 }
 
@@ -344,6 +491,9 @@ impl Iso230 {
             self.r_um, self.r_up_um, self.r_down_um
         );
         let _ = writeln!(s, "  B  = {:8.3} µm   (B̄ {:.3})", self.b_um, self.b_mean_um);
+        for f in &self.flags {
+            let _ = writeln!(s, "  flagged: {}", f.text(self));
+        }
         if self.rows_ignored > 0 {
             let _ = writeln!(
                 s,

@@ -36,7 +36,28 @@ pub struct Region {
     /// (0..1; `compare`'s regions only, like `ratio`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub share: Option<f64>,
+    /// For a time series at one position (`diagnose`'s cells of data whose
+    /// axes do not move): the time window `[from, to]` in s of `t_s`, the
+    /// worst of [`TIME_WINDOWS`] equal ones — where it is worst is *when*
+    /// (issue 24: "x 400…400, y 250…250" said nothing).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub time_s: Option<[f64; 2]>,
 }
+
+impl Region {
+    /// Where the region is, in words: its box (`x 600…800, y 150…350`),
+    /// or for a time window `t 3.0…6.0 h`.
+    pub fn place(&self) -> String {
+        match self.time_s {
+            Some([lo, hi]) => format!("t {:.1}…{:.1} h", lo / 3600.0, hi / 3600.0),
+            None => bbox_text(&self.bbox_mm),
+        }
+    }
+}
+
+/// Equal time windows a one-position time series is cut into to locate
+/// the worst of its residual.
+pub const TIME_WINDOWS: usize = 8;
 
 /// A region's box as text, `x 600…800, y 150…350` (mm, whole numbers).
 pub fn bbox_text(bbox_mm: &BTreeMap<String, [f64; 2]>) -> String {
@@ -205,6 +226,7 @@ pub fn worst_regions(
                 ratio: Some(ratio(rms, overall_rms)),
                 points: members.len(),
                 share: Some(ratio(ss, total_ss)),
+                time_s: None,
             }
         })
         .collect();
@@ -241,6 +263,9 @@ pub fn worst_cells(
     rows: &[usize],
     resid: &[f64],
 ) -> Vec<Region> {
+    if let Some(w) = worst_windows(data, t, rows, resid) {
+        return w;
+    }
     let cells_f = CELL_BINS as f64;
     let axes = data.axes();
     let cells = cell_sums(rows.iter().zip(resid).map(|(&r, &v)| {
@@ -276,7 +301,61 @@ pub fn worst_cells(
                 ratio: None,
                 points: c.points,
                 share: None,
+                time_s: None,
             }
         })
         .collect()
+}
+
+/// [`worst_cells`] of a time series at one position: the worst
+/// [`TOP_CELLS`] of [`TIME_WINDOWS`] equal windows of `t_s` (each with at
+/// least [`MIN_CELL_POINTS`] readings); `None` when the data's axes move or
+/// it has no `t_s`.
+fn worst_windows(data: &Dataset, t: usize, rows: &[usize], resid: &[f64]) -> Option<Vec<Region>> {
+    let ts = data.t_s.as_ref()?;
+    if !data.varying_axes().is_empty() || rows.is_empty() {
+        return None;
+    }
+    let (lo, hi) = rows
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &r| {
+            (l.min(ts[r]), h.max(ts[r]))
+        });
+    let width = (hi - lo) / TIME_WINDOWS as f64;
+    if width <= 0.0 {
+        return None;
+    }
+    let cells = cell_sums(
+        rows.iter()
+            .zip(resid)
+            .map(|(&r, &v)| (vec![bin_index((ts[r] - lo) / (hi - lo), TIME_WINDOWS)], v)),
+    );
+    let mut v: Vec<(usize, f64, CellSum)> = cells
+        .into_iter()
+        .filter(|(_, c)| c.points >= MIN_CELL_POINTS)
+        .map(|(k, c)| (k[0], c.rms(), c))
+        .collect();
+    v.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let bbox: BTreeMap<String, [f64; 2]> = data
+        .axes()
+        .into_iter()
+        .map(|a| {
+            let p = data.pos(a, rows[0]);
+            (AXES[a].to_string(), [p, p])
+        })
+        .collect();
+    Some(
+        v.into_iter()
+            .take(TOP_CELLS)
+            .map(|(k, rms, c)| Region {
+                target: TARGETS[t].into(),
+                bbox_mm: bbox.clone(),
+                rms_um: rms,
+                ratio: None,
+                points: c.points,
+                share: None,
+                time_s: Some([lo + k as f64 * width, lo + (k + 1) as f64 * width]),
+            })
+            .collect(),
+    )
 }

@@ -190,6 +190,12 @@ pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path, verbose: bool) ->
         Verdict::AboveNoiseFloor => {
             s.push_str("verdict: above_noise_floor — no candidate is significant, but systematic error is left:\n")
         }
+        Verdict::NoiseFloorUnknown => {
+            s.push_str("verdict: noise_floor_unknown — no candidate is significant, and these data cannot say how small the residual can get:\n");
+            for w in d.warnings.iter().filter(|w| w.code == "noise_floor_unknown") {
+                s.push_str(&format!("  {}\n", w.detail));
+            }
+        }
     }
     if d.verdict == Verdict::MissingEffect && !d.unexplained.is_empty() {
         s.push_str("left above the noise floor after the path:\n");
@@ -251,15 +257,10 @@ pub fn text(d: &Diagnosis, data_path: &Path, model_out: &Path, verbose: bool) ->
     if !d.worst_regions.is_empty() {
         s.push_str("worst regions:\n");
         for r in &d.worst_regions {
-            let bbox: Vec<String> = r
-                .bbox_mm
-                .iter()
-                .map(|(a, [lo, hi])| format!("{a} {lo:.0}…{hi:.0}"))
-                .collect();
             s.push_str(&format!(
                 "  {} {}: rms {:.3} µm ({} points)\n",
                 r.target,
-                bbox.join(", "),
+                r.place(),
                 r.rms_um,
                 r.points
             ));

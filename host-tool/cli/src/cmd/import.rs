@@ -58,6 +58,12 @@ impl Args {
             trueaxis_engine::files::write_with(out, |w| import::write_csv(&data, w))?;
         }
         let columns = import::column_names(&data);
+        let line = |r: usize| data.line.get(r).copied().unwrap_or(r + 1);
+        let duplicates: Vec<serde_json::Value> = data
+            .duplicate_rows()
+            .into_iter()
+            .map(|(r, of)| json!({"line": line(r), "of_line": line(of)}))
+            .collect();
         if self.json {
             let doc = json!({
                 "input": self.file.display().to_string(),
@@ -69,6 +75,7 @@ impl Args {
                 "skipped_count": data.skipped.len(),
                 "skipped": data.skipped.iter().map(|s| json!({"line": s.line, "reason": s.reason})).collect::<Vec<_>>(),
                 "sha256": trueaxis_engine::import::content_hash(&data),
+                "duplicate_rows": duplicates,
             });
             outln!("{doc}")?;
         } else {
@@ -94,6 +101,9 @@ impl Args {
                 for s in &data.skipped {
                     outln!("    line {}: {}", s.line, s.reason)?;
                 }
+            }
+            if let Some(w) = crate::input::duplicate_warning(&data) {
+                outln!("  warning ({}): {}", w.code, w.detail)?;
             }
             if let Some(out) = &self.output {
                 outln!("wrote {}", out.display())?;

@@ -28,8 +28,9 @@ pub struct Args {
     pub plan: Vec<String>,
     /// A whole measurement campaign instead of plans and effects:
     /// spindle-thermal (an ISO 230-3 thermal test at one point, 48 h, a
-    /// reading a minute, 12 temperature sensors; see docs/cli.md), or
-    /// on-machine (every file the on-machine commands read, with the hidden
+    /// reading a minute, 12 temperature sensors; see docs/cli.md),
+    /// spindle-warmup (a one-day warm-up whose growth follows unlogged heat
+    /// paths, one sensor), or on-machine (every file the on-machine commands read, with the hidden
     /// answers in truth.json; -o is then a directory; docs/on-machine.md).
     /// Only --seed, -o and --after-pass apply.
     #[arg(long, conflicts_with_all = ["plan", "effect", "reference"])]

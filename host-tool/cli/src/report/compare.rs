@@ -801,6 +801,7 @@ mod tests {
             ratio: Some(ratio),
             points: 10,
             share: Some(0.3),
+            time_s: None,
         };
         c.worst_regions = vec![region(1.35)];
         c.channels.clear();

@@ -25,7 +25,7 @@ use crate::report::{Figure, Page, Tone, Verdict};
 
 /// Warning codes that undermine a verdict (shown on the card); the rest
 /// (`in_model_span`, `aux_columns`, …) stay in the Warnings section.
-pub const UNDERMINING: [&str; 8] = [
+pub const UNDERMINING: [&str; 10] = [
     "aliasing",
     "one_direction",
     "constant_temperature",
@@ -34,6 +34,8 @@ pub const UNDERMINING: [&str; 8] = [
     "implausible_parameter",
     "aux_misspelled",
     "noise_floor_upper_bound",
+    "noise_floor_unknown",
+    "duplicate_rows",
 ];
 
 /// The `fit` command that adds every effect the path found (one that
@@ -200,7 +202,7 @@ pub fn verdict(d: &Diagnosis, data_path: &str, model_out: &str) -> Verdict {
             .iter()
             .filter(|r| r.target == t)
             .max_by(|a, b| a.rms_um.total_cmp(&b.rms_um))
-            .map(|r| trueaxis_engine::regions::bbox_text(&r.bbox_mm))
+            .map(|r| r.place())
     };
     let mut left_words: Vec<String> = left
         .iter()
@@ -1312,6 +1314,7 @@ mod tests {
                 ratio: None,
                 points: 40,
                 share: None,
+                time_s: None,
             }],
             warnings: Vec::new(),
             hold_out: "spatial cells".into(),

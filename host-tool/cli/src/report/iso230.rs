@@ -52,7 +52,7 @@ pub fn verdict(res: &Iso230, data_path: &str) -> Verdict {
         "{} targets, {} run(s) per direction.",
         res.targets, res.runs
     ));
-    let warnings = if res.runs < ISO_RUNS {
+    let mut warnings = if res.runs < ISO_RUNS {
         vec![format!(
             "{} run(s) per direction, ISO 230-2 asks for {ISO_RUNS}: s and the ±2s bands are uncertain",
             res.runs
@@ -60,6 +60,15 @@ pub fn verdict(res: &Iso230, data_path: &str) -> Verdict {
     } else {
         Vec::new()
     };
+    // A reading far outside the others (a beam break, a misread) sets A
+    // and R by itself: the figures keep it, as the standard says, but the
+    // card says so and is not green (issue 24).
+    for f in &res.flags {
+        warnings.push(format!(
+            "flagged reading: {} — check it (a broken beam, a misread) and re-measure that run",
+            f.text(res)
+        ));
+    }
     let removable = res.e_um > 1.5 * r_uni;
     let next = fit_command(res, data_path, big_reversal);
     Verdict {
@@ -77,7 +86,13 @@ pub fn verdict(res: &Iso230, data_path: &str) -> Verdict {
         details: std::mem::take(&mut details),
         warnings,
         next: Some(next),
-        tone: if removable { Tone::Action } else { Tone::Good },
+        tone: if !res.flags.is_empty() {
+            Tone::Unknown
+        } else if removable {
+            Tone::Action
+        } else {
+            Tone::Good
+        },
     }
 }
 
@@ -131,13 +146,28 @@ pub struct Reading {
     pub flag: Option<String>,
 }
 
+/// [`readings`] with the engine's flags (`Iso230::flags`) set: a flagged
+/// reading is ringed and named on the page.
+pub fn flagged_readings(data: &Dataset, axis: usize, res: &Iso230) -> Vec<Reading> {
+    let rows: Vec<usize> = match data.err_um[axis].as_ref() {
+        Some(err) => (0..data.len()).filter(|&r| err[r].is_some()).collect(),
+        None => Vec::new(),
+    };
+    let mut reads = readings(data, axis);
+    for (read, r) in reads.iter_mut().zip(rows) {
+        read.flag = res.flags.iter().find(|f| f.row == r).map(|f| {
+            format!(
+                "far outside the other readings there (their mean {:+.3} µm); without it A = {:.3} µm, R = {:.3} µm",
+                f.others_mean_um, f.a_without_um, f.r_without_um
+            )
+        });
+    }
+    reads
+}
+
 /// Every reading of `axis`'s error along `axis` with its direction and run.
 pub fn readings(data: &Dataset, axis: usize) -> Vec<Reading> {
-    let (Some(pos), Some(err), Some(dir)) = (
-        data.pos_mm[axis].as_ref(),
-        data.err_um[axis].as_ref(),
-        data.dir[axis].as_ref(),
-    ) else {
+    let Some((pos, err, dir)) = trueaxis_engine::iso230::readings_of(data, axis) else {
         return Vec::new();
     };
     (0..data.len())
@@ -190,7 +220,7 @@ pub fn write_page(res: &Iso230, data: &Dataset, data_path: &str, dir: &Path) -> 
         page.heading("Test conditions (from the file)");
         page.table(&["what", "value"], conds);
     }
-    let reads = readings(data, axis);
+    let reads = flagged_readings(data, axis, res);
     page.heading("Every run beside the means");
     page.figure(
         format!("iso230_{}", res.axis),

@@ -77,7 +77,7 @@ pub use crate::regions::Region;
 pub use swap::swap_in;
 pub use warnings::above_noise;
 
-use noise::{noise_floor, NoiseMethod};
+use noise::{target_noise_floor, NoiseMethod};
 use periodogram::Periodogram;
 use search::propose;
 use target::{fwl, hold_out_blocks, State, TargetData};
@@ -150,7 +150,8 @@ impl Options {
     }
 }
 
-/// `missing_effect`, `at_noise_floor` or `above_noise_floor` (docs/cli.md).
+/// `missing_effect`, `at_noise_floor`, `above_noise_floor` or
+/// `noise_floor_unknown` (docs/cli.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Verdict {
@@ -167,6 +168,12 @@ pub enum Verdict {
     /// candidate the sampling cannot support and what to measure,
     /// `unresolved` the pair and the measurement that separates them).
     AboveNoiseFloor,
+    /// No candidate is significant, nothing is left above a known floor,
+    /// but a target's noise floor cannot be known from these data (no
+    /// `u_um`, repeats or lines to difference): neither "at" nor "above"
+    /// can be said — the `noise_floor_unknown` warning says what to
+    /// measure.
+    NoiseFloorUnknown,
 }
 
 impl Verdict {
@@ -176,6 +183,7 @@ impl Verdict {
             Verdict::MissingEffect => "missing_effect",
             Verdict::AtNoiseFloor => "at_noise_floor",
             Verdict::AboveNoiseFloor => "above_noise_floor",
+            Verdict::NoiseFloorUnknown => "noise_floor_unknown",
         }
     }
 }
@@ -213,7 +221,7 @@ impl Unexplained {
                     self.ratio,
                     self.rms_um,
                     self.noise_floor_um,
-                    crate::regions::bbox_text(&r.bbox_mm),
+                    r.place(),
                     r.rms_um,
                     r.points
                 );
@@ -224,11 +232,7 @@ impl Unexplained {
             self.target, self.ratio, self.rms_um, self.noise_floor_um
         );
         if let Some(r) = &self.region {
-            s.push_str(&format!(
-                ", worst in {} ({:.3} µm)",
-                crate::regions::bbox_text(&r.bbox_mm),
-                r.rms_um
-            ));
+            s.push_str(&format!(", worst in {} ({:.3} µm)", r.place(), r.rms_um));
         }
         s
     }
@@ -648,9 +652,13 @@ fn one_target(
         &mut path,
         &mut unresolved,
     )?;
-    let nf = noise_floor(data, &td.rows, &st.resid);
+    let nf = target_noise_floor(data, t, &td.rows, &st.resid);
     let mut unexplained = Vec::new();
+    if nf.is_none() {
+        warnings.push(noise::unknown_warning(&tn, data, &td.rows));
+    }
     if let Some(nf) = &nf {
+        warnings.extend(noise::quantum_warning(&tn, nf));
         warnings.extend(noise::upper_bound_warning(&tn, nf, data, &td.rows));
         warnings.extend(above_noise_warning(&tn, st.rms(), nf, !first));
         let cells = crate::regions::worst_cells(data, &td.norm, t, &td.rows, &st.resid);
@@ -801,7 +809,9 @@ pub fn diagnose_specs(
     // attribute is not noise, whatever the floor says), no candidate held
     // back as aliasing-suspect (systematic error the data show and the
     // sampling cannot attribute) *and* every target within 1.3× its floor
-    // (a target without an estimate does not block it).
+    // — and only when every target has a floor: a target whose floor
+    // these data cannot give is not "at" it (`noise_floor_unknown`, with
+    // what to measure).
     let (candidates, specs): (Vec<Candidate>, Vec<CandidateSpec>) = candidates.into_iter().unzip();
     let held_back: Vec<String> = candidates
         .iter()
@@ -810,6 +820,10 @@ pub fn diagnose_specs(
         .collect();
     let verdict = if candidates.iter().any(|c| c.significant) {
         Verdict::MissingEffect
+    } else if !(unexplained.is_empty() && unresolved.is_empty() && held_back.is_empty()) {
+        Verdict::AboveNoiseFloor
+    } else if noise_floor_um.values().any(Option::is_none) {
+        Verdict::NoiseFloorUnknown
     } else if unexplained.is_empty() && unresolved.is_empty() && held_back.is_empty() {
         Verdict::AtNoiseFloor
     } else {

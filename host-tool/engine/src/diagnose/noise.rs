@@ -97,6 +97,9 @@ pub struct NoiseFloor {
     pub dof: usize,
     /// How it was estimated.
     pub method: NoiseMethod,
+    /// The reading quantum of the target's values (µm) when they sit on a
+    /// grid ([`quantum`]); the floor is never below its q/√12.
+    pub quantum_um: Option<f64>,
 }
 
 /// Fewest differences for an estimate to be used (and fewest repeated
@@ -131,7 +134,11 @@ fn key(v: f64) -> i64 {
 /// within [`CLIP`] times it, corrected for the clipping — as robust as the
 /// median (a spike beyond the clip does not count) but nearly as precise as
 /// an RMS (the median alone scatters ±20 % on 30 repeats).
-fn robust_sigma(z: &mut [f64]) -> f64 {
+///
+/// `least` is the smallest first scale (q/√12 of quantised readings, else
+/// 0): on readings quantised coarser than their noise most differences are
+/// exactly 0, the median |z| is 0, and the clip would keep only the zeros.
+fn robust_sigma(z: &mut [f64], least: f64) -> f64 {
     for v in z.iter_mut() {
         *v = v.abs();
     }
@@ -142,7 +149,7 @@ fn robust_sigma(z: &mut [f64]) -> f64 {
     } else {
         0.5 * (z[n / 2 - 1] + z[n / 2])
     };
-    let mut s = med / MEDIAN_ABS_NORMAL;
+    let mut s = (med / MEDIAN_ABS_NORMAL).max(least);
     // The clip is repeated with the new σ until the kept set stops
     // changing (on noise the first pass is already it; a cluster of large
     // differences that lifted the median is trimmed further).
@@ -164,11 +171,12 @@ const CLIP: f64 = 3.0;
 /// E[z² | |z| ≤ 3] for a standard normal: 1 − 2·3·φ(3)/(2Φ(3) − 1).
 const CLIP_VARIANCE: f64 = 0.973_336;
 
-fn floor(mut z: Vec<f64>, method: NoiseMethod) -> Option<NoiseFloor> {
+fn floor(mut z: Vec<f64>, method: NoiseMethod, least: f64) -> Option<NoiseFloor> {
     (z.len() >= MIN_DOF).then(|| NoiseFloor {
         dof: z.len(),
-        sigma_um: robust_sigma(&mut z),
+        sigma_um: robust_sigma(&mut z, least),
         method,
+        quantum_um: None,
     })
 }
 
@@ -182,19 +190,118 @@ fn checked(
     low: Vec<f64>,
     high: Vec<f64>,
     method: NoiseMethod,
+    least: f64,
 ) -> Result<Option<NoiseFloor>, NoiseFloor> {
-    let Some(lo) = floor(low, method) else {
+    let Some(lo) = floor(low, method, least) else {
         return Ok(None);
     };
-    match floor(high, method) {
+    match floor(high, method, least) {
         Some(hi) if hi.sigma_um < SHAPE_RATIO * lo.sigma_um => Err(hi),
         _ => Ok(Some(lo)),
     }
 }
 
 /// Noise floor of `resid_um` on data rows `rows` (same order), or `None`
-/// when the data has neither `u_um`, repeats nor lines to estimate it from.
+/// when the data has neither `u_um`, repeats nor lines to estimate it from
+/// (or what they give is 0: no floor, never a floor of 0). Rows that
+/// repeat an earlier row exactly ([`Dataset::duplicate_rows`]) are left
+/// out: a copy is not a second reading.
 pub fn noise_floor(data: &Dataset, rows: &[usize], resid_um: &[f64]) -> Option<NoiseFloor> {
+    floor_with_quantum(data, rows, resid_um, None)
+}
+
+/// [`noise_floor`] of target `t`, never below the reading quantum of its
+/// values: q/√12 when [`quantum`] finds one (the rounding error of a
+/// reading is uniform over one step). Measured differences of quantised
+/// readings already hold that rounding when the noise dithers it; when the
+/// noise is finer than the step most differences are exactly 0 and miss
+/// it — so the floor is the larger of the two, not their sum.
+pub fn target_noise_floor(
+    data: &Dataset,
+    t: usize,
+    rows: &[usize],
+    resid_um: &[f64],
+) -> Option<NoiseFloor> {
+    let q = data.err_um[t]
+        .as_ref()
+        .and_then(|c| quantum(rows.iter().filter_map(|&r| c[r])));
+    floor_with_quantum(data, rows, resid_um, q)
+}
+
+/// Fewest values [`quantum`] looks for a grid in.
+const QUANTUM_MIN_VALUES: usize = 20;
+/// Values closer than this (µm) are one grid step apart by rounding of
+/// the written decimals, not by the reading.
+const QUANTUM_TOL_UM: f64 = 1e-6;
+/// A grid finer than this (µm) is no reading quantum worth a floor (the
+/// decimals a file was written with, or none at all; its q/√12 would be
+/// below 0.6 nm).
+const QUANTUM_MIN_UM: f64 = 2e-3;
+
+/// The reading quantum of `values` (µm): the step of the grid every value
+/// sits on (a laser's or an encoder's resolution, a logger's rounding,
+/// 0.25 µm on a spindle's axial probe), found as the greatest common
+/// divisor of the differences between them (to [`QUANTUM_TOL_UM`]);
+/// `None` when there are fewer than [`QUANTUM_MIN_VALUES`] or the grid is
+/// finer than [`QUANTUM_MIN_UM`] (unquantised).
+pub fn quantum(values: impl Iterator<Item = f64>) -> Option<f64> {
+    let mut v: Vec<f64> = values.filter(|x| x.is_finite()).collect();
+    if v.len() < QUANTUM_MIN_VALUES {
+        return None;
+    }
+    v.sort_unstable_by(f64::total_cmp);
+    v.dedup();
+    if v.len() < 2 {
+        return None;
+    }
+    let gcd = |mut a: f64, mut b: f64| {
+        while b > QUANTUM_TOL_UM {
+            let mut r = a % b;
+            if b - r <= QUANTUM_TOL_UM {
+                r = 0.0;
+            }
+            a = b;
+            b = r;
+        }
+        a
+    };
+    let mut g = v[1] - v[0];
+    for w in v.windows(2) {
+        g = gcd(w[1] - w[0], g);
+        if g < QUANTUM_MIN_UM {
+            return None;
+        }
+    }
+    Some(g)
+}
+
+fn floor_with_quantum(
+    data: &Dataset,
+    rows: &[usize],
+    resid_um: &[f64],
+    quantum_um: Option<f64>,
+) -> Option<NoiseFloor> {
+    let copies: std::collections::HashSet<usize> =
+        data.duplicate_rows().into_iter().map(|(r, _)| r).collect();
+    let (rows, resid): (Vec<usize>, Vec<f64>) = rows
+        .iter()
+        .zip(resid_um)
+        .filter(|(r, _)| !copies.contains(r))
+        .map(|(&r, &e)| (r, e))
+        .unzip();
+    let least = quantum_um.map_or(0.0, |q| q / 12f64.sqrt());
+    estimate(data, &rows, &resid, least)
+        .map(|f| NoiseFloor {
+            sigma_um: f.sigma_um.max(least),
+            quantum_um,
+            ..f
+        })
+        .filter(|f| f.sigma_um > 0.0)
+}
+
+/// The floor before the quantum's bound, each robust σ seeded with at
+/// least `least`.
+fn estimate(data: &Dataset, rows: &[usize], resid_um: &[f64], least: f64) -> Option<NoiseFloor> {
     if let Some(u) = &data.u_um {
         let ms = rows.iter().map(|&r| u[r] * u[r]).sum::<f64>() / rows.len().max(1) as f64;
         if ms > 0.0 {
@@ -202,6 +309,7 @@ pub fn noise_floor(data: &Dataset, rows: &[usize], resid_um: &[f64]) -> Option<N
                 sigma_um: ms.sqrt(),
                 dof: rows.len(),
                 method: NoiseMethod::Uncertainty,
+                quantum_um: None,
             });
         }
     }
@@ -242,7 +350,7 @@ pub fn noise_floor(data: &Dataset, rows: &[usize], resid_um: &[f64]) -> Option<N
             }
         }
     }
-    if let Some(f) = floor(z, NoiseMethod::Repeats) {
+    if let Some(f) = floor(z, NoiseMethod::Repeats, least) {
         return Some(f);
     }
 
@@ -303,7 +411,7 @@ pub fn noise_floor(data: &Dataset, rows: &[usize], resid_um: &[f64]) -> Option<N
     lines_all.extend_from_slice(&sparse);
     let mut lines_all5 = dense5.clone();
     lines_all5.extend_from_slice(&sparse5);
-    if let Ok(Some(f)) = checked(dense, dense5, NoiseMethod::Differences) {
+    if let Ok(Some(f)) = checked(dense, dense5, NoiseMethod::Differences, least) {
         return Some(f);
     }
 
@@ -353,7 +461,12 @@ pub fn noise_floor(data: &Dataset, rows: &[usize], resid_um: &[f64]) -> Option<N
         }
         out
     };
-    let grid_bound = match checked(stencil(&W2), stencil(&W3), NoiseMethod::GridDifferences) {
+    let grid_bound = match checked(
+        stencil(&W2),
+        stencil(&W3),
+        NoiseMethod::GridDifferences,
+        least,
+    ) {
         Ok(Some(f)) => return Some(f),
         Ok(None) => None,
         Err(hi) => Some(hi),
@@ -363,7 +476,7 @@ pub fn noise_floor(data: &Dataset, rows: &[usize], resid_um: &[f64]) -> Option<N
     // else from the lattice's higher-order stencil. (Not the smallest of
     // all estimates: with a few dozen differences each, the smallest of
     // four fell to 0.5× the noise on a 50 mm line.)
-    let lines = match checked(lines_all, lines_all5, NoiseMethod::SparseDifferences) {
+    let lines = match checked(lines_all, lines_all5, NoiseMethod::SparseDifferences, least) {
         Ok(f) => f,
         Err(hi) => Some(hi),
     };
@@ -386,19 +499,7 @@ pub(super) fn upper_bound_warning(
     if nf.method != NoiseMethod::SparseDifferences {
         return None;
     }
-    let points: std::collections::BTreeSet<[i64; 3]> = rows
-        .iter()
-        .map(|&r| [0, 1, 2].map(|a| key(data.pos(a, r))))
-        .collect();
-    let m = points.len().max(1);
-    let what = if m >= MIN_DOF {
-        format!("re-probe {MIN_DOF} of its {m} points (or repeat the whole map)")
-    } else {
-        format!(
-            "re-probe each of its {m} points {} more times",
-            MIN_DOF.div_ceil(m)
-        )
-    };
+    let what = reprobe(data, rows, " (or repeat the whole map)");
     Some(super::Warning {
         code: "noise_floor_upper_bound".into(),
         detail: format!(
@@ -409,6 +510,61 @@ pub(super) fn upper_bound_warning(
             (MAX_REPEAT_GAP_S / 60.0).round()
         ),
     })
+}
+
+/// The `reading_quantum` warning of a target whose floor is set by its
+/// reading quantum (q/√12 above what the differences measure): the
+/// readings are coarser than their noise, so no model can get below it.
+pub(super) fn quantum_warning(target: &str, nf: &NoiseFloor) -> Option<super::Warning> {
+    let q = nf.quantum_um?;
+    let least = q / 12f64.sqrt();
+    (nf.sigma_um <= least).then(|| super::Warning {
+        code: "reading_quantum".into(),
+        detail: format!(
+            "{target}: the readings are quantised in steps of {q:.4} µm, coarser than their noise (most differences between neighbouring readings are exactly 0), so the noise floor is the rounding's own q/√12 = {least:.4} µm: a residual below it cannot be measured at this resolution"
+        ),
+    })
+}
+
+/// What to re-probe so that `repeats` can measure the floor: [`MIN_DOF`]
+/// of the points (`many` added after it), or each point enough times.
+fn reprobe(data: &Dataset, rows: &[usize], many: &str) -> String {
+    let points: std::collections::BTreeSet<[i64; 3]> = rows
+        .iter()
+        .map(|&r| [0, 1, 2].map(|a| key(data.pos(a, r))))
+        .collect();
+    let m = points.len().max(1);
+    if m >= MIN_DOF {
+        format!("re-probe {MIN_DOF} of its {m} points{many}")
+    } else {
+        format!(
+            "re-probe each of its {m} points {} more times",
+            MIN_DOF.div_ceil(m)
+        )
+    }
+}
+
+/// The `noise_floor_unknown` warning of a target without a floor: these
+/// data cannot say how small its residual can get (no `u_um`, no repeated
+/// readings, no evenly spaced line or lattice to difference), so nothing
+/// is said to be at or above it — and what to measure so that `repeats`
+/// can ([`MIN_DOF`] repeated readings, each within [`MAX_REPEAT_GAP_S`]
+/// of the first).
+pub(super) fn unknown_warning(target: &str, data: &Dataset, rows: &[usize]) -> super::Warning {
+    let what = reprobe(data, rows, "");
+    let copies = data.duplicate_rows().len();
+    super::Warning {
+        code: "noise_floor_unknown".into(),
+        detail: format!(
+            "{target}: the noise floor cannot be known from these data (no u_um column, no repeated readings{}, no evenly spaced line or lattice to difference), so the residual is not compared with it; {what}, each within {} min of its first reading (or give the instrument's uncertainty as u_um), to measure it",
+            if copies > 0 {
+                format!(" — the {copies} rows that repeat another exactly are copies, not readings")
+            } else {
+                String::new()
+            },
+            (MAX_REPEAT_GAP_S / 60.0).round()
+        ),
+    }
 }
 
 /// Difference weights of order 2, 3 and 5 (binomial, alternating).
@@ -488,14 +644,17 @@ mod tests {
     #[test]
     fn repeats_are_preferred() {
         let pos: Vec<f64> = (0..300).map(|i| (i % 50) as f64 * 10.0).collect();
-        let d = Dataset {
-            pos_mm: [Some(pos), None, None],
-            ..Dataset::default()
-        };
-        let rows: Vec<usize> = (0..300).collect();
         let resid: Vec<f64> = (0..300)
             .map(|i| (i % 50) as f64 + 0.1 * pseudo_noise(i))
             .collect();
+        // The readings themselves: repeats differ in their value (rows
+        // equal in every column are copies, not repeats).
+        let d = Dataset {
+            pos_mm: [Some(pos), None, None],
+            err_um: [Some(resid.iter().copied().map(Some).collect()), None, None],
+            ..Dataset::default()
+        };
+        let rows: Vec<usize> = (0..300).collect();
         let nf = noise_floor(&d, &rows, &resid).unwrap();
         assert_eq!(nf.method, NoiseMethod::Repeats);
         assert_eq!(nf.dof, 250);

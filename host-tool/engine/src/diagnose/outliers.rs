@@ -318,11 +318,17 @@ fn flag(data: &Dataset, t: usize, resid: &[(usize, f64, f64)], found: &[Outlier]
         .filter(|((r, _, _), _)| !flagged(*r))
         .filter_map(|(_, d)| d.map(|d| d.0.abs()))
         .collect();
-    let local_scale = MAD_TO_SIGMA * median(&mut dev);
+    // Neither local scale below the reading quantum: on readings quantised
+    // coarser than their noise most neighbours read the same value, both
+    // scales were 0, and a smooth warm-up's every one-step change "was far
+    // off its neighbours" — 15–24 cold-start readings of a spindle test
+    // were dropped against a constant model (issue 24).
+    let step = super::noise::quantum(resid.iter().map(|x| x.1)).unwrap_or(0.0);
+    let local_scale = (MAD_TO_SIGMA * median(&mut dev)).max(step);
     for (&(r, v, e), d) in resid.iter().zip(&local) {
         if (e - med).abs() > OUTLIER_K * scale
             && d.is_none_or(|(d, spread)| {
-                d.abs() > OUTLIER_K * local_scale && d.abs() > OUTLIER_K * spread
+                d.abs() > OUTLIER_K * local_scale && d.abs() > OUTLIER_K * spread.max(step)
             })
         {
             out.push(Outlier {

@@ -73,7 +73,7 @@ pub(super) fn region_above_noise_warning(
             region.rms_um,
             region.rms_um / nf.sigma_um,
             region.points,
-            crate::regions::bbox_text(&region.bbox_mm)
+            region.place()
         ),
     }
 }

@@ -23,7 +23,12 @@
 //! of each row depends on it. A leading UTF-8 byte order mark is skipped.
 
 use super::{shown, ImportError, Needs};
-use crate::data::{Dataset, AXES, ERR_PLAUSIBLE_UM, POS_PLAUSIBLE_MM};
+use crate::data::{Dataset, SkippedRow, AXES, ERR_PLAUSIBLE_UM, POS_PLAUSIBLE_MM};
+
+/// A deviation at least this large (µm) is no reading but the laser
+/// software's placeholder for one (−1e20 where the beam was lost): its run
+/// is left out with a note naming it, the other runs are used.
+pub const PLACEHOLDER_ABS: f64 = 1e19;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Section {
@@ -93,6 +98,8 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
     let mut seen_rtd = false;
     // (line, run, target index 0-based, deviation µm)
     let mut rows: Vec<(usize, usize, usize, f64)> = Vec::new();
+    // Readings that are the laser's placeholder: (line, run, target, as written).
+    let mut placeholders: Vec<(usize, usize, usize, String)> = Vec::new();
     let mut last_line = 0;
 
     for (i, raw) in text.lines().enumerate() {
@@ -327,7 +334,12 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                             ),
                         )
                     })?;
-                if dev.abs() > ERR_PLAUSIBLE_UM {
+                if dev.abs() >= PLACEHOLDER_ABS {
+                    // No reading: kept through the order checks, its run
+                    // left out below.
+                    placeholders.push((ln, run, target, toks[2].to_string()));
+                }
+                if dev.abs() > ERR_PLAUSIBLE_UM && dev.abs() < PLACEHOLDER_ABS {
                     return Err(err(
                         ln,
                         Some(3),
@@ -425,6 +437,39 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
             ));
         }
     }
+    // Runs with a placeholder are left out whole (ISO 230-2 needs every
+    // target of a run), each of their rows listed as skipped with why.
+    let bad_runs: std::collections::BTreeSet<usize> = placeholders.iter().map(|p| p.1).collect();
+    let mut skipped = Vec::new();
+    for row in rows.iter().filter(|row| bad_runs.contains(&row.1)) {
+        let reason = match placeholders.iter().find(|p| p.0 == row.0) {
+            Some(p) => format!(
+                "run {}, target {}: no reading (`{}`, the laser's placeholder) — run {} left out",
+                p.1,
+                p.2,
+                shown(&p.3),
+                p.1
+            ),
+            None => format!(
+                "run {}, target {}: its run has a reading missing (placeholder) — run {} left out",
+                row.1,
+                row.2 + 1,
+                row.1
+            ),
+        };
+        skipped.push(SkippedRow {
+            line: row.0,
+            reason,
+        });
+    }
+    rows.retain(|row| !bad_runs.contains(&row.1));
+    if rows.is_empty() {
+        return Err(err(
+            placeholders.first().map_or(last_line, |p| p.0),
+            Some(3),
+            "every run has a placeholder instead of a reading (`-1e20`: no reading — a broken beam); no run is left to use".into(),
+        ));
+    }
     let axis = axis_found.ok_or_else(|| {
         err(
             last_line,
@@ -450,5 +495,6 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
     );
     ds.pass_id = Some(rows.iter().map(|r| r.1 as i64).collect());
     ds.line = rows.iter().map(|r| r.0).collect();
+    ds.skipped = skipped;
     Ok(ds)
 }
