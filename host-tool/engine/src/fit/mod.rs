@@ -126,6 +126,11 @@ pub fn fit_recorded(
     if data.is_empty() {
         bail!("{}: no data rows", data.source);
     }
+    if data.targets().is_empty() {
+        bail!(
+            "no ex_um, ey_um or ez_um column — the data hold only angle or beam readings (ea_urad, eb_urad, ec_urad, e_beam_um), which only the volumetric model reads (docs/volumetric.md)"
+        );
+    }
     for e in adds {
         if data.err_um[e.target()].is_none() {
             bail!(

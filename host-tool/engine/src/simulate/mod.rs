@@ -336,6 +336,7 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
         aux: Vec::new(),
         line: Vec::new(),
         skipped: Vec::new(),
+        ..Dataset::default()
     };
     SimOutput {
         data,
