@@ -23,7 +23,8 @@ use trueaxis_engine::warning::Warning;
 pub struct Args {
     /// The measurement file (contract CSV or Renishaw .rtl).
     pub data: PathBuf,
-    /// Model spec: cubic19, kinematic, nn:<hidden> or grid:<step_mm>.
+    /// Model spec: cubic19, kinematic, nn:<hidden>, grid:<step_mm> or
+    /// rigid21[:<degree>] (docs/volumetric.md).
     #[arg(long)]
     pub model: String,
     /// Add a physical effect (`periodic:target=ey,axis=y,period_mm=5`, as

@@ -23,12 +23,14 @@ pub mod grid;
 pub mod linear;
 pub mod local;
 pub mod nn;
+pub mod rigid21;
 pub mod seed;
 
 pub use grid::{GridModel, GridOutput};
 pub use linear::{LinearModel, LinearOutput};
 pub use local::{LocalModel, LocalPatch};
 pub use nn::{NnModel, NnTraining};
+pub use rigid21::Rigid21Model;
 pub use seed::{ModelSeed, Seed};
 
 use crate::data::{Dataset, TARGETS};
@@ -137,6 +139,8 @@ pub enum FittedModel {
     Grid(GridModel),
     /// Piecewise local polynomials (`--local`).
     Local(LocalModel),
+    /// The 21 geometric errors on a kinematic chain (docs/volumetric.md).
+    Rigid21(Rigid21Model),
 }
 
 impl FittedModel {
@@ -147,6 +151,7 @@ impl FittedModel {
             FittedModel::Nn(m) => m.outputs.clone(),
             FittedModel::Grid(m) => m.outputs.iter().map(|o| o.target).collect(),
             FittedModel::Local(m) => m.targets(),
+            FittedModel::Rigid21(_) => vec![0, 1, 2],
         };
         t.sort_unstable();
         t.dedup();
@@ -176,6 +181,7 @@ impl FittedModel {
                 }
             }
             FittedModel::Local(m) => out = m.predict(data)?,
+            FittedModel::Rigid21(m) => out = m.predict_rows(data).map(Some),
         }
         Ok(out)
     }
@@ -359,6 +365,9 @@ impl ModelFile {
             (FittedModel::Grid(m), Seed::Grid { step_mm }) => {
                 *step_mm == m.step_mm && self.adds.is_empty()
             }
+            (FittedModel::Rigid21(m), Seed::Rigid21 { degree }) => {
+                *degree == m.degree && !seed.local && self.adds.is_empty()
+            }
             _ => false,
         };
         if !kind_ok {
@@ -381,6 +390,7 @@ impl ModelFile {
             FittedModel::Local(m) => check_local(m),
             FittedModel::Nn(m) => check_nn(m),
             FittedModel::Grid(m) => check_grid(m),
+            FittedModel::Rigid21(m) => m.check(),
         }
     }
 
@@ -423,6 +433,7 @@ impl FittedModel {
             FittedModel::Nn(_) => "nn",
             FittedModel::Grid(_) => "grid",
             FittedModel::Local(_) => "local",
+            FittedModel::Rigid21(_) => "rigid21",
         }
     }
 }
