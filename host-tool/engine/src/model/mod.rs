@@ -125,6 +125,11 @@ pub struct FitStats {
     /// their text (a list of strings).
     #[serde(default, with = "crate::warning::as_text")]
     pub warnings: Vec<crate::warning::Warning>,
+    /// rigid21 only: which errors the data determine, what stays hidden and
+    /// what to measure (docs/volumetric.md; `fit --json` `errors`,
+    /// `hidden_um`, `measure`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub volumetric: Option<rigid21::Identifiability>,
 }
 
 /// The model, by kind (`"kind": "linear" | "nn" | "grid" | "local"`).
@@ -418,6 +423,13 @@ impl ModelFile {
             "warnings": crate::warning::as_text::texts(&s.warnings),
             "data_sha256": self.data.sha256,
         });
+        if let Some(id) = &s.volumetric {
+            v["errors"] = serde_json::to_value(&id.errors).unwrap_or_default();
+            v["hidden_um"] = serde_json::json!(id.hidden_um);
+            v["hidden_from"] = serde_json::json!(id.hidden_from);
+            v["hidden_at_tool_mm"] = serde_json::json!(id.hidden_at_tool_mm);
+            v["measure"] = serde_json::to_value(&id.measure).unwrap_or_default();
+        }
         if let Some(p) = model_path {
             v["model_file"] = serde_json::Value::String(p.display().to_string());
         }

@@ -530,6 +530,64 @@ fn cross_um(w: [f64; 3], a: [f64; 3]) -> [f64; 3] {
     ]
 }
 
+/// One error's answer in `fit --json` `errors`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ErrorAnswer {
+    /// ISO 230-1 name.
+    pub name: String,
+    /// `estimated` or `cannot_know`.
+    pub status: Status,
+    /// µm or µrad.
+    pub unit: String,
+    /// Largest |value| over the travel (a constant's value, signed), for
+    /// `estimated` only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peak: Option<f64>,
+    /// Standard uncertainty of `peak` (at the same position).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma: Option<f64>,
+    /// Legendre coefficients, for `estimated` only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coef: Option<Vec<f64>>,
+    /// For `cannot_know` only: the largest error vector (µm) this error at
+    /// its realistic size gives over the working volume and the measured
+    /// tool range, and the tool length (mm) where.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hidden_um: Option<f64>,
+    /// See `hidden_um`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hidden_at_tool_mm: Option<f64>,
+}
+
+/// What the data cannot see, and what would show it.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Identifiability {
+    /// Per error, in the model's order.
+    pub errors: Vec<ErrorAnswer>,
+    /// The largest volumetric error (µm, vector length) over the working
+    /// volume and the measured tool range that realistic-size errors in the
+    /// directions these data cannot see give.
+    pub hidden_um: f64,
+    /// The errors that largest hidden error comes from.
+    pub hidden_from: Vec<String>,
+    /// The tool length, mm, at which it is largest.
+    pub hidden_at_tool_mm: f64,
+    /// The added measurement from the simulator's menu that removes the
+    /// most of `hidden_um`, with what would then remain; `None` when
+    /// nothing is hidden.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measure: Option<Measure>,
+}
+
+/// A measurement to add.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Measure {
+    /// What to measure, in words.
+    pub what: String,
+    /// `hidden_um` once it is added.
+    pub hidden_um_after: f64,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -17,6 +17,7 @@
 
 mod bump;
 mod config;
+pub mod instruments;
 mod machine;
 mod plan;
 mod spec;
