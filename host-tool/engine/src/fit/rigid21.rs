@@ -827,6 +827,81 @@ mod tests {
         assert!(after <= 1.5, "after {after} µm (before {before})");
     }
 
+    /// Every estimated error of the noisy fit within 4σ of the same
+    /// plan's noise-free fit (the truth in the gauge): no confident wrong
+    /// answer. Returns the noisy answer.
+    fn honest(m: &Machine, plan: &[Instrument], keep_axes: &[usize], seed: u64) -> Identifiability {
+        let cut = |mut d: Dataset| {
+            for a in 0..3 {
+                if !keep_axes.contains(&a) {
+                    d.pos_mm[a] = None;
+                }
+            }
+            d
+        };
+        let (_, id, _) = fit(&cut(measure(m, plan, seed, true)), 4).unwrap();
+        let (_, exact, _) = fit(&cut(measure(m, plan, seed, false)), 4).unwrap();
+        for (e, t) in id.errors.iter().zip(&exact.errors) {
+            if e.status == Status::Estimated {
+                let (v, s) = (e.peak.unwrap(), e.sigma.unwrap());
+                let tv = t.peak.expect("estimated without noise too");
+                assert!(
+                    (v - tv).abs() <= 4.0 * s + 1e-6,
+                    "{}: {v} ± {s}, truth {tv}",
+                    e.name
+                );
+            }
+        }
+        id
+    }
+
+    #[test]
+    fn a_two_axis_lathe_has_13_errors_and_answers_honestly() {
+        // X and Z only (the machine's Y at 0), lines at two tool lengths
+        // and two parallel offsets along Z / X.
+        let m = mill();
+        let mut plan = Vec::new();
+        for (axis, other) in [(0usize, 2usize), (2, 0)] {
+            for tool in [0.0, 100.0] {
+                for side in [0.2, 0.8] {
+                    let mut at = [0.0; 3];
+                    at[other] = m.travel_mm[other] * side;
+                    plan.push(Instrument::Line {
+                        axis,
+                        at_mm: at,
+                        tool_mm: tool,
+                        tool_lat_mm: [0.0, 0.0],
+                        straightness: true,
+                        points: 21,
+                    });
+                }
+            }
+        }
+        let id = honest(&m, &plan, &[0, 2], 21);
+        let n = id.errors.iter().filter(|e| !e.name.ends_with('T')).count();
+        assert_eq!(
+            n,
+            13,
+            "{:?}",
+            id.errors.iter().map(|e| &e.name).collect::<Vec<_>>()
+        );
+        assert_eq!(status(&id, "A0T"), Status::CannotKnow);
+    }
+
+    #[test]
+    fn one_tracker_station_at_one_tool_length_cannot_know_the_tilt() {
+        let m = mill();
+        let plan = [Instrument::Tracker {
+            tools_mm: vec![100.0],
+            lateral_mm: vec![[0.0, 0.0]],
+            points: 120,
+        }];
+        let id = honest(&m, &plan, &[0, 1, 2], 5);
+        for name in ["A0T", "B0T", "ECZ"] {
+            assert_eq!(status(&id, name), Status::CannotKnow, "{name}");
+        }
+    }
+
     #[test]
     fn laser_lines_cannot_know_the_tilt_and_say_how_much_it_hides() {
         let m = mill();
