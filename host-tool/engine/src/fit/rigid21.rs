@@ -19,8 +19,8 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::data::{Dataset, ANGLES, TARGETS};
 use crate::model::rigid21::{
-    Chain, ErrorAnswer, ErrorKind, Identifiability, Measure, Prediction, Rigid21Model, Status,
-    ToolPoint,
+    Chain, ErrorAnswer, ErrorKind, Identifiability, Measure, Prediction, ReadingResidual,
+    Rigid21Model, Status, ToolPoint,
 };
 use crate::simulate::instruments::{self, Instrument};
 use crate::simulate::Machine;
@@ -473,16 +473,22 @@ pub fn fit(
     }
     let nulls = null_directions(&pr.m);
     // Errors a null direction reaches.
+    // Per coefficient: an error is cannot_know when a null direction
+    // reaches any of its coefficients; the solve leaves out only the
+    // reached coefficients, so the visible shape of a cannot_know error
+    // (a roll's curvature seen by offset lines whose slope is lost) is
+    // fitted and biases no estimated error — but it is never reported or
+    // stored (docs/volumetric.md).
     let mut cannot = vec![false; model.errors.len()];
+    let mut keep: Vec<usize> = Vec::new();
     for (j, p) in params.iter().enumerate() {
         let reach: f64 = (0..nulls.ncols()).map(|k| nulls[(j, k)].powi(2)).sum();
         if reach > REACH {
             cannot[p.term] = true;
+        } else {
+            keep.push(j);
         }
     }
-    let keep: Vec<usize> = (0..params.len())
-        .filter(|&j| !cannot[params[j].term])
-        .collect();
     let (x, resid, cov) = solve_kept(&pr, &keep);
     for (i, e) in model.errors.iter_mut().enumerate() {
         if cannot[i] {
@@ -685,6 +691,95 @@ fn solve_kept(pr: &Projected, keep: &[usize]) -> (DVector<f64>, DVector<f64>, DM
     (x, resid, cov)
 }
 
+/// `model` evaluated at each row's tool point and compared with every
+/// reading of `data` (docs/volumetric.md): each set-up's unknowns (zeros,
+/// alignment slopes, frames) are fitted to what the model leaves, as the
+/// instrument's own placement, never as the machine's error. Returns the
+/// model plus set-up value per row for ex, ey, ez (what `compare`'s
+/// statistics use) and the residual per reading kind.
+pub fn reading_residuals(
+    model: &Rigid21Model,
+    data: &Dataset,
+) -> ([Option<Vec<f64>>; 3], Vec<ReadingResidual>) {
+    let mut left = data.clone();
+    let preds: Vec<Prediction> = (0..data.len())
+        .map(|r| model.predict(&ToolPoint::of_row(data, r)))
+        .collect();
+    for c in 0..3 {
+        if let Some(col) = left.err_um[c].as_mut() {
+            for (r, v) in col.iter_mut().enumerate() {
+                if let Some(v) = v {
+                    *v -= preds[r].e_um[c];
+                }
+            }
+        }
+        if let Some(col) = left.angle_urad[c].as_mut() {
+            for (r, v) in col.iter_mut().enumerate() {
+                if let Some(v) = v {
+                    *v -= preds[r].angle_urad[c];
+                }
+            }
+        }
+    }
+    if let (Some(col), Some(dirs)) = (left.beam_um.as_mut(), data.beam_dir.as_ref()) {
+        for (r, v) in col.iter_mut().enumerate() {
+            if let (Some(v), Some(d)) = (v.as_mut(), dirs[r]) {
+                *v -= preds[r].beam_um(d);
+            }
+        }
+    }
+    let pr = projected(&left, model, &[]);
+    let mut fitted: [Option<Vec<f64>>; 3] =
+        [0, 1, 2].map(|c| data.err_um[c].as_ref().map(|_| vec![f64::NAN; data.len()]));
+    let mut out: Vec<ReadingResidual> = Vec::new();
+    for (i, &(r, kind)) in pr.obs.iter().enumerate() {
+        let u = data.u_um.as_ref().map_or(1.0, |v| v[r]);
+        let res = pr.b[i] * u;
+        if let (Reading::E(c), Some(Some(v))) = (
+            kind,
+            data.err_um[kind_target(kind)].as_ref().map(|col| col[r]),
+        ) {
+            if let Some(f) = fitted[c].as_mut() {
+                f[r] = v - res;
+            }
+        }
+        let key = kind.key();
+        let unit = if matches!(kind, Reading::Angle(_)) {
+            "µrad"
+        } else {
+            "µm"
+        };
+        let entry = match out.iter_mut().position(|o| o.reading == key) {
+            Some(k) => &mut out[k],
+            None => {
+                out.push(ReadingResidual {
+                    reading: key,
+                    unit: unit.into(),
+                    count: 0,
+                    rms: 0.0,
+                    max_abs: 0.0,
+                });
+                out.last_mut().expect("just pushed")
+            }
+        };
+        entry.count += 1;
+        entry.rms += res * res;
+        entry.max_abs = entry.max_abs.max(res.abs());
+    }
+    for o in &mut out {
+        o.rms = (o.rms / o.count as f64).sqrt();
+    }
+    (fitted, out)
+}
+
+/// The ex/ey/ez column of an `E` reading (0 for the others, unused).
+fn kind_target(kind: Reading) -> usize {
+    match kind {
+        Reading::E(c) => c,
+        _ => 0,
+    }
+}
+
 /// The smallest and largest tool length of the data, mm.
 fn tool_range(data: &Dataset) -> [f64; 2] {
     match &data.tool_mm {
@@ -853,6 +948,35 @@ mod tests {
             }
         }
         id
+    }
+
+    #[test]
+    fn compare_sees_the_noise_once_set_ups_are_placed() {
+        let m = mill();
+        let plan = [Instrument::Tracker {
+            tools_mm: vec![0.0, 150.0],
+            lateral_mm: vec![[0.0, 0.0], [100.0, 0.0], [0.0, 100.0]],
+            points: 100,
+        }];
+        let data = measure(&m, &plan, 4, true);
+        let (model, id, _) = fit(&data, 4).unwrap();
+        assert!(id.errors.iter().all(|e| e.status == Status::Estimated));
+        // On a fresh station (another seed: other points, frame, noise).
+        let fresh = measure(&m, &plan, 8, true);
+        let (fitted, kinds) = reading_residuals(&model, &fresh);
+        for k in &kinds {
+            assert!(k.rms < 1.0, "{k:?}");
+        }
+        assert!(fitted[0].as_ref().unwrap().iter().all(|v| v.is_finite()));
+        // A model that is all zero leaves the machine's error.
+        let mut zero = model.clone();
+        for e in &mut zero.errors {
+            if let Some(c) = e.coef.as_mut() {
+                c.iter_mut().for_each(|v| *v = 0.0);
+            }
+        }
+        let (_, kinds0) = reading_residuals(&zero, &fresh);
+        assert!(kinds0.iter().any(|k| k.rms > 2.0), "{kinds0:?}");
     }
 
     #[test]

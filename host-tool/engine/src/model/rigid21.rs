@@ -588,6 +588,22 @@ pub struct Measure {
     pub hidden_um_after: f64,
 }
 
+/// One reading kind's residual after the model and each set-up's own
+/// unknowns (`compare` on a rigid21 model).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReadingResidual {
+    /// `ex`, `ey`, `ez`, `ea_urad`, `eb_urad`, `ec_urad` or `e_beam`.
+    pub reading: String,
+    /// µm or µrad.
+    pub unit: String,
+    /// Readings of this kind.
+    pub count: usize,
+    /// RMS of the residual.
+    pub rms: f64,
+    /// Largest |residual|.
+    pub max_abs: f64,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
