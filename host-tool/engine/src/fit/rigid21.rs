@@ -458,13 +458,14 @@ fn menu_data(model: &Rigid21Model, plan: &[Instrument]) -> Dataset {
     d
 }
 
+/// What [`fit`] returns: the model, the identifiability answer and per
+/// reading kind (key, RMS of the residual in the reading's unit, count).
+pub type Fitted = (Rigid21Model, Identifiability, Vec<(String, f64, usize)>);
+
 /// The fit of `rigid21:<degree>` to `data`: the model (cannot_know errors
 /// without coefficients), the answer per error, and the RMS of the
 /// weighted-back residuals per reading kind (`ex`, `ea_urad`, `e_beam`, …).
-pub fn fit(
-    data: &Dataset,
-    degree: usize,
-) -> Result<(Rigid21Model, Identifiability, Vec<(String, f64, usize)>)> {
+pub fn fit(data: &Dataset, degree: usize) -> Result<Fitted> {
     let mut model = skeleton(data, degree)?;
     let params = params_of(&model);
     let pr = projected(data, &model, &params);

@@ -439,8 +439,8 @@ impl Rigid21Model {
         let mut out: [Vec<f64>; 3] = Default::default();
         for row in 0..data.len() {
             let p = self.predict(&ToolPoint::of_row(data, row));
-            for i in 0..3 {
-                out[i].push(p.e_um[i]);
+            for (col, v) in out.iter_mut().zip(p.e_um) {
+                col.push(v);
             }
         }
         out

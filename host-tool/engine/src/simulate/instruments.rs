@@ -146,7 +146,7 @@ pub fn measure(machine: &Machine, plan: &[Instrument], seed: u64, noise: bool) -
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     // Noise from its own stream, so that the same seed gives the same
     // points, zeros and frames with and without noise.
-    let mut nrng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_0f_401_5e);
+    let mut nrng = ChaCha8Rng::seed_from_u64(seed ^ 0x05ee_d0f4_015e);
     let mut rows: Vec<Row> = Vec::new();
     let tr = machine.travel_mm;
     for (i, inst) in plan.iter().enumerate() {

@@ -251,9 +251,9 @@ impl Machine {
     /// reads before its zero; the tilt is no carriage rotation).
     pub fn angle_urad(&self, pos_mm: [f64; 3]) -> [f64; 3] {
         let mut w = [0.0; 3];
-        for k in 0..3 {
-            for (i, wi) in w.iter_mut().enumerate() {
-                *wi += self.axes[k].rot_urad[i].eval(pos_mm[k], self.travel_mm[k]);
+        for ((ax, &q), &tr) in self.axes.iter().zip(&pos_mm).zip(&self.travel_mm) {
+            for (wi, f) in w.iter_mut().zip(&ax.rot_urad) {
+                *wi += f.eval(q, tr);
             }
         }
         w
