@@ -86,7 +86,17 @@ pub fn run_compare(
             .get(trueaxis_engine::data::TARGETS[t])
             .copied()
     });
+    // A rigid21 model is compared with each reading after its set-up's own
+    // zeros, alignment and frame (docs/volumetric.md).
+    let (predicted, readings) = match &model.model {
+        trueaxis_engine::model::FittedModel::Rigid21(m) => {
+            let (fitted, kinds) = trueaxis_engine::fit::rigid21::reading_residuals(m, data);
+            (fitted, Some(kinds))
+        }
+        _ => (predicted, None),
+    };
     let mut c = compare::compare(data, &model.spec(), &predicted, held_out);
+    c.readings = readings;
     let hash = trueaxis_engine::import::content_hash(data);
     if !model.data.sha256.is_empty() && hash != model.data.sha256 {
         c.warnings.push(Warning {

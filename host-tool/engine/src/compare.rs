@@ -188,6 +188,10 @@ pub struct Comparison {
     pub warnings: Vec<Warning>,
     /// Path of the HTML report when one was written.
     pub report: Option<String>,
+    /// rigid21 models: the residual per reading kind (ex … ez, angle and
+    /// beam readings) after each set-up's own unknowns (docs/volumetric.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub readings: Option<Vec<crate::model::rigid21::ReadingResidual>>,
 }
 
 /// Residual (measured − predicted) per row for target `t`; `None` where the
@@ -229,6 +233,7 @@ pub fn compare(
         channels: Vec::new(),
         warnings: Vec::new(),
         report: None,
+        readings: None,
     };
     for t in data.targets() {
         let name = TARGETS[t].to_string();

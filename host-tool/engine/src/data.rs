@@ -14,6 +14,19 @@ use serde::{Deserialize, Serialize};
 pub const AXES: [&str; 3] = ["x", "y", "z"];
 /// Target (error) names, in index order 0, 1, 2: `ex`, `ey`, `ez`.
 pub const TARGETS: [&str; 3] = ["ex", "ey", "ez"];
+/// Angle reading names, in index order 0, 1, 2: rotation of the tool frame
+/// relative to the workpiece about +X, +Y, +Z (docs/volumetric.md).
+pub const ANGLES: [&str; 3] = ["ea", "eb", "ec"];
+
+/// How far the length of a `beam_x, beam_y, beam_z` direction may be from 1
+/// before the importers refuse it: direction cosines written with three
+/// decimals (0.577, 0.577, 0.577 → 0.99993) are unit vectors; a direction
+/// given in mm or left unnormalised (1, 1, 1) is not.
+pub const BEAM_UNIT_TOL: f64 = 1e-3;
+
+/// The largest |angle| an `e<a|b|c>_urad` cell may have, µrad: 0.1 rad. A
+/// larger value is a unit mistake (arcsec, mrad·1000) or a broken reading.
+pub const ANGLE_PLAUSIBLE_URAD: f64 = 100_000.0;
 
 /// The temperatures a `T_<name>_C` reading may have, °C: a machine shop's
 /// sensors (air, bed, spindle housing, coolant) read well inside −50…150 °C.
@@ -87,6 +100,33 @@ pub struct Dataset {
     /// nothing is silently skipped). Empty for simulated data.
     #[serde(default)]
     pub skipped: Vec<SkippedRow>,
+    /// The set-up of an instrument that reads relative to its own zero and
+    /// alignment (a laser line, an angular line, a diagonal, a tracker
+    /// station), per row (docs/volumetric.md § Set-ups).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub setup_id: Option<Vec<i64>>,
+    /// Lateral offsets of the measured point from the spindle axis along X
+    /// and Y, mm (`tool_x_mm`, `tool_y_mm`); `tool_mm` is the offset along it.
+    #[serde(default, skip_serializing_if = "no_columns")]
+    pub tool_lat_mm: [Option<Vec<f64>>; 2],
+    /// Angle readings `ea_urad`, `eb_urad`, `ec_urad`, µrad; `Some(None)`
+    /// cells for "not measured on this row".
+    #[serde(default, skip_serializing_if = "no_columns")]
+    pub angle_urad: [Option<Vec<Option<f64>>>; 3],
+    /// The unit direction `beam_x, beam_y, beam_z` of each row's
+    /// `e_beam_um` reading; `None` on rows without one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beam_dir: Option<Vec<Option<[f64; 3]>>>,
+    /// The error's component along the row's beam direction, µm
+    /// (`e_beam_um`: a diagonal's displacement, a ballbar's radial reading).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beam_um: Option<Vec<Option<f64>>>,
+}
+
+/// True when none of the columns is present (serde: old data sets keep
+/// their JSON).
+fn no_columns<T, const N: usize>(cols: &[Option<T>; N]) -> bool {
+    cols.iter().all(Option::is_none)
 }
 
 /// A source row that was left out of the data set, and why.
@@ -233,6 +273,24 @@ impl Dataset {
         (0..3).filter(|&t| self.err_um[t].is_some()).collect()
     }
 
+    /// True when the data hold a reading column beyond `ex_um`, `ey_um`,
+    /// `ez_um` (an angle or a beam reading), which only the volumetric
+    /// model reads (docs/volumetric.md).
+    pub fn has_volumetric_readings(&self) -> bool {
+        self.angle_urad.iter().any(Option::is_some) || self.beam_um.is_some()
+    }
+
+    /// Lateral offset of row `row`'s measured point from the spindle axis
+    /// along X (`lat` = 0) or Y (`lat` = 1), mm; 0 without the column.
+    pub fn tool_lat(&self, lat: usize, row: usize) -> f64 {
+        self.tool_lat_mm[lat].as_ref().map_or(0.0, |v| v[row])
+    }
+
+    /// Tool length of row `row`, mm; 0 without the column.
+    pub fn tool(&self, row: usize) -> f64 {
+        self.tool_mm.as_ref().map_or(0.0, |v| v[row])
+    }
+
     /// Position of row `row` on `axis` in mm; 0 for an axis not in the data
     /// (the machine sits at its reference there).
     pub fn pos(&self, axis: usize, row: usize) -> f64 {
@@ -264,7 +322,7 @@ impl Dataset {
                 self.source
             );
         }
-        if self.targets().is_empty() {
+        if self.targets().is_empty() && !self.has_volumetric_readings() {
             bail!(
                 "{}: no error column (expected ex_um, ey_um or ez_um)",
                 self.source
@@ -299,9 +357,58 @@ impl Dataset {
                 }
             }
         }
+        for (a, col) in self.angle_urad.iter().enumerate() {
+            if let Some(v) = col {
+                lens.push((format!("{}_urad", ANGLES[a]), v.len()));
+                if v.iter().flatten().any(|x| !x.is_finite()) {
+                    bail!(
+                        "{}: {}_urad holds a non-finite value",
+                        self.source,
+                        ANGLES[a]
+                    );
+                }
+            }
+        }
+        if let Some(v) = &self.beam_um {
+            lens.push(("e_beam_um".into(), v.len()));
+            if v.iter().flatten().any(|x| !x.is_finite()) {
+                bail!("{}: e_beam_um holds a non-finite value", self.source);
+            }
+            let Some(dirs) = &self.beam_dir else {
+                bail!(
+                    "{}: e_beam_um without its direction beam_x, beam_y, beam_z",
+                    self.source
+                );
+            };
+            for (r, (b, d)) in v.iter().zip(dirs).enumerate() {
+                match (b, d) {
+                    (Some(_), None) => {
+                        bail!(
+                            "{}: row {} has e_beam_um but no beam direction",
+                            self.source,
+                            r + 1
+                        )
+                    }
+                    (_, Some(d)) if !is_unit(*d) => bail!(
+                        "{}: row {}: beam direction ({}, {}, {}) is not a unit vector",
+                        self.source,
+                        r + 1,
+                        d[0],
+                        d[1],
+                        d[2]
+                    ),
+                    _ => {}
+                }
+            }
+        }
+        if let Some(v) = &self.beam_dir {
+            lens.push(("beam_x".into(), v.len()));
+        }
         let opt_f = [
             ("t_s", &self.t_s),
             ("tool_mm", &self.tool_mm),
+            ("tool_x_mm", &self.tool_lat_mm[0]),
+            ("tool_y_mm", &self.tool_lat_mm[1]),
             ("u_um", &self.u_um),
         ];
         for (name, col) in opt_f {
@@ -312,7 +419,11 @@ impl Dataset {
                 }
             }
         }
-        for (name, col) in [("pass_id", &self.pass_id), ("session_id", &self.session_id)] {
+        for (name, col) in [
+            ("pass_id", &self.pass_id),
+            ("session_id", &self.session_id),
+            ("setup_id", &self.setup_id),
+        ] {
             if let Some(v) = col {
                 lens.push((name.to_string(), v.len()));
             }
@@ -338,6 +449,12 @@ impl Dataset {
         Ok(())
     }
 }
+/// True when the direction `d` has length 1 within [`BEAM_UNIT_TOL`].
+pub fn is_unit(d: [f64; 3]) -> bool {
+    let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    d.iter().all(|c| c.is_finite()) && (len - 1.0).abs() <= BEAM_UNIT_TOL
+}
+
 /// The rows of `data` listed in `rows`, as a data set of their own (every
 /// per-row column sliced; metadata and channel names kept). Used to refit
 /// non-linear models (grid, local) without a block.
@@ -354,6 +471,11 @@ pub fn subset(data: &Dataset, rows: &[usize]) -> Dataset {
     out.pass_id = data.pass_id.as_ref().map(|v| pick(v, rows));
     out.session_id = data.session_id.as_ref().map(|v| pick(v, rows));
     out.u_um = data.u_um.as_ref().map(|v| pick(v, rows));
+    out.setup_id = data.setup_id.as_ref().map(|v| pick(v, rows));
+    out.tool_lat_mm = data.tool_lat_mm.clone().map(|c| c.map(|v| pick(&v, rows)));
+    out.angle_urad = data.angle_urad.clone().map(|c| c.map(|v| pick(&v, rows)));
+    out.beam_dir = data.beam_dir.as_ref().map(|v| pick(v, rows));
+    out.beam_um = data.beam_um.as_ref().map(|v| pick(v, rows));
     for t in &mut out.temps {
         t.temp_c = pick(&t.temp_c, rows);
     }

@@ -23,7 +23,8 @@ use trueaxis_engine::warning::Warning;
 pub struct Args {
     /// The measurement file (contract CSV or Renishaw .rtl).
     pub data: PathBuf,
-    /// Model spec: cubic19, kinematic, nn:<hidden> or grid:<step_mm>.
+    /// Model spec: cubic19, kinematic, nn:<hidden>, grid:<step_mm> or
+    /// rigid21[:<degree>] (docs/volumetric.md).
     #[arg(long)]
     pub model: String,
     /// Add a physical effect (`periodic:target=ey,axis=y,period_mm=5`, as
@@ -90,7 +91,10 @@ impl Args {
         // linear model) is said, and the fit below then names the problem
         // itself when it has the same one.
         let mut screen_warning = None;
-        let mut found = if self.keep_outliers {
+        // The outlier screen fits a linear model per target; a rigid21
+        // fit's readings (set-ups, angles, beams) are not screened yet.
+        let volumetric = matches!(seed, trueaxis_engine::model::Seed::Rigid21 { .. });
+        let mut found = if self.keep_outliers || volumetric {
             Vec::new()
         } else {
             outliers::find(&inside, &seed, &adds).unwrap_or_else(|e| {

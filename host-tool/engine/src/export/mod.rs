@@ -82,6 +82,7 @@ pub fn axis_travel_mm(model: &FittedModel, axis: usize) -> Option<(f64, f64)> {
                 m.origin_mm[i] + m.step_mm * (m.counts[i].max(1) - 1) as f64,
             )
         }),
+        FittedModel::Rigid21(m) => m.travel_mm[axis].map(|[lo, hi]| (lo, hi)),
         FittedModel::Local(m) => {
             // Like a linear model: only axes a patch's terms (or the choice
             // of patch) depend on; a line's other axes are not used.

@@ -14,13 +14,14 @@ pub mod grid;
 pub mod linear;
 pub mod local;
 pub mod nn;
+pub mod rigid21;
 
 use anyhow::{bail, Result};
 
 use crate::data::{Dataset, AXES, TARGETS};
 use crate::effect::Effect;
 use crate::holdout;
-use crate::model::{DataRef, ModelFile, ModelSeed, Seed, MODEL_FORMAT};
+use crate::model::{DataRef, FitStats, FittedModel, ModelFile, ModelSeed, Seed, MODEL_FORMAT};
 use crate::progress::Sink;
 use crate::warning::Warning;
 
@@ -126,6 +127,11 @@ pub fn fit_recorded(
     if data.is_empty() {
         bail!("{}: no data rows", data.source);
     }
+    if data.targets().is_empty() && !matches!(parsed, Seed::Rigid21 { .. }) {
+        bail!(
+            "no ex_um, ey_um or ez_um column — the data hold only angle or beam readings (ea_urad, eb_urad, ec_urad, e_beam_um), which only the volumetric model reads (docs/volumetric.md)"
+        );
+    }
     for e in adds {
         if data.err_um[e.target()].is_none() {
             bail!(
@@ -167,6 +173,23 @@ pub fn fit_recorded(
         Seed::Grid { step_mm } => {
             let (m, s) = grid::fit(data, step_mm, blocks)?;
             (m, s, seed.to_string())
+        }
+        Seed::Rigid21 { degree } => {
+            let (m, id, kinds) = rigid21::fit(data, degree)?;
+            let mut stats = FitStats {
+                terms: m.errors.iter().map(|e| e.degrees.len()).sum(),
+                holdout: "none (rigid21: hold-out by set-up is not built yet)".into(),
+                ..FitStats::default()
+            };
+            for (key, rms, n) in kinds {
+                stats.rows.insert(key.clone(), n);
+                stats.rms_um.insert(key, rms);
+            }
+            if let Some(text) = rigid21::cannot_know_text(&id) {
+                stats.warnings.push(Warning::new("cannot_know", text));
+            }
+            stats.volumetric = Some(id);
+            (FittedModel::Rigid21(m), stats, parsed.to_string())
         }
     };
     // Every model kind leaves out an axis held at one position (no terms,

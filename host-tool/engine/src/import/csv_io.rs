@@ -13,8 +13,8 @@ use anyhow::Context;
 use super::dialect::{dialect, utf16_text};
 use super::{shown, ImportError};
 use crate::data::{
-    AuxChannel, Dataset, SkippedRow, TempChannel, AXES, ERR_PLAUSIBLE_UM, POS_PLAUSIBLE_MM,
-    TARGETS, TEMP_PLAUSIBLE_C,
+    is_unit, AuxChannel, Dataset, SkippedRow, TempChannel, ANGLES, ANGLE_PLAUSIBLE_URAD, AXES,
+    ERR_PLAUSIBLE_UM, POS_PLAUSIBLE_MM, TARGETS, TEMP_PLAUSIBLE_C,
 };
 
 /// What a column means.
@@ -30,7 +30,28 @@ enum Col {
     Session,
     U,
     Aux,
+    /// `tool_x_mm` (0), `tool_y_mm` (1).
+    ToolLat(usize),
+    Setup,
+    /// `ea_urad`, `eb_urad`, `ec_urad`.
+    Angle(usize),
+    /// `beam_x`, `beam_y`, `beam_z`.
+    BeamDir(usize),
+    /// `e_beam_um`.
+    BeamErr,
 }
+
+/// The volumetric columns' stems and units (docs/volumetric.md): a unit
+/// suffix other than the contract's is refused (`ea_mrad`), any other
+/// suffix stays auxiliary, as for `t`, `tool` and `u`.
+const VOLUMETRIC_STEMS: [(&str, &str); 6] = [
+    ("ea", "urad"),
+    ("eb", "urad"),
+    ("ec", "urad"),
+    ("e_beam", "um"),
+    ("tool_x", "mm"),
+    ("tool_y", "mm"),
+];
 
 /// Quantity stems and the one unit suffix the contract gives each.
 const STEMS: [(&str, &str); 9] = [
@@ -72,6 +93,16 @@ fn classify(name: &str) -> Result<Col, String> {
         "pass_id" => return Ok(Col::Pass),
         "session_id" => return Ok(Col::Session),
         "u_um" => return Ok(Col::U),
+        "tool_x_mm" => return Ok(Col::ToolLat(0)),
+        "tool_y_mm" => return Ok(Col::ToolLat(1)),
+        "setup_id" => return Ok(Col::Setup),
+        "ea_urad" => return Ok(Col::Angle(0)),
+        "eb_urad" => return Ok(Col::Angle(1)),
+        "ec_urad" => return Ok(Col::Angle(2)),
+        "beam_x" => return Ok(Col::BeamDir(0)),
+        "beam_y" => return Ok(Col::BeamDir(1)),
+        "beam_z" => return Ok(Col::BeamDir(2)),
+        "e_beam_um" => return Ok(Col::BeamErr),
         _ => {}
     }
     if let Some(rest) = name.strip_prefix("T_") {
@@ -120,6 +151,32 @@ fn classify(name: &str) -> Result<Col, String> {
                     shown(unit_found)
                 ));
             }
+        }
+    }
+    for (stem, unit) in VOLUMETRIC_STEMS {
+        let canonical = format!("{stem}_{unit}");
+        if lower == canonical {
+            return Err(format!(
+                "column `{}`: expected `{canonical}` (column names are case-sensitive)",
+                shown(name)
+            ));
+        }
+        if let Some(unit_found) = name.strip_prefix(stem).and_then(|r| r.strip_prefix('_')) {
+            if UNITS.contains(&unit_found.to_ascii_lowercase().as_str()) {
+                return Err(format!(
+                    "column `{}`: unknown unit suffix `_{}`; expected `{canonical}`",
+                    shown(name),
+                    shown(unit_found)
+                ));
+            }
+        }
+    }
+    for fixed in ["setup_id", "beam_x", "beam_y", "beam_z"] {
+        if lower == fixed {
+            return Err(format!(
+                "column `{}`: expected `{fixed}` (column names are case-sensitive)",
+                shown(name)
+            ));
         }
     }
     // The other names differing only in case are refused like `X_mm`: a
@@ -467,7 +524,10 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
             ),
         ));
     }
-    if !cols.iter().any(|c| matches!(c, Col::Err(_))) {
+    if !cols
+        .iter()
+        .any(|c| matches!(c, Col::Err(_) | Col::Angle(_) | Col::BeamErr))
+    {
         return Err(ImportError::at(
             name,
             header_line,
@@ -476,6 +536,23 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
                 "no error column; expected at least one of ex_um, ey_um, ez_um{}",
                 closest_names(&names)
             ),
+        ));
+    }
+    // A beam reading and its direction come together: all four columns or
+    // none.
+    let beam_cols: Vec<usize> = (0..3)
+        .filter_map(|k| cols.iter().position(|c| *c == Col::BeamDir(k)))
+        .collect();
+    let beam_err_col = cols.iter().position(|c| *c == Col::BeamErr);
+    if (beam_err_col.is_some() || !beam_cols.is_empty())
+        && (beam_err_col.is_none() || beam_cols.len() != 3)
+    {
+        let at = beam_err_col.or(beam_cols.first().copied()).map(|i| i + 1);
+        return Err(ImportError::at(
+            name,
+            header_line,
+            at,
+            "a beam reading needs all four columns e_beam_um, beam_x, beam_y, beam_z (the reading and its unit direction)",
         ));
     }
 
@@ -488,6 +565,11 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
     let mut u = None::<Vec<f64>>;
     let mut pass = None::<Vec<i64>>;
     let mut session = None::<Vec<i64>>;
+    let mut setup = None::<Vec<i64>>;
+    let mut tool_lat: [Option<Vec<f64>>; 2] = Default::default();
+    let mut angle: [Option<Vec<Option<f64>>>; 3] = Default::default();
+    let mut beam_dir: Option<Vec<Option<[f64; 3]>>> = None;
+    let mut beam_um = None::<Vec<Option<f64>>>;
     let mut temps: Vec<TempChannel> = Vec::new();
     let mut aux: Vec<AuxChannel> = Vec::new();
     for (c, h) in cols.iter().zip(&names) {
@@ -500,6 +582,11 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
             Col::U => u = Some(Vec::new()),
             Col::Pass => pass = Some(Vec::new()),
             Col::Session => session = Some(Vec::new()),
+            Col::Setup => setup = Some(Vec::new()),
+            Col::ToolLat(k) => tool_lat[*k] = Some(Vec::new()),
+            Col::Angle(k) => angle[*k] = Some(Vec::new()),
+            Col::BeamDir(_) => beam_dir = Some(Vec::new()),
+            Col::BeamErr => beam_um = Some(Vec::new()),
             Col::Temp(s) => temps.push(TempChannel {
                 name: s.clone(),
                 temp_c: Vec::new(),
@@ -558,14 +645,29 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
             let at = |m: String| ImportError::at(name, line, Some(i + 1), m);
             let h = &names[i];
             let empty = cell.trim().is_empty();
-            let needs_value = !matches!(c, Col::Err(_) | Col::Aux);
+            let needs_value = !matches!(
+                c,
+                Col::Err(_) | Col::Aux | Col::Angle(_) | Col::BeamDir(_) | Col::BeamErr
+            );
             if empty && needs_value {
                 skip_reason.get_or_insert_with(|| format!("empty `{}` cell", shown(h)));
                 row_cells.push(Cell::F(0.0));
                 continue;
             }
             row_cells.push(match c {
-                Col::Err(_) if empty => Cell::OptF(None),
+                Col::Err(_) | Col::Angle(_) | Col::BeamDir(_) | Col::BeamErr if empty => {
+                    Cell::OptF(None)
+                }
+                Col::Angle(_) => Cell::OptF(Some(
+                    parse_bounded(cell, h, dc, ANGLE_PLAUSIBLE_URAD, "an angle in µrad")
+                        .map_err(at)?,
+                )),
+                Col::BeamErr => Cell::OptF(Some(
+                    parse_bounded(cell, h, dc, ERR_PLAUSIBLE_UM, "an error in µm").map_err(at)?,
+                )),
+                Col::BeamDir(_) => Cell::OptF(Some(
+                    parse_bounded(cell, h, dc, 1.0 + 1e-3, "a direction cosine").map_err(at)?,
+                )),
                 Col::Err(_) => Cell::OptF(Some(
                     parse_bounded(cell, h, dc, ERR_PLAUSIBLE_UM, "an error in µm").map_err(at)?,
                 )),
@@ -583,13 +685,15 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
                         }
                     }
                 }
-                Col::Pass | Col::Session => Cell::I(cell.trim().parse().map_err(|_| {
-                    at(format!(
-                        "column `{}`: expected an integer, found `{}`",
-                        shown(h),
-                        shown(cell)
-                    ))
-                })?),
+                Col::Pass | Col::Session | Col::Setup => {
+                    Cell::I(cell.trim().parse().map_err(|_| {
+                        at(format!(
+                            "column `{}`: expected an integer, found `{}`",
+                            shown(h),
+                            shown(cell)
+                        ))
+                    })?)
+                }
                 Col::U => {
                     let v = parse_num(cell, h, dc).map_err(at)?;
                     if v <= 0.0 {
@@ -607,13 +711,66 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
                     parse_bounded(cell, h, dc, POS_PLAUSIBLE_MM, "a position in mm").map_err(at)?,
                 ),
                 Col::Time | Col::Tool => Cell::F(parse_num(cell, h, dc).map_err(at)?),
+                Col::ToolLat(_) => Cell::F(
+                    parse_bounded(cell, h, dc, POS_PLAUSIBLE_MM, "an offset in mm").map_err(at)?,
+                ),
             });
         }
+        // The beam direction of this row: all three cells or none, a unit
+        // vector, and given wherever e_beam_um is.
+        let mut row_beam: Option<[f64; 3]> = None;
+        if let Some(ei) = beam_err_col {
+            let cell = |i: usize| match row_cells.get(i) {
+                Some(Cell::OptF(v)) => *v,
+                _ => None,
+            };
+            let d: Vec<Option<f64>> = beam_cols.iter().map(|&i| cell(i)).collect();
+            let first_empty = beam_cols.iter().zip(&d).find(|(_, v)| v.is_none());
+            if d.iter().all(Option::is_some) {
+                let d = [
+                    d[0].unwrap_or(0.0),
+                    d[1].unwrap_or(0.0),
+                    d[2].unwrap_or(0.0),
+                ];
+                if !is_unit(d) {
+                    return Err(ImportError::at(
+                        name,
+                        line,
+                        Some(beam_cols[0] + 1),
+                        format!(
+                            "beam direction ({}, {}, {}) has length {:.6}; expected a unit vector (direction cosines, length 1 within {})",
+                            d[0],
+                            d[1],
+                            d[2],
+                            (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt(),
+                            crate::data::BEAM_UNIT_TOL
+                        ),
+                    ));
+                }
+                row_beam = Some(d);
+            } else if cell(ei).is_some() || d.iter().any(Option::is_some) {
+                let i = first_empty.map_or(ei, |(i, _)| *i);
+                return Err(ImportError::at(
+                    name,
+                    line,
+                    Some(i + 1),
+                    format!(
+                        "column `{}`: expected a number — a row with a beam reading needs its direction in beam_x, beam_y, beam_z",
+                        shown(&names[i])
+                    ),
+                ));
+            }
+        }
         if skip_reason.is_none()
-            && cols
-                .iter()
-                .zip(&row_cells)
-                .all(|(c, v)| !matches!((c, v), (Col::Err(_), Cell::OptF(Some(_)))))
+            && cols.iter().zip(&row_cells).all(|(c, v)| {
+                !matches!(
+                    (c, v),
+                    (
+                        Col::Err(_) | Col::Angle(_) | Col::BeamErr,
+                        Cell::OptF(Some(_))
+                    )
+                )
+            })
         {
             skip_reason = Some("no error value on this row".into());
         }
@@ -632,6 +789,18 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
                 (Col::U, Cell::F(x)) => u.as_mut().map(|p| p.push(x)),
                 (Col::Pass, Cell::I(x)) => pass.as_mut().map(|p| p.push(x)),
                 (Col::Session, Cell::I(x)) => session.as_mut().map(|p| p.push(x)),
+                (Col::Setup, Cell::I(x)) => setup.as_mut().map(|p| p.push(x)),
+                (Col::ToolLat(k), Cell::F(x)) => tool_lat[*k].as_mut().map(|p| p.push(x)),
+                (Col::Angle(k), Cell::OptF(x)) => angle[*k].as_mut().map(|p| p.push(x)),
+                (Col::BeamErr, Cell::OptF(x)) => beam_um.as_mut().map(|p| p.push(x)),
+                (Col::BeamDir(k), Cell::OptF(_)) => {
+                    if *k == 0 {
+                        if let Some(p) = beam_dir.as_mut() {
+                            p.push(row_beam);
+                        }
+                    }
+                    None
+                }
                 (Col::Temp(_), Cell::F(x)) => {
                     temps[ti].temp_c.push(x);
                     ti += 1;
@@ -685,6 +854,11 @@ fn parse(text: &str, name: &str) -> Result<Dataset, ImportError> {
     ds.u_um = u;
     ds.pass_id = pass;
     ds.session_id = session;
+    ds.setup_id = setup;
+    ds.tool_lat_mm = tool_lat;
+    ds.angle_urad = angle;
+    ds.beam_dir = beam_dir;
+    ds.beam_um = beam_um;
     ds.temps = temps;
     ds.aux = aux;
     Ok(ds)
@@ -703,6 +877,14 @@ pub fn column_names(data: &Dataset) -> Vec<String> {
             .filter(|&t| data.err_um[t].is_some())
             .map(|t| format!("{}_um", TARGETS[t])),
     );
+    h.extend(
+        (0..3)
+            .filter(|&a| data.angle_urad[a].is_some())
+            .map(|a| format!("{}_urad", ANGLES[a])),
+    );
+    if data.beam_um.is_some() {
+        h.extend(["e_beam_um", "beam_x", "beam_y", "beam_z"].map(String::from));
+    }
     if data.t_s.is_some() {
         h.push("t_s".into());
     }
@@ -714,8 +896,11 @@ pub fn column_names(data: &Dataset) -> Vec<String> {
     h.extend(data.temps.iter().map(|c| format!("T_{}_C", c.name)));
     for (present, name) in [
         (data.tool_mm.is_some(), "tool_mm"),
+        (data.tool_lat_mm[0].is_some(), "tool_x_mm"),
+        (data.tool_lat_mm[1].is_some(), "tool_y_mm"),
         (data.pass_id.is_some(), "pass_id"),
         (data.session_id.is_some(), "session_id"),
+        (data.setup_id.is_some(), "setup_id"),
         (data.u_um.is_some(), "u_um"),
     ] {
         if present {
@@ -761,6 +946,30 @@ pub fn write_csv<W: Write>(data: &Dataset, mut out: W) -> anyhow::Result<()> {
             }));
         }
     }
+    for a in 0..3 {
+        if let Some(v) = &data.angle_urad[a] {
+            header.push(format!("{}_urad", ANGLES[a]));
+            getters.push(Box::new(move |r| {
+                v[r].map_or(String::new(), |x| x.to_string())
+            }));
+        }
+    }
+    if let Some(v) = &data.beam_um {
+        header.push("e_beam_um".into());
+        getters.push(Box::new(move |r| {
+            v[r].map_or(String::new(), |x| x.to_string())
+        }));
+        let dirs = data.beam_dir.as_deref().unwrap_or(&[]);
+        for (k, axis) in AXES.iter().enumerate() {
+            header.push(format!("beam_{axis}"));
+            getters.push(Box::new(move |r| {
+                dirs.get(r)
+                    .copied()
+                    .flatten()
+                    .map_or(String::new(), |d| d[k].to_string())
+            }));
+        }
+    }
     if let Some(v) = &data.t_s {
         header.push("t_s".into());
         getters.push(Box::new(move |r| v[r].to_string()));
@@ -779,12 +988,22 @@ pub fn write_csv<W: Write>(data: &Dataset, mut out: W) -> anyhow::Result<()> {
         header.push("tool_mm".into());
         getters.push(Box::new(move |r| v[r].to_string()));
     }
+    for (k, name) in ["tool_x_mm", "tool_y_mm"].into_iter().enumerate() {
+        if let Some(v) = &data.tool_lat_mm[k] {
+            header.push(name.into());
+            getters.push(Box::new(move |r| v[r].to_string()));
+        }
+    }
     if let Some(v) = &data.pass_id {
         header.push("pass_id".into());
         getters.push(Box::new(move |r| v[r].to_string()));
     }
     if let Some(v) = &data.session_id {
         header.push("session_id".into());
+        getters.push(Box::new(move |r| v[r].to_string()));
+    }
+    if let Some(v) = &data.setup_id {
+        header.push("setup_id".into());
         getters.push(Box::new(move |r| v[r].to_string()));
     }
     if let Some(v) = &data.u_um {
@@ -896,6 +1115,81 @@ mod tests {
         assert_eq!(a.dir, b.dir);
         assert_eq!(a.temps, b.temps);
         assert_eq!(a.aux[0].cells[0], "a,b");
+    }
+
+    #[test]
+    fn volumetric_columns_round_trip() {
+        let text = "x_mm,y_mm,z_mm,ex_um,ea_urad,ec_urad,e_beam_um,beam_x,beam_y,beam_z,tool_mm,tool_x_mm,tool_y_mm,setup_id\n\
+                    0,0,0,1.5,,,,,,,100,0,0,1\n\
+                    10,5,0,,12.5,-3,,,,,100,25,-25,2\n\
+                    10,10,10,,,,0.75,0.6,0.8,0,0,0,0,3\n";
+        let a = parse(text, "v.csv").unwrap();
+        assert_eq!(a.setup_id, Some(vec![1, 2, 3]));
+        assert_eq!(a.tool_lat_mm[0], Some(vec![0.0, 25.0, 0.0]));
+        assert_eq!(a.angle_urad[0], Some(vec![None, Some(12.5), None]));
+        assert_eq!(a.angle_urad[1], None);
+        assert_eq!(a.beam_um, Some(vec![None, None, Some(0.75)]));
+        assert_eq!(a.beam_dir, Some(vec![None, None, Some([0.6, 0.8, 0.0])]));
+        a.validate().unwrap();
+        let mut buf = Vec::new();
+        write_csv(&a, &mut buf).unwrap();
+        let b = parse(std::str::from_utf8(&buf).unwrap(), "v.csv").unwrap();
+        assert_eq!(
+            a,
+            Dataset {
+                line: a.line.clone(),
+                ..b
+            }
+        );
+    }
+
+    #[test]
+    fn a_file_of_beam_readings_alone_is_data() {
+        let text = "x_mm,y_mm,z_mm,e_beam_um,beam_x,beam_y,beam_z\n\
+                    100,100,100,1.25,0.57735,0.57735,0.57735\n";
+        let d = parse(text, "diag.csv").unwrap();
+        d.validate().unwrap();
+        assert!(d.targets().is_empty());
+        assert!(d.has_volumetric_readings());
+    }
+
+    #[test]
+    fn bad_volumetric_cells_are_located() {
+        let err = |text: &str| parse(text, "b.csv").unwrap_err().to_string();
+        let head = "x_mm,e_beam_um,beam_x,beam_y,beam_z\n";
+        let e = err(&format!("{head}0,1,0.6,0.8,0\n5,1,1,1,1\n"));
+        assert!(
+            e.starts_with(
+                "b.csv:3:3: beam direction (1, 1, 1) has length 1.732051; expected a unit vector"
+            ),
+            "{e}"
+        );
+        let e = err(&format!("{head}0,1,0.6,,0\n"));
+        assert!(
+            e.starts_with("b.csv:2:4: column `beam_y`: expected a number"),
+            "{e}"
+        );
+        let e = err("x_mm,e_beam_um,beam_x\n0,1,1\n");
+        assert!(
+            e.contains("b.csv:1:2: a beam reading needs all four columns"),
+            "{e}"
+        );
+        let e = err("x_mm,ea_mrad\n0,1\n");
+        assert!(
+            e.contains("unknown unit suffix `_mrad`; expected `ea_urad`"),
+            "{e}"
+        );
+        let e = err("x_mm,ea_urad,setup_id\n0,1,a\n");
+        assert!(
+            e.contains("b.csv:2:3: column `setup_id`: expected an integer"),
+            "{e}"
+        );
+        let e = err("x_mm,ea_urad\n0,1e6\n");
+        assert!(e.contains("expected an angle in µrad"), "{e}");
+        // An old file's auxiliary columns that only look like the new
+        // stems stay auxiliary.
+        let d = parse("x_mm,ex_um,ea_note,beam\n0,1,a,b\n", "o.csv").unwrap();
+        assert_eq!(d.aux.len(), 2);
     }
 
     #[test]

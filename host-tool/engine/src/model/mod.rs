@@ -23,12 +23,14 @@ pub mod grid;
 pub mod linear;
 pub mod local;
 pub mod nn;
+pub mod rigid21;
 pub mod seed;
 
 pub use grid::{GridModel, GridOutput};
 pub use linear::{LinearModel, LinearOutput};
 pub use local::{LocalModel, LocalPatch};
 pub use nn::{NnModel, NnTraining};
+pub use rigid21::Rigid21Model;
 pub use seed::{ModelSeed, Seed};
 
 use crate::data::{Dataset, TARGETS};
@@ -123,6 +125,11 @@ pub struct FitStats {
     /// their text (a list of strings).
     #[serde(default, with = "crate::warning::as_text")]
     pub warnings: Vec<crate::warning::Warning>,
+    /// rigid21 only: which errors the data determine, what stays hidden and
+    /// what to measure (docs/volumetric.md; `fit --json` `errors`,
+    /// `hidden_um`, `measure`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub volumetric: Option<rigid21::Identifiability>,
 }
 
 /// The model, by kind (`"kind": "linear" | "nn" | "grid" | "local"`).
@@ -137,6 +144,8 @@ pub enum FittedModel {
     Grid(GridModel),
     /// Piecewise local polynomials (`--local`).
     Local(LocalModel),
+    /// The 21 geometric errors on a kinematic chain (docs/volumetric.md).
+    Rigid21(Rigid21Model),
 }
 
 impl FittedModel {
@@ -147,6 +156,7 @@ impl FittedModel {
             FittedModel::Nn(m) => m.outputs.clone(),
             FittedModel::Grid(m) => m.outputs.iter().map(|o| o.target).collect(),
             FittedModel::Local(m) => m.targets(),
+            FittedModel::Rigid21(_) => vec![0, 1, 2],
         };
         t.sort_unstable();
         t.dedup();
@@ -176,6 +186,7 @@ impl FittedModel {
                 }
             }
             FittedModel::Local(m) => out = m.predict(data)?,
+            FittedModel::Rigid21(m) => out = m.predict_rows(data).map(Some),
         }
         Ok(out)
     }
@@ -359,6 +370,9 @@ impl ModelFile {
             (FittedModel::Grid(m), Seed::Grid { step_mm }) => {
                 *step_mm == m.step_mm && self.adds.is_empty()
             }
+            (FittedModel::Rigid21(m), Seed::Rigid21 { degree }) => {
+                *degree == m.degree && !seed.local && self.adds.is_empty()
+            }
             _ => false,
         };
         if !kind_ok {
@@ -381,6 +395,7 @@ impl ModelFile {
             FittedModel::Local(m) => check_local(m),
             FittedModel::Nn(m) => check_nn(m),
             FittedModel::Grid(m) => check_grid(m),
+            FittedModel::Rigid21(m) => m.check(),
         }
     }
 
@@ -408,6 +423,13 @@ impl ModelFile {
             "warnings": crate::warning::as_text::texts(&s.warnings),
             "data_sha256": self.data.sha256,
         });
+        if let Some(id) = &s.volumetric {
+            v["errors"] = serde_json::to_value(&id.errors).unwrap_or_default();
+            v["hidden_um"] = serde_json::json!(id.hidden_um);
+            v["hidden_from"] = serde_json::json!(id.hidden_from);
+            v["hidden_at_tool_mm"] = serde_json::json!(id.hidden_at_tool_mm);
+            v["measure"] = serde_json::to_value(&id.measure).unwrap_or_default();
+        }
         if let Some(p) = model_path {
             v["model_file"] = serde_json::Value::String(p.display().to_string());
         }
@@ -423,6 +445,7 @@ impl FittedModel {
             FittedModel::Nn(_) => "nn",
             FittedModel::Grid(_) => "grid",
             FittedModel::Local(_) => "local",
+            FittedModel::Rigid21(_) => "rigid21",
         }
     }
 }

@@ -27,12 +27,36 @@ pub enum Seed {
         /// Node spacing, mm (finite, > 0).
         step_mm: f64,
     },
+    /// The volumetric model of the 21 geometric errors (`rigid21`,
+    /// `rigid21:<degree>`; docs/volumetric.md).
+    Rigid21 {
+        /// Highest Legendre degree of each error function.
+        degree: usize,
+    },
 }
 
 impl Seed {
     /// Parses a `--model` spec.
     pub fn parse(spec: &str) -> Result<Seed> {
-        let expected = "expected cubic19, kinematic, nn:<hidden> or grid:<step_mm>";
+        let expected =
+            "expected cubic19, kinematic, nn:<hidden>, grid:<step_mm> or rigid21[:<degree>]";
+        if spec == "rigid21" {
+            return Ok(Seed::Rigid21 {
+                degree: crate::model::rigid21::DEFAULT_DEGREE,
+            });
+        }
+        if let Some(d) = spec.strip_prefix("rigid21:") {
+            let max = crate::model::rigid21::MAX_DEGREE;
+            let d: usize = d.parse().map_err(|_| {
+                anyhow::anyhow!(
+                    "model `{spec}`: the degree must be a whole number 1..={max} ({expected})"
+                )
+            })?;
+            if !(1..=max).contains(&d) {
+                bail!("model `{spec}`: the degree must be 1..={max}");
+            }
+            return Ok(Seed::Rigid21 { degree: d });
+        }
         if let Some(h) = spec.strip_prefix("nn:") {
             let h: usize = h.parse().map_err(|_| {
                 anyhow::anyhow!(
@@ -95,6 +119,10 @@ impl fmt::Display for Seed {
             Seed::Kinematic => f.write_str("kinematic"),
             Seed::Nn { hidden } => write!(f, "nn:{hidden}"),
             Seed::Grid { step_mm } => write!(f, "grid:{step_mm}"),
+            Seed::Rigid21 { degree } if *degree == crate::model::rigid21::DEFAULT_DEGREE => {
+                f.write_str("rigid21")
+            }
+            Seed::Rigid21 { degree } => write!(f, "rigid21:{degree}"),
         }
     }
 }
@@ -148,6 +176,8 @@ mod tests {
             ("nn:16", Seed::Nn { hidden: 16 }),
             ("grid:50", Seed::Grid { step_mm: 50.0 }),
             ("grid:12.5", Seed::Grid { step_mm: 12.5 }),
+            ("rigid21", Seed::Rigid21 { degree: 4 }),
+            ("rigid21:6", Seed::Rigid21 { degree: 6 }),
         ] {
             let seed: Seed = s.parse().unwrap();
             assert_eq!(seed, want);
@@ -190,6 +220,8 @@ mod tests {
             ("nn:x", "whole number"),
             ("grid:-1", "positive number of mm"),
             ("grid:abc", "number of mm"),
+            ("rigid21:0", "1..=10"),
+            ("rigid21:x", "whole number"),
         ] {
             let e = Seed::parse(s).unwrap_err().to_string();
             assert!(e.contains(needle), "{s}: {e}");

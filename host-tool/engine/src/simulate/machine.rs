@@ -108,6 +108,10 @@ pub struct Machine {
     pub axes: [AxisErrors; 3],
     /// Squareness errors.
     pub squareness: Squareness,
+    /// Spindle-axis tilt about X and Y (A0T, B0T), µrad: the tool's axis
+    /// is tilted so that e += (A0T, B0T, 0) × (0, 0, −L) (docs/volumetric.md).
+    #[serde(default)]
+    pub tilt_urad: [f64; 2],
 }
 
 /// The ranges a realistic preset's errors lie in (ARCHITECTURE.md,
@@ -135,7 +139,7 @@ pub const REALISTIC: Realistic = Realistic {
 };
 
 /// Names accepted by [`Machine::preset`].
-pub const PRESETS: [&str; 3] = ["mill800", "mill800-wavy", "perfect800"];
+pub const PRESETS: [&str; 4] = ["mill800", "mill800-wavy", "perfect800", "mill800-21"];
 
 impl Machine {
     /// A machine with the seed's travels (800 × 500 × 500 mm) and no error
@@ -160,11 +164,13 @@ impl Machine {
     /// - `mill800-wavy`: the same plus long-wave shapes (periods 180–320 mm,
     ///   0.8–1.5 µm / 4 µrad) that a cubic cannot follow.
     /// - `perfect800`: the same travels with no errors.
+    /// - `mill800-21`: `mill800` plus the spindle-axis tilt A0T = 12 µrad,
+    ///   B0T = −10 µrad: all 21 errors and the tilt (issue 26).
     pub fn preset(name: &str) -> anyhow::Result<Machine> {
         let p = ErrorFn::poly;
         let mut m = match name {
             "perfect800" => Machine::perfect([800.0, 500.0, 500.0]),
-            "mill800" | "mill800-wavy" => Machine {
+            "mill800" | "mill800-wavy" | "mill800-21" => Machine {
                 name: name.into(),
                 travel_mm: [800.0, 500.0, 500.0],
                 // Peaks over the travel in the comments (µm, µrad).
@@ -211,9 +217,13 @@ impl Machine {
                     xz_urad: -30.0,
                     yz_urad: 20.0,
                 },
+                tilt_urad: [0.0; 2],
             },
             other => bail!("unknown preset `{other}` (expected {})", PRESETS.join(", ")),
         };
+        if name == "mill800-21" {
+            m.tilt_urad = [12.0, -10.0];
+        }
         if name == "mill800-wavy" {
             let wave = |amp: f64, period_mm: f64, phase_rad: f64| Wave {
                 amp,
@@ -233,11 +243,32 @@ impl Machine {
     /// nominal axis positions `pos_mm` with tool length `tool_mm`, from the
     /// geometric errors alone (no effects, no noise).
     pub fn error_um(&self, pos_mm: [f64; 3], tool_mm: f64) -> [f64; 3] {
+        self.error_at_um(pos_mm, tool_mm, [0.0, 0.0])
+    }
+
+    /// Rotation of the tool frame relative to the workpiece at `pos_mm`,
+    /// µrad: the sum of the carriages' rotations (what an angular line
+    /// reads before its zero; the tilt is no carriage rotation).
+    pub fn angle_urad(&self, pos_mm: [f64; 3]) -> [f64; 3] {
+        let mut w = [0.0; 3];
+        for ((ax, &q), &tr) in self.axes.iter().zip(&pos_mm).zip(&self.travel_mm) {
+            for (wi, f) in w.iter_mut().zip(&ax.rot_urad) {
+                *wi += f.eval(q, tr);
+            }
+        }
+        w
+    }
+
+    /// [`Machine::error_um`] at a point offset laterally by `tool_lat_mm`
+    /// (x, y) from the spindle axis: the measured point is
+    /// (x + tool_x, y + tool_y, z − tool_mm) (docs/volumetric.md).
+    pub fn error_at_um(&self, pos_mm: [f64; 3], tool_mm: f64, tool_lat_mm: [f64; 2]) -> [f64; 3] {
         let [_, y, z] = pos_mm;
+        let [tx, ty] = tool_lat_mm;
         let arms = [
-            [0.0, y, z - tool_mm],
-            [0.0, 0.0, z - tool_mm],
-            [0.0, 0.0, -tool_mm],
+            [tx, y + ty, z - tool_mm],
+            [tx, ty, z - tool_mm],
+            [tx, ty, -tool_mm],
         ];
         let mut e = [0.0; 3];
         for k in 0..3 {
@@ -260,6 +291,11 @@ impl Machine {
         let s = &self.squareness;
         e[0] += -(s.xy_urad * y + s.xz_urad * z) * 1e-3;
         e[1] += -s.yz_urad * z * 1e-3;
+        if self.tilt_urad != [0.0; 2] {
+            // (A, B, 0) × (0, 0, −L) = (−B·L, A·L, 0).
+            e[0] += -self.tilt_urad[1] * tool_mm * 1e-3;
+            e[1] += self.tilt_urad[0] * tool_mm * 1e-3;
+        }
         e
     }
 }

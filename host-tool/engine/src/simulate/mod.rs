@@ -17,6 +17,7 @@
 
 mod bump;
 mod config;
+pub mod instruments;
 mod machine;
 mod plan;
 mod spec;
@@ -336,6 +337,7 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
         aux: Vec::new(),
         line: Vec::new(),
         skipped: Vec::new(),
+        ..Dataset::default()
     };
     SimOutput {
         data,

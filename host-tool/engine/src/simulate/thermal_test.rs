@@ -185,6 +185,7 @@ pub fn spindle_thermal(seed: u64) -> SimOutput {
         aux: Vec::new(),
         line: Vec::new(),
         skipped: Vec::new(),
+        ..Dataset::default()
     };
     SimOutput {
         data,

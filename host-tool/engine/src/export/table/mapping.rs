@@ -31,6 +31,9 @@ pub(super) fn terms_of(
     let mut terms = Vec::new();
     let mut channels: Vec<String> = Vec::new();
     match model {
+        FittedModel::Rigid21(_) => bail!(
+            "rigid21 models are not exported as a table yet (issue 26: the table evaluates the model at the tool point with the tool length as an input)"
+        ),
         FittedModel::Linear(m) => {
             for o in &m.outputs {
                 let out = o.target as u8;
