@@ -253,6 +253,24 @@ impl Dataset {
             k.push(self.pass_id.as_ref().map_or(0, |c| c[r] as u64));
             k.push(self.session_id.as_ref().map_or(0, |c| c[r] as u64));
             k.push(self.u_um.as_ref().map_or(0, |c| bits(c[r])));
+            // The volumetric columns (docs/volumetric.md): two readings of
+            // one set-up at one point along other beams are no copies.
+            let cell = |c: Option<f64>| c.map_or(f64::NAN.to_bits(), bits);
+            k.push(self.setup_id.as_ref().map_or(0, |c| c[r] as u64));
+            k.extend(
+                self.tool_lat_mm
+                    .iter()
+                    .map(|c| c.as_ref().map_or(0, |c| bits(c[r]))),
+            );
+            k.extend(
+                self.angle_urad
+                    .iter()
+                    .map(|c| c.as_ref().map_or(0, |c| cell(c[r]))),
+            );
+            if let Some(d) = &self.beam_dir {
+                k.extend(d[r].map_or([f64::NAN; 3], |v| v).map(bits));
+            }
+            k.push(self.beam_um.as_ref().map_or(0, |c| cell(c[r])));
             let cells: Vec<&str> = self
                 .aux
                 .iter()

@@ -174,3 +174,30 @@ fn no_floor_is_said_to_be_unknown_with_what_to_measure() {
         "noise_floor_unknown"
     );
 }
+
+/// Readings of one point along other beams, or in other set-ups, are no
+/// copies (docs/volumetric.md); the same beam reading written twice is.
+#[test]
+fn readings_along_other_beams_are_not_copies() {
+    let s = 1.0 / 3f64.sqrt();
+    let dirs = [[1.0, 0.0, 0.0], [s, s, s], [s, s, s]];
+    let d = Dataset {
+        source: "beams.csv".into(),
+        pos_mm: [
+            Some(vec![100.0; 3]),
+            Some(vec![50.0; 3]),
+            Some(vec![0.0; 3]),
+        ],
+        err_um: [None, None, None],
+        beam_dir: Some(dirs.iter().map(|&v| Some(v)).collect()),
+        beam_um: Some(vec![Some(1.5); 3]),
+        line: vec![2, 3, 4],
+        ..Dataset::default()
+    };
+    assert_eq!(d.duplicate_rows(), [(2, 1)]);
+    let other_setup = Dataset {
+        setup_id: Some(vec![1, 1, 2]),
+        ..d.clone()
+    };
+    assert!(other_setup.duplicate_rows().is_empty());
+}
