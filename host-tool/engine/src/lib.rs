@@ -8,8 +8,9 @@
 //! CLI's commands). `import` (files ↔ data sets) and `units` (units the
 //! data probably do not have) sit beside `data`, and so do `warning`,
 //! `progress` and `files`, which import nothing;
-//! `simulate` makes data sets from the effect families' simulated forms
-//! and is imported by no engine module.
+//! `simulate` makes data sets from the effect families' simulated forms;
+//! of the pipeline only `fit/rigid21` imports it (the simulator's
+//! instruments are the menu `measure` chooses from, docs/volumetric.md).
 //!
 //! Beside the pipeline stands the **on-machine wing**, `onmachine/`: parts
 //! and probes measured on the machine (probe calibration, error
