@@ -307,3 +307,113 @@ fn a_bed_is_spoken_of_as_a_bed() {
     assert!(html.contains("as Klipper and Mainsail colour a mesh"));
     assert!(!html.contains("plane z = 0"), "an invented plane z = 0");
 }
+
+#[test]
+fn an_exported_mesh_is_checked_at_the_probed_points() {
+    // Issue 28: a Klipper mesh from a cubic fit of a real delta bed departed
+    // from the probed points by tens of µm while export spoke only of the
+    // interpolation against the model. Export now compares the mesh, as the
+    // firmware interpolates it, with every probed reading.
+    let dir = tmp_dir("maps", "probed");
+    let csv = dir.join("bed.csv");
+    json(&run(&[
+        "import",
+        s(&data("bed_heightmap.csv")),
+        "-o",
+        s(&csv),
+        "--json",
+    ]));
+    let model = dir.join("bed.json");
+    let fit = json(&run(&[
+        "fit",
+        s(&csv),
+        "--model",
+        "cubic19",
+        "-o",
+        s(&model),
+        "--json",
+    ]));
+    let worst_fit = fit["max_abs_um"]["ez"].as_f64().unwrap();
+    let out = dir.join("m.cfg");
+    let args = |extra: &[&str]| -> Vec<String> {
+        let mut v: Vec<String> = [
+            "export",
+            s(&model),
+            "--format",
+            "klipper-mesh",
+            "-o",
+            s(&out),
+        ]
+        .iter()
+        .map(|a| a.to_string())
+        .collect();
+        v.extend(extra.iter().map(|a| a.to_string()));
+        v
+    };
+    let run_v = |v: &[String]| run(&v.iter().map(String::as_str).collect::<Vec<_>>());
+    let doc = json(&run_v(&args(&["--max-departure-um", "1000", "--json"])));
+    let c = &doc["probed_points"];
+    assert_eq!(c["fitted_data"], true, "{doc}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let rows = text.lines().filter(|l| !l.starts_with('#')).count() - 1;
+    assert_eq!(c["points"].as_u64(), Some(rows as u64), "{doc}");
+    let dep = c["max_departure_um"].as_f64().unwrap();
+    // The mesh's worst departure is at least the model's own worst miss
+    // less what the mesh's nodes move it, and above the interpolation
+    // figure alone when the model misses readings.
+    assert!(
+        dep > 0.5 * worst_fit,
+        "{dep} vs the fit's {worst_fit}: {doc}"
+    );
+    assert!(dep > doc["max_interp_error_um"].as_f64().unwrap(), "{doc}");
+    // Below that departure the mesh is refused, naming the reading, and not
+    // written.
+    std::fs::remove_file(&out).unwrap();
+    let limit = format!("{:.3}", 0.5 * dep);
+    let refused = run_v(&args(&["--max-departure-um", &limit]));
+    assert_eq!(refused.status.code(), Some(1));
+    let err = stderr(&refused);
+    assert!(
+        err.contains("departs from the reading")
+            && err.contains("line ")
+            && err.contains("--max-departure-um"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    // The data moved away: exported, with the check said to be missing.
+    std::fs::rename(&csv, dir.join("moved.csv")).unwrap();
+    let doc = json(&run_v(&args(&["--max-departure-um", "1000", "--json"])));
+    assert!(doc.get("probed_points").is_none(), "{doc}");
+    assert!(
+        doc["warnings"]
+            .to_string()
+            .contains("probed_points_unchecked"),
+        "{doc}"
+    );
+    // Given with --data, it is checked again.
+    let moved = dir.join("moved.csv");
+    let doc = json(&run_v(&args(&[
+        "--data",
+        s(&moved),
+        "--max-departure-um",
+        "1000",
+        "--json",
+    ])));
+    assert_eq!(
+        doc["probed_points"]["max_departure_um"].as_f64(),
+        Some(dep),
+        "{doc}"
+    );
+    // A flag of the meshes given to a controller file is a usage error.
+    let usage = run(&[
+        "export",
+        s(&model),
+        "--format",
+        "table",
+        "--data",
+        s(&moved),
+        "-o",
+        s(&dir.join("t.bin")),
+    ]);
+    assert_eq!(usage.status.code(), Some(2));
+}

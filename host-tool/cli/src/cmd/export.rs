@@ -18,12 +18,13 @@ use serde_json::json;
 
 use crate::cmd::out::outln;
 use crate::workflow::{export_table, max_corr_refusal, tiny_refusal, write_file};
-use trueaxis_engine::data::{AXES, TARGETS};
+use trueaxis_engine::data::{Dataset, AXES, TARGETS};
 use trueaxis_engine::export::checks::{axis_list, FileError};
 use trueaxis_engine::export::controller::{self, Controller, ControllerOptions};
 use trueaxis_engine::export::mesh::{self, MeshFormat, MeshOptions};
 use trueaxis_engine::export::table::TableOptions;
 use trueaxis_engine::export::{fmt_no_neg_zero, Warning};
+use trueaxis_engine::import;
 use trueaxis_engine::model::ModelFile;
 
 /// Output format of `trueaxis export`.
@@ -75,6 +76,15 @@ pub struct Args {
     /// [klipper-mesh] Name of the bed mesh profile [default: trueaxis].
     #[arg(long)]
     pub profile: Option<String>,
+    /// [rrf-heightmap, klipper-mesh] The probed points to check the mesh at
+    /// (default: the data the model was fitted to, when that file is found
+    /// unchanged).
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// [rrf-heightmap, klipper-mesh] Largest accepted departure of the mesh
+    /// from a probed reading, µm; above it the mesh is refused [default: 40].
+    #[arg(long, allow_negative_numbers = true)]
+    pub max_departure_um: Option<f64>,
     /// [every format] Largest |correction| the export may hold, µm (default:
     /// 1.5 × the largest the model asks for, at least 1; at most 4000). The
     /// firmware table clamps there (warned when below the model's largest);
@@ -219,6 +229,18 @@ impl Args {
             "--mesh-points",
             MESHES,
             "only a bed mesh is a grid over x and y",
+        );
+        flag(
+            self.data.is_some(),
+            "--data",
+            MESHES,
+            "only a bed mesh is checked at the probed points",
+        );
+        flag(
+            self.max_departure_um.is_some(),
+            "--max-departure-um",
+            MESHES,
+            "only a bed mesh is checked at the probed points",
         );
         flag(
             self.profile.is_some(),
@@ -423,11 +445,38 @@ impl Args {
             source: self.model.display().to_string(),
             max_corr_um: self.max_corr_um,
             accept_tiny: self.accept_tiny_corrections,
+            max_departure_um: self.max_departure_um,
         };
-        let e = mesh::export(model, format, &opts).map_err(|e| file_refusal(e, &self.output))?;
+        if let Some(v) = self
+            .max_departure_um
+            .filter(|v| !(v.is_finite() && *v >= 0.0))
+        {
+            bail!("--max-departure-um {v}: expected a finite number of µm ≥ 0");
+        }
+        let (probed_data, fitted, mut notes) = self.probed_points(model)?;
+        let probed = probed_data
+            .as_ref()
+            .map(|data| mesh::Probed { data, fitted });
+        let mut e = mesh::export(model, format, &opts, probed)
+            .map_err(|e| file_refusal(e, &self.output))?;
         write_file(&self.output, e.body.as_bytes())?;
+        e.warnings.append(&mut notes);
+        let probed_line = e.probed.as_ref().map_or(String::new(), |c| {
+            format!(
+                "; at the {} probed readings{} it departs from them by at most {:.3} µm at x {:.2}, y {:.2} mm (line {}; the model itself misses that reading by {:.3} µm), RMS {:.3} µm, limit {} µm",
+                c.points,
+                if c.fitted_data { "" } else { " given" },
+                c.max_departure_um,
+                c.at_mm[0],
+                c.at_mm[1],
+                c.line,
+                c.model_miss_um,
+                c.rms_departure_um,
+                c.limit_um
+            )
+        });
         let text = format!(
-            "{}: {}, {} × {} nodes over x {:.2}…{:.2} mm, y {:.2}…{:.2} mm; heights up to {:.3} µm; bilinear interpolation of the nodes differs from the model by at most {:.3} µm (height = −ez: the firmware lifts the tool where ez is negative)\n",
+            "{}: {}, {} × {} nodes over x {:.2}…{:.2} mm, y {:.2}…{:.2} mm; heights up to {:.3} µm; bilinear interpolation of the nodes differs from the model by at most {:.3} µm{probed_line} (height = −ez: the firmware lifts the tool where ez is negative)\n",
             self.output.display(),
             format_name(self.format),
             e.nodes[0],
@@ -440,6 +489,67 @@ impl Args {
             e.max_interp_error_um
         );
         Ok((self.doc(&e)?, e.warnings.clone(), text))
+    }
+}
+
+impl Args {
+    /// The probed readings a bed mesh is checked at: `--data`, else the
+    /// file the model was fitted to (as fit recorded it, from here or from
+    /// the model's folder) when its content is unchanged; whether they are
+    /// the fitted data; and the warnings when no check is possible.
+    fn probed_points(&self, model: &ModelFile) -> Result<(Option<Dataset>, bool, Vec<Warning>)> {
+        let fitted_hash = &model.data.sha256;
+        if let Some(path) = &self.data {
+            let data = crate::input::load_data(path, None)?;
+            let fitted = &import::content_hash(&data) == fitted_hash;
+            let mut w = Vec::new();
+            if !fitted {
+                w.push(Warning::new(
+                    "probed_points_other_data",
+                    format!(
+                        "{} is not the data the model was fitted to ({}): the mesh was checked at its readings",
+                        path.display(),
+                        model.data.source
+                    ),
+                ));
+            }
+            return Ok((Some(data), fitted, w));
+        }
+        let source = &model.data.source;
+        let unchecked = |why: String| {
+            Ok((
+                None,
+                false,
+                vec![Warning::new(
+                    "probed_points_unchecked",
+                    format!("the mesh was not checked at the probed points: {why}; pass --data FILE to check it"),
+                )],
+            ))
+        };
+        let stored = Path::new(source);
+        let beside = self
+            .model
+            .parent()
+            .map(|dir| dir.join(stored))
+            .filter(|_| stored.is_relative());
+        let Some(path) = std::iter::once(stored.to_path_buf())
+            .chain(beside)
+            .find(|p| p.is_file())
+        else {
+            return unchecked(format!(
+                "the data it was fitted to ({source}) are not found"
+            ));
+        };
+        let Ok(data) = import::load_with_axis(&path, None) else {
+            return unchecked(format!("the data it was fitted to ({source}) do not read"));
+        };
+        if &import::content_hash(&data) != fitted_hash {
+            return unchecked(format!(
+                "{} has changed since the model was fitted to it",
+                path.display()
+            ));
+        }
+        Ok((Some(data), true, Vec::new()))
     }
 }
 
@@ -478,6 +588,9 @@ fn file_refusal(e: FileError, output: &Path) -> anyhow::Error {
             TARGETS[target],
             largest_nm / 1000.0,
             limit_nm / 1000.0
+        ),
+        e @ FileError::Departs { .. } => format!(
+            "{e}; {out} was not written — add nodes (--mesh-points), fit a model that follows the readings (a grid model), or accept it with --max-departure-um"
         ),
         FileError::Other(e) => return e,
     };

@@ -204,6 +204,22 @@ pub enum FileError {
         /// The limit, nm.
         limit_nm: f64,
     },
+    /// A bed mesh departs from a probed reading by more than the limit.
+    #[error(
+        "the {format} mesh departs from the reading at x {:.2}, y {:.2} mm (line {}) by {:.3} µm, above the limit of {} µm (the model itself misses it by {:.3} µm, the interpolation between nodes the rest)",
+        check.at_mm[0],
+        check.at_mm[1],
+        check.line,
+        check.max_departure_um,
+        check.limit_um,
+        check.model_miss_um
+    )]
+    Departs {
+        /// The format's name (`klipper-mesh`).
+        format: &'static str,
+        /// The check at the probed points.
+        check: Box<super::mesh::ProbedCheck>,
+    },
     /// Any other failure, as the step that failed says it.
     #[error(transparent)]
     Other(#[from] anyhow::Error),

@@ -26,6 +26,7 @@ use super::{
     at_reference, axis_travel_mm, crc32_hex, fmt_no_neg_zero, predict_points, thermal_channels,
     Point, Warning,
 };
+use crate::data::Dataset;
 use crate::features::Feature;
 use crate::model::{FittedModel, ModelFile};
 
@@ -35,6 +36,10 @@ pub const DEFAULT_NODES: [usize; 2] = [11, 11];
 /// The most nodes along an axis a command line should ask for (the
 /// firmwares' own limits are of that order).
 pub const MAX_NODES: usize = 100;
+
+/// Largest departure of a mesh from a probed reading when no limit is
+/// given, µm: a fifth of a typical 0.2 mm first layer's thickness.
+pub const DEFAULT_MAX_DEPARTURE_UM: f64 = 40.0;
 
 /// The bed-mesh formats.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -87,6 +92,46 @@ pub struct MeshOptions {
     pub max_corr_um: Option<f64>,
     /// Export even when every correction is tiny.
     pub accept_tiny: bool,
+    /// Largest accepted departure of the mesh from a probed reading, µm;
+    /// `None` = [`DEFAULT_MAX_DEPARTURE_UM`].
+    pub max_departure_um: Option<f64>,
+}
+
+/// The readings a mesh is checked at: the probed points.
+#[derive(Clone, Copy, Debug)]
+pub struct Probed<'a> {
+    /// The data set (its `ez` readings at x, y).
+    pub data: &'a Dataset,
+    /// Whether these are the data the model was fitted to (their content
+    /// hash is the model file's).
+    pub fitted: bool,
+}
+
+/// How the mesh, as the firmware interpolates it, meets the probed
+/// readings (the JSON's `probed_points`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ProbedCheck {
+    /// Readings of `ez` compared.
+    pub points: usize,
+    /// Largest |mesh − reading|, µm.
+    pub max_departure_um: f64,
+    /// Where: x, y of that reading, mm.
+    pub at_mm: [f64; 2],
+    /// Its line in the data file.
+    pub line: usize,
+    /// Of it, what the model itself misses there (|model − reading|, the
+    /// model at the mesh's fixed inputs), µm; the rest is the mesh's
+    /// interpolation between its nodes.
+    pub model_miss_um: f64,
+    /// RMS of |mesh − reading| over the points, µm.
+    pub rms_departure_um: f64,
+    /// Readings outside the nodes' span (the firmware holds the edge
+    /// there), compared with the edge value.
+    pub outside_nodes: usize,
+    /// The limit, µm.
+    pub limit_um: f64,
+    /// Whether the readings are the data the model was fitted to.
+    pub fitted_data: bool,
 }
 
 /// A bed mesh and what it holds (the JSON of `trueaxis export` for these
@@ -113,6 +158,9 @@ pub struct MeshExport {
     pub max_corr_um: f64,
     /// The largest |height| of the mesh, µm.
     pub largest_height_um: f64,
+    /// The mesh at the probed readings (absent when no data were given).
+    #[serde(rename = "probed_points", skip_serializing_if = "Option::is_none")]
+    pub probed: Option<ProbedCheck>,
     /// What the mesh leaves out and how it was evaluated.
     pub warnings: Vec<Warning>,
     /// The file's text.
@@ -122,12 +170,27 @@ pub struct MeshExport {
 
 /// Makes the `format` mesh of `model` (see the module docs). Nothing is
 /// written: the caller writes [`MeshExport::body`].
+///
+/// With `probed`, the mesh as the firmware interpolates it is compared
+/// with every `ez` reading there ([`check_probed`]) and refused
+/// ([`FileError::Departs`]) when one departs by more than the limit.
 pub fn export(
     model: &ModelFile,
     format: MeshFormat,
     opts: &MeshOptions,
+    probed: Option<Probed<'_>>,
 ) -> Result<MeshExport, FileError> {
     let m = sample_mesh(model, opts.nodes.unwrap_or(DEFAULT_NODES))?;
+    let limit_um = opts.max_departure_um.unwrap_or(DEFAULT_MAX_DEPARTURE_UM);
+    let probed = probed
+        .map(|p| check_probed(&model.model, &m, p, limit_um))
+        .transpose()?;
+    if let Some(c) = probed.as_ref().filter(|c| c.max_departure_um > c.limit_um) {
+        return Err(FileError::Departs {
+            format: format.name(),
+            check: Box::new(c.clone()),
+        });
+    }
     let ez_nm: Vec<f64> = m.height_mm.iter().flatten().map(|h| -1e6 * h).collect();
     let (max_corr_nm, largest_nm) = check_unclampable(
         2,
@@ -150,9 +213,106 @@ pub fn export(
         max_interp_error_um: m.max_interp_error_um,
         max_corr_um: max_corr_nm.ceil() / 1000.0,
         largest_height_um: largest_nm / 1000.0,
+        probed,
         warnings: m.warnings,
         body,
     })
+}
+
+/// The node heights at (x, y) as RepRapFirmware interpolates them
+/// (bilinear in the cell; outside the nodes' span the edge is held), mm.
+fn interpolate_mm(m: &MeshSamples, x: f64, y: f64) -> f64 {
+    let cell = |g: &[f64], v: f64| -> (usize, f64) {
+        let n = g.len();
+        let s = g[1] - g[0];
+        let t = ((v - g[0]) / s).clamp(0.0, (n - 1) as f64);
+        let i = (t.floor() as usize).min(n - 2);
+        (i, t - i as f64)
+    };
+    let ((i, u), (j, v)) = (cell(&m.x_mm, x), cell(&m.y_mm, y));
+    let h = &m.height_mm;
+    (1.0 - u) * (1.0 - v) * h[j][i]
+        + u * (1.0 - v) * h[j][i + 1]
+        + (1.0 - u) * v * h[j + 1][i]
+        + u * v * h[j + 1][i + 1]
+}
+
+/// The mesh `m` of `model` at every `ez` reading of `probed`: the largest
+/// and RMS departure, where, and how much of it the model itself misses
+/// (the model at the mesh's fixed inputs: z, reference temperatures, the
+/// mean of both directions). Klipper upsamples between the nodes
+/// (bicubic, `mesh_pps = 2`) before its own bilinear step; the check
+/// interpolates bilinearly as RepRapFirmware does.
+pub fn check_probed(
+    model: &FittedModel,
+    m: &MeshSamples,
+    probed: Probed<'_>,
+    limit_um: f64,
+) -> Result<ProbedCheck> {
+    let d = probed.data;
+    let (Some(ez), Some(xs), Some(ys)) = (&d.err_um[2], &d.pos_mm[0], &d.pos_mm[1]) else {
+        bail!(
+            "{} has no ez readings over x and y: the mesh cannot be checked at its probed points",
+            d.source
+        );
+    };
+    let rows: Vec<(usize, f64)> = ez
+        .iter()
+        .enumerate()
+        .filter_map(|(i, e)| e.map(|e| (i, e)))
+        .collect();
+    if rows.is_empty() {
+        bail!(
+            "{} has no ez reading: the mesh cannot be checked at its probed points",
+            d.source
+        );
+    }
+    let chans = thermal_channels(model);
+    let names: Vec<String> = chans.iter().map(|c| c.0.clone()).collect();
+    let mut pts = Vec::with_capacity(2 * rows.len());
+    for dir in [1i8, -1] {
+        pts.extend(rows.iter().map(|&(i, _)| Point {
+            pos_mm: [xs[i], ys[i], m.z_mm],
+            dir: [dir; 3],
+            temp_c: chans.iter().map(|c| c.1).collect(),
+            tool_mm: 0.0,
+        }));
+    }
+    let full = predict_points(model, &names, &pts)?;
+    let Some(full) = &full[2] else {
+        bail!("the model predicts no ez");
+    };
+    let n = rows.len();
+    let inside = |g: &[f64], v: f64| v >= g[0] - 1e-9 && v <= g[g.len() - 1] + 1e-9;
+    let mut c = ProbedCheck {
+        points: n,
+        max_departure_um: -1.0,
+        at_mm: [0.0; 2],
+        line: 0,
+        model_miss_um: 0.0,
+        rms_departure_um: 0.0,
+        outside_nodes: 0,
+        limit_um,
+        fitted_data: probed.fitted,
+    };
+    let mut sum2 = 0.0;
+    for (k, &(i, reading)) in rows.iter().enumerate() {
+        let (x, y) = (xs[i], ys[i]);
+        let mesh_ez = -1000.0 * interpolate_mm(m, x, y);
+        let dep = (mesh_ez - reading).abs();
+        sum2 += dep * dep;
+        if !(inside(&m.x_mm, x) && inside(&m.y_mm, y)) {
+            c.outside_nodes += 1;
+        }
+        if dep > c.max_departure_um {
+            c.max_departure_um = dep;
+            c.at_mm = [x, y];
+            c.line = d.line.get(i).copied().unwrap_or(i + 2);
+            c.model_miss_um = (0.5 * (full[k] + full[n + k]) - reading).abs();
+        }
+    }
+    c.rms_departure_um = (sum2 / n as f64).sqrt();
+    Ok(c)
 }
 
 /// The error `ez` of a model sampled on an x–y grid.
@@ -430,7 +590,7 @@ mod tests {
             source: "bed.json".into(),
             ..MeshOptions::default()
         };
-        let e = export(&bed(), MeshFormat::RrfHeightmap, &opts).unwrap();
+        let e = export(&bed(), MeshFormat::RrfHeightmap, &opts, None).unwrap();
         assert_eq!(e.nodes, DEFAULT_NODES);
         assert_eq!(
             (e.x_mm, e.y_mm, e.spacing_mm),
@@ -449,7 +609,7 @@ mod tests {
             .contains("generated by trueaxis from bed.json"));
         // Row y = 0, node x = 0: h = −15 µm.
         assert!(lines.nth(2).unwrap().starts_with(" -0.015,"), "{}", e.body);
-        let k = export(&bed(), MeshFormat::KlipperMesh, &opts).unwrap();
+        let k = export(&bed(), MeshFormat::KlipperMesh, &opts, None).unwrap();
         assert!(
             k.body.starts_with("#*# [bed_mesh trueaxis]\n"),
             "{}",
@@ -460,7 +620,7 @@ mod tests {
             nodes: Some([5, 3]),
             ..opts
         };
-        let k = export(&bed(), MeshFormat::KlipperMesh, &named).unwrap();
+        let k = export(&bed(), MeshFormat::KlipperMesh, &named, None).unwrap();
         assert!(k.body.starts_with("#*# [bed_mesh hot]\n"), "{}", k.body);
         assert_eq!(k.nodes, [5, 3]);
     }
@@ -471,7 +631,7 @@ mod tests {
             max_corr_um: Some(10.0),
             ..MeshOptions::default()
         };
-        match export(&bed(), MeshFormat::KlipperMesh, &opts).unwrap_err() {
+        match export(&bed(), MeshFormat::KlipperMesh, &opts, None).unwrap_err() {
             e @ FileError::AboveLimit {
                 target: 2,
                 format: "klipper-mesh",
@@ -492,9 +652,113 @@ mod tests {
             e => panic!("{e}"),
         }
         let tiny = linear(2, &[(mono([1, 0, 0]), 0.01), (mono([0, 1, 0]), 0.01)]);
-        let e = export(&tiny, MeshFormat::RrfHeightmap, &MeshOptions::default()).unwrap_err();
+        let e = export(
+            &tiny,
+            MeshFormat::RrfHeightmap,
+            &MeshOptions::default(),
+            None,
+        )
+        .unwrap_err();
         assert!(matches!(e, FileError::Tiny(_)), "{e}");
         assert!(!e.to_string().contains("--"), "{e}");
+    }
+
+    /// Readings of `ez` at (x, y) with their file lines 2, 3, ….
+    fn readings(pts: &[(f64, f64, f64)]) -> Dataset {
+        Dataset {
+            source: "bed.csv".into(),
+            pos_mm: [
+                Some(pts.iter().map(|p| p.0).collect()),
+                Some(pts.iter().map(|p| p.1).collect()),
+                None,
+            ],
+            err_um: [None, None, Some(pts.iter().map(|p| Some(p.2)).collect())],
+            line: (2..2 + pts.len()).collect(),
+            ..Dataset::default()
+        }
+    }
+
+    #[test]
+    fn a_mesh_is_checked_at_the_probed_readings_and_refused_past_the_limit() {
+        // The bed model holds 20 + 10·u_x − 5·u_y (bilinear: the mesh is
+        // exact between nodes); one reading is 50 µm off the model.
+        let ez = |x: f64, y: f64| 20.0 + 10.0 * (x - 100.0) / 100.0 - 5.0 * (y - 100.0) / 100.0;
+        let mut pts: Vec<(f64, f64, f64)> =
+            [(0.0, 0.0), (105.0, 95.0), (200.0, 130.0), (37.0, 181.0)]
+                .iter()
+                .map(|&(x, y)| (x, y, ez(x, y)))
+                .collect();
+        pts[1].2 += 50.0;
+        let data = readings(&pts);
+        let probed = Probed {
+            data: &data,
+            fitted: true,
+        };
+        match export(
+            &bed(),
+            MeshFormat::KlipperMesh,
+            &MeshOptions::default(),
+            Some(probed),
+        ) {
+            Err(FileError::Departs {
+                format: "klipper-mesh",
+                check,
+            }) => {
+                assert!((check.max_departure_um - 50.0).abs() < 1e-6, "{check:?}");
+                assert!((check.model_miss_um - 50.0).abs() < 1e-6, "{check:?}");
+                assert_eq!(
+                    (check.at_mm, check.line, check.points),
+                    ([105.0, 95.0], 3, 4)
+                );
+                assert_eq!(check.limit_um, DEFAULT_MAX_DEPARTURE_UM);
+            }
+            e => panic!("{e:?}"),
+        }
+        let opts = MeshOptions {
+            max_departure_um: Some(60.0),
+            ..MeshOptions::default()
+        };
+        let e = export(&bed(), MeshFormat::RrfHeightmap, &opts, Some(probed)).unwrap();
+        let c = e.probed.unwrap();
+        assert!((c.rms_departure_um - 25.0).abs() < 1e-6, "{c:?}");
+        assert_eq!((c.outside_nodes, c.limit_um), (0, 60.0));
+    }
+
+    #[test]
+    fn the_check_tells_the_interpolation_from_the_model_miss() {
+        // ez = 100·u_x² on 3 nodes along x (0, 100, 200 mm): at x = 50 the
+        // model says 25 µm, the nodes' line 50 µm. The reading is the
+        // model's: all of the 25 µm departure is the interpolation.
+        let model = linear(2, &[(mono([2, 0, 0]), 100.0), (mono([0, 1, 0]), 1.0)]);
+        let data = readings(&[(50.0, 100.0, 25.0), (210.0, 100.0, 100.0 + 1e-9)]);
+        let m = sample_mesh(&model, [3, 2]).unwrap();
+        let c = check_probed(
+            &model.model,
+            &m,
+            Probed {
+                data: &data,
+                fitted: false,
+            },
+            40.0,
+        )
+        .unwrap();
+        assert!((c.max_departure_um - 25.0).abs() < 1e-6, "{c:?}");
+        assert!(c.model_miss_um < 1e-6, "{c:?}");
+        // Past the nodes the firmware holds the edge value (100 µm at x = 200).
+        assert_eq!((c.outside_nodes, c.fitted_data), (1, false));
+        // Without ez readings there is nothing to check against.
+        let mut no_ez = data.clone();
+        no_ez.err_um[2] = None;
+        assert!(check_probed(
+            &model.model,
+            &m,
+            Probed {
+                data: &no_ez,
+                fitted: true
+            },
+            40.0
+        )
+        .is_err());
     }
 
     fn mesh() -> MeshSamples {
