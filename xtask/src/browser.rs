@@ -83,7 +83,14 @@ pub struct Measure {
     /// Top of the first working-volume overview map (`figure#overview_…`,
     /// diagnose's "Where the model fails"), px; None when the page has none.
     pub overview_top: Option<f64>,
+    /// The smallest text drawn in a figure, px (font size × the drawing's
+    /// scale), and the figure's id; None when no figure has text.
+    pub smallest_text: Option<(f64, String)>,
 }
+
+/// Text in a figure drawn smaller than this (px) cannot be read: a 720 px
+/// plot scaled into a phone had 5 px labels (issue 28).
+pub const MIN_TEXT_PX: f64 = 7.5;
 
 /// The overview of where the model fails must start within this many px of
 /// the top (the 2000 px window's first screen): diagnose's page says where
@@ -100,14 +107,29 @@ const SCRIPT: &str = r#"<script>
   out.push('viewport_meta=' + (meta !== null && /width=device-width/.test(meta.getAttribute('content') || '')));
   out.push('scroll_width=' + document.documentElement.scrollWidth);
   out.push('height=' + document.documentElement.scrollHeight);
-  var figs = document.querySelectorAll('figure > svg');
+  // A figure may hold a drawing per window width (svg.wide, svg.narrow):
+  // the one the style hides is not on the page.
+  var figs = Array.prototype.filter.call(document.querySelectorAll('figure > svg'), function (s) {
+    return getComputedStyle(s).display !== 'none';
+  });
   out.push('figures=' + figs.length);
+  var smallest = Infinity, smallestIn = '';
   figs.forEach(function (s) {
     var b = s.getBoundingClientRect();
     if (b.width < 10 || b.height < 10 || b.right > vw + 0.5) {
       out.push('bad_figure=' + s.parentElement.id + ' ' + Math.round(b.width) + 'x' + Math.round(b.height) + ' right ' + Math.round(b.right));
     }
+    // Text as drawn: its font size times the drawing's scale.
+    var vb = s.viewBox && s.viewBox.baseVal;
+    if (!vb || !(vb.width > 0)) { return; }
+    var k = b.width / vb.width;
+    s.querySelectorAll('text').forEach(function (t) {
+      if (!t.textContent.trim()) { return; }
+      var fs = parseFloat(t.getAttribute('font-size') || getComputedStyle(t).fontSize);
+      if (fs > 0 && fs * k < smallest) { smallest = fs * k; smallestIn = s.parentElement.id; }
+    });
   });
+  if (smallest < Infinity) { out.push('smallest_text=' + smallest.toFixed(2) + ' ' + smallestIn); }
   var imgs = document.querySelectorAll('img');
   out.push('images=' + imgs.length);
   imgs.forEach(function (i) {
@@ -156,6 +178,14 @@ pub fn parse(dom: &str) -> std::result::Result<Measure, String> {
             "verdict_top" => m.verdict_top = num()?,
             "layout_ms" => m.layout_ms = num()?,
             "overview_top" => m.overview_top = Some(num()?),
+            "smallest_text" => {
+                let (px, id) = v.split_once(' ').unwrap_or((v, ""));
+                let px = px
+                    .trim()
+                    .parse::<f64>()
+                    .map_err(|e| format!("{k}={v}: {e}"))?;
+                m.smallest_text = Some((px, id.trim().to_string()));
+            }
             _ => {}
         }
     }
@@ -200,6 +230,11 @@ pub fn failures(m: &Measure, page_bytes: u64, width: u32) -> Vec<String> {
     }
     for b in &m.bad_figures {
         f.push(format!("figure not drawn inside the window: {b}"));
+    }
+    if let Some((px, id)) = m.smallest_text.as_ref().filter(|t| t.0 < MIN_TEXT_PX) {
+        f.push(format!(
+            "text in figure {id} is drawn {px:.1} px high, below the {MIN_TEXT_PX} px that can be read"
+        ));
     }
     for i in &m.broken_images {
         f.push(format!("image did not load: {i}"));
@@ -605,10 +640,13 @@ pub fn test(args: &[String]) -> Result<()> {
                 f.extend(overview_failures(&m));
             }
             eprintln!(
-                "{name:<21} {width:>4} px {:>5.2} MB  laid out in {:>5.0} ms (browser {wall_s:.1} s)  {} figures  width {}/{} px  height {} px  verdict first: {}  {}",
+                "{name:<21} {width:>4} px {:>5.2} MB  laid out in {:>5.0} ms (browser {wall_s:.1} s)  {} figures  smallest text {}  width {}/{} px  height {} px  verdict first: {}  {}",
                 bytes as f64 / 1e6,
                 m.layout_ms,
                 m.figures,
+                m.smallest_text
+                    .as_ref()
+                    .map_or("—".to_string(), |t| format!("{:.1} px", t.0)),
                 m.scroll_width,
                 m.viewport,
                 m.height,
@@ -656,6 +694,7 @@ mod tests {
             verdict_top: 70.0,
             layout_ms: 400.0,
             overview_top: None,
+            smallest_text: Some((11.0, "a".into())),
         }
     }
 
@@ -772,6 +811,14 @@ mod tests {
                 "laid out after",
             ),
             (good(), MAX_PAGE_BYTES + 1, "weighs"),
+            (
+                Measure {
+                    smallest_text: Some((4.2, "history".into())),
+                    ..good()
+                },
+                1000,
+                "below the 7.5 px",
+            ),
             (
                 Measure {
                     viewport_meta: false,

@@ -15,8 +15,8 @@ use trueaxis_engine::compare::{
 use trueaxis_engine::data::{Dataset, AXES, TARGETS};
 
 use crate::report::plot::{
-    axis_title, before_after, format_value, heat_map_pair, ticks_for, HeatMap, Series, Style,
-    XyPlot,
+    axis_title, before_after, format_value, ticks_for, Drawing as _, HeatMap, MapPair, Series,
+    Style, XyPlot,
 };
 use crate::report::{Figure, Page, Tone, Verdict};
 
@@ -365,22 +365,33 @@ pub fn build_report(
     let rms_fig = Figure {
         name: "before_after_rms".into(),
         caption: "RMS error per target before compensation (the raw measured error) and after (the residual the model leaves).".into(),
-        svg: before_after("Before vs after: RMS", "RMS (µm)", &names, &before, &after).to_svg()?,
+        svg: String::new(),
+        narrow: None,
     };
+    let rms_fig = Figure::plot(
+        rms_fig.name,
+        rms_fig.caption,
+        &before_after("Before vs after: RMS", "RMS (µm)", &names, &before, &after),
+    )?;
     let before: Vec<f64> = c.targets.values().map(|r| r.before.max_abs_um).collect();
     let after: Vec<f64> = c.targets.values().map(|r| r.after.max_abs_um).collect();
     let max_fig = Figure {
         name: "before_after_max".into(),
         caption: "Largest |error| per target before and after compensation.".into(),
-        svg: before_after(
+        svg: String::new(),
+        narrow: None,
+    };
+    let max_fig = Figure::plot(
+        max_fig.name,
+        max_fig.caption,
+        &before_after(
             "Before vs after: max |e|",
             "max |e| (µm)",
             &names,
             &before,
             &after,
-        )
-        .to_svg()?,
-    };
+        ),
+    )?;
     page.grid_wide(vec![rms_fig, max_fig]);
 
     page.heading("Worst regions");
@@ -528,7 +539,8 @@ pub fn build_report(
                     } else {
                         format!("Residual of {} {}.", TARGETS[t], on(plane))
                     },
-                    svg: m.to_svg()?,
+                    svg: m.svg()?,
+                    narrow: m.phone_svg()?,
                 });
             }
             page.grid(figs);
@@ -550,15 +562,18 @@ pub fn build_report(
                 raw.and_then(|c| c[r]).map(|v| sign * v)
             });
             let after = plane_map(data, plane, a_title, |r| res[r].map(|v| sign * v));
-            page.figure(
+            page.plot(
                 format!("map_before_after_{}", TARGETS[t]),
                 format!(
                     "{} before and after compensation {}, on one colour scale.",
                     if bed { "The bed height" } else { TARGETS[t] },
                     on(plane)
                 ),
-                heat_map_pair(&before, &after)?,
-            );
+                &MapPair {
+                    before: &before,
+                    after: &after,
+                },
+            )?;
         }
     }
 
@@ -633,7 +648,8 @@ pub fn build_report(
                 "Measured error and model along {ax} at {}{passes}.",
                 line.label
             ),
-            svg: meas.to_svg()?,
+            svg: meas.svg()?,
+            narrow: meas.phone_svg()?,
         }];
         // Zoom on the first 60 mm of a long line: short periods (a lead
         // screw's pitch) are unreadable over the whole travel.
@@ -650,7 +666,8 @@ pub fn build_report(
         figs.push(Figure {
             name: format!("line{k}_residual"),
             caption: format!("Residual along {ax} at {}{passes}.", line.label),
-            svg: resid.to_svg()?,
+            svg: resid.svg()?,
+            narrow: resid.phone_svg()?,
         });
         if let Some(z) = zoom {
             figs.push(Figure {
@@ -659,7 +676,8 @@ pub fn build_report(
                     "Residual along {ax} at {}, the first 60 mm{passes}.",
                     line.label
                 ),
-                svg: z.to_svg()?,
+                svg: z.svg()?,
+                narrow: z.phone_svg()?,
             });
         }
         page.grid_wide(figs);
@@ -689,11 +707,11 @@ pub fn build_report(
     if lo.is_finite() {
         mv = mv.with(Series::line("y = x", vec![(lo, lo), (hi, hi)]));
     }
-    page.figure(
+    page.plot(
         "measured_vs_model",
         "Each point is one measurement; on the line y = x the model is exact.",
-        mv.to_svg()?,
-    );
+        &mv,
+    )?;
 
     // Residual against every axis and channel.
     page.heading("Residual against positions and channels");
@@ -738,7 +756,8 @@ pub fn build_report(
                 "Residual against {} (column {channel}), with the mean per bin.",
                 axis_title(channel)
             ),
-            svg: plot.to_svg()?,
+            svg: plot.svg()?,
+            narrow: plot.phone_svg()?,
         });
     }
     page.grid_wide(figs);

@@ -18,8 +18,8 @@ use trueaxis_engine::features;
 use trueaxis_engine::diagnose::{Verdict as DVerdict, ABOVE_NOISE_RATIO};
 
 use crate::report::plot::{
-    self, axis_title, darker, format_value, heat_map_pair, target_colour, HeatMap, Series, Style,
-    Ticks, XyPlot, DIRECTION_COLOURS,
+    self, axis_title, darker, format_value, target_colour, Drawing as _, HeatMap, MapPair, Series,
+    Style, Ticks, XyPlot, DIRECTION_COLOURS,
 };
 use crate::report::{Figure, Page, Tone, Verdict};
 
@@ -625,7 +625,8 @@ fn volume_overview(page: &mut Page, d: &Diagnosis, data: &Dataset) -> Result<()>
                     "RMS of the {tn} residual after the path per cell, projected on {}–{} (red: where the model fails most).",
                     m.x_label, m.y_label
                 ),
-                svg: m.to_svg()?,
+                svg: m.svg()?,
+            narrow: m.phone_svg()?,
             });
         }
     }
@@ -798,7 +799,8 @@ fn thermal_slope(
                 "growth per kelvin"
             },
         ),
-        svg: plot.to_svg()?,
+        svg: plot.svg()?,
+            narrow: plot.phone_svg()?,
     }))
 }
 
@@ -1080,7 +1082,8 @@ pub fn write_for(
                 format!("periodogram_{tn}_{ax}")
             },
             caption,
-            svg: plot.to_svg()?,
+            svg: plot.svg()?,
+            narrow: plot.phone_svg()?,
         });
     }
     // Forward/backward split of each reversal on the path: the partial
@@ -1193,7 +1196,8 @@ pub fn write_for(
             caption: format!(
                 "{caption}; lines: the forward and the backward profile, the mean per {PROFILE_BINS}th of the travel — the gap between them is the reversal"
             ),
-            svg: plot.to_svg()?,
+            svg: plot.svg()?,
+            narrow: plot.phone_svg()?,
         });
     }
     // Component + residual of every effect on the path.
@@ -1236,7 +1240,8 @@ pub fn write_for(
                 "Path step {} of {}: the fitted {} component with the final residual added back",
                 comp.step, TARGETS[t], c.effect
             ),
-            svg: plot.to_svg()?,
+            svg: plot.svg()?,
+            narrow: plot.phone_svg()?,
         });
         if let Some(fig) = thermal_slope(data, c, comp.step, rows, &comp.values, after)? {
             figs.push(fig);
@@ -1276,14 +1281,17 @@ pub fn write_for(
             };
             let hb = mk(&format!("{tn} residual, {}", d.model), before);
             let ha = mk(&format!("{tn} residual after the path"), after);
-            page.figure(
+            page.plot(
                 format!("residual_map_{tn}"),
                 format!(
                     "{tn}: mean residual per ({}, {}) cell, before and after",
                     AXES[a], AXES[b]
                 ),
-                heat_map_pair(&hb, &ha)?,
-            );
+                &MapPair {
+                    before: &hb,
+                    after: &ha,
+                },
+            )?;
         }
     }
     page.write(dir)

@@ -350,7 +350,7 @@ pub fn verdict(h: &History, model: &str, data: &str, noise_um: &BTreeMap<String,
 /// `diagnose --report` on a model that has a history.
 pub fn add_to_page(page: &mut Page, h: &History, noise_um: &BTreeMap<String, f64>) -> Result<()> {
     let plot = plot(h, noise_um);
-    page.figure(
+    page.plot(
         "history",
         format!(
             "Residual RMS (in-sample) and block-held-out RMS per target after each fit; each step is labelled with the effect it added; dashed: the noise floor of the measurement, where known.{}",
@@ -360,8 +360,8 @@ pub fn add_to_page(page: &mut Page, h: &History, noise_um: &BTreeMap<String, f64
                 ""
             }
         ),
-        plot.to_svg()?,
-    );
+        &plot,
+    )?;
     let rows = h
         .steps
         .iter()

@@ -222,15 +222,18 @@ pub fn write_page(res: &Iso230, data: &Dataset, data_path: &str, dir: &Path) -> 
     }
     let reads = flagged_readings(data, axis, res);
     page.heading("Every run beside the means");
-    page.figure(
+    page.plot(
         format!("iso230_{}", res.axis),
         format!(
             "Each run's readings (thin lines and open dots: {} readings in {} run(s) per direction) beside x̄↑ and x̄↓ (the mean deviation approaching from below and from above) with their ±2s bands: a reading far from its run's neighbours stands out.",
             reads.len(),
             res.runs
         ),
-        svg_with(res, &reads)?,
-    );
+        &IsoPlot {
+            res,
+            readings: &reads,
+        },
+    )?;
     let flagged: Vec<Vec<String>> = reads
         .iter()
         .filter_map(|r| {
@@ -305,7 +308,40 @@ pub fn svg(res: &Iso230) -> Result<String> {
 /// right, so they do not hide each other), a flagged reading ringed red;
 /// the legend in a strip of its own right of the plot, never on the data.
 pub fn svg_with(res: &Iso230, readings: &[Reading]) -> Result<String> {
-    use crate::report::plot::{darker, draw_legend, legend_width, LegendMark, DIRECTION_COLOURS};
+    svg_sized(res, readings, (900, 520))
+}
+
+/// The ISO plot as a [`Drawing`](crate::report::plot::Drawing): 900 px
+/// wide, and for a phone [`PHONE_WIDTH`](crate::report::plot::PHONE_WIDTH)
+/// wide with the legend under it.
+#[derive(Debug)]
+pub struct IsoPlot<'a> {
+    /// The figures.
+    pub res: &'a Iso230,
+    /// Every run's readings.
+    pub readings: &'a [Reading],
+}
+
+impl crate::report::plot::Drawing for IsoPlot<'_> {
+    fn svg(&self) -> Result<String> {
+        svg_with(self.res, self.readings)
+    }
+    fn phone_svg(&self) -> Result<Option<String>> {
+        svg_sized(
+            self.res,
+            self.readings,
+            (crate::report::plot::PHONE_WIDTH, 420),
+        )
+        .map(Some)
+    }
+}
+
+/// [`svg_with`] at `size` (the plot; a legend under a narrow plot adds to
+/// its height).
+fn svg_sized(res: &Iso230, readings: &[Reading], size: (u32, u32)) -> Result<String> {
+    use crate::report::plot::{
+        darker, legend_below_height, legend_strip, LegendMark, DIRECTION_COLOURS, LEGEND_BELOW,
+    };
     use plotters::prelude::*;
     let t = &res.per_target;
     let lo = min(t
@@ -349,21 +385,28 @@ pub fn svg_with(res: &Iso230, readings: &[Reading]) -> Result<String> {
         ));
     }
     let mut buf = String::new();
-    let size = (900u32, 520u32);
-    let whole = SVGBackend::with_string(&mut buf, size).into_drawing_area();
-    let (root, legend) = whole.split_horizontally(size.0 - legend_width(&entries));
+    let below = legend_below_height(&entries, size.0);
+    let narrow = size.0 < LEGEND_BELOW;
+    let whole = SVGBackend::with_string(&mut buf, (size.0, size.1 + below)).into_drawing_area();
     let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
         whole.fill(&WHITE)?;
-        draw_legend(&legend, &entries).map_err(|e| e.to_string())?;
+        let root = legend_strip(&whole, &entries, size).map_err(|e| e.to_string())?;
         // Left and right of the target by 0.6 % of the travel.
         let dx = 0.006 * (x1 - x0).abs().max(1.0);
         let mut chart = ChartBuilder::on(&root)
             .caption(
-                format!(
-                    "ISO 230-2 axis {}: A = {:.2} µm, E = {:.2} µm, R = {:.2} µm, B = {:.2} µm",
-                    res.axis, res.a_um, res.e_um, res.r_um, res.b_um
-                ),
-                ("sans-serif", 18),
+                if narrow {
+                    format!(
+                        "axis {}: A {:.2}, E {:.2}, R {:.2}, B {:.2} µm",
+                        res.axis, res.a_um, res.e_um, res.r_um, res.b_um
+                    )
+                } else {
+                    format!(
+                        "ISO 230-2 axis {}: A = {:.2} µm, E = {:.2} µm, R = {:.2} µm, B = {:.2} µm",
+                        res.axis, res.a_um, res.e_um, res.r_um, res.b_um
+                    )
+                },
+                ("sans-serif", if narrow { 14 } else { 18 }),
             )
             .margin(12)
             .x_label_area_size(40)
@@ -436,7 +479,7 @@ pub fn svg_with(res: &Iso230, readings: &[Reading]) -> Result<String> {
         Ok(())
     };
     draw().map_err(|e| anyhow::anyhow!("drawing the ISO 230-2 plot: {e}"))?;
-    drop((root, legend, whole));
+    drop(whole);
     // Scales to the window like every report figure (viewBox, no width).
     Ok(crate::report::plot::responsive(buf))
 }

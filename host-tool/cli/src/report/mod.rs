@@ -60,6 +60,34 @@ pub struct Figure {
     pub caption: String,
     /// The SVG document.
     pub svg: String,
+    /// The same plot drawn for a phone ([`plot::Drawing::phone_svg`]),
+    /// shown instead of `svg` in a window narrower than 600 px.
+    pub narrow: Option<String>,
+}
+
+impl Figure {
+    /// A figure of a drawn SVG (no phone drawing: it scales).
+    pub fn new(name: impl Into<String>, caption: impl Into<String>, svg: String) -> Figure {
+        Figure {
+            name: name.into(),
+            caption: caption.into(),
+            svg,
+            narrow: None,
+        }
+    }
+
+    /// A figure of `plot`, drawn at its size and, when that is wider than
+    /// a phone, again at the phone's width.
+    pub fn plot(
+        name: impl Into<String>,
+        caption: impl Into<String>,
+        plot: &dyn plot::Drawing,
+    ) -> anyhow::Result<Figure> {
+        Ok(Figure {
+            narrow: plot.phone_svg()?,
+            ..Figure::new(name, caption, plot.svg()?)
+        })
+    }
 }
 
 /// How a verdict reads at a glance (the card's colour).
@@ -156,12 +184,22 @@ impl Page {
         caption: impl Into<String>,
         svg: String,
     ) -> &mut Page {
-        self.blocks.push(Block::Figure(Figure {
-            name: name.into(),
-            caption: caption.into(),
-            svg,
-        }));
+        self.blocks
+            .push(Block::Figure(Figure::new(name, caption, svg)));
         self
+    }
+
+    /// A figure of `plot` ([`Figure::plot`]: drawn again for a phone when
+    /// it is wider than one).
+    pub fn plot(
+        &mut self,
+        name: impl Into<String>,
+        caption: impl Into<String>,
+        plot: &dyn plot::Drawing,
+    ) -> anyhow::Result<&mut Page> {
+        self.blocks
+            .push(Block::Figure(Figure::plot(name, caption, plot)?));
+        Ok(self)
     }
 
     /// The colour key shared by every plot below it: ex, ey, ez and the
@@ -374,14 +412,30 @@ fn write_key(h: &mut String) {
 /// most the drawing's own (the SVG scales down to narrower windows).
 fn write_figure(h: &mut String, f: &Figure) {
     let max = svg_width(&f.svg).map_or(String::new(), |w| format!(" style=\"max-width:{w}px\""));
+    // With a phone drawing both are inlined, classed; the style shows one.
+    let drawings = match &f.narrow {
+        Some(narrow) => format!(
+            "{}\n{}",
+            with_class(strip_xml_declaration(&f.svg), "wide"),
+            with_class(strip_xml_declaration(narrow), "narrow")
+        ),
+        None => strip_xml_declaration(&f.svg).to_string(),
+    };
     let _ = write!(
         h,
-        "<figure id=\"{}\"{max}>\n{}\n<figcaption>{} <a href=\"{}.svg\">(SVG)</a></figcaption>\n</figure>\n",
+        "<figure id=\"{}\"{max}>\n{drawings}\n<figcaption>{} <a href=\"{}.svg\">(SVG)</a></figcaption>\n</figure>\n",
         esc(&f.name),
-        strip_xml_declaration(&f.svg),
         esc(&f.caption),
         esc(&f.name)
     );
+}
+
+/// `svg` with `class="…"` on its root element.
+fn with_class(svg: &str, class: &str) -> String {
+    match svg.find("<svg") {
+        Some(i) => format!("{}<svg class=\"{class}\"{}", &svg[..i], &svg[i + 4..]),
+        None => svg.to_string(),
+    }
 }
 
 /// A cell that reads as a number (`2.0137`, `-6751`, `47 %`, `14.4×`, `—`).
@@ -463,7 +517,8 @@ figure{margin:.6em 0}figure svg{display:block;width:100%;height:auto}\
 figcaption{font-size:.9em;color:#555;max-width:720px}pre{background:#f6f6f6;padding:.6em;overflow-x:auto}\
 .grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(min(340px,100%),1fr));gap:.4em 1em}\
 .grid.wide{grid-template-columns:repeat(auto-fill,minmax(min(560px,100%),1fr))}.grid figure{margin:0}\
-@media (max-width:600px){body{padding:0 .5em;margin:.5em auto}h1{font-size:1.25em}th,td{padding:.2em .35em}}\
+figure>svg.narrow{display:none}\
+@media (max-width:600px){body{padding:0 .5em;margin:.5em auto}h1{font-size:1.25em}th,td{padding:.2em .35em}figure>svg.wide{display:none}figure>svg.narrow{display:block}}\
 .verdict{border:2px solid #999;border-left-width:10px;border-radius:6px;padding:.4em 1em;margin:1em 0;background:#fafafa}\
 .verdict.good{border-color:#009e73;background:#eefaf5}.verdict.action{border-color:#d55e00;background:#fff4ec}\
 .verdict.unknown{border-color:#e69f00;background:#fffaeb}\
@@ -475,6 +530,34 @@ figcaption{font-size:.9em;color:#555;max-width:720px}pre{background:#f6f6f6;padd
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_plot_wider_than_a_phone_is_drawn_again_for_one() {
+        // Issue 28: a 720 px plot scaled into a 390 px window had 5 px text.
+        // Wider than a phone, a plot carries a drawing PHONE_WIDTH wide,
+        // with its legend under it; the page shows one of the two by width.
+        let wide = plot::XyPlot::new("t", "x (mm)", "e (µm)")
+            .with(plot::Series::line("ex", vec![(0.0, 1.0), (1.0, 2.0)]));
+        let f = Figure::plot("a", "c", &wide).unwrap();
+        let narrow = f.narrow.as_deref().expect("a phone drawing");
+        assert_eq!(svg_width(&f.svg), Some(plot::SIZE.0));
+        assert_eq!(svg_width(narrow), Some(plot::PHONE_WIDTH));
+        let mut p = Page::new("p");
+        p.plot("a", "c", &wide).unwrap();
+        let html = p.to_html();
+        assert!(html.contains("<svg class=\"wide\"") && html.contains("<svg class=\"narrow\""));
+        assert!(STYLE.contains("figure>svg.narrow{display:none}"));
+        assert!(
+            STYLE.contains("@media (max-width:600px)")
+                && STYLE.contains("figure>svg.wide{display:none}figure>svg.narrow{display:block}")
+        );
+        // A drawing already as narrow as a phone is shown as it is.
+        let small = plot::XyPlot {
+            size: (plot::PHONE_WIDTH, 300),
+            ..wide
+        };
+        assert!(Figure::plot("b", "c", &small).unwrap().narrow.is_none());
+    }
 
     #[test]
     fn page_escapes_and_inlines() {
@@ -531,11 +614,7 @@ mod tests {
     #[test]
     fn grids_hold_small_multiples_and_tables_scroll_inside() {
         let mut p = Page::new("t");
-        let f = |n: &str| Figure {
-            name: n.into(),
-            caption: "c".into(),
-            svg: "<svg viewBox=\"0 0 460 380\"></svg>".into(),
-        };
+        let f = |n: &str| Figure::new(n, "c", "<svg viewBox=\"0 0 460 380\"></svg>".into());
         p.grid(vec![f("a"), f("b")]).table(
             &["add", "ΔBIC", "gain", "evidence"],
             vec![vec![

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 
-use super::plot::{heat_map_pair, HeatMap, Series, XyPlot};
+use super::plot::{Drawing as _, HeatMap, MapPair, Series, XyPlot};
 use super::{esc, Page, Tone, Verdict};
 
 /// Colours of the polar plot's profiles (the pages' palette order).
@@ -201,11 +201,13 @@ pub fn roundness_page(r: &Roundness, dir: &Path) -> Result<PathBuf> {
             name: "part".into(),
             caption: "the part's roundness around its base circle (deviations magnified)".into(),
             svg: polar_svg("part roundness (µm)", &[("part", r.part_um)]),
+            narrow: None,
         },
         super::Figure {
             name: "spindle".into(),
             caption: "the spindle's synchronous radial error motion, centring left out (deviations magnified)".into(),
             svg: polar_svg("spindle error motion (µm)", &r.spindle),
+            narrow: None,
         },
     ]);
     write(&page, dir)
@@ -245,11 +247,11 @@ pub fn reversal_page(
     )
     .with(Series::line("part form", pts(part_um)))
     .with(Series::line("slide straightness", pts(slide_um)));
-    page.figure(
+    page.plot(
         "profiles",
         "the two separated profiles along the travel",
-        plot.to_svg()?,
-    );
+        &plot,
+    )?;
     write(&page, dir)
 }
 
@@ -318,11 +320,11 @@ pub fn probe_page(p: &ProbePage, dir: &Path) -> Result<PathBuf> {
         "residual on the ball with it",
         xy(p.residual_nm),
     ));
-    page.figure(
+    page.plot(
         "form",
         "the form error against contact angle, and what is left on the ball",
-        plot.to_svg()?,
-    );
+        &plot,
+    )?;
     write(&page, dir)
 }
 
@@ -456,11 +458,14 @@ pub fn probe3d_page(p: &Probe3dPage, dir: &Path) -> Result<PathBuf> {
         &pts,
         2.0,
     );
-    page.figure(
+    page.plot(
         "form-map",
         "the probe's form error over the calibrated directions (left; grey: outside the cone, not calibrated) and what is left on the ball with it (right), on one colour scale",
-        heat_map_pair(&form, &resid)?,
-    );
+        &MapPair {
+                    before: &form,
+                    after: &resid,
+                },
+    )?;
     write(&page, dir)
 }
 
@@ -589,11 +594,11 @@ pub fn part_diagnosis_page(
             format!("deviation ({})", d.profile_unit),
         )
         .with(Series::points("scan", d.profile.clone()));
-        page.figure(
+        page.plot(
             "scan",
             format!("{what}: every source it holds, summed (a drift found is removed)"),
-            plot.to_svg()?,
-        );
+            &plot,
+        )?;
     }
     write(&page, dir)
 }
@@ -695,7 +700,8 @@ pub fn workpiece_page(w: &WorkpiecePage, dir: &Path) -> Result<PathBuf> {
         figs.push(super::Figure {
             name: format!("gen{}", (c * 10.0).round() as i64),
             caption: format!("along z at c = {c:.1}°"),
-            svg: plot.to_svg()?,
+            svg: plot.svg()?,
+            narrow: plot.phone_svg()?,
         });
     }
     let zm = 0.5 * (w.z_range_mm[0] + w.z_range_mm[1]);

@@ -274,6 +274,10 @@ impl HeatMap {
             .disable_mesh()
             .x_desc(&self.x_label)
             .y_desc(&self.y_label)
+            // plotters sizes these from the area's height: a short map
+            // (a stacked pair on a phone) got 6 px axis titles.
+            .axis_desc_style(("sans-serif", 12))
+            .label_style(("sans-serif", 12))
             .x_labels(6)
             .y_labels(8)
             .x_label_formatter(&|v| map_tick(*v, x1 - x0))
@@ -411,6 +415,49 @@ pub fn heat_map_pair(before: &HeatMap, after: &HeatMap) -> Result<String> {
         root.present().map_err(plot_err)?;
     }
     Ok(responsive(buf))
+}
+
+/// Two heat maps on one colour scale as a [`Drawing`]: side by side
+/// ([`heat_map_pair`]), and on a phone one above the other, each
+/// [`PHONE_WIDTH`] wide.
+#[derive(Clone, Copy, Debug)]
+pub struct MapPair<'a> {
+    /// The map before compensation (left, or top).
+    pub before: &'a HeatMap,
+    /// The map after (right, or below).
+    pub after: &'a HeatMap,
+}
+
+impl Drawing for MapPair<'_> {
+    fn svg(&self) -> Result<String> {
+        heat_map_pair(self.before, self.after)
+    }
+    fn phone_svg(&self) -> Result<Option<String>> {
+        if 2 * self.before.fitted_size().0 <= PHONE_MAX {
+            return Ok(None);
+        }
+        let limit = self.before.max_abs().max(self.after.max_abs());
+        let narrow = |m: &HeatMap| HeatMap {
+            size: (PHONE_WIDTH, m.size.1),
+            limit: Some(limit),
+            ..m.clone()
+        };
+        let (before, after) = (narrow(self.before), narrow(self.after));
+        let (w, h) = before.fitted_size();
+        let mut buf = String::new();
+        {
+            let root = SVGBackend::with_string(&mut buf, (w, 2 * h)).into_drawing_area();
+            root.fill(&WHITE).map_err(plot_err)?;
+            let (top, bottom) = root.split_vertically(h);
+            for (m, area) in [(&before, &top), (&after, &bottom)] {
+                if !(m.x.is_empty() || m.y.is_empty()) {
+                    m.draw(area)?;
+                }
+            }
+            root.present().map_err(plot_err)?;
+        }
+        Ok(Some(responsive(buf)))
+    }
 }
 
 /// Diverging colour for t in [−1, 1]: blue (negative) – white – red

@@ -20,10 +20,87 @@ pub mod decimate;
 pub(crate) mod heat;
 
 pub use decimate::Reduction;
-pub use heat::{diverging, heat_map_pair, HeatMap};
+pub use heat::{diverging, heat_map_pair, HeatMap, MapPair};
 
 /// Default plot size in pixels (SVG user units).
 pub const SIZE: (u32, u32) = (720, 420);
+
+/// The width a plot is drawn again at for a phone: a 390 px window less
+/// the page's margins. Drawn at that width its text is at its own size; a
+/// 720 px drawing scaled into a phone had 5 px text (issue 28).
+pub const PHONE_WIDTH: u32 = 360;
+/// Drawings at most this wide need no phone drawing.
+pub const PHONE_MAX: u32 = 400;
+/// Below this width a plot's legend goes under the plot, not beside it.
+pub const LEGEND_BELOW: u32 = 500;
+
+/// A plot drawn at its own size and, when that is wider than a phone,
+/// again at [`PHONE_WIDTH`] (the page shows that one in a narrow window:
+/// `report::Figure::plot`).
+pub trait Drawing {
+    /// The SVG at the plot's own size.
+    fn svg(&self) -> Result<String>;
+    /// The SVG for a phone; `None` when [`Drawing::svg`] is narrow enough.
+    fn phone_svg(&self) -> Result<Option<String>>;
+}
+
+/// A plot's size for a phone: [`PHONE_WIDTH`] wide, a little less tall
+/// than designed but never flatter than 3 : 4; `None` when it is narrow
+/// enough already.
+pub fn phone_size(size: (u32, u32)) -> Option<(u32, u32)> {
+    (size.0 > PHONE_MAX).then(|| (PHONE_WIDTH, (size.1 * 4 / 5).max(PHONE_WIDTH * 3 / 4)))
+}
+
+impl Drawing for XyPlot {
+    fn svg(&self) -> Result<String> {
+        self.to_svg()
+    }
+    fn phone_svg(&self) -> Result<Option<String>> {
+        phone_size(self.size)
+            .map(|size| {
+                XyPlot {
+                    size,
+                    ..self.clone()
+                }
+                .to_svg()
+            })
+            .transpose()
+    }
+}
+
+impl Drawing for BarPlot {
+    fn svg(&self) -> Result<String> {
+        self.to_svg()
+    }
+    fn phone_svg(&self) -> Result<Option<String>> {
+        phone_size(self.size)
+            .map(|size| {
+                BarPlot {
+                    size,
+                    ..self.clone()
+                }
+                .to_svg()
+            })
+            .transpose()
+    }
+}
+
+impl Drawing for HeatMap {
+    fn svg(&self) -> Result<String> {
+        self.to_svg()
+    }
+    fn phone_svg(&self) -> Result<Option<String>> {
+        (self.fitted_size().0 > PHONE_MAX)
+            .then(|| {
+                HeatMap {
+                    size: (PHONE_WIDTH, self.size.1),
+                    ..self.clone()
+                }
+                .to_svg()
+            })
+            .transpose()
+    }
+}
 
 /// Series colours, chosen to stay distinct for colour-blind readers
 /// (Okabe–Ito palette). The first three are the targets' and the next two
@@ -475,6 +552,9 @@ impl XyPlot {
     pub fn reduced(&self) -> (XyPlot, Reduction) {
         let mut r = Reduction::default();
         let mut plot = self.clone();
+        // A narrower drawing (a phone's) has fewer pixel columns to fill.
+        let k = (f64::from(self.size.0) / f64::from(SIZE.0)).min(1.0);
+        let scaled = |n: usize| ((n as f64 * k).round() as usize).max(n / 4);
         for s in &mut plot.series {
             let finite: Vec<(f64, f64)> = s
                 .points
@@ -485,11 +565,11 @@ impl XyPlot {
             let kept = match s.style {
                 Style::Points => decimate::scatter(
                     &finite,
-                    decimate::MAX_SCATTER_POINTS,
-                    decimate::SCATTER_BINS,
+                    scaled(decimate::MAX_SCATTER_POINTS),
+                    scaled(decimate::SCATTER_BINS),
                 ),
                 Style::Line | Style::Step | Style::LinePoints | Style::DashedPoints => {
-                    decimate::line(&finite, decimate::LINE_BINS)
+                    decimate::line(&finite, scaled(decimate::LINE_BINS))
                 }
             };
             r.add(finite.len(), kept.len());
@@ -516,32 +596,26 @@ impl XyPlot {
     fn draw_svg(&self, note: Option<String>) -> Result<String> {
         let mut buf = String::new();
         {
+            let entries = self.legend_entries();
+            let below = legend_below_height(&entries, self.size.0);
             let size = match note {
-                Some(_) => (self.size.0, self.size.1 + NOTE_STRIP),
-                None => self.size,
+                Some(_) => (self.size.0, self.size.1 + below + NOTE_STRIP),
+                None => (self.size.0, self.size.1 + below),
             };
             let root = SVGBackend::with_string(&mut buf, size).into_drawing_area();
             root.fill(&WHITE).map_err(plot_err)?;
             let root = match &note {
                 Some(text) => {
-                    let (plot, strip) = root.split_vertically(self.size.1);
+                    let (plot, strip) = root.split_vertically(self.size.1 + below);
                     draw_note(&strip, text)?;
                     plot
                 }
                 None => root,
             };
-            // The legend gets a strip of its own right of the plot, so it
-            // never covers data (a legend in a corner sat on the hottest
-            // points).
-            let entries = self.legend_entries();
-            let plot_area = if entries.is_empty() {
-                root.clone()
-            } else {
-                let w = legend_width(&entries);
-                let (p, l) = root.split_horizontally(self.size.0.saturating_sub(w));
-                draw_legend(&l, &entries)?;
-                p
-            };
+            // The legend gets a strip of its own right of the plot (under
+            // it on a phone-wide drawing), so it never covers data (a
+            // legend in a corner sat on the hottest points).
+            let plot_area = legend_strip(&root, &entries, self.size)?;
             let ((x0, x1), (y0, y1)) = self.ranges();
             let mut chart = ChartBuilder::on(&plot_area)
                 .caption(&self.title, ("sans-serif", 17))
@@ -813,6 +887,41 @@ pub(crate) fn legend_width(entries: &[(String, RGBColor, LegendMark)]) -> u32 {
     ((chars as f64 * 6.6) as u32 + 40).clamp(90, 260)
 }
 
+/// The height of a legend strip under a plot `width` wide: 0 when the
+/// legend goes beside it (at least [`LEGEND_BELOW`] wide, or no entries).
+pub(crate) fn legend_below_height(entries: &[(String, RGBColor, LegendMark)], width: u32) -> u32 {
+    if entries.is_empty() || width >= LEGEND_BELOW {
+        0
+    } else {
+        8 + 20 * entries.len() as u32
+    }
+}
+
+/// Draws the legend of a plot of `size` in a strip of `root` — right of
+/// the plot, or under it when the drawing is narrower than
+/// [`LEGEND_BELOW`] (`root` is then `size.1` + [`legend_below_height`]
+/// tall) — and returns the plot's area.
+pub(crate) fn legend_strip<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    entries: &[(String, RGBColor, LegendMark)],
+    size: (u32, u32),
+) -> Result<DrawingArea<DB, plotters::coord::Shift>>
+where
+    DB::ErrorType: 'static,
+{
+    if entries.is_empty() {
+        return Ok(root.clone());
+    }
+    if legend_below_height(entries, size.0) > 0 {
+        let (p, l) = root.split_vertically(size.1);
+        draw_legend_from(&l, entries, 10)?;
+        return Ok(p);
+    }
+    let (p, l) = root.split_horizontally(size.0.saturating_sub(legend_width(entries)));
+    draw_legend(&l, entries)?;
+    Ok(p)
+}
+
 /// Draws the legend entries top-down in `area` (a strip right of the plot).
 pub(crate) fn draw_legend<DB: DrawingBackend>(
     area: &DrawingArea<DB, plotters::coord::Shift>,
@@ -821,9 +930,21 @@ pub(crate) fn draw_legend<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
+    draw_legend_from(area, entries, 48)
+}
+
+/// [`draw_legend`] with the first entry at `top` px.
+fn draw_legend_from<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    entries: &[(String, RGBColor, LegendMark)],
+    top: i32,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
     let font = ("sans-serif", 12).into_font();
     for (k, (name, colour, mark)) in entries.iter().enumerate() {
-        let y = 48 + 20 * k as i32;
+        let y = top + 20 * k as i32;
         let c = *colour;
         match mark {
             LegendMark::Line => area
@@ -1023,8 +1144,6 @@ impl BarPlot {
         let span = (top - bottom).max(1e-12);
         let mut buf = String::new();
         {
-            let root = SVGBackend::with_string(&mut buf, self.size).into_drawing_area();
-            root.fill(&WHITE).map_err(plot_err)?;
             let colour = self.colour_fn();
             let entries: Vec<(String, RGBColor, LegendMark)> = self
                 .groups
@@ -1032,9 +1151,11 @@ impl BarPlot {
                 .enumerate()
                 .map(|(k, (name, _))| (name.clone(), colour(k, None), LegendMark::Bar))
                 .collect();
-            let (root, legend) =
-                root.split_horizontally(self.size.0.saturating_sub(legend_width(&entries)));
-            draw_legend(&legend, &entries)?;
+            let below = legend_below_height(&entries, self.size.0);
+            let root = SVGBackend::with_string(&mut buf, (self.size.0, self.size.1 + below))
+                .into_drawing_area();
+            root.fill(&WHITE).map_err(plot_err)?;
+            let root = legend_strip(&root, &entries, self.size)?;
             let cats = self.categories.clone();
             let fmt = move |x: &f64| -> String {
                 let i = x.floor();
