@@ -332,7 +332,7 @@ impl HeatMap {
             Text::new(
                 format_value(f * limit),
                 (1.15, f * limit),
-                ("sans-serif", 11).into_font(),
+                ("sans-serif", 12).into_font(),
             )
         }))
         .map_err(plot_err)?;
