@@ -566,6 +566,15 @@ pub fn fit(data: &Dataset, degree: usize) -> Result<Fitted> {
             peak,
             sigma,
             coef: e.coef.clone(),
+            coef_cov: (!cannot[t]).then(|| {
+                idx.iter()
+                    .map(|&(k1, j1)| {
+                        idx.iter()
+                            .map(|&(k2, j2)| cov[(k1, k2)] * params[j1].size * params[j2].size)
+                            .collect()
+                    })
+                    .collect()
+            }),
             hidden_um: None,
             hidden_at_tool_mm: None,
         });

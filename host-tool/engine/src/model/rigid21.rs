@@ -549,6 +549,11 @@ pub struct ErrorAnswer {
     /// Legendre coefficients, for `estimated` only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub coef: Option<Vec<f64>>,
+    /// Covariance of `coef` (row and column per coefficient, µm² or
+    /// µrad²), for `estimated` only: the ±2σ band of the function over the
+    /// travel on a report page (σ(s)² = pᵀ C p, p the Legendre values).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coef_cov: Option<Vec<Vec<f64>>>,
     /// For `cannot_know` only: the largest error vector (µm) this error at
     /// its realistic size gives over the working volume and the measured
     /// tool range, and the tool length (mm) where.
