@@ -12,7 +12,7 @@
 
 use trueaxis_engine::compare::Comparison;
 use trueaxis_engine::model::rigid21::{
-    legendre, ErrorAnswer, ErrorKind, Identifiability, Rigid21Model, Status,
+    self, legendre, ErrorAnswer, ErrorKind, Identifiability, Rigid21Model, Status,
 };
 
 use crate::report::plot::{format_value, Band, Series, XyPlot, OTHER_COLOURS, TARGET_COLOURS};
@@ -149,48 +149,11 @@ fn warning_texts(c: &Comparison) -> Vec<String> {
         .collect()
 }
 
-/// What an error function is called in words (`X yaw`, `Y straightness
-/// along Z`).
+/// What an error is called in words (`X yaw`, `Y straightness along Z`).
 pub fn words(model: &Rigid21Model, name: &str) -> String {
-    let Some(e) = model.error(name) else {
-        return name.into();
-    };
-    let axis = |a: usize| ["X", "Y", "Z"][a];
-    match (e.kind, e.axis) {
-        (ErrorKind::Positioning, Some(a)) => format!("{} positioning", axis(a)),
-        (ErrorKind::Straightness, Some(a)) => {
-            format!("{} straightness along {}", axis(a), axis(e.component))
-        }
-        (ErrorKind::Angle, Some(a)) => {
-            format!(
-                "{} {}",
-                axis(a),
-                ["roll", "pitch", "yaw"][angle_role(a, e.component)]
-            )
-        }
-        (ErrorKind::Squareness, Some(later)) => {
-            format!(
-                "squareness of {} to {}",
-                axis(later),
-                axis(3 - later - e.component)
-            )
-        }
-        (ErrorKind::Tilt, _) => format!("spindle tilt about {}", axis(e.component)),
-        _ => name.into(),
-    }
-}
-
-/// 0 roll (about the axis itself), 1 pitch, 2 yaw (ISO 230-1 for a
-/// machine with Z vertical: yaw is about Z; for Z the pitch is about X and
-/// the yaw about Y).
-fn angle_role(axis: usize, about: usize) -> usize {
-    match (axis, about) {
-        (a, b) if a == b => 0,
-        (_, 2) => 2,
-        (2, 0) => 1,
-        (2, 1) => 2,
-        _ => 1,
-    }
+    model
+        .error(name)
+        .map_or_else(|| name.into(), rigid21::words)
 }
 
 /// One function's plot: its value over the travel with the ±2σ band, or a

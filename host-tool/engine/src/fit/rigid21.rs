@@ -35,29 +35,29 @@ pub const SIZE_ANGLE_URAD: f64 = 30.0;
 pub const NEAR_NULL: f64 = 3.0;
 /// Share of a null direction's weight on an error's coefficients above
 /// which the error is `cannot_know`.
-const REACH: f64 = 0.02;
+pub(crate) const REACH: f64 = 0.02;
 
 /// A parameter: error `term` (index in the layout), Legendre degree.
 #[derive(Clone, Copy, Debug)]
-struct Param {
-    term: usize,
-    degree: usize,
+pub(crate) struct Param {
+    pub(crate) term: usize,
+    pub(crate) degree: usize,
     /// Realistic size of one unit of the scaled coefficient.
-    size: f64,
+    pub(crate) size: f64,
 }
 
 /// The design with set-up unknowns projected out, weighted by 1/u.
-struct Projected {
-    m: DMatrix<f64>,
-    b: DVector<f64>,
+pub(crate) struct Projected {
+    pub(crate) m: DMatrix<f64>,
+    pub(crate) b: DVector<f64>,
     /// (row, reading kind) of each observation, for residual statistics.
-    obs: Vec<(usize, Reading)>,
-    nuisance: usize,
+    pub(crate) obs: Vec<(usize, Reading)>,
+    pub(crate) nuisance: usize,
 }
 
 /// What an observation reads.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Reading {
+pub(crate) enum Reading {
     E(usize),
     Angle(usize),
     Beam,
@@ -99,7 +99,7 @@ pub fn skeleton(data: &Dataset, degree: usize) -> Result<Rigid21Model> {
     })
 }
 
-fn params_of(model: &Rigid21Model) -> Vec<Param> {
+pub(crate) fn params_of(model: &Rigid21Model) -> Vec<Param> {
     let mut out = Vec::new();
     for (t, e) in model.errors.iter().enumerate() {
         let size = if e.kind.is_angular() {
@@ -121,7 +121,7 @@ fn params_of(model: &Rigid21Model) -> Vec<Param> {
 /// Builds the weighted design of `data` for `model`'s parameters (scaled
 /// by their sizes) and projects the set-up unknowns out
 /// (docs/volumetric.md § Set-ups).
-fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) -> Projected {
+pub(crate) fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) -> Projected {
     let n = data.len();
     // Set-up groups and their moving axes.
     let group = |r: usize| data.setup_id.as_ref().map(|s| s[r]);
