@@ -145,3 +145,79 @@ fn compare_report_of_a_rigid21_model_speaks_in_errors() {
     let a0t = &table[table.find("A0T").unwrap()..];
     assert!(a0t[..a0t.find("</tr>").unwrap()].contains("cannot know"));
 }
+
+/// `diagnose` on a rigid21 model fitted with too low a degree names the
+/// missing function in ISO 230-1 words, with its size and the hold-out by
+/// set-up; the next command refits with a higher degree.
+#[test]
+fn diagnose_names_the_missing_error_function() {
+    use trueaxis_engine::simulate::ErrorFn;
+    let dir = tmp_dir("rigid21", "diagnose");
+    let mut m = Machine::preset("mill800-21").unwrap();
+    for ax in &mut m.axes {
+        for f in ax.trans_um.iter_mut().chain(ax.rot_urad.iter_mut()) {
+            f.poly.truncate(3);
+            f.waves.clear();
+        }
+    }
+    // X yaw: 28 µrad × P₃ on top (P₃(2u − 1) = 20u³ − 30u² + 12u − 1).
+    let mut p = m.axes[0].rot_urad[2].poly.clone();
+    p.resize(4, 0.0);
+    for (k, v) in [-28.0, 336.0, -840.0, 560.0].into_iter().enumerate() {
+        p[k] += v;
+    }
+    m.axes[0].rot_urad[2] = ErrorFn::poly(&p);
+    let data = measure(&m, &laser_lines(m.travel_mm, &[0.0, 150.0]), 11, true);
+    let csv = dir.join("lines.csv");
+    import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
+    let model = dir.join("lines.model.json");
+    run(&[
+        "fit",
+        csv.to_str().unwrap(),
+        "--model",
+        "rigid21:2",
+        "-o",
+        model.to_str().unwrap(),
+    ]);
+    let doc = json(&run(&[
+        "diagnose",
+        csv.to_str().unwrap(),
+        "--model",
+        model.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(doc["model"], "rigid21:2", "{doc}");
+    assert_eq!(doc["setups"], 12);
+    let f = &doc["findings"][0];
+    assert_eq!(f["error"], "ECX", "{doc}");
+    let peak = f["peak"].as_f64().unwrap();
+    assert!((peak - 28.0).abs() < 4.0, "{peak}");
+    assert!(
+        doc["next_command"]
+            .as_str()
+            .unwrap()
+            .contains("--model rigid21:4"),
+        "{doc}"
+    );
+    let out = run(&[
+        "diagnose",
+        csv.to_str().unwrap(),
+        "--model",
+        model.to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("missing: X yaw ECX, "), "{text}");
+    // --report is refused with what to run instead, never half-done.
+    common::expect_exit(
+        &[
+            "diagnose",
+            csv.to_str().unwrap(),
+            "--model",
+            "rigid21:2",
+            "--report",
+            dir.join("r").to_str().unwrap(),
+        ],
+        1,
+        &["--report is not supported yet", "compare"],
+    );
+}
