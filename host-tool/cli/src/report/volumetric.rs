@@ -35,9 +35,7 @@ fn volumetric(c: &Comparison) -> Option<([f64; 2], [f64; 2])> {
         mb = mb.max(r.before.max_abs_um);
         ma = ma.max(r.after.max_abs_um);
     }
-    (n > 0.0)
-        .then(|| [[(sb / n).sqrt(), mb], [(sa / n).sqrt(), ma]].into())
-        .map(|v: [[f64; 2]; 2]| (v[0], v[1]))
+    (n > 0.0).then(|| ([(sb / n).sqrt(), mb], [(sa / n).sqrt(), ma]))
 }
 
 /// The card of a rigid21 comparison: the volumetric error before and
