@@ -59,6 +59,19 @@ fn laser_lines_fit_says_what_it_cannot_know() {
     assert!(r.error("A0T").unwrap().coef.is_none());
 }
 
+/// `machine` measured with laser lines at tool 0 and 150 mm (seed 11),
+/// written as `DIR/lines.csv` and fitted with `--model spec` to
+/// `DIR/lines.model.json`: (csv, model).
+fn lines_fitted(dir: &std::path::Path, m: &Machine, spec: &str) -> (String, String) {
+    let data = measure(m, &laser_lines(m.travel_mm, &[0.0, 150.0]), 11, true);
+    let csv = dir.join("lines.csv");
+    import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
+    let model = dir.join("lines.model.json");
+    let (csv, model) = (csv.display().to_string(), model.display().to_string());
+    common::assert_success(&run(&["fit", &csv, "--model", spec, "-o", &model]));
+    (csv, model)
+}
+
 /// `compare --report` on a rigid21 model: the card speaks in errors (the
 /// volumetric error before and after, what cannot be known, the
 /// measurement that would tell), each axis' six functions are drawn with
@@ -68,29 +81,17 @@ fn laser_lines_fit_says_what_it_cannot_know() {
 fn compare_report_of_a_rigid21_model_speaks_in_errors() {
     let dir = tmp_dir("rigid21", "page");
     let m = Machine::preset("mill800-21").unwrap();
-    let data = measure(&m, &laser_lines(m.travel_mm, &[0.0, 150.0]), 11, true);
-    let csv = dir.join("lines.csv");
-    import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
-    let model = dir.join("lines.model.json");
-    run(&[
-        "fit",
-        csv.to_str().unwrap(),
-        "--model",
-        "rigid21",
-        "-o",
-        model.to_str().unwrap(),
-        "--json",
-    ]);
+    let (csv, model) = lines_fitted(&dir, &m, "rigid21");
     let report = dir.join("report");
-    run(&[
+    common::assert_success(&run(&[
         "compare",
-        csv.to_str().unwrap(),
+        &csv,
         "--model",
-        model.to_str().unwrap(),
+        &model,
         "--report",
         report.to_str().unwrap(),
         "--json",
-    ]);
+    ]));
     let html = std::fs::read_to_string(report.join("index.html")).unwrap();
     // The card comes first and says what these data cannot know and what
     // would tell.
@@ -114,7 +115,7 @@ fn compare_report_of_a_rigid21_model_speaks_in_errors() {
         let f = format!("fn_{}.svg", name.to_lowercase());
         assert!(report.join(&f).is_file(), "{f}");
     }
-    let file = ModelFile::load(&model).unwrap();
+    let file = ModelFile::load(std::path::Path::new(&model)).unwrap();
     let FittedModel::Rigid21(r) = &file.model else {
         panic!()
     };
@@ -167,25 +168,8 @@ fn diagnose_names_the_missing_error_function() {
         p[k] += v;
     }
     m.axes[0].rot_urad[2] = ErrorFn::poly(&p);
-    let data = measure(&m, &laser_lines(m.travel_mm, &[0.0, 150.0]), 11, true);
-    let csv = dir.join("lines.csv");
-    import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
-    let model = dir.join("lines.model.json");
-    run(&[
-        "fit",
-        csv.to_str().unwrap(),
-        "--model",
-        "rigid21:2",
-        "-o",
-        model.to_str().unwrap(),
-    ]);
-    let doc = json(&run(&[
-        "diagnose",
-        csv.to_str().unwrap(),
-        "--model",
-        model.to_str().unwrap(),
-        "--json",
-    ]));
+    let (csv, model) = lines_fitted(&dir, &m, "rigid21:2");
+    let doc = json(&run(&["diagnose", &csv, "--model", &model, "--json"]));
     assert_eq!(doc["model"], "rigid21:2", "{doc}");
     assert_eq!(doc["setups"], 12);
     let f = &doc["findings"][0];
@@ -199,19 +183,14 @@ fn diagnose_names_the_missing_error_function() {
             .contains("--model rigid21:4"),
         "{doc}"
     );
-    let out = run(&[
-        "diagnose",
-        csv.to_str().unwrap(),
-        "--model",
-        model.to_str().unwrap(),
-    ]);
+    let out = run(&["diagnose", &csv, "--model", &model]);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("missing: X yaw ECX, "), "{text}");
     // --report is refused with what to run instead, never half-done.
     common::expect_exit(
         &[
             "diagnose",
-            csv.to_str().unwrap(),
+            &csv,
             "--model",
             "rigid21:2",
             "--report",
