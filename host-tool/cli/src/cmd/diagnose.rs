@@ -130,7 +130,9 @@ impl Args {
         let d = trueaxis_engine::diagnose::rigid21::diagnose(&data, degree)
             .with_context(|| format!("{}: cannot diagnose", self.data.display()))?;
         let model_out = next_model_path(&self.model, &self.data);
-        let next = (!d.findings.is_empty()).then(|| {
+        // A higher degree holds a function's missing shape; a lead error on
+        // top is no degree (named effects on rigid21 are not fitted yet).
+        let next = d.findings.iter().any(|f| f.period_mm.is_none()).then(|| {
             use crate::report::diagnose::shell_word;
             format!(
                 "trueaxis fit {} --model rigid21:{} -o {}",

@@ -20,8 +20,12 @@ use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
 use crate::data::Dataset;
-use crate::fit::rigid21::{params_of, projected, skeleton, Param, NEAR_NULL, REACH};
-use crate::model::rigid21::{legendre, words, MAX_DEGREE};
+use std::f64::consts::TAU;
+
+use crate::fit::rigid21::{
+    params_of, projected_with, skeleton, ExtraColumn, Param, NEAR_NULL, REACH,
+};
+use crate::model::rigid21::{legendre, words, ErrorKind, Prediction, ToolPoint, MAX_DEGREE};
 
 /// ΔBIC below which a candidate is a finding (strong evidence).
 pub const BIC_FINDING: f64 = -10.0;
@@ -29,6 +33,8 @@ pub const BIC_FINDING: f64 = -10.0;
 pub const HELD_OUT_GAIN: f64 = 0.05;
 /// Degrees beyond the model's a candidate adds.
 const EXTRA_DEGREES: usize = 2;
+/// Periods tried per axis for a lead error.
+const PERIODS: usize = 30;
 /// At most this many findings (forward selection steps).
 const MAX_FINDINGS: usize = 6;
 
@@ -41,8 +47,11 @@ pub struct Missing {
     pub what: String,
     /// µm or µrad.
     pub unit: String,
-    /// The Legendre degrees it adds.
+    /// The Legendre degrees it adds (empty for a lead error).
     pub degrees: Vec<usize>,
+    /// A periodic (lead) error's period, mm; the amplitude is `peak`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub period_mm: Option<f64>,
     /// Largest |value| of the added shape over the travel (µm or µrad);
     /// null when not identifiable.
     pub peak: Option<f64>,
@@ -57,6 +66,9 @@ pub struct Missing {
     /// The finding in words ("X yaw ECX, 28 µrad over the travel beyond
     /// degree 2").
     pub text: String,
+    /// Index into the diagnosis' own candidate list.
+    #[serde(skip)]
+    index: usize,
 }
 
 /// What `diagnose` says about a rigid21 model.
@@ -82,6 +94,13 @@ pub struct Rigid21Diagnosis {
     /// What undermines it.
     pub warnings: Vec<String>,
 }
+
+/// A lead-error column's effect at a tool point.
+type Wave = dyn Fn(&ToolPoint) -> Prediction;
+
+/// A candidate: its columns, the (axis, period mm) of a lead error (none
+/// for a function's higher degrees), and the error it belongs to.
+type Candidate = (Vec<usize>, Option<(usize, f64)>, usize);
 
 /// Per-set-up sums of the projected design: Gram matrix, Mᵀb, bᵀb, count.
 struct Fold {
@@ -157,7 +176,47 @@ pub fn diagnose(data: &Dataset, degree: usize) -> anyhow::Result<Rigid21Diagnosi
     }
     let model = skeleton(data, top)?;
     let params: Vec<Param> = params_of(&model);
-    let pr = projected(data, &model, &params);
+    // Periodic candidates: per moving axis a lead error sin/cos(2π q / P)
+    // on its positioning, P from 2.5 steps of its positions to half its
+    // travel (30 periods, geometric).
+    let mut periodic: Vec<(usize, f64)> = Vec::new();
+    for k in model.chain.axes() {
+        let Some([lo, hi]) = model.travel_mm[k] else {
+            continue;
+        };
+        let mut q: Vec<f64> = (0..data.len()).map(|r| data.pos(k, r)).collect();
+        q.sort_by(f64::total_cmp);
+        q.dedup_by(|a, b| (*a - *b).abs() < 1e-6);
+        let mut steps: Vec<f64> = q.windows(2).map(|w| w[1] - w[0]).collect();
+        steps.sort_by(f64::total_cmp);
+        let Some(&step) = steps.get(steps.len() / 2) else {
+            continue;
+        };
+        let (pmin, pmax) = (2.5 * step, (hi - lo) / 2.0);
+        if pmin >= pmax {
+            continue;
+        }
+        for i in 0..PERIODS {
+            periodic.push((
+                k,
+                pmin * (pmax / pmin).powf(i as f64 / (PERIODS - 1) as f64),
+            ));
+        }
+    }
+    let waves: Vec<Box<Wave>> = periodic
+        .iter()
+        .flat_map(|&(k, period)| {
+            [0.0, std::f64::consts::FRAC_PI_2].map(|phase| {
+                Box::new(move |pt: &ToolPoint| {
+                    let mut out = Prediction::default();
+                    out.e_um[k] = (TAU * pt.pos_mm[k] / period + phase).sin();
+                    out
+                }) as Box<Wave>
+            })
+        })
+        .collect();
+    let extra: Vec<ExtraColumn> = waves.iter().map(|b| b.as_ref() as ExtraColumn).collect();
+    let pr = projected_with(data, &model, &params, &extra);
     let n = pr.b.len();
     if n <= pr.nuisance + 1 {
         anyhow::bail!(
@@ -169,30 +228,32 @@ pub fn diagnose(data: &Dataset, degree: usize) -> anyhow::Result<Rigid21Diagnosi
     let mut ids: Vec<i64> = pr.obs.iter().map(|&(r, _)| setup_of(r)).collect();
     ids.sort_unstable();
     ids.dedup();
-    let p = params.len();
-    let mut folds: Vec<Fold> = ids
-        .iter()
-        .map(|_| Fold {
-            g: DMatrix::zeros(p, p),
-            h: DVector::zeros(p),
-            bb: 0.0,
-            n: 0,
-        })
-        .collect();
-    for (i, &(r, _)) in pr.obs.iter().enumerate() {
-        let f = &mut folds[ids.binary_search(&setup_of(r)).unwrap_or(0)];
-        let row = pr.m.row(i);
-        f.g += row.transpose() * row;
-        f.h += row.transpose() * pr.b[i];
-        f.bb += pr.b[i] * pr.b[i];
-        f.n += 1;
-    }
-    let mut total = Fold {
+    let p = pr.m.ncols();
+    let empty = || Fold {
         g: DMatrix::zeros(p, p),
         h: DVector::zeros(p),
         bb: 0.0,
         n: 0,
     };
+    let mut rows_of: Vec<Vec<usize>> = vec![Vec::new(); ids.len()];
+    for (i, &(r, _)) in pr.obs.iter().enumerate() {
+        rows_of[ids.binary_search(&setup_of(r)).unwrap_or(0)].push(i);
+    }
+    let folds: Vec<Fold> = rows_of
+        .iter()
+        .map(|rows| {
+            let mf = pr.m.select_rows(rows);
+            let bf = DVector::from_fn(rows.len(), |i, _| pr.b[rows[i]]);
+            let mt = mf.transpose();
+            Fold {
+                g: &mt * &mf,
+                h: &mt * &bf,
+                bb: bf.norm_squared(),
+                n: rows.len(),
+            }
+        })
+        .collect();
+    let mut total = empty();
     for f in &folds {
         total.g += &f.g;
         total.h += &f.h;
@@ -208,7 +269,9 @@ pub fn diagnose(data: &Dataset, degree: usize) -> anyhow::Result<Rigid21Diagnosi
         ));
     }
     // The model as fitted: degree ≤ `degree`, minus what the data cannot see.
-    let base_all: Vec<usize> = (0..p).filter(|&j| params[j].degree <= degree).collect();
+    let base_all: Vec<usize> = (0..params.len())
+        .filter(|&j| params[j].degree <= degree)
+        .collect();
     let lost: Vec<usize> = reached(&total.g, &base_all);
     let mut cannot = vec![false; model.errors.len()];
     for &i in &lost {
@@ -223,47 +286,72 @@ pub fn diagnose(data: &Dataset, degree: usize) -> anyhow::Result<Rigid21Diagnosi
     let (rss0, held0) = score(&folds, &total, &base, cv);
     let rms_sigma = (rss0 / dof(base.len())).sqrt();
     let held_out_rms_sigma = held0.map(|h| (h / n as f64).sqrt());
-    let candidate = |t: usize| -> Vec<usize> {
-        (0..p)
+    // Candidates: a function's higher degrees, or a lead error of an axis
+    // at one period.
+    let mut cands: Vec<Candidate> = Vec::new();
+    for t in (0..model.errors.len()).filter(|&t| !cannot[t]) {
+        let cols: Vec<usize> = (0..params.len())
             .filter(|&j| params[j].term == t && params[j].degree > degree)
-            .collect()
-    };
-    let terms: Vec<usize> = (0..model.errors.len())
-        .filter(|&t| !cannot[t] && !candidate(t).is_empty())
-        .collect();
-    let evaluate = |base: &[usize], t: usize| -> Missing {
-        let e = &model.errors[t];
-        let cand = candidate(t);
-        let degrees: Vec<usize> = cand.iter().map(|&j| params[j].degree).collect();
-        let name = |peak: Option<f64>| match peak {
-            Some(v) => format!(
+            .collect();
+        if !cols.is_empty() {
+            cands.push((cols, None, t));
+        }
+    }
+    for (i, &(k, period)) in periodic.iter().enumerate() {
+        let Some(t) = model.errors.iter().position(|e| {
+            e.axis == Some(k) && e.component == k && e.kind == ErrorKind::Positioning
+        }) else {
+            continue;
+        };
+        let c0 = params.len() + 2 * i;
+        cands.push((vec![c0, c0 + 1], Some((k, period)), t));
+    }
+    let evaluate = |base: &[usize], ci: usize| -> Missing {
+        let (cand, wave, t) = &cands[ci];
+        let e = &model.errors[*t];
+        let degrees: Vec<usize> = match wave {
+            None => cand.iter().map(|&j| params[j].degree).collect(),
+            Some(_) => Vec::new(),
+        };
+        let name = |peak: Option<f64>| match (peak, wave) {
+            (Some(v), None) => format!(
                 "{} {}, {} {} over the travel beyond degree {degree}",
                 words(e),
                 e.name,
                 sig3(v),
                 e.kind.unit()
             ),
-            None => format!(
+            (Some(v), Some((_, period))) => format!(
+                "{} {}: a periodic (lead) error of {} µm amplitude, period {} mm",
+                words(e),
+                e.name,
+                sig3(v),
+                sig3(*period)
+            ),
+            (None, _) => format!(
                 "{} {}: cannot be told from the model's other errors",
                 words(e),
                 e.name
             ),
         };
+        let missing = |peak: Option<f64>, delta_bic, held_out_gain| Missing {
+            error: e.name.clone(),
+            what: words(e),
+            unit: e.kind.unit().into(),
+            degrees: degrees.clone(),
+            period_mm: wave.map(|w| w.1),
+            peak,
+            identifiable: peak.is_some(),
+            delta_bic,
+            held_out_gain,
+            text: name(peak),
+            index: ci,
+        };
         let mut cols = base.to_vec();
-        cols.extend(&cand);
+        cols.extend(cand);
         let unseen = reached(&total.g, &cols);
         if unseen.iter().any(|&i| i >= base.len()) {
-            return Missing {
-                error: e.name.clone(),
-                what: words(e),
-                unit: e.kind.unit().into(),
-                degrees,
-                peak: None,
-                identifiable: false,
-                delta_bic: None,
-                held_out_gain: None,
-                text: name(None),
-            };
+            return missing(None, None, None);
         }
         let (rss_b, held_b) = score(&folds, &total, base, cv);
         let (rss1, held1) = score(&folds, &total, &cols, cv);
@@ -281,59 +369,61 @@ pub fn diagnose(data: &Dataset, degree: usize) -> anyhow::Result<Rigid21Diagnosi
             .cholesky()
             .map(|c| c.solve(&h))
             .unwrap_or_else(|| DVector::zeros(cols.len()));
-        let peak = (0..=100)
-            .map(|i| {
-                let s = -1.0 + 2.0 * i as f64 / 100.0;
-                let pl = legendre(top, s);
-                cand.iter()
-                    .enumerate()
-                    .map(|(k, &j)| x[base.len() + k] * params[j].size * pl[params[j].degree])
-                    .sum::<f64>()
-                    .abs()
-            })
-            .fold(0.0, f64::max);
-        Missing {
-            error: e.name.clone(),
-            what: words(e),
-            unit: e.kind.unit().into(),
-            degrees,
-            peak: Some(peak),
-            identifiable: true,
-            delta_bic: Some(delta_bic),
-            held_out_gain,
-            text: name(Some(peak)),
-        }
+        let peak = match wave {
+            Some(_) => x[base.len()].hypot(x[base.len() + 1]),
+            None => (0..=100)
+                .map(|i| {
+                    let s = -1.0 + 2.0 * i as f64 / 100.0;
+                    let pl = legendre(top, s);
+                    cand.iter()
+                        .enumerate()
+                        .map(|(k, &j)| x[base.len() + k] * params[j].size * pl[params[j].degree])
+                        .sum::<f64>()
+                        .abs()
+                })
+                .fold(0.0, f64::max),
+        };
+        missing(Some(peak), Some(delta_bic), held_out_gain)
     };
     let passes = |m: &Missing| {
         m.delta_bic.is_some_and(|d| d < BIC_FINDING)
             && (!cv || m.held_out_gain.is_some_and(|g| g >= HELD_OUT_GAIN))
     };
-    let order = |v: &mut Vec<Missing>| {
+    // Best first; of an axis' lead errors only the best period is kept
+    // (the others are the same candidate at a worse period).
+    let round_of = |base: &[usize], left: &[usize]| -> Vec<Missing> {
+        let mut v: Vec<Missing> = left.iter().map(|&ci| evaluate(base, ci)).collect();
         v.sort_by(|a, b| {
             a.delta_bic
                 .unwrap_or(f64::INFINITY)
                 .total_cmp(&b.delta_bic.unwrap_or(f64::INFINITY))
-        })
+        });
+        let mut seen: Vec<String> = Vec::new();
+        v.retain(|m| {
+            if m.period_mm.is_none() {
+                return true;
+            }
+            let fresh = !seen.contains(&m.error);
+            seen.push(m.error.clone());
+            fresh
+        });
+        v
     };
-    let mut candidates: Vec<Missing> = terms.iter().map(|&t| evaluate(&base, t)).collect();
-    order(&mut candidates);
+    let mut left: Vec<usize> = (0..cands.len()).collect();
+    let candidates = round_of(&base, &left);
     let mut findings: Vec<Missing> = Vec::new();
-    let mut left: Vec<usize> = terms.clone();
     let mut round = candidates.clone();
     while findings.len() < MAX_FINDINGS {
         let Some(best) = round.first().filter(|m| passes(m)).cloned() else {
             break;
         };
-        let t = model
-            .errors
-            .iter()
-            .position(|e| e.name == best.error)
-            .unwrap_or(0);
-        base.extend(candidate(t));
-        left.retain(|&u| u != t);
+        base.extend(&cands[best.index].0);
+        // A function's degrees once; an axis' lead error once.
+        let (_, wave, t) = &cands[best.index];
+        let (is_wave, t) = (wave.is_some(), *t);
+        left.retain(|&ci| !(cands[ci].2 == t && cands[ci].1.is_some() == is_wave));
         findings.push(best);
-        round = left.iter().map(|&u| evaluate(&base, u)).collect();
-        order(&mut round);
+        round = round_of(&base, &left);
     }
     let unknown: Vec<String> = model
         .errors
@@ -450,5 +540,36 @@ mod tests {
             "{:?}",
             d.warnings
         );
+    }
+
+    #[test]
+    fn a_lead_error_on_top_is_named_with_its_period() {
+        use crate::simulate::instruments::Instrument;
+        use crate::simulate::Wave;
+        let mut m = machine(0.0);
+        m.axes[0].trans_um[0].waves.push(Wave {
+            amp: 3.0,
+            period_mm: 100.0,
+            phase_rad: 0.3,
+        });
+        // The X lines dense enough to see a 100 mm lead (5 mm steps).
+        let mut plan = laser_lines(m.travel_mm, &[0.0, 150.0]);
+        for inst in &mut plan {
+            if let Instrument::Line {
+                axis: 0, points, ..
+            } = inst
+            {
+                *points = 161;
+            }
+        }
+        let data = measure(&m, &plan, 11, true);
+        let d = diagnose(&data, 2).unwrap();
+        let f = d.findings.first().expect("a finding");
+        assert_eq!(f.error, "EXX", "{:#?}", d.findings);
+        let period = f.period_mm.expect("a lead error");
+        assert!((period - 100.0).abs() < 10.0, "{period}");
+        let amp = f.peak.unwrap();
+        assert!((amp - 3.0).abs() < 1.0, "{amp}");
+        assert!(f.text.contains("periodic"), "{}", f.text);
     }
 }

@@ -122,7 +122,27 @@ pub(crate) fn params_of(model: &Rigid21Model) -> Vec<Param> {
 /// by their sizes) and projects the set-up unknowns out
 /// (docs/volumetric.md § Set-ups).
 pub(crate) fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) -> Projected {
+    projected_with(data, model, params, &[])
+}
+
+/// A column beyond the model's: its effect at a tool point (diagnose's
+/// candidates — a periodic lead error — scored on the same design).
+pub(crate) type ExtraColumn<'a> = &'a dyn Fn(&ToolPoint) -> Prediction;
+
+/// [`projected`] with `extra` columns (unit size) after the parameters'.
+pub(crate) fn projected_with(
+    data: &Dataset,
+    model: &Rigid21Model,
+    params: &[Param],
+    extra: &[ExtraColumn],
+) -> Projected {
     let n = data.len();
+    let sizes: Vec<f64> = params
+        .iter()
+        .map(|p| p.size)
+        .chain(extra.iter().map(|_| 1.0))
+        .collect();
+    let params_len = sizes.len();
     // Set-up groups and their moving axes.
     let group = |r: usize| data.setup_id.as_ref().map(|s| s[r]);
     let mut moving: HashMap<Option<i64>, Vec<usize>> = HashMap::new();
@@ -153,6 +173,7 @@ pub(crate) fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) 
         let resp: Vec<Prediction> = params
             .iter()
             .map(|p| model.unit_response(&model.errors[p.term], p.degree, &pt))
+            .chain(extra.iter().map(|f| f(&pt)))
             .collect();
         let u = data.u_um.as_ref().map_or(1.0, |v| v[r]);
         let w = 1.0 / u;
@@ -175,10 +196,10 @@ pub(crate) fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) 
             let Some(v) = data.err_um[c].as_ref().and_then(|col| col[r]) else {
                 continue;
             };
-            let mrow: Vec<f64> = params
+            let mrow: Vec<f64> = sizes
                 .iter()
                 .zip(&resp)
-                .map(|(pa, re)| re.e_um[c] * pa.size)
+                .map(|(pa, re)| re.e_um[c] * pa)
                 .collect();
             let mut nrow = Vec::new();
             if g.is_none() || mv.len() >= 2 {
@@ -218,10 +239,10 @@ pub(crate) fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) 
             let Some(v) = data.angle_urad[c].as_ref().and_then(|col| col[r]) else {
                 continue;
             };
-            let mrow: Vec<f64> = params
+            let mrow: Vec<f64> = sizes
                 .iter()
                 .zip(&resp)
-                .map(|(pa, re)| re.angle_urad[c] * pa.size)
+                .map(|(pa, re)| re.angle_urad[c] * pa)
                 .collect();
             let nrow = if g.is_some() {
                 vec![(col((g, 4, c)), 1.0)]
@@ -242,10 +263,10 @@ pub(crate) fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) 
             data.beam_um.as_ref().map(|c| c[r]),
             data.beam_dir.as_ref().map(|c| c[r]),
         ) {
-            let mrow: Vec<f64> = params
+            let mrow: Vec<f64> = sizes
                 .iter()
                 .zip(&resp)
-                .map(|(pa, re)| re.beam_um(d) * pa.size)
+                .map(|(pa, re)| re.beam_um(d) * pa)
                 .collect();
             let nrow = if g.is_some() {
                 (0..3)
@@ -268,7 +289,7 @@ pub(crate) fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) 
     }
     let rows = b.len();
     let nn = nuis.len();
-    let mut m = DMatrix::from_fn(rows, params.len(), |i, j| rows_m[i][j]);
+    let mut m = DMatrix::from_fn(rows, params_len, |i, j| rows_m[i][j]);
     let mut bv = DVector::from_vec(b);
     if nn > 0 {
         let mut nm = DMatrix::zeros(rows, nn);
