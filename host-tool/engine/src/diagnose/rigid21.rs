@@ -441,7 +441,7 @@ pub fn diagnose(data: &Dataset, degree: usize) -> anyhow::Result<Rigid21Diagnosi
     let verdict = match findings.first() {
         Some(f) => format!("Missing: {}.", f.text),
         None if rms_sigma > 2.0 => format!(
-            "No error function's higher degree explains the residual ({} σ of the readings): the effect on top is not a smooth function of one axis — a periodic lead error, a reversal or a thermal drift, which diagnose on rigid21 does not test yet.",
+            "Nothing tested explains the residual ({} σ of the readings at their u_um): neither a function's higher degree nor a lead error at the periods these data resolve — a reversal or a thermal drift, which diagnose on rigid21 does not test yet, or readings noisier than their u_um.",
             sig3(rms_sigma)
         ),
         None => "Nothing missing that these data show: no error function needs a higher degree.".into(),
