@@ -3,7 +3,8 @@
 //! ECX, 28 µrad over the travel beyond degree 2").
 //!
 //! The candidates are the shapes the model's degree leaves out: per error
-//! function the next two Legendre degrees. Each is scored on the joint
+//! function the next two Legendre degrees; and per moving axis a periodic
+//! lead error on its positioning. Each is scored on the joint
 //! design of every reading with the set-ups' unknowns projected out (the
 //! fit's own design, so an angle is judged through its arms and every
 //! reading it reaches), by ΔBIC and by hold-out **by set-up**: each set-up
