@@ -245,6 +245,9 @@ fn function_figure(model: &Rigid21Model, id: Option<&Identifiability>, name: &st
         svg: plot.to_svg().unwrap_or_else(|e| {
             format!("<svg xmlns=\"http://www.w3.org/2000/svg\"><text>{e}</text></svg>")
         }),
+        narrow: crate::report::plot::Drawing::phone_svg(&plot)
+            .ok()
+            .flatten(),
     }
 }
 
