@@ -57,3 +57,40 @@ fn laser_lines_fit_says_what_it_cannot_know() {
     };
     assert!(r.error("A0T").unwrap().coef.is_none());
 }
+
+/// A fitted rigid21 model exports as a board table (poly and Abbe blocks,
+/// the tool length as the table's tool arm) and passes the accuracy check.
+#[test]
+fn a_fitted_rigid21_model_exports_as_a_table() {
+    let dir = tmp_dir("rigid21", "export");
+    let m = Machine::preset("mill800-21").unwrap();
+    let data = measure(&m, &laser_lines(m.travel_mm, &[0.0, 150.0]), 11, true);
+    let csv = dir.join("lines.csv");
+    import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
+    let model = dir.join("lines.model.json");
+    let fit = run(&[
+        "fit",
+        csv.to_str().unwrap(),
+        "--model",
+        "rigid21",
+        "-o",
+        model.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(fit.status.success(), "{fit:?}");
+    let table = dir.join("t.bin");
+    let out = run(&[
+        "export",
+        model.to_str().unwrap(),
+        "-o",
+        table.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(out.status.success(), "{out:?}");
+    let doc = json(&out);
+    assert_eq!(doc["format"], "table");
+    assert!(doc["terms"].as_u64().unwrap() >= 5, "{doc}");
+    assert!(doc["max_fixed_error_nm"].as_f64().unwrap() <= 1.0, "{doc}");
+    assert_eq!(doc["envelope"]["tool_range_mm"][1], 300.0, "{doc}");
+    assert!(table.exists());
+}
