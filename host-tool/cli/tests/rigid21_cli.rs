@@ -14,9 +14,11 @@ use trueaxis_engine::model::{FittedModel, ModelFile};
 use trueaxis_engine::simulate::instruments::{laser_lines, measure};
 use trueaxis_engine::simulate::Machine;
 
-#[test]
-fn laser_lines_fit_says_what_it_cannot_know() {
-    let dir = tmp_dir("rigid21", "lines");
+/// The simulator's laser lines at tool 0 and 150 mm (seed 11) fitted with
+/// `fit --model rigid21` in a fresh directory: MODEL.json's path and the
+/// run.
+fn fit_lines(name: &str) -> (std::path::PathBuf, std::process::Output) {
+    let dir = tmp_dir("rigid21", name);
     let m = Machine::preset("mill800-21").unwrap();
     let data = measure(&m, &laser_lines(m.travel_mm, &[0.0, 150.0]), 11, true);
     let csv = dir.join("lines.csv");
@@ -31,6 +33,12 @@ fn laser_lines_fit_says_what_it_cannot_know() {
         model.to_str().unwrap(),
         "--json",
     ]);
+    (model, out)
+}
+
+#[test]
+fn laser_lines_fit_says_what_it_cannot_know() {
+    let (model, out) = fit_lines("lines");
     let doc = json(&out);
     assert_eq!(doc["kind"], "rigid21");
     let errors = doc["errors"].as_array().unwrap();
@@ -199,4 +207,27 @@ fn diagnose_names_the_missing_error_function() {
         1,
         &["--report is not supported yet", "compare"],
     );
+}
+
+/// A fitted rigid21 model exports as a board table (poly and Abbe blocks,
+/// the tool length as the table's tool arm) and passes the accuracy check.
+#[test]
+fn a_fitted_rigid21_model_exports_as_a_table() {
+    let (model, fit) = fit_lines("export");
+    assert!(fit.status.success(), "{fit:?}");
+    let table = model.with_file_name("t.bin");
+    let out = run(&[
+        "export",
+        model.to_str().unwrap(),
+        "-o",
+        table.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(out.status.success(), "{out:?}");
+    let doc = json(&out);
+    assert_eq!(doc["format"], "table");
+    assert!(doc["terms"].as_u64().unwrap() >= 5, "{doc}");
+    assert!(doc["max_fixed_error_nm"].as_f64().unwrap() <= 1.0, "{doc}");
+    assert_eq!(doc["envelope"]["tool_range_mm"][1], 300.0, "{doc}");
+    assert!(table.exists());
 }
