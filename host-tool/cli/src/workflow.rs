@@ -111,7 +111,20 @@ pub fn run_compare(
         });
     }
     if let Some(dir) = report {
-        let index = crate::report::compare::write_report_from(dir, data, &predicted, &c, sources)?;
+        let index = match &model.model {
+            trueaxis_engine::model::FittedModel::Rigid21(m) => {
+                crate::report::compare::write_report_rigid21(
+                    dir,
+                    data,
+                    &predicted,
+                    &c,
+                    sources,
+                    m,
+                    model.stats.volumetric.as_ref(),
+                )?
+            }
+            _ => crate::report::compare::write_report_from(dir, data, &predicted, &c, sources)?,
+        };
         c.report = Some(index.display().to_string());
     }
     Ok(c)

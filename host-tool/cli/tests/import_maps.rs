@@ -247,12 +247,17 @@ fn a_mesh_exported_from_a_fit_of_a_mesh_gives_the_mesh_back() {
     assert!(stderr(&out).contains("a bed mesh"), "{}", stderr(&out));
 }
 
-#[test]
-fn a_bed_is_spoken_of_as_a_bed() {
-    // Issue 28: a printer's heightmap was told to measure ball-screw leads
-    // forward and backward, coloured with high = blue and captioned with a
-    // plane z = 0 it does not have.
-    let dir = tmp_dir("maps", "bed-words");
+/// The real delta-printer heightmap imported into a fresh `maps-NAME`
+/// directory and fitted with cubic19: (dir, bed.csv, bed.json, fit's JSON).
+fn real_bed_cubic(
+    name: &str,
+) -> (
+    std::path::PathBuf,
+    std::path::PathBuf,
+    std::path::PathBuf,
+    serde_json::Value,
+) {
+    let dir = tmp_dir("maps", name);
     let csv = dir.join("bed.csv");
     json(&run(&[
         "import",
@@ -262,7 +267,7 @@ fn a_bed_is_spoken_of_as_a_bed() {
         "--json",
     ]));
     let model = dir.join("bed.json");
-    json(&run(&[
+    let fit = json(&run(&[
         "fit",
         s(&csv),
         "--model",
@@ -271,6 +276,15 @@ fn a_bed_is_spoken_of_as_a_bed() {
         s(&model),
         "--json",
     ]));
+    (dir, csv, model, fit)
+}
+
+#[test]
+fn a_bed_is_spoken_of_as_a_bed() {
+    // Issue 28: a printer's heightmap was told to measure ball-screw leads
+    // forward and backward, coloured with high = blue and captioned with a
+    // plane z = 0 it does not have.
+    let (dir, csv, model, _) = real_bed_cubic("bed-words");
     let report = dir.join("diag");
     let d = json(&run(&[
         "diagnose",
@@ -314,25 +328,7 @@ fn an_exported_mesh_is_checked_at_the_probed_points() {
     // from the probed points by tens of µm while export spoke only of the
     // interpolation against the model. Export now compares the mesh, as the
     // firmware interpolates it, with every probed reading.
-    let dir = tmp_dir("maps", "probed");
-    let csv = dir.join("bed.csv");
-    json(&run(&[
-        "import",
-        s(&data("bed_heightmap.csv")),
-        "-o",
-        s(&csv),
-        "--json",
-    ]));
-    let model = dir.join("bed.json");
-    let fit = json(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&model),
-        "--json",
-    ]));
+    let (dir, csv, model, fit) = real_bed_cubic("probed");
     let worst_fit = fit["max_abs_um"]["ez"].as_f64().unwrap();
     let out = dir.join("m.cfg");
     let args = |extra: &[&str]| -> Vec<String> {

@@ -9,13 +9,16 @@ mod common;
 
 use common::{json, run, tmp_dir};
 use trueaxis_engine::import;
+use trueaxis_engine::model::rigid21::{ErrorKind, Status};
 use trueaxis_engine::model::{FittedModel, ModelFile};
 use trueaxis_engine::simulate::instruments::{laser_lines, measure};
 use trueaxis_engine::simulate::Machine;
 
-#[test]
-fn laser_lines_fit_says_what_it_cannot_know() {
-    let dir = tmp_dir("rigid21", "lines");
+/// The simulator's laser lines at tool 0 and 150 mm (seed 11) fitted with
+/// `fit --model rigid21` in a fresh directory: MODEL.json's path and the
+/// run.
+fn fit_lines(name: &str) -> (std::path::PathBuf, std::process::Output) {
+    let dir = tmp_dir("rigid21", name);
     let m = Machine::preset("mill800-21").unwrap();
     let data = measure(&m, &laser_lines(m.travel_mm, &[0.0, 150.0]), 11, true);
     let csv = dir.join("lines.csv");
@@ -30,6 +33,12 @@ fn laser_lines_fit_says_what_it_cannot_know() {
         model.to_str().unwrap(),
         "--json",
     ]);
+    (model, out)
+}
+
+#[test]
+fn laser_lines_fit_says_what_it_cannot_know() {
+    let (model, out) = fit_lines("lines");
     let doc = json(&out);
     assert_eq!(doc["kind"], "rigid21");
     let errors = doc["errors"].as_array().unwrap();
@@ -56,4 +65,169 @@ fn laser_lines_fit_says_what_it_cannot_know() {
         panic!("kind {}", file.model.kind())
     };
     assert!(r.error("A0T").unwrap().coef.is_none());
+}
+
+/// `machine` measured with laser lines at tool 0 and 150 mm (seed 11),
+/// written as `DIR/lines.csv` and fitted with `--model spec` to
+/// `DIR/lines.model.json`: (csv, model).
+fn lines_fitted(dir: &std::path::Path, m: &Machine, spec: &str) -> (String, String) {
+    let data = measure(m, &laser_lines(m.travel_mm, &[0.0, 150.0]), 11, true);
+    let csv = dir.join("lines.csv");
+    import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
+    let model = dir.join("lines.model.json");
+    let (csv, model) = (csv.display().to_string(), model.display().to_string());
+    common::assert_success(&run(&["fit", &csv, "--model", spec, "-o", &model]));
+    (csv, model)
+}
+
+/// `compare --report` on a rigid21 model: the card speaks in errors (the
+/// volumetric error before and after, what cannot be known, the
+/// measurement that would tell), each axis' six functions are drawn with
+/// their ±2σ band, a cannot_know error gets a label and no curve, and the
+/// squarenesses and tilts are a table with ±.
+#[test]
+fn compare_report_of_a_rigid21_model_speaks_in_errors() {
+    let dir = tmp_dir("rigid21", "page");
+    let m = Machine::preset("mill800-21").unwrap();
+    let (csv, model) = lines_fitted(&dir, &m, "rigid21");
+    let report = dir.join("report");
+    common::assert_success(&run(&[
+        "compare",
+        &csv,
+        "--model",
+        &model,
+        "--report",
+        report.to_str().unwrap(),
+        "--json",
+    ]));
+    let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+    // The card comes first and says what these data cannot know and what
+    // would tell.
+    let card = html.find("class=\"verdict").expect("a verdict card");
+    let first_figure = html.find("<figure").unwrap();
+    assert!(card < first_figure);
+    let card_text = &html[card..first_figure];
+    assert!(
+        card_text.contains("volumetric error falls from"),
+        "{card_text}"
+    );
+    assert!(
+        card_text.contains("Cannot know: ") && card_text.contains("A0T"),
+        "{card_text}"
+    );
+    assert!(card_text.contains("would tell the most"), "{card_text}");
+    // Eighteen functions, one figure each, before the compare sections.
+    for name in [
+        "EXX", "EYX", "EZX", "EAX", "EBX", "ECX", "ECY", "EZZ", "ECZ",
+    ] {
+        let f = format!("fn_{}.svg", name.to_lowercase());
+        assert!(report.join(&f).is_file(), "{f}");
+    }
+    let file = ModelFile::load(std::path::Path::new(&model)).unwrap();
+    let FittedModel::Rigid21(r) = &file.model else {
+        panic!()
+    };
+    let id = file.stats.volumetric.as_ref().unwrap();
+    for e in r.errors() {
+        let ans = id.errors.iter().find(|a| a.name == e.name).unwrap();
+        if e.axis.is_none() || e.kind == ErrorKind::Squareness {
+            continue;
+        }
+        let svg = std::fs::read_to_string(report.join(format!("fn_{}.svg", e.name.to_lowercase())))
+            .unwrap();
+        match e.status {
+            // A band (ans.coef_cov) and a curve.
+            Status::Estimated => {
+                assert!(ans.coef_cov.is_some(), "{}", e.name);
+                assert!(!svg.contains("cannot know"), "{}", e.name);
+                assert!(svg.contains("±2σ"), "{}: no band", e.name);
+            }
+            Status::CannotKnow => {
+                assert!(svg.contains("cannot know"), "{}", e.name);
+                assert!(!svg.contains("fitted"), "{}: a curve", e.name);
+            }
+        }
+    }
+    // Squarenesses and tilts as a table with ±; the tilt without a value.
+    let table = &html[html.find("Squarenesses and tilts").unwrap()..];
+    assert!(table.contains("C0Y") && table.contains(" ± "), "{table}");
+    let a0t = &table[table.find("A0T").unwrap()..];
+    assert!(a0t[..a0t.find("</tr>").unwrap()].contains("cannot know"));
+}
+
+/// `diagnose` on a rigid21 model fitted with too low a degree names the
+/// missing function in ISO 230-1 words, with its size and the hold-out by
+/// set-up; the next command refits with a higher degree.
+#[test]
+fn diagnose_names_the_missing_error_function() {
+    use trueaxis_engine::simulate::ErrorFn;
+    let dir = tmp_dir("rigid21", "diagnose");
+    let mut m = Machine::preset("mill800-21").unwrap();
+    for ax in &mut m.axes {
+        for f in ax.trans_um.iter_mut().chain(ax.rot_urad.iter_mut()) {
+            f.poly.truncate(3);
+            f.waves.clear();
+        }
+    }
+    // X yaw: 28 µrad × P₃ on top (P₃(2u − 1) = 20u³ − 30u² + 12u − 1).
+    let mut p = m.axes[0].rot_urad[2].poly.clone();
+    p.resize(4, 0.0);
+    for (k, v) in [-28.0, 336.0, -840.0, 560.0].into_iter().enumerate() {
+        p[k] += v;
+    }
+    m.axes[0].rot_urad[2] = ErrorFn::poly(&p);
+    let (csv, model) = lines_fitted(&dir, &m, "rigid21:2");
+    let doc = json(&run(&["diagnose", &csv, "--model", &model, "--json"]));
+    assert_eq!(doc["model"], "rigid21:2", "{doc}");
+    assert_eq!(doc["setups"], 12);
+    let f = &doc["findings"][0];
+    assert_eq!(f["error"], "ECX", "{doc}");
+    let peak = f["peak"].as_f64().unwrap();
+    assert!((peak - 28.0).abs() < 4.0, "{peak}");
+    assert!(
+        doc["next_command"]
+            .as_str()
+            .unwrap()
+            .contains("--model rigid21:4"),
+        "{doc}"
+    );
+    let out = run(&["diagnose", &csv, "--model", &model]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("missing: X yaw ECX, "), "{text}");
+    // --report is refused with what to run instead, never half-done.
+    common::expect_exit(
+        &[
+            "diagnose",
+            &csv,
+            "--model",
+            "rigid21:2",
+            "--report",
+            dir.join("r").to_str().unwrap(),
+        ],
+        1,
+        &["--report is not supported yet", "compare"],
+    );
+}
+
+/// A fitted rigid21 model exports as a board table (poly and Abbe blocks,
+/// the tool length as the table's tool arm) and passes the accuracy check.
+#[test]
+fn a_fitted_rigid21_model_exports_as_a_table() {
+    let (model, fit) = fit_lines("export");
+    assert!(fit.status.success(), "{fit:?}");
+    let table = model.with_file_name("t.bin");
+    let out = run(&[
+        "export",
+        model.to_str().unwrap(),
+        "-o",
+        table.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(out.status.success(), "{out:?}");
+    let doc = json(&out);
+    assert_eq!(doc["format"], "table");
+    assert!(doc["terms"].as_u64().unwrap() >= 5, "{doc}");
+    assert!(doc["max_fixed_error_nm"].as_f64().unwrap() <= 1.0, "{doc}");
+    assert_eq!(doc["envelope"]["tool_range_mm"][1], 300.0, "{doc}");
+    assert!(table.exists());
 }

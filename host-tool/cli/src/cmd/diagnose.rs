@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 
 use crate::cmd::out::{self, outln};
 use crate::input;
@@ -44,6 +44,9 @@ pub struct Args {
 
 impl Args {
     pub fn run(self) -> Result<()> {
+        if let Some(degree) = rigid21_degree(&self.model)? {
+            return self.run_rigid21(degree);
+        }
         let (seed, mut adds) = model_spec(&self.model)?;
         for a in &self.add {
             let spec: EffectSpec = a.parse()?;
@@ -110,6 +113,87 @@ impl Args {
             crate::cmd::out::print(&t)?;
         }
         Ok(())
+    }
+}
+
+impl Args {
+    /// `diagnose` on a rigid21 model (docs/volumetric.md § Diagnose): the
+    /// error function it is missing, in ISO 230-1 words.
+    fn run_rigid21(self, degree: usize) -> Result<()> {
+        if !self.add.is_empty() {
+            bail!("diagnose --model rigid21: --add is not supported yet (named effects on a rigid21 model are not fitted yet)");
+        }
+        if self.report.is_some() {
+            bail!("diagnose --model rigid21: --report is not supported yet; `compare DATA --model MODEL.json --report DIR` draws the model's error functions");
+        }
+        let data = input::load_data(&self.data, None)?;
+        let d = trueaxis_engine::diagnose::rigid21::diagnose(&data, degree)
+            .with_context(|| format!("{}: cannot diagnose", self.data.display()))?;
+        let model_out = next_model_path(&self.model, &self.data);
+        // A higher degree holds a function's missing shape; a lead error on
+        // top is no degree (named effects on rigid21 are not fitted yet).
+        let next = d.findings.iter().any(|f| f.period_mm.is_none()).then(|| {
+            use crate::report::diagnose::shell_word;
+            format!(
+                "trueaxis fit {} --model rigid21:{} -o {}",
+                shell_word(&self.data.display().to_string()),
+                (degree + 2).min(trueaxis_engine::model::rigid21::MAX_DEGREE),
+                shell_word(&model_out.display().to_string())
+            )
+        });
+        if self.json {
+            let mut doc = serde_json::to_value(&d)?;
+            doc["next_command"] = next.into();
+            input::add_skipped_count(&mut doc, &data);
+            out::json_pretty(&doc)?;
+            return Ok(());
+        }
+        let mut t = format!(
+            "{}: model {} ({} set-ups; hold-out by set-up)\n  residual {} σ of the readings (u_um), held-out {}\n",
+            self.data.display(),
+            d.model,
+            d.setups,
+            fmt3(d.rms_sigma),
+            d.held_out_rms_sigma.map_or("n/a".into(), |v| format!("{} σ", fmt3(v)))
+        );
+        for f in &d.findings {
+            t.push_str(&format!(
+                "missing: {} (ΔBIC {}, held-out {})\n",
+                f.text,
+                f.delta_bic.map_or("n/a".into(), |v| format!("{v:.0}")),
+                f.held_out_gain
+                    .map_or("n/a".into(), |g| format!("−{:.0} %", 100.0 * g))
+            ));
+        }
+        t.push_str(&format!("verdict: {}\n", d.verdict));
+        for w in &d.warnings {
+            t.push_str(&format!("warning: {w}\n"));
+        }
+        if let Some(n) = next {
+            t.push_str(&format!("next: {n}\n"));
+        }
+        crate::cmd::out::print(&t)
+    }
+}
+
+/// Three significant figures.
+fn fmt3(v: f64) -> String {
+    crate::report::plot::format_value(v)
+}
+
+/// The degree when `--model` is a rigid21 spec or a rigid21 MODEL.json.
+fn rigid21_degree(model: &str) -> Result<Option<usize>> {
+    let seed = if model.ends_with(".json") || Path::new(model).is_file() {
+        input::load_model(Path::new(model))?.seed
+    } else {
+        model.to_string()
+    };
+    if !seed.starts_with("rigid21") {
+        return Ok(None);
+    }
+    match seed.parse::<trueaxis_engine::model::Seed>()? {
+        trueaxis_engine::model::Seed::Rigid21 { degree } => Ok(Some(degree)),
+        _ => Ok(None),
     }
 }
 

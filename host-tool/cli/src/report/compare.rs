@@ -140,6 +140,27 @@ pub fn write_report_from(
     page.write(dir)
 }
 
+/// [`write_report_from`] for a `rigid21` model: the card speaks in errors
+/// (volumetric error before and after, what cannot be known and what would
+/// tell) and the model's error functions come before the compare sections
+/// (docs/volumetric.md § The page).
+pub fn write_report_rigid21(
+    dir: &Path,
+    data: &Dataset,
+    predicted: &[Option<Vec<f64>>; 3],
+    c: &Comparison,
+    sources: Option<Sources>,
+    model: &trueaxis_engine::model::rigid21::Rigid21Model,
+    id: Option<&trueaxis_engine::model::rigid21::Identifiability>,
+) -> Result<PathBuf> {
+    let mut page = Page::new(format!("trueaxis compare — {} vs {}", c.data, c.model));
+    let next = verdict_for(c, sources, dir, false).next;
+    page.verdict(crate::report::volumetric::verdict(c, id, next));
+    crate::report::volumetric::build_section(&mut page, model, id);
+    build_report(&mut page, data, predicted, c)?;
+    page.write(dir)
+}
+
 /// The compare page's verdict: what is left after compensation, where, and
 /// what it follows — and that `diagnose` names what is missing.
 pub fn verdict(c: &Comparison, sources: Option<Sources>, dir: &Path) -> Verdict {
@@ -284,6 +305,11 @@ pub fn next_command(
     use crate::report::diagnose::shell_word;
     let word = |p: &Path| shell_word(&p.display().to_string());
     let seed = model_spec.split([' ', '+']).next().unwrap_or("");
+    // A rigid21 model: diagnose names the error function it misses (no
+    // page of its own yet).
+    if seed.starts_with("rigid21") && !bed {
+        return format!("trueaxis diagnose {} --model {}", word(data), word(model));
+    }
     if !matches!(seed, "cubic19" | "kinematic") {
         return if bed {
             format!(

@@ -17,6 +17,7 @@ pub mod history;
 pub mod iso230;
 pub mod onmachine;
 pub mod plot;
+pub mod volumetric;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};

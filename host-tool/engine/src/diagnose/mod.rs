@@ -53,6 +53,7 @@ pub mod outliers;
 mod path;
 pub mod periodogram;
 mod physical;
+pub mod rigid21;
 mod score;
 mod search;
 mod smooth;

@@ -35,29 +35,29 @@ pub const SIZE_ANGLE_URAD: f64 = 30.0;
 pub const NEAR_NULL: f64 = 3.0;
 /// Share of a null direction's weight on an error's coefficients above
 /// which the error is `cannot_know`.
-const REACH: f64 = 0.02;
+pub(crate) const REACH: f64 = 0.02;
 
 /// A parameter: error `term` (index in the layout), Legendre degree.
 #[derive(Clone, Copy, Debug)]
-struct Param {
-    term: usize,
-    degree: usize,
+pub(crate) struct Param {
+    pub(crate) term: usize,
+    pub(crate) degree: usize,
     /// Realistic size of one unit of the scaled coefficient.
-    size: f64,
+    pub(crate) size: f64,
 }
 
 /// The design with set-up unknowns projected out, weighted by 1/u.
-struct Projected {
-    m: DMatrix<f64>,
-    b: DVector<f64>,
+pub(crate) struct Projected {
+    pub(crate) m: DMatrix<f64>,
+    pub(crate) b: DVector<f64>,
     /// (row, reading kind) of each observation, for residual statistics.
-    obs: Vec<(usize, Reading)>,
-    nuisance: usize,
+    pub(crate) obs: Vec<(usize, Reading)>,
+    pub(crate) nuisance: usize,
 }
 
 /// What an observation reads.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Reading {
+pub(crate) enum Reading {
     E(usize),
     Angle(usize),
     Beam,
@@ -99,7 +99,7 @@ pub fn skeleton(data: &Dataset, degree: usize) -> Result<Rigid21Model> {
     })
 }
 
-fn params_of(model: &Rigid21Model) -> Vec<Param> {
+pub(crate) fn params_of(model: &Rigid21Model) -> Vec<Param> {
     let mut out = Vec::new();
     for (t, e) in model.errors.iter().enumerate() {
         let size = if e.kind.is_angular() {
@@ -121,8 +121,28 @@ fn params_of(model: &Rigid21Model) -> Vec<Param> {
 /// Builds the weighted design of `data` for `model`'s parameters (scaled
 /// by their sizes) and projects the set-up unknowns out
 /// (docs/volumetric.md § Set-ups).
-fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) -> Projected {
+pub(crate) fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) -> Projected {
+    projected_with(data, model, params, &[])
+}
+
+/// A column beyond the model's: its effect at a tool point (diagnose's
+/// candidates — a periodic lead error — scored on the same design).
+pub(crate) type ExtraColumn<'a> = &'a dyn Fn(&ToolPoint) -> Prediction;
+
+/// [`projected`] with `extra` columns (unit size) after the parameters'.
+pub(crate) fn projected_with(
+    data: &Dataset,
+    model: &Rigid21Model,
+    params: &[Param],
+    extra: &[ExtraColumn],
+) -> Projected {
     let n = data.len();
+    let sizes: Vec<f64> = params
+        .iter()
+        .map(|p| p.size)
+        .chain(extra.iter().map(|_| 1.0))
+        .collect();
+    let params_len = sizes.len();
     // Set-up groups and their moving axes.
     let group = |r: usize| data.setup_id.as_ref().map(|s| s[r]);
     let mut moving: HashMap<Option<i64>, Vec<usize>> = HashMap::new();
@@ -153,6 +173,7 @@ fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) -> Projecte
         let resp: Vec<Prediction> = params
             .iter()
             .map(|p| model.unit_response(&model.errors[p.term], p.degree, &pt))
+            .chain(extra.iter().map(|f| f(&pt)))
             .collect();
         let u = data.u_um.as_ref().map_or(1.0, |v| v[r]);
         let w = 1.0 / u;
@@ -175,10 +196,10 @@ fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) -> Projecte
             let Some(v) = data.err_um[c].as_ref().and_then(|col| col[r]) else {
                 continue;
             };
-            let mrow: Vec<f64> = params
+            let mrow: Vec<f64> = sizes
                 .iter()
                 .zip(&resp)
-                .map(|(pa, re)| re.e_um[c] * pa.size)
+                .map(|(pa, re)| re.e_um[c] * pa)
                 .collect();
             let mut nrow = Vec::new();
             if g.is_none() || mv.len() >= 2 {
@@ -218,10 +239,10 @@ fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) -> Projecte
             let Some(v) = data.angle_urad[c].as_ref().and_then(|col| col[r]) else {
                 continue;
             };
-            let mrow: Vec<f64> = params
+            let mrow: Vec<f64> = sizes
                 .iter()
                 .zip(&resp)
-                .map(|(pa, re)| re.angle_urad[c] * pa.size)
+                .map(|(pa, re)| re.angle_urad[c] * pa)
                 .collect();
             let nrow = if g.is_some() {
                 vec![(col((g, 4, c)), 1.0)]
@@ -242,10 +263,10 @@ fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) -> Projecte
             data.beam_um.as_ref().map(|c| c[r]),
             data.beam_dir.as_ref().map(|c| c[r]),
         ) {
-            let mrow: Vec<f64> = params
+            let mrow: Vec<f64> = sizes
                 .iter()
                 .zip(&resp)
-                .map(|(pa, re)| re.beam_um(d) * pa.size)
+                .map(|(pa, re)| re.beam_um(d) * pa)
                 .collect();
             let nrow = if g.is_some() {
                 (0..3)
@@ -268,7 +289,7 @@ fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) -> Projecte
     }
     let rows = b.len();
     let nn = nuis.len();
-    let mut m = DMatrix::from_fn(rows, params.len(), |i, j| rows_m[i][j]);
+    let mut m = DMatrix::from_fn(rows, params_len, |i, j| rows_m[i][j]);
     let mut bv = DVector::from_vec(b);
     if nn > 0 {
         let mut nm = DMatrix::zeros(rows, nn);
@@ -566,6 +587,15 @@ pub fn fit(data: &Dataset, degree: usize) -> Result<Fitted> {
             peak,
             sigma,
             coef: e.coef.clone(),
+            coef_cov: (!cannot[t]).then(|| {
+                idx.iter()
+                    .map(|&(k1, j1)| {
+                        idx.iter()
+                            .map(|&(k2, j2)| cov[(k1, k2)] * params[j1].size * params[j2].size)
+                            .collect()
+                    })
+                    .collect()
+            }),
             hidden_um: None,
             hidden_at_tool_mm: None,
         });

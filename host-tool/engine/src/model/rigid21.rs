@@ -266,6 +266,34 @@ pub fn function_name(axis: usize, dir: usize, angle: bool) -> String {
     format!("E{d}{}", ["X", "Y", "Z"][axis])
 }
 
+/// An error in ISO 230-1 words: `X positioning`, `X straightness along
+/// Y`, `X yaw` (for Z vertical: roll about the axis itself, yaw about Z;
+/// Z's pitch about X, its yaw about Y), `squareness of Y to X`, `spindle
+/// tilt about X`.
+pub fn words(term: &ErrorTerm) -> String {
+    let axis = |a: usize| ["X", "Y", "Z"][a];
+    let c = term.component;
+    match (term.kind, term.axis) {
+        (ErrorKind::Positioning, Some(a)) => format!("{} positioning", axis(a)),
+        (ErrorKind::Straightness, Some(a)) => {
+            format!("{} straightness along {}", axis(a), axis(c))
+        }
+        (ErrorKind::Angle, Some(a)) => {
+            let role = match (a, c) {
+                (a, b) if a == b => "roll",
+                (_, 2) | (2, 1) => "yaw",
+                _ => "pitch",
+            };
+            format!("{} {role}", axis(a))
+        }
+        (ErrorKind::Squareness, Some(later)) => {
+            format!("squareness of {} to {}", axis(later), axis(3 - later - c))
+        }
+        (ErrorKind::Tilt, _) => format!("spindle tilt about {}", axis(c)),
+        _ => term.name.clone(),
+    }
+}
+
 /// The squareness of `later` to `earlier` (both present, earlier < later):
 /// its name and rotation axis (C0Y: Y to X about Z; B0Z: Z to X about Y;
 /// A0Z: Z to Y about X).
@@ -549,6 +577,11 @@ pub struct ErrorAnswer {
     /// Legendre coefficients, for `estimated` only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub coef: Option<Vec<f64>>,
+    /// Covariance of `coef` (row and column per coefficient, µm² or
+    /// µrad²), for `estimated` only: the ±2σ band of the function over the
+    /// travel on a report page (σ(s)² = pᵀ C p, p the Legendre values).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coef_cov: Option<Vec<Vec<f64>>>,
     /// For `cannot_know` only: the largest error vector (µm) this error at
     /// its realistic size gives over the working volume and the measured
     /// tool range, and the tool length (mm) where.

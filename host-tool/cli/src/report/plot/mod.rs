@@ -499,6 +499,9 @@ impl XyPlot {
         ys.extend(self.hlines.iter().map(|v| v.0).filter(|v| v.is_finite()));
         ys.extend(self.dashed.iter().map(|v| v.0).filter(|v| v.is_finite()));
         ys.extend(self.notes.iter().map(|v| v.1).filter(|v| v.is_finite()));
+        // A note stands where it is put, even on a plot with no data (a
+        // rigid21 function that cannot be known: its travel, a label).
+        xs.extend(self.notes.iter().map(|v| v.0).filter(|v| v.is_finite()));
         let x = match self.x_ticks {
             Ticks::Auto | Ticks::Period => padded_range(&xs, 0.02),
             // Half a step beyond the first and last: a single fit is a

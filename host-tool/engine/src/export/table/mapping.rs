@@ -31,9 +31,7 @@ pub(super) fn terms_of(
     let mut terms = Vec::new();
     let mut channels: Vec<String> = Vec::new();
     match model {
-        FittedModel::Rigid21(_) => bail!(
-            "rigid21 models are not exported as a table yet (issue 26: the table evaluates the model at the tool point with the tool length as an input)"
-        ),
+        FittedModel::Rigid21(m) => terms.extend(rigid21_terms(m)?),
         FittedModel::Linear(m) => {
             for o in &m.outputs {
                 let out = o.target as u8;
@@ -306,6 +304,131 @@ pub(super) fn terms_of(
         );
     }
     Ok((terms, channels, warnings))
+}
+
+/// A rigid21 model on the spindle axis (no lateral offset) at tool length
+/// L is e = P0(x, y, z) + L·P1(x, y, z) with P0 of degree D + 1 and P1 of
+/// degree D (docs/volumetric.md § On the board): per target a `Poly` term
+/// (−P0) and an `Abbe` term (−P1), in the table's scaled coordinates u.
+/// The monomial coefficients are solved from the model's own values on a
+/// tensor grid of D + 2 Chebyshev nodes per axis, which determines every
+/// polynomial of degree ≤ D + 1 exactly (up to rounding). Refused when the
+/// monomials of degree D + 1 are more than a block holds.
+fn rigid21_terms(m: &crate::model::Rigid21Model) -> Result<Vec<TermSpec>> {
+    use crate::model::rigid21::ToolPoint;
+    let top = m.degree + 1;
+    let axes = m.chain.axes();
+    if top > usize::from(MAX_DEGREE) {
+        bail!(
+            "a rigid21:{} model is a polynomial of degree {top} on the board (degree {} error functions times the arms); a table holds degree {MAX_DEGREE}: refit with rigid21:{} or lower",
+            m.degree,
+            m.degree,
+            usize::from(MAX_DEGREE) - 1
+        );
+    }
+    let mut exps: Vec<[u8; 3]> = Vec::new();
+    let mut push_exps = |e: [u8; 3]| {
+        let used_ok = (0..3).all(|a| e[a] == 0 || axes.contains(&a));
+        if used_ok && e.iter().map(|&v| usize::from(v)).sum::<usize>() <= top {
+            exps.push(e);
+        }
+    };
+    for i in 0..=top as u8 {
+        for j in 0..=top as u8 {
+            for k in 0..=top as u8 {
+                push_exps([i, j, k]);
+            }
+        }
+    }
+    if exps.len() > model_core::limits::MAX_MONOMIALS {
+        bail!(
+            "a rigid21:{} model needs {} monomials per target on the board; a table block holds {}: refit with a lower degree",
+            m.degree,
+            exps.len(),
+            model_core::limits::MAX_MONOMIALS
+        );
+    }
+    let (_, scaling) = super::envelope::travel_and_scaling(&FittedModel::Rigid21(m.clone()))?;
+    let n = top + 1;
+    let nodes: Vec<f64> = (0..n)
+        .map(|i| (std::f64::consts::PI * (i as f64 + 0.5) / n as f64).cos())
+        .collect();
+    let grid = |a: usize| -> Vec<f64> {
+        if axes.contains(&a) {
+            nodes.clone()
+        } else {
+            vec![0.0]
+        }
+    };
+    let mut us: Vec<[f64; 3]> = Vec::new();
+    for &x in &grid(0) {
+        for &y in &grid(1) {
+            for &z in &grid(2) {
+                us.push([x, y, z]);
+            }
+        }
+    }
+    let to_mm = |a: usize, u: f64| {
+        if axes.contains(&a) {
+            (f64::from(scaling.centre_nm[a]) + u * f64::from(scaling.half_span_nm[a])) * 1e-6
+        } else {
+            0.0
+        }
+    };
+    // The arm used to separate P1: any length works (e is linear in L).
+    const ARM_MM: f64 = 100.0;
+    let cols: Vec<Vec<f64>> = exps
+        .iter()
+        .map(|e| {
+            us.iter()
+                .map(|u| (0..3).map(|a| u[a].powi(i32::from(e[a]))).product())
+                .collect()
+        })
+        .collect();
+    let mut y0: [Vec<f64>; 3] = Default::default();
+    let mut y1: [Vec<f64>; 3] = Default::default();
+    for u in &us {
+        let pos_mm = [0, 1, 2].map(|a| to_mm(a, u[a]));
+        let at = |tool_mm| {
+            m.predict(&ToolPoint {
+                pos_mm,
+                tool_mm,
+                tool_lat_mm: [0.0; 2],
+            })
+            .e_um
+        };
+        let (e0, e1) = (at(0.0), at(ARM_MM));
+        for t in 0..3 {
+            // Correction = −error: nm, and nm per nm of arm.
+            y0[t].push(-1000.0 * e0[t]);
+            y1[t].push(-1e-3 * (e1[t] - e0[t]) / ARM_MM);
+        }
+    }
+    let mut terms = Vec::new();
+    for t in 0..3 {
+        let keep = |beta: Vec<f64>| -> Vec<PolyCoef> {
+            exps.iter()
+                .zip(beta)
+                .filter(|(_, c)| *c != 0.0)
+                .map(|(e, c)| (*e, c))
+                .collect()
+        };
+        let poly = keep(crate::linalg::basis::small_fit(&cols, &y0[t]).beta);
+        let abbe = keep(crate::linalg::basis::small_fit(&cols, &y1[t]).beta);
+        if !poly.is_empty() {
+            terms.push(TermSpec::Poly {
+                output: t as u8,
+                coefs: poly,
+            });
+        }
+        if !abbe.is_empty() {
+            terms.push(TermSpec::Abbe {
+                output: t as u8,
+                coefs: abbe,
+            });
+        }
+    }
+    Ok(terms)
 }
 
 /// True when the model has a term of this kind (for the sweep's states).

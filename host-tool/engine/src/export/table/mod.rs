@@ -307,7 +307,9 @@ pub fn export(file: &ModelFile, opts: &TableOptions) -> Result<TableExport, Tabl
         }
     }
     let temps_c = envelope::temp_ranges(file, &channels, opts.temp_range_c, &mut warnings)?;
-    let has_abbe = mapping::has(&model, |f| matches!(f, Feature::Abbe { .. }));
+    // A rigid21 model's error depends on the tool length (its Abbe terms).
+    let has_abbe = matches!(model, FittedModel::Rigid21(_))
+        || mapping::has(&model, |f| matches!(f, Feature::Abbe { .. }));
     let tool_mm = envelope::tool_range(opts.tool_range_mm, has_abbe)?;
     let has_rev = mapping::has(&model, |f| matches!(f, Feature::Reversal { .. }));
     let ranges = envelope::Ranges {
@@ -665,6 +667,98 @@ mod tests {
         );
         assert_eq!(e.envelope.travel_mm[1], None);
         assert_eq!(e.envelope.travel_mm[2], Some([0.0, 50.0]));
+    }
+
+    /// A rigid21:D model of the default chain over 800 × 500 × 400 mm
+    /// with every coefficient a fixed pseudo-random value of a few µm/µrad.
+    fn rigid21_model(degree: usize) -> crate::model::Rigid21Model {
+        use crate::model::rigid21::{Chain, Rigid21Model};
+        let chain = Chain::default();
+        let mut errors = Rigid21Model::layout(&chain, degree);
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        for e in &mut errors {
+            let c = (0..e.degrees.len())
+                .map(|_| {
+                    state = state
+                        .wrapping_mul(6_364_136_223_846_793_005)
+                        .wrapping_add(1_442_695_040_888_963_407);
+                    ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 8.0
+                })
+                .collect();
+            e.coef = Some(c);
+        }
+        Rigid21Model {
+            degree,
+            chain,
+            travel_mm: [Some([0.0, 800.0]), Some([0.0, 500.0]), Some([0.0, 400.0])],
+            errors,
+        }
+    }
+
+    #[test]
+    fn a_rigid21_model_exports_as_poly_and_abbe_terms() {
+        use crate::model::rigid21::ToolPoint;
+        let m = rigid21_model(4);
+        let e = export(
+            &file(FittedModel::Rigid21(m.clone())),
+            &TableOptions::default(),
+        )
+        .unwrap();
+        // The accuracy gate (default 1 nm allowance) passed; per target a
+        // polynomial block, an Abbe block for ex and ey (a rotation moves
+        // the tool tip along z by ω × arm, whose z part has no arm_z: ez
+        // does not depend on the tool length).
+        assert!(e.max_f32_error_nm <= 1.0, "{e:?}");
+        assert!(e.max_fixed_error_nm <= 1.0, "{e:?}");
+        assert_eq!(e.terms, 5);
+        assert_eq!(e.envelope.tool_range_mm, [0.0, 300.0]);
+        let t = model_core::parse(&e.table).unwrap();
+        // The table's f64 reference equals the model at random points at
+        // two tool lengths.
+        let mut state = 7u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut worst = 0.0f64;
+        let mut largest = 0.0f64;
+        for _ in 0..200 {
+            let pos_nm = [800.0, 500.0, 400.0].map(|h| (next() * h * 1e6).round() as i32);
+            for tool_mm in [0.0, 250.0] {
+                let inp = Inputs {
+                    pos_nm,
+                    tool_nm: (tool_mm * 1e6) as i32,
+                    ..Inputs::default()
+                };
+                let got = model_core::definition::eval_f64(&t, &inp);
+                let want = m
+                    .predict(&ToolPoint {
+                        pos_mm: pos_nm.map(|p| f64::from(p) * 1e-6),
+                        tool_mm,
+                        tool_lat_mm: [0.0; 2],
+                    })
+                    .e_um;
+                for k in 0..3 {
+                    worst = worst.max((got[k] + 1000.0 * want[k]).abs());
+                    largest = largest.max(want[k].abs());
+                }
+            }
+        }
+        assert!(largest > 1.0, "the model is not trivial: {largest} µm");
+        assert!(worst <= 0.5, "table f64 vs model: {worst} nm");
+    }
+
+    #[test]
+    fn a_rigid21_model_above_degree_4_is_refused() {
+        let err = export(
+            &file(FittedModel::Rigid21(rigid21_model(5))),
+            &TableOptions::default(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("rigid21:4 or lower"), "{err}");
     }
 
     #[test]

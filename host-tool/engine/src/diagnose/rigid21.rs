@@ -1,0 +1,576 @@
+//! `diagnose` on a `rigid21` model (docs/volumetric.md § Diagnose): which
+//! error function the model is missing, named in ISO 230-1 words ("X yaw
+//! ECX, 28 µrad over the travel beyond degree 2").
+//!
+//! The candidates are the shapes the model's degree leaves out: per error
+//! function the next two Legendre degrees; and per moving axis a periodic
+//! lead error on its positioning. Each is scored on the joint
+//! design of every reading with the set-ups' unknowns projected out (the
+//! fit's own design, so an angle is judged through its arms and every
+//! reading it reaches), by ΔBIC and by hold-out **by set-up**: each set-up
+//! (a laser line, a tracker station) is predicted by the model fitted to
+//! all the others, its own zeros and frame fitted to what the model leaves
+//! — the projection of a set-up's unknowns touches only its own rows, so
+//! its projected rows are exactly that. A candidate the data cannot tell
+//! from the model's other errors (a null direction reaches it, as in the
+//! fit's identifiability) is never a finding. Forward selection: the best
+//! finding joins the model and the rest are scored again, so two names for
+//! one shape are not both reported.
+
+use nalgebra::{DMatrix, DVector};
+use serde::Serialize;
+
+use crate::data::Dataset;
+use std::f64::consts::TAU;
+
+use crate::fit::rigid21::{
+    params_of, projected_with, skeleton, ExtraColumn, Param, NEAR_NULL, REACH,
+};
+use crate::model::rigid21::{legendre, words, ErrorKind, Prediction, ToolPoint, MAX_DEGREE};
+
+/// ΔBIC below which a candidate is a finding (strong evidence).
+pub const BIC_FINDING: f64 = -10.0;
+/// Held-out (by set-up) RMS must fall by at least this share.
+pub const HELD_OUT_GAIN: f64 = 0.05;
+/// Degrees beyond the model's a candidate adds.
+const EXTRA_DEGREES: usize = 2;
+/// Periods tried per axis for a lead error.
+const PERIODS: usize = 30;
+/// At most this many findings (forward selection steps).
+const MAX_FINDINGS: usize = 6;
+
+/// One candidate: the part of an error function above the model's degree.
+#[derive(Clone, Debug, Serialize)]
+pub struct Missing {
+    /// ISO 230-1 name (`ECX`).
+    pub error: String,
+    /// In words (`X yaw`).
+    pub what: String,
+    /// µm or µrad.
+    pub unit: String,
+    /// The Legendre degrees it adds (empty for a lead error).
+    pub degrees: Vec<usize>,
+    /// A periodic (lead) error's period, mm; the amplitude is `peak`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub period_mm: Option<f64>,
+    /// Largest |value| of the added shape over the travel (µm or µrad);
+    /// null when not identifiable.
+    pub peak: Option<f64>,
+    /// False when the data cannot tell it from the model's other errors.
+    pub identifiable: bool,
+    /// BIC with it minus without (negative: better); null when not
+    /// identifiable.
+    pub delta_bic: Option<f64>,
+    /// Share by which the held-out-by-set-up RMS falls with it; null when
+    /// there are fewer than 3 set-ups or it is not identifiable.
+    pub held_out_gain: Option<f64>,
+    /// The finding in words ("X yaw ECX, 28 µrad over the travel beyond
+    /// degree 2").
+    pub text: String,
+    /// Index into the diagnosis' own candidate list.
+    #[serde(skip)]
+    index: usize,
+}
+
+/// What `diagnose` says about a rigid21 model.
+#[derive(Clone, Debug, Serialize)]
+pub struct Rigid21Diagnosis {
+    /// The model diagnosed (`rigid21:2`).
+    pub model: String,
+    /// Its degree.
+    pub degree: usize,
+    /// Set-ups in the data (the hold-out's folds).
+    pub setups: usize,
+    /// RMS of the weighted residual of the model, in standard deviations
+    /// of the readings (1 at the stated `u_um`).
+    pub rms_sigma: f64,
+    /// Held-out RMS by set-up, same unit; null with fewer than 3 set-ups.
+    pub held_out_rms_sigma: Option<f64>,
+    /// The findings, in the order forward selection took them.
+    pub findings: Vec<Missing>,
+    /// Every candidate as scored against the model alone, best first.
+    pub candidates: Vec<Missing>,
+    /// The answer in one sentence.
+    pub verdict: String,
+    /// What undermines it.
+    pub warnings: Vec<String>,
+}
+
+/// A lead-error column's effect at a tool point.
+type Wave = dyn Fn(&ToolPoint) -> Prediction;
+
+/// A candidate: its columns, the (axis, period mm) of a lead error (none
+/// for a function's higher degrees), and the error it belongs to.
+type Candidate = (Vec<usize>, Option<(usize, f64)>, usize);
+
+/// Per-set-up sums of the projected design: Gram matrix, Mᵀb, bᵀb, count.
+struct Fold {
+    g: DMatrix<f64>,
+    h: DVector<f64>,
+    bb: f64,
+    n: usize,
+}
+
+/// Weighted RSS of the least-squares fit on `cols` over all folds, and
+/// the held-out RSS (each fold predicted from the others) when `cv`.
+fn score(folds: &[Fold], total: &Fold, cols: &[usize], cv: bool) -> (f64, Option<f64>) {
+    let sub = |f: &Fold| {
+        (
+            DMatrix::from_fn(cols.len(), cols.len(), |i, j| f.g[(cols[i], cols[j])]),
+            DVector::from_fn(cols.len(), |i, _| f.h[cols[i]]),
+        )
+    };
+    let solve = |g: DMatrix<f64>, h: &DVector<f64>| -> DVector<f64> {
+        // A whisker of ridge: the columns were checked identifiable, this
+        // only keeps a fold that lost a column's support solvable.
+        let n = g.nrows();
+        let tr = (0..n).map(|i| g[(i, i)]).sum::<f64>().max(1e-300);
+        let g = g + DMatrix::identity(n, n) * (tr / n as f64 * 1e-10);
+        g.cholesky()
+            .map(|c| c.solve(h))
+            .unwrap_or_else(|| DVector::zeros(n))
+    };
+    let rss = |g: &DMatrix<f64>, h: &DVector<f64>, bb: f64, x: &DVector<f64>| {
+        (bb - 2.0 * x.dot(h) + (g * x).dot(x)).max(0.0)
+    };
+    let (gt, ht) = sub(total);
+    let x = solve(gt.clone(), &ht);
+    let in_sample = rss(&gt, &ht, total.bb, &x);
+    let held = cv.then(|| {
+        folds
+            .iter()
+            .map(|f| {
+                let (gf, hf) = sub(f);
+                let x = solve(&gt - &gf, &(&ht - &hf));
+                rss(&gf, &hf, f.bb, &x)
+            })
+            .sum()
+    });
+    (in_sample, held)
+}
+
+/// Indices of `cols` a near-null direction of their Gram matrix reaches
+/// (the fit's identifiability test: singular value below [`NEAR_NULL`],
+/// weight above [`REACH`]).
+fn reached(g: &DMatrix<f64>, cols: &[usize]) -> Vec<usize> {
+    let sub = DMatrix::from_fn(cols.len(), cols.len(), |i, j| g[(cols[i], cols[j])]);
+    let eig = sub.symmetric_eigen();
+    let mut reach = vec![0.0; cols.len()];
+    for (k, &ev) in eig.eigenvalues.iter().enumerate() {
+        if ev < NEAR_NULL * NEAR_NULL {
+            for (i, r) in reach.iter_mut().enumerate() {
+                *r += eig.eigenvectors[(i, k)].powi(2);
+            }
+        }
+    }
+    (0..cols.len()).filter(|&i| reach[i] > REACH).collect()
+}
+
+/// Diagnoses `rigid21:<degree>` on `data`: the error functions whose
+/// higher-degree shape the readings show.
+pub fn diagnose(data: &Dataset, degree: usize) -> anyhow::Result<Rigid21Diagnosis> {
+    let top = (degree + EXTRA_DEGREES).min(MAX_DEGREE);
+    if top == degree {
+        anyhow::bail!(
+            "rigid21:{degree}: no higher degree to try (at most {MAX_DEGREE}); diagnose a lower degree"
+        );
+    }
+    let model = skeleton(data, top)?;
+    let params: Vec<Param> = params_of(&model);
+    // Periodic candidates: per moving axis a lead error sin/cos(2π q / P)
+    // on its positioning, P from 2.5 steps of its positions to half its
+    // travel (30 periods, geometric).
+    let mut periodic: Vec<(usize, f64)> = Vec::new();
+    for k in model.chain.axes() {
+        let Some([lo, hi]) = model.travel_mm[k] else {
+            continue;
+        };
+        let mut q: Vec<f64> = (0..data.len()).map(|r| data.pos(k, r)).collect();
+        q.sort_by(f64::total_cmp);
+        q.dedup_by(|a, b| (*a - *b).abs() < 1e-6);
+        let mut steps: Vec<f64> = q.windows(2).map(|w| w[1] - w[0]).collect();
+        steps.sort_by(f64::total_cmp);
+        let Some(&step) = steps.get(steps.len() / 2) else {
+            continue;
+        };
+        let (pmin, pmax) = (2.5 * step, (hi - lo) / 2.0);
+        if pmin >= pmax {
+            continue;
+        }
+        for i in 0..PERIODS {
+            periodic.push((
+                k,
+                pmin * (pmax / pmin).powf(i as f64 / (PERIODS - 1) as f64),
+            ));
+        }
+    }
+    let waves: Vec<Box<Wave>> = periodic
+        .iter()
+        .flat_map(|&(k, period)| {
+            [0.0, std::f64::consts::FRAC_PI_2].map(|phase| {
+                Box::new(move |pt: &ToolPoint| {
+                    let mut out = Prediction::default();
+                    out.e_um[k] = (TAU * pt.pos_mm[k] / period + phase).sin();
+                    out
+                }) as Box<Wave>
+            })
+        })
+        .collect();
+    let extra: Vec<ExtraColumn> = waves.iter().map(|b| b.as_ref() as ExtraColumn).collect();
+    let pr = projected_with(data, &model, &params, &extra);
+    let n = pr.b.len();
+    if n <= pr.nuisance + 1 {
+        anyhow::bail!(
+            "rigid21: no readings left once each set-up's own zeros and frames are taken out"
+        );
+    }
+    // Folds by set-up (rows without a set-up: one fold).
+    let setup_of = |r: usize| data.setup_id.as_ref().map_or(0, |s| s[r]);
+    let mut ids: Vec<i64> = pr.obs.iter().map(|&(r, _)| setup_of(r)).collect();
+    ids.sort_unstable();
+    ids.dedup();
+    let p = pr.m.ncols();
+    let empty = || Fold {
+        g: DMatrix::zeros(p, p),
+        h: DVector::zeros(p),
+        bb: 0.0,
+        n: 0,
+    };
+    let mut rows_of: Vec<Vec<usize>> = vec![Vec::new(); ids.len()];
+    for (i, &(r, _)) in pr.obs.iter().enumerate() {
+        rows_of[ids.binary_search(&setup_of(r)).unwrap_or(0)].push(i);
+    }
+    let folds: Vec<Fold> = rows_of
+        .iter()
+        .map(|rows| {
+            let mf = pr.m.select_rows(rows);
+            let bf = DVector::from_fn(rows.len(), |i, _| pr.b[rows[i]]);
+            let mt = mf.transpose();
+            Fold {
+                g: &mt * &mf,
+                h: &mt * &bf,
+                bb: bf.norm_squared(),
+                n: rows.len(),
+            }
+        })
+        .collect();
+    let mut total = empty();
+    for f in &folds {
+        total.g += &f.g;
+        total.h += &f.h;
+        total.bb += f.bb;
+        total.n += f.n;
+    }
+    let cv = folds.len() >= 3;
+    let mut warnings = Vec::new();
+    if !cv {
+        warnings.push(format!(
+            "{} set-up(s): no hold-out by set-up (it needs 3); the findings rest on ΔBIC alone",
+            folds.len()
+        ));
+    }
+    // The model as fitted: degree ≤ `degree`, minus what the data cannot see.
+    let base_all: Vec<usize> = (0..params.len())
+        .filter(|&j| params[j].degree <= degree)
+        .collect();
+    let lost: Vec<usize> = reached(&total.g, &base_all);
+    let mut cannot = vec![false; model.errors.len()];
+    for &i in &lost {
+        cannot[params[base_all[i]].term] = true;
+    }
+    let mut base: Vec<usize> = base_all
+        .iter()
+        .copied()
+        .filter(|&j| !cannot[params[j].term])
+        .collect();
+    let dof = |k: usize| (n - pr.nuisance).saturating_sub(k).max(1) as f64;
+    let (rss0, held0) = score(&folds, &total, &base, cv);
+    let rms_sigma = (rss0 / dof(base.len())).sqrt();
+    let held_out_rms_sigma = held0.map(|h| (h / n as f64).sqrt());
+    // Candidates: a function's higher degrees, or a lead error of an axis
+    // at one period.
+    let mut cands: Vec<Candidate> = Vec::new();
+    for t in (0..model.errors.len()).filter(|&t| !cannot[t]) {
+        let cols: Vec<usize> = (0..params.len())
+            .filter(|&j| params[j].term == t && params[j].degree > degree)
+            .collect();
+        if !cols.is_empty() {
+            cands.push((cols, None, t));
+        }
+    }
+    for (i, &(k, period)) in periodic.iter().enumerate() {
+        let Some(t) = model.errors.iter().position(|e| {
+            e.axis == Some(k) && e.component == k && e.kind == ErrorKind::Positioning
+        }) else {
+            continue;
+        };
+        let c0 = params.len() + 2 * i;
+        cands.push((vec![c0, c0 + 1], Some((k, period)), t));
+    }
+    let evaluate = |base: &[usize], ci: usize| -> Missing {
+        let (cand, wave, t) = &cands[ci];
+        let e = &model.errors[*t];
+        let degrees: Vec<usize> = match wave {
+            None => cand.iter().map(|&j| params[j].degree).collect(),
+            Some(_) => Vec::new(),
+        };
+        let name = |peak: Option<f64>| match (peak, wave) {
+            (Some(v), None) => format!(
+                "{} {}, {} {} over the travel beyond degree {degree}",
+                words(e),
+                e.name,
+                sig3(v),
+                e.kind.unit()
+            ),
+            (Some(v), Some((_, period))) => format!(
+                "{} {}: a periodic (lead) error of {} µm amplitude, period {} mm",
+                words(e),
+                e.name,
+                sig3(v),
+                sig3(*period)
+            ),
+            (None, _) => format!(
+                "{} {}: cannot be told from the model's other errors",
+                words(e),
+                e.name
+            ),
+        };
+        let missing = |peak: Option<f64>, delta_bic, held_out_gain| Missing {
+            error: e.name.clone(),
+            what: words(e),
+            unit: e.kind.unit().into(),
+            degrees: degrees.clone(),
+            period_mm: wave.map(|w| w.1),
+            peak,
+            identifiable: peak.is_some(),
+            delta_bic,
+            held_out_gain,
+            text: name(peak),
+            index: ci,
+        };
+        let mut cols = base.to_vec();
+        cols.extend(cand);
+        let unseen = reached(&total.g, &cols);
+        if unseen.iter().any(|&i| i >= base.len()) {
+            return missing(None, None, None);
+        }
+        let (rss_b, held_b) = score(&folds, &total, base, cv);
+        let (rss1, held1) = score(&folds, &total, &cols, cv);
+        let nn = (n - pr.nuisance) as f64;
+        let delta_bic =
+            nn * (rss1.max(1e-300) / rss_b.max(1e-300)).ln() + cand.len() as f64 * nn.ln();
+        let held_out_gain = match (held_b, held1) {
+            (Some(a), Some(b)) if a > 0.0 => Some(1.0 - (b / a).sqrt()),
+            _ => None,
+        };
+        // The added shape's coefficients from the full solve.
+        let g = DMatrix::from_fn(cols.len(), cols.len(), |i, j| total.g[(cols[i], cols[j])]);
+        let h = DVector::from_fn(cols.len(), |i, _| total.h[cols[i]]);
+        let x = g
+            .cholesky()
+            .map(|c| c.solve(&h))
+            .unwrap_or_else(|| DVector::zeros(cols.len()));
+        let peak = match wave {
+            Some(_) => x[base.len()].hypot(x[base.len() + 1]),
+            None => (0..=100)
+                .map(|i| {
+                    let s = -1.0 + 2.0 * i as f64 / 100.0;
+                    let pl = legendre(top, s);
+                    cand.iter()
+                        .enumerate()
+                        .map(|(k, &j)| x[base.len() + k] * params[j].size * pl[params[j].degree])
+                        .sum::<f64>()
+                        .abs()
+                })
+                .fold(0.0, f64::max),
+        };
+        missing(Some(peak), Some(delta_bic), held_out_gain)
+    };
+    let passes = |m: &Missing| {
+        m.delta_bic.is_some_and(|d| d < BIC_FINDING)
+            && (!cv || m.held_out_gain.is_some_and(|g| g >= HELD_OUT_GAIN))
+    };
+    // Best first; of an axis' lead errors only the best period is kept
+    // (the others are the same candidate at a worse period).
+    let round_of = |base: &[usize], left: &[usize]| -> Vec<Missing> {
+        let mut v: Vec<Missing> = left.iter().map(|&ci| evaluate(base, ci)).collect();
+        v.sort_by(|a, b| {
+            a.delta_bic
+                .unwrap_or(f64::INFINITY)
+                .total_cmp(&b.delta_bic.unwrap_or(f64::INFINITY))
+        });
+        let mut seen: Vec<String> = Vec::new();
+        v.retain(|m| {
+            if m.period_mm.is_none() {
+                return true;
+            }
+            let fresh = !seen.contains(&m.error);
+            seen.push(m.error.clone());
+            fresh
+        });
+        v
+    };
+    let mut left: Vec<usize> = (0..cands.len()).collect();
+    let candidates = round_of(&base, &left);
+    let mut findings: Vec<Missing> = Vec::new();
+    let mut round = candidates.clone();
+    while findings.len() < MAX_FINDINGS {
+        let Some(best) = round.first().filter(|m| passes(m)).cloned() else {
+            break;
+        };
+        base.extend(&cands[best.index].0);
+        // A function's degrees once; an axis' lead error once.
+        let (_, wave, t) = &cands[best.index];
+        let (is_wave, t) = (wave.is_some(), *t);
+        left.retain(|&ci| !(cands[ci].2 == t && cands[ci].1.is_some() == is_wave));
+        findings.push(best);
+        round = round_of(&base, &left);
+    }
+    let unknown: Vec<String> = model
+        .errors
+        .iter()
+        .zip(&cannot)
+        .filter(|(_, &c)| c)
+        .map(|(e, _)| e.name.clone())
+        .collect();
+    if !unknown.is_empty() {
+        warnings.push(format!(
+            "these data cannot know {}: a shape missing there cannot be found here either",
+            unknown.join(", ")
+        ));
+    }
+    let verdict = match findings.first() {
+        Some(f) => format!("Missing: {}.", f.text),
+        None if rms_sigma > 2.0 => format!(
+            "Nothing tested explains the residual ({} σ of the readings at their u_um): neither a function's higher degree nor a lead error at the periods these data resolve — a reversal or a thermal drift, which diagnose on rigid21 does not test yet, or readings noisier than their u_um.",
+            sig3(rms_sigma)
+        ),
+        None => "Nothing missing that these data show: no error function needs a higher degree.".into(),
+    };
+    Ok(Rigid21Diagnosis {
+        model: format!("rigid21:{degree}"),
+        degree,
+        setups: folds.len(),
+        rms_sigma,
+        held_out_rms_sigma,
+        findings,
+        candidates,
+        verdict,
+        warnings,
+    })
+}
+
+/// Three significant figures, as the pages write a value (28.4, 1.23).
+fn sig3(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let digits = (2 - v.abs().log10().floor() as i32).clamp(0, 6) as usize;
+    format!("{v:.digits$}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::simulate::instruments::{laser_lines, measure};
+    use crate::simulate::{ErrorFn, Machine};
+
+    /// `mill800-21` with every error function cut to degree 2 (all a
+    /// rigid21:2 model holds), plus `ecx_p3_urad` × P₃ on X's yaw.
+    fn machine(ecx_p3_urad: f64) -> Machine {
+        let mut m = Machine::preset("mill800-21").unwrap();
+        for ax in &mut m.axes {
+            for f in ax.trans_um.iter_mut().chain(ax.rot_urad.iter_mut()) {
+                f.poly.truncate(3);
+                f.waves.clear();
+            }
+        }
+        // P₃(2u − 1) = 20u³ − 30u² + 12u − 1.
+        let c = ecx_p3_urad;
+        let mut p = m.axes[0].rot_urad[2].poly.clone();
+        p.resize(4, 0.0);
+        for (k, v) in [-c, 12.0 * c, -30.0 * c, 20.0 * c].into_iter().enumerate() {
+            p[k] += v;
+        }
+        m.axes[0].rot_urad[2] = ErrorFn::poly(&p);
+        m
+    }
+
+    #[test]
+    fn a_yaw_beyond_the_degree_is_named_with_its_size() {
+        let m = machine(28.0);
+        let data = measure(&m, &laser_lines(m.travel_mm, &[0.0, 150.0]), 11, true);
+        let d = diagnose(&data, 2).unwrap();
+        let f = d.findings.first().expect("a finding");
+        assert_eq!(f.error, "ECX", "{d:#?}");
+        assert_eq!(f.what, "X yaw");
+        let peak = f.peak.unwrap();
+        assert!((peak - 28.0).abs() < 4.0, "{peak}");
+        assert!(f.text.starts_with("X yaw ECX, "), "{}", f.text);
+        assert!(f.held_out_gain.unwrap() > 0.2, "{f:?}");
+        assert_eq!(d.setups, 12);
+        assert!(d.verdict.contains("ECX"), "{}", d.verdict);
+    }
+
+    #[test]
+    fn nothing_is_named_when_the_degree_holds_the_machine() {
+        let m = machine(0.0);
+        let data = measure(&m, &laser_lines(m.travel_mm, &[0.0, 150.0]), 11, true);
+        let d = diagnose(&data, 2).unwrap();
+        assert!(d.findings.is_empty(), "{:#?}", d.findings);
+        assert!(d.verdict.starts_with("Nothing missing"), "{}", d.verdict);
+        assert!(d.rms_sigma < 1.5, "{}", d.rms_sigma);
+    }
+
+    #[test]
+    fn an_error_the_data_cannot_see_is_never_a_finding() {
+        // ECY has no arm for a tool on the spindle axis: however large its
+        // higher degree, laser lines never name it.
+        let mut m = machine(0.0);
+        m.axes[1].rot_urad[2] = ErrorFn::poly(&[-40.0, 480.0, -1200.0, 800.0]);
+        let data = measure(&m, &laser_lines(m.travel_mm, &[0.0, 150.0]), 11, true);
+        let d = diagnose(&data, 2).unwrap();
+        assert!(
+            d.findings.iter().all(|f| f.error != "ECY"),
+            "{:#?}",
+            d.findings
+        );
+        assert!(d.candidates.iter().all(|c| c.error != "ECY"));
+        assert!(
+            d.warnings.iter().any(|w| w.contains("ECY")),
+            "{:?}",
+            d.warnings
+        );
+    }
+
+    #[test]
+    fn a_lead_error_on_top_is_named_with_its_period() {
+        use crate::simulate::instruments::Instrument;
+        use crate::simulate::Wave;
+        let mut m = machine(0.0);
+        m.axes[0].trans_um[0].waves.push(Wave {
+            amp: 3.0,
+            period_mm: 100.0,
+            phase_rad: 0.3,
+        });
+        // The X lines dense enough to see a 100 mm lead (5 mm steps).
+        let mut plan = laser_lines(m.travel_mm, &[0.0, 150.0]);
+        for inst in &mut plan {
+            if let Instrument::Line {
+                axis: 0, points, ..
+            } = inst
+            {
+                *points = 161;
+            }
+        }
+        let data = measure(&m, &plan, 11, true);
+        let d = diagnose(&data, 2).unwrap();
+        let f = d.findings.first().expect("a finding");
+        assert_eq!(f.error, "EXX", "{:#?}", d.findings);
+        let period = f.period_mm.expect("a lead error");
+        assert!((period - 100.0).abs() < 10.0, "{period}");
+        let amp = f.peak.unwrap();
+        assert!((amp - 3.0).abs() < 1.0, "{amp}");
+        assert!(f.text.contains("periodic"), "{}", f.text);
+    }
+}
