@@ -209,6 +209,34 @@ fn diagnose_names_the_missing_error_function() {
     );
 }
 
+/// `diagnose` on a rigid21 model that misses nothing these data show says so
+/// and proposes the export; the proposed command runs as pasted (in the
+/// model's directory) and writes the table.
+#[test]
+fn diagnose_with_nothing_missing_proposes_the_export() {
+    let dir = tmp_dir("rigid21", "diagnose-nothing");
+    let mut m = Machine::preset("mill800-21").unwrap();
+    for ax in &mut m.axes {
+        for f in ax.trans_um.iter_mut().chain(ax.rot_urad.iter_mut()) {
+            f.poly.truncate(3);
+            f.waves.clear();
+        }
+    }
+    let (csv, model) = lines_fitted(&dir, &m, "rigid21:2");
+    let doc = json(&run(&["diagnose", &csv, "--model", &model, "--json"]));
+    assert_eq!(doc["findings"].as_array().map(Vec::len), Some(0), "{doc}");
+    let next = doc["next_command"].as_str().expect("a next command");
+    assert!(next.starts_with("trueaxis export "), "{next}");
+    let words: Vec<&str> = next.split_whitespace().skip(1).collect();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_trueaxis"))
+        .args(&words)
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{next}: {out:?}");
+    assert!(dir.join("table.bin").exists(), "{next}");
+}
+
 /// A fitted rigid21 model exports as a board table (poly and Abbe blocks,
 /// the tool length as the table's tool arm) and passes the accuracy check.
 #[test]

@@ -131,16 +131,29 @@ impl Args {
             .with_context(|| format!("{}: cannot diagnose", self.data.display()))?;
         let model_out = next_model_path(&self.model, &self.data);
         // A higher degree holds a function's missing shape; a lead error on
-        // top is no degree (named effects on rigid21 are not fitted yet).
-        let next = d.findings.iter().any(|f| f.period_mm.is_none()).then(|| {
-            use crate::report::diagnose::shell_word;
-            format!(
+        // top is no degree (named effects on rigid21 are not fitted yet), so
+        // it gets no command. Nothing missing: the model goes to the board
+        // (a model file as it is; a seed name is fitted first).
+        use crate::report::diagnose::shell_word;
+        let word = |p: &Path| shell_word(&p.display().to_string());
+        let next = if d.findings.iter().any(|f| f.period_mm.is_none()) {
+            Some(format!(
                 "trueaxis fit {} --model rigid21:{} -o {}",
-                shell_word(&self.data.display().to_string()),
+                word(&self.data),
                 (degree + 2).min(trueaxis_engine::model::rigid21::MAX_DEGREE),
-                shell_word(&model_out.display().to_string())
-            )
-        });
+                word(&model_out)
+            ))
+        } else if !d.findings.is_empty() {
+            None
+        } else if Path::new(&self.model).is_file() {
+            Some(format!("trueaxis export {} -o table.bin", word(&model_out)))
+        } else {
+            Some(format!(
+                "trueaxis fit {} --model rigid21:{degree} -o {}",
+                word(&self.data),
+                word(&model_out)
+            ))
+        };
         if self.json {
             let mut doc = serde_json::to_value(&d)?;
             doc["next_command"] = next.into();

@@ -156,7 +156,7 @@ pub fn write_report_rigid21(
     let mut page = Page::new(format!("trueaxis compare — {} vs {}", c.data, c.model));
     let next = verdict_for(c, sources, dir, false).next;
     page.verdict(crate::report::volumetric::verdict(c, id, next));
-    crate::report::volumetric::build_section(&mut page, model, id);
+    crate::report::volumetric::build_section(&mut page, model, id)?;
     build_report(&mut page, data, predicted, c)?;
     page.write(dir)
 }
@@ -388,28 +388,16 @@ pub fn build_report(
     let names: Vec<String> = c.targets.keys().cloned().collect();
     let before: Vec<f64> = c.targets.values().map(|r| r.before.rms_um).collect();
     let after: Vec<f64> = c.targets.values().map(|r| r.after.rms_um).collect();
-    let rms_fig = Figure {
-        name: "before_after_rms".into(),
-        caption: "RMS error per target before compensation (the raw measured error) and after (the residual the model leaves).".into(),
-        svg: String::new(),
-        narrow: None,
-    };
     let rms_fig = Figure::plot(
-        rms_fig.name,
-        rms_fig.caption,
+        "before_after_rms",
+        "RMS error per target before compensation (the raw measured error) and after (the residual the model leaves).",
         &before_after("Before vs after: RMS", "RMS (µm)", &names, &before, &after),
     )?;
     let before: Vec<f64> = c.targets.values().map(|r| r.before.max_abs_um).collect();
     let after: Vec<f64> = c.targets.values().map(|r| r.after.max_abs_um).collect();
-    let max_fig = Figure {
-        name: "before_after_max".into(),
-        caption: "Largest |error| per target before and after compensation.".into(),
-        svg: String::new(),
-        narrow: None,
-    };
     let max_fig = Figure::plot(
-        max_fig.name,
-        max_fig.caption,
+        "before_after_max",
+        "Largest |error| per target before and after compensation.",
         &before_after(
             "Before vs after: max |e|",
             "max |e| (µm)",

@@ -156,7 +156,11 @@ pub fn words(model: &Rigid21Model, name: &str) -> String {
 
 /// One function's plot: its value over the travel with the ±2σ band, or a
 /// "cannot know" label and no curve.
-fn function_figure(model: &Rigid21Model, id: Option<&Identifiability>, name: &str) -> Figure {
+fn function_figure(
+    model: &Rigid21Model,
+    id: Option<&Identifiability>,
+    name: &str,
+) -> anyhow::Result<Figure> {
     let e = model.error(name).expect("the layout's own name");
     let a = e.axis.unwrap_or(0);
     let [lo, hi] = model.travel_mm[a].unwrap_or([0.0, 1.0]);
@@ -239,21 +243,16 @@ fn function_figure(model: &Rigid21Model, id: Option<&Identifiability>, name: &st
             };
         }
     }
-    Figure {
-        name: format!("fn_{}", name.to_lowercase()),
-        caption,
-        svg: plot.to_svg().unwrap_or_else(|e| {
-            format!("<svg xmlns=\"http://www.w3.org/2000/svg\"><text>{e}</text></svg>")
-        }),
-        narrow: crate::report::plot::Drawing::phone_svg(&plot)
-            .ok()
-            .flatten(),
-    }
+    Figure::plot(format!("fn_{}", name.to_lowercase()), caption, &plot)
 }
 
 /// Adds the model's errors to `page`: per axis its six functions, then the
 /// squarenesses and tilts with ±.
-pub fn build_section(page: &mut Page, model: &Rigid21Model, id: Option<&Identifiability>) {
+pub fn build_section(
+    page: &mut Page,
+    model: &Rigid21Model,
+    id: Option<&Identifiability>,
+) -> anyhow::Result<()> {
     page.heading("The error functions of each axis (ISO 230-1)");
     page.paragraph(
         "Each axis' positioning, two straightnesses, roll, pitch and yaw over its measured travel, in the ISO 230-1 gauge (positioning and angles without a mean, straightness without its line: that slope is squareness). Translations in µm in their component's colour, angles in µrad in black; the shaded band is ±2σ of the fitted function. An error these data cannot determine is labelled and drawn without a curve.",
@@ -270,7 +269,7 @@ pub fn build_section(page: &mut Page, model: &Rigid21Model, id: Option<&Identifi
                     )
             })
             .map(|e| function_figure(model, id, &e.name))
-            .collect();
+            .collect::<anyhow::Result<Vec<_>>>()?;
         page.grid_wide(figs);
     }
     let constants: Vec<Vec<String>> = model
@@ -297,4 +296,5 @@ pub fn build_section(page: &mut Page, model: &Rigid21Model, id: Option<&Identifi
         page.heading("Squarenesses and tilts");
         page.table(&["error", "what", "value (µrad, ± 1σ)"], constants);
     }
+    Ok(())
 }

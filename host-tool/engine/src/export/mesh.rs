@@ -230,11 +230,29 @@ fn interpolate_mm(m: &MeshSamples, x: f64, y: f64) -> f64 {
         (i, t - i as f64)
     };
     let ((i, u), (j, v)) = (cell(&m.x_mm, x), cell(&m.y_mm, y));
-    let h = &m.height_mm;
-    (1.0 - u) * (1.0 - v) * h[j][i]
-        + u * (1.0 - v) * h[j][i + 1]
-        + (1.0 - u) * v * h[j + 1][i]
-        + u * v * h[j + 1][i + 1]
+    bilinear(|a, b| m.height_mm[b][a], (i, j), (u, v))
+}
+
+/// Bilinear interpolation in the cell whose lower corner is node `(i, j)`
+/// at fractions `(u, v)` of its sides; `h(a, b)` the value of node (a, b).
+/// The one interpolation the mesh's own check and the probed check share.
+fn bilinear(h: impl Fn(usize, usize) -> f64, (i, j): (usize, usize), (u, v): (f64, f64)) -> f64 {
+    (1.0 - u) * (1.0 - v) * h(i, j)
+        + u * (1.0 - v) * h(i + 1, j)
+        + (1.0 - u) * v * h(i, j + 1)
+        + u * v * h(i + 1, j + 1)
+}
+
+/// Where a mesh evaluates the model: (x, y) at the mesh's fixed z, the
+/// thermal channels at their reference temperatures, approach `dir` on
+/// every axis (a mesh holds the mean of both), the tool on the spindle.
+fn mesh_point(z_mm: f64, chans: &[(String, f64)], x: f64, y: f64, dir: i8) -> Point {
+    Point {
+        pos_mm: [x, y, z_mm],
+        dir: [dir; 3],
+        temp_c: chans.iter().map(|c| c.1).collect(),
+        tool_mm: 0.0,
+    }
 }
 
 /// The mesh `m` of `model` at every `ez` reading of `probed`: the largest
@@ -271,12 +289,10 @@ pub fn check_probed(
     let names: Vec<String> = chans.iter().map(|c| c.0.clone()).collect();
     let mut pts = Vec::with_capacity(2 * rows.len());
     for dir in [1i8, -1] {
-        pts.extend(rows.iter().map(|&(i, _)| Point {
-            pos_mm: [xs[i], ys[i], m.z_mm],
-            dir: [dir; 3],
-            temp_c: chans.iter().map(|c| c.1).collect(),
-            tool_mm: 0.0,
-        }));
+        pts.extend(
+            rows.iter()
+                .map(|&(i, _)| mesh_point(m.z_mm, &chans, xs[i], ys[i], dir)),
+        );
     }
     let full = predict_points(model, &names, &pts)?;
     let Some(full) = &full[2] else {
@@ -418,12 +434,7 @@ pub fn sample_mesh(file: &ModelFile, counts: [usize; 2]) -> Result<MeshSamples> 
     let chans = thermal_channels(model);
     let names: Vec<String> = chans.iter().map(|c| c.0.clone()).collect();
     warnings.extend(at_reference(&chans, "a bed mesh"));
-    let point = |x: f64, y: f64, dir: i8| Point {
-        pos_mm: [x, y, z_mm],
-        dir: [dir; 3],
-        temp_c: chans.iter().map(|c| c.1).collect(),
-        tool_mm: 0.0,
-    };
+    let point = |x: f64, y: f64, dir: i8| mesh_point(z_mm, &chans, x, y, dir);
     // Nodes, then a grid 8× finer for the interpolation check; both
     // directions (a mesh has none: it holds their mean).
     const FINE: usize = 8;
@@ -471,11 +482,7 @@ pub fn sample_mesh(file: &ModelFile, counts: [usize; 2]) -> Result<MeshSamples> 
                 (i - ci * FINE) as f64 / FINE as f64,
                 (j - cj * FINE) as f64 / FINE as f64,
             );
-            let h = |a: usize, b: usize| -height_mm[b][a] * 1000.0;
-            let interp = (1.0 - u) * (1.0 - v) * h(ci, cj)
-                + u * (1.0 - v) * h(ci + 1, cj)
-                + (1.0 - u) * v * h(ci, cj + 1)
-                + u * v * h(ci + 1, cj + 1);
+            let interp = bilinear(|a, b| -height_mm[b][a] * 1000.0, (ci, cj), (u, v));
             max_interp_error_um = max_interp_error_um.max((interp - mean(full, at(i, j))).abs());
         }
     }
