@@ -235,8 +235,11 @@ fn function_figure(
                 Some(h) if h < 0.05 => format!(
                     "{name}: cannot know from these data (no value); it has no arm at the measured tool points (no lateral offset), so it moves none of them — a tool off the spindle axis would feel it."
                 ),
+                // Its own effect, not what stays unseen: part of it the data
+                // see mixed with the other errors (the card's figure is the
+                // unseen part of them all, which can be smaller).
                 Some(h) => format!(
-                    "{name}: cannot know from these data (no value); at a realistic size it moves the tool point up to {} µm unseen.",
+                    "{name}: cannot know from these data (no value); at a realistic size it alone would move the tool point by up to {} µm — the data see part of that only mixed with other errors (what stays unseen of all of them: the card).",
                     format_value(h)
                 ),
                 None => format!("{name}: cannot know from these data (no value)."),
@@ -285,7 +288,10 @@ pub fn build_section(
                 ),
                 (Some(c), None) => format_value(c.first().copied().unwrap_or(0.0)),
                 (None, _) => match ans.and_then(|x| x.hidden_um) {
-                    Some(h) => format!("cannot know (hides up to {} µm)", format_value(h)),
+                    Some(h) => format!(
+                        "cannot know (alone up to {} µm at the tool point)",
+                        format_value(h)
+                    ),
                     None => "cannot know".into(),
                 },
             };
