@@ -430,10 +430,11 @@ fn pages(out: &Path) -> Vec<(&'static str, PathBuf)> {
 }
 
 /// The commands that write the pages beside the demo's, run in `out` after
-/// `simulate --scenario on-machine -o om/` and `simulate --plan iso230:x`
+/// `simulate --scenario on-machine -o om/`, `simulate --plan iso230:x` and
+/// `simulate --scenario volumetric-lines` (fitted with rigid21)
 /// (`{data}` is the tests' data folder, the report folder is appended as
 /// `--report pages/<name>`).
-const PAGE_COMMANDS: [(&str, &[&str]); 11] = [
+const PAGE_COMMANDS: [(&str, &[&str]); 12] = [
     ("iso230", &["iso230", "iso.csv"]),
     ("iso230-rtl", &["iso230", "{data}/iso_worked.rtl"]),
     (
@@ -510,6 +511,8 @@ const PAGE_COMMANDS: [(&str, &[&str]); 11] = [
         "bed-compare",
         &["compare", "bed.csv", "--model", "bed.json"],
     ),
+    // The rigid21 page: laser lines' errors and what they cannot know.
+    ("volumetric", &["compare", "vol.csv", "--model", "vol.json"]),
 ];
 
 /// Runs `bin args…` in `dir`, failing with its stderr.
@@ -575,13 +578,21 @@ fn write_pages(root: &Path, out: &Path) -> Result<()> {
         .join("data");
     let data_s = data.to_string_lossy().into_owned();
     let bed = format!("{data_s}/bed_heightmap.csv");
-    let setup: [&[&str]; 4] = [
+    let setup: [&[&str]; 6] = [
         &["simulate", "--scenario", "on-machine", "-o", "om/"],
         &[
             "simulate", "--plan", "iso230:x", "--seed", "2", "-o", "iso.csv",
         ],
         &["import", &bed, "-o", "bed.csv"],
         &["fit", "bed.csv", "--model", "cubic19", "-o", "bed.json"],
+        &[
+            "simulate",
+            "--scenario",
+            "volumetric-lines",
+            "-o",
+            "vol.csv",
+        ],
+        &["fit", "vol.csv", "--model", "rigid21", "-o", "vol.json"],
     ];
     for args in setup {
         run_in(out, &bin, args)?;

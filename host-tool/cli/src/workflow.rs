@@ -248,6 +248,11 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
 /// a mesh, not a machine's polynomial); anything else with the cubic seed.
 pub fn next_for_data(data: &Dataset, path: &Path) -> String {
     let p = crate::report::diagnose::shell_word(&path.display().to_string());
+    // Readings relative to their own set-ups (laser lines, trackers,
+    // diagonals): only the volumetric model knows their unknowns.
+    if data.setup_id.is_some() {
+        return format!("trueaxis fit {p} --model rigid21 -o model.json");
+    }
     let moving: Vec<usize> = (0..3).filter(|&a| spacing_mm(data, a).is_some()).collect();
     if let [a] = moving[..] {
         if data.dir[a].is_some() {

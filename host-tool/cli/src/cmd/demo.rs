@@ -423,6 +423,8 @@ impl Demo {
         ))?;
         let (story, on_machine_json) = self.on_machine()?;
         say(story)?;
+        let (story, volumetric_json) = self.volumetric()?;
+        say(story)?;
         let elapsed_s = t0.elapsed().as_secs_f64();
         say(format!(
             "Done in {elapsed_s:.1} s. Files for the board stage: {}, {}, {}",
@@ -439,6 +441,7 @@ impl Demo {
             "final": final_json,
             "table": table_json,
             "on_machine": on_machine_json,
+            "volumetric": volumetric_json,
             "files": {
                 "data_csv": path(self.data_csv()),
                 "model_json": path(self.model_json()),

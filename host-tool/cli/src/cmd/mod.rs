@@ -2,6 +2,7 @@
 
 pub mod compare;
 pub mod demo;
+mod demo_volumetric;
 pub mod diagnose;
 pub mod diagnose_part;
 pub mod export;

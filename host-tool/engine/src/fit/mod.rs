@@ -15,6 +15,7 @@ pub mod linear;
 pub mod local;
 pub mod nn;
 pub mod rigid21;
+pub mod volumetric_check;
 
 use anyhow::{bail, Result};
 

@@ -870,37 +870,6 @@ mod tests {
     /// Max over the points of |truth − model| after the best rigid-body
     /// placement (t + ω × p) of the model's frame: the gauge leaves the
     /// frame free, and a workpiece is set up by probing anyway.
-    fn worst_after_frame(m: &Machine, model: &Rigid21Model, check: &Dataset) -> (f64, f64) {
-        let n = check.len();
-        let mut a = DMatrix::zeros(3 * n, 6);
-        let mut d = DVector::zeros(3 * n);
-        let mut before = 0.0f64;
-        for r in 0..n {
-            let pt = ToolPoint::of_row(check, r);
-            let e = m.error_at_um(pt.pos_mm, pt.tool_mm, pt.tool_lat_mm);
-            let pr = model.predict(&pt).e_um;
-            before = before.max((e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt());
-            let p = pt.point_mm();
-            for c in 0..3 {
-                a[(3 * r + c, c)] = 1.0;
-                d[3 * r + c] = e[c] - pr[c];
-            }
-            // ω × p, ω in µrad, p in mm → µm.
-            a[(3 * r, 4)] = p[2] * 1e-3;
-            a[(3 * r, 5)] = -p[1] * 1e-3;
-            a[(3 * r + 1, 3)] = -p[2] * 1e-3;
-            a[(3 * r + 1, 5)] = p[0] * 1e-3;
-            a[(3 * r + 2, 3)] = p[1] * 1e-3;
-            a[(3 * r + 2, 4)] = -p[0] * 1e-3;
-        }
-        let x = a.clone().svd(true, true).solve(&d, 1e-12).unwrap();
-        let res = d - a * x;
-        let after = (0..n)
-            .map(|r| (0..3).map(|c| res[3 * r + c].powi(2)).sum::<f64>().sqrt())
-            .fold(0.0, f64::max);
-        (before, after)
-    }
-
     #[test]
     fn tracker_at_two_tool_lengths_estimates_all_21_and_the_tilt() {
         let m = mill();
@@ -938,19 +907,18 @@ mod tests {
         );
         // The volumetric error at points the fit never saw, at other tool
         // lengths and offsets: from tens of µm to ≤ 1.5 µm.
-        let check = measure(
+        // (Both after the one rigid frame the gauge leaves free.)
+        let checks = super::super::volumetric_check::against_machine(
             &m,
-            &[Instrument::Tracker {
-                tools_mm: vec![40.0, 120.0],
-                lateral_mm: vec![[0.0, 0.0], [50.0, -50.0]],
-                points: 60,
-            }],
+            &model,
+            &[40.0, 120.0, 250.0],
+            60,
             99,
-            false,
         );
-        let (before, after) = worst_after_frame(&m, &model, &check);
-        assert!(before > 20.0, "before {before}");
-        assert!(after <= 1.5, "after {after} µm (before {before})");
+        for c in &checks {
+            assert!(c.before_max_um > 20.0, "{c:?}");
+            assert!(c.after_max_um <= 1.5, "{c:?}");
+        }
     }
 
     /// Every estimated error of the noisy fit within 4σ of the same

@@ -22,6 +22,7 @@ mod machine;
 mod plan;
 mod spec;
 pub mod thermal_test;
+pub mod volumetric;
 
 use std::f64::consts::TAU;
 

@@ -33,7 +33,12 @@ pub const SPINDLE_THERMAL: &str = "spindle-thermal";
 pub const SPINDLE_WARMUP: &str = "spindle-warmup";
 
 /// Names accepted by [`scenario`].
-pub const SCENARIOS: [&str; 2] = [SPINDLE_THERMAL, SPINDLE_WARMUP];
+pub const SCENARIOS: [&str; 4] = [
+    SPINDLE_THERMAL,
+    SPINDLE_WARMUP,
+    super::volumetric::VOLUMETRIC_LINES,
+    super::volumetric::VOLUMETRIC_TRACKER,
+];
 
 /// The point measured, mm (mid-travel of the 800 × 500 × 500 mill).
 pub const POINT_MM: [f64; 3] = [400.0, 250.0, 250.0];
@@ -105,10 +110,13 @@ pub fn scenario(name: &str, seed: u64) -> anyhow::Result<SimOutput> {
     match name {
         SPINDLE_THERMAL => Ok(spindle_thermal(seed)),
         SPINDLE_WARMUP => Ok(spindle_warmup(seed)),
-        other => anyhow::bail!(
-            "unknown scenario `{other}` (expected {}, or on-machine with -o a directory)",
-            SCENARIOS.join(", ")
-        ),
+        other => match super::volumetric::scenario(other, seed)? {
+            Some(s) => Ok(s),
+            None => anyhow::bail!(
+                "unknown scenario `{other}` (expected {}, or on-machine with -o a directory)",
+                SCENARIOS.join(", ")
+            ),
+        },
     }
 }
 
