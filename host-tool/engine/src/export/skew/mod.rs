@@ -291,9 +291,11 @@ fn write_klipper(
     sq: &BTreeMap<String, f64>,
     profile: &str,
 ) -> anyhow::Result<(String, BTreeMap<String, f64>, Vec<Applied>)> {
-    if profile.is_empty() || profile.contains([']', '\n', '\r']) {
+    // `SKEW_PROFILE LOAD=NAME` reads one word: a name with a space could
+    // be written but never loaded.
+    if profile.is_empty() || profile.contains(|c: char| c == ']' || c.is_whitespace()) {
         anyhow::bail!(
-            "Klipper profile name `{profile}`: expected a name without `]` or line breaks"
+            "Klipper profile name `{profile}`: expected one word without `]` (SKEW_PROFILE LOAD= reads one word)"
         );
     }
     let mut out = String::new();

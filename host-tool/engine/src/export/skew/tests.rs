@@ -278,3 +278,30 @@ fn another_kind_of_model_is_refused() {
     let err = export(&lin, SkewFormat::Klipper, &SkewOptions::default()).unwrap_err();
     assert!(err.to_string().contains("rigid21"), "{err}");
 }
+
+#[test]
+fn a_klipper_profile_is_named_by_one_word() {
+    let m = model(25.0, -30.0, 20.0);
+    let named = |p: &str| {
+        let opts = SkewOptions {
+            tool_mm: 0.0,
+            profile: Some(p.into()),
+        };
+        export(
+            &file(FittedModel::Rigid21(m.clone())),
+            SkewFormat::Klipper,
+            &opts,
+        )
+    };
+    let ok = named("mill_1").unwrap();
+    assert!(
+        ok.body.contains("[skew_correction mill_1]\n"),
+        "{}",
+        ok.body
+    );
+    assert!(ok.body.contains("SKEW_PROFILE LOAD=mill_1"), "{}", ok.body);
+    for bad in ["my mill", "a]b", ""] {
+        let e = named(bad).unwrap_err().to_string();
+        assert!(e.contains("one word"), "{bad}: {e}");
+    }
+}
