@@ -22,6 +22,7 @@ use trueaxis_engine::data::{Dataset, AXES, TARGETS};
 use trueaxis_engine::export::checks::{axis_list, FileError};
 use trueaxis_engine::export::controller::{self, Controller, ControllerOptions};
 use trueaxis_engine::export::mesh::{self, MeshFormat, MeshOptions};
+use trueaxis_engine::export::skew::{self, SkewFormat, SkewOptions};
 use trueaxis_engine::export::table::TableOptions;
 use trueaxis_engine::export::{fmt_no_neg_zero, Warning};
 use trueaxis_engine::import;
@@ -42,6 +43,15 @@ pub enum Format {
     /// Klipper bed mesh profile (`#*# [bed_mesh NAME]`, for printer.cfg):
     /// the model's ez over x and y.
     KlipperMesh,
+    /// Klipper skew correction (`[skew_correction NAME]` and `SET_SKEW`):
+    /// the squarenesses of a rigid21 model.
+    KlipperSkew,
+    /// Marlin skew correction (`M852 I J K`): the squarenesses of a rigid21
+    /// model.
+    MarlinSkew,
+    /// LinuxCNC matrixkins calibration matrix (`setp matrixkins.C_xy …`):
+    /// the squarenesses of a rigid21 model.
+    Matrixkins,
 }
 
 /// Arguments of `trueaxis export`. Each flag applies to the formats named
@@ -73,9 +83,15 @@ pub struct Args {
     /// or `NX,NY` [default: 11,11].
     #[arg(long)]
     pub mesh_points: Option<String>,
-    /// [klipper-mesh] Name of the bed mesh profile [default: trueaxis].
+    /// [klipper-mesh, klipper-skew] Name of the bed mesh or skew profile
+    /// [default: trueaxis].
     #[arg(long)]
     pub profile: Option<String>,
+    /// [klipper-skew, marlin-skew, matrixkins] Tool length, mm, at which
+    /// what the file leaves out of the model (the tilt and the angles act
+    /// through it) is evaluated [default: 0].
+    #[arg(long, allow_negative_numbers = true)]
+    pub tool_mm: Option<f64>,
     /// [rrf-heightmap, klipper-mesh] The probed points to check the mesh at
     /// (default: the data the model was fitted to, when that file is found
     /// unchanged).
@@ -85,13 +101,13 @@ pub struct Args {
     /// from a probed reading, µm; above it the mesh is refused [default: 40].
     #[arg(long, allow_negative_numbers = true)]
     pub max_departure_um: Option<f64>,
-    /// [every format] Largest |correction| the export may hold, µm (default:
+    /// [every format but the skew ones] Largest |correction| the export may hold, µm (default:
     /// 1.5 × the largest the model asks for, at least 1; at most 4000). The
     /// firmware table clamps there (warned when below the model's largest);
     /// a controller file, which cannot clamp, is refused then.
     #[arg(long, allow_negative_numbers = true)]
     pub max_corr_um: Option<f64>,
-    /// [every format] Export even when every correction is below 0.05 µm
+    /// [every format but the skew ones] Export even when every correction is below 0.05 µm
     /// (refused otherwise: nothing worth compensating, or errors in mm
     /// written into µm columns).
     #[arg(long)]
@@ -151,7 +167,15 @@ const TABLE_ONLY: &[Format] = &[Format::Table];
 const CONTROLLERS: &[Format] = &[Format::Linuxcnc, Format::Sinumerik];
 const SINUMERIK_ONLY: &[Format] = &[Format::Sinumerik];
 const MESHES: &[Format] = &[Format::RrfHeightmap, Format::KlipperMesh];
-const KLIPPER_ONLY: &[Format] = &[Format::KlipperMesh];
+const KLIPPERS: &[Format] = &[Format::KlipperMesh, Format::KlipperSkew];
+const SKEWS: &[Format] = &[Format::KlipperSkew, Format::MarlinSkew, Format::Matrixkins];
+const CORRECTION_FILES: &[Format] = &[
+    Format::Table,
+    Format::Linuxcnc,
+    Format::Sinumerik,
+    Format::RrfHeightmap,
+    Format::KlipperMesh,
+];
 
 fn format_name(f: Format) -> &'static str {
     match f {
@@ -160,6 +184,9 @@ fn format_name(f: Format) -> &'static str {
         Format::Sinumerik => "sinumerik",
         Format::RrfHeightmap => "rrf-heightmap",
         Format::KlipperMesh => "klipper-mesh",
+        Format::KlipperSkew => "klipper-skew",
+        Format::MarlinSkew => "marlin-skew",
+        Format::Matrixkins => "matrixkins",
     }
 }
 
@@ -245,8 +272,27 @@ impl Args {
         flag(
             self.profile.is_some(),
             "--profile",
-            KLIPPER_ONLY,
-            "only a Klipper mesh is a named profile",
+            KLIPPERS,
+            "only a Klipper mesh or skew correction is a named profile",
+        );
+        let skew_why = "a skew file holds three factors, not a table of corrections; what it corrects is reported as squareness_um";
+        flag(
+            self.max_corr_um.is_some(),
+            "--max-corr-um",
+            CORRECTION_FILES,
+            skew_why,
+        );
+        flag(
+            self.accept_tiny_corrections,
+            "--accept-tiny-corrections",
+            CORRECTION_FILES,
+            skew_why,
+        );
+        flag(
+            self.tool_mm.is_some(),
+            "--tool-mm",
+            SKEWS,
+            "only a skew file is evaluated at one tool length",
         );
         flag(
             self.max_slew_nm_per_ms.is_some(),
@@ -326,6 +372,9 @@ impl Args {
             Format::Sinumerik => self.controller(&model, Controller::Sinumerik)?,
             Format::RrfHeightmap => self.mesh(&model, MeshFormat::RrfHeightmap)?,
             Format::KlipperMesh => self.mesh(&model, MeshFormat::KlipperMesh)?,
+            Format::KlipperSkew => self.skew(&model, SkewFormat::Klipper)?,
+            Format::MarlinSkew => self.skew(&model, SkewFormat::Marlin)?,
+            Format::Matrixkins => self.skew(&model, SkewFormat::Matrixkins)?,
         };
         // Rows the model was fitted without (outside its travel): every
         // format says so, first.
@@ -493,6 +542,57 @@ impl Args {
 }
 
 impl Args {
+    /// A skew correction from a rigid21 model's squarenesses, with what it
+    /// leaves out (docs/export-formats.md § Skew corrections).
+    fn skew(&self, model: &ModelFile, format: SkewFormat) -> Result<Printed> {
+        let opts = SkewOptions {
+            tool_mm: self.tool_mm.unwrap_or(0.0),
+            profile: self.profile.clone(),
+        };
+        if !opts.tool_mm.is_finite() {
+            bail!("--tool-mm {}: expected a finite number of mm", opts.tool_mm);
+        }
+        let e = skew::export(model, format, &opts).map_err(|e| file_refusal(e, &self.output))?;
+        write_file(&self.output, e.body.as_bytes())?;
+        let sq: Vec<String> = e
+            .squareness_urad
+            .iter()
+            .map(|(n, v)| format!("{n} {v:.3} µrad"))
+            .collect();
+        let kinds: Vec<String> = e
+            .left_out_by_kind_um
+            .iter()
+            .map(|(k, v)| format!("{k} {v:.3}"))
+            .collect();
+        let unknown = if e.cannot_know.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; the data cannot know {} (no value, not counted{})",
+                e.cannot_know.join(", "),
+                e.hidden_um.map_or(String::new(), |h| format!(
+                    "; they may hide up to {h:.3} µm"
+                ))
+            )
+        };
+        let text = format!(
+            "{}: {} from the squarenesses ({}), which give up to {:.3} µm over the working volume (the numbers as written leave {:.6} µm of it); the model's error, up to {:.3} µm, falls to what the file leaves out, the rest of the model: up to {:.3} µm at x {:.1}, y {:.1}, z {:.1} mm, tool {} mm ({} µm){unknown}\n",
+            self.output.display(),
+            format_name(self.format),
+            sq.join(", "),
+            e.squareness_um,
+            e.max_written_error_um,
+            e.model_um,
+            e.left_out_um,
+            e.left_out_at_mm[0],
+            e.left_out_at_mm[1],
+            e.left_out_at_mm[2],
+            e.tool_mm,
+            kinds.join(", ")
+        );
+        Ok((self.doc(&e)?, e.warnings.clone(), text))
+    }
+
     /// The probed readings a bed mesh is checked at: `--data`, else the
     /// file the model was fitted to (as fit recorded it, from here or from
     /// the model's folder) when its content is unchanged; whether they are
@@ -592,6 +692,7 @@ fn file_refusal(e: FileError, output: &Path) -> anyhow::Error {
         e @ FileError::Departs { .. } => format!(
             "{e}; {out} was not written — add nodes (--mesh-points), fit a model that follows the readings (a grid model), or accept it with --max-departure-um"
         ),
+        e @ FileError::CannotKnow { .. } => format!("{e}; {out} was not written"),
         FileError::Other(e) => return e,
     };
     anyhow!(msg)

@@ -220,6 +220,20 @@ pub enum FileError {
         /// The check at the probed points.
         check: Box<super::mesh::ProbedCheck>,
     },
+    /// The file needs errors of a rigid21 model that the data cannot
+    /// determine (`cannot_know`): no value is written for them.
+    #[error(
+        "the {format} file needs {}, which these data cannot determine (cannot_know): no value is written for what cannot be known — measure {measure}",
+        names.join(", ")
+    )]
+    CannotKnow {
+        /// The format's name (`klipper-skew`).
+        format: &'static str,
+        /// The ISO 230-1 names of the errors.
+        names: Vec<String>,
+        /// What would determine them, in words.
+        measure: String,
+    },
     /// Any other failure, as the step that failed says it.
     #[error(transparent)]
     Other(#[from] anyhow::Error),

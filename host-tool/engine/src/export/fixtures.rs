@@ -46,3 +46,29 @@ pub(crate) fn linear(target: usize, terms: &[(Feature, f64)]) -> ModelFile {
 pub(crate) fn mono(exp: [u8; 3]) -> Feature {
     Feature::Monomial { exp }
 }
+
+/// A rigid21:D model of the default chain over 800 × 500 × 400 mm
+/// with every coefficient a fixed pseudo-random value of a few µm/µrad.
+pub(crate) fn rigid21(degree: usize) -> crate::model::Rigid21Model {
+    use crate::model::rigid21::{Chain, Rigid21Model};
+    let chain = Chain::default();
+    let mut errors = Rigid21Model::layout(&chain, degree);
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    for e in &mut errors {
+        let c = (0..e.degrees.len())
+            .map(|_| {
+                state = state
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1_442_695_040_888_963_407);
+                ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 8.0
+            })
+            .collect();
+        e.coef = Some(c);
+    }
+    Rigid21Model {
+        degree,
+        chain,
+        travel_mm: [Some([0.0, 800.0]), Some([0.0, 500.0]), Some([0.0, 400.0])],
+        errors,
+    }
+}

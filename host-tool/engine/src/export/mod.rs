@@ -13,6 +13,10 @@
 //! - [`mesh`]: a 3-D printer's bed mesh, RepRapFirmware or Klipper
 //!   ([`mesh::export`] → [`mesh::MeshExport`] or a
 //!   [`checks::FileError`]).
+//! - [`skew`]: the squarenesses of a rigid21 model as a firmware's skew
+//!   correction — Klipper, Marlin `M852`, LinuxCNC `matrixkins` —
+//!   with what it leaves out ([`skew::export`] → [`skew::SkewExport`] or
+//!   a [`checks::FileError`]).
 //! - [`checks`]: what every export checks before it writes (tiny
 //!   corrections, the max |correction| limit, a file that cannot clamp)
 //!   and the typed refusals.
@@ -39,6 +43,7 @@ pub mod controller;
 #[cfg(test)]
 mod fixtures;
 pub mod mesh;
+pub mod skew;
 pub mod table;
 
 use anyhow::{bail, Result};
