@@ -118,8 +118,8 @@ fn the_checked_in_rigid21_table_is_the_engines_export() {
             }
             at_tool.push(want);
         }
-        for k in 0..3 {
-            tool_effect_um = tool_effect_um.max((at_tool[1][k] - at_tool[0][k]).abs());
+        for (long, short) in at_tool[1].iter().zip(&at_tool[0]) {
+            tool_effect_um = tool_effect_um.max((long - short).abs());
         }
     }
     assert!(worst_nm <= 0.5, "table f64 vs model: {worst_nm} nm");
