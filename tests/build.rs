@@ -5,7 +5,8 @@
 //! (see qemu.x and `flip_ram`), links every image, test
 //! suite included, with cortex-m-rt's and defmt's linker scripts and
 //! qemu.x (the stack below the statics, so an overflow faults), and
-//! encodes the bench tables (build/tables.rs) into OUT_DIR for the bench
+//! encodes the bench tables (build/tables.rs, and golden/rigid21.bin: the
+//! engine's export of a fitted rigid21 model, copied) into OUT_DIR for the bench
 //! image (with its table list, `bench_tables.rs`) and the model-core suite
 //! to `include_bytes!`, with the host's
 //! evaluation of each on seeded inputs (`<name>.vectors`, records of
@@ -49,11 +50,27 @@ fn main() {
         ("full", tables::full),
         ("nn_3x16x3", tables::nn_3x16x3),
     ];
-    for (name, build) in benches {
-        let bytes = build(0x7E57_AB1E).unwrap_or_else(|e| panic!("bench table {name}: {e}"));
+    let mut tables: Vec<(&str, Vec<u8>)> = benches
+        .iter()
+        .map(|&(name, build)| {
+            let bytes = build(0x7E57_AB1E).unwrap_or_else(|e| panic!("bench table {name}: {e}"));
+            (name, bytes)
+        })
+        .collect();
+    // The engine's export of a fitted rigid21:4 model (issue 26), checked
+    // in: host-tool/engine/tests/rigid21_board_table.rs writes it and
+    // requires today's export to equal it.
+    let rigid21 = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("golden/rigid21.bin");
+    println!("cargo:rerun-if-changed={}", rigid21.display());
+    tables.push((
+        "rigid21",
+        fs::read(&rigid21).unwrap_or_else(|e| panic!("{}: {e}", rigid21.display())),
+    ));
+    for (name, bytes) in &tables {
+        let (name, bytes) = (*name, bytes.as_slice());
         // The host's evaluation of the same table on seeded inputs: the
         // on-target suite must reproduce it (fixed point bit for bit).
-        let table = model_core::parse(&bytes).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let table = model_core::parse(bytes).unwrap_or_else(|e| panic!("{name}: {e}"));
         let model =
             Box::new(model_core::Model::load(&table).unwrap_or_else(|e| panic!("{name}: {e:?}")));
         let mut vectors = Vec::new();
@@ -62,10 +79,13 @@ fn main() {
                 vectors.extend_from_slice(&w.to_le_bytes());
             }
         }
-        fs::write(out.join(format!("{name}.bin")), &bytes).expect("write a bench table");
+        fs::write(out.join(format!("{name}.bin")), bytes).expect("write a bench table");
         fs::write(out.join(format!("{name}.vectors")), vectors).expect("write vectors");
     }
-    bench_list(&out, benches.map(|(name, _)| name));
+    bench_list(
+        &out,
+        &tables.iter().map(|(name, _)| *name).collect::<Vec<_>>(),
+    );
     // The safety suite's table that the board must refuse (issue 25).
     let off = tables::off_definition(0x0FFD_EF00).unwrap_or_else(|e| panic!("off_definition: {e}"));
     fs::write(out.join("off_definition.bin"), off).expect("write off_definition.bin");
@@ -73,13 +93,14 @@ fn main() {
 }
 
 /// The bench image's table list (`bench_tables.rs` in OUT_DIR): the three
-/// tables of build/tables.rs (the bench names of docs/qemu.md, "Instruction counts"), two checked-in golden
+/// tables of build/tables.rs and the engine's rigid21 export
+/// (golden/rigid21.bin; the bench names of docs/qemu.md, "Instruction counts"), two checked-in golden
 /// tables of model-core (`grid_17x11`; `all_kinds`, every term kind in one
 /// table: the worst realistic case), and build/cost_tables.rs (one table
 /// per evaluation path, for the check of model-core's cost estimate). With
 /// the package's `calibrate` feature (`cargo xtask bench-mcu --calibrate`)
 /// also the cost estimate's calibration set, `cost_tables::calibration`.
-fn bench_list(out: &std::path::Path, contract: [&str; 3]) {
+fn bench_list(out: &std::path::Path, contract: &[&str]) {
     let mut names: Vec<String> = contract.iter().map(|s| s.to_string()).collect();
     let golden = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../model-core/tests/golden");
     for name in ["grid_17x11", "all_kinds"] {

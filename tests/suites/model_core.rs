@@ -52,7 +52,7 @@ fn records(bytes: &'static [u8]) -> impl Iterator<Item = Record> {
 }
 
 /// The tables and their host vectors.
-const CASES: [(&str, &[u8], &[u8]); 3] = [
+const CASES: [(&str, &[u8], &[u8]); 4] = [
     (
         "cubic19",
         include_bytes!(concat!(env!("OUT_DIR"), "/cubic19.bin")),
@@ -67,6 +67,14 @@ const CASES: [(&str, &[u8], &[u8]); 3] = [
         "nn_3x16x3",
         include_bytes!(concat!(env!("OUT_DIR"), "/nn_3x16x3.bin")),
         include_bytes!(concat!(env!("OUT_DIR"), "/nn_3x16x3.vectors")),
+    ),
+    // The engine's export of a fitted rigid21:4 model (P0 + L·P1: polynomial
+    // and Abbe blocks, the tool length as input; tests/golden/rigid21.bin),
+    // at tool lengths −10…310 mm.
+    (
+        "rigid21",
+        include_bytes!(concat!(env!("OUT_DIR"), "/rigid21.bin")),
+        include_bytes!(concat!(env!("OUT_DIR"), "/rigid21.vectors")),
     ),
 ];
 
@@ -297,6 +305,40 @@ mod tests {
                 flagged
             );
         }
+    }
+
+    /// The rigid21 table's vectors carry tool lengths, and on the target
+    /// the tool length changes the correction (its Abbe blocks are
+    /// evaluated): the same records at tool 0 give other values.
+    #[test]
+    fn rigid21_corrects_for_the_tool_length() {
+        let Some((name, table, vectors)) = CASES.iter().find(|c| c.0 == "rigid21") else {
+            defmt::panic!("no rigid21 case")
+        };
+        let model = load(name, table);
+        let (mut n, mut long, mut moved) = (0u32, 0u32, 0u32);
+        for r in records(vectors) {
+            let at_zero = model_core::Inputs {
+                tool_nm: 0,
+                ..r.inputs
+            };
+            long += u32::from(r.inputs.tool_nm.abs() >= 100_000_000);
+            moved += u32::from(model.eval_fixed(&at_zero).corr_nm != r.fixed_nm);
+            n += 1;
+        }
+        defmt::assert!(long > n / 2, "{} of {} records at a tool ≥ 100 mm", long, n);
+        defmt::assert!(
+            moved >= long,
+            "{} of {} records moved by the tool",
+            moved,
+            n
+        );
+        defmt::info!(
+            "rigid21: {} of {} records at a tool ≥ 100 mm, {} corrected differently than at tool 0",
+            long,
+            n,
+            moved
+        );
     }
 
     #[test]

@@ -14,7 +14,8 @@
 //! the axes move: the simulated board's sample table (polynomials,
 //! reversal, thermal) and model-core's golden tables — `all_kinds` (every
 //! term kind in one table, a two-layer 4-16-16-3 network among them) is
-//! the worst realistic case. Step pulses are counted, not bit-banged (the
+//! the worst realistic case — and the engine's export of a fitted rigid21
+//! model (tests/golden/rigid21.bin, with a 150 mm tool). Step pulses are counted, not bit-banged (the
 //! board's bit-banging costs 2 µs per pulse by construction).
 //!
 //! Output (semihosting stdout): `BUDGET period=… tick=… engine=… model=…`
@@ -43,7 +44,7 @@ use trueaxis_protocol::{Slot, SlotInfo, LINK_TEMPS};
 mod tim2;
 
 /// The tables, by name.
-static TABLES: [(&str, &[u8]); 6] = [
+static TABLES: [(&str, &[u8]); 7] = [
     (
         "sample_table",
         include_bytes!(concat!(env!("OUT_DIR"), "/sample.bin")),
@@ -68,7 +69,16 @@ static TABLES: [(&str, &[u8]); 6] = [
         "all_kinds",
         include_bytes!("../../../model-core/tests/golden/all_kinds.bin"),
     ),
+    // The engine's export of a fitted rigid21:4 model (issue 26): ticked
+    // with a 150 mm tool (`RIGID21_TOOL_NM`), so its Abbe blocks carry an arm.
+    (
+        "rigid21",
+        include_bytes!("../../../tests/golden/rigid21.bin"),
+    ),
 ];
+
+/// The tool length the rigid21 case ticks with, nm.
+const RIGID21_TOOL_NM: i32 = 150_000_000;
 
 /// The board's home switch (firmware/board/src/board.rs).
 const HOME: HomeSwitch = HomeSwitch {
@@ -215,7 +225,15 @@ fn main() -> ! {
             len: table.len() as u32,
             crc32: trueaxis_protocol::table_id(table),
         };
-        let mut engine = match Engine::new(CONFIG) {
+        let cfg = EngineConfig {
+            tool_nm: if name == "rigid21" {
+                RIGID21_TOOL_NM
+            } else {
+                0
+            },
+            ..CONFIG
+        };
+        let mut engine = match Engine::new(cfg) {
             Ok(e) => e,
             Err(_) => panic!("board configuration refused"),
         };

@@ -308,13 +308,26 @@ pub(super) fn mono20_q30(u: [i32; 3]) -> [i32; 20] {
     ]
 }
 
-/// All 56 graded monomials (degree ≤ 5), Q30.
+/// All 56 graded monomials (degree ≤ 5), Q30: each its parent times one
+/// coordinate, as the loop over [`MONO_PARENT`] and [`MONO_AXIS`] would
+/// make them (the same integers), but straight-line with the indices
+/// constant — one SMULL and a funnel shift per monomial, no table loads or
+/// loop (issue 26: the monomial vector of a rigid21 table, degree 5, was
+/// the largest part of its tick).
+#[inline(always)]
 pub(super) fn mono56_q30(u: [i32; 3]) -> [i32; MAX_MONOMIALS] {
     let mut mv = [0i32; MAX_MONOMIALS];
     mv[0] = ONE_Q30;
-    for i in 1..MAX_MONOMIALS {
-        mv[i] = mul_q30(mv[MONO_PARENT[i] as usize], u[MONO_AXIS[i] as usize]);
+    mv[1] = u[0];
+    mv[2] = u[1];
+    mv[3] = u[2];
+    macro_rules! products {
+        ($($i:literal)*) => {
+            $(mv[$i] = mul_q30(mv[MONO_PARENT[$i] as usize], u[MONO_AXIS[$i] as usize]);)*
+        };
     }
+    products!(4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29
+        30 31 32 33 34 35 36 37 38 39 40 41 42 43 44 45 46 47 48 49 50 51 52 53 54 55);
     mv
 }
 
@@ -406,6 +419,27 @@ mod tests {
                 }
                 assert_eq!(rshr_var(x, s), rshr(x, s), "{x} >> {s}");
             }
+        }
+    }
+
+    /// The straight-line `mono56_q30` gives the integers of the loop over
+    /// the parent table it unrolls (every entry, at the Q30 limits too).
+    #[test]
+    fn mono56_q30_is_the_parent_loop() {
+        let mut rng = trueaxis_test_support::XorShift64(0x9b05_688c_2b3e_6c1fu64);
+        let lim = (1i64 << 30) + 1;
+        for k in 0..20_000 {
+            let u: [i32; 3] = core::array::from_fn(|a| match (k + a) % 5 {
+                0 => lim as i32,
+                1 => -lim as i32,
+                _ => rng.range(-lim, lim + 1) as i32,
+            });
+            let mut want = [0i32; MAX_MONOMIALS];
+            want[0] = ONE_Q30;
+            for i in 1..MAX_MONOMIALS {
+                want[i] = mul_q30(want[MONO_PARENT[i] as usize], u[MONO_AXIS[i] as usize]);
+            }
+            assert_eq!(mono56_q30(u), want, "{u:?}");
         }
     }
 

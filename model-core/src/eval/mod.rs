@@ -646,8 +646,10 @@ struct TermQ {
 const FQ_CAP: usize = 8;
 
 /// Most monomials the fixed block sums by monomial (every block of degree
-/// ≤ 3 has at most 20).
-const BLK_CAP: usize = 24;
+/// ≤ 3 has at most 20; 28 is half of the 56 of degree ≤ 5, the most the
+/// rule "at most half of the vector's" lets through — a rigid21:4 table's
+/// block reads 25, docs/volumetric.md "On the board").
+const BLK_CAP: usize = 28;
 /// Size of the vector v of `vp_*` (1, x, y, z and up to 4 products; a
 /// power of two, so an index is one AND). The kernels run over all of it
 /// in straight-line code (fixed trip counts, no loop overhead).
