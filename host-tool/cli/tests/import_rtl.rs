@@ -289,3 +289,63 @@ fn a_placeholder_run_is_left_out_and_the_others_used() {
         "{e}"
     );
 }
+
+/// An `.rtl` from a Russian-language Windows (issue 24): its metadata in
+/// Windows-1251 reads as Cyrillic, not as Latin-1 noise, and the note says
+/// which code page was read from which line; a German one (Windows-1252)
+/// keeps its umlauts. The readings are the same either way.
+#[test]
+fn legacy_code_pages_in_rtl_metadata_are_decoded_and_said() {
+    let dir = common::tmp_dir("rtl", "codepage");
+    let base = std::fs::read(data("iso_worked.rtl")).unwrap();
+    let text = String::from_utf8(base).unwrap();
+    // "By: A. Tester" → "By: Иванов" (Windows-1251), line 14.
+    let mut ru: Vec<u8> = Vec::new();
+    let (head, tail) = text.split_at(text.find("A. Tester").unwrap());
+    ru.extend(head.as_bytes());
+    ru.extend([0xC8, 0xE2, 0xE0, 0xED, 0xEE, 0xE2]);
+    ru.extend(&tail.as_bytes()["A. Tester".len()..]);
+    let p = dir.join("ru.rtl");
+    std::fs::write(&p, &ru).unwrap();
+    let ds = import::load(&p).unwrap();
+    let meta = |ds: &trueaxis_engine::data::Dataset, k: &str| {
+        ds.metadata
+            .iter()
+            .find(|(key, _)| key.contains(k))
+            .map(|(_, v)| v.clone())
+    };
+    assert_eq!(
+        meta(&ds, "By").as_deref(),
+        Some("Иванов"),
+        "{:?}",
+        ds.metadata
+    );
+    let note = meta(&ds, "encoding").expect("a note");
+    assert!(
+        note.contains("Windows-1251") && note.contains("line 14"),
+        "{note}"
+    );
+    let out = run(&[
+        "import",
+        p.to_str().unwrap(),
+        "-o",
+        dir.join("ru.csv").to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{out:?}");
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("read as Windows-1251"),
+        "{out:?}"
+    );
+    // "Location: Bay 3" → "Location: Prüfstand" (Windows-1252).
+    let de = text.replace("Bay 3", "Pr\u{fc}fstand");
+    let de: Vec<u8> = de
+        .chars()
+        .map(|c| if c == 'ü' { 0xFC } else { c as u8 })
+        .collect();
+    let p = dir.join("de.rtl");
+    std::fs::write(&p, &de).unwrap();
+    let de_ds = import::load(&p).unwrap();
+    assert_eq!(meta(&de_ds, "Location").as_deref(), Some("Prüfstand"));
+    assert!(meta(&de_ds, "encoding").unwrap().contains("Windows-1252"));
+    assert_eq!(de_ds.err_um, ds.err_um);
+}

@@ -354,15 +354,14 @@ pub fn read_csv<R: Read>(mut reader: R, name: &str) -> anyhow::Result<Dataset> {
             Ok(t) => t,
             // Excel's "CSV" in a Western European locale (German, French,
             // …) is Windows-1252: `°C`, `µm`, `ü` as single bytes that are
-            // not UTF-8. Read as that, and say so (issue 28: refused
-            // without a hint).
+            // not UTF-8; a Cyrillic one is Windows-1251. Read as that, and
+            // say so (issue 28: refused without a hint).
             Err(e) => {
-                let upto = &e.as_bytes()[..e.utf8_error().valid_up_to()];
-                let line = upto.iter().filter(|&&b| b == b'\n').count() + 1;
-                note = Some(format!(
-                    "not valid UTF-8 (from line {line}): read as Windows-1252, the encoding Excel's \"CSV\" uses in Western Europe — save as \"CSV UTF-8\" to be sure of `°` and `µ`"
-                ));
-                windows_1252(e.as_bytes())
+                let (text, how) = super::legacy::decode(e.as_bytes());
+                if let Some((page, line)) = how {
+                    note = Some(super::legacy::note(page, line));
+                }
+                text.into_owned()
             }
         },
     };

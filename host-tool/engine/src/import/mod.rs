@@ -12,6 +12,7 @@ mod bedmesh;
 mod csv_io;
 mod dialect;
 mod ecmc;
+mod legacy;
 mod rtl;
 
 use std::fmt;
@@ -210,12 +211,16 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> anyhow::Result<Dataset> {
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {name}"))?;
-    let text = || String::from_utf8_lossy(&bytes);
+    // .rtl, .dat and .cfg files from Windows software may be in a legacy
+    // code page (legacy.rs); the CSV reader decodes its own bytes.
+    let (decoded, legacy_page) = legacy::decode(&bytes);
+    let text = || decoded.clone();
     if opts.profile.is_some() && ext != "cfg" {
         return Err(LoadError::ProfileNotCfg { file: name }.into());
     }
+    let heightmap = ext == "csv" && bedmesh::is_rrf_heightmap(&text());
     let ds = match ext.as_str() {
-        "csv" if bedmesh::is_rrf_heightmap(&text()) => read_rrf_heightmap(&text(), &name)?,
+        "csv" if heightmap => read_rrf_heightmap(&text(), &name)?,
         // Excel's "Unicode text" (.txt, UTF-16, tab-separated) and tab-
         // separated files (.tsv) are the CSV with another delimiter, which
         // the reader detects (issue 28: "unknown file type").
@@ -230,6 +235,13 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> anyhow::Result<Dataset> {
             "{name}: unknown file type `.{other}` (expected .csv, .txt/.tsv (tab-separated, Excel's \"Unicode text\"), .rtl, .dat (ecmc ISO 230-2) or .cfg (Klipper bed mesh))"
         ),
     };
+    let mut ds = ds;
+    // The CSV reader says its own decoding; the others read `text()`.
+    let via_text = heightmap || !matches!(ext.as_str(), "csv" | "txt" | "tsv");
+    if let (Some((page, line)), true) = (legacy_page, via_text) {
+        ds.metadata
+            .push((ENCODING_NOTE.into(), legacy::note(page, line)));
+    }
     ds.validate()?;
     Ok(ds)
 }
