@@ -1326,6 +1326,8 @@ mod tests {
             }],
             warnings: Vec::new(),
             hold_out: "spatial cells".into(),
+            n_eff: Default::default(),
+            lag1_autocorrelation: Default::default(),
             evidence: Evidence::default(),
             unexplained: Vec::new(),
             held_back: Vec::new(),

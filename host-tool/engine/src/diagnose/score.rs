@@ -186,7 +186,13 @@ pub(super) fn score(
             if let Some(inv) = lag_aware_xtx_inv(td, st, &p.spec, &ff) {
                 ff.fit.xtx_inv = inv;
             }
-            let phys = physical(td, &p, &ff, sigma2);
+            // Residuals correlated in time (the model plus this candidate's,
+            // in time order): n readings count as n_eff, and every standard
+            // error grows by √(n/n_eff) — σ² scaled by n/n_eff.
+            let time_series =
+                super::autocorr::in_time_after(td, &st.resid, &ff.partialled, &ff.fit.beta);
+            let widen = time_series.map_or(1.0, |(_, ne)| super::autocorr::widening(n, ne));
+            let phys = physical(td, &p, &ff, sigma2 * widen * widen);
             let mut base = base;
             if let Some(ph) = &phys {
                 base.params.insert(param_key(ph), ph.value);
