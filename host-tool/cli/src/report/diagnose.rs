@@ -1473,6 +1473,8 @@ mod tests {
             rms_um: 0.21,
             held_out_rms_um: 0.22,
             replaces: None,
+            effective_n: None,
+            delta_bic_effective: None,
         }];
         d.candidates = vec![Candidate {
             effect: Family::Periodic,

@@ -91,6 +91,27 @@ pub fn widening(n: usize, n_eff: f64) -> f64 {
     }
 }
 
+/// A ΔBIC of `n` readings, n·ln(RSS₁/RSS₀) + k·ln n with `k` parameters
+/// charged, recomputed as if the data held `n_eff` independent ones:
+/// n_eff·ln(RSS₁/RSS₀) + k·ln n_eff.
+pub fn effective_dbic(dbic: f64, n: usize, n_eff: f64, k: f64) -> f64 {
+    let nf = n as f64;
+    let per_reading = (dbic - k * nf.ln()) / nf;
+    n_eff * per_reading + k * n_eff.max(1.0).ln()
+}
+
+/// Whether n_eff enters the path's decision for `td`: a time series at one
+/// position (a `t_s` column, no axis moving). There every reading's
+/// neighbour in time is the same point read again, and a residual
+/// correlated from one reading to the next is the error wandering in
+/// time. In a scan the neighbour in time is the next point in space, and
+/// the lag-1 correlation is mostly the seed's smooth misfit along the path
+/// — judged by the spatial hold-out and the smooth rule instead (the
+/// intervals are widened either way).
+pub(super) fn decides(td: &TargetData) -> bool {
+    td.data.t_s.is_some() && td.data.varying_axes().is_empty()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -128,5 +149,18 @@ mod tests {
         assert_eq!(effective_n(100, -0.3), 100.0);
         assert_eq!(widening(100, 100.0), 1.0);
         assert!(lag1_autocorrelation(&[1.0, 1.0, 1.0]).is_none());
+    }
+
+    #[test]
+    fn effective_dbic_counts_n_eff_readings() {
+        // n = 1000, RSS halved, 2 parameters charged.
+        let (n, k) = (1000usize, 2.0);
+        let dbic = n as f64 * 0.5f64.ln() + k * (n as f64).ln();
+        assert!((effective_dbic(dbic, n, n as f64, k) - dbic).abs() < 1e-9);
+        let e = effective_dbic(dbic, n, 10.0, k);
+        assert!(
+            (e - (10.0 * 0.5f64.ln() + k * 10f64.ln())).abs() < 1e-9,
+            "{e}"
+        );
     }
 }

@@ -460,6 +460,14 @@ pub struct PathStep {
     pub held_out_rms_um: f64,
     /// The effect this step swapped out (same effect, new parameter), if any.
     pub replaces: Option<String>,
+    /// On a time series at one position: the effective sample size of the
+    /// residual with the step's effect in (`autocorr`), absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub effective_n: Option<f64>,
+    /// Its ΔBIC recomputed with `effective_n` readings: the step is added
+    /// only when this is below −10 too. Absent with `effective_n`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub delta_bic_effective: Option<f64>,
 }
 
 /// A measurement-design or identifiability warning, with the measurement

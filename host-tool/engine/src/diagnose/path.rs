@@ -507,6 +507,26 @@ pub(super) fn follow(
         let Some(bi) = cur.iter().position(|s| s.cand.significant) else {
             break;
         };
+        // Readings correlated in time count as fewer: the step must pass
+        // the ΔBIC rule with n_eff readings too (a time series at one
+        // position, `autocorr::decides`).
+        if let Some((ne, d_eff)) = cur[bi].effective.filter(|&(_, d)| d >= DBIC_SIGNIFICANT) {
+            cur[bi].cand.significant = false;
+            cur[bi].cand.evidence.push_str(&format!(
+                " — but its readings are correlated in time: {} count as about {ne:.0}, and its ΔBIC with {ne:.0} is {d_eff:.0} (not below {DBIC_SIGNIFICANT}), so it is not added",
+                td.rows.len()
+            ));
+            warnings.push(Warning {
+                code: "not_significant_in_time".into(),
+                detail: format!(
+                    "{tn}: `{}` (ΔBIC {:.0} counting every reading) is not added: its residual is correlated in time, {} readings count as about {ne:.0}, and with them its ΔBIC is {d_eff:.0}; measure longer, or with the conditions varied more often, for it to be told from a wandering error",
+                    cur[bi].cand.add,
+                    cur[bi].cand.delta_bic.unwrap_or(f64::NAN),
+                    td.rows.len()
+                ),
+            });
+            break;
+        }
         let mut adds = st.adds.clone();
         swap_in(&mut adds, &cur[bi].spec, cur[bi].replaces.as_ref());
         let effects: Vec<Effect> = adds.into_iter().map(Effect::new).collect();
@@ -522,6 +542,7 @@ pub(super) fn follow(
                 .push_str(" — but the refit's block-held-out RMS did not fall, so it is not added");
             break;
         }
+        let effective = cur[bi].effective;
         let (mut best, typed) = cur.remove(bi).listed();
         best.step = Some(k);
         path.push(PathStep {
@@ -531,6 +552,8 @@ pub(super) fn follow(
             rms_um: next.rms(),
             held_out_rms_um: next.held_out_rms,
             replaces: best.replaces.clone(),
+            effective_n: effective.map(|e| e.0),
+            delta_bic_effective: effective.map(|e| e.1),
         });
         warnings.extend(plausibility_warning(&best));
         on_path.push((k, typed.add.clone()));
