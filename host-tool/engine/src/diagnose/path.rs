@@ -10,11 +10,11 @@ use crate::model::Seed;
 
 use super::aliasing;
 use super::score::{score, Replacing, Scored};
-use super::search::{propose, researchable, Proposal};
+use super::search::{propose, researchable, unidentified_lags, Proposal};
 use super::smooth;
 use super::swap::swap_in;
 use super::target::{State, TargetData};
-use super::warnings::plausibility_warning;
+use super::warnings::{lags_warning, plausibility_warning};
 use super::{
     Candidate, ComponentEvidence, Evidence, Listed, Options, PathStep, PeriodogramEvidence,
     Unresolved, Warning, COMPETING_OVERLAP, CONFOUNDED_OVERLAP, DBIC_SIGNIFICANT, MAX_PATH_STEPS,
@@ -629,6 +629,14 @@ pub(super) fn follow(
                 Some(i) => l[i] = f.to_listed(),
                 None => l.push(f.to_listed()),
             }
+        }
+    }
+    // A lag of the final model at the edge of its search is not identified
+    // (single and multi-sensor alike): say which sensor and lag.
+    for add in st.adds.iter().filter(|a| a.target().index() == t) {
+        let lags = unidentified_lags(td, add);
+        if !lags.is_empty() {
+            warnings.push(lags_warning(&tn, add, &lags));
         }
     }
     // What the path could not attribute: the pair blocking it where it
