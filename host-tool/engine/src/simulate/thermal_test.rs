@@ -23,6 +23,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::data::{Dataset, TempChannel};
 use crate::features::lagged;
 
+use super::spindle_duty::{spindle_drift, spindle_duty, SPINDLE_DRIFT, SPINDLE_DUTY};
 use super::{normal, round_dec, SimOutput};
 
 /// The scenario's name (`trueaxis simulate --scenario spindle-thermal`).
@@ -33,7 +34,7 @@ pub const SPINDLE_THERMAL: &str = "spindle-thermal";
 pub const SPINDLE_WARMUP: &str = "spindle-warmup";
 
 /// Names accepted by [`scenario`].
-pub const SCENARIOS: [&str; 2] = [SPINDLE_THERMAL, SPINDLE_WARMUP];
+pub const SCENARIOS: [&str; 4] = [SPINDLE_THERMAL, SPINDLE_WARMUP, SPINDLE_DUTY, SPINDLE_DRIFT];
 
 /// The point measured, mm (mid-travel of the 800 × 500 × 500 mill).
 pub const POINT_MM: [f64; 3] = [400.0, 250.0, 250.0];
@@ -105,6 +106,8 @@ pub fn scenario(name: &str, seed: u64) -> anyhow::Result<SimOutput> {
     match name {
         SPINDLE_THERMAL => Ok(spindle_thermal(seed)),
         SPINDLE_WARMUP => Ok(spindle_warmup(seed)),
+        SPINDLE_DUTY => Ok(spindle_duty(seed)),
+        SPINDLE_DRIFT => Ok(spindle_drift(seed)),
         other => anyhow::bail!(
             "unknown scenario `{other}` (expected {}, or on-machine with -o a directory)",
             SCENARIOS.join(", ")
