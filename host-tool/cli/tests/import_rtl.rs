@@ -289,3 +289,48 @@ fn a_placeholder_run_is_left_out_and_the_others_used() {
         "{e}"
     );
 }
+
+/// USER-TEXT in a legacy code page (issue 24): a Russian shop's PC writes
+/// Windows-1251, a German one Windows-1252; both decoded, and said.
+#[test]
+fn legacy_code_page_metadata_is_decoded() {
+    let dir = common::tmp_dir("import_rtl", "legacy_code_page");
+    let base = std::fs::read(data("iso_worked.rtl")).unwrap();
+    let swap = |from: &[u8], to: &[u8]| -> Vec<u8> {
+        let at = base
+            .windows(from.len())
+            .position(|w| w == from)
+            .expect("in the file");
+        [&base[..at], to, &base[at + from.len()..]].concat()
+    };
+    // "Цех 3, Иванов" in Windows-1251; "Halle 3, Müller" in Windows-1252.
+    for (bytes, want, cp) in [
+        (
+            swap(b"Bay 3", b"\xd6\xe5\xf5 3, \xc8\xe2\xe0\xed\xee\xe2"),
+            "Цех 3, Иванов",
+            "Windows-1251",
+        ),
+        (
+            swap(b"Bay 3", b"Halle 3, M\xfcller"),
+            "Halle 3, Müller",
+            "Windows-1252",
+        ),
+    ] {
+        let path = dir.join("legacy.rtl");
+        std::fs::write(&path, bytes).unwrap();
+        let d = import::load(&path).unwrap();
+        let meta = |k: &str| {
+            d.metadata
+                .iter()
+                .find(|(key, _)| key == k)
+                .map(|(_, v)| v.as_str())
+        };
+        assert_eq!(meta("Location"), Some(want));
+        assert!(
+            meta("encoding").is_some_and(|n| n.contains(cp)),
+            "{:?}",
+            d.metadata
+        );
+        assert_eq!(d.len(), 12);
+    }
+}

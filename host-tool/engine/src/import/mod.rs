@@ -9,6 +9,7 @@
 //! nothing is silently dropped (docs/cli.md § Measurement CSV).
 
 mod bedmesh;
+mod codepage;
 mod csv_io;
 mod dialect;
 mod ecmc;
@@ -220,7 +221,19 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> anyhow::Result<Dataset> {
         // separated files (.tsv) are the CSV with another delimiter, which
         // the reader detects (issue 28: "unknown file type").
         "csv" | "txt" | "tsv" => read_csv(bytes.as_slice(), &name)?,
-        "rtl" => read_rtl(&text(), &name, opts.axis)?,
+        "rtl" => {
+            // Metadata in a legacy code page (Windows-1251/1252) decoded,
+            // and said (issue 24: garbled Cyrillic USER-TEXT).
+            let (text, code_page) = codepage::decode(&bytes);
+            let mut ds = read_rtl(&text, &name, opts.axis)?;
+            if let Some(cp) = code_page {
+                ds.metadata.push((
+                    ENCODING_NOTE.into(),
+                    format!("not valid UTF-8: read as {cp}, the code page of the PC that wrote it"),
+                ));
+            }
+            ds
+        }
         "dat" if ecmc::is_ecmc_iso230(&text()) => read_ecmc(&text(), &name, opts.axis)?,
         "dat" => anyhow::bail!(
             "{name}: a .dat file without TGT_DATA[i]= lines; expected an ecmc ISO230 file (TGT_DATA, REF_DATA_FWD, REF_DATA_BWD)"
