@@ -96,7 +96,7 @@ enum BlockKind {
 
 /// The time order key of `row`: (session, t_s) — `t_s` restarts in each
 /// session.
-fn time_key(data: &Dataset, row: usize) -> (i64, f64) {
+pub(crate) fn time_key(data: &Dataset, row: usize) -> (i64, f64) {
     (
         data.session_id.as_ref().map_or(0, |s| s[row]),
         data.t_s.as_ref().map_or(0.0, |t| t[row]),

@@ -114,3 +114,53 @@ fn a_lag_beyond_the_grid_is_searched_further_or_said_unidentified() {
         short.evidence
     );
 }
+
+/// Lags at the edge of their search are said unidentified for a
+/// multi-sensor model too (issue 24): the growth follows the bed without
+/// lag and the column 12 000 s late — longer than the multi-sensor grid's
+/// 7 200 s. Whatever thermal effect the path ends with that holds the
+/// column at its longest lag searched is named in `lags_unidentified`.
+#[test]
+fn a_multi_sensor_lag_at_the_grid_edge_is_said_unidentified() {
+    let effects = [
+        "thermal:channel=bed,target=ez,times=none,cte_um_per_m_k=0,offset_um_per_k=1.5,rise_c=3,tau_s=3600,lag_s=0,swing_c=1,swing_period_s=20000",
+        "thermal:channel=column,target=ez,times=none,cte_um_per_m_k=0,offset_um_per_k=-2,rise_c=4,tau_s=10000,lag_s=12000,swing_c=0.8,swing_period_s=43200",
+    ];
+    let data = sim(
+        &["point:x=400,y=250,z=250,repeats=1440"],
+        &effects,
+        60.0,
+        25.0,
+        3,
+    );
+    let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
+    let path: Vec<&str> = d
+        .path
+        .iter()
+        .filter(|s| s.target == "ez")
+        .map(|s| s.add.as_str())
+        .collect();
+    let w: Vec<&str> = d
+        .warnings
+        .iter()
+        .filter(|w| w.code == "lags_unidentified")
+        .map(|w| w.detail.as_str())
+        .collect();
+    eprintln!("path {path:?}\nwarnings {w:?}");
+    let multi = path
+        .iter()
+        .find(|a| a.contains("channel=bed+column") || a.contains("channel=column+bed"))
+        .unwrap_or_else(|| panic!("no multi-sensor step: {path:?}"));
+    assert!(multi.contains("7200"), "{multi}");
+    assert!(
+        w.iter()
+            .any(|w| w.contains("T_column_C lag 7200 s") && w.contains(multi)),
+        "{w:?}"
+    );
+    let c = d.candidates.iter().find(|c| c.add == *multi).unwrap();
+    assert!(
+        c.evidence.contains("lag not identified for T_column_C"),
+        "{}",
+        c.evidence
+    );
+}

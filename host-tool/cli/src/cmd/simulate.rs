@@ -30,10 +30,13 @@ pub struct Args {
     /// spindle-thermal (an ISO 230-3 thermal test at one point, 48 h, a
     /// reading a minute, 12 temperature sensors; see docs/cli.md),
     /// spindle-warmup (a one-day warm-up whose growth follows unlogged heat
-    /// paths, one sensor), volumetric-lines / volumetric-tracker (the
-    /// mill800-21 machine, all 21 geometric errors and the tilt, measured
-    /// with laser lines or two tracker stations; docs/volumetric.md), or
-    /// on-machine (every file the on-machine commands read, with the hidden
+    /// paths, one sensor), spindle-duty (48 h, 14 sensors, three driving
+    /// the growth with lags, day 2 at another duty cycle), spindle-drift
+    /// (its control: wandering sensors, an AR(1) drift), volumetric-lines /
+    /// volumetric-tracker (the mill800-21 machine, all 21 geometric errors
+    /// and the tilt, measured with laser lines or two tracker stations;
+    /// docs/volumetric.md), or on-machine (every file the on-machine
+    /// commands read, with the hidden
     /// answers in truth.json; -o is then a directory; docs/on-machine.md).
     /// Only --seed, -o and --after-pass apply.
     #[arg(long, conflicts_with_all = ["plan", "effect", "reference"])]

@@ -1326,6 +1326,8 @@ mod tests {
             }],
             warnings: Vec::new(),
             hold_out: "spatial cells".into(),
+            n_eff: Default::default(),
+            lag1_autocorrelation: Default::default(),
             evidence: Evidence::default(),
             unexplained: Vec::new(),
             held_back: Vec::new(),
@@ -1471,6 +1473,8 @@ mod tests {
             rms_um: 0.21,
             held_out_rms_um: 0.22,
             replaces: None,
+            effective_n: None,
+            delta_bic_effective: None,
         }];
         d.candidates = vec![Candidate {
             effect: Family::Periodic,

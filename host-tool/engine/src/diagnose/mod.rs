@@ -48,6 +48,7 @@
 //! ([`EffectSpec`], [`Seed`]); the strings are the JSON's.
 
 pub mod aliasing;
+pub mod autocorr;
 pub mod noise;
 pub mod outliers;
 mod path;
@@ -459,6 +460,14 @@ pub struct PathStep {
     pub held_out_rms_um: f64,
     /// The effect this step swapped out (same effect, new parameter), if any.
     pub replaces: Option<String>,
+    /// On a time series at one position: the effective sample size of the
+    /// residual with the step's effect in (`autocorr`), absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub effective_n: Option<f64>,
+    /// Its ΔBIC recomputed with `effective_n` readings: the step is added
+    /// only when this is below −10 too. Absent with `effective_n`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub delta_bic_effective: Option<f64>,
 }
 
 /// A measurement-design or identifiability warning, with the measurement
@@ -553,6 +562,15 @@ pub struct Diagnosis {
     pub outliers: Vec<outliers::Outlier>,
     /// How hold-out blocks were formed (`pass_id` or `spatial cells`).
     pub hold_out: String,
+    /// Effective sample size per target of a time series (a `t_s`
+    /// column): n·(1−ρ)/(1+ρ) with ρ the final residual's lag-1
+    /// autocorrelation in time order (n for ρ ≤ 0). Absent without `t_s`.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub n_eff: BTreeMap<String, f64>,
+    /// The final residual's lag-1 autocorrelation in time order, per
+    /// target (absent without `t_s`).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub lag1_autocorrelation: BTreeMap<String, f64>,
     /// Plot material.
     #[serde(skip)]
     pub evidence: Evidence,
@@ -600,6 +618,8 @@ struct TargetOut {
     unresolved: Vec<Unresolved>,
     noise_floor_um: Option<f64>,
     noise_method: Option<NoiseMethod>,
+    /// (lag-1 autocorrelation, n_eff) of the final residual in time order.
+    time_series: Option<(f64, f64)>,
     ev: Evidence,
 }
 
@@ -636,6 +656,7 @@ fn one_target(
         nfolds,
         progress,
         forward: Default::default(),
+        time_order: Default::default(),
     };
     let st0 = State::new(&td, &opts.seed, effects)?;
     let rms = st0.rms();
@@ -690,6 +711,20 @@ fn one_target(
             });
         }
     }
+    let time_series = autocorr::in_time(&td, &st.resid);
+    if let Some((rho, n_eff)) = time_series {
+        let n = td.rows.len();
+        if n_eff < n as f64 / 2.0 {
+            warnings.push(Warning {
+                code: "autocorrelated_residuals".into(),
+                detail: format!(
+                    "{tn}: residuals correlated in time: {n} readings count as about {:.0} (lag-1 autocorrelation {rho:.2}); every 95 % interval is widened by {:.1}×",
+                    n_eff,
+                    autocorr::widening(n, n_eff)
+                ),
+            });
+        }
+    }
     ev.resid_after.push((t, td.rows.clone(), st.resid.clone()));
     progress.emit(&Event::Diagnose {
         target: TARGETS[t],
@@ -708,6 +743,7 @@ fn one_target(
         unresolved,
         noise_floor_um: nf.as_ref().map(|n| n.sigma_um),
         noise_method: nf.map(|n| n.method),
+        time_series,
         ev,
     })
 }
@@ -753,6 +789,8 @@ pub fn diagnose_specs(
     let mut held_out_rms_um = BTreeMap::new();
     let mut noise_floor_um = BTreeMap::new();
     let mut noise_method = BTreeMap::new();
+    let mut n_eff = BTreeMap::new();
+    let mut lag1_autocorrelation = BTreeMap::new();
     let mut candidates = Vec::new();
     let mut path = Vec::new();
     let mut regions = Vec::new();
@@ -782,6 +820,10 @@ pub fn diagnose_specs(
         unexplained.extend(o.unexplained);
         unresolved.extend(o.unresolved);
         noise_floor_um.insert(tn.clone(), o.noise_floor_um);
+        if let Some((rho, ne)) = o.time_series {
+            lag1_autocorrelation.insert(tn.clone(), rho);
+            n_eff.insert(tn.clone(), ne);
+        }
         noise_method.insert(tn, o.noise_method);
         ev.periodograms.extend(o.ev.periodograms);
         ev.components.extend(o.ev.components);
@@ -850,6 +892,8 @@ pub fn diagnose_specs(
         warnings,
         outliers,
         hold_out,
+        n_eff,
+        lag1_autocorrelation,
         evidence: ev,
     };
     Ok((d, specs))
@@ -970,6 +1014,7 @@ pub fn library(data: &Dataset, opts: &Options) -> Result<Vec<TargetLibrary>> {
             nfolds,
             progress: &Sink::none(),
             forward: Default::default(),
+            time_order: Default::default(),
         };
         let st = State::new(&td, &opts.seed, &effects)?;
         let mut groups = Vec::new();

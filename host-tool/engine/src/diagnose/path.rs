@@ -10,11 +10,11 @@ use crate::model::Seed;
 
 use super::aliasing;
 use super::score::{score, Replacing, Scored};
-use super::search::{propose, researchable, Proposal};
+use super::search::{propose, researchable, unidentified_lags, Proposal};
 use super::smooth;
 use super::swap::swap_in;
 use super::target::{State, TargetData};
-use super::warnings::plausibility_warning;
+use super::warnings::{lags_warning, plausibility_warning};
 use super::{
     Candidate, ComponentEvidence, Evidence, Listed, Options, PathStep, PeriodogramEvidence,
     Unresolved, Warning, COMPETING_OVERLAP, CONFOUNDED_OVERLAP, DBIC_SIGNIFICANT, MAX_PATH_STEPS,
@@ -507,6 +507,26 @@ pub(super) fn follow(
         let Some(bi) = cur.iter().position(|s| s.cand.significant) else {
             break;
         };
+        // Readings correlated in time count as fewer: the step must pass
+        // the ΔBIC rule with n_eff readings too (a time series at one
+        // position, `autocorr::decides`).
+        if let Some((ne, d_eff)) = cur[bi].effective.filter(|&(_, d)| d >= DBIC_SIGNIFICANT) {
+            cur[bi].cand.significant = false;
+            cur[bi].cand.evidence.push_str(&format!(
+                " — but its readings are correlated in time: {} count as about {ne:.0}, and its ΔBIC with {ne:.0} is {d_eff:.0} (not below {DBIC_SIGNIFICANT}), so it is not added",
+                td.rows.len()
+            ));
+            warnings.push(Warning {
+                code: "not_significant_in_time".into(),
+                detail: format!(
+                    "{tn}: `{}` (ΔBIC {:.0} counting every reading) is not added: its residual is correlated in time, {} readings count as about {ne:.0}, and with them its ΔBIC is {d_eff:.0}; measure longer, or with the conditions varied more often, for it to be told from a wandering error",
+                    cur[bi].cand.add,
+                    cur[bi].cand.delta_bic.unwrap_or(f64::NAN),
+                    td.rows.len()
+                ),
+            });
+            break;
+        }
         let mut adds = st.adds.clone();
         swap_in(&mut adds, &cur[bi].spec, cur[bi].replaces.as_ref());
         let effects: Vec<Effect> = adds.into_iter().map(Effect::new).collect();
@@ -522,6 +542,7 @@ pub(super) fn follow(
                 .push_str(" — but the refit's block-held-out RMS did not fall, so it is not added");
             break;
         }
+        let effective = cur[bi].effective;
         let (mut best, typed) = cur.remove(bi).listed();
         best.step = Some(k);
         path.push(PathStep {
@@ -531,6 +552,8 @@ pub(super) fn follow(
             rms_um: next.rms(),
             held_out_rms_um: next.held_out_rms,
             replaces: best.replaces.clone(),
+            effective_n: effective.map(|e| e.0),
+            delta_bic_effective: effective.map(|e| e.1),
         });
         warnings.extend(plausibility_warning(&best));
         on_path.push((k, typed.add.clone()));
@@ -606,6 +629,14 @@ pub(super) fn follow(
                 Some(i) => l[i] = f.to_listed(),
                 None => l.push(f.to_listed()),
             }
+        }
+    }
+    // A lag of the final model at the edge of its search is not identified
+    // (single and multi-sensor alike): say which sensor and lag.
+    for add in st.adds.iter().filter(|a| a.target().index() == t) {
+        let lags = unidentified_lags(td, add);
+        if !lags.is_empty() {
+            warnings.push(lags_warning(&tn, add, &lags));
         }
     }
     // What the path could not attribute: the pair blocking it where it

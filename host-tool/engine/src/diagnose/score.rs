@@ -22,6 +22,10 @@ pub(super) struct Scored {
     /// The effect it replaces (`cand.replaces`), typed.
     pub(super) replaces: Option<EffectSpec>,
     pub(super) partialled: Vec<Vec<f64>>,
+    /// On a time series where n_eff decides (`autocorr::decides`): the
+    /// effective sample size of the residual with the candidate in, and
+    /// its ΔBIC recomputed with it.
+    pub(super) effective: Option<(f64, f64)>,
 }
 
 impl Scored {
@@ -68,6 +72,7 @@ pub(super) fn score(
 ) -> Vec<Scored> {
     let n = td.rows.len();
     let tn = TARGETS[td.t];
+    let decides = super::autocorr::decides(td);
     let mut out = Vec::new();
     // A few proposals at a time projected together (one pass over the
     // model's basis for all their columns), their columns kept only while
@@ -154,6 +159,7 @@ pub(super) fn score(
                     spec: p.spec,
                     replaces: repl.map(|r| r.old.clone()),
                     partialled: ff.partialled,
+                    effective: None,
                 });
                 continue;
             }
@@ -186,7 +192,22 @@ pub(super) fn score(
             if let Some(inv) = lag_aware_xtx_inv(td, st, &p.spec, &ff) {
                 ff.fit.xtx_inv = inv;
             }
-            let phys = physical(td, &p, &ff, sigma2);
+            // Residuals correlated in time (the model plus this candidate's,
+            // in time order): n readings count as n_eff, and every standard
+            // error grows by √(n/n_eff) — σ² scaled by n/n_eff.
+            let time_series =
+                super::autocorr::in_time_after(td, &st.resid, &ff.partialled, &ff.fit.beta);
+            let widen = time_series.map_or(1.0, |(_, ne)| super::autocorr::widening(n, ne));
+            let phys = physical(td, &p, &ff, sigma2 * widen * widen);
+            // The parameters the ΔBIC charged: the columns (and searched
+            // parameters) added, or a replacement's change in columns.
+            let charged = match repl {
+                Some(r) => ff.fit.rank as f64 - r.old_rank as f64,
+                None => (ff.fit.rank + p.searched) as f64,
+            };
+            let effective = time_series
+                .filter(|_| decides)
+                .map(|(_, ne)| (ne, super::autocorr::effective_dbic(ff.dbic, n, ne, charged)));
             let mut base = base;
             if let Some(ph) = &phys {
                 base.params.insert(param_key(ph), ph.value);
@@ -273,6 +294,7 @@ pub(super) fn score(
                 spec: p.spec,
                 replaces: repl.map(|r| r.old.clone()),
                 partialled: ff.partialled,
+                effective,
             });
         }
     }

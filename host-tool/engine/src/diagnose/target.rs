@@ -28,6 +28,8 @@ pub(super) struct TargetData<'a> {
     pub(super) progress: &'a crate::progress::Sink,
     /// [`forward_blocks`], made once.
     pub(super) forward: std::sync::OnceLock<Option<Vec<Vec<usize>>>>,
+    /// `autocorr::time_positions`, made once.
+    pub(super) time_order: std::sync::OnceLock<Option<Vec<usize>>>,
 }
 
 impl TargetData<'_> {
@@ -467,6 +469,7 @@ mod tests {
             nfolds,
             progress: &crate::progress::Sink::none(),
             forward: Default::default(),
+            time_order: Default::default(),
         };
         let st = State::new(&td, &Seed::Cubic19, &[]).unwrap();
         assert!(st.held_out_rms.is_finite());

@@ -35,6 +35,27 @@ pub(super) fn plausibility_warning(c: &Candidate) -> Option<Warning> {
     })
 }
 
+/// The `lags_unidentified` warning: `add` (in the final model of `target`)
+/// has lags at the longest its search tries — the sum of squares was still
+/// falling there, so each is a lower bound, not a found lag.
+pub(super) fn lags_warning(
+    target: &str,
+    add: &crate::effect::EffectSpec,
+    lags: &[(String, f64)],
+) -> Warning {
+    let named: Vec<String> = lags
+        .iter()
+        .map(|(ch, lag)| format!("T_{ch}_C lag {} s", super::search::fmt_num(*lag, 0)))
+        .collect();
+    Warning {
+        code: "lags_unidentified".into(),
+        detail: format!(
+            "{target}: `{add}`: {} at the longest lag searched — not identified, only at least that long (the fit would take a longer one); its coefficient leans on the lag: measure longer than 3× the slow sensor's time constant, or with a cool-down, to identify it",
+            named.join(", ")
+        ),
+    }
+}
+
 /// The `above_noise_floor` warning: the residual at the end is clearly
 /// above the noise floor, so whatever the verdict says about the named
 /// candidates, the data is not explained down to its noise.

@@ -21,6 +21,7 @@ pub mod instruments;
 mod machine;
 mod plan;
 mod spec;
+pub mod spindle_duty;
 pub mod thermal_test;
 pub mod volumetric;
 

@@ -23,6 +23,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::data::{Dataset, TempChannel};
 use crate::features::lagged;
 
+use super::spindle_duty::{spindle_drift, spindle_duty, SPINDLE_DRIFT, SPINDLE_DUTY};
 use super::{normal, round_dec, SimOutput};
 
 /// The scenario's name (`trueaxis simulate --scenario spindle-thermal`).
@@ -33,9 +34,11 @@ pub const SPINDLE_THERMAL: &str = "spindle-thermal";
 pub const SPINDLE_WARMUP: &str = "spindle-warmup";
 
 /// Names accepted by [`scenario`].
-pub const SCENARIOS: [&str; 4] = [
+pub const SCENARIOS: [&str; 6] = [
     SPINDLE_THERMAL,
     SPINDLE_WARMUP,
+    SPINDLE_DUTY,
+    SPINDLE_DRIFT,
     super::volumetric::VOLUMETRIC_LINES,
     super::volumetric::VOLUMETRIC_TRACKER,
 ];
@@ -110,6 +113,8 @@ pub fn scenario(name: &str, seed: u64) -> anyhow::Result<SimOutput> {
     match name {
         SPINDLE_THERMAL => Ok(spindle_thermal(seed)),
         SPINDLE_WARMUP => Ok(spindle_warmup(seed)),
+        SPINDLE_DUTY => Ok(spindle_duty(seed)),
+        SPINDLE_DRIFT => Ok(spindle_drift(seed)),
         other => match super::volumetric::scenario(other, seed)? {
             Some(s) => Ok(s),
             None => anyhow::bail!(

@@ -166,3 +166,5 @@ pub(super) fn researchable(family: Family, td: &TargetData) -> bool {
         .iter()
         .any(|f| f.family == family && (f.researchable)(td))
 }
+
+pub(super) use thermal::unidentified_lags;

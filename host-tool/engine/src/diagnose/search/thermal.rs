@@ -158,6 +158,49 @@ pub(super) fn propose(s: &mut Search) -> Vec<Proposal> {
     out
 }
 
+/// The longest lag a single-sensor search of `td` tries: the grid's
+/// longest, extended by [`LAG_EXTEND`] while it stays within half the
+/// test's duration (a best lag there is the edge, not a found lag).
+fn longest_lag_s(td: &TargetData) -> f64 {
+    let half = 0.5 * duration_s(td);
+    let mut lag = LAGS_S[LAGS_S.len() - 1];
+    while lag * LAG_EXTEND <= half {
+        lag *= LAG_EXTEND;
+    }
+    lag
+}
+
+/// The channels of a thermal effect whose lag sits at the longest lag its
+/// search tries (`(channel, lag_s)`): the sum of squares was still falling
+/// there, so the data do not identify the lag — only that it is at least
+/// that long. A multi-sensor effect searches the grid [`LAGS_S`] only; a
+/// single sensor's grid is extended up to half the test (`longest_lag_s`).
+pub(in crate::diagnose) fn unidentified_lags(
+    td: &TargetData,
+    spec: &EffectSpec,
+) -> Vec<(String, f64)> {
+    let crate::effect::Params::Thermal(th) = spec.params() else {
+        return Vec::new();
+    };
+    if td.data.t_s.is_none() {
+        return Vec::new();
+    }
+    let channels: Vec<&str> = th.channels().collect();
+    let edge = if channels.len() > 1 {
+        LAGS_S[LAGS_S.len() - 1]
+    } else {
+        longest_lag_s(td)
+    };
+    channels
+        .iter()
+        .enumerate()
+        .filter_map(|(i, ch)| {
+            let lag = *th.lags_s.get(i).or(th.lags_s.first())?;
+            ((lag - edge).abs() < 0.5 && lag > 0.0).then(|| (ch.to_string(), lag))
+        })
+        .collect()
+}
+
 /// Thermal lags tried, s (then refined between neighbours).
 const LAGS_S: [f64; 11] = [
     0.0, 120.0, 300.0, 600.0, 900.0, 1200.0, 1800.0, 2400.0, 3600.0, 5400.0, 7200.0,
@@ -321,6 +364,20 @@ fn multi_sensor(td: &TargetData, st: &State, target: Target) -> Option<Proposal>
         .iter()
         .map(|&(c, l)| format!("T_{}_C (lag {} s)", chans[c], fmt_num(LAGS_S[l], 0)))
         .collect();
+    let edge: Vec<String> = set
+        .iter()
+        .filter(|&&(_, l)| l == LAGS_S.len() - 1)
+        .map(|&(c, _)| format!("T_{}_C", chans[c]))
+        .collect();
+    let flag = if edge.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "; lag not identified for {}: the longest lag tried ({} s) — the data say only that it is at least that long",
+            edge.join(", "),
+            fmt_num(LAGS_S[LAGS_S.len() - 1], 0)
+        )
+    };
     Some(Proposal {
         spec,
         // A channel and a lag chosen per sensor.
@@ -332,7 +389,7 @@ fn multi_sensor(td: &TargetData, st: &State, target: Target) -> Option<Proposal>
             (cur / n).sqrt(),
             chans[single.1 .0],
             (single.0 / n).sqrt()
-        ),
+        ) + &flag,
     })
 }
 
