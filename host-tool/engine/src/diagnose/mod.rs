@@ -58,7 +58,6 @@ mod score;
 mod search;
 mod smooth;
 mod swap;
-pub mod synth;
 mod target;
 mod warnings;
 

@@ -10,6 +10,7 @@ use nalgebra::{DMatrix, DVector};
 use crate::data::{Dataset, TARGETS};
 use crate::effect::{Effect, EffectSpec};
 use crate::features::{Feature, Norm};
+use crate::fit::linear::terms_for;
 use crate::model::Seed;
 use crate::regions::bin_index;
 
@@ -56,22 +57,14 @@ pub(super) struct State {
 impl State {
     /// The model `seed` plus `effects` fitted to the target.
     pub(super) fn new(td: &TargetData, seed: &Seed, effects: &[Effect]) -> Result<State> {
-        // The seed's terms as `fit` has them: none in an axis held at one
-        // position (those would be zero columns).
+        // The terms as `fit`'s design has them, on the data's own moving
+        // axes.
         let axes = td.data.varying_axes();
         let mut cols = Vec::new();
         let mut owner = Vec::new();
-        for exp in seed.monomials(td.t, &axes)? {
-            cols.push(td.col(&Feature::Monomial { exp })?);
-            owner.push(None);
-        }
-        for (i, e) in effects.iter().enumerate() {
-            if e.target() == td.t {
-                for f in &e.features {
-                    cols.push(td.col(f)?);
-                    owner.push(Some(i));
-                }
-            }
+        for (f, o) in terms_for(*seed, effects, td.t, &axes)? {
+            cols.push(td.col(&f)?);
+            owner.push(o);
         }
         let n = td.rows.len();
         let basis = Basis::new(&cols, n);
