@@ -340,10 +340,6 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
                 )
             })
             .then_some(rows_session),
-        u_um: None,
-        aux: Vec::new(),
-        line: Vec::new(),
-        skipped: Vec::new(),
         ..Dataset::default()
     };
     SimOutput {
