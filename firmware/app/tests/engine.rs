@@ -33,6 +33,17 @@ fn loaded(table: &[u8]) -> &'static mut ModelBuf {
     m
 }
 
+/// The simulated engine with `table` loaded — referenced at zero first
+/// when `referenced` — its clock at 0 and its I/O at rest.
+fn rig(table: &[u8], referenced: bool) -> (Engine<'static>, FakeClock, Fake) {
+    let mut e = Engine::new(sim_engine_config()).unwrap();
+    if referenced {
+        reference_at_zero(&mut e);
+    }
+    e.set_model(loaded(table), info(table));
+    (e, FakeClock(Cell::new(0)), Fake::new())
+}
+
 /// Ticks `n` times at the nominal period.
 fn run(e: &mut Engine<'_>, clock: &FakeClock, io: &mut Fake, n: u64) {
     let period = e.config().period_us as u64;
@@ -47,11 +58,7 @@ fn run(e: &mut Engine<'_>, clock: &FakeClock, io: &mut Fake, n: u64) {
 #[test]
 fn an_hour_of_random_motion_pulses_equal_the_rounded_correction_every_tick() {
     let table = sample_table(0);
-    let mut e = Engine::new(sim_engine_config()).unwrap();
-    reference_at_zero(&mut e);
-    e.set_model(loaded(&table), info(&table));
-    let clock = FakeClock(Cell::new(0));
-    let mut io = Fake::new();
+    let (mut e, clock, mut io) = rig(&table, true);
     let mut rng = Rng(0x1234_5678_9abc_def1);
     let pulse_nm = sim_engine_config().axes.map(|a| a.pulse_nm as i64);
     // One simulated hour at 1 kHz: 3.6 M ticks.
@@ -90,11 +97,7 @@ fn an_hour_of_random_motion_pulses_equal_the_rounded_correction_every_tick() {
 fn output_equals_model_core_fixed_point_and_tracks_reversal() {
     let table = sample_table(1);
     let m = Model::load(&model_core::parse(&table).unwrap()).unwrap();
-    let mut e = Engine::new(sim_engine_config()).unwrap();
-    reference_at_zero(&mut e);
-    e.set_model(loaded(&table), info(&table));
-    let clock = FakeClock(Cell::new(0));
-    let mut io = Fake::new();
+    let (mut e, clock, mut io) = rig(&table, true);
     io.temps[0] = 31_000;
     let mut dir = DirTracker::new();
     let transition = m.reversal_transition_nm(0).unwrap();
@@ -128,11 +131,7 @@ fn output_equals_model_core_fixed_point_and_tracks_reversal() {
 #[test]
 fn slew_limit_holds_on_a_table_switch() {
     let (t1, t2) = (sample_table(0), sample_table(3));
-    let mut e = Engine::new(sim_engine_config()).unwrap();
-    reference_at_zero(&mut e);
-    e.set_model(loaded(&t1), info(&t1));
-    let clock = FakeClock(Cell::new(0));
-    let mut io = Fake::new();
+    let (mut e, clock, mut io) = rig(&t1, true);
     io.counts = [3_000_000, -2_500_000, 1_000_000];
     run(&mut e, &clock, &mut io, 1000);
     let before = e.corr_nm();
@@ -207,10 +206,7 @@ fn fault_ramps_to_zero(
     expect: Faults,
 ) -> (Engine<'static>, FakeClock, Fake) {
     let table = sample_table(0);
-    let mut e = Engine::new(sim_engine_config()).unwrap();
-    e.set_model(loaded(&table), info(&table));
-    let clock = FakeClock(Cell::new(0));
-    let mut io = Fake::new();
+    let (mut e, clock, mut io) = rig(&table, false);
     io.counts = [3_900_000, 3_900_000, 3_900_000];
     // 3.9 M counts of 0.1 µm: the axes are at 390 mm.
     for axis in 0..3 {
@@ -361,11 +357,7 @@ fn a_tick_that_ends_past_the_next_deadline_is_an_overrun() {
 #[test]
 fn a_stall_announced_by_the_server_is_not_an_overrun() {
     let table = sample_table(0);
-    let mut e = Engine::new(sim_engine_config()).unwrap();
-    reference_at_zero(&mut e);
-    e.set_model(loaded(&table), info(&table));
-    let clock = FakeClock(Cell::new(0));
-    let mut io = Fake::new();
+    let (mut e, clock, mut io) = rig(&table, true);
     run(&mut e, &clock, &mut io, 10);
     // The board's order: a normal tick, the 1.5 s erase, the first tick
     // after it, then the link task ends the stall.
@@ -502,10 +494,7 @@ fn model_at(table: &[u8], pos_nm: [i32; 3]) -> [i32; 3] {
 #[test]
 fn no_correction_until_every_axis_is_referenced_then_it_ramps_in_at_the_table_slew() {
     let table = sample_table(0);
-    let mut e = Engine::new(sim_engine_config()).unwrap();
-    e.set_model(loaded(&table), info(&table));
-    let clock = FakeClock(Cell::new(0));
-    let mut io = Fake::new();
+    let (mut e, clock, mut io) = rig(&table, false);
     // Switched on somewhere: 100 mm, -50 mm, 20 mm of counts.
     io.counts = [1_000_000, -500_000, 200_000];
     run(&mut e, &clock, &mut io, 500);
@@ -630,10 +619,7 @@ fn an_axis_without_an_encoder_needs_no_reference() {
 #[test]
 fn a_reference_keeps_the_reversal_state() {
     let table = sample_table(1);
-    let mut e = Engine::new(sim_engine_config()).unwrap();
-    e.set_model(loaded(&table), info(&table));
-    let clock = FakeClock(Cell::new(0));
-    let mut io = Fake::new();
+    let (mut e, clock, mut io) = rig(&table, false);
     reference_at_zero(&mut e);
     run(&mut e, &clock, &mut io, 1);
     // X moves forward by 1 mm (past the reversal transition).
@@ -670,10 +656,7 @@ fn still_injection(pos_nm: [i32; 3], temp_c: i32) -> Injection {
 #[test]
 fn an_injection_ends_when_its_lease_runs_out_or_an_axis_moves() {
     let table = sample_table(0);
-    let mut e = Engine::new(sim_engine_config()).unwrap();
-    e.set_model(loaded(&table), info(&table));
-    let clock = FakeClock(Cell::new(0));
-    let mut io = Fake::new();
+    let (mut e, clock, mut io) = rig(&table, false);
     reference_at_zero(&mut e);
     run(&mut e, &clock, &mut io, 10);
     let inj = still_injection([100_000_000, 0, 0], 20);
@@ -703,10 +686,7 @@ fn an_injection_ends_when_its_lease_runs_out_or_an_axis_moves() {
 #[test]
 fn sensor_checks_stay_on_while_injecting() {
     let table = sample_table(0);
-    let mut e = Engine::new(sim_engine_config()).unwrap();
-    e.set_model(loaded(&table), info(&table));
-    let clock = FakeClock(Cell::new(0));
-    let mut io = Fake::new();
+    let (mut e, clock, mut io) = rig(&table, false);
     reference_at_zero(&mut e);
     run(&mut e, &clock, &mut io, 10);
     // A real thermistor open while plausible temperatures are injected.

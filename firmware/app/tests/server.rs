@@ -57,6 +57,18 @@ fn reference_all(b: &mut SimBoard, p: &mut Port) {
     b.tick(1);
 }
 
+/// Request `seq` commits the uploaded table.
+fn assert_committed(b: &mut SimBoard, p: &mut Port, seq: u16) {
+    let answer = call(b, p, seq, Request::Commit);
+    assert!(matches!(answer, Response::Committed(_)), "{answer:?}");
+}
+
+/// Request `seq` activates the committed table.
+fn assert_activated(b: &mut SimBoard, p: &mut Port, seq: u16) {
+    let answer = call(b, p, seq, Request::Activate);
+    assert!(matches!(answer, Response::Activated(_)), "{answer:?}");
+}
+
 fn status(b: &mut SimBoard, p: &mut Port) -> trueaxis_protocol::Telemetry {
     let Response::Status(t) = call(b, p, 60, Request::Status) else {
         panic!()
@@ -334,14 +346,8 @@ fn upload_resumes_after_a_dropped_link() {
         );
         off = end;
     }
-    assert!(matches!(
-        call(&mut b, &mut p, 9, Request::Commit),
-        Response::Committed(_)
-    ));
-    assert!(matches!(
-        call(&mut b, &mut p, 10, Request::Activate),
-        Response::Activated(_)
-    ));
+    assert_committed(&mut b, &mut p, 9);
+    assert_activated(&mut b, &mut p, 10);
 }
 
 /// The host retries a request whose answer it did not get. For a commit
@@ -637,10 +643,7 @@ fn commit_is_refused_while_axes_move() {
     // Standing still for the quiet time makes it go through (the upload
     // is kept meanwhile).
     b.tick(200);
-    assert!(matches!(
-        call(&mut b, &mut p, 4, Request::Commit),
-        Response::Committed(_)
-    ));
+    assert_committed(&mut b, &mut p, 4);
 }
 
 #[test]
@@ -1156,10 +1159,7 @@ fn activate_while_moving_does_not_reset_the_reversal_state() {
     // (+1: X last moved forward) is kept across the table's reload.
     b.tick(250);
     let before = b.engine().telemetry().model_corr_nm;
-    assert!(matches!(
-        call(&mut b, &mut p, 21, Request::Activate),
-        Response::Activated(_)
-    ));
+    assert_activated(&mut b, &mut p, 21);
     b.tick(1);
     assert_eq!(b.engine().telemetry().model_corr_nm, before);
 }

@@ -11,9 +11,9 @@ use std::process::Output;
 
 use common::{fit, json, run, s};
 use serde_json::Value;
-use trueaxis_engine::diagnose::synth::{generate, Hidden, Plan, SynthConfig};
 use trueaxis_engine::diagnose::{diagnose, Options};
 use trueaxis_engine::model::Seed;
+use trueaxis_engine::simulate::synth::{generate, Hidden, Plan, SynthConfig};
 
 fn tmp_dir(name: &str) -> std::path::PathBuf {
     common::tmp_dir("diag", name)

@@ -10,9 +10,9 @@
 
 use std::sync::{Arc, Mutex, OnceLock};
 
-use trueaxis_engine::diagnose::synth::{generate, Hidden, SynthConfig};
 use trueaxis_engine::diagnose::{diagnose, Diagnosis, Options, Verdict};
 use trueaxis_engine::model::Seed;
+use trueaxis_engine::simulate::synth::{generate, Hidden, SynthConfig};
 
 const NOISE_UM: f64 = 0.3;
 

@@ -17,8 +17,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::{Context, Result};
 use serde_json::json;
-use trueaxis_engine::diagnose::synth::{generate, Hidden, SynthConfig};
 use trueaxis_engine::diagnose::{diagnose, library, Options};
+use trueaxis_engine::simulate::synth::{generate, Hidden, SynthConfig};
 
 const NOISE_UM: f64 = 0.3;
 

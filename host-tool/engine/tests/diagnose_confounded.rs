@@ -13,9 +13,9 @@
 //! member of the same confound, which the `confounded` warning covers).
 
 use trueaxis_engine::data::Dataset;
-use trueaxis_engine::diagnose::synth::{generate, Hidden, Plan, SynthConfig};
 use trueaxis_engine::diagnose::{diagnose, Diagnosis, Options, Verdict};
 use trueaxis_engine::model::Seed;
+use trueaxis_engine::simulate::synth::{generate, Hidden, Plan, SynthConfig};
 
 /// A 100 mm grid, one approach direction, tool length by tool length.
 fn tool_by_tool(hidden: Vec<Hidden>) -> Dataset {

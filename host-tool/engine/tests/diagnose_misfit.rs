@@ -9,9 +9,9 @@
 //! says smooth error is left above the noise floor, and `smooth_misfit`
 //! says why.
 
-use trueaxis_engine::diagnose::synth::{generate, SynthConfig};
 use trueaxis_engine::diagnose::{diagnose, Options, Verdict};
 use trueaxis_engine::model::Seed;
+use trueaxis_engine::simulate::synth::{generate, SynthConfig};
 
 #[test]
 fn a_smooth_misfit_is_not_named_as_a_physical_effect() {

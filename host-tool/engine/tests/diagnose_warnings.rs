@@ -5,9 +5,9 @@
 //! `constant_temperature` for a sensor that does not change. Each test also
 //! checks the case that must not warn.
 
-use trueaxis_engine::diagnose::synth::{generate, SynthConfig};
 use trueaxis_engine::diagnose::{diagnose, Diagnosis, Options};
 use trueaxis_engine::model::Seed;
+use trueaxis_engine::simulate::synth::{generate, SynthConfig};
 
 fn warned(d: &Diagnosis, code: &str, needle: &str) -> bool {
     d.warnings

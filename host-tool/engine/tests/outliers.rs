@@ -85,20 +85,11 @@ fn beam_breaks_are_found_left_out_and_explain_nothing() {
 #[test]
 fn shape_the_model_lacks_is_not_an_outlier() {
     use trueaxis_engine::diagnose::outliers::find;
-    use trueaxis_engine::diagnose::synth::{generate, Hidden, SynthConfig};
+    use trueaxis_engine::simulate::synth::{generate, Hidden, SynthConfig};
     for seed in [5, 9] {
         let data = generate(&SynthConfig {
             seed,
-            hidden: vec![
-                Hidden::Periodic,
-                Hidden::Thermal,
-                Hidden::Reversal,
-                Hidden::Abbe,
-                Hidden::Drift,
-                Hidden::Squareness,
-                Hidden::HigherOrder,
-                Hidden::PeriodicX,
-            ],
+            hidden: Hidden::ALL.into_iter().chain([Hidden::PeriodicX]).collect(),
             ..SynthConfig::default()
         });
         let o = find(&data, &Seed::Cubic19, &[]).unwrap();

@@ -202,13 +202,7 @@ impl Calibrate {
         let (outliers, said) = outliers_said(&cal.outliers, &lines, &name);
         cal.warnings.extend(said);
         let pr = &cal.probe;
-        crate::workflow::write_file(
-            &self.output,
-            (serde_json::to_string_pretty(pr)? + "\n").as_bytes(),
-        )?;
-        for w in &cal.warnings {
-            eprintln!("warning: {w}");
-        }
+        self.write_probe(pr, &cal.warnings)?;
         let report = self
             .report
             .as_ref()
@@ -233,17 +227,8 @@ impl Calibrate {
             })
             .transpose()?;
         if self.json {
-            let doc = json!({
-                "scan": self.scan.display().to_string(),
-                "output": self.output.display().to_string(),
-                "report": report.as_ref().map(|p| p.display().to_string()),
-                "probe": pr,
-                "pv_without_form_nm": cal.pv_without_form_nm,
-                "pv_with_form_nm": cal.pv_with_form_nm,
-                "outliers": outliers,
-                "warnings": cal.warnings,
-            });
-            out::json_pretty(&doc)?;
+            let pv = [cal.pv_without_form_nm, cal.pv_with_form_nm];
+            self.print_json(report.as_ref(), pr, pv, outliers, &cal.warnings)?;
         } else {
             let mut s = String::new();
             let _ = writeln!(
@@ -287,6 +272,42 @@ impl Calibrate {
 }
 
 impl Calibrate {
+    /// Writes the probe file (either kind) to `-o` and says the
+    /// calibration's warnings on stderr.
+    fn write_probe(&self, probe: &impl serde::Serialize, warnings: &[String]) -> Result<()> {
+        crate::workflow::write_file(
+            &self.output,
+            (serde_json::to_string_pretty(probe)? + "\n").as_bytes(),
+        )?;
+        for w in warnings {
+            eprintln!("warning: {w}");
+        }
+        Ok(())
+    }
+
+    /// The `--json` document of a calibration (either kind); `pv_nm` is
+    /// the ball's PV without and with the form.
+    fn print_json(
+        &self,
+        report: Option<&PathBuf>,
+        probe: &impl serde::Serialize,
+        pv_nm: [f64; 2],
+        outliers: serde_json::Value,
+        warnings: &[String],
+    ) -> Result<()> {
+        let doc = json!({
+            "scan": self.scan.display().to_string(),
+            "output": self.output.display().to_string(),
+            "report": report.map(|p| p.display().to_string()),
+            "probe": probe,
+            "pv_without_form_nm": pv_nm[0],
+            "pv_with_form_nm": pv_nm[1],
+            "outliers": outliers,
+            "warnings": warnings,
+        });
+        out::json_pretty(&doc)
+    }
+
     /// `--plane xyz`: the 3-D calibration (docs/on-machine.md).
     fn run_3d(self) -> Result<()> {
         let text = crate::input::scan_text(&self.scan, self.session, Small::Positions)?;
@@ -298,13 +319,7 @@ impl Calibrate {
         let (outliers, said) = outliers_said(&cal.outliers, &lines, &name);
         cal.warnings.extend(said);
         let pr = &cal.probe;
-        crate::workflow::write_file(
-            &self.output,
-            (serde_json::to_string_pretty(pr)? + "\n").as_bytes(),
-        )?;
-        for w in &cal.warnings {
-            eprintln!("warning: {w}");
-        }
+        self.write_probe(pr, &cal.warnings)?;
         let report = self
             .report
             .as_ref()
@@ -332,17 +347,8 @@ impl Calibrate {
             })
             .transpose()?;
         if self.json {
-            let doc = json!({
-                "scan": self.scan.display().to_string(),
-                "output": self.output.display().to_string(),
-                "report": report.as_ref().map(|p| p.display().to_string()),
-                "probe": pr,
-                "pv_without_form_nm": cal.pv_without_form_nm,
-                "pv_with_form_nm": cal.pv_with_form_nm,
-                "outliers": outliers,
-                "warnings": cal.warnings,
-            });
-            return out::json_pretty(&doc);
+            let pv = [cal.pv_without_form_nm, cal.pv_with_form_nm];
+            return self.print_json(report.as_ref(), pr, pv, outliers, &cal.warnings);
         }
         let mut s = String::new();
         let a = pr.cone_axis;

@@ -59,7 +59,6 @@ mod score;
 mod search;
 mod smooth;
 mod swap;
-pub mod synth;
 mod target;
 mod warnings;
 
@@ -82,7 +81,7 @@ pub use warnings::above_noise;
 use noise::{target_noise_floor, NoiseMethod};
 use periodogram::Periodogram;
 use search::propose;
-use target::{fwl, hold_out_blocks, State, TargetData};
+use target::{fwl, State, TargetData};
 use warnings::{above_noise_warning, dedup_warnings, design_warnings, region_above_noise_warning};
 
 /// ΔBIC a candidate must beat to count (Kass & Raftery: "very strong").
@@ -636,28 +635,15 @@ fn one_target(
     let mut warnings = Vec::new();
     let mut ev = Evidence::default();
     let mut path = Vec::new();
-    let (rows, y): (Vec<usize>, Vec<f64>) = data.measured(t).unzip();
-    let (fold, nfolds, how) = hold_out_blocks(data, &rows, &norm);
+    let (td, how) = TargetData::new(data, norm, t, progress);
     let tn = TARGETS[t].to_string();
     progress.emit(&Event::Diagnose {
         target: TARGETS[t],
         stage: DiagnoseStage::Fitting {
-            rows: rows.len(),
+            rows: td.rows.len(),
             of,
         },
     });
-    let td = TargetData {
-        data,
-        norm,
-        t,
-        rows,
-        y,
-        fold,
-        nfolds,
-        progress,
-        forward: Default::default(),
-        time_order: Default::default(),
-    };
     let st0 = State::new(&td, &opts.seed, effects)?;
     let rms = st0.rms();
     let held_out_rms = st0.held_out_rms;
@@ -1002,20 +988,8 @@ pub fn library(data: &Dataset, opts: &Options) -> Result<Vec<TargetLibrary>> {
     let effects: Vec<Effect> = opts.adds.iter().cloned().map(Effect::new).collect();
     let mut out = Vec::new();
     for t in data.targets() {
-        let (rows, y): (Vec<usize>, Vec<f64>) = data.measured(t).unzip();
-        let (fold, nfolds, _) = hold_out_blocks(data, &rows, &norm);
-        let td = TargetData {
-            data,
-            norm,
-            t,
-            rows,
-            y,
-            fold,
-            nfolds,
-            progress: &Sink::none(),
-            forward: Default::default(),
-            time_order: Default::default(),
-        };
+        let none = Sink::none();
+        let (td, _) = TargetData::new(data, norm, t, &none);
         let st = State::new(&td, &opts.seed, &effects)?;
         let mut groups = Vec::new();
         for p in propose(&td, &st, &mut Evidence::default(), None) {

@@ -10,6 +10,7 @@ use nalgebra::{DMatrix, DVector};
 use crate::data::{Dataset, TARGETS};
 use crate::effect::{Effect, EffectSpec};
 use crate::features::{Feature, Norm};
+use crate::fit::linear::terms_for;
 use crate::model::Seed;
 use crate::regions::bin_index;
 
@@ -32,7 +33,33 @@ pub(super) struct TargetData<'a> {
     pub(super) time_order: std::sync::OnceLock<Option<Vec<usize>>>,
 }
 
-impl TargetData<'_> {
+impl<'a> TargetData<'a> {
+    /// Target `t` of `data`: the rows where it is measured, their values
+    /// and hold-out blocks ([`hold_out_blocks`]), with the blocks'
+    /// description.
+    pub(super) fn new(
+        data: &'a Dataset,
+        norm: Norm,
+        t: usize,
+        progress: &'a crate::progress::Sink,
+    ) -> (TargetData<'a>, String) {
+        let (rows, y): (Vec<usize>, Vec<f64>) = data.measured(t).unzip();
+        let (fold, nfolds, how) = hold_out_blocks(data, &rows, &norm);
+        let td = TargetData {
+            data,
+            norm,
+            t,
+            rows,
+            y,
+            fold,
+            nfolds,
+            progress,
+            forward: Default::default(),
+            time_order: Default::default(),
+        };
+        (td, how)
+    }
+
     pub(super) fn col(&self, f: &Feature) -> Result<Vec<f64>> {
         let full = f.column(self.data, &self.norm)?;
         Ok(self.rows.iter().map(|&r| full[r]).collect())
@@ -58,22 +85,14 @@ pub(super) struct State {
 impl State {
     /// The model `seed` plus `effects` fitted to the target.
     pub(super) fn new(td: &TargetData, seed: &Seed, effects: &[Effect]) -> Result<State> {
-        // The seed's terms as `fit` has them: none in an axis held at one
-        // position (those would be zero columns).
+        // The terms as `fit`'s design has them, on the data's own moving
+        // axes.
         let axes = td.data.varying_axes();
         let mut cols = Vec::new();
         let mut owner = Vec::new();
-        for exp in seed.monomials(td.t, &axes)? {
-            cols.push(td.col(&Feature::Monomial { exp })?);
-            owner.push(None);
-        }
-        for (i, e) in effects.iter().enumerate() {
-            if e.target() == td.t {
-                for f in &e.features {
-                    cols.push(td.col(f)?);
-                    owner.push(Some(i));
-                }
-            }
+        for (f, o) in terms_for(*seed, effects, td.t, &axes)? {
+            cols.push(td.col(&f)?);
+            owner.push(o);
         }
         let n = td.rows.len();
         let basis = Basis::new(&cols, n);
@@ -241,11 +260,7 @@ pub(super) fn rss_many(td: &TargetData, st: &State, specs: &[EffectSpec]) -> Vec
     out
 }
 
-pub(super) fn hold_out_blocks(
-    data: &Dataset,
-    rows: &[usize],
-    norm: &Norm,
-) -> (Vec<usize>, usize, String) {
+fn hold_out_blocks(data: &Dataset, rows: &[usize], norm: &Norm) -> (Vec<usize>, usize, String) {
     const K: usize = 5;
     // Whole passes, but a long pass (a dense line of 1600 points) is cut
     // into segments (holdout::PASS_SEGMENT consecutive rows): holding out a
@@ -440,7 +455,6 @@ pub(super) fn forward_rms(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::target::hold_out_blocks;
     use crate::simulate::thermal_test::spindle_thermal;
 
     /// The spindle thermal test at one point: a cubic in time follows the
@@ -455,22 +469,9 @@ mod tests {
         let full = spindle_thermal(1).data;
         let day: Vec<usize> = (0..=16 * 60).collect();
         let data = crate::data::subset(&full, &day);
-        let norm = Norm::from_data(&data);
-        let (rows, y): (Vec<usize>, Vec<f64>) = data.measured(2).unzip();
-        let (fold, nfolds, how) = hold_out_blocks(&data, &rows, &norm);
+        let none = crate::progress::Sink::none();
+        let (td, how) = TargetData::new(&data, Norm::from_data(&data), 2, &none);
         assert!(how.contains("time"), "{how}");
-        let td = TargetData {
-            data: &data,
-            norm,
-            t: 2,
-            rows,
-            y,
-            fold,
-            nfolds,
-            progress: &crate::progress::Sink::none(),
-            forward: Default::default(),
-            time_order: Default::default(),
-        };
         let st = State::new(&td, &Seed::Cubic19, &[]).unwrap();
         assert!(st.held_out_rms.is_finite());
         let blocks = forward_blocks(&td).unwrap();

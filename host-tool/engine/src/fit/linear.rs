@@ -19,23 +19,44 @@ use crate::linalg::lsq::{self, Gram, LsqError, LsqSolution, ILL_CONDITIONED};
 use crate::model::{FitStats, FittedModel, LinearModel, LinearOutput, Seed};
 use crate::warning::Warning;
 
+/// The terms of `seed` + `adds` for target `target` on data with the
+/// given axes: the seed's monomials (none in an axis not among `axes`:
+/// those would be zero columns), then the columns of each effect on
+/// `target` in the order of `adds`, each with the index into `adds` of
+/// the effect it belongs to (None for the seed's). The one list both the
+/// fit's [`Design`] and the diagnosis' model of a target build their
+/// columns from.
+pub fn terms_for(
+    seed: Seed,
+    adds: &[Effect],
+    target: usize,
+    axes: &[usize],
+) -> Result<Vec<(Feature, Option<usize>)>> {
+    let mut f: Vec<(Feature, Option<usize>)> = seed
+        .monomials(target, axes)?
+        .into_iter()
+        .map(|exp| (Feature::Monomial { exp }, None))
+        .collect();
+    for (i, e) in adds.iter().enumerate() {
+        if e.target() == target {
+            f.extend(e.features.iter().map(|x| (x.clone(), Some(i))));
+        }
+    }
+    Ok(f)
+}
+
 /// The features of `seed` (+ the effects for `target`) for target `target`
-/// on data with the given axes.
+/// on data with the given axes ([`terms_for`] without their owners).
 pub fn features_for(
     seed: Seed,
     adds: &[Effect],
     target: usize,
     axes: &[usize],
 ) -> Result<Vec<Feature>> {
-    let mut f: Vec<Feature> = seed
-        .monomials(target, axes)?
+    Ok(terms_for(seed, adds, target, axes)?
         .into_iter()
-        .map(|exp| Feature::Monomial { exp })
-        .collect();
-    for e in adds.iter().filter(|e| e.target() == target) {
-        f.extend(e.features.iter().cloned());
-    }
-    Ok(f)
+        .map(|(f, _)| f)
+        .collect())
 }
 
 /// One target's fit with its statistics.

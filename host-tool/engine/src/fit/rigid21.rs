@@ -989,14 +989,7 @@ mod tests {
                 for side in [0.2, 0.8] {
                     let mut at = [0.0; 3];
                     at[other] = m.travel_mm[other] * side;
-                    plan.push(Instrument::Line {
-                        axis,
-                        at_mm: at,
-                        tool_mm: tool,
-                        tool_lat_mm: [0.0, 0.0],
-                        straightness: true,
-                        points: 21,
-                    });
+                    plan.push(instruments::laser_line(axis, at, tool));
                 }
             }
         }

@@ -395,6 +395,14 @@ impl ProbeTable {
                 )
             })
         };
+        // A row's values of `cols`, comma-separated, as one line.
+        let line = |r: &ProbeRow, cols: &[&str]| -> Result<String> {
+            let v = cols
+                .iter()
+                .map(|c| need(r, c).map(num))
+                .collect::<Result<Vec<_>>>()?;
+            Ok(v.join(",") + "\n")
+        };
         let timed = !rows.is_empty() && rows.iter().all(|r| r.get("t_s").is_some());
         let mut out = String::new();
         match kind {
@@ -403,22 +411,11 @@ impl ProbeTable {
                     .into_iter()
                     .filter(|c| rows.iter().any(|r| r.get(c).is_some()))
                     .collect();
-                let mut head = pos.join(",");
-                if timed {
-                    head.push_str(",t_s");
-                }
-                out.push_str(&head);
-                out.push('\n');
+                out.push_str(&pos.join(","));
+                out.push_str(if timed { ",t_s\n" } else { "\n" });
+                let cols: Vec<&str> = pos.into_iter().chain(timed.then_some("t_s")).collect();
                 for r in &rows {
-                    let mut cells = Vec::new();
-                    for c in &pos {
-                        cells.push(num(need(r, c)?));
-                    }
-                    if timed {
-                        cells.push(num(need(r, "t_s")?));
-                    }
-                    out.push_str(&cells.join(","));
-                    out.push('\n');
+                    out.push_str(&line(r, &cols)?);
                 }
             }
             Small::Straightness(axis, o) => {
@@ -453,15 +450,12 @@ impl ProbeTable {
                     reading.join(","),
                     if timed { ",t_s" } else { "" }
                 ));
+                let cols: Vec<&str> = std::iter::once(pos.as_str())
+                    .chain(reading.iter().map(String::as_str))
+                    .chain(timed.then_some("t_s"))
+                    .collect();
                 for r in mine {
-                    out.push_str(&num(need(r, &pos)?));
-                    for c in &reading {
-                        out.push_str(&format!(",{}", num(need(r, c)?)));
-                    }
-                    if timed {
-                        out.push_str(&format!(",{}", num(need(r, "t_s")?)));
-                    }
-                    out.push('\n');
+                    out.push_str(&line(r, &cols)?);
                 }
             }
             Small::ThreeProbe => {
@@ -508,37 +502,20 @@ impl ProbeTable {
             Small::MultiStep => {
                 out.push_str("c_deg,step_deg,p_um\n");
                 for r in &rows {
-                    out.push_str(&format!(
-                        "{},{},{}\n",
-                        num(need(r, "c_deg")?),
-                        num(need(r, "step_deg")?),
-                        num(need(r, "d_um")?)
-                    ));
+                    out.push_str(&line(r, &["c_deg", "step_deg", "d_um"])?);
                 }
             }
             Small::Roundness => {
                 out.push_str(&format!("c_deg,p_um{}\n", if timed { ",t_s" } else { "" }));
+                let cols = ["c_deg", "d_um", "t_s"];
                 for r in &rows {
-                    out.push_str(&format!(
-                        "{},{}",
-                        num(need(r, "c_deg")?),
-                        num(need(r, "d_um")?)
-                    ));
-                    if timed {
-                        out.push_str(&format!(",{}", num(need(r, "t_s")?)));
-                    }
-                    out.push('\n');
+                    out.push_str(&line(r, &cols[..if timed { 3 } else { 2 }])?);
                 }
             }
             Small::Workpiece => {
                 out.push_str("c_deg,z_mm,dev_um\n");
                 for r in &rows {
-                    out.push_str(&format!(
-                        "{},{},{}\n",
-                        num(need(r, "c_deg")?),
-                        num(need(r, "z_mm")?),
-                        num(need(r, "d_um")?)
-                    ));
+                    out.push_str(&line(r, &["c_deg", "z_mm", "d_um"])?);
                 }
             }
         }

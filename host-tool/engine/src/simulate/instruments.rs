@@ -78,6 +78,20 @@ pub enum Instrument {
     },
 }
 
+/// A laser line along `axis` through `at_mm` at tool length `tool_mm`,
+/// no lateral offset: positioning and straightness at 21 points (each of
+/// [`laser_lines`]).
+pub fn laser_line(axis: usize, at_mm: [f64; 3], tool_mm: f64) -> Instrument {
+    Instrument::Line {
+        axis,
+        at_mm,
+        tool_mm,
+        tool_lat_mm: [0.0, 0.0],
+        straightness: true,
+        points: 21,
+    }
+}
+
 /// The plans a `mill800`-sized machine is measured with in tests and
 /// examples: laser lines (positioning and straightness) along each axis at
 /// two tool lengths and two parallel offsets.
@@ -89,14 +103,7 @@ pub fn laser_lines(travel_mm: [f64; 3], tools_mm: &[f64]) -> Vec<Instrument> {
                 let mut at = travel_mm.map(|t| t * 0.5);
                 // Parallel offsets along the next axis.
                 at[(axis + 1) % 3] = travel_mm[(axis + 1) % 3] * side;
-                out.push(Instrument::Line {
-                    axis,
-                    at_mm: at,
-                    tool_mm: tool,
-                    tool_lat_mm: [0.0, 0.0],
-                    straightness: true,
-                    points: 21,
-                });
+                out.push(laser_line(axis, at, tool));
             }
         }
     }

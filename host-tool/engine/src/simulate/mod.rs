@@ -11,6 +11,11 @@
 //! byte-identical CSV: the only randomness is a ChaCha8 stream, turned into
 //! floats and normals by hand-written code that no crate upgrade changes.
 //!
+//! [`synth`] is the diagnosis' small mill with an answer key (hidden
+//! effects of known family and place, misfit outside the seed's span by
+//! construction), for the diagnosis tests and the Monte Carlo benchmark;
+//! it draws from its own SplitMix64 stream (`splitmix.rs`).
+//!
 //! Output resolution: errors are rounded to 0.1 nm, t_s to 1 ms,
 //! temperatures to 1 mK (an instrument's display), and every effect is
 //! computed from the rounded temperature the file shows.
@@ -22,6 +27,8 @@ mod machine;
 mod plan;
 mod spec;
 pub mod spindle_duty;
+mod splitmix;
+pub mod synth;
 pub mod thermal_test;
 pub mod volumetric;
 
@@ -335,10 +342,6 @@ pub fn simulate_detailed(cfg: &SimConfig) -> SimOutput {
                 )
             })
             .then_some(rows_session),
-        u_um: None,
-        aux: Vec::new(),
-        line: Vec::new(),
-        skipped: Vec::new(),
         ..Dataset::default()
     };
     SimOutput {

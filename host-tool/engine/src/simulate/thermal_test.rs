@@ -189,15 +189,7 @@ pub fn spindle_thermal(seed: u64) -> SimOutput {
         pos_mm: POINT_MM.map(|p| Some(vec![p; n])),
         err_um: err,
         t_s: Some(t_s),
-        dir: Default::default(),
         temps,
-        tool_mm: None,
-        pass_id: None,
-        session_id: None,
-        u_um: None,
-        aux: Vec::new(),
-        line: Vec::new(),
-        skipped: Vec::new(),
         ..Dataset::default()
     };
     SimOutput {

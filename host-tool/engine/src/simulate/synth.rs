@@ -1,19 +1,21 @@
-//! A small synthetic machine for testing and benchmarking the diagnosis:
-//! an 800 × 500 × 500 mm mill measured on a 100 mm grid plus dense lines
-//! (1 mm) along each axis, forward and backward, with one or more hidden
-//! effects of known family, amplitude and place, optional smooth misfit that
-//! the cubic19 seed cannot fit, and Gaussian noise from a fixed seed.
+//! A small synthetic machine with an answer key, for testing and
+//! benchmarking the diagnosis: an 800 × 500 × 500 mm mill measured on a
+//! 100 mm grid plus dense lines (1 mm) along each axis, forward and
+//! backward, with one or more hidden effects of known family, amplitude
+//! and place, optional smooth misfit that the cubic19 seed cannot fit, and
+//! Gaussian noise from a fixed seed.
 //!
-//! It lives beside the diagnosis (rather than in `simulate`) because the
-//! tests and the Monte Carlo benchmark need exact control of what is hidden
-//! and where — the answer key — and of the misfit, which must lie outside
-//! the seed's span by construction. Everything is deterministic for a seed
-//! (the SplitMix64 stream of `trueaxis-test-support`, bit-identical on
-//! every platform).
+//! Beside [`super::simulate`] rather than through it: the tests and the
+//! Monte Carlo benchmark need exact control of what is hidden and where —
+//! the answer key — and of the misfit, which must lie outside the seed's
+//! span by construction; and its data sets stay bit for bit those the
+//! tests and BENCHMARKS.md were made with. Everything is deterministic for a seed (a SplitMix64
+//! stream, `splitmix.rs`, bit-identical on every platform and to the one
+//! of `trueaxis-test-support` these data sets were first drawn from).
 
 use std::f64::consts::TAU;
 
-use trueaxis_test_support::SplitMix64;
+use super::splitmix::SplitMix64;
 
 use crate::data::{Dataset, TempChannel};
 use crate::features::{kinematic, lagged, Norm, CUBIC19};
