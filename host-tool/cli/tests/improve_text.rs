@@ -78,15 +78,7 @@ fn improve_carries_diagnoses_design_warnings() {
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let m = dir.join("m.json");
-    let o = run(&[
-        "improve",
-        s(&data),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&m),
-        "--json",
-    ]);
+    let o = common::cubic19("improve", &data, &m, &[]);
     let doc = common::json(&o);
     let codes: Vec<&str> = doc["warnings"]
         .as_array()
