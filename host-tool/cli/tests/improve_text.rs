@@ -80,12 +80,7 @@ fn improve_carries_diagnoses_design_warnings() {
     let m = dir.join("m.json");
     let o = common::cubic19("improve", &data, &m, &[]);
     let doc = common::json(&o);
-    let codes: Vec<&str> = doc["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(|w| w["code"].as_str())
-        .collect();
+    let codes = common::warning_codes(&doc);
     for want in ["aliasing", "no_temperature"] {
         assert!(codes.contains(&want), "{want} missing: {codes:?}");
     }
