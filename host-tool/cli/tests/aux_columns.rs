@@ -54,14 +54,7 @@ fn a_contract_name_in_the_wrong_case_is_refused_like_x_mm() {
         s(&csv)
     );
     expect_exit(
-        &[
-            "fit",
-            s(&csv),
-            "--model",
-            "cubic19",
-            "-o",
-            s(&dir.join("m.json")),
-        ],
+        &common::cubic19_args("fit", &csv, &dir.join("m.json"), &[]),
         1,
         &[&msg],
     );

@@ -28,14 +28,12 @@ fn a_step_that_adds_two_effects_explains_both() {
         s(&data),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let o = run(&[
+    let o = run(&common::cubic19_args(
         "improve",
-        s(&data),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&dir.join("m.json")),
-    ]);
+        &data,
+        &dir.join("m.json"),
+        &[],
+    ));
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let text = String::from_utf8_lossy(&o.stdout);
     let step = text
