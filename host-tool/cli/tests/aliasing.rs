@@ -44,15 +44,7 @@ fn simulate(dir: &Path, name: &str, plans: &[&str], effect: &str, seed: &str) ->
 }
 
 fn improve(csv: &Path, model: &Path) -> Value {
-    json(&run(&[
-        "improve",
-        s(csv),
-        "--model",
-        "cubic19",
-        "-o",
-        s(model),
-        "--json",
-    ]))
+    json(&common::cubic19("improve", csv, model, &[]))
 }
 
 /// RMS per (line axis, target) of `model` on dense 0.5 mm lines along x,

@@ -54,14 +54,7 @@ fn a_contract_name_in_the_wrong_case_is_refused_like_x_mm() {
         s(&csv)
     );
     expect_exit(
-        &[
-            "fit",
-            s(&csv),
-            "--model",
-            "cubic19",
-            "-o",
-            s(&dir.join("m.json")),
-        ],
+        &common::cubic19_args("fit", &csv, &dir.join("m.json"), &[]),
         1,
         &[&msg],
     );
@@ -190,22 +183,9 @@ fn data_without_aux_columns_gets_no_aux_warning() {
         "{}",
         doc["warnings"]
     );
-    let doc = json(&run(&[
-        "improve",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&dir.join("i.json")),
-        "--json",
-    ]));
+    let doc = json(&common::cubic19("improve", &csv, &dir.join("i.json"), &[]));
     // No aux warning; the design warnings of the last diagnosis only.
-    let codes: Vec<&str> = doc["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(|w| w["code"].as_str())
-        .collect();
+    let codes = common::warning_codes(&doc);
     assert!(codes.iter().all(|c| !c.starts_with("aux_")), "{codes:?}");
     assert!(codes.contains(&"no_temperature"), "{codes:?}");
 }

@@ -99,15 +99,12 @@ fn simulated_line_and_iso230_data_fit_with_the_polynomial_seeds() {
     assert_eq!(lin.norm.half_span_mm[2], 0.001);
 
     // improve from the bare seed adds the reversal and stops at the floor.
-    let v = json(&run(&[
+    let v = json(&common::cubic19(
         "improve",
-        s(&iso),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&dir.join("improved.json")),
-        "--json",
-    ]));
+        &iso,
+        &dir.join("improved.json"),
+        &[],
+    ));
     assert_eq!(v["model"], "cubic19 --add reversal:target=ex,axis=x", "{v}");
     assert_eq!(v["verdict"], "at_noise_floor", "{v}");
 }

@@ -32,15 +32,7 @@ fn diagnose_json(csv: &Path, model: &str) -> Output {
 
 /// `trueaxis improve CSV --model cubic19 -o MODEL --json`.
 fn improve_json(csv: &Path, model: &Path) -> Output {
-    run(&[
-        "improve",
-        s(csv),
-        "--model",
-        "cubic19",
-        "-o",
-        s(model),
-        "--json",
-    ])
+    common::cubic19("improve", csv, model, &[])
 }
 
 /// Stderr of a run that must succeed.

@@ -54,14 +54,7 @@ fn an_escape_sequence_in_a_cell_or_header_is_shown_escaped() {
         text.push_str(&format!("{},{},a\n", i * 100, (i as f64 * 0.7).sin()));
     }
     std::fs::write(&aux, text).unwrap();
-    let out = run(&[
-        "fit",
-        s(&aux),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&dir.join("m.json")),
-    ]);
+    let out = run(&common::cubic19_args("fit", &aux, &dir.join("m.json"), &[]));
     common::assert_success(&out);
     let err = String::from_utf8(out.stderr).unwrap();
     assert!(err.contains("`no\\u{1b}[8mte`"), "{err}");

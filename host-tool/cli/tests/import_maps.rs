@@ -51,15 +51,7 @@ fn a_reprapfirmware_map_becomes_a_z_error_map_with_the_compensation_sign() {
     assert!((node(&csv, 200.0, 195.0) - 37.0).abs() < 1e-9);
     // fit reads it directly and says which row it left out.
     let model = dir.join("m.json");
-    let fit = run(&[
-        "fit",
-        s(&map),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&model),
-        "--json",
-    ]);
+    let fit = common::cubic19("fit", &map, &model, &[]);
     assert!(stderr(&fit).contains("line 12"), "{}", stderr(&fit));
     let f = json(&fit);
     // The map is mostly a tilted dish: a cubic follows it to a few µm of a
@@ -159,15 +151,7 @@ fn a_mesh_exported_from_a_fit_of_a_mesh_gives_the_mesh_back() {
         "--json",
     ]));
     let model = dir.join("m.json");
-    json(&run(&[
-        "fit",
-        s(&hot),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&model),
-        "--json",
-    ]));
+    json(&common::cubic19("fit", &hot, &model, &[]));
     let measured = std::fs::read_to_string(&hot).unwrap();
     for (format, file, tol_um) in [
         ("klipper-mesh", "back.cfg", 1e-3),
@@ -226,15 +210,7 @@ fn a_mesh_exported_from_a_fit_of_a_mesh_gives_the_mesh_back() {
         "--json",
     ]));
     let lm = dir.join("line.json");
-    json(&run(&[
-        "fit",
-        s(&line),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&lm),
-        "--json",
-    ]));
+    json(&common::cubic19("fit", &line, &lm, &[]));
     let out = run(&[
         "export",
         s(&lm),
@@ -267,15 +243,7 @@ fn real_bed_cubic(
         "--json",
     ]));
     let model = dir.join("bed.json");
-    let fit = json(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&model),
-        "--json",
-    ]));
+    let fit = json(&common::cubic19("fit", &csv, &model, &[]));
     (dir, csv, model, fit)
 }
 

@@ -28,14 +28,12 @@ fn a_step_that_adds_two_effects_explains_both() {
         s(&data),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let o = run(&[
+    let o = run(&common::cubic19_args(
         "improve",
-        s(&data),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&dir.join("m.json")),
-    ]);
+        &data,
+        &dir.join("m.json"),
+        &[],
+    ));
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let text = String::from_utf8_lossy(&o.stdout);
     let step = text
@@ -78,22 +76,9 @@ fn improve_carries_diagnoses_design_warnings() {
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let m = dir.join("m.json");
-    let o = run(&[
-        "improve",
-        s(&data),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&m),
-        "--json",
-    ]);
+    let o = common::cubic19("improve", &data, &m, &[]);
     let doc = common::json(&o);
-    let codes: Vec<&str> = doc["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(|w| w["code"].as_str())
-        .collect();
+    let codes = common::warning_codes(&doc);
     for want in ["aliasing", "no_temperature"] {
         assert!(codes.contains(&want), "{want} missing: {codes:?}");
     }

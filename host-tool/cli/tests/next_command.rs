@@ -26,15 +26,7 @@ fn the_next_command_runs_as_printed_and_continues_the_history() {
         "--json",
     ]));
     let model = dir.join("m.json");
-    json(&run(&[
-        "fit",
-        s(&data),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&model),
-        "--json",
-    ]));
+    json(&common::cubic19("fit", &data, &model, &[]));
     let d = json(&run(&[
         "diagnose",
         s(&data),

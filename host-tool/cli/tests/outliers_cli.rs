@@ -89,27 +89,10 @@ fn spikes_are_reported_with_their_lines_and_left_out() {
 
     // fit leaves them out (its RMS is the clean data's), --keep-outliers not.
     let m = dir.join("m.json");
-    let f = json(&run(&[
-        "fit",
-        s(&spiky),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&m),
-        "--json",
-    ]));
+    let f = json(&common::cubic19("fit", &spiky, &m, &[]));
     assert_eq!(f["outliers"].as_array().unwrap().len(), expected.len());
     assert!(f["rms_um"]["ex"].as_f64().unwrap() < 0.2, "{f}");
-    let f = json(&run(&[
-        "fit",
-        s(&spiky),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&m),
-        "--keep-outliers",
-        "--json",
-    ]));
+    let f = json(&common::cubic19("fit", &spiky, &m, &["--keep-outliers"]));
     assert!(f["outliers"].as_array().unwrap().is_empty());
     assert!(f["rms_um"]["ex"].as_f64().unwrap() > 1.0, "{f}");
 

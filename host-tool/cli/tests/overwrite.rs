@@ -36,15 +36,7 @@ fn fit_improve_and_import_refuse_to_write_over_the_data() {
     );
     unchanged(&csv, CSV);
     expect_exit(
-        &[
-            "improve",
-            s(&csv),
-            "--model",
-            "cubic19",
-            "-o",
-            s(&csv),
-            "--json",
-        ],
+        &common::cubic19_args("improve", &csv, &csv, &["--json"]),
         1,
         &[&msg],
     );
@@ -52,15 +44,7 @@ fn fit_improve_and_import_refuse_to_write_over_the_data() {
     // Another spelling of the same path.
     let other = dir.join(".").join("r6.csv");
     expect_exit(
-        &[
-            "fit",
-            s(&csv),
-            "--model",
-            "cubic19",
-            "-o",
-            s(&other),
-            "--json",
-        ],
+        &common::cubic19_args("fit", &csv, &other, &["--json"]),
         1,
         &["is the data file", "nothing was written"],
     );

@@ -27,15 +27,7 @@ fn a_thermal_test_at_one_point_is_fitted_and_its_temperature_named() {
     assert_eq!(sim["rows"], 2881);
     // fit: a constant per target, said in a warning (it used to stop with
     // "every measured point lies at one position").
-    let fit = json(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&dir.join("m.json")),
-        "--json",
-    ]));
+    let fit = json(&common::cubic19("fit", &csv, &dir.join("m.json"), &[]));
     assert_eq!(fit["terms"], 1);
     assert!(fit["warnings"][0]
         .as_str()
@@ -94,15 +86,12 @@ fn a_thermal_test_at_one_point_is_fitted_and_its_temperature_named() {
         .iter()
         .all(|c| c["effect"] != "drift" || c["significant"] == false));
     // improve: the loop adds the two temperatures, never drift.
-    let imp = json(&run(&[
+    let imp = json(&common::cubic19(
         "improve",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&dir.join("imp.json")),
-        "--json",
-    ]));
+        &csv,
+        &dir.join("imp.json"),
+        &[],
+    ));
     let model = imp["model"].as_str().unwrap();
     assert!(
         model.contains("thermal:target=ez,channel=column_front+spindle_housing"),
@@ -229,15 +218,7 @@ fn with_a_fake_travel_improve_still_picks_the_temperatures_not_drift() {
         .collect();
     let fake = dir.join("fake.csv");
     std::fs::write(&fake, text.join("\n") + "\n").unwrap();
-    let imp = json(&run(&[
-        "improve",
-        s(&fake),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&dir.join("m.json")),
-        "--json",
-    ]));
+    let imp = json(&common::cubic19("improve", &fake, &dir.join("m.json"), &[]));
     let model = imp["model"].as_str().unwrap();
     assert!(
         model.contains("thermal:target=ez,channel=column_front+spindle_housing"),

@@ -184,15 +184,7 @@ fn the_users_travel_keeps_the_row_or_cuts_where_it_says() {
 fn improve_leaves_the_stray_row_out_of_every_step() {
     let dir = tmp_dir("travel", "improve");
     let (_, stray, line) = stray_case(&dir);
-    let out = run(&[
-        "improve",
-        s(&stray),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&dir.join("imp.json")),
-        "--json",
-    ]);
+    let out = common::cubic19("improve", &stray, &dir.join("imp.json"), &[]);
     let err = String::from_utf8_lossy(&out.stderr).into_owned();
     let v = json(&out);
     assert_eq!(v["outside_travel"][0]["line"], line);

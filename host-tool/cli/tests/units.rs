@@ -45,15 +45,7 @@ fn errors_in_mm_are_warned_and_their_table_refused_unless_told() {
     let dir = tmp_dir("units", "mm");
     let mm = grid_in_mm(&dir);
     let model = dir.join("m.json");
-    let fit = run(&[
-        "fit",
-        s(&mm),
-        "--model",
-        "cubic19",
-        "-o",
-        s(&model),
-        "--json",
-    ]);
+    let fit = common::cubic19("fit", &mm, &model, &[]);
     let err = String::from_utf8_lossy(&fit.stderr).into_owned();
     assert!(
         err.contains("units_suspect") && err.contains("multiply them by 1000"),

@@ -75,17 +75,28 @@ pub fn simulate_grid(dir: &Path, name: &str, seed: u64) -> PathBuf {
     csv
 }
 
+/// The arguments `CMD CSV --model cubic19 -o MODEL [EXTRA…]`.
+pub fn cubic19_args<'a>(
+    cmd: &'a str,
+    csv: &'a Path,
+    model: &'a Path,
+    extra: &[&'a str],
+) -> Vec<&'a str> {
+    let mut args = vec![cmd, s(csv), "--model", "cubic19", "-o", s(model)];
+    args.extend_from_slice(extra);
+    args
+}
+
+/// `trueaxis CMD CSV --model cubic19 -o MODEL [EXTRA…] --json`.
+pub fn cubic19(cmd: &str, csv: &Path, model: &Path, extra: &[&str]) -> Output {
+    let mut args = cubic19_args(cmd, csv, model, extra);
+    args.push("--json");
+    run(&args)
+}
+
 /// `trueaxis fit CSV --model cubic19 -o MODEL --json`; returns its JSON.
 pub fn fit_cubic19(csv: &Path, model: &Path) -> Value {
-    json(&run(&[
-        "fit",
-        s(csv),
-        "--model",
-        "cubic19",
-        "-o",
-        s(model),
-        "--json",
-    ]))
+    json(&cubic19("fit", csv, model, &[]))
 }
 
 /// A checked-in input file, `tests/data/NAME`.
