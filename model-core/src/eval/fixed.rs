@@ -276,8 +276,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         let n = (self.blk_n as usize).min(BLK_CAP);
         let mut a = self.block_round;
         for c in &self.blk_q[..n] {
-            // Load keeps every index below `n_monos` ≤ N; the clamp (no
-            // branch, unlike a bounds check) only keeps the read in `mv`.
+            // Index < n_monos ≤ N (load); the clamp is branchless, unlike a bounds check.
             let m = mv[(c[3] as u32 as usize).min(N - 1)] as i64;
             a[0] += c[0] as i64 * m;
             a[1] += c[1] as i64 * m;
