@@ -74,7 +74,7 @@ fn main() {
         let model =
             Box::new(model_core::Model::load(&table).unwrap_or_else(|e| panic!("{name}: {e:?}")));
         let mut vectors = Vec::new();
-        for inp in tables::vector_inputs(0x5EED_0000 + name.len() as u64, 200) {
+        for inp in tables::vector_inputs(tables::vector_seed(name), 200) {
             for w in tables::vector_record(&model, &inp) {
                 vectors.extend_from_slice(&w.to_le_bytes());
             }

@@ -162,6 +162,16 @@ pub const RECORD_WORDS: usize = 3 + 3 + model_core::MAX_TEMPS + 1 + 3 + 1 + 3 + 
 /// positions up to 2 % outside the travel, both reversal states and
 /// mid-transition values, temperatures beyond the channel range, tools
 /// beyond the arm range — so the clamps and flags are exercised too.
+/// The seed of a bench table's replay vectors, from its name's bytes
+/// (FNV-1a, 64 bit): two names of one length get different inputs (the
+/// seed was once `0x5EED_0000 + name.len()`, which gave `rigid21` the
+/// inputs of `cubic19`).
+pub fn vector_seed(name: &str) -> u64 {
+    name.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
 pub fn vector_inputs(seed: u64, n: usize) -> Vec<model_core::Inputs> {
     let mut rng = Rng::new(seed);
     (0..n)

@@ -275,8 +275,9 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         let mv = core::hint::black_box(mv);
         let n = (self.blk_n as usize).min(BLK_CAP);
         let mut a = self.block_round;
-        for (&i, c) in self.blk_idx[..n].iter().zip(&self.blk_q[..n]) {
-            let m = mv.get(i as usize).copied().unwrap_or(0) as i64;
+        for c in &self.blk_q[..n] {
+            // Index < n_monos ≤ N (load); the clamp is branchless, unlike a bounds check.
+            let m = mv[(c[3] as u32 as usize).min(N - 1)] as i64;
             a[0] += c[0] as i64 * m;
             a[1] += c[1] as i64 * m;
             a[2] += c[2] as i64 * m;

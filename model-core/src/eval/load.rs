@@ -325,8 +325,8 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         let count = used.clone().count();
         if self.has_block && count <= BLK_CAP && 2 * count <= n {
             for (k, i) in used.enumerate() {
-                self.blk_idx[k] = i as u8;
-                self.blk_q[k] = core::array::from_fn(|o| self.block_q[o][i]);
+                let q = &self.block_q;
+                self.blk_q[k] = [q[0][i], q[1][i], q[2][i], i as i32];
                 self.blk_n = k as u8 + 1;
             }
         }

@@ -606,8 +606,10 @@ pub struct ModelCap<const P: usize, const G: usize> {
     /// the block has more than [`BLK_CAP`] such monomials (the rows of
     /// `block_q` then). Last, so the fields above keep their offsets.
     blk_n: u8,
-    blk_idx: [u8; BLK_CAP],
-    blk_q: [[i32; 3]; BLK_CAP],
+    /// Per monomial read: its three coefficients, then its graded index
+    /// (< `n_monos`), so one LDM reads all four and the three sums stay
+    /// in registers (rigid21_fixed 1 443 → 1 392, BENCHMARKS.md).
+    blk_q: [[i32; 4]; BLK_CAP],
     /// Fixed point with few monomials (`vp_n` > 0, see `prepare_vp`): the
     /// vector v of the monomials the block reads and their parents — 1, x,
     /// y, z, then one entry per product — built by `vp_step` (for k ≥ 4,
@@ -709,8 +711,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             fac_f32: Vec::new(),
             half_nm: [0; 3],
             blk_n: 0,
-            blk_idx: [0; BLK_CAP],
-            blk_q: [[0; 3]; BLK_CAP],
+            blk_q: [[0; 4]; BLK_CAP],
             vp_n: 0,
             vp_step: [(0, 0); VP_CAP],
             vp_q: [[0; 3]; VP_CAP],
