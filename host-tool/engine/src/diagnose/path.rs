@@ -325,7 +325,7 @@ pub(super) fn rank_target(
         // to correlate with it.
         let passes_alone = dbic < DBIC_SIGNIFICANT && gain >= MIN_HELD_OUT_GAIN;
         let smooth = (passes_alone && gap_ok && c.replaces.is_none())
-            .then(|| smooth::alternative(td, st, &sc[b].spec, sc[b].partialled.len()))
+            .then(|| smooth::alternative(td, st, &sc[b].spec, sc[b].width))
             .flatten();
         let smooth_ok = smooth
             .as_ref()
@@ -334,7 +334,7 @@ pub(super) fn rank_target(
         // and the path does not go past it either: the dense line settles it.
         let under_alias = held_dbic.as_ref().filter(|(d, _)| *d < dbic);
         if passes_alone && under_alias.is_none() && (!gap_ok || !smooth_ok) {
-            blocked = Some(blocking(&sc, &top, &spans, n));
+            blocked = Some(blocking(td, st, &sc, &top, &spans, n));
         }
         if let Some(a) = smooth.as_ref().filter(|_| !smooth_ok) {
             warnings.push(Warning {
@@ -419,7 +419,14 @@ pub(super) fn rank_target(
 /// What blocks the best of `top` (indices into `sc`; `spans` their bases):
 /// the competitors within the gap rule's margin, and the candidates
 /// independent of the best and of everything that competes with it.
-fn blocking(sc: &[Scored], top: &[usize], spans: &[Basis], n: usize) -> Blocked {
+fn blocking(
+    td: &TargetData,
+    st: &State,
+    sc: &[Scored],
+    top: &[usize],
+    spans: &[Basis],
+    n: usize,
+) -> Blocked {
     let b = &sc[top[0]].cand;
     let dbic = b.delta_bic.unwrap_or(f64::INFINITY);
     // The group: the best and every contender sharing its signal.
@@ -442,12 +449,16 @@ fn blocking(sc: &[Scored], top: &[usize], spans: &[Basis], n: usize) -> Blocked 
     // Every other identifiable new effect (not a replacement), judged by
     // its overlap with each member of the group — not only the contenders
     // with ΔBIC < 0: with the group's signal left in the residual, an
-    // independent effect's ΔBIC is diluted.
+    // independent effect's ΔBIC is diluted. Its partialled columns are
+    // recomputed if not kept (not a replacement: scored against `st`).
     let in_group = |i: usize| group.iter().any(|&jj| top[jj] == i);
     let independent = (0..sc.len())
         .filter(|&i| !in_group(i) && sc[i].cand.identifiable && sc[i].cand.replaces.is_none())
         .filter(|&i| {
-            let bi = Basis::new(&sc[i].partialled, n);
+            let Some(cols) = sc[i].partialled_or(td, st) else {
+                return false;
+            };
+            let bi = Basis::new(&cols, n);
             group
                 .iter()
                 .all(|&jj| spans[jj].overlap(&bi) < COMPETING_OVERLAP)

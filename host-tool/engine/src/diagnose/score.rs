@@ -21,7 +21,13 @@ pub(super) struct Scored {
     pub(super) spec: EffectSpec,
     /// The effect it replaces (`cand.replaces`), typed.
     pub(super) replaces: Option<EffectSpec>,
+    /// Its columns with the model partialled out, kept only for a plausible
+    /// contender (identifiable, ΔBIC < 0: the overlaps among the contenders
+    /// need them); empty otherwise — n rows each, 8 MB a column at a
+    /// million rows (issue 29). [`Scored::partialled_or`] recomputes them.
     pub(super) partialled: Vec<Vec<f64>>,
+    /// Its number of columns.
+    pub(super) width: usize,
     /// On a time series where n_eff decides (`autocorr::decides`): the
     /// effective sample size of the residual with the candidate in, and
     /// its ΔBIC recomputed with it.
@@ -37,6 +43,21 @@ impl Scored {
             replaces: self.replaces,
         };
         (self.cand, spec)
+    }
+
+    /// Its partialled columns: the kept ones, else recomputed on the model
+    /// `st` it was scored against (the same values: each column is
+    /// projected on its own); None if they cannot be.
+    pub(super) fn partialled_or(
+        &self,
+        td: &TargetData,
+        st: &State,
+    ) -> Option<std::borrow::Cow<'_, [Vec<f64>]>> {
+        if !self.partialled.is_empty() || self.width == 0 {
+            return Some(std::borrow::Cow::Borrowed(&self.partialled));
+        }
+        let ff = super::target::fwl(td, st, &self.spec, 0).ok()?;
+        Some(std::borrow::Cow::Owned(ff.partialled))
     }
 
     /// [`Scored::listed`] of a copy.
@@ -158,7 +179,8 @@ pub(super) fn score(
                     },
                     spec: p.spec,
                     replaces: repl.map(|r| r.old.clone()),
-                    partialled: ff.partialled,
+                    width: ff.partialled.len(),
+                    partialled: Vec::new(),
                     effective: None,
                 });
                 continue;
@@ -293,10 +315,74 @@ pub(super) fn score(
                 },
                 spec: p.spec,
                 replaces: repl.map(|r| r.old.clone()),
-                partialled: ff.partialled,
+                width: ff.partialled.len(),
+                partialled: if ff.dbic < 0.0 {
+                    ff.partialled
+                } else {
+                    Vec::new()
+                },
                 effective,
             });
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::features::Norm;
+    use crate::simulate::thermal_test::spindle_thermal;
+
+    /// Only a plausible contender (identifiable, ΔBIC < 0) keeps its
+    /// partialled columns; the others' are recomputed on demand, equal to
+    /// the bit to what scoring (several proposals projected together) had.
+    #[test]
+    fn only_contenders_keep_their_columns_and_the_rest_are_recomputed_exactly() {
+        let full = spindle_thermal(1).data;
+        let day: Vec<usize> = (0..=16 * 60).collect();
+        let data = crate::data::subset(&full, &day);
+        let none = crate::progress::Sink::none();
+        let (td, _) = TargetData::new(&data, Norm::from_data(&data), 2, &none);
+        let st = State::new(&td, &Seed::Cubic19, &[]).unwrap();
+        let props: Vec<Proposal> = [
+            "drift:target=ez,order=3",
+            "thermal:target=ez,channel=spindle_housing",
+            "reversal:target=ez,axis=x",
+            "drift:target=ez,order=1",
+            "drift:target=ez,order=2",
+            "thermal:target=ez,channel=bed",
+            "periodic:target=ez,axis=x,period_mm=50",
+            "thermal:target=ez,channel=spindle_housing,times=x",
+        ]
+        .iter()
+        .map(|s| Proposal {
+            spec: s.parse().unwrap(),
+            searched: 0,
+            note: String::new(),
+        })
+        .collect();
+        let sc = score(&td, &st, props, &Seed::Cubic19, &mut Vec::new(), None);
+        assert!(sc.len() >= 3, "{} scored", sc.len());
+        let (mut kept, mut dropped) = (0, 0);
+        for s in &sc {
+            let contender = s.cand.identifiable && s.cand.delta_bic.is_some_and(|d| d < 0.0);
+            assert_eq!(!s.partialled.is_empty(), contender, "{}", s.cand.add);
+            assert_eq!(s.partialled.len(), if contender { s.width } else { 0 });
+            let again = s.partialled_or(&td, &st).unwrap();
+            let direct = super::super::target::fwl(&td, &st, &s.spec, 0).unwrap();
+            assert_eq!(again.len(), s.width, "{}", s.cand.add);
+            assert!(again.iter().zip(&direct.partialled).all(|(a, b)| a == b));
+            if contender {
+                kept += 1;
+            } else {
+                dropped += 1;
+            }
+        }
+        let names: Vec<_> = sc.iter().map(|s| (&s.cand.add, s.cand.delta_bic)).collect();
+        assert!(
+            kept > 0 && dropped > 0,
+            "kept {kept}, dropped {dropped}: {names:?}"
+        );
+    }
 }
