@@ -33,8 +33,9 @@ pub struct Args {
     /// paths, one sensor), spindle-duty (48 h, 14 sensors, three driving
     /// the growth with lags, day 2 at another duty cycle), spindle-drift
     /// (its control: wandering sensors, an AR(1) drift), volumetric-lines /
-    /// volumetric-tracker (the mill800-21 machine, all 21 geometric errors
-    /// and the tilt, measured with laser lines or two tracker stations;
+    /// volumetric-tracker / volumetric-ballbar (the mill800-21 machine, all
+    /// 21 geometric errors and the tilt, measured with laser lines, two
+    /// tracker stations or ballbar circles in three planes;
     /// docs/volumetric.md), or on-machine (every file the on-machine
     /// commands read, with the hidden
     /// answers in truth.json; -o is then a directory; docs/on-machine.md).

@@ -159,6 +159,21 @@ pub(crate) fn projected_with(
             }
         }
     }
+    // Beam set-ups whose direction turns (a ballbar circle): the bar's own
+    // zero besides the centre's offset (n · t cannot hold a constant when
+    // n turns; on one direction it is that zero already).
+    let mut turning: HashMap<Option<i64>, bool> = HashMap::new();
+    if let Some(dirs) = data.beam_dir.as_ref() {
+        let mut first: HashMap<Option<i64>, [f64; 3]> = HashMap::new();
+        for (r, d) in dirs.iter().enumerate() {
+            if let Some(d) = d {
+                let f = *first.entry(group(r)).or_insert(*d);
+                if f != *d {
+                    turning.insert(group(r), true);
+                }
+            }
+        }
+    }
     let mut nuis: HashMap<(Option<i64>, u8, usize), usize> = HashMap::new();
     let mut rows_m: Vec<Vec<f64>> = Vec::new();
     let mut rows_n: Vec<Vec<(usize, f64)>> = Vec::new();
@@ -269,10 +284,14 @@ pub(crate) fn projected_with(
                 .map(|(pa, re)| re.beam_um(d) * pa)
                 .collect();
             let nrow = if g.is_some() {
-                (0..3)
+                let mut nrow: Vec<(usize, f64)> = (0..3)
                     .filter(|&j| d[j] != 0.0)
                     .map(|j| (col((g, 5, j)), d[j]))
-                    .collect()
+                    .collect();
+                if turning.contains_key(&g) {
+                    nrow.push((col((g, 6, 0)), 1.0));
+                }
+                nrow
             } else {
                 Vec::new()
             };

@@ -1,9 +1,10 @@
 //! The volumetric instruments (issue 26, docs/volumetric.md): laser
 //! positioning/straightness lines at tool offsets, angular lines, body and
-//! face diagonals (ISO 230-6) and tracker stations with unknown frames,
-//! each reading relative to its own set-up (zero, alignment, frame) with
-//! its instrument's noise (ARCHITECTURE.md): laser positioning 0.2 µm,
-//! straightness 0.5 µm, angular 0.5 µrad, diagonal 0.3 µm, tracker 0.5 µm.
+//! face diagonals (ISO 230-6), ballbar circles (ISO 230-4) and tracker
+//! stations with unknown frames, each reading relative to its own set-up
+//! (zero, alignment, frame, centre) with its instrument's noise
+//! (ARCHITECTURE.md): laser positioning 0.2 µm, straightness 0.5 µm,
+//! angular 0.5 µrad, diagonal 0.3 µm, ballbar 0.2 µm, tracker 0.5 µm.
 //! Every set-up gets its own `setup_id`; `u_um` is the instrument's noise
 //! in the row's reading unit.
 
@@ -22,6 +23,8 @@ pub const STRAIGHTNESS_UM: f64 = 0.5;
 pub const ANGULAR_URAD: f64 = 0.5;
 /// Diagonal (ISO 230-6) noise, µm.
 pub const DIAGONAL_UM: f64 = 0.3;
+/// Ballbar noise per reading, µm.
+pub const BALLBAR_UM: f64 = 0.2;
 /// Tracker noise per coordinate, µm.
 pub const TRACKER_UM: f64 = 0.5;
 
@@ -63,6 +66,24 @@ pub enum Instrument {
         /// End, mm.
         to_mm: [f64; 3],
         /// Points.
+        points: usize,
+    },
+    /// A ballbar circle (ISO 230-4) in the plane of axes `plane` about
+    /// `centre_mm`, radius `radius_mm`, with the tool ball at `tool_mm`:
+    /// the change of the bar's length, n · (e(p) − e(c)) with n the bar's
+    /// direction, read relative to the bar's own calibrated length (a zero)
+    /// and a centre ball set where the machine put it (an offset in the
+    /// plane).
+    Ballbar {
+        /// The two axes of the circle's plane.
+        plane: [usize; 2],
+        /// Centre, mm.
+        centre_mm: [f64; 3],
+        /// Radius, mm.
+        radius_mm: f64,
+        /// Tool length, mm.
+        tool_mm: f64,
+        /// Points around the circle.
         points: usize,
     },
     /// A tracker station: points spread over the volume, each at every
@@ -131,6 +152,22 @@ pub fn body_diagonals(travel_mm: [f64; 3]) -> Vec<Instrument> {
         });
     }
     out
+}
+
+/// Ballbar circles (ISO 230-4) in the XY, YZ and ZX planes about the
+/// centre of the volume, radius 150 mm (or 40 % of the shorter travel of
+/// the plane when that is less), 90 points each, at tool length `tool_mm`.
+pub fn ballbar_circles(travel_mm: [f64; 3], tool_mm: f64) -> Vec<Instrument> {
+    [[0, 1], [1, 2], [2, 0]]
+        .into_iter()
+        .map(|plane: [usize; 2]| Instrument::Ballbar {
+            plane,
+            centre_mm: travel_mm.map(|t| t * 0.5),
+            radius_mm: (0.4 * travel_mm[plane[0]].min(travel_mm[plane[1]])).min(150.0),
+            tool_mm,
+            points: 90,
+        })
+        .collect()
 }
 
 /// One row being built.
@@ -258,6 +295,38 @@ pub fn measure(machine: &Machine, plan: &[Instrument], seed: u64, noise: bool) -
                         setup,
                         beam: Some((n_dir, v + z0 + n)),
                         u: DIAGONAL_UM,
+                        ..Row::default()
+                    });
+                }
+            }
+            Instrument::Ballbar {
+                plane,
+                centre_mm,
+                radius_mm,
+                tool_mm,
+                points,
+            } => {
+                let z0 = zero(&mut rng);
+                let e_c = machine.error_at_um(*centre_mm, *tool_mm, [0.0, 0.0]);
+                for j in 0..*points {
+                    let th = std::f64::consts::TAU * j as f64 / *points as f64;
+                    let mut n_dir = [0.0; 3];
+                    n_dir[plane[0]] = th.cos();
+                    n_dir[plane[1]] = th.sin();
+                    let pos = [0, 1, 2].map(|k| centre_mm[k] + radius_mm * n_dir[k]);
+                    let e = machine.error_at_um(pos, *tool_mm, [0.0, 0.0]);
+                    let v: f64 = (0..3).map(|k| n_dir[k] * (e[k] - e_c[k])).sum();
+                    let n = if noise {
+                        BALLBAR_UM * normal(&mut nrng)
+                    } else {
+                        0.0
+                    };
+                    rows.push(Row {
+                        pos,
+                        tool: *tool_mm,
+                        setup,
+                        beam: Some((n_dir, v + z0 + n)),
+                        u: BALLBAR_UM,
                         ..Row::default()
                     });
                 }

@@ -34,13 +34,14 @@ pub const SPINDLE_THERMAL: &str = "spindle-thermal";
 pub const SPINDLE_WARMUP: &str = "spindle-warmup";
 
 /// Names accepted by [`scenario`].
-pub const SCENARIOS: [&str; 6] = [
+pub const SCENARIOS: [&str; 7] = [
     SPINDLE_THERMAL,
     SPINDLE_WARMUP,
     SPINDLE_DUTY,
     SPINDLE_DRIFT,
     super::volumetric::VOLUMETRIC_LINES,
     super::volumetric::VOLUMETRIC_TRACKER,
+    super::volumetric::VOLUMETRIC_BALLBAR,
 ];
 
 /// The point measured, mm (mid-travel of the 800 × 500 × 500 mill).

@@ -13,22 +13,31 @@
 //! - `volumetric-tracker`: two tracker stations (each an unknown frame)
 //!   over the volume, every point at both tool lengths and at lateral
 //!   offsets of ±100 mm: enough to determine every error.
+//! - `volumetric-ballbar`: ballbar circles (ISO 230-4) in the XY, YZ and
+//!   ZX planes about the centre of the volume at a 100 mm tool: the bar
+//!   reads relative to its own length and centre, and three circles
+//!   confound the squarenesses with the angles and straightnesses — the
+//!   fit says nothing is known and names the measurement to add.
 //!
 //! Why scenarios and not `--plan` options: an instrument's set-up (its
-//! zero, alignment and frame) is part of what it reads, and these two
+//! zero, alignment and frame) is part of what it reads, and these
 //! plans are the ones the documentation's claims are checked on; the
 //! engine's [`Instrument`] list stays the one place they are defined.
 
 use crate::data::Dataset;
 
-use super::instruments::{laser_lines, measure, Instrument};
+use super::instruments::{ballbar_circles, laser_lines, measure, Instrument};
 use super::{Machine, SimOutput};
 
 /// `simulate --scenario volumetric-lines`.
 pub const VOLUMETRIC_LINES: &str = "volumetric-lines";
 /// `simulate --scenario volumetric-tracker`.
 pub const VOLUMETRIC_TRACKER: &str = "volumetric-tracker";
-/// The machine both scenarios measure.
+/// `simulate --scenario volumetric-ballbar`.
+pub const VOLUMETRIC_BALLBAR: &str = "volumetric-ballbar";
+/// The tool length of the ballbar circles, mm.
+pub const BALLBAR_TOOL_MM: f64 = 100.0;
+/// The machine the scenarios measure.
 pub const PRESET: &str = "mill800-21";
 /// The two tool lengths every plan measures at, mm.
 pub const TOOLS_MM: [f64; 2] = [0.0, 150.0];
@@ -59,6 +68,7 @@ pub fn scenario(name: &str, seed: u64) -> anyhow::Result<Option<SimOutput>> {
     let plan = match name {
         VOLUMETRIC_LINES => lines_plan(m.travel_mm),
         VOLUMETRIC_TRACKER => tracker_plan(),
+        VOLUMETRIC_BALLBAR => ballbar_circles(m.travel_mm, BALLBAR_TOOL_MM),
         _ => return Ok(None),
     };
     let data = measure(&m, &plan, seed, true);
@@ -103,6 +113,10 @@ mod tests {
         let tracker = scenario(VOLUMETRIC_TRACKER, 3).unwrap().expect("known");
         assert!((0..tracker.data.len()).any(|r| tracker.data.tool_lat(0, r) == -100.0));
         assert_eq!(tracker.truth_um[0].len(), tracker.data.len());
+        let ballbar = scenario(VOLUMETRIC_BALLBAR, 3).unwrap().expect("known");
+        assert_eq!(ballbar.data.len(), 270);
+        assert!(ballbar.data.err_um.iter().all(Option::is_none));
+        assert!((0..270).all(|r| ballbar.data.tool(r) == BALLBAR_TOOL_MM));
         // The same seed, the same rows; an unknown name is not ours.
         let again = scenario(VOLUMETRIC_LINES, 3).unwrap().unwrap();
         assert_eq!(again.data.err_um, lines.data.err_um);
