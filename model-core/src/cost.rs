@@ -104,6 +104,14 @@ pub struct Features {
     /// Fixed point sums the block by monomial (`blk_*`: at most 28 used
     /// monomials, at most half of the vector's; not on the `vp` path).
     pub blk: bool,
+    /// Fixed point takes the separable path (`eval`'s Horner rows, issue
+    /// 26: every monomial u_a^n·(1 | u_b), degree ≥ 4, only polynomial,
+    /// thermal and Abbe terms; `eval::horner_plan`).
+    pub horner: bool,
+    /// Its rows, and the Horner steps of each.
+    pub horner_rows: u32,
+    /// See `horner_rows`.
+    pub horner_steps: u32,
 }
 
 impl Features {
@@ -225,6 +233,11 @@ impl Features {
             && f.other_terms == f.factored + f.reversal
             && f.other_terms as usize <= crate::eval::FQ_MAX_TERMS;
         f.blk = f.has_block && !f.vp && count <= crate::eval::BLK_MAX && 2 * count <= n_monos;
+        if let Some(p) = crate::eval::horner_plan(table) {
+            f.horner = true;
+            f.horner_rows = p.n as u32;
+            f.horner_steps = p.steps as u32;
+        }
         f
     }
 
@@ -370,6 +383,24 @@ const FIXED_FEW: FewWeights = FewWeights {
     blk_used: 270,
 };
 
+/// Fixed point's separable path (issue 26), tenths: once (the normalised
+/// positions, their three products, the sums' shifts), per row and per
+/// Horner step of each row, per thermal/Abbe term (its factor). Set on
+/// `cargo xtask bench-mcu --calibrate`'s counts (BENCHMARKS.md).
+struct HornerWeights {
+    entry: u32,
+    row: u32,
+    step: u32,
+    factored: u32,
+}
+
+const FIXED_HORNER: HornerWeights = HornerWeights {
+    entry: 400,
+    row: 70,
+    step: 55,
+    factored: 250,
+};
+
 const FIXED_TERMS: TermWeights = TermWeights {
     entry: 614,
     factored: 1442,
@@ -442,7 +473,10 @@ impl Features {
     fn fixed_mono_block(&self) -> u64 {
         let f = |x: u32| u64::from(x);
         let (m20, m56) = self.monos();
-        if self.vp {
+        if self.horner {
+            let h = &FIXED_HORNER;
+            f(h.entry) + f(self.horner_rows) * (f(h.row) + f(self.horner_steps) * f(h.step))
+        } else if self.vp {
             f(FIXED_FEW.vp)
         } else if self.blk {
             m20 * f(FIXED.mono20)
@@ -454,10 +488,13 @@ impl Features {
         }
     }
 
-    /// Fixed point's terms: the flat loop or the general one.
+    /// Fixed point's terms: the separable path's factors, the flat loop
+    /// or the general one.
     fn fixed_terms(&self) -> u64 {
         let f = |x: u32| u64::from(x);
-        if self.fq {
+        if self.horner {
+            f(self.factored) * f(FIXED_HORNER.factored)
+        } else if self.fq {
             f(FIXED_FEW.fq_entry)
                 + f(self.factored) * f(FIXED_FEW.fq_factored)
                 + f(self.reversal) * f(FIXED_FEW.fq_reversal)

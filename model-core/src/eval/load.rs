@@ -88,6 +88,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         self.has_rev = false;
         self.per_f32.clear();
         self.fac_f32.clear();
+        self.hr = super::horner::HornerQ::EMPTY;
     }
 
     /// Lay the terms out per kind for [`ModelCap::flat_f32`] (sets `flat`
@@ -194,6 +195,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         }
         self.prepare_flat();
         self.prepare_vp();
+        self.prepare_horner(table);
         self.poly = match (self.terms.is_empty() && self.has_block, self.n_monos) {
             (true, 1..=4) => PolyKind::Linear,
             (true, 5..=20) => PolyKind::Cubic,

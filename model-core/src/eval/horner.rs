@@ -1,0 +1,412 @@
+//! The fixed-point path of separable polynomials ("Horner rows", issue
+//! 26): a table whose every polynomial, thermal and Abbe monomial is one
+//! axis to a power times at most one linear factor of another axis
+//! (u_a^n, u_a^n·u_b — the shape a rigid-body chain such as `rigid21`
+//! produces) is evaluated row by row instead of through the 56-entry
+//! monomial vector. For each (sum, axis a, weight w) the loader gathers
+//! the monomials u_a^n·(1 | u_b) as w · H(u_a), w ∈ {x, y, z, xy, xz, yz}
+//! (w = u_a for the pure powers: u_a^n = u_a · u_a^(n−1); the products
+//! u_a·u_b once per call) and H a polynomial of degree ≤ 4 evaluated by
+//! Horner's rule in Q(q), q the sum's binary scale. The constant goes
+//! into the sum's start. A sum is an output's share of the block or one
+//! thermal/Abbe term's polynomial.
+//!
+//! Ranges: each sum's scale is chosen with one bit of headroom, Σ|c|·2^q
+//! < 2^30 ([`plan`]). A Horner step h ← ⌊h·u / 2^30⌋ + c with |u| ≤ 2^30 + 1
+//! grows |h| by at most 2 beyond |c|, so every partial value stays below
+//! Σ|c_q| + 3·4 < 2^31 (i32), and a sum Σ h·w (|w| ≤ 2^30 + 2) plus its
+//! start (rounding ≤ 2^61, constant ≤ 2^60) stays below 2^62 (i64; test
+//! `extreme_separable_tables_do_not_overflow`). Errors: ≤ 4 units of
+//! 2^-q per row from the truncated steps, ½ per coefficient, 2 per row
+//! from the truncated product w — far below 1 nm for any table whose
+//! outputs fit ±4 mm (`tests/accuracy.rs`).
+//!
+//! [`plan`] is the one decision: the loader, [`crate::cost`] and
+//! [`crate::definition`] all ask it.
+
+use super::kernels::{choose_q, mul_q30, rshr, rshr_var, to_q};
+use super::{factored_q, Inputs, ModelCap, MAX_TERMS};
+use crate::table::{Table, TermView};
+
+/// Most rows the path takes (a rigid21:4 table has 21).
+pub(crate) const HR_CAP: usize = 32;
+/// Most thermal/Abbe terms it takes.
+pub(crate) const HF_CAP: usize = 4;
+/// Sums: the three outputs' blocks, then one per thermal/Abbe term.
+const SLOTS: usize = 3 + HF_CAP;
+/// Coefficients of H per row (u_a^1 … u_a^5).
+const HC: usize = 5;
+
+/// One row: `w[wi] · H(u[axis])`, H = Σ c[k]·u^k, into sum `slot`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(super) struct HRow {
+    c: [i32; HC],
+    axis: u8,
+    wi: u8,
+    slot: u8,
+}
+
+/// A thermal/Abbe term's factor on this path.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(super) struct HFac {
+    output: u8,
+    /// 0…3 a temperature channel (minus `k` = T_ref), 4 the tool arm.
+    src: u8,
+    k: i32,
+    /// From Q(q + 16) (the sum's Q(q+30) rounded to Q(q), times the
+    /// factor) to Q16 nm: q − 16.
+    shift: u32,
+}
+
+/// The prepared path (`n` = 0: off).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct HornerQ {
+    n: u8,
+    /// Horner steps per row (the highest power of H in use, 2…4).
+    steps: u8,
+    nf: u8,
+    /// The block sums' shift to Q16 nm (q + 14; each start holds the
+    /// rounding 2^(shift−1)).
+    shift: [u32; 3],
+    /// Each sum's start: rounding and constant coefficient (× 2^30).
+    init: [i64; SLOTS],
+    fac: [HFac; HF_CAP],
+    rows: [HRow; HR_CAP],
+}
+
+impl HornerQ {
+    pub(super) const EMPTY: HornerQ = HornerQ {
+        n: 0,
+        steps: 0,
+        nf: 0,
+        shift: [0; 3],
+        init: [0; SLOTS],
+        fac: [HFac {
+            output: 0,
+            src: 0,
+            k: 0,
+            shift: 0,
+        }; HF_CAP],
+        rows: [HRow {
+            c: [0; HC],
+            axis: 0,
+            wi: 0,
+            slot: 0,
+        }; HR_CAP],
+    };
+
+    /// Whether the path is taken.
+    pub(super) fn on(&self) -> bool {
+        self.n > 0
+    }
+}
+
+/// A monomial u_a^n·(1 | u_b), n ≥ 1, as (a, n − 1, w index): w = a for
+/// a pure power, 3 + the pair (xy 3, xz 4, yz 5) with a factor. `None`:
+/// the constant, or not separable (three axes, or two above degree 1).
+fn split(m: [u8; 3]) -> Option<(usize, usize, usize)> {
+    let nz: heapless::Vec<usize, 3> = (0..3).filter(|&a| m[a] > 0).collect();
+    let pair = |a: usize, b: usize| 3 + a.min(b) + a.max(b) - 1;
+    match nz.as_slice() {
+        [a] => Some((*a, m[*a] as usize - 1, *a)),
+        [a, b] if m[*b] == 1 => Some((*a, m[*a] as usize - 1, pair(*a, *b))),
+        [a, b] if m[*a] == 1 => Some((*b, m[*b] as usize - 1, pair(*a, *b))),
+        _ => None,
+    }
+}
+
+/// What [`plan`] found: the rows in f64 (as the table's coefficients,
+/// thermal ones per m°C), the constants and the sums' scales.
+pub(crate) struct Plan {
+    rows: [(u8, u8, u8, [f64; HC]); HR_CAP],
+    /// Rows used.
+    pub n: usize,
+    /// Horner steps per row (see [`HornerQ`]).
+    pub steps: usize,
+    /// Thermal/Abbe terms: (output, src, T_ref m°C).
+    fac: [(u8, u8, i32); HF_CAP],
+    /// Their number.
+    pub nf: usize,
+    c0: [f64; SLOTS],
+    /// Each sum's binary scale q.
+    pub q: [i32; SLOTS],
+}
+
+/// The Horner-row plan of `table`, or `None` when the fixed path keeps
+/// the monomial vector: a term that is not a polynomial, thermal or Abbe
+/// term, a monomial that is not separable, no monomial of degree ≥ 4 (the
+/// paths of degree ≤ 3 are cheaper), more than [`HR_CAP`] rows or
+/// [`HF_CAP`] thermal/Abbe terms, or a sum whose Σ|c| leaves no scale
+/// with the headroom (Σ|c|·2^q < 2^30; thermal/Abbe q ≥ 16).
+pub(crate) fn plan(table: &Table<'_>) -> Option<Plan> {
+    let mut p = Plan {
+        rows: [(0, 0, 0, [0.0; HC]); HR_CAP],
+        n: 0,
+        steps: 0,
+        fac: [(0, 0, 0); HF_CAP],
+        nf: 0,
+        c0: [0.0; SLOTS],
+        q: [0; SLOTS],
+    };
+    let mut max_deg = 0;
+    if table.term_count() > MAX_TERMS {
+        return None;
+    }
+    for t in table.terms() {
+        let (slot, coefs, per_mc) = match t.view() {
+            TermView::Poly { output, coefs } => (output % 3, coefs, false),
+            TermView::Thermal {
+                output,
+                channel,
+                t_ref_mc,
+                coefs,
+            } => {
+                let slot = 3 + p.nf;
+                *p.fac.get_mut(p.nf)? = (output as u8, channel as u8 & 3, t_ref_mc);
+                p.nf += 1;
+                (slot, coefs, true)
+            }
+            TermView::Abbe { output, coefs } => {
+                let slot = 3 + p.nf;
+                *p.fac.get_mut(p.nf)? = (output as u8, 4, 0);
+                p.nf += 1;
+                (slot, coefs, false)
+            }
+            _ => return None,
+        };
+        for (m, c) in coefs.iter() {
+            let c = if per_mc { c / 1000.0 } else { c };
+            max_deg = max_deg.max(m[0] + m[1] + m[2]);
+            if m == [0, 0, 0] {
+                p.c0[slot] += c;
+                continue;
+            }
+            let (a, k, wi) = split(m)?;
+            let key = (slot as u8, a as u8, wi as u8);
+            let i = match p.rows[..p.n].iter().position(|r| (r.0, r.1, r.2) == key) {
+                Some(i) => i,
+                None => {
+                    p.n += 1;
+                    *p.rows.get_mut(p.n - 1)? = (key.0, key.1, key.2, [0.0; HC]);
+                    p.n - 1
+                }
+            };
+            p.rows[i].3[k] += c;
+        }
+    }
+    if max_deg < 4 {
+        return None;
+    }
+    let mut sum = p.c0.map(f64::abs);
+    for r in &p.rows[..p.n] {
+        sum[r.0 as usize] += r.3.iter().map(|c| c.abs()).sum::<f64>();
+        let top = (0..HC).rev().find(|&k| r.3[k] != 0.0).unwrap_or(0);
+        p.steps = p.steps.max(top);
+    }
+    p.steps = p.steps.clamp(2, HC - 1);
+    for s in 0..SLOTS {
+        p.q[s] = if s < 3 {
+            choose_q(2.0 * sum[s], 0)?
+        } else if s < 3 + p.nf {
+            factored_q(2.0 * sum[s])?
+        } else {
+            0
+        };
+    }
+    Some(p)
+}
+
+impl<const P: usize, const G: usize> ModelCap<P, G> {
+    /// Set the path from `table`'s [`plan`] (off when there is none).
+    pub(super) fn prepare_horner(&mut self, table: &Table<'_>) {
+        self.hr = HornerQ::EMPTY;
+        let Some(p) = plan(table) else {
+            return;
+        };
+        let h = &mut self.hr;
+        for (r, pr) in h.rows.iter_mut().zip(&p.rows[..p.n]) {
+            let q = p.q[pr.0 as usize];
+            *r = HRow {
+                c: pr.3.map(|c| to_q(c, q)),
+                axis: pr.1,
+                wi: pr.2,
+                slot: pr.0,
+            };
+        }
+        for s in 0..SLOTS {
+            h.init[s] = (to_q(p.c0[s], p.q[s]) as i64) << 30;
+            if s < 3 {
+                h.shift[s] = (p.q[s] + 14) as u32;
+                h.init[s] += 1i64 << (p.q[s] + 13);
+            }
+        }
+        for (j, (f, pf)) in h.fac.iter_mut().zip(&p.fac[..p.nf]).enumerate() {
+            *f = HFac {
+                output: pf.0,
+                src: pf.1,
+                k: pf.2,
+                shift: (p.q[3 + j] - 16) as u32,
+            };
+        }
+        h.nf = p.nf as u8;
+        h.steps = p.steps as u8;
+        h.n = p.n as u8;
+    }
+
+    /// The block and the thermal/Abbe terms by rows, Q16 nm per output
+    /// (`pos` held inside the travel).
+    #[inline(always)]
+    pub(super) fn horner_fixed(
+        &self,
+        pos: &[i32; 3],
+        inp: &Inputs,
+        flags: &mut super::Flags,
+    ) -> [i64; 3] {
+        let h = &self.hr;
+        let u: [i32; 3] =
+            core::array::from_fn(|a| self.u_scale[a].apply(pos[a].wrapping_sub(self.centre_nm[a])));
+        let w = [
+            u[0],
+            u[1],
+            u[2],
+            mul_q30(u[0], u[1]),
+            mul_q30(u[0], u[2]),
+            mul_q30(u[1], u[2]),
+        ];
+        let mut s = h.init;
+        match h.steps {
+            4 => h.rows_q::<4>(&u, &w, &mut s),
+            3 => h.rows_q::<3>(&u, &w, &mut s),
+            _ => h.rows_q::<2>(&u, &w, &mut s),
+        }
+        let mut out: [i64; 3] = core::array::from_fn(|o| s[o] >> (h.shift[o] & 63));
+        if h.nf > 0 {
+            let (temp, tool) = self.hold_aux(inp, flags);
+            for (j, f) in h.fac[..(h.nf as usize).min(HF_CAP)].iter().enumerate() {
+                let v = if f.src < 4 {
+                    temp[f.src as usize & 3] as i64 - f.k as i64
+                } else {
+                    tool as i64
+                };
+                let val = rshr_var(rshr(s[3 + j], 30) * v, f.shift);
+                let o = (f.output as usize).min(2);
+                out[o] = out[o].saturating_add(val);
+            }
+        }
+        out
+    }
+}
+
+impl HornerQ {
+    /// Every row with `S` Horner steps (the rows' coefficients above S
+    /// are 0), added into its sum: exact i64 products.
+    #[inline(always)]
+    fn rows_q<const S: usize>(&self, u: &[i32; 3], w: &[i32; 6], s: &mut [i64; SLOTS]) {
+        for r in &self.rows[..(self.n as usize).min(HR_CAP)] {
+            let ua = u[(r.axis as usize).min(2)] as i64;
+            let mut acc = r.c[S];
+            for k in (0..S).rev() {
+                acc = ((acc as i64 * ua) >> 30) as i32 + r.c[k];
+            }
+            s[(r.slot as usize).min(SLOTS - 1)] += acc as i64 * w[(r.wi as usize).min(5)] as i64;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{Inputs, Model};
+    use super::*;
+    use crate::spec::{InputsF64, TableSpec};
+
+    /// The engine's rigid21:4 export takes the path (21 rows, its two Abbe
+    /// terms, 3 Horner steps) and stays within 1 nm of the f64 reference
+    /// and of the monomial-vector path it replaces, inside the envelope
+    /// (travel corners, where |u| = 1, among the inputs) and held beyond
+    /// it, with the same flags. Fails if a row, a scale or a factor were
+    /// wrong (e.g. the Abbe terms dropped: ≈ 7 µm at a 150 mm tool).
+    #[test]
+    fn rigid21_rows_match_the_reference_and_the_vector_path() {
+        let bytes = include_bytes!("../../../tests/golden/rigid21.bin");
+        let table = crate::parse(bytes).unwrap();
+        let m = Model::load(&table).unwrap();
+        assert_eq!((m.hr.n, m.hr.nf, m.hr.steps), (21, 2, 3));
+        let mut vector = m.clone();
+        vector.hr = HornerQ::EMPTY;
+        let spec = TableSpec::from_table(&table);
+        let env = *m.envelope();
+        let mut rng = trueaxis_test_support::XorShift64(0x2626_7e11_a5b1_0c3du64);
+        let (mut worst_ref, mut worst_vec, mut held) = (0.0f64, 0i64, 0);
+        for k in 0..20_000u64 {
+            let pos_nm = core::array::from_fn(|a| {
+                let (lo, hi) = (env.travel_min_nm[a] as i64, env.travel_max_nm[a] as i64);
+                (match (k + a as u64) % 7 {
+                    0 => lo,
+                    1 => hi,
+                    2 => rng.range(hi, hi + 1_000_000),
+                    _ => rng.range(lo, hi),
+                }) as i32
+            });
+            let tool_nm = match k % 5 {
+                0 => env.tool_max_nm,
+                1 => rng.range(env.tool_max_nm as i64, i32::MAX as i64) as i32,
+                _ => rng.range(env.tool_min_nm as i64, env.tool_max_nm as i64) as i32,
+            };
+            let inp = Inputs {
+                pos_nm,
+                tool_nm,
+                ..Inputs::default()
+            };
+            let (a, b) = (m.eval_fixed(&inp), vector.eval_fixed(&inp));
+            assert_eq!(a.flags, b.flags, "{inp:?}");
+            held += !a.flags.is_empty() as u32;
+            let h = Inputs {
+                pos_nm: core::array::from_fn(|a| {
+                    pos_nm[a].clamp(env.travel_min_nm[a], env.travel_max_nm[a])
+                }),
+                tool_nm: tool_nm.clamp(env.tool_min_nm, env.tool_max_nm),
+                ..inp
+            };
+            let r = spec.eval_f64(&InputsF64::from(&h));
+            for o in 0..3 {
+                worst_ref = worst_ref.max((a.corr_nm[o] as f64 - r[o]).abs());
+                worst_vec = worst_vec.max((a.corr_nm[o] as i64 - b.corr_nm[o] as i64).abs());
+            }
+        }
+        assert!(
+            worst_ref <= 1.0 && worst_vec <= 1,
+            "{worst_ref} {worst_vec}"
+        );
+        assert!(held > 5_000, "{held}");
+    }
+
+    /// The split of a monomial into (axis, power − 1, weight): every
+    /// separable monomial of degree ≤ 5 is w·u_a^k with the same
+    /// exponents, the others (three axes, two above degree 1) are not.
+    #[test]
+    fn split_keeps_the_exponents() {
+        let mut separable = 0;
+        for m in super::super::MONO_EXPS.iter().copied().skip(1) {
+            let Some((a, k, wi)) = split(m) else {
+                let nz = m.iter().filter(|&&e| e > 0).count();
+                assert!(
+                    nz == 3 || m.iter().filter(|&&e| e > 1).count() == 2,
+                    "{m:?}"
+                );
+                continue;
+            };
+            separable += 1;
+            let mut e = [0u8; 3];
+            e[a] += k as u8;
+            match wi {
+                0..=2 => e[wi] += 1,
+                3 => (e[0], e[1]) = (e[0] + 1, e[1] + 1),
+                4 => (e[0], e[2]) = (e[0] + 1, e[2] + 1),
+                _ => (e[1], e[2]) = (e[1] + 1, e[2] + 1),
+            }
+            assert_eq!(e, m);
+        }
+        // 3 axes × 5 powers + 6 ordered pairs × 4 powers − the 3 xy/xz/yz counted twice.
+        assert_eq!(separable, 15 + 24 - 3);
+    }
+}
