@@ -6,20 +6,25 @@
 //! monomial vector. For each (sum, axis a, weight w) the loader gathers
 //! the monomials u_a^n·(1 | u_b) as w · H(u_a), w ∈ {x, y, z, xy, xz, yz}
 //! (w = u_a for the pure powers: u_a^n = u_a · u_a^(n−1); the products
-//! u_a·u_b once per call) and H a polynomial of degree ≤ 4 evaluated by
-//! Horner's rule in Q(q), q the sum's binary scale. The constant goes
-//! into the sum's start. A sum is an output's share of the block or one
-//! thermal/Abbe term's polynomial.
+//! u_a·u_b once per call) and H = Σ c_k·u_a^k a polynomial of degree ≤ 4.
+//! The constant goes into the sum's start. A sum is an output's share of
+//! the block or one thermal/Abbe term's polynomial.
 //!
-//! Ranges: each sum's scale is chosen with one bit of headroom, Σ|c|·2^q
-//! < 2^30 ([`plan`]). A Horner step h ← ⌊h·u / 2^30⌋ + c with |u| ≤ 2^30 + 1
-//! grows |h| by at most 2 beyond |c|, so every partial value stays below
-//! Σ|c_q| + 3·4 < 2^31 (i32), and a sum Σ h·w (|w| ≤ 2^30 + 2) plus its
-//! start (rounding ≤ 2^61, constant ≤ 2^60) stays below 2^62 (i64; test
-//! `extreme_separable_tables_do_not_overflow`). Errors: ≤ 4 units of
-//! 2^-q per row from the truncated steps, ½ per coefficient, 2 per row
-//! from the truncated product w — far below 1 nm for any table whose
-//! outputs fit ±4 mm (`tests/accuracy.rs`).
+//! H is evaluated by Horner's rule on u/2, each step one SMMLA (h ← c'_k
+//! + ⌊h·u' / 2^32⌋, u' = 2u in Q30 saturated to i32, i.e. u/2 in Q32),
+//! with the coefficients c'_k = c_k·2^k in Q(q); then the row adds h·w
+//! (Q(q+30), exact) into its sum, which stays in registers over the
+//! sum's rows (the rows are sorted by sum).
+//!
+//! Ranges: each sum's scale q is chosen with one bit of headroom,
+//! Σ|c'|·2^q < 2^30 ([`plan`]). A step adds at most |h|/2 + 1 in
+//! magnitude, so every partial value stays below Σ|c'_q| + 4 < 2^31
+//! (i32), and a sum Σ h·w (|w| ≤ 2^30 + 2) plus its start (rounding ≤
+//! 2^61, constant ≤ 2^60) stays below 2^62 (i64; test
+//! `extreme_separable_tables_do_not_overflow`). Errors, in units of 2^-q
+//! of the sum: ≤ 4 per row from the truncated steps, ½ per coefficient,
+//! 2 per row from the truncated product w — far below 1 nm for any table
+//! whose outputs fit ±4 mm (`tests/separable.rs`).
 //!
 //! [`plan`] is the one decision: the loader, [`crate::cost`] and
 //! [`crate::definition`] all ask it.
@@ -34,16 +39,15 @@ pub(crate) const HR_CAP: usize = 32;
 pub(crate) const HF_CAP: usize = 4;
 /// Sums: the three outputs' blocks, then one per thermal/Abbe term.
 const SLOTS: usize = 3 + HF_CAP;
-/// Coefficients of H per row (u_a^1 … u_a^5).
+/// Coefficients of H per row (u_a^0 … u_a^4).
 const HC: usize = 5;
 
-/// One row: `w[wi] · H(u[axis])`, H = Σ c[k]·u^k, into sum `slot`.
+/// One row: `w[wi] · H(u[axis])`, H = Σ c[k]·(u/2)^k in Q(q).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(super) struct HRow {
     c: [i32; HC],
     axis: u8,
     wi: u8,
-    slot: u8,
 }
 
 /// A thermal/Abbe term's factor on this path.
@@ -70,6 +74,8 @@ pub(super) struct HornerQ {
     shift: [u32; 3],
     /// Each sum's start: rounding and constant coefficient (× 2^30).
     init: [i64; SLOTS],
+    /// The rows of sum j are `rows[end[j − 1]..end[j]]`.
+    end: [u8; SLOTS],
     fac: [HFac; HF_CAP],
     rows: [HRow; HR_CAP],
 }
@@ -81,6 +87,7 @@ impl HornerQ {
         nf: 0,
         shift: [0; 3],
         init: [0; SLOTS],
+        end: [0; SLOTS],
         fac: [HFac {
             output: 0,
             src: 0,
@@ -91,7 +98,6 @@ impl HornerQ {
             c: [0; HC],
             axis: 0,
             wi: 0,
-            slot: 0,
         }; HR_CAP],
     };
 
@@ -118,6 +124,7 @@ fn split(m: [u8; 3]) -> Option<(usize, usize, usize)> {
 /// What [`plan`] found: the rows in f64 (as the table's coefficients,
 /// thermal ones per m°C), the constants and the sums' scales.
 pub(crate) struct Plan {
+    /// (sum, axis, w index, c_k).
     rows: [(u8, u8, u8, [f64; HC]); HR_CAP],
     /// Rows used.
     pub n: usize,
@@ -129,15 +136,22 @@ pub(crate) struct Plan {
     pub nf: usize,
     c0: [f64; SLOTS],
     /// Each sum's binary scale q.
-    pub q: [i32; SLOTS],
+    q: [i32; SLOTS],
+}
+
+impl Plan {
+    /// The binary scale of the `j`-th thermal/Abbe term (table order).
+    pub(crate) fn factored_q(&self, j: usize) -> i32 {
+        self.q[(3 + j).min(SLOTS - 1)]
+    }
 }
 
 /// The Horner-row plan of `table`, or `None` when the fixed path keeps
 /// the monomial vector: a term that is not a polynomial, thermal or Abbe
 /// term, a monomial that is not separable, no monomial of degree ≥ 4 (the
 /// paths of degree ≤ 3 are cheaper), more than [`HR_CAP`] rows or
-/// [`HF_CAP`] thermal/Abbe terms, or a sum whose Σ|c| leaves no scale
-/// with the headroom (Σ|c|·2^q < 2^30; thermal/Abbe q ≥ 16).
+/// [`HF_CAP`] thermal/Abbe terms, or a sum whose Σ|c_k|·2^k leaves no
+/// scale with the headroom (Σ·2^q < 2^30; thermal/Abbe q ≥ 16).
 pub(crate) fn plan(table: &Table<'_>) -> Option<Plan> {
     let mut p = Plan {
         rows: [(0, 0, 0, [0.0; HC]); HR_CAP],
@@ -197,9 +211,13 @@ pub(crate) fn plan(table: &Table<'_>) -> Option<Plan> {
     if max_deg < 4 {
         return None;
     }
+    // The rows by sum (their order within a sum changes no exact sum).
+    p.rows[..p.n].sort_unstable_by_key(|r| r.0);
     let mut sum = p.c0.map(f64::abs);
     for r in &p.rows[..p.n] {
-        sum[r.0 as usize] += r.3.iter().map(|c| c.abs()).sum::<f64>();
+        sum[r.0 as usize] += (0..HC)
+            .map(|k| r.3[k].abs() * f64::from(1u32 << k))
+            .sum::<f64>();
         let top = (0..HC).rev().find(|&k| r.3[k] != 0.0).unwrap_or(0);
         p.steps = p.steps.max(top);
     }
@@ -227,11 +245,14 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         for (r, pr) in h.rows.iter_mut().zip(&p.rows[..p.n]) {
             let q = p.q[pr.0 as usize];
             *r = HRow {
-                c: pr.3.map(|c| to_q(c, q)),
+                c: core::array::from_fn(|k| to_q(pr.3[k] * f64::from(1u32 << k), q)),
                 axis: pr.1,
                 wi: pr.2,
-                slot: pr.0,
             };
+            let j = pr.0 as usize;
+            for e in h.end[j..].iter_mut() {
+                *e += 1;
+            }
         }
         for s in 0..SLOTS {
             h.init[s] = (to_q(p.c0[s], p.q[s]) as i64) << 30;
@@ -265,6 +286,13 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         let h = &self.hr;
         let u: [i32; 3] =
             core::array::from_fn(|a| self.u_scale[a].apply(pos[a].wrapping_sub(self.centre_nm[a])));
+        // u/2 in Q32 (2u in Q30; +1 saturates to 2^31 − 1, 2^-31 off).
+        let uh = [
+            u[0].saturating_add(u[0]),
+            u[1].saturating_add(u[1]),
+            u[2].saturating_add(u[2]),
+            0,
+        ];
         let w = [
             u[0],
             u[1],
@@ -272,23 +300,27 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             mul_q30(u[0], u[1]),
             mul_q30(u[0], u[2]),
             mul_q30(u[1], u[2]),
+            0,
+            0,
         ];
-        let mut s = h.init;
-        match h.steps {
-            4 => h.rows_q::<4>(&u, &w, &mut s),
-            3 => h.rows_q::<3>(&u, &w, &mut s),
-            _ => h.rows_q::<2>(&u, &w, &mut s),
-        }
+        let s = match h.steps {
+            4 => h.sums::<4>(&uh, &w),
+            3 => h.sums::<3>(&uh, &w),
+            _ => h.sums::<2>(&uh, &w),
+        };
         let mut out: [i64; 3] = core::array::from_fn(|o| s[o] >> (h.shift[o] & 63));
         if h.nf > 0 {
             let (temp, tool) = self.hold_aux(inp, flags);
             for (j, f) in h.fac[..(h.nf as usize).min(HF_CAP)].iter().enumerate() {
+                // Held temperatures and T_ref are within ±200 °C: i32.
                 let v = if f.src < 4 {
-                    temp[f.src as usize & 3] as i64 - f.k as i64
+                    temp[f.src as usize & 3].wrapping_sub(f.k)
                 } else {
-                    tool as i64
+                    tool
                 };
-                let val = rshr_var(rshr(s[3 + j], 30) * v, f.shift);
+                // |sum| < 2^61: rounded to Q(q) it fits i32.
+                let poly = rshr(s[3 + j], 30) as i32;
+                let val = rshr_var(poly as i64 * v as i64, f.shift);
                 let o = (f.output as usize).min(2);
                 out[o] = out[o].saturating_add(val);
             }
@@ -298,18 +330,27 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
 }
 
 impl HornerQ {
-    /// Every row with `S` Horner steps (the rows' coefficients above S
-    /// are 0), added into its sum: exact i64 products.
+    /// Every sum: its start plus its rows, each `S` Horner steps (the
+    /// coefficients above S are 0) times its weight — exact i64 products.
     #[inline(always)]
-    fn rows_q<const S: usize>(&self, u: &[i32; 3], w: &[i32; 6], s: &mut [i64; SLOTS]) {
-        for r in &self.rows[..(self.n as usize).min(HR_CAP)] {
-            let ua = u[(r.axis as usize).min(2)] as i64;
-            let mut acc = r.c[S];
-            for k in (0..S).rev() {
-                acc = ((acc as i64 * ua) >> 30) as i32 + r.c[k];
+    fn sums<const S: usize>(&self, uh: &[i32; 4], w: &[i32; 8]) -> [i64; SLOTS] {
+        let mut s = [0i64; SLOTS];
+        let mut start = 0;
+        for j in 0..(3 + self.nf as usize).min(SLOTS) {
+            let end = (self.end[j] as usize).min(HR_CAP);
+            let mut acc = self.init[j];
+            for r in self.rows.get(start..end).unwrap_or(&[]) {
+                let ua = uh[r.axis as usize & 3] as i64;
+                let mut x = r.c[S];
+                for k in (0..S).rev() {
+                    x = ((x as i64 * ua) >> 32) as i32 + r.c[k];
+                }
+                acc += x as i64 * w[r.wi as usize & 7] as i64;
             }
-            s[(r.slot as usize).min(SLOTS - 1)] += acc as i64 * w[(r.wi as usize).min(5)] as i64;
+            s[j] = acc;
+            start = end;
         }
+        s
     }
 }
 
@@ -331,6 +372,7 @@ mod tests {
         let table = crate::parse(bytes).unwrap();
         let m = Model::load(&table).unwrap();
         assert_eq!((m.hr.n, m.hr.nf, m.hr.steps), (21, 2, 3));
+        assert_eq!(m.hr.end, [6, 11, 15, 18, 21, 21, 21]);
         let mut vector = m.clone();
         vector.hr = HornerQ::EMPTY;
         let spec = TableSpec::from_table(&table);
