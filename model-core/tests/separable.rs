@@ -65,22 +65,24 @@ fn separable_spec(seed: u64) -> TableSpec {
     let channels = rng.int(1, 2) as usize;
     let mut spec = base_spec(&mut rng, channels);
     let deg = rng.int(4, 5) as u8;
+    // At most 5 rows per output, 4 per Abbe term, 3 for the thermal term
+    // (taken with at most one Abbe term): ≤ 23 rows (the path takes 24).
     for o in 0..3u8 {
-        // (at most 6 rows per output, 4 per Abbe or thermal term: ≤ 30 in all)
-        let set = monomials(&mut rng, deg, 3);
+        let set = monomials(&mut rng, deg, 2);
         let amp = rng.range(100.0, 40_000.0);
         let coefs = set.iter().map(|&m| (m, rng.sym(amp))).collect();
         spec.terms.push(TermSpec::Poly { output: o, coefs });
     }
-    for _ in 0..rng.int(0, 2) {
+    let abbe = rng.int(0, 2);
+    for _ in 0..abbe {
         let set = monomials(&mut rng, 4, 1);
         spec.terms.push(TermSpec::Abbe {
             output: rng.int(0, 2) as u8,
             coefs: set.iter().map(|&m| (m, rng.sym(3e-5))).collect(),
         });
     }
-    if rng.unit() < 0.5 {
-        let set = monomials(&mut rng, 2, 1);
+    if abbe < 2 && rng.unit() < 0.6 {
+        let set = monomials(&mut rng, 2, 0);
         spec.terms.push(TermSpec::Thermal {
             output: rng.int(0, 2) as u8,
             channel: rng.int(0, spec.channels.len() as i64 - 1) as u8,

@@ -33,8 +33,9 @@ use super::kernels::{choose_q, mul_q30, rshr, rshr_var, to_q};
 use super::{factored_q, Inputs, ModelCap, MAX_TERMS};
 use crate::table::{Table, TermView};
 
-/// Most rows the path takes (a rigid21:4 table has 21).
-pub(crate) const HR_CAP: usize = 32;
+/// Most rows the path takes (a rigid21:4 table has 21; a model is
+/// resident in RAM, 24 bytes per row).
+pub(crate) const HR_CAP: usize = 24;
 /// Most thermal/Abbe terms it takes.
 pub(crate) const HF_CAP: usize = 4;
 /// Sums: the three outputs' blocks, then one per thermal/Abbe term.
@@ -121,11 +122,11 @@ fn split(m: [u8; 3]) -> Option<(usize, usize, usize)> {
     }
 }
 
-/// What [`plan`] found: the rows in f64 (as the table's coefficients,
-/// thermal ones per m°C), the constants and the sums' scales.
+/// What [`plan`] found: the rows' (sum, axis, w index) sorted by sum,
+/// the constants and the sums' scales (a few hundred bytes: it is made on
+/// the board too, at load and by the cost estimate).
 pub(crate) struct Plan {
-    /// (sum, axis, w index, c_k).
-    rows: [(u8, u8, u8, [f64; HC]); HR_CAP],
+    keys: [(u8, u8, u8); HR_CAP],
     /// Rows used.
     pub n: usize,
     /// Horner steps per row (see [`HornerQ`]).
@@ -144,25 +145,26 @@ impl Plan {
     pub(crate) fn factored_q(&self, j: usize) -> i32 {
         self.q[(3 + j).min(SLOTS - 1)]
     }
+
+    /// The row of a non-constant separable monomial in sum `slot`.
+    fn row(&self, slot: usize, m: [u8; 3]) -> Option<(usize, usize)> {
+        let (a, k, wi) = split(m)?;
+        let key = (slot as u8, a as u8, wi as u8);
+        let i = self.keys[..self.n].iter().position(|&r| r == key)?;
+        Some((i, k))
+    }
 }
 
-/// The Horner-row plan of `table`, or `None` when the fixed path keeps
-/// the monomial vector: a term that is not a polynomial, thermal or Abbe
-/// term, a monomial that is not separable, no monomial of degree ≥ 4 (the
-/// paths of degree ≤ 3 are cheaper), more than [`HR_CAP`] rows or
-/// [`HF_CAP`] thermal/Abbe terms, or a sum whose Σ|c_k|·2^k leaves no
-/// scale with the headroom (Σ·2^q < 2^30; thermal/Abbe q ≥ 16).
-pub(crate) fn plan(table: &Table<'_>) -> Option<Plan> {
-    let mut p = Plan {
-        rows: [(0, 0, 0, [0.0; HC]); HR_CAP],
-        n: 0,
-        steps: 0,
-        fac: [(0, 0, 0); HF_CAP],
-        nf: 0,
-        c0: [0.0; SLOTS],
-        q: [0; SLOTS],
-    };
-    let mut max_deg = 0;
+/// Every (sum, monomial, coefficient) of `table`'s polynomial, thermal
+/// (per m°C) and Abbe terms, in table order, and the thermal/Abbe terms'
+/// factors; `None` when a term of another kind or more than [`HF_CAP`]
+/// thermal/Abbe terms, or when `f` says no.
+fn each_monomial(
+    table: &Table<'_>,
+    mut f: impl FnMut(usize, [u8; 3], f64) -> Option<()>,
+) -> Option<([(u8, u8, i32); HF_CAP], usize)> {
+    let mut fac = [(0, 0, 0); HF_CAP];
+    let mut nf = 0;
     if table.term_count() > MAX_TERMS {
         return None;
     }
@@ -175,52 +177,70 @@ pub(crate) fn plan(table: &Table<'_>) -> Option<Plan> {
                 t_ref_mc,
                 coefs,
             } => {
-                let slot = 3 + p.nf;
-                *p.fac.get_mut(p.nf)? = (output as u8, channel as u8 & 3, t_ref_mc);
-                p.nf += 1;
-                (slot, coefs, true)
+                *fac.get_mut(nf)? = (output as u8, channel as u8 & 3, t_ref_mc);
+                nf += 1;
+                (2 + nf, coefs, true)
             }
             TermView::Abbe { output, coefs } => {
-                let slot = 3 + p.nf;
-                *p.fac.get_mut(p.nf)? = (output as u8, 4, 0);
-                p.nf += 1;
-                (slot, coefs, false)
+                *fac.get_mut(nf)? = (output as u8, 4, 0);
+                nf += 1;
+                (2 + nf, coefs, false)
             }
             _ => return None,
         };
         for (m, c) in coefs.iter() {
-            let c = if per_mc { c / 1000.0 } else { c };
-            max_deg = max_deg.max(m[0] + m[1] + m[2]);
-            if m == [0, 0, 0] {
-                p.c0[slot] += c;
-                continue;
-            }
-            let (a, k, wi) = split(m)?;
-            let key = (slot as u8, a as u8, wi as u8);
-            let i = match p.rows[..p.n].iter().position(|r| (r.0, r.1, r.2) == key) {
-                Some(i) => i,
-                None => {
-                    p.n += 1;
-                    *p.rows.get_mut(p.n - 1)? = (key.0, key.1, key.2, [0.0; HC]);
-                    p.n - 1
-                }
-            };
-            p.rows[i].3[k] += c;
+            f(slot, m, if per_mc { c / 1000.0 } else { c })?;
         }
     }
+    Some((fac, nf))
+}
+
+/// The Horner-row plan of `table`, or `None` when the fixed path keeps
+/// the monomial vector: a term that is not a polynomial, thermal or Abbe
+/// term, a monomial that is not separable, no monomial of degree ≥ 4 (the
+/// paths of degree ≤ 3 are cheaper), more than [`HR_CAP`] rows or
+/// [`HF_CAP`] thermal/Abbe terms, or a sum whose Σ|c_k|·2^k (over the
+/// table's coefficients, before two terms' are added: an upper bound)
+/// leaves no scale with the headroom (Σ·2^q < 2^30; thermal/Abbe q ≥ 16).
+/// Out of line (load time, the cost estimate and the definition check).
+#[inline(never)]
+pub(crate) fn plan(table: &Table<'_>) -> Option<Plan> {
+    let mut p = Plan {
+        keys: [(0, 0, 0); HR_CAP],
+        n: 0,
+        steps: 0,
+        fac: [(0, 0, 0); HF_CAP],
+        nf: 0,
+        c0: [0.0; SLOTS],
+        q: [0; SLOTS],
+    };
+    let mut max_deg = 0;
+    let mut sum = [0.0f64; SLOTS];
+    let (fac, nf) = each_monomial(table, |slot, m, c| {
+        max_deg = max_deg.max(m[0] + m[1] + m[2]);
+        if m == [0, 0, 0] {
+            p.c0[slot] += c;
+            sum[slot] += c.abs();
+            return Some(());
+        }
+        let (a, k, wi) = split(m)?;
+        let key = (slot as u8, a as u8, wi as u8);
+        if !p.keys[..p.n].contains(&key) {
+            *p.keys.get_mut(p.n)? = key;
+            p.n += 1;
+        }
+        sum[slot] += c.abs() * f64::from(1u32 << k);
+        if c != 0.0 {
+            p.steps = p.steps.max(k);
+        }
+        Some(())
+    })?;
     if max_deg < 4 {
         return None;
     }
+    (p.fac, p.nf) = (fac, nf);
     // The rows by sum (their order within a sum changes no exact sum).
-    p.rows[..p.n].sort_unstable_by_key(|r| r.0);
-    let mut sum = p.c0.map(f64::abs);
-    for r in &p.rows[..p.n] {
-        sum[r.0 as usize] += (0..HC)
-            .map(|k| r.3[k].abs() * f64::from(1u32 << k))
-            .sum::<f64>();
-        let top = (0..HC).rev().find(|&k| r.3[k] != 0.0).unwrap_or(0);
-        p.steps = p.steps.max(top);
-    }
+    p.keys[..p.n].sort_unstable();
     p.steps = p.steps.clamp(2, HC - 1);
     for s in 0..SLOTS {
         p.q[s] = if s < 3 {
@@ -236,24 +256,35 @@ pub(crate) fn plan(table: &Table<'_>) -> Option<Plan> {
 
 impl<const P: usize, const G: usize> ModelCap<P, G> {
     /// Set the path from `table`'s [`plan`] (off when there is none).
+    /// Out of line: load time only.
+    #[inline(never)]
     pub(super) fn prepare_horner(&mut self, table: &Table<'_>) {
         self.hr = HornerQ::EMPTY;
         let Some(p) = plan(table) else {
             return;
         };
         let h = &mut self.hr;
-        for (r, pr) in h.rows.iter_mut().zip(&p.rows[..p.n]) {
-            let q = p.q[pr.0 as usize];
-            *r = HRow {
-                c: core::array::from_fn(|k| to_q(pr.3[k] * f64::from(1u32 << k), q)),
-                axis: pr.1,
-                wi: pr.2,
-            };
-            let j = pr.0 as usize;
-            for e in h.end[j..].iter_mut() {
+        for (r, &(j, a, wi)) in h.rows.iter_mut().zip(&p.keys[..p.n]) {
+            (r.axis, r.wi) = (a, wi);
+            for e in h.end[j as usize..].iter_mut() {
                 *e += 1;
             }
         }
+        // Each coefficient rounded on its own (½ unit each): the sum of
+        // the magnitudes is within the plan's bound plus n/2 units.
+        let rows = &mut h.rows;
+        let filled = each_monomial(table, |slot, m, c| {
+            if let Some((i, k)) = p.row(slot, m) {
+                let v = &mut rows[i].c[k];
+                *v = v.saturating_add(to_q(c * f64::from(1u32 << k), p.q[slot]));
+            }
+            Some(())
+        });
+        if filled.is_none() {
+            self.hr = HornerQ::EMPTY;
+            return;
+        }
+        let h = &mut self.hr;
         for s in 0..SLOTS {
             h.init[s] = (to_q(p.c0[s], p.q[s]) as i64) << 30;
             if s < 3 {
@@ -275,8 +306,10 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     }
 
     /// The block and the thermal/Abbe terms by rows, Q16 nm per output
-    /// (`pos` held inside the travel).
-    #[inline(always)]
+    /// (`pos` held inside the travel). Out of line, so that the general
+    /// path keeps its registers (inlined, the other fixed-point benches
+    /// took 4–8 instructions more).
+    #[inline(never)]
     pub(super) fn horner_fixed(
         &self,
         pos: &[i32; 3],
