@@ -33,8 +33,7 @@ use super::kernels::{choose_q, mul_q30, rshr, rshr_var, to_q};
 use super::{factored_q, Inputs, ModelCap, MAX_TERMS};
 use crate::table::{Table, TermView};
 
-/// Most rows the path takes (a rigid21:4 table has 21; a model is
-/// resident in RAM, 24 bytes per row).
+/// Most rows the path takes (a rigid21:4 table has 21).
 pub(crate) const HR_CAP: usize = 24;
 /// Most thermal/Abbe terms it takes.
 pub(crate) const HF_CAP: usize = 4;
@@ -42,14 +41,6 @@ pub(crate) const HF_CAP: usize = 4;
 const SLOTS: usize = 3 + HF_CAP;
 /// Coefficients of H per row (u_a^0 … u_a^4).
 const HC: usize = 5;
-
-/// One row: `w[wi] · H(u[axis])`, H = Σ c[k]·(u/2)^k in Q(q).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub(super) struct HRow {
-    c: [i32; HC],
-    axis: u8,
-    wi: u8,
-}
 
 /// A thermal/Abbe term's factor on this path.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -75,10 +66,17 @@ pub(super) struct HornerQ {
     shift: [u32; 3],
     /// Each sum's start: rounding and constant coefficient (× 2^30).
     init: [i64; SLOTS],
-    /// The rows of sum j are `rows[end[j − 1]..end[j]]`.
+    /// The rows of sum j are rows `end[j − 1]..end[j]`.
     end: [u8; SLOTS],
     fac: [HFac; HF_CAP],
-    rows: [HRow; HR_CAP],
+    /// Where the rows' coefficients start in the parameter pool: row i
+    /// is `pq[base + 5i ..][..5]` (c'_0 … c'_4, Q(q)) — in the pool, so
+    /// the model grows by this header only (a model on a 40 KiB stack,
+    /// as the tick bench has it, had no room for 500 bytes more).
+    base: u16,
+    /// Row i's (axis, w index, its sum, the next row's sum — or 0xFF
+    /// while the next row adds into the same sum).
+    ix: [[u8; 4]; HR_CAP],
 }
 
 impl HornerQ {
@@ -95,16 +93,26 @@ impl HornerQ {
             k: 0,
             shift: 0,
         }; HF_CAP],
-        rows: [HRow {
-            c: [0; HC],
-            axis: 0,
-            wi: 0,
-        }; HR_CAP],
+        base: 0,
+        ix: [[0; 4]; HR_CAP],
     };
 
     /// Whether the path is taken.
     pub(super) fn on(&self) -> bool {
         self.n > 0
+    }
+
+    /// Off, every field zero, in place.
+    pub(super) fn clear(&mut self) {
+        self.n = 0;
+        self.steps = 0;
+        self.nf = 0;
+        self.shift = [0; 3];
+        self.init = [0; SLOTS];
+        self.end = [0; SLOTS];
+        self.fac.fill(HFac::default());
+        self.base = 0;
+        self.ix = [[0; 4]; HR_CAP];
     }
 }
 
@@ -259,31 +267,44 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
     /// Out of line: load time only.
     #[inline(never)]
     pub(super) fn prepare_horner(&mut self, table: &Table<'_>) {
-        self.hr = HornerQ::EMPTY;
+        self.hr.clear();
         let Some(p) = plan(table) else {
             return;
         };
-        let h = &mut self.hr;
-        for (r, &(j, a, wi)) in h.rows.iter_mut().zip(&p.keys[..p.n]) {
-            (r.axis, r.wi) = (a, wi);
-            for e in h.end[j as usize..].iter_mut() {
+        // The rows' coefficients in the pools, after every term's parameters.
+        let base = self.pq.len();
+        if base + HC * p.n > P.min(u16::MAX as usize) {
+            return;
+        }
+        for (i, &(j, a, wi)) in p.keys[..p.n].iter().enumerate() {
+            for _ in 0..HC {
+                let (_, _, _) = (self.pf.push(0.0), self.pq.push(0), self.pidx.push(0));
+            }
+            let next = if i + 1 < p.n { p.keys[i + 1].0 } else { j };
+            let last = i + 1 == p.n || next != j;
+            self.hr.ix[i] = [a, wi, j, if last { next } else { 0xFF }];
+            for e in self.hr.end[j as usize..].iter_mut() {
                 *e += 1;
             }
         }
         // Each coefficient rounded on its own (½ unit each): the sum of
         // the magnitudes is within the plan's bound plus n/2 units.
-        let rows = &mut h.rows;
+        let rows = self.pq.get_mut(base..).unwrap_or(&mut []);
         let filled = each_monomial(table, |slot, m, c| {
             if let Some((i, k)) = p.row(slot, m) {
-                let v = &mut rows[i].c[k];
+                let v = rows.get_mut(HC * i + k)?;
                 *v = v.saturating_add(to_q(c * f64::from(1u32 << k), p.q[slot]));
             }
             Some(())
         });
         if filled.is_none() {
-            self.hr = HornerQ::EMPTY;
+            self.pf.truncate(base);
+            self.pq.truncate(base);
+            self.pidx.truncate(base);
+            self.hr.clear();
             return;
         }
+        self.hr.base = base as u16;
         let h = &mut self.hr;
         for s in 0..SLOTS {
             h.init[s] = (to_q(p.c0[s], p.q[s]) as i64) << 30;
@@ -336,10 +357,11 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
             0,
             0,
         ];
+        let rows = self.pq.get(h.base as usize..).unwrap_or(&[]).as_chunks().0;
         let s = match h.steps {
-            4 => h.sums::<4>(&uh, &w),
-            3 => h.sums::<3>(&uh, &w),
-            _ => h.sums::<2>(&uh, &w),
+            4 => h.sums::<4>(rows, &uh, &w),
+            3 => h.sums::<3>(rows, &uh, &w),
+            _ => h.sums::<2>(rows, &uh, &w),
         };
         let mut out: [i64; 3] = core::array::from_fn(|o| s[o] >> (h.shift[o] & 63));
         if h.nf > 0 {
@@ -366,22 +388,28 @@ impl HornerQ {
     /// Every sum: its start plus its rows, each `S` Horner steps (the
     /// coefficients above S are 0) times its weight — exact i64 products.
     #[inline(always)]
-    fn sums<const S: usize>(&self, uh: &[i32; 4], w: &[i32; 8]) -> [i64; SLOTS] {
-        let mut s = [0i64; SLOTS];
-        let mut start = 0;
-        for j in 0..(3 + self.nf as usize).min(SLOTS) {
-            let end = (self.end[j] as usize).min(HR_CAP);
-            let mut acc = self.init[j];
-            for r in self.rows.get(start..end).unwrap_or(&[]) {
-                let ua = uh[r.axis as usize & 3] as i64;
-                let mut x = r.c[S];
-                for k in (0..S).rev() {
-                    x = ((x as i64 * ua) >> 32) as i32 + r.c[k];
-                }
-                acc += x as i64 * w[r.wi as usize & 7] as i64;
+    fn sums<const S: usize>(
+        &self,
+        rows: &[[i32; HC]],
+        uh: &[i32; 4],
+        w: &[i32; 8],
+    ) -> [i64; SLOTS] {
+        // One pass over the rows (sorted by sum): the running sum stays in
+        // registers and is stored when the next row starts another sum.
+        let mut s = self.init;
+        let n = (self.n as usize).min(HR_CAP);
+        let mut acc = s[(self.ix[0][2] as usize).min(SLOTS - 1)];
+        for (r, ix) in rows.iter().zip(&self.ix[..n]) {
+            let ua = uh[ix[0] as usize & 3] as i64;
+            let mut x = r[S];
+            for k in (0..S).rev() {
+                x = ((x as i64 * ua) >> 32) as i32 + r[k];
             }
-            s[j] = acc;
-            start = end;
+            acc += x as i64 * w[ix[1] as usize & 7] as i64;
+            if ix[3] != 0xFF {
+                s[(ix[2] as usize).min(SLOTS - 1)] = acc;
+                acc = s[(ix[3] as usize).min(SLOTS - 1)];
+            }
         }
         s
     }

@@ -58,6 +58,10 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         let r = self.load_inner(table);
         if r.is_err() {
             self.clear();
+        } else {
+            // After `load_inner` returned: its frame (≈ 2 KiB on the M4)
+            // and this one's are not on the stack together.
+            self.prepare_horner(table);
         }
         r
     }
@@ -88,7 +92,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         self.has_rev = false;
         self.per_f32.clear();
         self.fac_f32.clear();
-        self.hr = super::horner::HornerQ::EMPTY;
+        self.hr.clear();
     }
 
     /// Lay the terms out per kind for [`ModelCap::flat_f32`] (sets `flat`
@@ -195,7 +199,6 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         }
         self.prepare_flat();
         self.prepare_vp();
-        self.prepare_horner(table);
         self.poly = match (self.terms.is_empty() && self.has_block, self.n_monos) {
             (true, 1..=4) => PolyKind::Linear,
             (true, 5..=20) => PolyKind::Cubic,
