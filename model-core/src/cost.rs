@@ -384,9 +384,12 @@ const FIXED_FEW: FewWeights = FewWeights {
 };
 
 /// Fixed point's separable path (issue 26), tenths: once (the normalised
-/// positions, their three products, the sums' shifts), per row and per
-/// Horner step of each row, per thermal/Abbe term (its factor). Set on
-/// `cargo xtask bench-mcu --calibrate`'s counts (BENCHMARKS.md).
+/// positions, their three products, the sums' starts and shifts), per row
+/// and per Horner step of each row, per thermal/Abbe term (its factor).
+/// From an exec trace of `rigid21_fixed` (824 of its 934 instructions in
+/// the kernel: ≈ 230 once, ≈ 22 per row of 3 steps, ≈ 50 per Abbe term),
+/// each rounded up, so that its estimate is 1.10 × the count (`cargo
+/// xtask bench-mcu --calibrate`, BENCHMARKS.md).
 struct HornerWeights {
     entry: u32,
     row: u32,
@@ -395,10 +398,10 @@ struct HornerWeights {
 }
 
 const FIXED_HORNER: HornerWeights = HornerWeights {
-    entry: 400,
-    row: 70,
-    step: 55,
-    factored: 250,
+    entry: 2500,
+    row: 125,
+    step: 40,
+    factored: 550,
 };
 
 const FIXED_TERMS: TermWeights = TermWeights {
@@ -608,6 +611,11 @@ mod tests {
         assert!(!all.flat && all.reads_temp && all.reads_tool);
         assert_eq!((all.mlp_two_layer, all.l1_units, all.l1_macs), (1, 16, 64));
         assert_eq!(all.grid, 1);
+        assert!(!all.horner && !cubic.horner && !full.horner);
+        // rigid21:4 (separable, degree 5, two Abbe terms): the Horner rows.
+        let rigid = features(include_bytes!("../../tests/golden/rigid21.bin"));
+        assert!(rigid.horner, "{rigid:?}");
+        assert_eq!((rigid.horner_rows, rigid.horner_steps), (21, 3));
     }
 
     #[test]
