@@ -228,6 +228,69 @@ fn extreme_separable_tables_do_not_overflow() {
             }
         }
     }
-    eprintln!("taken {taken} compared {compared}");
     assert!(taken >= 40 && compared > 1_000, "{taken} {compared}");
+}
+
+/// Separable tables at the edges the definition check (issue 25) sees:
+/// each term scaled by 10^−6 … 10^9, the tool arm's range up to ±2^31 nm
+/// on half the draws, nothing clamped. Every one that takes the path and
+/// that `board::check` accepts evaluates in fixed point within the bound
+/// at 300 inputs of its envelope (the check's static bound uses the
+/// path's own scales, `Plan::factored_q`); some are refused (else the
+/// test proved nothing).
+#[test]
+fn separable_edge_tables_the_check_accepts_are_within_the_bound() {
+    use model_core::board::{check, LimitError};
+    use model_core::definition::{definition_nm, DEFINITION_BOUND_NM};
+    let (mut refused, mut accepted) = (0, 0);
+    for seed in 0..300u64 {
+        let mut spec = separable_spec(0x5E9A_0000 + seed);
+        let mut rng = Rng(seed ^ 0xED6E);
+        spec.envelope.max_corr_nm = [model_core::table::MAX_CORR_LIMIT_NM; 3];
+        if rng.unit() < 0.5 {
+            let arm = (10f64.powf(rng.range(3.0, 9.34)) as i64).min(i32::MAX as i64) as i32;
+            spec.envelope.tool_min_nm = -arm;
+            spec.envelope.tool_max_nm = arm;
+        }
+        for t in spec.terms.iter_mut() {
+            let s = 10f64.powf(rng.range(-6.0, 9.0));
+            if let TermSpec::Poly { coefs, .. }
+            | TermSpec::Abbe { coefs, .. }
+            | TermSpec::Thermal {
+                coefs_nm_per_k: coefs,
+                ..
+            } = t
+            {
+                for c in coefs.iter_mut() {
+                    c.1 *= s;
+                }
+            }
+        }
+        let Ok(bytes) = spec.encode() else { continue };
+        let table = parse(&bytes).expect("parse");
+        let Ok(model) = LargeModel::load(&table) else {
+            continue;
+        };
+        if !Features::of(&table).horner {
+            continue;
+        }
+        match check(&table) {
+            Err(LimitError::OffDefinition(_)) => {
+                refused += 1;
+                continue;
+            }
+            Ok(()) => accepted += 1,
+            Err(_) => continue,
+        }
+        for _ in 0..300 {
+            let inp = corner_inputs(&mut rng, &spec);
+            let def = definition_nm(&table, &inp);
+            let q = model.eval_fixed(&inp).corr_nm;
+            for o in 0..3 {
+                let d = (q[o] as f64 - def[o]).abs();
+                assert!(d <= DEFINITION_BOUND_NM as f64, "seed {seed}: {d} nm off");
+            }
+        }
+    }
+    assert!(refused >= 5 && accepted >= 30, "{refused} {accepted}");
 }
