@@ -19,7 +19,7 @@ use proptest::prelude::*;
 /// Whether `m` is u_a^n or u_a^n·u_b (n ≥ 1).
 fn is_separable(m: [u8; 3]) -> bool {
     let nz = m.iter().filter(|&&e| e > 0).count();
-    nz == 1 || (nz == 2 && m.iter().any(|&e| e == 1))
+    nz == 1 || (nz == 2 && m.contains(&1))
 }
 
 /// A random subset of the separable monomials of degree ≤ `deg` (the

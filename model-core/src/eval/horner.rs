@@ -10,8 +10,8 @@
 //! The constant goes into the sum's start. A sum is an output's share of
 //! the block or one thermal/Abbe term's polynomial.
 //!
-//! H is evaluated by Horner's rule on u/2, each step one SMMLA (h ← c'_k
-//! + ⌊h·u' / 2^32⌋, u' = 2u in Q30 saturated to i32, i.e. u/2 in Q32),
+//! H is evaluated by Horner's rule on u/2, each step one SMMLA (h ←
+//! c'_k + ⌊h·u' / 2^32⌋, u' = 2u in Q30 saturated to i32, i.e. u/2 in Q32),
 //! with the coefficients c'_k = c_k·2^k in Q(q); then the row adds h·w
 //! (Q(q+30), exact) into its sum, which stays in registers over the
 //! sum's rows (the rows are sorted by sum).
@@ -163,6 +163,10 @@ impl Plan {
     }
 }
 
+/// The thermal/Abbe terms' factors: (output, src, T_ref m°C) each, and
+/// their number.
+type Factors = ([(u8, u8, i32); HF_CAP], usize);
+
 /// Every (sum, monomial, coefficient) of `table`'s polynomial, thermal
 /// (per m°C) and Abbe terms, in table order, and the thermal/Abbe terms'
 /// factors; `None` when a term of another kind or more than [`HF_CAP`]
@@ -170,7 +174,7 @@ impl Plan {
 fn each_monomial(
     table: &Table<'_>,
     mut f: impl FnMut(usize, [u8; 3], f64) -> Option<()>,
-) -> Option<([(u8, u8, i32); HF_CAP], usize)> {
+) -> Option<Factors> {
     let mut fac = [(0, 0, 0); HF_CAP];
     let mut nf = 0;
     if table.term_count() > MAX_TERMS {
