@@ -6,7 +6,8 @@
 //!
 //! The estimate follows the structure of [`crate::eval`]: which monomial
 //! vector is built (none, the 20 of degree ≤ 3 in straight-line code, or
-//! all 56), whether the shared polynomial block is summed, whether the f32
+//! all 56 — or none on the separable path's Horner rows, priced per row
+//! and step), whether the shared polynomial block is summed, whether the f32
 //! fast path applies (every non-polynomial term a reversal, a periodic term
 //! or a thermal/Abbe term of degree ≤ 1), and then a cost per term by kind
 //! and size (coefficients, harmonics, grid, network units and

@@ -59,9 +59,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         if r.is_err() {
             self.clear();
         } else {
-            // After `load_inner` returned: its frame (≈ 2 KiB on the M4)
-            // and this one's are not on the stack together.
-            self.prepare_horner(table);
+            self.prepare_horner(table); // (not under load_inner's 2 KiB frame)
         }
         r
     }
