@@ -6,7 +6,8 @@
 //!
 //! The estimate follows the structure of [`crate::eval`]: which monomial
 //! vector is built (none, the 20 of degree ≤ 3 in straight-line code, or
-//! all 56), whether the shared polynomial block is summed, whether the f32
+//! all 56 — or none on the separable path's Horner rows, priced per row
+//! and step), whether the shared polynomial block is summed, whether the f32
 //! fast path applies (every non-polynomial term a reversal, a periodic term
 //! or a thermal/Abbe term of degree ≤ 1), and then a cost per term by kind
 //! and size (coefficients, harmonics, grid, network units and
@@ -104,6 +105,14 @@ pub struct Features {
     /// Fixed point sums the block by monomial (`blk_*`: at most 28 used
     /// monomials, at most half of the vector's; not on the `vp` path).
     pub blk: bool,
+    /// Fixed point takes the separable path (`eval`'s Horner rows, issue
+    /// 26: every monomial u_a^n·(1 | u_b), degree ≥ 4, only polynomial,
+    /// thermal and Abbe terms; `eval::horner_plan`).
+    pub horner: bool,
+    /// Its rows, and the Horner steps of each.
+    pub horner_rows: u32,
+    /// See `horner_rows`.
+    pub horner_steps: u32,
 }
 
 impl Features {
@@ -225,6 +234,11 @@ impl Features {
             && f.other_terms == f.factored + f.reversal
             && f.other_terms as usize <= crate::eval::FQ_MAX_TERMS;
         f.blk = f.has_block && !f.vp && count <= crate::eval::BLK_MAX && 2 * count <= n_monos;
+        if let Some(p) = crate::eval::horner_plan(table) {
+            f.horner = true;
+            f.horner_rows = p.n as u32;
+            f.horner_steps = p.steps as u32;
+        }
         f
     }
 
@@ -370,6 +384,27 @@ const FIXED_FEW: FewWeights = FewWeights {
     blk_used: 270,
 };
 
+/// Fixed point's separable path (issue 26), tenths: once (the normalised
+/// positions, their three products, the sums' starts and shifts), per row
+/// and per Horner step of each row, per thermal/Abbe term (its factor).
+/// From an exec trace of `rigid21_fixed` (824 of its 934 instructions in
+/// the kernel: ≈ 230 once, ≈ 22 per row of 3 steps, ≈ 50 per Abbe term),
+/// each rounded up, so that its estimate is 1.10 × the count (`cargo
+/// xtask bench-mcu --calibrate`, BENCHMARKS.md).
+struct HornerWeights {
+    entry: u32,
+    row: u32,
+    step: u32,
+    factored: u32,
+}
+
+const FIXED_HORNER: HornerWeights = HornerWeights {
+    entry: 2500,
+    row: 125,
+    step: 40,
+    factored: 550,
+};
+
 const FIXED_TERMS: TermWeights = TermWeights {
     entry: 614,
     factored: 1442,
@@ -442,7 +477,10 @@ impl Features {
     fn fixed_mono_block(&self) -> u64 {
         let f = |x: u32| u64::from(x);
         let (m20, m56) = self.monos();
-        if self.vp {
+        if self.horner {
+            let h = &FIXED_HORNER;
+            f(h.entry) + f(self.horner_rows) * (f(h.row) + f(self.horner_steps) * f(h.step))
+        } else if self.vp {
             f(FIXED_FEW.vp)
         } else if self.blk {
             m20 * f(FIXED.mono20)
@@ -454,10 +492,13 @@ impl Features {
         }
     }
 
-    /// Fixed point's terms: the flat loop or the general one.
+    /// Fixed point's terms: the separable path's factors, the flat loop
+    /// or the general one.
     fn fixed_terms(&self) -> u64 {
         let f = |x: u32| u64::from(x);
-        if self.fq {
+        if self.horner {
+            f(self.factored) * f(FIXED_HORNER.factored)
+        } else if self.fq {
             f(FIXED_FEW.fq_entry)
                 + f(self.factored) * f(FIXED_FEW.fq_factored)
                 + f(self.reversal) * f(FIXED_FEW.fq_reversal)
@@ -571,6 +612,11 @@ mod tests {
         assert!(!all.flat && all.reads_temp && all.reads_tool);
         assert_eq!((all.mlp_two_layer, all.l1_units, all.l1_macs), (1, 16, 64));
         assert_eq!(all.grid, 1);
+        assert!(!all.horner && !cubic.horner && !full.horner);
+        // rigid21:4 (separable, degree 5, two Abbe terms): the Horner rows.
+        let rigid = features(include_bytes!("../../tests/golden/rigid21.bin"));
+        assert!(rigid.horner, "{rigid:?}");
+        assert_eq!((rigid.horner_rows, rigid.horner_steps), (21, 3));
     }
 
     #[test]

@@ -547,7 +547,8 @@ impl StaticBound {
 
 /// The static bound of `table` ([`StaticBound`]): for the fixed-point
 /// path, what a thermal or Abbe term's rounding can add (its polynomial
-/// rounded to the loader's binary scale q before the factor multiplies it)
+/// rounded to the loader's binary scale q before the factor multiplies it,
+/// by the monomial vector or by the separable path's rows)
 /// and an MLP's ([`mlp_bound_nm`]); for the f32 path, the rounding of every
 /// term linear in its coefficients (polynomial, thermal, Abbe, reversal),
 /// an MLP's, and that of the sum of all terms of the output — each f32
@@ -564,6 +565,8 @@ pub fn static_bound_nm(table: &Table<'_>) -> StaticBound {
     let mut best = [[0.0f64; 3]; 2];
     let mut total = [0.0f64; 3];
     let mut terms = [0.0f64; 3];
+    let horner = crate::eval::horner_plan(table);
+    let mut fac = 0;
     for (i, term) in table.terms().enumerate() {
         let view = term.view();
         let i = (i, term.kind);
@@ -618,8 +621,20 @@ pub fn static_bound_nm(table: &Table<'_>) -> StaticBound {
             .iter()
             .map(|(_, c)| if per_mc { c / 1000.0 } else { c }.abs())
             .sum();
-        let units = 0.5 * n + 4.0 * (deg + 1.0) + 0.5;
-        let v = match crate::eval::factored_q(sum) {
+        // On the separable path (Horner rows, `eval::horner_plan`) the
+        // term's scale is the plan's and each monomial's row adds at most
+        // 4 truncated steps and 2 units from its weight's product.
+        let (units, q) = match &horner {
+            Some(p) => {
+                fac += 1;
+                (0.5 * n + 6.0 * n + 0.5, Some(p.factored_q(fac - 1)))
+            }
+            None => (
+                0.5 * n + 4.0 * (deg + 1.0) + 0.5,
+                crate::eval::factored_q(sum),
+            ),
+        };
+        let v = match q {
             Some(q) => units * libm::exp2(-f64::from(q)) * max_factor(table, &view) + 1.0,
             None => f64::INFINITY,
         };

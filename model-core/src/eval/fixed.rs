@@ -155,7 +155,10 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                 self.u_scale[2].apply(pos[2].wrapping_sub(self.centre_nm[2])),
             ]
         };
-        let out = if self.vp_n > 0 {
+        let out = if self.hr.on() {
+            // Separable, degree ≥ 4: rows instead of the monomial vector.
+            self.horner_fixed(&pos, inp, &mut flags)
+        } else if self.vp_n > 0 {
             // Few monomials: only those the block reads (and their parents).
             let v = self.mono_vp_q30(u());
             let mut out = self.block_vp(&v);

@@ -58,6 +58,8 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         let r = self.load_inner(table);
         if r.is_err() {
             self.clear();
+        } else {
+            self.prepare_horner(table); // (not under load_inner's 2 KiB frame)
         }
         r
     }
@@ -88,6 +90,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
         self.has_rev = false;
         self.per_f32.clear();
         self.fac_f32.clear();
+        self.hr.clear();
     }
 
     /// Lay the terms out per kind for [`ModelCap::flat_f32`] (sets `flat`

@@ -44,6 +44,7 @@ pub use kernels::{mono_index, MONO_EXPS};
 
 mod f32;
 mod fixed;
+mod horner;
 mod kernels;
 mod load;
 
@@ -503,6 +504,7 @@ pub(crate) const VP_MAX_PRODUCTS: usize = VP_STEPS;
 pub(crate) const FQ_MAX_TERMS: usize = FQ_CAP;
 /// Most monomials the block by monomial takes.
 pub(crate) const BLK_MAX: usize = BLK_CAP;
+pub(crate) use horner::plan as horner_plan;
 
 /// See [`poly_fixed_takes`].
 const fn poly_fixed_shift_ok(shift: u32) -> bool {
@@ -626,6 +628,9 @@ pub struct ModelCap<const P: usize, const G: usize> {
     /// no pool slices, the polynomial dense over 1, x, y, z.
     fq_n: u8,
     fq: [TermQ; FQ_CAP],
+    /// The fixed path of a separable table of degree ≥ 4 (`horner`: rows
+    /// instead of the 56-entry monomial vector; off unless `hr.on()`).
+    hr: horner::HornerQ,
 }
 
 /// A reversal or a thermal/Abbe term of degree ≤ 1 for the flat fixed path:
@@ -724,6 +729,7 @@ impl<const P: usize, const G: usize> ModelCap<P, G> {
                 k: 0,
                 c: [0; 4],
             }; FQ_CAP],
+            hr: horner::HornerQ::EMPTY,
         }
     }
 
