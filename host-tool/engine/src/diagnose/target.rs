@@ -559,4 +559,27 @@ mod tests {
             "forward gain of the housing sensor {forward}"
         );
     }
+    /// The one-position forward check refits the level on the earlier
+    /// blocks only and predicts every later block from each origin: a
+    /// level that jumps in the last block is missed from all three
+    /// origins (3 of the 6 origin–block pairs at 36 µm²), not only from
+    /// the last (next block only: 1 of 3), and never known in advance.
+    #[test]
+    fn the_refitted_forward_check_predicts_every_later_block_from_earlier_ones() {
+        let blocks: Vec<Vec<usize>> = (0..4).map(|b| vec![2 * b, 2 * b + 1]).collect();
+        let y = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 6.0, 6.0];
+        let level = Basis::new(&[vec![1.0; 8]], 8);
+        let got = forward_refit_rms(&blocks, &y, &level, &[]);
+        assert!((got - 18f64.sqrt()).abs() < 1e-9, "{got}");
+        // A column that carries the jump predicts it once it has been
+        // seen... and here it never is before the last block: no better.
+        let step = vec![vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0]];
+        let with = forward_refit_rms(&blocks, &y, &level, &step);
+        assert!((with - got).abs() < 1e-9, "{with}");
+        // A column seen to move with y on the earliest block already does.
+        let ramp = vec![(0..8).map(|i| 0.5 * i as f64).collect::<Vec<f64>>()];
+        let y2: Vec<f64> = ramp[0].iter().map(|r| 2.0 * r).collect();
+        assert!(forward_refit_rms(&blocks, &y2, &level, &ramp) < 1e-6);
+        assert!(forward_refit_rms(&blocks, &y2, &level, &[]) > 2.0);
+    }
 }
