@@ -72,26 +72,29 @@ fn a_wandering_error_gains_no_effect_counted_with_n_eff() {
         let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
         let steps = ez_steps(&d);
         added += steps.len();
-        // What counting every reading would have added: a candidate that
-        // passes ΔBIC < −10 and the held-out gain of 10 %.
+        // What ΔBIC counting every reading would have added: its best
+        // candidate below −10. Refused by the n_eff rule (the step's ΔBIC
+        // counted with n_eff) or, before it, by the forward check (the
+        // whole model refitted on the earlier hours predicts the later
+        // ones no better: issue 24).
         let best = d
             .candidates
             .iter()
             .filter(|c| c.target == "ez" && c.identifiable)
             .filter(|c| c.delta_bic.is_some_and(|b| b < -10.0))
-            .filter(|c| c.gain.is_some_and(|g| g >= 0.10))
             .min_by(|a, b| a.delta_bic.unwrap().total_cmp(&b.delta_bic.unwrap()));
         let refused = d
             .warnings
             .iter()
             .any(|w| w.code == "not_significant_in_time");
         eprintln!(
-            "seed {seed}: path {:?}; best passing every reading counted: {:?} (ΔBIC {:?}); refused in time: {refused}",
+            "seed {seed}: path {:?}; best by ΔBIC every reading counted: {:?} (ΔBIC {:?}, forward gain {:?}); refused in time: {refused}",
             steps.iter().map(|s| s.add.as_str()).collect::<Vec<_>>(),
             best.map(|c| c.add.as_str()),
-            best.and_then(|c| c.delta_bic)
+            best.and_then(|c| c.delta_bic),
+            best.and_then(|c| c.gain)
         );
-        if best.is_some() && refused {
+        if best.is_some() {
             naive_pass += 1;
         }
         for s in &steps {
@@ -100,10 +103,10 @@ fn a_wandering_error_gains_no_effect_counted_with_n_eff() {
             assert!(s.effective_n.is_some_and(|n| n <= 1500.0));
         }
     }
-    eprintln!("{naive_pass}/{seeds} seeds had a step passing with every reading counted and refused with n_eff; {added} steps added in all");
-    // The case is real: a quarter of the seeds or more would have taken a
-    // step (a two-sensor "thermal" at ΔBIC −900 to −1400 on 3 of the first
-    // 8 seeds), each refused with n_eff.
+    eprintln!("{naive_pass}/{seeds} seeds had a candidate passing ΔBIC with every reading counted; {added} steps added in all");
+    // The case is real: a quarter of the seeds or more have a candidate
+    // that ΔBIC alone would take (a two-sensor "thermal" at ΔBIC −900 to
+    // −1400 on 3 of the first 8 seeds before issue 24's forward rule).
     assert!(naive_pass * 4 >= seeds as usize, "{naive_pass}/{seeds}");
     // And nothing (or almost nothing) is claimed.
     assert!(added <= 1, "{added} steps added on a wandering error");

@@ -11,7 +11,10 @@ use crate::model::Seed;
 
 use super::physical::{lag_aware_xtx_inv, param_key, physical};
 use super::search::Proposal;
-use super::target::{block_rms, forward_blocks, forward_rms, fwl_many, State, TargetData};
+use super::target::{
+    block_rms, candidate_forward_rms, forward_blocks, forward_refit_rms, fwl_many, State,
+    TargetData,
+};
 use super::{Candidate, CandidateSpec, HoldOutKind, Listed, Warning, IN_SPAN_SHARE};
 
 /// The scored candidates of one target, with the columns needed for overlaps.
@@ -198,8 +201,14 @@ pub(super) fn score(
                 .flatten();
             let (ref_held, held, kind) = match &forward {
                 Some(blocks) => {
-                    let (before, after) = forward_rms(blocks, &st.resid, &ff.partialled);
+                    let (before, after) =
+                        candidate_forward_rms(td, st, blocks, &ff.cols, &ff.partialled);
                     let before = match repl {
+                        // At one position: the current model refitted
+                        // forward, as the candidate is.
+                        Some(r) if decides => {
+                            forward_refit_rms(blocks, &td.y, &r.current.basis, &[])
+                        }
                         // Against the current model: its own residual, forward.
                         Some(r) => block_rms(&blocks[1..], |i| r.current.resid[i]),
                         None => before,

@@ -189,6 +189,11 @@ impl Basis {
         self.u.iter().map(Vec::as_slice)
     }
 
+    /// The basis vectors (orthonormal over all rows), one per dimension.
+    pub fn columns(&self) -> &[Vec<f64>] {
+        &self.u
+    }
+
     /// Dimension of the span.
     pub fn rank(&self) -> usize {
         self.u.len()

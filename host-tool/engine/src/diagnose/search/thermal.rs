@@ -14,7 +14,9 @@ use crate::features::Feature;
 use crate::linalg::basis::small_fit;
 use crate::linalg::brent::brent_min;
 
-use super::super::target::{forward_blocks, forward_rms, rss_many, State, TargetData};
+use super::super::target::{
+    forward_blocks, forward_refit_rms, forward_rms, rss_many, State, TargetData,
+};
 use super::super::{CONSTANT_TEMPERATURE_K, DBIC_SIGNIFICANT, MIN_HELD_OUT_GAIN};
 use super::{fmt_num, shown, Proposal, Search};
 
@@ -252,7 +254,10 @@ fn multi_sensor(td: &TargetData, st: &State, target: Target) -> Option<Proposal>
     if chans.len() < 2 {
         return None;
     }
-    // Every (channel, lag) column with the model partialled out.
+    // Every (channel, lag) column with the model partialled out (and, at
+    // one position, as it is: the forward check refits the whole model).
+    let refit = super::super::autocorr::decides(td);
+    let mut raws: Vec<Vec<Vec<f64>>> = Vec::new();
     let mut cols: Vec<Vec<Vec<f64>>> = Vec::with_capacity(chans.len());
     for ch in &chans {
         let mut raw = Vec::with_capacity(LAGS_S.len());
@@ -267,6 +272,9 @@ fn multi_sensor(td: &TargetData, st: &State, target: Target) -> Option<Proposal>
         }
         let refs: Vec<&[f64]> = raw.iter().map(Vec::as_slice).collect();
         cols.push(st.basis.residuals(&refs));
+        if refit {
+            raws.push(raw);
+        }
     }
     let rss_of = |set: &[(usize, usize)]| -> f64 {
         let cs: Vec<Vec<f64>> = set.iter().map(|&(c, l)| cols[c][l].clone()).collect();
@@ -288,6 +296,11 @@ fn multi_sensor(td: &TargetData, st: &State, target: Target) -> Option<Proposal>
     let earns = |big: &[(usize, usize)], r_big: f64, small: &[(usize, usize)], r_small: f64| {
         let forward_ok = forward.as_ref().is_none_or(|b| {
             let f = |set: &[(usize, usize)]| {
+                if refit {
+                    let cs: Vec<Vec<f64>> =
+                        set.iter().map(|&(c, l)| raws[c][l].clone()).collect();
+                    return forward_refit_rms(b, &td.y, &st.basis, &cs);
+                }
                 let cs: Vec<Vec<f64>> = set.iter().map(|&(c, l)| cols[c][l].clone()).collect();
                 forward_rms(b, &st.resid, &cs).1
             };
