@@ -88,12 +88,7 @@ fn fit_diagnose_and_improve_report_aux_columns_and_what_they_probably_meant() {
     let model = dir.join("m.json");
     let out = run(&["fit", src, "--model", "cubic19", "-o", s(&model), "--json"]);
     let doc = json(&out);
-    let w: Vec<&str> = doc["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|w| w.as_str().unwrap())
-        .collect();
+    let w = common::strs(&doc["warnings"]);
     assert!(
         w.contains(&format!("aux_misspelled: {meant}").as_str()),
         "{w:?}"

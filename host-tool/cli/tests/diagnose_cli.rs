@@ -388,12 +388,7 @@ fn fit_add_accepts_every_familys_add_string_verbatim() {
     args.extend(["-o", s(&model), "--json"]);
     json(&run(&args));
     let m: Value = serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
-    let kept: Vec<&str> = m["adds"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|a| a.as_str().unwrap())
-        .collect();
+    let kept = common::strs(&m["adds"]);
     assert_eq!(kept, chosen.iter().map(String::as_str).collect::<Vec<_>>());
     std::fs::remove_dir_all(&dir).unwrap();
 }

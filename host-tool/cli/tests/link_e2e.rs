@@ -1074,12 +1074,7 @@ fn status_shows_a_boot_fallback_and_why() {
     let s = status_json(&board.port);
     let t = &s["telemetry"];
     assert_eq!(t["active"]["crc32"], crc_hex(&t1), "{s}");
-    let latched: Vec<&str> = t["faults_latched"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_str().unwrap())
-        .collect();
+    let latched = common::strs(&t["faults_latched"]);
     assert!(latched.contains(&"trial_failed"), "{s}");
     assert!(latched.contains(&"reset_by_panic"), "{s}");
     assert!(!t["faults"].to_string().contains("trial_failed"), "{s}");

@@ -18,7 +18,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{expect_exit, fit_cubic19, json, run, s, simulate_grid, tmp_dir};
+use common::{expect_exit, grid_cubic19, json, run, s, simulate_grid, tmp_dir};
 use serde_json::Value;
 use trueaxis_engine::model::ModelFile;
 
@@ -119,9 +119,7 @@ fn zero_span_and_short_coefficient_list_are_refused_by_every_reader() {
     // exit 0 "predicts nothing", export wrote a table with error 0.0 nm);
     // 5 of 19 coefficients exported a different model.
     let dir = tmp_dir("model-file", "r3");
-    let csv = simulate_grid(&dir, "r3.csv", 1);
-    let model = dir.join("r3.json");
-    fit_cubic19(&csv, &model);
+    let (csv, model, _) = grid_cubic19(&dir, "r3", 1);
     let zero = damaged(
         &model,
         &dir.join("zero.json"),
@@ -403,9 +401,7 @@ fn a_non_finite_prediction_fails_export() {
     // read NaN as 0 nm (f64::max drops NaN); export now refuses the
     // prediction, naming the target and the point, and writes nothing.
     let dir = tmp_dir("model-file", "inf");
-    let csv = simulate_grid(&dir, "g.csv", 4);
-    let model = dir.join("m.json");
-    fit_cubic19(&csv, &model);
+    let (_, model, _) = grid_cubic19(&dir, "g", 4);
     let huge = damaged(&model, &dir.join("huge.json"), |v| {
         v["model"]["outputs"][0]["coef_um"][0] = 1e308.into();
         v["model"]["outputs"][0]["coef_um"][1] = 1e308.into();
@@ -484,9 +480,7 @@ fn every_single_bit_flip_is_refused_or_changes_nothing() {
 #[test]
 fn a_model_file_without_a_checksum_loads_with_a_note() {
     let dir = tmp_dir("model-file", "old");
-    let csv = simulate_grid(&dir, "g.csv", 6);
-    let model = dir.join("m.json");
-    fit_cubic19(&csv, &model);
+    let (_, model, _) = grid_cubic19(&dir, "g", 6);
     let text = std::fs::read_to_string(&model).unwrap();
     assert!(text.trim_end().ends_with('}'));
     let last = text

@@ -11,7 +11,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use common::{expect_exit, fit_cubic19, json, run, s, simulate_grid, tmp_dir};
+use common::{expect_exit, fit_cubic19, grid_cubic19, json, run, s, simulate_grid, tmp_dir};
 
 /// Runs `trueaxis ARGS` with files limited to `blocks` × 512 bytes
 /// (`ulimit -f`; SIGXFSZ ignored, so a write past it fails with EFBIG as a
@@ -41,9 +41,7 @@ fn names(dir: &Path) -> Vec<String> {
 #[test]
 fn a_write_that_fails_half_way_leaves_the_old_file_and_no_temporary() {
     let dir = tmp_dir("output-files", "cut");
-    let csv = simulate_grid(&dir, "d.csv", 3);
-    let model = dir.join("m.json");
-    fit_cubic19(&csv, &model);
+    let (csv, model, _) = grid_cubic19(&dir, "d", 3);
     let out = dir.join("out");
     std::fs::create_dir_all(&out).unwrap();
     let old = "the old content\n";

@@ -412,12 +412,7 @@ fn three_probes_give_roundness_and_name_the_lobes_they_cannot_see() {
         String::from_utf8_lossy(&out.stderr)
     );
     let doc = json(&out);
-    let unseen: Vec<u64> = doc["unseen_harmonics"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_u64().unwrap())
-        .collect();
+    let unseen = common::u64s(&doc["unseen_harmonics"]);
     assert!(unseen.contains(&3) && unseen.contains(&7), "{unseen:?}");
 }
 
@@ -452,12 +447,7 @@ fn a_probe_calibrated_in_3d_on_the_ball_corrects_a_scan_in_a_plane() {
     let doc = calibrate_on_4mm_ball(&scan, true, &probe, &[]);
     let pr = &doc["probe"];
     assert_eq!(pr["format"], "trueaxis-probe3d/1", "{doc}");
-    let centre: Vec<f64> = pr["centre_mm"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let centre = common::f64s(&pr["centre_mm"]);
     for (a, b) in centre.iter().zip(c) {
         assert!((a - b).abs() < 1e-4, "centre {centre:?}");
     }
@@ -617,12 +607,7 @@ fn multi_step_separates_roundness_and_names_what_the_steps_cannot() {
         s(&outu),
         "--json",
     ]));
-    let ins: Vec<u64> = doc["inseparable_harmonics"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_u64().unwrap())
-        .collect();
+    let ins = common::u64s(&doc["inseparable_harmonics"]);
     assert!(ins.iter().all(|&k| k > 20), "{ins:?}");
     check(&outu, false, 0.02);
 }

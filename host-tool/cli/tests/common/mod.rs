@@ -56,6 +56,29 @@ pub fn json(out: &Output) -> Value {
     serde_json::from_slice(&out.stdout).expect("exactly one JSON document on stdout")
 }
 
+/// A JSON array of strings, each as `&str` (panics on anything else).
+pub fn strs(v: &Value) -> Vec<&str> {
+    array_of(v, Value::as_str)
+}
+
+/// A JSON array of numbers, each as `f64` (panics on anything else).
+pub fn f64s(v: &Value) -> Vec<f64> {
+    array_of(v, Value::as_f64)
+}
+
+/// A JSON array of whole numbers, each as `u64` (panics on anything else).
+pub fn u64s(v: &Value) -> Vec<u64> {
+    array_of(v, Value::as_u64)
+}
+
+fn array_of<'a, T>(v: &'a Value, each: impl Fn(&'a Value) -> Option<T>) -> Vec<T> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| each(x).unwrap())
+        .collect()
+}
+
 /// `trueaxis simulate --plan grid:100 --seed SEED -o DIR/NAME --json`: the
 /// preset mill on a 100 mm grid (9 × 6 × 6 = 324 points, ex ey ez),
 /// σ = 0.2 µm noise. Returns the CSV's path.
