@@ -43,12 +43,11 @@ fn spreadsheet_csv(dir: &Path) -> PathBuf {
 #[test]
 fn a_contract_name_in_the_wrong_case_is_refused_like_x_mm() {
     let dir = tmp_dir("aux", "case");
-    let csv = dir.join("r5.csv");
-    std::fs::write(
-        &csv,
+    let csv = common::file_in(
+        &dir,
+        "r5.csv",
         "x_mm,ex_um,ey [um],T_bed,dir_X\n0,1,3,20,1\n100,2,4,20.5,1\n200,1.5,5,21,1\n300,0.5,6,21.5,-1\n400,-1,7,22,-1\n500,-2,8,22.5,-1\n",
-    )
-    .unwrap();
+    );
     let msg = format!(
         "{}:1:5: column `dir_X`: expected `dir_x` (column names are case-sensitive)",
         s(&csv)

@@ -260,15 +260,8 @@ fn report_opens_offline_with_every_figure() {
         &body[..300.min(body.len())]
     );
     let verdict = &body[..body.find("</section>").unwrap()];
-    assert!(verdict.contains("After compensation e"), "{verdict}");
-    assert!(
-        verdict.contains(&format!(
-            "trueaxis diagnose {} --model {}",
-            s(&csv),
-            s(&model)
-        )),
-        "{verdict}"
-    );
+    let next = format!("trueaxis diagnose {} --model {}", s(&csv), s(&model));
+    common::assert_has(verdict, &["After compensation e", &next]);
     // Figures scale to the window: no fixed pixel width on any SVG.
     for l in &svgs {
         let text = std::fs::read_to_string(rep.join(l)).unwrap();
@@ -313,16 +306,15 @@ fn report_opens_offline_with_every_figure() {
 fn report_maps_every_plane_in_every_orientation() {
     let dir = tmp_dir("compare", "planes");
     let csv = dir.join("planes.csv");
-    json(&run(&[
-        "simulate",
-        "--plan",
-        "plane:xz:50,y=250",
-        "plane:xy:50,z=100",
-        "plane:yz:50,x=400",
-        "-o",
-        s(&csv),
-        "--json",
-    ]));
+    common::simulate(
+        &[
+            "--plan",
+            "plane:xz:50,y=250",
+            "plane:xy:50,z=100",
+            "plane:yz:50,x=400",
+        ],
+        &csv,
+    );
     let model = dir.join("planes.model.json");
     fit_cubic19(&csv, &model);
     let rep = dir.join("rep");
@@ -493,10 +485,7 @@ fn numeric_auxiliary_columns_are_channels() {
         .lines()
         .find(|l| l.contains("ex vs humidity_pct:"))
         .unwrap_or_else(|| panic!("{text}"));
-    assert!(
-        line.contains("(r = +0.99)") && line.contains("µm per unit"),
-        "{line}"
-    );
+    common::assert_has(&line, &["(r = +0.99)", "µm per unit"]);
 }
 
 #[test]

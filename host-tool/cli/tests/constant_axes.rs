@@ -10,7 +10,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{compare, expect_exit, export, fit, json, run, s, tmp_dir, CUBIC19_REVERSAL_X};
+use common::{compare, expect_exit, export, fit, json, s, tmp_dir, CUBIC19_REVERSAL_X};
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::import;
 use trueaxis_engine::model::{FittedModel, ModelFile};
@@ -19,18 +19,17 @@ use trueaxis_engine::model::{FittedModel, ModelFile};
 /// --seed 7 -o DIR/NAME`.
 fn simulate(dir: &Path, name: &str, plan: &str) -> PathBuf {
     let csv = dir.join(name);
-    json(&run(&[
-        "simulate",
-        "--plan",
-        plan,
-        "--effect",
-        "reversal:axis=x,backlash_um=8",
-        "--seed",
-        "7",
-        "-o",
-        s(&csv),
-        "--json",
-    ]));
+    common::simulate(
+        &[
+            "--plan",
+            plan,
+            "--effect",
+            "reversal:axis=x,backlash_um=8",
+            "--seed",
+            "7",
+        ],
+        &csv,
+    );
     csv
 }
 

@@ -150,15 +150,8 @@ fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
     let html = std::fs::read_to_string(hist.join("index.html")).unwrap();
     let body = &html[html.find("</h1>").unwrap() + 5..];
     assert!(body.trim_start().starts_with("<section id=\"verdict\""));
-    assert!(body.contains("One fit so far"), "{body}");
-    assert!(
-        body.contains(&format!(
-            "trueaxis diagnose {} --model {}",
-            s(&csv),
-            s(&model)
-        )),
-        "{body}"
-    );
+    let next = format!("trueaxis diagnose {} --model {}", s(&csv), s(&model));
+    common::assert_has(body, &["One fit so far", &next]);
     // Diagnosing that model with --report shows its history as well.
     let report = dir.join("report");
     stderr_ok(&run(&[
@@ -258,10 +251,7 @@ fn improve_runs_to_the_noise_floor_and_keeps_the_history() {
     let out = run(&["history", s(&model)]);
     stderr_ok(&out);
     let out = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.contains("2 step(s)") && out.contains("reversal:target=ex,axis=x"),
-        "{out}"
-    );
+    common::assert_has(&out, &["2 step(s)", "reversal:target=ex,axis=x"]);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

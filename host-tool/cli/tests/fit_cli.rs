@@ -8,7 +8,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{json, run, tmp_dir, with_blank_error_row};
+use common::{json, run, s, tmp_dir, with_blank_error_row};
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::import;
 use trueaxis_engine::model::{FittedModel, ModelFile};
@@ -106,20 +106,15 @@ fn add_effects_and_output_path() {
     let csv = dir.join("grid.csv");
     write(&grid_data(), &csv);
     let model = dir.join("m.json");
-    let out = run(&[
-        "fit",
-        csv.to_str().unwrap(),
+    let squareness = [
         "--model",
         "kinematic",
         "--add",
         "squareness:target=ex,axis=y",
         "--add",
         "squareness:target=ey,axis=x",
-        "-o",
-        model.to_str().unwrap(),
-        "--json",
-    ]);
-    let v = json(&out);
+    ];
+    let v = common::fit(&csv, &squareness, &model);
     assert_eq!(
         v["model"],
         "kinematic --add squareness:target=ex,axis=y --add squareness:target=ey,axis=x"
@@ -162,10 +157,7 @@ fn every_model_kind_runs_from_the_command_line() {
     let out = run(&["fit", csv.to_str().unwrap(), "--model", "cubic19"]);
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        text.contains("held-out") && text.contains("model written to"),
-        "{text}"
-    );
+    common::assert_has(&text, &["held-out", "model written to"]);
 }
 
 /// Rows the importer leaves out are said on stderr (with the line and the
@@ -181,13 +173,7 @@ fn rows_left_out_are_counted_and_said() {
 
     let holed = dir.join("holed.csv");
     let line = with_blank_error_row(&csv, &holed);
-    let out = run(&[
-        "fit",
-        holed.to_str().unwrap(),
-        "--model",
-        "cubic19",
-        "--json",
-    ]);
+    let out = run(&["fit", s(&holed), "--model", "cubic19", "--json"]);
     let v = json(&out);
     assert_eq!(v["skipped_count"], 1);
     assert_eq!(v["rows"]["ex"], 270, "the row is not fitted");
@@ -281,12 +267,7 @@ fn bad_input_exits_1_and_usage_exits_2() {
         "no T_bed_C",
     );
     expect_exit(
-        &[
-            "fit",
-            dir.join("missing.csv").to_str().unwrap(),
-            "--model",
-            "cubic19",
-        ],
+        &["fit", s(&dir.join("missing.csv")), "--model", "cubic19"],
         1,
         "missing.csv",
     );
@@ -305,13 +286,7 @@ fn bad_input_exits_1_and_usage_exits_2() {
     let small = dir.join("line.csv");
     write(&line, &small);
     expect_exit(
-        &[
-            "fit",
-            small.to_str().unwrap(),
-            "--model",
-            "cubic19",
-            "--json",
-        ],
+        &["fit", s(&small), "--model", "cubic19", "--json"],
         1,
         &format!(
             "{}: cannot fit cubic19: ex: 3 distinct points but the model has 4 terms",
@@ -348,18 +323,18 @@ fn the_text_gives_each_targets_term_count_when_they_differ() {
         "--seed",
         "4",
         "-o",
-        common::s(&csv),
+        s(&csv),
         "--json",
     ]));
     let out = common::run(&[
         "fit",
-        common::s(&csv),
+        s(&csv),
         "--model",
         "cubic19",
         "--add",
         "reversal:target=ex,axis=x",
         "-o",
-        common::s(&dir.join("m.json")),
+        s(&dir.join("m.json")),
     ]);
     common::assert_success(&out);
     let text = String::from_utf8_lossy(&out.stdout);

@@ -201,14 +201,7 @@ fn a_mesh_exported_from_a_fit_of_a_mesh_gives_the_mesh_back() {
     assert_eq!(out.status.code(), Some(2));
     // A one-axis model is not a bed mesh.
     let line = dir.join("line.csv");
-    json(&run(&[
-        "simulate",
-        "--plan",
-        "line:x:10",
-        "-o",
-        s(&line),
-        "--json",
-    ]));
+    common::simulate(&["--plan", "line:x:10"], &line);
     let lm = dir.join("line.json");
     json(&common::cubic19("fit", &line, &lm, &[]));
     let out = run(&[
@@ -337,11 +330,9 @@ fn an_exported_mesh_is_checked_at_the_probed_points() {
     let refused = run_v(&args(&["--max-departure-um", &limit]));
     assert_eq!(refused.status.code(), Some(1));
     let err = stderr(&refused);
-    assert!(
-        err.contains("departs from the reading")
-            && err.contains("line ")
-            && err.contains("--max-departure-um"),
-        "{err}"
+    common::assert_has(
+        &err,
+        &["departs from the reading", "line ", "--max-departure-um"],
     );
     assert!(!out.exists());
     // The data moved away: exported, with the check said to be missing.

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{data_file as data, json, run};
+use common::{data_file as data, json, run, s};
 use trueaxis_engine::import;
 
 #[test]
@@ -79,9 +79,9 @@ fn cli_converts_rtl_to_contract_csv() {
     let out_csv = std::env::temp_dir().join(format!("trueaxis-rtl-{}.csv", std::process::id()));
     let out = run(&[
         "import",
-        data("iso_worked.rtl").to_str().unwrap(),
+        s(&data("iso_worked.rtl")),
         "-o",
-        out_csv.to_str().unwrap(),
+        s(&out_csv),
         "--json",
     ]);
     let v = json(&out);
@@ -321,16 +321,8 @@ fn legacy_code_pages_in_rtl_metadata_are_decoded_and_said() {
         ds.metadata
     );
     let note = meta(&ds, "encoding").expect("a note");
-    assert!(
-        note.contains("Windows-1251") && note.contains("line 14"),
-        "{note}"
-    );
-    let out = run(&[
-        "import",
-        p.to_str().unwrap(),
-        "-o",
-        dir.join("ru.csv").to_str().unwrap(),
-    ]);
+    common::assert_has(&note, &["Windows-1251", "line 14"]);
+    let out = run(&["import", s(&p), "-o", s(&dir.join("ru.csv"))]);
     assert!(out.status.success(), "{out:?}");
     assert!(
         String::from_utf8_lossy(&out.stderr).contains("read as Windows-1251"),

@@ -77,12 +77,8 @@ fn assert_refused(model: &Path, dir: &Path, edit: impl FnOnce(&mut Value), needl
 fn out_of_range_target_is_an_error_not_a_panic() {
     // The user test's R2: `"target": 7` in model.outputs[0].
     let dir = tmp_dir("model-file", "target");
-    let csv = dir.join("r2.csv");
-    std::fs::write(
-        &csv,
-        "x_mm,ex_um\n0,1\n100,2\n200,1.5\n300,0.5\n400,-1\n500,-2\n",
-    )
-    .unwrap();
+    let rows = "x_mm,ex_um\n0,1\n100,2\n200,1.5\n300,0.5\n400,-1\n500,-2\n";
+    let csv = common::file_in(&dir, "r2.csv", rows);
     let model = fit(&csv, "cubic19", &[], &dir.join("r2.json"));
     let bad = damaged(
         &model,

@@ -10,7 +10,7 @@ mod common;
 
 use std::path::PathBuf;
 
-use common::{assert_success, json, run};
+use common::{assert_success, json, run, s};
 
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::import;
@@ -61,7 +61,7 @@ fn same_seed_same_bytes_other_seed_other_bytes() {
             "--seed",
             seed,
             "-o",
-            out.to_str().unwrap(),
+            s(&out),
         ]);
         assert_success(&o);
         std::fs::read(out).unwrap()
@@ -295,7 +295,7 @@ fn cli_json_shape_and_bad_specs() {
         "--seed",
         "3",
         "-o",
-        out_csv.to_str().unwrap(),
+        s(&out_csv),
         "--json",
     ]);
     let v = json(&o);
@@ -325,27 +325,15 @@ fn cli_json_shape_and_bad_specs() {
         "--effect",
         "periodic:axis=w,period_mm=5,amp_um=1",
         "-o",
-        out_csv.to_str().unwrap(),
+        s(&out_csv),
     ]);
     assert_eq!(bad.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("`axis=w`: expected x, y or z"));
-    let bad = run(&[
-        "simulate",
-        "--plan",
-        "line:y:1,x=900",
-        "-o",
-        out_csv.to_str().unwrap(),
-    ]);
+    let bad = run(&["simulate", "--plan", "line:y:1,x=900", "-o", s(&out_csv)]);
     assert_eq!(bad.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("outside the travel"));
     // A 1 mm grid of the preset would be 2·10⁸ rows: refused, not attempted.
-    let bad = run(&[
-        "simulate",
-        "--plan",
-        "grid:1",
-        "-o",
-        out_csv.to_str().unwrap(),
-    ]);
+    let bad = run(&["simulate", "--plan", "grid:1", "-o", s(&out_csv)]);
     assert_eq!(bad.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("coarser step"));
 }

@@ -14,16 +14,7 @@ use common::{json, run, s, tmp_dir};
 fn a_thermal_test_at_one_point_is_fitted_and_its_temperature_named() {
     let dir = tmp_dir("timeseries", "spindle");
     let csv = dir.join("spindle.csv");
-    let sim = json(&run(&[
-        "simulate",
-        "--scenario",
-        "spindle-thermal",
-        "--seed",
-        "1",
-        "-o",
-        s(&csv),
-        "--json",
-    ]));
+    let sim = common::simulate(&["--scenario", "spindle-thermal", "--seed", "1"], &csv);
     assert_eq!(sim["rows"], 2881);
     // fit: a constant per target, said in a warning (it used to stop with
     // "every measured point lies at one position").
@@ -105,11 +96,9 @@ fn in_model_span_is_one_line_in_text_and_every_one_in_json_and_verbose() {
     let dir = tmp_dir("timeseries", "in_span");
     let csv = common::simulate_grid(&dir, "g.csv", 3);
     let j = json(&run(&["diagnose", s(&csv), "--model", "cubic19", "--json"]));
-    let n = j["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|w| w["code"] == "in_model_span")
+    let n = common::warning_codes(&j)
+        .into_iter()
+        .filter(|&c| c == "in_model_span")
         .count();
     assert!(n >= 2, "{n}");
     let lines = |args: &[&str]| {

@@ -47,10 +47,7 @@ fn errors_in_mm_are_warned_and_their_table_refused_unless_told() {
     let model = dir.join("m.json");
     let fit = common::cubic19("fit", &mm, &model, &[]);
     let err = String::from_utf8_lossy(&fit.stderr).into_owned();
-    assert!(
-        err.contains("units_suspect") && err.contains("multiply them by 1000"),
-        "{err}"
-    );
+    common::assert_has(&err, &["units_suspect", "multiply them by 1000"]);
     let doc = json(&fit);
     assert!(
         doc["warnings"].to_string().contains("units_suspect"),

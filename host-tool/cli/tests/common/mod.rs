@@ -79,22 +79,21 @@ fn array_of<'a, T>(v: &'a Value, each: impl Fn(&'a Value) -> Option<T>) -> Vec<T
         .collect()
 }
 
+/// `trueaxis simulate ARGS… -o OUT --json`; returns its JSON.
+pub fn simulate(args: &[&str], out: &Path) -> Value {
+    let mut a = vec!["simulate"];
+    a.extend_from_slice(args);
+    a.extend_from_slice(&["-o", s(out), "--json"]);
+    json(&run(&a))
+}
+
 /// `trueaxis simulate --plan grid:100 --seed SEED -o DIR/NAME --json`: the
 /// preset mill on a 100 mm grid (9 × 6 × 6 = 324 points, ex ey ez),
 /// σ = 0.2 µm noise. Returns the CSV's path.
 pub fn simulate_grid(dir: &Path, name: &str, seed: u64) -> PathBuf {
     let csv = dir.join(name);
     let seed = seed.to_string();
-    json(&run(&[
-        "simulate",
-        "--plan",
-        "grid:100",
-        "--seed",
-        &seed,
-        "-o",
-        s(&csv),
-        "--json",
-    ]));
+    simulate(&["--plan", "grid:100", "--seed", &seed], &csv);
     csv
 }
 
@@ -243,6 +242,26 @@ pub fn warning_codes(v: &Value) -> Vec<&str> {
         .collect()
 }
 
+/// Writes `text` to `DIR/NAME`; returns its path.
+pub fn file_in(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Asserts that `text` contains every one of `needles`, showing it if not.
+#[track_caller]
+pub fn assert_has(text: &str, needles: &[&str]) {
+    assert!(needles.iter().all(|n| text.contains(n)), "{text}");
+}
+
+/// The first element of the JSON array `v` that passes `test`; panics,
+/// showing `v`, when none does.
+pub fn find_in<'a>(v: &'a Value, test: impl Fn(&Value) -> bool) -> &'a Value {
+    let found = v.as_array().unwrap().iter().find(|e| test(e));
+    found.unwrap_or_else(|| panic!("none found in {v}"))
+}
+
 /// The first of a JSON document's `warnings` with `code`, if any.
 pub fn find_warning<'a>(v: &'a Value, code: &str) -> Option<&'a Value> {
     v["warnings"]
@@ -294,16 +313,7 @@ pub fn golden(name: &str, actual: &[u8]) {
 /// and the hidden answers (`truth.json`'s content).
 pub fn on_machine_campaign(dir: &Path) -> (PathBuf, Value) {
     let camp = dir.join("camp");
-    let doc = json(&run(&[
-        "simulate",
-        "--scenario",
-        "on-machine",
-        "--seed",
-        "7",
-        "-o",
-        s(&camp),
-        "--json",
-    ]));
+    let doc = simulate(&["--scenario", "on-machine", "--seed", "7"], &camp);
     (camp, doc["truth"].clone())
 }
 

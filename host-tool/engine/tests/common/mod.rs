@@ -5,11 +5,8 @@ use trueaxis_engine::diagnose::Diagnosis;
 
 /// The effects the forward path added for `target`, in the order added.
 pub fn path_adds<'a>(d: &'a Diagnosis, target: &str) -> Vec<&'a str> {
-    d.path
-        .iter()
-        .filter(|s| s.target == target)
-        .map(|s| s.add.as_str())
-        .collect()
+    let on_target = d.path.iter().filter(|s| s.target == target);
+    on_target.map(|s| s.add.as_str()).collect()
 }
 
 /// The details of the warnings with `code`, in the order given.

@@ -549,7 +549,7 @@ pub fn read_scan_lines(text: &str, name: &str) -> Result<(Vec<[f64; 3]>, Vec<usi
 #[cfg(test)]
 mod tests {
     use super::*;
-    use trueaxis_test_support::SplitMix64;
+    use trueaxis_test_support::{assert_any, SplitMix64};
 
     /// A 0.49715 mm probe with lobing (3 lobes around the stylus and a
     /// term that grows toward the equator, ~170 nm PV) on a 2 mm master
@@ -671,13 +671,7 @@ mod tests {
         assert!(cal.probe.form_pv_nm < 15.0, "{}", cal.probe.form_pv_nm);
         assert!((cal.probe.probe_radius_mm - 0.5).abs() < 3e-6);
         let cap = calibrate(&hemisphere(4, 30.0), 2.0).unwrap();
-        assert!(
-            cap.warnings
-                .iter()
-                .any(|w| w.contains("scan at least a hemisphere")),
-            "{:?}",
-            cap.warnings
-        );
+        assert_any(&cap.warnings, |w| w.contains("scan at least a hemisphere"));
         let e = calibrate(&p, 3.0).unwrap_err();
         assert!(format!("{e}").contains("not above the master ball"), "{e}");
     }
