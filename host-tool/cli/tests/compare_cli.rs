@@ -412,12 +412,12 @@ fn rows_left_out_are_counted_and_said() {
         let out = run(&args);
         assert!(out.status.success());
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(
-            err.contains(&format!(
+        common::assert_has(
+            &err,
+            &[&format!(
                 "note: 1 row of {} was left out (line {line}: no error value on this row)",
                 s(&holed)
-            )),
-            "{err}"
+            )],
         );
         if json_flag {
             let v = json(&out);

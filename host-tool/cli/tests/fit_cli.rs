@@ -178,11 +178,11 @@ fn rows_left_out_are_counted_and_said() {
     assert_eq!(v["skipped_count"], 1);
     assert_eq!(v["rows"]["ex"], 270, "the row is not fitted");
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains(&format!(
+    common::assert_has(
+        &err,
+        &[&format!(
             "was left out (line {line}: no error value on this row)"
-        )),
-        "{err}"
+        )],
     );
     // In text mode too.
     let out = run(&["fit", holed.to_str().unwrap(), "--model", "cubic19"]);

@@ -832,11 +832,11 @@ fn a_lost_link_during_upload_says_how_to_check_the_board() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     common::assert_no_document(&["--json"], &out);
-    assert!(
-        err.contains(&format!(
+    common::assert_has(
+        &err,
+        &[&format!(
             "the board may run the new table already: `trueaxis status --port {port}` tells"
-        )),
-        "{err}"
+        )],
     );
 }
 

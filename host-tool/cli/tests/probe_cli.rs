@@ -5,7 +5,8 @@
 mod common;
 
 use common::onmachine::{
-    ball_scan_dirs, calibrate_on_4mm_ball, correct_scan, pv_line_removed, rigid_fit, without_rigid,
+    ball_scan_dirs, calibrate_on_4mm_ball, correct_scan, probe_form_3d_nm, pv_line_removed,
+    rigid_fit, without_rigid,
 };
 use common::{json, run, s, tmp_dir};
 
@@ -414,15 +415,6 @@ fn three_probes_give_roundness_and_name_the_lobes_they_cannot_see() {
     let doc = json(&out);
     let unseen = common::u64s(&doc["unseen_harmonics"]);
     assert!(unseen.contains(&3) && unseen.contains(&7), "{unseen:?}");
-}
-
-/// The probe's form as a function of its contact direction (3-D): lobes
-/// around the stylus growing toward the equator and a term in the polar
-/// angle (~170 nm PV over the upper hemisphere).
-fn probe_form_3d_nm(n: [f64; 3]) -> f64 {
-    let s = (1.0 - n[2] * n[2]).max(0.0).sqrt();
-    let az = n[1].atan2(n[0]);
-    60.0 * s.powi(3) * (3.0 * az).cos() + 40.0 * n[2] * n[2] - 25.0 * s * s * (2.0 * az).sin()
 }
 
 #[test]

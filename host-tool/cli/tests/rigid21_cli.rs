@@ -8,10 +8,9 @@
 mod common;
 
 use common::{json, run, s, tmp_dir};
-use trueaxis_engine::import;
 use trueaxis_engine::model::rigid21::{ErrorKind, Status};
 use trueaxis_engine::model::{FittedModel, ModelFile};
-use trueaxis_engine::simulate::instruments::{laser_lines, measure};
+use trueaxis_engine::simulate::instruments::laser_lines;
 use trueaxis_engine::simulate::Machine;
 
 /// The simulator's laser lines at tool 0 and 150 mm (seed 11) fitted with
@@ -20,19 +19,7 @@ use trueaxis_engine::simulate::Machine;
 fn fit_lines(name: &str) -> (std::path::PathBuf, std::process::Output) {
     let dir = tmp_dir("rigid21", name);
     let m = Machine::preset("mill800-21").unwrap();
-    let data = measure(&m, &laser_lines(m.travel_mm, &[0.0, 150.0]), 11, true);
-    let csv = dir.join("lines.csv");
-    import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
-    let model = dir.join("lines.model.json");
-    let out = run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "rigid21",
-        "-o",
-        s(&model),
-        "--json",
-    ]);
+    let (_, model, out) = lines_fit(&dir, &m, "rigid21", &["--json"]);
     (model, out)
 }
 
@@ -68,13 +55,21 @@ fn laser_lines_fit_says_what_it_cannot_know() {
 /// written as `DIR/lines.csv` and fitted with `--model spec` to
 /// `DIR/lines.model.json`: (csv, model).
 fn lines_fitted(dir: &std::path::Path, m: &Machine, spec: &str) -> (String, String) {
-    let data = measure(m, &laser_lines(m.travel_mm, &[0.0, 150.0]), 11, true);
-    let csv = dir.join("lines.csv");
-    import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
-    let model = dir.join("lines.model.json");
-    let (csv, model) = (csv.display().to_string(), model.display().to_string());
-    common::assert_success(&run(&["fit", &csv, "--model", spec, "-o", &model]));
-    (csv, model)
+    let (csv, model, out) = lines_fit(dir, m, spec, &[]);
+    common::assert_success(&out);
+    (csv.display().to_string(), model.display().to_string())
+}
+
+/// [`common::measured_fit`] of laser lines at tool 0 and 150 mm (seed 11)
+/// as `DIR/lines.csv`.
+fn lines_fit(
+    dir: &std::path::Path,
+    m: &Machine,
+    spec: &str,
+    extra: &[&str],
+) -> (std::path::PathBuf, std::path::PathBuf, std::process::Output) {
+    let plan = laser_lines(m.travel_mm, &[0.0, 150.0]);
+    common::measured_fit(dir, "lines", m, &plan, 11, spec, extra)
 }
 
 /// `compare --report` on a rigid21 model: the card speaks in errors (the

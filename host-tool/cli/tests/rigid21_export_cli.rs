@@ -7,30 +7,19 @@
 
 mod common;
 
-use common::{expect_exit, export, export_args, run, s, tmp_dir};
+use common::{expect_exit, export, export_args, run, tmp_dir};
 use std::path::{Path, PathBuf};
-use trueaxis_engine::import;
 use trueaxis_engine::model::rigid21::{ErrorKind, Rigid21Model, ToolPoint};
 use trueaxis_engine::model::{FittedModel, ModelFile};
-use trueaxis_engine::simulate::instruments::{laser_lines, measure, Instrument};
+use trueaxis_engine::simulate::instruments::{laser_lines, Instrument};
 use trueaxis_engine::simulate::Machine;
 
 /// `mill800-21` measured with `plan` (seed 7), written to `DIR/NAME.csv`
 /// and fitted with `fit --model rigid21`: the model's path.
 fn fitted(dir: &Path, name: &str, plan: &[Instrument]) -> PathBuf {
     let m = Machine::preset("mill800-21").unwrap();
-    let data = measure(&m, plan, 7, true);
-    let csv = dir.join(format!("{name}.csv"));
-    import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
-    let model = dir.join(format!("{name}.model.json"));
-    common::assert_success(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "rigid21",
-        "-o",
-        s(&model),
-    ]));
+    let (_, model, out) = common::measured_fit(dir, name, &m, plan, 7, "rigid21", &[]);
+    common::assert_success(&out);
     model
 }
 

@@ -13,6 +13,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use serde_json::Value;
+use trueaxis_engine::import;
+use trueaxis_engine::simulate::instruments::{measure, Instrument};
+use trueaxis_engine::simulate::Machine;
 
 /// A fresh directory `trueaxis-<suite>-<pid>-<name>` under the temp dir.
 pub fn tmp_dir(suite: &str, name: &str) -> PathBuf {
@@ -240,6 +243,28 @@ pub fn warning_codes(v: &Value) -> Vec<&str> {
         .iter()
         .filter_map(|w| w["code"].as_str())
         .collect()
+}
+
+/// `machine` measured with `plan` (random stream SEED, with noise), written
+/// to `DIR/NAME.csv`, then `trueaxis fit DIR/NAME.csv --model SPEC -o
+/// DIR/NAME.model.json EXTRA…`: (data, model, the fit's run).
+pub fn measured_fit(
+    dir: &Path,
+    name: &str,
+    machine: &Machine,
+    plan: &[Instrument],
+    seed: u64,
+    spec: &str,
+    extra: &[&str],
+) -> (PathBuf, PathBuf, Output) {
+    let data = measure(machine, plan, seed, true);
+    let csv = dir.join(format!("{name}.csv"));
+    import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
+    let model = dir.join(format!("{name}.model.json"));
+    let mut args = vec!["fit", s(&csv), "--model", spec, "-o", s(&model)];
+    args.extend_from_slice(extra);
+    let out = run(&args);
+    (csv, model, out)
 }
 
 /// Writes `text` to `DIR/NAME`; returns its path.
