@@ -319,8 +319,7 @@ fn five_iso230_targets_get_no_interpolating_term() {
             }
         }
     }
-    let data = dir.join("iso230.csv");
-    std::fs::write(&data, csv).unwrap();
+    let data = common::file_in(&dir, "iso230.csv", csv);
     let model = dir.join("m.json");
     let imp = improve(&data, &model);
     let added = adds(&model);

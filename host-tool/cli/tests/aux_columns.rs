@@ -35,9 +35,7 @@ fn spreadsheet_csv(dir: &Path) -> PathBuf {
         }
         out.push('\n');
     }
-    let csv = dir.join("sheet.csv");
-    std::fs::write(&csv, out).unwrap();
-    csv
+    common::file_in(dir, "sheet.csv", out)
 }
 
 #[test]

@@ -388,8 +388,11 @@ fn fit_add_accepts_every_familys_add_string_verbatim() {
 #[test]
 fn too_few_rows_name_the_file_once() {
     let dir = tmp_dir("few");
-    let csv = dir.join("few.csv");
-    std::fs::write(&csv, "x_mm,ex_um\n0,1\n10,2\n20,1.5\n30,2.5\n40,3\n").unwrap();
+    let csv = common::file_in(
+        &dir,
+        "few.csv",
+        "x_mm,ex_um\n0,1\n10,2\n20,1.5\n30,2.5\n40,3\n",
+    );
     let err = common::expect_exit(
         &["diagnose", s(&csv), "--model", "cubic19"],
         1,

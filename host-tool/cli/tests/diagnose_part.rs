@@ -179,8 +179,7 @@ fn a_timed_turn_gives_the_drift_and_a_multi_step_set_splits_part_and_spindle() {
             _ => format!("{l}\n"),
         })
         .collect();
-    let bare = dir.join("untimed.csv");
-    std::fs::write(&bare, untimed).unwrap();
+    let bare = common::file_in(&dir, "untimed.csv", untimed);
     unknown(&diagnose(&[s(&bare)]), "thermal_drift", "t_s");
 
     // With the 5-step set: the part without its 10th lobe (a multiple of

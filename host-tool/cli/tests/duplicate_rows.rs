@@ -26,8 +26,7 @@ fn twice(dir: &std::path::Path) -> std::path::PathBuf {
         out.push_str(line);
         out.push('\n');
     }
-    let csv = dir.join("twice.csv");
-    std::fs::write(&csv, out).unwrap();
+    let csv = common::file_in(&dir, "twice.csv", out);
     csv
 }
 

@@ -40,8 +40,7 @@ fn an_escape_sequence_in_a_cell_or_header_is_shown_escaped() {
         );
     }
     // A header: in an error (a unit suffix it does not know) …
-    let head = dir.join("head.csv");
-    std::fs::write(&head, "x_mm,ex_\x1b]0;owned\x07um\n0,1\n").unwrap();
+    let head = common::file_in(&dir, "head.csv", "x_mm,ex_\x1b]0;owned\x07um\n0,1\n");
     let err = refused(&["import", s(&head)]);
     assert!(
         err.contains("column `ex_\\u{1b}]0;owned\\u{7}um`: unknown unit suffix"),

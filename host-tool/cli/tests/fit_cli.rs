@@ -6,12 +6,21 @@
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use common::{json, run, s, tmp_dir, with_blank_error_row};
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::import;
 use trueaxis_engine::model::{FittedModel, ModelFile};
+
+/// [`grid_data`] written to `grid.csv` in a fresh directory for test
+/// NAME: (the directory, the file).
+fn grid_csv(name: &str) -> (PathBuf, PathBuf) {
+    let dir = tmp_dir("fit", name);
+    let csv = dir.join("grid.csv");
+    write(&grid_data(), &csv);
+    (dir, csv)
+}
 
 fn write(data: &Dataset, path: &Path) {
     let f = std::fs::File::create(path).unwrap();
@@ -53,9 +62,7 @@ fn grid_data() -> Dataset {
 
 #[test]
 fn json_shape_and_model_file_round_trip() {
-    let dir = tmp_dir("fit", "shape");
-    let csv = dir.join("grid.csv");
-    write(&grid_data(), &csv);
+    let (dir, csv) = grid_csv("shape");
     let out = run(&["fit", csv.to_str().unwrap(), "--model", "cubic19", "--json"]);
     let v = json(&out);
     assert_eq!(v["model"], "cubic19");
@@ -102,9 +109,7 @@ fn json_shape_and_model_file_round_trip() {
 
 #[test]
 fn add_effects_and_output_path() {
-    let dir = tmp_dir("fit", "add");
-    let csv = dir.join("grid.csv");
-    write(&grid_data(), &csv);
+    let (dir, csv) = grid_csv("add");
     let model = dir.join("m.json");
     let squareness = [
         "--model",
@@ -134,9 +139,7 @@ fn add_effects_and_output_path() {
 
 #[test]
 fn every_model_kind_runs_from_the_command_line() {
-    let dir = tmp_dir("fit", "kinds");
-    let csv = dir.join("grid.csv");
-    write(&grid_data(), &csv);
+    let (dir, csv) = grid_csv("kinds");
     for (args, kind) in [
         (vec!["--model", "grid:100"], "grid"),
         (vec!["--model", "cubic19", "--local"], "local"),
@@ -164,9 +167,7 @@ fn every_model_kind_runs_from_the_command_line() {
 /// reason) and counted in the JSON as `skipped_count`.
 #[test]
 fn rows_left_out_are_counted_and_said() {
-    let dir = tmp_dir("fit", "skipped");
-    let csv = dir.join("grid.csv");
-    write(&grid_data(), &csv);
+    let (dir, csv) = grid_csv("skipped");
     let clean = run(&["fit", csv.to_str().unwrap(), "--model", "cubic19", "--json"]);
     assert_eq!(json(&clean)["skipped_count"], 0);
     assert!(!String::from_utf8_lossy(&clean.stderr).contains("left out"));
@@ -205,9 +206,7 @@ fn expect_exit(args: &[&str], code: i32, needle: &str) {
 
 #[test]
 fn bad_input_exits_1_and_usage_exits_2() {
-    let dir = tmp_dir("fit", "bad");
-    let csv = dir.join("grid.csv");
-    write(&grid_data(), &csv);
+    let (dir, csv) = grid_csv("bad");
     let c = csv.to_str().unwrap();
     expect_exit(
         &["fit", c, "--model", "cubic21", "--json"],

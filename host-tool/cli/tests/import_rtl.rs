@@ -305,8 +305,7 @@ fn legacy_code_pages_in_rtl_metadata_are_decoded_and_said() {
     ru.extend(head.as_bytes());
     ru.extend([0xC8, 0xE2, 0xE0, 0xED, 0xEE, 0xE2]);
     ru.extend(&tail.as_bytes()["A. Tester".len()..]);
-    let p = dir.join("ru.rtl");
-    std::fs::write(&p, &ru).unwrap();
+    let p = common::file_in(&dir, "ru.rtl", &ru);
     let ds = import::load(&p).unwrap();
     let meta = |ds: &trueaxis_engine::data::Dataset, k: &str| {
         ds.metadata
@@ -334,8 +333,7 @@ fn legacy_code_pages_in_rtl_metadata_are_decoded_and_said() {
         .chars()
         .map(|c| if c == 'ü' { 0xFC } else { c as u8 })
         .collect();
-    let p = dir.join("de.rtl");
-    std::fs::write(&p, &de).unwrap();
+    let p = common::file_in(&dir, "de.rtl", &de);
     let de_ds = import::load(&p).unwrap();
     assert_eq!(meta(&de_ds, "Location").as_deref(), Some("Prüfstand"));
     assert!(meta(&de_ds, "encoding").unwrap().contains("Windows-1252"));

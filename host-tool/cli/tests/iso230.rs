@@ -243,8 +243,7 @@ fn axis_option_reaches_the_rtl_reader() {
     let dir = common::tmp_dir("iso230", "axis");
     let text = std::fs::read_to_string(data_file("iso_worked.rtl")).unwrap();
     assert!(text.contains("Axis: X\r\n"));
-    let no_axis = dir.join("no_axis.rtl");
-    std::fs::write(&no_axis, text.replace("Axis: X\r\n", "")).unwrap();
+    let no_axis = common::file_in(&dir, "no_axis.rtl", text.replace("Axis: X\r\n", ""));
     let f = s(&no_axis);
 
     let out = common::run(&["iso230", f]);
@@ -294,14 +293,8 @@ fn the_page_shows_every_run_and_the_test_conditions() {
     let x_of = |text: &str| -> f64 {
         let at = svg.find(text).unwrap_or_else(|| panic!("{text}"));
         let head = &svg[svg[..at].rfind("<text").unwrap()..at];
-        head.split("x=\"")
-            .nth(1)
-            .unwrap()
-            .split('"')
-            .next()
-            .unwrap()
-            .parse()
-            .unwrap()
+        let (_, x) = head.split_once("x=\"").unwrap();
+        x[..x.find('"').unwrap()].parse().unwrap()
     };
     assert!(x_of("x̄↑ ± 2s (from below)") > x_of("200.0\n</text>") + 10.0);
     let _ = std::fs::remove_dir_all(&dir);

@@ -370,8 +370,7 @@ fn every_kind_fitted_where_only_x_varies_loads() {
         out.push('\n');
         out.push_str(&pick(l));
     }
-    let xonly = dir.join("xonly.csv");
-    std::fs::write(&xonly, out + "\n").unwrap();
+    let xonly = common::file_in(&dir, "xonly.csv", out + "\n");
     for data in [&csv, &xonly] {
         for (i, (spec, extra)) in [
             ("cubic19", &[][..]),
@@ -482,8 +481,7 @@ fn a_model_file_without_a_checksum_loads_with_a_note() {
     let last = text
         .rfind(",\n  \"checksum_sha256\"")
         .expect("the checksum is the last field");
-    let old = dir.join("old.json");
-    std::fs::write(&old, format!("{}\n}}\n", &text[..last])).unwrap();
+    let old = common::file_in(&dir, "old.json", format!("{}\n}}\n", &text[..last]));
     assert_eq!(
         ModelFile::load(&old).unwrap(),
         ModelFile::load(&model).unwrap()

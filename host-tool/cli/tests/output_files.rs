@@ -159,8 +159,7 @@ fn a_csv_cut_in_its_last_row_is_refused_with_its_line() {
         }
     }
     // Cut mid-row (cells missing): refused as before, with its line.
-    let p = dir.join("mid.csv");
-    std::fs::write(&p, &whole[..whole.len() - 12]).unwrap();
+    let p = common::file_in(&dir, "mid.csv", &whole[..whole.len() - 12]);
     expect_exit(
         &["import", s(&p)],
         1,

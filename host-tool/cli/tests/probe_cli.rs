@@ -132,8 +132,7 @@ fn a_probe_calibrated_on_a_master_ball_corrects_a_part_scan() {
 #[test]
 fn bad_probe_input_is_refused_with_its_place() {
     let dir = tmp_dir("probe", "bad");
-    let scan = dir.join("bad.csv");
-    std::fs::write(&scan, "x_mm,z_mm\n1.0,2.0\n1.5,abc\n").unwrap();
+    let scan = common::file_in(&dir, "bad.csv", "x_mm,z_mm\n1.0,2.0\n1.5,abc\n");
     let out = run(&[
         "probe",
         "calibrate",
@@ -157,8 +156,7 @@ fn bad_probe_input_is_refused_with_its_place() {
         s(&dir.join("p.json")),
     ]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("needs `x_mm` and `z_mm`"));
-    let probe = dir.join("probe.json");
-    std::fs::write(&probe, "{\"format\": \"something else\"}").unwrap();
+    let probe = common::file_in(&dir, "probe.json", "{\"format\": \"something else\"}");
     let out = run(&[
         "probe",
         "correct",
@@ -318,8 +316,7 @@ fn a_workpiece_correction_pass_makes_the_form_fall_pass_by_pass() {
             i += 1;
         }
     }
-    let p2 = dir.join("pass2.csv");
-    std::fs::write(&p2, scan2).unwrap();
+    let p2 = common::file_in(&dir, "pass2.csv", scan2);
     let doc = json(&run(&[
         "workpiece",
         s(&p2),
@@ -332,16 +329,16 @@ fn a_workpiece_correction_pass_makes_the_form_fall_pass_by_pass() {
     let pv2 = h[1]["form_pv_um"].as_f64().unwrap();
     assert!(pv2 < 1.0 && pv2 < pv1 / 10.0, "{pv1} → {pv2}");
     // G-code without the diameter it is programmed in is refused.
-    let out = run(&[
+    let x_mpf = dir.join("x.mpf");
+    let args = [
         "workpiece",
         s(&p2),
         "--gcode",
         "siemens",
         "--gcode-out",
-        s(&dir.join("x.mpf")),
-    ]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--nominal-diameter-mm"));
+        s(&x_mpf),
+    ];
+    common::expect_exit(&args, 1, &["--nominal-diameter-mm"]);
 }
 
 #[test]
@@ -433,8 +430,7 @@ fn a_probe_calibrated_in_3d_on_the_ball_corrects_a_scan_in_a_plane() {
             c[2] + d * n[2]
         ));
     }
-    let scan = dir.join("ball3d.csv");
-    std::fs::write(&scan, csv).unwrap();
+    let scan = common::file_in(&dir, "ball3d.csv", csv);
     let probe = dir.join("probe3d.json");
     let doc = calibrate_on_4mm_ball(&scan, true, &probe, &[]);
     let pr = &doc["probe"];
@@ -505,8 +501,11 @@ fn a_probe_calibrated_in_3d_on_the_ball_corrects_a_scan_in_a_plane() {
     // against the true 221.0 nm.)
     // A damaged 3-D probe file is refused with its name.
     let text = std::fs::read_to_string(&probe).unwrap();
-    let bad = dir.join("bad3d.json");
-    std::fs::write(&bad, text.replace("\"degree\": ", "\"degree\": 1")).unwrap();
+    let bad = common::file_in(
+        &dir,
+        "bad3d.json",
+        text.replace("\"degree\": ", "\"degree\": 1"),
+    );
     let o = run(&[
         "probe",
         "correct",

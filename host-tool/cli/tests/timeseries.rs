@@ -30,15 +30,7 @@ fn a_thermal_test_at_one_point_is_fitted_and_its_temperature_named() {
     // diagnose: held-out RMS finite everywhere; the growth of ez is a
     // spindle temperature's, and no drift is significant.
     let report = dir.join("report");
-    let d = json(&run(&[
-        "diagnose",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "--report",
-        s(&report),
-        "--json",
-    ]));
+    let d = common::diagnose_report(&csv, "cubic19", &report);
     // The multi-sensor component is drawn against time.
     let svg = std::fs::read_to_string(report.join("component_ez_1.svg")).unwrap();
     assert!(svg.contains("t_s (s)"));
@@ -205,8 +197,7 @@ fn with_a_fake_travel_improve_still_picks_the_temperatures_not_drift() {
             format!("{},{rest}", 400 + ((row - 1) % 5) * 10)
         })
         .collect();
-    let fake = dir.join("fake.csv");
-    std::fs::write(&fake, text.join("\n") + "\n").unwrap();
+    let fake = common::file_in(&dir, "fake.csv", text.join("\n") + "\n");
     let imp = json(&common::cubic19("improve", &fake, &dir.join("m.json"), &[]));
     let model = imp["model"].as_str().unwrap();
     assert!(

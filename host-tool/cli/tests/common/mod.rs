@@ -230,6 +230,13 @@ pub fn export(model: &Path, args: &[&str], out: &Path) -> Value {
     json(&run(&a))
 }
 
+/// `trueaxis diagnose CSV --model MODEL --report DIR --json`; returns its
+/// JSON.
+pub fn diagnose_report(csv: &Path, model: &str, report: &Path) -> Value {
+    let args = ["diagnose", s(csv), "--model", model, "--report", s(report)];
+    json(&run(&[&args[..], &["--json"]].concat()))
+}
+
 /// `trueaxis compare CSV --model MODEL --json`; returns its JSON.
 pub fn compare(csv: &Path, model: &Path) -> Value {
     json(&run(&["compare", s(csv), "--model", s(model), "--json"]))
@@ -268,10 +275,18 @@ pub fn measured_fit(
 }
 
 /// Writes `text` to `DIR/NAME`; returns its path.
-pub fn file_in(dir: &Path, name: &str, text: &str) -> PathBuf {
+pub fn file_in(dir: &Path, name: &str, text: impl AsRef<[u8]>) -> PathBuf {
     let path = dir.join(name);
     std::fs::write(&path, text).unwrap();
     path
+}
+
+/// The first line of `text` that passes `test`; panics, showing `text`,
+/// when none does.
+#[track_caller]
+pub fn line_where(text: &str, test: impl Fn(&str) -> bool) -> &str {
+    let found = text.lines().find(|l| test(l));
+    found.unwrap_or_else(|| panic!("no such line in\n{text}"))
 }
 
 /// Asserts that `text` contains every one of `needles`, showing it if not.
