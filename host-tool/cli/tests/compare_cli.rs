@@ -481,7 +481,7 @@ fn numeric_auxiliary_columns_are_channels() {
     let out = run(&["compare", s(&humid), "--model", s(&model)]);
     let text = String::from_utf8_lossy(&out.stdout);
     let line = common::line_where(&text, |l| l.contains("ex vs humidity_pct:"));
-    common::assert_has(&line, &["(r = +0.99)", "µm per unit"]);
+    common::assert_has(line, &["(r = +0.99)", "µm per unit"]);
 }
 
 #[test]

@@ -37,7 +37,7 @@ fn a_step_that_adds_two_effects_explains_both() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let text = String::from_utf8_lossy(&o.stdout);
     let step = common::line_where(&text, |l| l.starts_with("step 2:"));
-    common::assert_has(&step, &["add reversal:target=ey", "add periodic:target=ex"]);
+    common::assert_has(step, &["add reversal:target=ey", "add periodic:target=ex"]);
     let because: Vec<&str> = text.lines().filter(|l| l.contains("because (")).collect();
     assert_eq!(because.len(), 2, "{text}");
     assert!(

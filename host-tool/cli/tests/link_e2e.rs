@@ -594,7 +594,7 @@ fn tables_beyond_the_boards_limits_are_refused_before_touching_it() {
     ] {
         // No board on this port and (here) no probe: the check comes first.
         for args in [
-            vec!["upload", common::s(&path), "--port", "tcp://127.0.0.1:9"],
+            vec!["upload", common::s(path), "--port", "tcp://127.0.0.1:9"],
             vec!["flash", path.to_str().unwrap()],
         ] {
             let out = trueaxis(&args);

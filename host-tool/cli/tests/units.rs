@@ -35,8 +35,7 @@ fn grid_in_mm(dir: &std::path::Path) -> std::path::PathBuf {
         }
         out.push('\n');
     }
-    let mm = common::file_in(&dir, "grid_mm.csv", out);
-    mm
+    common::file_in(dir, "grid_mm.csv", out)
 }
 
 #[test]

@@ -297,7 +297,7 @@ pub fn assert_has(text: &str, needles: &[&str]) {
 
 /// The first element of the JSON array `v` that passes `test`; panics,
 /// showing `v`, when none does.
-pub fn find_in<'a>(v: &'a Value, test: impl Fn(&Value) -> bool) -> &'a Value {
+pub fn find_in(v: &Value, test: impl Fn(&Value) -> bool) -> &Value {
     let found = v.as_array().unwrap().iter().find(|e| test(e));
     found.unwrap_or_else(|| panic!("none found in {v}"))
 }
