@@ -77,14 +77,8 @@ fn broken_files_name_the_line() {
 #[test]
 fn cli_converts_rtl_to_contract_csv() {
     let out_csv = std::env::temp_dir().join(format!("trueaxis-rtl-{}.csv", std::process::id()));
-    let out = run(&[
-        "import",
-        s(&data("iso_worked.rtl")),
-        "-o",
-        s(&out_csv),
-        "--json",
-    ]);
-    let v = json(&out);
+    let rtl = data("iso_worked.rtl");
+    let v = json(&run(&["import", s(&rtl), "-o", s(&out_csv), "--json"]));
     assert_eq!(v["rows"], 12);
     assert_eq!(
         v["columns"],

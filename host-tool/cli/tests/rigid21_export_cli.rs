@@ -97,11 +97,8 @@ fn skew_files_of_a_fitted_model_remove_its_squareness_and_say_what_they_leave_ou
     let m = rigid21(&model);
     // Klipper: the profile's factors.
     let cfg = dir.join("skew.cfg");
-    let doc = export(
-        &model,
-        &["--format", "klipper-skew", "--tool-mm", "150"],
-        &cfg,
-    );
+    let klipper = ["--format", "klipper-skew", "--tool-mm", "150"];
+    let doc = export(&model, &klipper, &cfg);
     assert_eq!(doc["format"], "klipper-skew");
     let body = std::fs::read_to_string(&cfg).unwrap();
     let f = ["xy_skew =", "xz_skew =", "yz_skew ="].map(|k| {
