@@ -92,6 +92,14 @@ impl XorShift64 {
     }
 }
 
+/// Asserts that one of `lines` (warnings, commands run, …) passes `test`,
+/// showing them all when none does.
+#[cfg(feature = "std")]
+#[track_caller]
+pub fn assert_any<S: AsRef<str> + core::fmt::Debug>(lines: &[S], test: impl Fn(&str) -> bool) {
+    assert!(lines.iter().any(|l| test(l.as_ref())), "{lines:#?}");
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

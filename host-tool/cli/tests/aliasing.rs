@@ -155,12 +155,7 @@ fn the_reproducer_adds_no_alias_and_says_what_to_measure() {
     assert_eq!(c["significant"], false);
     assert_eq!(d["held_back"][0], c["add"]);
     // The true lead is among the periods that look the same on the grid.
-    let periods: Vec<f64> = c["alias_periods_mm"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|p| p.as_f64().unwrap())
-        .collect();
+    let periods = common::f64s(&c["alias_periods_mm"]);
     assert!(
         periods.iter().any(|p| (p - 5.08).abs() < 0.05),
         "{periods:?}"
@@ -324,8 +319,7 @@ fn five_iso230_targets_get_no_interpolating_term() {
             }
         }
     }
-    let data = dir.join("iso230.csv");
-    std::fs::write(&data, csv).unwrap();
+    let data = common::file_in(&dir, "iso230.csv", csv);
     let model = dir.join("m.json");
     let imp = improve(&data, &model);
     let added = adds(&model);

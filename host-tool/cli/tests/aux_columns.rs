@@ -35,20 +35,17 @@ fn spreadsheet_csv(dir: &Path) -> PathBuf {
         }
         out.push('\n');
     }
-    let csv = dir.join("sheet.csv");
-    std::fs::write(&csv, out).unwrap();
-    csv
+    common::file_in(dir, "sheet.csv", out)
 }
 
 #[test]
 fn a_contract_name_in_the_wrong_case_is_refused_like_x_mm() {
     let dir = tmp_dir("aux", "case");
-    let csv = dir.join("r5.csv");
-    std::fs::write(
-        &csv,
+    let csv = common::file_in(
+        &dir,
+        "r5.csv",
         "x_mm,ex_um,ey [um],T_bed,dir_X\n0,1,3,20,1\n100,2,4,20.5,1\n200,1.5,5,21,1\n300,0.5,6,21.5,-1\n400,-1,7,22,-1\n500,-2,8,22.5,-1\n",
-    )
-    .unwrap();
+    );
     let msg = format!(
         "{}:1:5: column `dir_X`: expected `dir_x` (column names are case-sensitive)",
         s(&csv)
@@ -88,12 +85,7 @@ fn fit_diagnose_and_improve_report_aux_columns_and_what_they_probably_meant() {
     let model = dir.join("m.json");
     let out = run(&["fit", src, "--model", "cubic19", "-o", s(&model), "--json"]);
     let doc = json(&out);
-    let w: Vec<&str> = doc["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|w| w.as_str().unwrap())
-        .collect();
+    let w = common::strs(&doc["warnings"]);
     assert!(
         w.contains(&format!("aux_misspelled: {meant}").as_str()),
         "{w:?}"

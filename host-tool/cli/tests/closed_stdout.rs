@@ -7,7 +7,7 @@ mod common;
 
 use std::process::{Command, Stdio};
 
-use common::{data_file, fit_cubic19, s, simulate_grid, tmp_dir};
+use common::{data_file, grid_cubic19, s, tmp_dir};
 
 /// Runs `trueaxis args` with stdout a pipe nobody reads; returns the exit
 /// code and stderr.
@@ -29,9 +29,7 @@ fn run_into_closed_pipe(args: &[&str]) -> (Option<i32>, String) {
 #[test]
 fn every_command_exits_0_quietly_when_stdout_is_closed() {
     let dir = tmp_dir("closed-stdout", "all");
-    let csv = simulate_grid(&dir, "d.csv", 1);
-    let model = dir.join("m.json");
-    fit_cubic19(&csv, &model);
+    let (csv, model, _) = grid_cubic19(&dir, "d", 1);
     let csv2 = dir.join("d2.csv");
     let model2 = dir.join("m2.json");
     let table = dir.join("t.bin");

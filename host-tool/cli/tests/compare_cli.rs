@@ -260,15 +260,8 @@ fn report_opens_offline_with_every_figure() {
         &body[..300.min(body.len())]
     );
     let verdict = &body[..body.find("</section>").unwrap()];
-    assert!(verdict.contains("After compensation e"), "{verdict}");
-    assert!(
-        verdict.contains(&format!(
-            "trueaxis diagnose {} --model {}",
-            s(&csv),
-            s(&model)
-        )),
-        "{verdict}"
-    );
+    let next = format!("trueaxis diagnose {} --model {}", s(&csv), s(&model));
+    common::assert_has(verdict, &["After compensation e", &next]);
     // Figures scale to the window: no fixed pixel width on any SVG.
     for l in &svgs {
         let text = std::fs::read_to_string(rep.join(l)).unwrap();
@@ -313,16 +306,15 @@ fn report_opens_offline_with_every_figure() {
 fn report_maps_every_plane_in_every_orientation() {
     let dir = tmp_dir("compare", "planes");
     let csv = dir.join("planes.csv");
-    json(&run(&[
-        "simulate",
-        "--plan",
-        "plane:xz:50,y=250",
-        "plane:xy:50,z=100",
-        "plane:yz:50,x=400",
-        "-o",
-        s(&csv),
-        "--json",
-    ]));
+    common::simulate(
+        &[
+            "--plan",
+            "plane:xz:50,y=250",
+            "plane:xy:50,z=100",
+            "plane:yz:50,x=400",
+        ],
+        &csv,
+    );
     let model = dir.join("planes.model.json");
     fit_cubic19(&csv, &model);
     let rep = dir.join("rep");
@@ -420,12 +412,12 @@ fn rows_left_out_are_counted_and_said() {
         let out = run(&args);
         assert!(out.status.success());
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(
-            err.contains(&format!(
+        common::assert_has(
+            &err,
+            &[&format!(
                 "note: 1 row of {} was left out (line {line}: no error value on this row)",
                 s(&holed)
-            )),
-            "{err}"
+            )],
         );
         if json_flag {
             let v = json(&out);
@@ -467,8 +459,7 @@ fn numeric_auxiliary_columns_are_channels() {
         }
         out.push('\n');
     }
-    let humid = dir.join("humid.csv");
-    std::fs::write(&humid, out).unwrap();
+    let humid = common::file_in(&dir, "humid.csv", out);
     let model = dir.join("humid.model.json");
     fit_cubic19(&humid, &model);
     let v = compare(&humid, &model);
@@ -489,14 +480,8 @@ fn numeric_auxiliary_columns_are_channels() {
     // The text output names it among the channels the residual follows.
     let out = run(&["compare", s(&humid), "--model", s(&model)]);
     let text = String::from_utf8_lossy(&out.stdout);
-    let line = text
-        .lines()
-        .find(|l| l.contains("ex vs humidity_pct:"))
-        .unwrap_or_else(|| panic!("{text}"));
-    assert!(
-        line.contains("(r = +0.99)") && line.contains("µm per unit"),
-        "{line}"
-    );
+    let line = common::line_where(&text, |l| l.contains("ex vs humidity_pct:"));
+    common::assert_has(line, &["(r = +0.99)", "µm per unit"]);
 }
 
 #[test]
@@ -536,8 +521,7 @@ fn bad_input_exits_1_and_usage_exits_2() {
         &["cannot read model file", s(&missing)],
     );
     // JSON, but not a model: `fit --json` output saved by mistake.
-    let not_model = dir.join("fit-output.json");
-    std::fs::write(&not_model, fit_json.to_string()).unwrap();
+    let not_model = common::file_in(&dir, "fit-output.json", fit_json.to_string());
     expect_exit(
         &["compare", s(&csv), "--model", s(&not_model), "--json"],
         1,
@@ -548,15 +532,21 @@ fn bad_input_exits_1_and_usage_exits_2() {
     );
     // The fit history beside the model, and diagnose's output: named as
     // what they are, not as what serde missed in them.
-    let history = dir.join("m.history.json");
-    std::fs::write(&history, r#"{"format": "trueaxis-history/1", "steps": []}"#).unwrap();
+    let history = common::file_in(
+        &dir,
+        "m.history.json",
+        r#"{"format": "trueaxis-history/1", "steps": []}"#,
+    );
     expect_exit(
         &["compare", s(&csv), "--model", s(&history)],
         1,
         &["it is a fit history (MODEL.history.json)"],
     );
-    let diagnosis = dir.join("diagnosis.json");
-    std::fs::write(&diagnosis, r#"{"candidates": [], "rms_um": {}}"#).unwrap();
+    let diagnosis = common::file_in(
+        &dir,
+        "diagnosis.json",
+        r#"{"candidates": [], "rms_um": {}}"#,
+    );
     expect_exit(
         &["compare", s(&csv), "--model", s(&diagnosis)],
         1,
@@ -564,8 +554,7 @@ fn bad_input_exits_1_and_usage_exits_2() {
     );
     // A truncated model file.
     let text = std::fs::read_to_string(&model).unwrap();
-    let cut = dir.join("cut.model.json");
-    std::fs::write(&cut, &text[..text.len() / 2]).unwrap();
+    let cut = common::file_in(&dir, "cut.model.json", &text[..text.len() / 2]);
     expect_exit(
         &["compare", s(&csv), "--model", s(&cut)],
         1,
@@ -595,8 +584,7 @@ fn bad_input_exits_1_and_usage_exits_2() {
     let bad_row = cells.join(",");
     let mut bad_lines = lines.clone();
     bad_lines[bad_line] = &bad_row;
-    let bad = dir.join("bad.csv");
-    std::fs::write(&bad, bad_lines.join("\n") + "\n").unwrap();
+    let bad = common::file_in(&dir, "bad.csv", bad_lines.join("\n") + "\n");
     let at = format!("{}:{}:{}:", s(&bad), bad_line + 1, col + 1);
     expect_exit(
         &["compare", s(&bad), "--model", s(&model), "--json"],
@@ -607,8 +595,7 @@ fn bad_input_exits_1_and_usage_exits_2() {
     cells[col] = "NaN";
     let nan_row = cells.join(",");
     bad_lines[bad_line] = &nan_row;
-    let nan = dir.join("nan.csv");
-    std::fs::write(&nan, bad_lines.join("\n") + "\n").unwrap();
+    let nan = common::file_in(&dir, "nan.csv", bad_lines.join("\n") + "\n");
     let at = format!("{}:{}:{}:", s(&nan), bad_line + 1, col + 1);
     expect_exit(
         &["compare", s(&nan), "--model", s(&model)],
@@ -704,8 +691,11 @@ fn data_lacking_an_effect_input_is_named() {
         ],
         &model,
     );
-    let xonly = dir.join("xonly.csv");
-    std::fs::write(&xonly, "x_mm,ex_um\n0,1\n100,2\n200,1.5\n300,2.5\n").unwrap();
+    let xonly = common::file_in(
+        &dir,
+        "xonly.csv",
+        "x_mm,ex_um\n0,1\n100,2\n200,1.5\n300,2.5\n",
+    );
     expect_exit(
         &["compare", s(&xonly), "--model", s(&model)],
         1,

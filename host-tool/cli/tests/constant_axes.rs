@@ -10,7 +10,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{compare, expect_exit, export, fit, json, run, s, tmp_dir, CUBIC19_REVERSAL_X};
+use common::{compare, expect_exit, export, fit, json, s, tmp_dir, CUBIC19_REVERSAL_X};
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::import;
 use trueaxis_engine::model::{FittedModel, ModelFile};
@@ -19,19 +19,27 @@ use trueaxis_engine::model::{FittedModel, ModelFile};
 /// --seed 7 -o DIR/NAME`.
 fn simulate(dir: &Path, name: &str, plan: &str) -> PathBuf {
     let csv = dir.join(name);
-    json(&run(&[
-        "simulate",
-        "--plan",
-        plan,
-        "--effect",
-        "reversal:axis=x,backlash_um=8",
-        "--seed",
-        "7",
-        "-o",
-        s(&csv),
-        "--json",
-    ]));
+    common::simulate(
+        &[
+            "--plan",
+            plan,
+            "--effect",
+            "reversal:axis=x,backlash_um=8",
+            "--seed",
+            "7",
+        ],
+        &csv,
+    );
     csv
+}
+
+/// `simulate(DIR, STEM.csv, PLAN)` fitted to `DIR/m.json` with cubic19 and
+/// x reversal. Returns (data, model).
+fn fitted(dir: &Path, stem: &str, plan: &str) -> (PathBuf, PathBuf) {
+    let csv = simulate(dir, &format!("{stem}.csv"), plan);
+    let model = dir.join("m.json");
+    fit(&csv, CUBIC19_REVERSAL_X, &model);
+    (csv, model)
 }
 
 fn warnings(v: &serde_json::Value) -> Vec<String> {
@@ -112,9 +120,7 @@ fn simulated_line_and_iso230_data_fit_with_the_polynomial_seeds() {
 #[test]
 fn the_model_of_a_line_does_not_depend_on_the_held_axes() {
     let dir = tmp_dir("constant-axes", "predict");
-    let line = simulate(&dir, "line.csv", "line:x:5,bidir");
-    let model = dir.join("m.json");
-    fit(&line, CUBIC19_REVERSAL_X, &model);
+    let (line, model) = fitted(&dir, "line", "line:x:5,bidir");
     let m = ModelFile::load(&model).unwrap();
     let at = |y: f64, z: f64| -> [Option<Vec<f64>>; 3] {
         let x: Vec<f64> = (0..=16).map(|i| f64::from(i) * 50.0).collect();
@@ -145,9 +151,7 @@ fn the_model_of_a_line_does_not_depend_on_the_held_axes() {
 #[test]
 fn every_export_format_treats_the_held_axes_as_unused() {
     let dir = tmp_dir("constant-axes", "export");
-    let iso = simulate(&dir, "iso.csv", "iso230:x");
-    let model = dir.join("m.json");
-    fit(&iso, CUBIC19_REVERSAL_X, &model);
+    let (iso, model) = fitted(&dir, "iso", "iso230:x");
     // Firmware table: y and z unbounded, the firmware's own evaluation
     // agrees with the model to well under 1 nm.
     let v = export(&model, &[], &dir.join("m.tbl"));

@@ -150,15 +150,8 @@ fn diagnose_json_has_the_contract_shape_and_add_feeds_fit() {
     let html = std::fs::read_to_string(hist.join("index.html")).unwrap();
     let body = &html[html.find("</h1>").unwrap() + 5..];
     assert!(body.trim_start().starts_with("<section id=\"verdict\""));
-    assert!(body.contains("One fit so far"), "{body}");
-    assert!(
-        body.contains(&format!(
-            "trueaxis diagnose {} --model {}",
-            s(&csv),
-            s(&model)
-        )),
-        "{body}"
-    );
+    let next = format!("trueaxis diagnose {} --model {}", s(&csv), s(&model));
+    common::assert_has(body, &["One fit so far", &next]);
     // Diagnosing that model with --report shows its history as well.
     let report = dir.join("report");
     stderr_ok(&run(&[
@@ -258,10 +251,7 @@ fn improve_runs_to_the_noise_floor_and_keeps_the_history() {
     let out = run(&["history", s(&model)]);
     stderr_ok(&out);
     let out = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.contains("2 step(s)") && out.contains("reversal:target=ex,axis=x"),
-        "{out}"
-    );
+    common::assert_has(&out, &["2 step(s)", "reversal:target=ex,axis=x"]);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -388,12 +378,7 @@ fn fit_add_accepts_every_familys_add_string_verbatim() {
     args.extend(["-o", s(&model), "--json"]);
     json(&run(&args));
     let m: Value = serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
-    let kept: Vec<&str> = m["adds"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|a| a.as_str().unwrap())
-        .collect();
+    let kept = common::strs(&m["adds"]);
     assert_eq!(kept, chosen.iter().map(String::as_str).collect::<Vec<_>>());
     std::fs::remove_dir_all(&dir).unwrap();
 }
@@ -403,8 +388,11 @@ fn fit_add_accepts_every_familys_add_string_verbatim() {
 #[test]
 fn too_few_rows_name_the_file_once() {
     let dir = tmp_dir("few");
-    let csv = dir.join("few.csv");
-    std::fs::write(&csv, "x_mm,ex_um\n0,1\n10,2\n20,1.5\n30,2.5\n40,3\n").unwrap();
+    let csv = common::file_in(
+        &dir,
+        "few.csv",
+        "x_mm,ex_um\n0,1\n10,2\n20,1.5\n30,2.5\n40,3\n",
+    );
     let err = common::expect_exit(
         &["diagnose", s(&csv), "--model", "cubic19"],
         1,

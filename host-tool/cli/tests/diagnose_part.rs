@@ -179,8 +179,7 @@ fn a_timed_turn_gives_the_drift_and_a_multi_step_set_splits_part_and_spindle() {
             _ => format!("{l}\n"),
         })
         .collect();
-    let bare = dir.join("untimed.csv");
-    std::fs::write(&bare, untimed).unwrap();
+    let bare = common::file_in(&dir, "untimed.csv", untimed);
     unknown(&diagnose(&[s(&bare)]), "thermal_drift", "t_s");
 
     // With the 5-step set: the part without its 10th lobe (a multiple of
@@ -282,10 +281,7 @@ fn an_arc_needs_the_ball_calibration_or_a_known_diameter_for_the_probe() {
 /// The simulated probe's form at contact angle θ in the XZ plane, nm
 /// (`truth.json`'s formula).
 fn probe_form_xz(t: f64) -> f64 {
-    let n = [t.cos(), 0.0, t.sin()];
-    let s3 = (1.0 - n[2] * n[2]).max(0.0).sqrt();
-    let az = n[1].atan2(n[0]);
-    60.0 * s3.powi(3) * (3.0 * az).cos() + 40.0 * n[2] * n[2] - 25.0 * s3 * s3 * (2.0 * az).sin()
+    common::onmachine::probe_form_3d_nm([t.cos(), 0.0, t.sin()])
 }
 
 #[test]

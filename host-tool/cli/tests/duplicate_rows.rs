@@ -26,9 +26,7 @@ fn twice(dir: &std::path::Path) -> std::path::PathBuf {
         out.push_str(line);
         out.push('\n');
     }
-    let csv = dir.join("twice.csv");
-    std::fs::write(&csv, out).unwrap();
-    csv
+    common::file_in(dir, "twice.csv", out)
 }
 
 /// The line of the header (1-based) in `csv`: the data start after it.

@@ -131,14 +131,8 @@ fn table_envelope_follows_the_options() {
     // will clamp).
     let (v, env) = envelope(&["--max-corr-um", "2"]);
     assert_eq!(env.max_corr_nm, [2000; 3]);
-    assert!(
-        v["warnings"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .any(|w| w["code"] == "max_corr_below_model"),
-        "{v}"
-    );
+    let codes = warning_codes(&v);
+    assert!(codes.contains(&"max_corr_below_model"), "{v}");
     // … and it does: where the model asks for more, the table gives ±2 µm.
     let bytes = std::fs::read(&bin).unwrap();
     let t = model_core::parse(&bytes).unwrap();
@@ -206,20 +200,10 @@ fn thermal_lag_is_refused_without_drop_lag_and_drift_is_left_out() {
     let dir = tmp_dir("export", "thermal");
     let csv = thermal_csv(&dir);
     let model = dir.join("thermal.model.json");
-    fit(
-        &csv,
-        &[
-            "--model",
-            "cubic19",
-            "--add",
-            "reversal:target=ex,axis=x",
-            "--add",
-            "thermal:target=ex,channel=bed,times=x,lag_s=300",
-            "--add",
-            "drift:target=ex",
-        ],
-        &model,
-    );
+    let lagged = "thermal:target=ex,channel=bed,times=x,lag_s=300";
+    let mut args = common::CUBIC19_REVERSAL_X.to_vec();
+    args.extend(["--add", lagged, "--add", "drift:target=ex"]);
+    fit(&csv, &args, &model);
     let bin = dir.join("thermal.bin");
     expect_exit(
         &["export", s(&model), "-o", s(&bin), "--json"],
@@ -234,10 +218,7 @@ fn thermal_lag_is_refused_without_drop_lag_and_drift_is_left_out() {
     assert!(codes.contains(&"lag_dropped"), "{codes:?}");
     assert!(codes.contains(&"drift_left_out"), "{codes:?}");
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("warning (drift_left_out)") && err.contains("warning (lag_dropped)"),
-        "{err}"
-    );
+    common::assert_has(&err, &["warning (drift_left_out)", "warning (lag_dropped)"]);
     assert!(num(&v["max_f32_error_nm"]) <= 1.0 && num(&v["max_fixed_error_nm"]) <= 1.0);
 
     let bytes = std::fs::read(&bin).unwrap();
@@ -324,22 +305,23 @@ fn bad_input_exits_1_with_a_clear_message() {
         &["cannot read model file", s(&missing)],
     );
     let text = std::fs::read_to_string(&model).unwrap();
-    let cut = dir.join("cut.model.json");
-    std::fs::write(&cut, &text[..text.len() / 3]).unwrap();
+    let cut = common::file_in(&dir, "cut.model.json", &text[..text.len() / 3]);
     expect_exit(
         &["export", s(&cut), "-o", o],
         1,
         &[s(&cut), "not a trueaxis model file"],
     );
-    let not_model = dir.join("other.json");
-    std::fs::write(&not_model, r#"{"bytes": 316, "crc32": "0x00000000"}"#).unwrap();
+    let not_model = common::file_in(
+        &dir,
+        "other.json",
+        r#"{"bytes": 316, "crc32": "0x00000000"}"#,
+    );
     expect_exit(
         &["export", s(&not_model), "-o", o, "--format", "linuxcnc"],
         1,
         &[s(&not_model), "not a trueaxis model file"],
     );
-    let garbage = dir.join("garbage.json");
-    std::fs::write(&garbage, [0xff, 0xfe, 0x00, 0x41]).unwrap();
+    let garbage = common::file_in(&dir, "garbage.json", [0xff, 0xfe, 0x00, 0x41]);
     expect_exit(&["export", s(&garbage), "-o", o], 1, &[s(&garbage)]);
     assert!(!out.exists(), "nothing written for bad input");
 
@@ -566,8 +548,11 @@ fn temperature_envelope_defaults_to_the_measured_range() {
     old["data"].as_object_mut().unwrap().remove("temp_range_c");
     // … and before the checksum was written (docs/cli.md § MODEL.json).
     old.as_object_mut().unwrap().remove("checksum_sha256");
-    let old_model = dir.join("old.model.json");
-    std::fs::write(&old_model, serde_json::to_string_pretty(&old).unwrap()).unwrap();
+    let old_model = common::file_in(
+        &dir,
+        "old.model.json",
+        serde_json::to_string_pretty(&old).unwrap(),
+    );
     let out = run(&["export", s(&old_model), "-o", s(&bin), "--json"]);
     let v = json(&out);
     assert_eq!(

@@ -6,12 +6,21 @@
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use common::{json, run, tmp_dir, with_blank_error_row};
+use common::{json, run, s, tmp_dir, with_blank_error_row};
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::import;
 use trueaxis_engine::model::{FittedModel, ModelFile};
+
+/// [`grid_data`] written to `grid.csv` in a fresh directory for test
+/// NAME: (the directory, the file).
+fn grid_csv(name: &str) -> (PathBuf, PathBuf) {
+    let dir = tmp_dir("fit", name);
+    let csv = dir.join("grid.csv");
+    write(&grid_data(), &csv);
+    (dir, csv)
+}
 
 fn write(data: &Dataset, path: &Path) {
     let f = std::fs::File::create(path).unwrap();
@@ -53,9 +62,7 @@ fn grid_data() -> Dataset {
 
 #[test]
 fn json_shape_and_model_file_round_trip() {
-    let dir = tmp_dir("fit", "shape");
-    let csv = dir.join("grid.csv");
-    write(&grid_data(), &csv);
+    let (dir, csv) = grid_csv("shape");
     let out = run(&["fit", csv.to_str().unwrap(), "--model", "cubic19", "--json"]);
     let v = json(&out);
     assert_eq!(v["model"], "cubic19");
@@ -102,24 +109,17 @@ fn json_shape_and_model_file_round_trip() {
 
 #[test]
 fn add_effects_and_output_path() {
-    let dir = tmp_dir("fit", "add");
-    let csv = dir.join("grid.csv");
-    write(&grid_data(), &csv);
+    let (dir, csv) = grid_csv("add");
     let model = dir.join("m.json");
-    let out = run(&[
-        "fit",
-        csv.to_str().unwrap(),
+    let squareness = [
         "--model",
         "kinematic",
         "--add",
         "squareness:target=ex,axis=y",
         "--add",
         "squareness:target=ey,axis=x",
-        "-o",
-        model.to_str().unwrap(),
-        "--json",
-    ]);
-    let v = json(&out);
+    ];
+    let v = common::fit(&csv, &squareness, &model);
     assert_eq!(
         v["model"],
         "kinematic --add squareness:target=ex,axis=y --add squareness:target=ey,axis=x"
@@ -139,9 +139,7 @@ fn add_effects_and_output_path() {
 
 #[test]
 fn every_model_kind_runs_from_the_command_line() {
-    let dir = tmp_dir("fit", "kinds");
-    let csv = dir.join("grid.csv");
-    write(&grid_data(), &csv);
+    let (dir, csv) = grid_csv("kinds");
     for (args, kind) in [
         (vec!["--model", "grid:100"], "grid"),
         (vec!["--model", "cubic19", "--local"], "local"),
@@ -162,41 +160,30 @@ fn every_model_kind_runs_from_the_command_line() {
     let out = run(&["fit", csv.to_str().unwrap(), "--model", "cubic19"]);
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        text.contains("held-out") && text.contains("model written to"),
-        "{text}"
-    );
+    common::assert_has(&text, &["held-out", "model written to"]);
 }
 
 /// Rows the importer leaves out are said on stderr (with the line and the
 /// reason) and counted in the JSON as `skipped_count`.
 #[test]
 fn rows_left_out_are_counted_and_said() {
-    let dir = tmp_dir("fit", "skipped");
-    let csv = dir.join("grid.csv");
-    write(&grid_data(), &csv);
+    let (dir, csv) = grid_csv("skipped");
     let clean = run(&["fit", csv.to_str().unwrap(), "--model", "cubic19", "--json"]);
     assert_eq!(json(&clean)["skipped_count"], 0);
     assert!(!String::from_utf8_lossy(&clean.stderr).contains("left out"));
 
     let holed = dir.join("holed.csv");
     let line = with_blank_error_row(&csv, &holed);
-    let out = run(&[
-        "fit",
-        holed.to_str().unwrap(),
-        "--model",
-        "cubic19",
-        "--json",
-    ]);
+    let out = run(&["fit", s(&holed), "--model", "cubic19", "--json"]);
     let v = json(&out);
     assert_eq!(v["skipped_count"], 1);
     assert_eq!(v["rows"]["ex"], 270, "the row is not fitted");
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains(&format!(
+    common::assert_has(
+        &err,
+        &[&format!(
             "was left out (line {line}: no error value on this row)"
-        )),
-        "{err}"
+        )],
     );
     // In text mode too.
     let out = run(&["fit", holed.to_str().unwrap(), "--model", "cubic19"]);
@@ -219,9 +206,7 @@ fn expect_exit(args: &[&str], code: i32, needle: &str) {
 
 #[test]
 fn bad_input_exits_1_and_usage_exits_2() {
-    let dir = tmp_dir("fit", "bad");
-    let csv = dir.join("grid.csv");
-    write(&grid_data(), &csv);
+    let (dir, csv) = grid_csv("bad");
     let c = csv.to_str().unwrap();
     expect_exit(
         &["fit", c, "--model", "cubic21", "--json"],
@@ -281,12 +266,7 @@ fn bad_input_exits_1_and_usage_exits_2() {
         "no T_bed_C",
     );
     expect_exit(
-        &[
-            "fit",
-            dir.join("missing.csv").to_str().unwrap(),
-            "--model",
-            "cubic19",
-        ],
+        &["fit", s(&dir.join("missing.csv")), "--model", "cubic19"],
         1,
         "missing.csv",
     );
@@ -305,13 +285,7 @@ fn bad_input_exits_1_and_usage_exits_2() {
     let small = dir.join("line.csv");
     write(&line, &small);
     expect_exit(
-        &[
-            "fit",
-            small.to_str().unwrap(),
-            "--model",
-            "cubic19",
-            "--json",
-        ],
+        &["fit", s(&small), "--model", "cubic19", "--json"],
         1,
         &format!(
             "{}: cannot fit cubic19: ex: 3 distinct points but the model has 4 terms",
@@ -348,18 +322,18 @@ fn the_text_gives_each_targets_term_count_when_they_differ() {
         "--seed",
         "4",
         "-o",
-        common::s(&csv),
+        s(&csv),
         "--json",
     ]));
     let out = common::run(&[
         "fit",
-        common::s(&csv),
+        s(&csv),
         "--model",
         "cubic19",
         "--add",
         "reversal:target=ex,axis=x",
         "-o",
-        common::s(&dir.join("m.json")),
+        s(&dir.join("m.json")),
     ]);
     common::assert_success(&out);
     let text = String::from_utf8_lossy(&out.stdout);

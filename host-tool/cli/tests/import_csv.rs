@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{data_file as data, json, run as trueaxis};
+use common::{data_file as data, json, run as trueaxis, s};
 use trueaxis_engine::import;
 
 /// Runs `import FILE --json`, expects exit 1 and a stderr message that
@@ -115,13 +115,7 @@ fn no_position_column() {
 fn good_file_reports_rows_metadata_aux_and_skipped() {
     let path = data("good.csv");
     let out_csv = std::env::temp_dir().join(format!("trueaxis-import-{}.csv", std::process::id()));
-    let out = trueaxis(&[
-        "import",
-        path.to_str().unwrap(),
-        "-o",
-        out_csv.to_str().unwrap(),
-        "--json",
-    ]);
+    let out = trueaxis(&["import", s(&path), "-o", s(&out_csv), "--json"]);
     let v = json(&out);
     assert_eq!(v["rows"], 3);
     assert_eq!(
@@ -346,7 +340,7 @@ fn crlf_bom_and_other_separators() {
 fn excel_files_are_read_as_written() {
     let v = json(&trueaxis(&[
         "import",
-        data("excel_semicolon.csv").to_str().unwrap(),
+        s(&data("excel_semicolon.csv")),
         "--json",
     ]));
     assert_eq!(v["rows"], 3, "{v}");
@@ -425,8 +419,7 @@ fn implausible_positions_and_errors() {
     // At the limit itself the value is accepted.
     let dir = std::env::temp_dir().join(format!("trueaxis-plausible-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let edge = dir.join("edge.csv");
-    std::fs::write(&edge, "x_mm,ex_um\n-10000,-10000\n10000,10000\n").unwrap();
+    let edge = common::file_in(&dir, "edge.csv", "x_mm,ex_um\n-10000,-10000\n10000,10000\n");
     let out = trueaxis(&["import", edge.to_str().unwrap(), "--json"]);
     assert_eq!(
         out.status.code(),
@@ -494,21 +487,13 @@ fn excel_files_from_a_german_desktop_are_read_or_answered_with_the_names_meant()
         json(&trueaxis(&["import", txt.to_str().unwrap(), "--json"]))["rows"],
         2
     );
-    let tsv = dir.join("d.tsv");
-    std::fs::write(&tsv, "x_mm\tex_um\n0\t1,5\n50\t-0,25\n").unwrap();
+    let tsv = common::file_in(&dir, "d.tsv", "x_mm\tex_um\n0\t1,5\n50\t-0,25\n");
     let out = dir.join("d_out.csv");
-    json(&trueaxis(&[
-        "import",
-        tsv.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--json",
-    ]));
+    json(&trueaxis(&["import", s(&tsv), "-o", s(&out), "--json"]));
     let written = std::fs::read_to_string(&out).unwrap();
     assert!(written.contains("\n0,1.5\n50,-0.25\n"), "{written}");
     // A header in words: the error names the contract columns meant.
-    let words = dir.join("words.csv");
-    std::fs::write(&words, "x (mm);ex [um]\n0;1,5\n50;2\n").unwrap();
+    let words = common::file_in(&dir, "words.csv", "x (mm);ex [um]\n0;1,5\n50;2\n");
     let out = trueaxis(&["import", words.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);

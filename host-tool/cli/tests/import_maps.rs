@@ -65,14 +65,8 @@ fn a_reprapfirmware_map_becomes_a_z_error_map_with_the_compensation_sign() {
 #[test]
 fn a_klipper_config_with_two_meshes_needs_a_profile() {
     let cfg = data("klipper_printer.cfg");
-    let out = run(&["import", s(&cfg)]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(
-        stderr(&out).contains("2 bed mesh profiles (default, hot)"),
-        "{}",
-        stderr(&out)
-    );
-    assert!(stderr(&out).contains("--profile"));
+    let profiles = "2 bed mesh profiles (default, hot)";
+    common::expect_exit(&["import", s(&cfg)], 1, &[profiles, "--profile"]);
     let dir = tmp_dir("maps", "klipper");
     let out_csv = dir.join("hot.csv");
     let doc = json(&run(&[
@@ -91,30 +85,16 @@ fn a_klipper_config_with_two_meshes_needs_a_profile() {
     assert!((node(&csv, 117.5, 117.5) + 30.0).abs() < 1e-9);
     assert!((node(&csv, 34.0, 34.0) - 80.0).abs() < 1e-9);
     let out = run(&["import", s(&cfg), "--profile", "cold"]);
-    assert!(
-        stderr(&out).contains("no bed mesh profile `cold`"),
-        "{}",
-        stderr(&out)
-    );
+    common::assert_has(&stderr(&out), &["no bed mesh profile `cold`"]);
     let out = run(&["import", s(&data("good.csv")), "--profile", "hot"]);
     assert_eq!(out.status.code(), Some(1));
-    assert!(
-        stderr(&out).contains("expected a .cfg file"),
-        "{}",
-        stderr(&out)
-    );
+    common::assert_has(&stderr(&out), &["expected a .cfg file"]);
 }
 
 #[test]
 fn an_ecmc_iso230_run_gives_the_iso230_figures_it_was_made_with() {
     let dat = data("axis1_ISO230.dat");
-    let out = run(&["iso230", s(&dat)]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(
-        stderr(&out).contains("pass --axis x|y|z"),
-        "{}",
-        stderr(&out)
-    );
+    common::expect_exit(&["iso230", s(&dat)], 1, &["pass --axis x|y|z"]);
     // Made with a 3 µm backlash (backward reads 3 µm short) and noise that
     // averages to zero over the 5 cycles at every target: B = 3 µm, and the
     // forward mean at 15 mm is 12e-6·15 mm + 1 µm·sin(2π·15/50) = 1.131 µm.
@@ -201,26 +181,12 @@ fn a_mesh_exported_from_a_fit_of_a_mesh_gives_the_mesh_back() {
     assert_eq!(out.status.code(), Some(2));
     // A one-axis model is not a bed mesh.
     let line = dir.join("line.csv");
-    json(&run(&[
-        "simulate",
-        "--plan",
-        "line:x:10",
-        "-o",
-        s(&line),
-        "--json",
-    ]));
+    common::simulate(&["--plan", "line:x:10"], &line);
     let lm = dir.join("line.json");
     json(&common::cubic19("fit", &line, &lm, &[]));
-    let out = run(&[
-        "export",
-        s(&lm),
-        "--format",
-        "rrf-heightmap",
-        "-o",
-        s(&dir.join("l.csv")),
-    ]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(stderr(&out).contains("a bed mesh"), "{}", stderr(&out));
+    let l_csv = dir.join("l.csv");
+    let rrf = common::export_args(&lm, &["--format", "rrf-heightmap"], &l_csv);
+    common::expect_exit(&rrf, 1, &["a bed mesh"]);
 }
 
 /// The real delta-printer heightmap imported into a fresh `maps-NAME`
@@ -254,15 +220,7 @@ fn a_bed_is_spoken_of_as_a_bed() {
     // plane z = 0 it does not have.
     let (dir, csv, model, _) = real_bed_cubic("bed-words");
     let report = dir.join("diag");
-    let d = json(&run(&[
-        "diagnose",
-        s(&csv),
-        "--model",
-        s(&model),
-        "--report",
-        s(&report),
-        "--json",
-    ]));
+    let d = common::diagnose_report(&csv, s(&model), &report);
     let text = d["warnings"].to_string();
     assert!(text.contains("bed_model"), "{text}");
     for machine_tool in ["ball-screw", "one_direction", "no_temperature", "ISO 230-2"] {
@@ -337,11 +295,9 @@ fn an_exported_mesh_is_checked_at_the_probed_points() {
     let refused = run_v(&args(&["--max-departure-um", &limit]));
     assert_eq!(refused.status.code(), Some(1));
     let err = stderr(&refused);
-    assert!(
-        err.contains("departs from the reading")
-            && err.contains("line ")
-            && err.contains("--max-departure-um"),
-        "{err}"
+    common::assert_has(
+        &err,
+        &["departs from the reading", "line ", "--max-departure-um"],
     );
     assert!(!out.exists());
     // The data moved away: exported, with the check said to be missing.

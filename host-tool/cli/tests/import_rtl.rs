@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{data_file as data, json, run};
+use common::{data_file as data, json, run, s};
 use trueaxis_engine::import;
 
 #[test]
@@ -77,14 +77,8 @@ fn broken_files_name_the_line() {
 #[test]
 fn cli_converts_rtl_to_contract_csv() {
     let out_csv = std::env::temp_dir().join(format!("trueaxis-rtl-{}.csv", std::process::id()));
-    let out = run(&[
-        "import",
-        data("iso_worked.rtl").to_str().unwrap(),
-        "-o",
-        out_csv.to_str().unwrap(),
-        "--json",
-    ]);
-    let v = json(&out);
+    let rtl = data("iso_worked.rtl");
+    let v = json(&run(&["import", s(&rtl), "-o", s(&out_csv), "--json"]));
     assert_eq!(v["rows"], 12);
     assert_eq!(
         v["columns"],
@@ -305,8 +299,7 @@ fn legacy_code_pages_in_rtl_metadata_are_decoded_and_said() {
     ru.extend(head.as_bytes());
     ru.extend([0xC8, 0xE2, 0xE0, 0xED, 0xEE, 0xE2]);
     ru.extend(&tail.as_bytes()["A. Tester".len()..]);
-    let p = dir.join("ru.rtl");
-    std::fs::write(&p, &ru).unwrap();
+    let p = common::file_in(&dir, "ru.rtl", &ru);
     let ds = import::load(&p).unwrap();
     let meta = |ds: &trueaxis_engine::data::Dataset, k: &str| {
         ds.metadata
@@ -321,16 +314,8 @@ fn legacy_code_pages_in_rtl_metadata_are_decoded_and_said() {
         ds.metadata
     );
     let note = meta(&ds, "encoding").expect("a note");
-    assert!(
-        note.contains("Windows-1251") && note.contains("line 14"),
-        "{note}"
-    );
-    let out = run(&[
-        "import",
-        p.to_str().unwrap(),
-        "-o",
-        dir.join("ru.csv").to_str().unwrap(),
-    ]);
+    common::assert_has(&note, &["Windows-1251", "line 14"]);
+    let out = run(&["import", s(&p), "-o", s(&dir.join("ru.csv"))]);
     assert!(out.status.success(), "{out:?}");
     assert!(
         String::from_utf8_lossy(&out.stderr).contains("read as Windows-1251"),
@@ -342,8 +327,7 @@ fn legacy_code_pages_in_rtl_metadata_are_decoded_and_said() {
         .chars()
         .map(|c| if c == 'ü' { 0xFC } else { c as u8 })
         .collect();
-    let p = dir.join("de.rtl");
-    std::fs::write(&p, &de).unwrap();
+    let p = common::file_in(&dir, "de.rtl", &de);
     let de_ds = import::load(&p).unwrap();
     assert_eq!(meta(&de_ds, "Location").as_deref(), Some("Prüfstand"));
     assert!(meta(&de_ds, "encoding").unwrap().contains("Windows-1252"));

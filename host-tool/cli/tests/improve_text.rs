@@ -36,14 +36,8 @@ fn a_step_that_adds_two_effects_explains_both() {
     ));
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let text = String::from_utf8_lossy(&o.stdout);
-    let step = text
-        .lines()
-        .find(|l| l.starts_with("step 2:"))
-        .unwrap_or_else(|| panic!("no step 2 in\n{text}"));
-    assert!(
-        step.contains("add reversal:target=ey") && step.contains("add periodic:target=ex"),
-        "{step}"
-    );
+    let step = common::line_where(&text, |l| l.starts_with("step 2:"));
+    common::assert_has(step, &["add reversal:target=ey", "add periodic:target=ex"]);
     let because: Vec<&str> = text.lines().filter(|l| l.contains("because (")).collect();
     assert_eq!(because.len(), 2, "{text}");
     assert!(

@@ -39,6 +39,7 @@ mod common;
 
 use common::{assert_success, data_file, json, run, s};
 use trueaxis_engine::{import, iso230};
+use trueaxis_test_support::assert_any;
 
 const TOL: f64 = 1e-6;
 
@@ -94,7 +95,7 @@ fn cli_json_keys_and_plot() {
     let dir = std::env::temp_dir().join(format!("trueaxis-iso-{}", std::process::id()));
     let out = run(&[
         "iso230",
-        data_file("iso_worked.csv").to_str().unwrap(),
+        s(&data_file("iso_worked.csv")),
         "--axis",
         "x",
         "--json",
@@ -217,7 +218,7 @@ fn rows_left_out_on_load_are_counted_and_said() {
     let dir = common::tmp_dir("iso230", "skipped");
     let holed = dir.join("holed.csv");
     let line = common::with_blank_error_row(&data_file("iso_worked.csv"), &holed);
-    let out = common::run(&["iso230", common::s(&holed), "--json"]);
+    let out = common::run(&["iso230", s(&holed), "--json"]);
     let v = common::json(&out);
     assert_eq!(v["skipped_count"], 1);
     assert_eq!(v["rows_ignored"], 0);
@@ -228,11 +229,7 @@ fn rows_left_out_on_load_are_counted_and_said() {
         err.contains(&format!("(line {line}: no error value on this row)")),
         "{err}"
     );
-    let clean = common::run(&[
-        "iso230",
-        data_file("iso_worked.csv").to_str().unwrap(),
-        "--json",
-    ]);
+    let clean = common::run(&["iso230", s(&data_file("iso_worked.csv")), "--json"]);
     assert_eq!(common::json(&clean)["skipped_count"], 0);
     let _ = std::fs::remove_dir_all(dir);
 }
@@ -246,9 +243,8 @@ fn axis_option_reaches_the_rtl_reader() {
     let dir = common::tmp_dir("iso230", "axis");
     let text = std::fs::read_to_string(data_file("iso_worked.rtl")).unwrap();
     assert!(text.contains("Axis: X\r\n"));
-    let no_axis = dir.join("no_axis.rtl");
-    std::fs::write(&no_axis, text.replace("Axis: X\r\n", "")).unwrap();
-    let f = common::s(&no_axis);
+    let no_axis = common::file_in(&dir, "no_axis.rtl", text.replace("Axis: X\r\n", ""));
+    let f = s(&no_axis);
 
     let out = common::run(&["iso230", f]);
     assert_eq!(out.status.code(), Some(1));
@@ -297,14 +293,8 @@ fn the_page_shows_every_run_and_the_test_conditions() {
     let x_of = |text: &str| -> f64 {
         let at = svg.find(text).unwrap_or_else(|| panic!("{text}"));
         let head = &svg[svg[..at].rfind("<text").unwrap()..at];
-        head.split("x=\"")
-            .nth(1)
-            .unwrap()
-            .split('"')
-            .next()
-            .unwrap()
-            .parse()
-            .unwrap()
+        let (_, x) = head.split_once("x=\"").unwrap();
+        x[..x.find('"').unwrap()].parse().unwrap()
     };
     assert!(x_of("x̄↑ ± 2s (from below)") > x_of("200.0\n</text>") + 10.0);
     let _ = std::fs::remove_dir_all(&dir);
@@ -369,13 +359,9 @@ fn one_bad_reading_is_flagged_and_the_figures_kept() {
         "{text}"
     );
     let v = trueaxis::report::iso230::verdict(&r, "run.csv");
-    assert!(
-        v.warnings
-            .iter()
-            .any(|w| w.starts_with("flagged reading: run 1, target 150 mm")),
-        "{:?}",
-        v.warnings
-    );
+    assert_any(&v.warnings, |w| {
+        w.starts_with("flagged reading: run 1, target 150 mm")
+    });
     assert_ne!(v.tone, trueaxis::report::Tone::Good);
     let reads = trueaxis::report::iso230::flagged_readings(&iso_with(true), 0, &r);
     assert_eq!(reads.iter().filter(|x| x.flag.is_some()).count(), 1);

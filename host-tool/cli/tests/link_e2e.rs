@@ -439,10 +439,9 @@ fn uploading_the_running_table_keeps_the_standby() {
     let out = trueaxis(&["upload", p1.to_str().unwrap(), "--port", &board.port]);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success());
-    assert!(
-        text.contains("already runs on")
-            && text.contains("nothing written, the standby table kept"),
-        "{text}"
+    common::assert_has(
+        &text,
+        &["already runs on", "nothing written, the standby table kept"],
     );
 }
 
@@ -548,7 +547,7 @@ fn invalid_tables_are_refused_before_anything_is_sent() {
     // No board on this port: the local check must fail first.
     let out = trueaxis(&[
         "upload",
-        p.to_str().unwrap(),
+        common::s(&p),
         "--port",
         "tcp://127.0.0.1:9",
         "--json",
@@ -595,12 +594,7 @@ fn tables_beyond_the_boards_limits_are_refused_before_touching_it() {
     ] {
         // No board on this port and (here) no probe: the check comes first.
         for args in [
-            vec![
-                "upload",
-                path.to_str().unwrap(),
-                "--port",
-                "tcp://127.0.0.1:9",
-            ],
+            vec!["upload", common::s(path), "--port", "tcp://127.0.0.1:9"],
             vec!["flash", path.to_str().unwrap()],
         ] {
             let out = trueaxis(&args);
@@ -838,11 +832,11 @@ fn a_lost_link_during_upload_says_how_to_check_the_board() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     common::assert_no_document(&["--json"], &out);
-    assert!(
-        err.contains(&format!(
+    common::assert_has(
+        &err,
+        &[&format!(
             "the board may run the new table already: `trueaxis status --port {port}` tells"
-        )),
-        "{err}"
+        )],
     );
 }
 
@@ -903,9 +897,9 @@ fn the_board_corrects_only_after_trueaxis_reference_and_status_shows_it() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    assert!(
-        text.contains("x referenced at 0.000000 mm on ") && text.contains("y NOT REFERENCED"),
-        "{text}"
+    common::assert_has(
+        &text,
+        &["x referenced at 0.000000 mm on ", "y NOT REFERENCED"],
     );
     assert!(
         text.contains("the correction stays at zero until"),
@@ -1016,11 +1010,13 @@ fn reference_is_refused_while_an_axis_moves() {
     mover.join().unwrap();
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("referencing y on tcp://")
-            && err.contains("the board refused reference: the axes are moving")
-            && err.contains("at rest (within 1 µm) for 20 ms"),
-        "{err}"
+    common::assert_has(
+        &err,
+        &[
+            "referencing y on tcp://",
+            "the board refused reference: the axes are moving",
+            "at rest (within 1 µm) for 20 ms",
+        ],
     );
     let t = &status_json(&board.port)["telemetry"];
     assert_eq!(t["axes"]["y"]["referenced"], false, "{t}");
@@ -1074,12 +1070,7 @@ fn status_shows_a_boot_fallback_and_why() {
     let s = status_json(&board.port);
     let t = &s["telemetry"];
     assert_eq!(t["active"]["crc32"], crc_hex(&t1), "{s}");
-    let latched: Vec<&str> = t["faults_latched"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_str().unwrap())
-        .collect();
+    let latched = common::strs(&t["faults_latched"]);
     assert!(latched.contains(&"trial_failed"), "{s}");
     assert!(latched.contains(&"reset_by_panic"), "{s}");
     assert!(!t["faults"].to_string().contains("trial_failed"), "{s}");

@@ -18,7 +18,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{expect_exit, fit_cubic19, json, run, s, simulate_grid, tmp_dir};
+use common::{expect_exit, grid_cubic19, json, run, s, simulate_grid, tmp_dir};
 use serde_json::Value;
 use trueaxis_engine::model::ModelFile;
 
@@ -77,12 +77,8 @@ fn assert_refused(model: &Path, dir: &Path, edit: impl FnOnce(&mut Value), needl
 fn out_of_range_target_is_an_error_not_a_panic() {
     // The user test's R2: `"target": 7` in model.outputs[0].
     let dir = tmp_dir("model-file", "target");
-    let csv = dir.join("r2.csv");
-    std::fs::write(
-        &csv,
-        "x_mm,ex_um\n0,1\n100,2\n200,1.5\n300,0.5\n400,-1\n500,-2\n",
-    )
-    .unwrap();
+    let rows = "x_mm,ex_um\n0,1\n100,2\n200,1.5\n300,0.5\n400,-1\n500,-2\n";
+    let csv = common::file_in(&dir, "r2.csv", rows);
     let model = fit(&csv, "cubic19", &[], &dir.join("r2.json"));
     let bad = damaged(
         &model,
@@ -119,9 +115,7 @@ fn zero_span_and_short_coefficient_list_are_refused_by_every_reader() {
     // exit 0 "predicts nothing", export wrote a table with error 0.0 nm);
     // 5 of 19 coefficients exported a different model.
     let dir = tmp_dir("model-file", "r3");
-    let csv = simulate_grid(&dir, "r3.csv", 1);
-    let model = dir.join("r3.json");
-    fit_cubic19(&csv, &model);
+    let (csv, model, _) = grid_cubic19(&dir, "r3", 1);
     let zero = damaged(
         &model,
         &dir.join("zero.json"),
@@ -376,8 +370,7 @@ fn every_kind_fitted_where_only_x_varies_loads() {
         out.push('\n');
         out.push_str(&pick(l));
     }
-    let xonly = dir.join("xonly.csv");
-    std::fs::write(&xonly, out + "\n").unwrap();
+    let xonly = common::file_in(&dir, "xonly.csv", out + "\n");
     for data in [&csv, &xonly] {
         for (i, (spec, extra)) in [
             ("cubic19", &[][..]),
@@ -403,9 +396,7 @@ fn a_non_finite_prediction_fails_export() {
     // read NaN as 0 nm (f64::max drops NaN); export now refuses the
     // prediction, naming the target and the point, and writes nothing.
     let dir = tmp_dir("model-file", "inf");
-    let csv = simulate_grid(&dir, "g.csv", 4);
-    let model = dir.join("m.json");
-    fit_cubic19(&csv, &model);
+    let (_, model, _) = grid_cubic19(&dir, "g", 4);
     let huge = damaged(&model, &dir.join("huge.json"), |v| {
         v["model"]["outputs"][0]["coef_um"][0] = 1e308.into();
         v["model"]["outputs"][0]["coef_um"][1] = 1e308.into();
@@ -484,16 +475,13 @@ fn every_single_bit_flip_is_refused_or_changes_nothing() {
 #[test]
 fn a_model_file_without_a_checksum_loads_with_a_note() {
     let dir = tmp_dir("model-file", "old");
-    let csv = simulate_grid(&dir, "g.csv", 6);
-    let model = dir.join("m.json");
-    fit_cubic19(&csv, &model);
+    let (_, model, _) = grid_cubic19(&dir, "g", 6);
     let text = std::fs::read_to_string(&model).unwrap();
     assert!(text.trim_end().ends_with('}'));
     let last = text
         .rfind(",\n  \"checksum_sha256\"")
         .expect("the checksum is the last field");
-    let old = dir.join("old.json");
-    std::fs::write(&old, format!("{}\n}}\n", &text[..last])).unwrap();
+    let old = common::file_in(&dir, "old.json", format!("{}\n}}\n", &text[..last]));
     assert_eq!(
         ModelFile::load(&old).unwrap(),
         ModelFile::load(&model).unwrap()
@@ -501,12 +489,12 @@ fn a_model_file_without_a_checksum_loads_with_a_note() {
     let out = run(&["export", s(&old), "-o", s(&dir.join("t.bin")), "--json"]);
     let err = String::from_utf8_lossy(&out.stderr).into_owned();
     json(&out);
-    assert!(
-        err.contains(&format!(
+    common::assert_has(
+        &err,
+        &[&format!(
             "note: {} has no checksum (written by an older trueaxis, or edited by hand): it loads unchecked — refit it to have one",
             old.display()
-        )),
-        "{err}"
+        )],
     );
     // The table is the same as from the checked file.
     let checked = dir.join("c.bin");

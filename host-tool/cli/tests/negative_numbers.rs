@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{expect_exit, json, run, s, tmp_dir};
+use common::{expect_exit, s, tmp_dir};
 use trueaxis_engine::import;
 use trueaxis_engine::simulate::SimConfig;
 
@@ -14,18 +14,10 @@ use trueaxis_engine::simulate::SimConfig;
 fn simulate_takes_a_negative_tool_length() {
     let dir = tmp_dir("negative-numbers", "tool");
     let csv = dir.join("x.csv");
-    let v = json(&run(&[
-        "simulate",
-        "--plan",
-        "grid:100",
-        "--tool-mm",
-        "-50",
-        "--noise-um",
-        "0",
-        "-o",
-        s(&csv),
-        "--json",
-    ]));
+    let v = common::simulate(
+        &["--plan", "grid:100", "--tool-mm", "-50", "--noise-um", "0"],
+        &csv,
+    );
     assert_eq!(v["rows"], 324, "{v}");
     // The errors are the preset machine's with a −50 mm Abbe arm (the arm
     // lengthens its angular errors; it is not written as a column).

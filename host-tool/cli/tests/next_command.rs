@@ -11,20 +11,19 @@ fn the_next_command_runs_as_printed_and_continues_the_history() {
     // A dir with a space: the command must quote it.
     let dir = tmp_dir("next", "a b");
     let data = dir.join("grid lead.csv");
-    json(&run(&[
-        "simulate",
-        "--plan",
-        "grid:100",
-        "--plan",
-        "line:x:1,bidir",
-        "--effect",
-        "periodic:axis=x,period_mm=10,amp_um=2",
-        "--seed",
-        "3",
-        "-o",
-        s(&data),
-        "--json",
-    ]));
+    common::simulate(
+        &[
+            "--plan",
+            "grid:100",
+            "--plan",
+            "line:x:1,bidir",
+            "--effect",
+            "periodic:axis=x,period_mm=10,amp_um=2",
+            "--seed",
+            "3",
+        ],
+        &data,
+    );
     let model = dir.join("m.json");
     json(&common::cubic19("fit", &data, &model, &[]));
     let d = json(&run(&[

@@ -45,8 +45,7 @@ fn wavy_map(noise_um: f64, seed: u64) -> String {
 #[test]
 fn a_coarse_wavy_bed_map_gets_an_upper_bound_and_what_to_reprobe() {
     let dir = tmp_dir("noise-floor", "rrf");
-    let map = dir.join("heightmap.csv");
-    std::fs::write(&map, wavy_map(1.5, 18)).unwrap();
+    let map = common::file_in(&dir, "heightmap.csv", wavy_map(1.5, 18));
     let d = json(&run(&["diagnose", s(&map), "--model", "cubic19", "--json"]));
     assert_eq!(d["noise_method"]["ez"], "sparse_differences", "{d}");
     // An upper bound of 1.5 µm of noise: not below it, and far below the

@@ -430,12 +430,7 @@ fn an_arc_with_the_probe_says_part_plus_slides_as_a_sum_that_holds_the_truth() {
         s(&probe),
         "--json",
     ]));
-    let part_form = d["findings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|f| f["source"] == "part_form")
-        .unwrap();
+    let part_form = common::find_in(&d["findings"], |f| f["source"] == "part_form");
     assert_eq!(part_form["status"], "cannot_know", "{part_form}");
     let sum = &d["combined"][0];
     assert_eq!(

@@ -97,16 +97,16 @@ fn spikes_are_reported_with_their_lines_and_left_out() {
     assert!(f["rms_um"]["ex"].as_f64().unwrap() > 1.0, "{f}");
 
     // simulate refuses an absurd share, naming the flag.
-    let bad = run(&[
+    let x = dir.join("x.csv");
+    let args = [
         "simulate",
         "--plan",
         "grid:100",
         "--spikes",
         "0.5,20",
         "-o",
-        s(&dir.join("x.csv")),
-    ]);
-    assert_eq!(bad.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&bad.stderr).contains("--spikes FRAC"));
+        s(&x),
+    ];
+    common::expect_exit(&args, 1, &["--spikes FRAC"]);
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -11,7 +11,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use common::{expect_exit, fit_cubic19, json, run, s, simulate_grid, tmp_dir};
+use common::{expect_exit, fit_cubic19, grid_cubic19, json, run, s, simulate_grid, tmp_dir};
 
 /// Runs `trueaxis ARGS` with files limited to `blocks` × 512 bytes
 /// (`ulimit -f`; SIGXFSZ ignored, so a write past it fails with EFBIG as a
@@ -41,9 +41,7 @@ fn names(dir: &Path) -> Vec<String> {
 #[test]
 fn a_write_that_fails_half_way_leaves_the_old_file_and_no_temporary() {
     let dir = tmp_dir("output-files", "cut");
-    let csv = simulate_grid(&dir, "d.csv", 3);
-    let model = dir.join("m.json");
-    fit_cubic19(&csv, &model);
+    let (csv, model, _) = grid_cubic19(&dir, "d", 3);
     let out = dir.join("out");
     std::fs::create_dir_all(&out).unwrap();
     let old = "the old content\n";
@@ -161,8 +159,7 @@ fn a_csv_cut_in_its_last_row_is_refused_with_its_line() {
         }
     }
     // Cut mid-row (cells missing): refused as before, with its line.
-    let p = dir.join("mid.csv");
-    std::fs::write(&p, &whole[..whole.len() - 12]).unwrap();
+    let p = common::file_in(&dir, "mid.csv", &whole[..whole.len() - 12]);
     expect_exit(
         &["import", s(&p)],
         1,

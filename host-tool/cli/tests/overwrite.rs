@@ -5,7 +5,7 @@
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use common::{expect_exit, fit_cubic19, s, tmp_dir};
 
@@ -19,11 +19,20 @@ fn unchanged(p: &Path, was: &str) {
     );
 }
 
+/// CSV in `DIR/d.csv` fitted with cubic19 to `DIR/m.json`: (data, model,
+/// the model file's text).
+fn fitted(dir: &Path) -> (PathBuf, PathBuf, String) {
+    let csv = common::file_in(dir, "d.csv", CSV);
+    let model = dir.join("m.json");
+    fit_cubic19(&csv, &model);
+    let text = std::fs::read_to_string(&model).unwrap();
+    (csv, model, text)
+}
+
 #[test]
 fn fit_improve_and_import_refuse_to_write_over_the_data() {
     let dir = tmp_dir("overwrite", "data");
-    let csv = dir.join("r6.csv");
-    std::fs::write(&csv, CSV).unwrap();
+    let csv = common::file_in(&dir, "r6.csv", CSV);
     let msg = format!(
         "-o {} is the data file {}: writing it would destroy the input; nothing was written — choose another output path",
         s(&csv),
@@ -57,8 +66,7 @@ fn fit_improve_and_import_refuse_to_write_over_the_data() {
     unchanged(&csv, CSV);
     // The history file fit keeps beside the model: `-o h.json` writes
     // h.history.json, which here is the data.
-    let hist = dir.join("h.history.json");
-    std::fs::write(&hist, CSV).unwrap();
+    let hist = common::file_in(&dir, "h.history.json", CSV);
     let model = dir.join("h.json");
     expect_exit(
         &["fit", s(&hist), "--model", "cubic19", "-o", s(&model)],
@@ -76,11 +84,7 @@ fn fit_improve_and_import_refuse_to_write_over_the_data() {
 #[test]
 fn export_refuses_to_write_over_the_model() {
     let dir = tmp_dir("overwrite", "export");
-    let csv = dir.join("d.csv");
-    std::fs::write(&csv, CSV).unwrap();
-    let model = dir.join("m.json");
-    fit_cubic19(&csv, &model);
-    let text = std::fs::read_to_string(&model).unwrap();
+    let (_, model, text) = fitted(&dir);
     let msg = format!("-o {} is the model file {}", s(&model), s(&model));
     expect_exit(
         &["export", s(&model), "-o", s(&model), "--json"],
@@ -107,13 +111,8 @@ fn a_damaged_history_stops_the_fit_before_anything_is_written() {
     // silently by a new one; a history that could not be written (here a
     // directory in its place) left m.json written without its step.
     let dir = tmp_dir("overwrite", "history");
-    let csv = dir.join("d.csv");
-    std::fs::write(&csv, CSV).unwrap();
-    let model = dir.join("m.json");
-    fit_cubic19(&csv, &model);
-    let text = std::fs::read_to_string(&model).unwrap();
-    let hist = dir.join("m.history.json");
-    std::fs::write(&hist, "garbage\n").unwrap();
+    let (csv, model, text) = fitted(&dir);
+    let hist = common::file_in(&dir, "m.history.json", "garbage\n");
     let want = format!(
         "the history beside {} cannot be continued; move {} away (a new history then starts) or choose another -o — nothing was written: {}: not a trueaxis history file",
         s(&model),

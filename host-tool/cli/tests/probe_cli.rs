@@ -5,7 +5,8 @@
 mod common;
 
 use common::onmachine::{
-    ball_scan_dirs, calibrate_on_4mm_ball, correct_scan, pv_line_removed, rigid_fit, without_rigid,
+    ball_scan_dirs, calibrate_on_4mm_ball, correct_scan, probe_form_3d_nm, pv_line_removed,
+    rigid_fit, without_rigid,
 };
 use common::{json, run, s, tmp_dir};
 
@@ -131,8 +132,7 @@ fn a_probe_calibrated_on_a_master_ball_corrects_a_part_scan() {
 #[test]
 fn bad_probe_input_is_refused_with_its_place() {
     let dir = tmp_dir("probe", "bad");
-    let scan = dir.join("bad.csv");
-    std::fs::write(&scan, "x_mm,z_mm\n1.0,2.0\n1.5,abc\n").unwrap();
+    let scan = common::file_in(&dir, "bad.csv", "x_mm,z_mm\n1.0,2.0\n1.5,abc\n");
     let out = run(&[
         "probe",
         "calibrate",
@@ -156,8 +156,7 @@ fn bad_probe_input_is_refused_with_its_place() {
         s(&dir.join("p.json")),
     ]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("needs `x_mm` and `z_mm`"));
-    let probe = dir.join("probe.json");
-    std::fs::write(&probe, "{\"format\": \"something else\"}").unwrap();
+    let probe = common::file_in(&dir, "probe.json", "{\"format\": \"something else\"}");
     let out = run(&[
         "probe",
         "correct",
@@ -317,8 +316,7 @@ fn a_workpiece_correction_pass_makes_the_form_fall_pass_by_pass() {
             i += 1;
         }
     }
-    let p2 = dir.join("pass2.csv");
-    std::fs::write(&p2, scan2).unwrap();
+    let p2 = common::file_in(&dir, "pass2.csv", scan2);
     let doc = json(&run(&[
         "workpiece",
         s(&p2),
@@ -331,16 +329,16 @@ fn a_workpiece_correction_pass_makes_the_form_fall_pass_by_pass() {
     let pv2 = h[1]["form_pv_um"].as_f64().unwrap();
     assert!(pv2 < 1.0 && pv2 < pv1 / 10.0, "{pv1} → {pv2}");
     // G-code without the diameter it is programmed in is refused.
-    let out = run(&[
+    let x_mpf = dir.join("x.mpf");
+    let args = [
         "workpiece",
         s(&p2),
         "--gcode",
         "siemens",
         "--gcode-out",
-        s(&dir.join("x.mpf")),
-    ]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--nominal-diameter-mm"));
+        s(&x_mpf),
+    ];
+    common::expect_exit(&args, 1, &["--nominal-diameter-mm"]);
 }
 
 #[test]
@@ -412,22 +410,8 @@ fn three_probes_give_roundness_and_name_the_lobes_they_cannot_see() {
         String::from_utf8_lossy(&out.stderr)
     );
     let doc = json(&out);
-    let unseen: Vec<u64> = doc["unseen_harmonics"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_u64().unwrap())
-        .collect();
+    let unseen = common::u64s(&doc["unseen_harmonics"]);
     assert!(unseen.contains(&3) && unseen.contains(&7), "{unseen:?}");
-}
-
-/// The probe's form as a function of its contact direction (3-D): lobes
-/// around the stylus growing toward the equator and a term in the polar
-/// angle (~170 nm PV over the upper hemisphere).
-fn probe_form_3d_nm(n: [f64; 3]) -> f64 {
-    let s = (1.0 - n[2] * n[2]).max(0.0).sqrt();
-    let az = n[1].atan2(n[0]);
-    60.0 * s.powi(3) * (3.0 * az).cos() + 40.0 * n[2] * n[2] - 25.0 * s * s * (2.0 * az).sin()
 }
 
 #[test]
@@ -446,18 +430,12 @@ fn a_probe_calibrated_in_3d_on_the_ball_corrects_a_scan_in_a_plane() {
             c[2] + d * n[2]
         ));
     }
-    let scan = dir.join("ball3d.csv");
-    std::fs::write(&scan, csv).unwrap();
+    let scan = common::file_in(&dir, "ball3d.csv", csv);
     let probe = dir.join("probe3d.json");
     let doc = calibrate_on_4mm_ball(&scan, true, &probe, &[]);
     let pr = &doc["probe"];
     assert_eq!(pr["format"], "trueaxis-probe3d/1", "{doc}");
-    let centre: Vec<f64> = pr["centre_mm"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let centre = common::f64s(&pr["centre_mm"]);
     for (a, b) in centre.iter().zip(c) {
         assert!((a - b).abs() < 1e-4, "centre {centre:?}");
     }
@@ -523,8 +501,11 @@ fn a_probe_calibrated_in_3d_on_the_ball_corrects_a_scan_in_a_plane() {
     // against the true 221.0 nm.)
     // A damaged 3-D probe file is refused with its name.
     let text = std::fs::read_to_string(&probe).unwrap();
-    let bad = dir.join("bad3d.json");
-    std::fs::write(&bad, text.replace("\"degree\": ", "\"degree\": 1")).unwrap();
+    let bad = common::file_in(
+        &dir,
+        "bad3d.json",
+        text.replace("\"degree\": ", "\"degree\": 1"),
+    );
     let o = run(&[
         "probe",
         "correct",
@@ -536,10 +517,7 @@ fn a_probe_calibrated_in_3d_on_the_ball_corrects_a_scan_in_a_plane() {
     ]);
     assert!(!o.status.success());
     let e = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        e.contains("bad3d.json") && e.contains("not a valid probe file"),
-        "{e}"
-    );
+    common::assert_has(&e, &["bad3d.json", "not a valid probe file"]);
 }
 
 #[test]
@@ -579,10 +557,7 @@ fn multi_step_separates_roundness_and_names_what_the_steps_cannot() {
     assert_eq!(doc["inseparable_harmonics"][0], 4, "{doc}");
     assert_eq!(doc["inseparable_harmonics"][1], 8, "{doc}");
     let e = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        e.contains("harmonics 4, 8, 12") && e.contains("5 steps"),
-        "{e}"
-    );
+    common::assert_has(&e, &["harmonics 4, 8, 12", "5 steps"]);
     // Point by point: the part and the spindle without the 8th harmonic (a
     // multiple of the 4 steps), which is given as their sum.
     let check = |outp: &std::path::Path, insep8: bool, tol: f64| {
@@ -617,12 +592,7 @@ fn multi_step_separates_roundness_and_names_what_the_steps_cannot() {
         s(&outu),
         "--json",
     ]));
-    let ins: Vec<u64> = doc["inseparable_harmonics"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_u64().unwrap())
-        .collect();
+    let ins = common::u64s(&doc["inseparable_harmonics"]);
     assert!(ins.iter().all(|&k| k > 20), "{ins:?}");
     check(&outu, false, 0.02);
 }

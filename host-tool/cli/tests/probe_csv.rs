@@ -144,8 +144,7 @@ fn without_paths(mut v: Value) -> Value {
 fn the_campaign_as_one_measurement_csv_gives_the_same_results_as_its_files() {
     let dir = tmp_dir("probe_csv", "same");
     let (camp, _) = on_machine_campaign(&dir);
-    let one = dir.join("campaign.csv");
-    std::fs::write(&one, one_csv(&camp)).unwrap();
+    let one = common::file_in(&dir, "campaign.csv", one_csv(&camp));
     let f = |n: &str| camp.join(n);
     let o = |n: &str| dir.join(n);
     let o1 = s(&one);
@@ -314,8 +313,7 @@ fn a_bad_probe_value_is_placed_and_a_session_must_be_named() {
     let dir = tmp_dir("probe_csv", "bad");
     let (camp, _) = on_machine_campaign(&dir);
     let text = one_csv(&camp);
-    let one = dir.join("campaign.csv");
-    std::fs::write(&one, &text).unwrap();
+    let one = common::file_in(&dir, "campaign.csv", &text);
     // Several sessions and none named: which one is asked.
     expect_exit(
         &[
@@ -333,8 +331,7 @@ fn a_bad_probe_value_is_placed_and_a_session_must_be_named() {
     let k = lines.iter().position(|l| l.starts_with("4,")).unwrap();
     let mut bad: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
     bad[k] = bad[k].replace(",0,,", ",90,,");
-    let badf = dir.join("bad.csv");
-    std::fs::write(&badf, bad.join("\n") + "\n").unwrap();
+    let badf = common::file_in(&dir, "bad.csv", bad.join("\n") + "\n");
     expect_exit(
         &[
             "separate",
@@ -359,8 +356,7 @@ fn a_bad_probe_value_is_placed_and_a_session_must_be_named() {
         cell.clear();
     }
     part[k] = c.join(",");
-    let partf = dir.join("normals.csv");
-    std::fs::write(&partf, part.join("\n") + "\n").unwrap();
+    let partf = common::file_in(&dir, "normals.csv", part.join("\n") + "\n");
     calibrate_on_4mm_ball(&camp.join("ball.csv"), false, &dir.join("p.json"), &[]);
     expect_exit(
         &[

@@ -7,11 +7,10 @@
 
 mod common;
 
-use common::{json, run, tmp_dir};
-use trueaxis_engine::import;
+use common::{json, run, s, tmp_dir};
 use trueaxis_engine::model::rigid21::{ErrorKind, Status};
 use trueaxis_engine::model::{FittedModel, ModelFile};
-use trueaxis_engine::simulate::instruments::{laser_lines, measure};
+use trueaxis_engine::simulate::instruments::laser_lines;
 use trueaxis_engine::simulate::Machine;
 
 /// The simulator's laser lines at tool 0 and 150 mm (seed 11) fitted with
@@ -20,19 +19,7 @@ use trueaxis_engine::simulate::Machine;
 fn fit_lines(name: &str) -> (std::path::PathBuf, std::process::Output) {
     let dir = tmp_dir("rigid21", name);
     let m = Machine::preset("mill800-21").unwrap();
-    let data = measure(&m, &laser_lines(m.travel_mm, &[0.0, 150.0]), 11, true);
-    let csv = dir.join("lines.csv");
-    import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
-    let model = dir.join("lines.model.json");
-    let out = run(&[
-        "fit",
-        csv.to_str().unwrap(),
-        "--model",
-        "rigid21",
-        "-o",
-        model.to_str().unwrap(),
-        "--json",
-    ]);
+    let (_, model, out) = lines_fit(&dir, &m, "rigid21", &["--json"]);
     (model, out)
 }
 
@@ -56,10 +43,7 @@ fn laser_lines_fit_says_what_it_cannot_know() {
     assert!(doc["hidden_um"].as_f64().unwrap() > 4.0);
     assert!(doc["measure"]["what"].as_str().is_some(), "{doc}");
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        stderr.contains("cannot know") && stderr.contains("A0T"),
-        "{stderr}"
-    );
+    common::assert_has(&stderr, &["cannot know", "A0T"]);
     let file = ModelFile::load(&model).unwrap();
     let FittedModel::Rigid21(r) = &file.model else {
         panic!("kind {}", file.model.kind())
@@ -71,13 +55,21 @@ fn laser_lines_fit_says_what_it_cannot_know() {
 /// written as `DIR/lines.csv` and fitted with `--model spec` to
 /// `DIR/lines.model.json`: (csv, model).
 fn lines_fitted(dir: &std::path::Path, m: &Machine, spec: &str) -> (String, String) {
-    let data = measure(m, &laser_lines(m.travel_mm, &[0.0, 150.0]), 11, true);
-    let csv = dir.join("lines.csv");
-    import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
-    let model = dir.join("lines.model.json");
-    let (csv, model) = (csv.display().to_string(), model.display().to_string());
-    common::assert_success(&run(&["fit", &csv, "--model", spec, "-o", &model]));
-    (csv, model)
+    let (csv, model, out) = lines_fit(dir, m, spec, &[]);
+    common::assert_success(&out);
+    (csv.display().to_string(), model.display().to_string())
+}
+
+/// [`common::measured_fit`] of laser lines at tool 0 and 150 mm (seed 11)
+/// as `DIR/lines.csv`.
+fn lines_fit(
+    dir: &std::path::Path,
+    m: &Machine,
+    spec: &str,
+    extra: &[&str],
+) -> (std::path::PathBuf, std::path::PathBuf, std::process::Output) {
+    let plan = laser_lines(m.travel_mm, &[0.0, 150.0]);
+    common::measured_fit(dir, "lines", m, &plan, 11, spec, extra)
 }
 
 /// `compare --report` on a rigid21 model: the card speaks in errors (the
@@ -97,7 +89,7 @@ fn compare_report_of_a_rigid21_model_speaks_in_errors() {
         "--model",
         &model,
         "--report",
-        report.to_str().unwrap(),
+        s(&report),
         "--json",
     ]));
     let html = std::fs::read_to_string(report.join("index.html")).unwrap();
@@ -111,10 +103,7 @@ fn compare_report_of_a_rigid21_model_speaks_in_errors() {
         card_text.contains("volumetric error falls from"),
         "{card_text}"
     );
-    assert!(
-        card_text.contains("Cannot know: ") && card_text.contains("A0T"),
-        "{card_text}"
-    );
+    common::assert_has(card_text, &["Cannot know: ", "A0T"]);
     assert!(card_text.contains("would tell the most"), "{card_text}");
     // Eighteen functions, one figure each, before the compare sections.
     for name in [
@@ -150,7 +139,7 @@ fn compare_report_of_a_rigid21_model_speaks_in_errors() {
     }
     // Squarenesses and tilts as a table with ±; the tilt without a value.
     let table = &html[html.find("Squarenesses and tilts").unwrap()..];
-    assert!(table.contains("C0Y") && table.contains(" ± "), "{table}");
+    common::assert_has(table, &["C0Y", " ± "]);
     let a0t = &table[table.find("A0T").unwrap()..];
     assert!(a0t[..a0t.find("</tr>").unwrap()].contains("cannot know"));
 }
@@ -202,7 +191,7 @@ fn diagnose_names_the_missing_error_function() {
             "--model",
             "rigid21:2",
             "--report",
-            dir.join("r").to_str().unwrap(),
+            s(&dir.join("r")),
         ],
         1,
         &["--report is not supported yet", "compare"],
@@ -244,13 +233,7 @@ fn a_fitted_rigid21_model_exports_as_a_table() {
     let (model, fit) = fit_lines("export");
     assert!(fit.status.success(), "{fit:?}");
     let table = model.with_file_name("t.bin");
-    let out = run(&[
-        "export",
-        model.to_str().unwrap(),
-        "-o",
-        table.to_str().unwrap(),
-        "--json",
-    ]);
+    let out = run(&["export", s(&model), "-o", s(&table), "--json"]);
     assert!(out.status.success(), "{out:?}");
     let doc = json(&out);
     assert_eq!(doc["format"], "table");

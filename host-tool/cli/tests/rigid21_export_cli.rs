@@ -7,30 +7,19 @@
 
 mod common;
 
-use common::{expect_exit, export, export_args, run, s, tmp_dir};
+use common::{expect_exit, export, export_args, run, tmp_dir};
 use std::path::{Path, PathBuf};
-use trueaxis_engine::import;
 use trueaxis_engine::model::rigid21::{ErrorKind, Rigid21Model, ToolPoint};
 use trueaxis_engine::model::{FittedModel, ModelFile};
-use trueaxis_engine::simulate::instruments::{laser_lines, measure, Instrument};
+use trueaxis_engine::simulate::instruments::{laser_lines, Instrument};
 use trueaxis_engine::simulate::Machine;
 
 /// `mill800-21` measured with `plan` (seed 7), written to `DIR/NAME.csv`
 /// and fitted with `fit --model rigid21`: the model's path.
 fn fitted(dir: &Path, name: &str, plan: &[Instrument]) -> PathBuf {
     let m = Machine::preset("mill800-21").unwrap();
-    let data = measure(&m, plan, 7, true);
-    let csv = dir.join(format!("{name}.csv"));
-    import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
-    let model = dir.join(format!("{name}.model.json"));
-    common::assert_success(&run(&[
-        "fit",
-        s(&csv),
-        "--model",
-        "rigid21",
-        "-o",
-        s(&model),
-    ]));
+    let (_, model, out) = common::measured_fit(dir, name, &m, plan, 7, "rigid21", &[]);
+    common::assert_success(&out);
     model
 }
 
@@ -108,11 +97,8 @@ fn skew_files_of_a_fitted_model_remove_its_squareness_and_say_what_they_leave_ou
     let m = rigid21(&model);
     // Klipper: the profile's factors.
     let cfg = dir.join("skew.cfg");
-    let doc = export(
-        &model,
-        &["--format", "klipper-skew", "--tool-mm", "150"],
-        &cfg,
-    );
+    let klipper = ["--format", "klipper-skew", "--tool-mm", "150"];
+    let doc = export(&model, &klipper, &cfg);
     assert_eq!(doc["format"], "klipper-skew");
     let body = std::fs::read_to_string(&cfg).unwrap();
     let f = ["xy_skew =", "xz_skew =", "yz_skew ="].map(|k| {

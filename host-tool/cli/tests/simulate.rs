@@ -10,7 +10,7 @@ mod common;
 
 use std::path::PathBuf;
 
-use common::{assert_success, json, run};
+use common::{assert_success, json, run, s};
 
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::import;
@@ -61,7 +61,7 @@ fn same_seed_same_bytes_other_seed_other_bytes() {
             "--seed",
             seed,
             "-o",
-            out.to_str().unwrap(),
+            s(out),
         ]);
         assert_success(&o);
         std::fs::read(out).unwrap()
@@ -144,13 +144,15 @@ fn squareness_only_gives_minus_angle_times_position() {
     );
 }
 
+/// `perfect` runs of an x line (4 runs, every 50 mm) under the thermal
+/// `effect`, simulated.
+fn warming_line(effect: &str) -> trueaxis_engine::data::Dataset {
+    simulate::simulate(&perfect(&["line:x:50,runs=4"], &[effect]))
+}
+
 #[test]
 fn thermal_growth_is_cte_times_delta_t_times_position() {
-    let cfg = perfect(
-        &["line:x:50,runs=4"],
-        &["thermal:channel=bed,cte_um_per_m_k=11.5,start_c=20,rise_c=3,tau_s=120"],
-    );
-    let d = simulate::simulate(&cfg);
+    let d = warming_line("thermal:channel=bed,cte_um_per_m_k=11.5,start_c=20,rise_c=3,tau_s=120");
     let temp = &d.temp("bed").expect("T_bed_C column").temp_c;
     assert!(
         temp[0] < 20.1 && *temp.last().unwrap() > 22.0,
@@ -167,11 +169,7 @@ fn thermal_growth_is_cte_times_delta_t_times_position() {
 
 #[test]
 fn thermal_lag_follows_features_lagged() {
-    let cfg = perfect(
-        &["line:x:50,runs=4"],
-        &["thermal:channel=bed,rise_c=3,tau_s=600,lag_s=900"],
-    );
-    let d = simulate::simulate(&cfg);
+    let d = warming_line("thermal:channel=bed,rise_c=3,tau_s=600,lag_s=900");
     let temp = &d.temp("bed").unwrap().temp_c;
     let lagged = trueaxis_engine::features::lagged(temp, d.t_s.as_ref().unwrap(), None, 900.0);
     let ex = col(&d, 0);
@@ -295,7 +293,7 @@ fn cli_json_shape_and_bad_specs() {
         "--seed",
         "3",
         "-o",
-        out_csv.to_str().unwrap(),
+        s(&out_csv),
         "--json",
     ]);
     let v = json(&o);
@@ -325,27 +323,15 @@ fn cli_json_shape_and_bad_specs() {
         "--effect",
         "periodic:axis=w,period_mm=5,amp_um=1",
         "-o",
-        out_csv.to_str().unwrap(),
+        s(&out_csv),
     ]);
     assert_eq!(bad.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("`axis=w`: expected x, y or z"));
-    let bad = run(&[
-        "simulate",
-        "--plan",
-        "line:y:1,x=900",
-        "-o",
-        out_csv.to_str().unwrap(),
-    ]);
+    let bad = run(&["simulate", "--plan", "line:y:1,x=900", "-o", s(&out_csv)]);
     assert_eq!(bad.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("outside the travel"));
     // A 1 mm grid of the preset would be 2·10⁸ rows: refused, not attempted.
-    let bad = run(&[
-        "simulate",
-        "--plan",
-        "grid:1",
-        "-o",
-        out_csv.to_str().unwrap(),
-    ]);
+    let bad = run(&["simulate", "--plan", "grid:1", "-o", s(&out_csv)]);
     assert_eq!(bad.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("coarser step"));
 }

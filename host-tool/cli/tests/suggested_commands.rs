@@ -16,6 +16,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use common::{page_next, pages_under, paste, tmp_dir};
+use trueaxis_test_support::assert_any;
 
 const BIN: &str = env!("CARGO_BIN_EXE_trueaxis");
 const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data");
@@ -219,13 +220,9 @@ fn iso_runs_beds_and_imports_suggest_commands_that_run() {
     }
     log.pages(&w, &w);
     // The bed is fitted with a grid, not the machine-tool polynomial.
-    assert!(
-        log.ran
-            .iter()
-            .any(|c| c.starts_with("trueaxis fit bed_heightmap.csv.csv --model grid:")),
-        "{:#?}",
-        log.ran
-    );
+    assert_any(&log.ran, |c| {
+        c.starts_with("trueaxis fit bed_heightmap.csv.csv --model grid:")
+    });
     assert_all_ran(&log, 7);
 }
 

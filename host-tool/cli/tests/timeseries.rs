@@ -14,16 +14,7 @@ use common::{json, run, s, tmp_dir};
 fn a_thermal_test_at_one_point_is_fitted_and_its_temperature_named() {
     let dir = tmp_dir("timeseries", "spindle");
     let csv = dir.join("spindle.csv");
-    let sim = json(&run(&[
-        "simulate",
-        "--scenario",
-        "spindle-thermal",
-        "--seed",
-        "1",
-        "-o",
-        s(&csv),
-        "--json",
-    ]));
+    let sim = common::simulate(&["--scenario", "spindle-thermal", "--seed", "1"], &csv);
     assert_eq!(sim["rows"], 2881);
     // fit: a constant per target, said in a warning (it used to stop with
     // "every measured point lies at one position").
@@ -39,15 +30,7 @@ fn a_thermal_test_at_one_point_is_fitted_and_its_temperature_named() {
     // diagnose: held-out RMS finite everywhere; the growth of ez is a
     // spindle temperature's, and no drift is significant.
     let report = dir.join("report");
-    let d = json(&run(&[
-        "diagnose",
-        s(&csv),
-        "--model",
-        "cubic19",
-        "--report",
-        s(&report),
-        "--json",
-    ]));
+    let d = common::diagnose_report(&csv, "cubic19", &report);
     // The multi-sensor component is drawn against time.
     let svg = std::fs::read_to_string(report.join("component_ez_1.svg")).unwrap();
     assert!(svg.contains("t_s (s)"));
@@ -105,11 +88,9 @@ fn in_model_span_is_one_line_in_text_and_every_one_in_json_and_verbose() {
     let dir = tmp_dir("timeseries", "in_span");
     let csv = common::simulate_grid(&dir, "g.csv", 3);
     let j = json(&run(&["diagnose", s(&csv), "--model", "cubic19", "--json"]));
-    let n = j["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|w| w["code"] == "in_model_span")
+    let n = common::warning_codes(&j)
+        .into_iter()
+        .filter(|&c| c == "in_model_span")
         .count();
     assert!(n >= 2, "{n}");
     let lines = |args: &[&str]| {
@@ -216,8 +197,7 @@ fn with_a_fake_travel_improve_still_picks_the_temperatures_not_drift() {
             format!("{},{rest}", 400 + ((row - 1) % 5) * 10)
         })
         .collect();
-    let fake = dir.join("fake.csv");
-    std::fs::write(&fake, text.join("\n") + "\n").unwrap();
+    let fake = common::file_in(&dir, "fake.csv", text.join("\n") + "\n");
     let imp = json(&common::cubic19("improve", &fake, &dir.join("m.json"), &[]));
     let model = imp["model"].as_str().unwrap();
     assert!(

@@ -35,9 +35,7 @@ fn grid_in_mm(dir: &std::path::Path) -> std::path::PathBuf {
         }
         out.push('\n');
     }
-    let mm = dir.join("grid_mm.csv");
-    std::fs::write(&mm, out).unwrap();
-    mm
+    common::file_in(dir, "grid_mm.csv", out)
 }
 
 #[test]
@@ -47,25 +45,15 @@ fn errors_in_mm_are_warned_and_their_table_refused_unless_told() {
     let model = dir.join("m.json");
     let fit = common::cubic19("fit", &mm, &model, &[]);
     let err = String::from_utf8_lossy(&fit.stderr).into_owned();
-    assert!(
-        err.contains("units_suspect") && err.contains("multiply them by 1000"),
-        "{err}"
-    );
+    common::assert_has(&err, &["units_suspect", "multiply them by 1000"]);
     let doc = json(&fit);
     assert!(
         doc["warnings"].to_string().contains("units_suspect"),
         "{doc}"
     );
     let d = json(&run(&["diagnose", s(&mm), "--model", s(&model), "--json"]));
-    assert!(
-        d["warnings"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .any(|w| w["code"] == "units_suspect"),
-        "{}",
-        d["warnings"]
-    );
+    let suspect = common::find_warning(&d, "units_suspect");
+    assert!(suspect.is_some(), "{}", d["warnings"]);
     let table = dir.join("t.bin");
     let out = run(&["export", s(&model), "-o", s(&table)]);
     assert_eq!(out.status.code(), Some(1));

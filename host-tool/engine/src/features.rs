@@ -68,6 +68,16 @@ pub enum Phase {
     Cos,
 }
 
+impl Phase {
+    /// `sin` or `cos`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Phase::Sin => "sin",
+            Phase::Cos => "cos",
+        }
+    }
+}
+
 /// One column of a design matrix. `exp` is the monomial u_x^a·u_y^b·u_z^c
 /// in normalised coordinates ([0, 0, 0] is the constant 1).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -163,13 +173,12 @@ impl fmt::Display for Feature {
                 period_mm,
                 harmonic,
                 phase,
-            } => {
-                let fun = match phase {
-                    Phase::Sin => "sin",
-                    Phase::Cos => "cos",
-                };
-                write!(f, "{fun}(2π·{harmonic}·{}/{period_mm}mm)", AXES[*axis])
-            }
+            } => write!(
+                f,
+                "{}(2π·{harmonic}·{}/{period_mm}mm)",
+                phase.name(),
+                AXES[*axis]
+            ),
             Feature::Thermal {
                 channel,
                 lag_s,

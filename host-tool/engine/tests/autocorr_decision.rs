@@ -126,12 +126,7 @@ fn a_real_thermal_effect_keeps_its_steps() {
         assert!(e < -10.0 && e >= s.delta_bic, "{s:?}");
         assert!(ne > 0.0 && ne <= sim.data.len() as f64, "{s:?}");
     }
-    let json = serde_json::to_value(&d).unwrap();
-    let step = json["path"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|s| s["target"] == "ez")
-        .unwrap();
+    let ez = d.path.iter().find(|s| s.target == "ez").unwrap();
+    let step = serde_json::to_value(ez).unwrap();
     assert!(step["effective_n"].is_number() && step["delta_bic_effective"].is_number());
 }

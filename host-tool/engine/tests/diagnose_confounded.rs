@@ -12,6 +12,9 @@
 //! the run, a temperature × x would go with tool length × x as well (a third
 //! member of the same confound, which the `confounded` warning covers).
 
+mod common;
+
+use common::path_adds;
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::diagnose::{diagnose, Diagnosis, Options, Verdict};
 use trueaxis_engine::model::Seed;
@@ -64,12 +67,7 @@ fn an_independent_effect_is_found_past_a_confounded_pair() {
         &Options::seed(Seed::Cubic19),
     )
     .expect("diagnose runs");
-    let steps: Vec<&str> = d
-        .path
-        .iter()
-        .filter(|s| s.target == "ex")
-        .map(|s| s.add.as_str())
-        .collect();
+    let steps = path_adds(&d, "ex");
     // The independent effect is added; neither member of the pair is.
     assert_eq!(steps, ["abbe:target=ex,times=x"], "{:#?}", d.path);
     let c = d

@@ -9,6 +9,9 @@
 //! says smooth error is left above the noise floor, and `smooth_misfit`
 //! says why.
 
+mod common;
+
+use common::warning_details;
 use trueaxis_engine::diagnose::{diagnose, Options, Verdict};
 use trueaxis_engine::model::Seed;
 use trueaxis_engine::simulate::synth::{generate, SynthConfig};
@@ -32,11 +35,6 @@ fn a_smooth_misfit_is_not_named_as_a_physical_effect() {
     assert!(d.path.is_empty(), "{:#?}", d.path);
     // The misfit is still reported: above the floor, as smooth error.
     assert_eq!(d.verdict, Verdict::AboveNoiseFloor);
-    let smooth: Vec<&str> = d
-        .warnings
-        .iter()
-        .filter(|w| w.code == "smooth_misfit")
-        .map(|w| w.detail.as_str())
-        .collect();
+    let smooth = warning_details(&d, "smooth_misfit");
     assert!(smooth.iter().any(|w| w.contains("times=y")), "{smooth:#?}");
 }

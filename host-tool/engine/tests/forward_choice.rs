@@ -6,17 +6,16 @@
 //! effect named is the temperature (main named `drift:order=3` first).
 //! Fixed seeds.
 
+mod common;
+
+use common::path_adds;
 use trueaxis_engine::data::subset;
 use trueaxis_engine::diagnose::{diagnose, Options};
 use trueaxis_engine::model::Seed;
 use trueaxis_engine::simulate::thermal_test::{spindle_thermal, spindle_warmup};
 
 fn ez_path(d: &trueaxis_engine::diagnose::Diagnosis) -> Vec<&str> {
-    d.path
-        .iter()
-        .filter(|s| s.target == "ez")
-        .map(|s| s.add.as_str())
-        .collect()
+    path_adds(d, "ez")
 }
 
 #[test]

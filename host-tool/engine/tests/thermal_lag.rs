@@ -10,6 +10,9 @@
 //! And a lag at the edge of the searched grid is searched further out, or
 //! said to be unidentified when the test is shorter than it.
 
+mod common;
+
+use common::{path_adds, warning_details};
 use trueaxis_engine::data::Dataset;
 use trueaxis_engine::diagnose::{diagnose, Options};
 use trueaxis_engine::model::Seed;
@@ -134,18 +137,8 @@ fn a_multi_sensor_lag_at_the_grid_edge_is_said_unidentified() {
         3,
     );
     let d = diagnose(&data, &Options::seed(Seed::Cubic19)).unwrap();
-    let path: Vec<&str> = d
-        .path
-        .iter()
-        .filter(|s| s.target == "ez")
-        .map(|s| s.add.as_str())
-        .collect();
-    let w: Vec<&str> = d
-        .warnings
-        .iter()
-        .filter(|w| w.code == "lags_unidentified")
-        .map(|w| w.detail.as_str())
-        .collect();
+    let path = path_adds(&d, "ez");
+    let w = warning_details(&d, "lags_unidentified");
     eprintln!("path {path:?}\nwarnings {w:?}");
     let multi = path
         .iter()

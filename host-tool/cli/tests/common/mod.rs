@@ -13,6 +13,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use serde_json::Value;
+use trueaxis_engine::import;
+use trueaxis_engine::simulate::instruments::{measure, Instrument};
+use trueaxis_engine::simulate::Machine;
 
 /// A fresh directory `trueaxis-<suite>-<pid>-<name>` under the temp dir.
 pub fn tmp_dir(suite: &str, name: &str) -> PathBuf {
@@ -56,22 +59,44 @@ pub fn json(out: &Output) -> Value {
     serde_json::from_slice(&out.stdout).expect("exactly one JSON document on stdout")
 }
 
+/// A JSON array of strings, each as `&str` (panics on anything else).
+pub fn strs(v: &Value) -> Vec<&str> {
+    array_of(v, Value::as_str)
+}
+
+/// A JSON array of numbers, each as `f64` (panics on anything else).
+pub fn f64s(v: &Value) -> Vec<f64> {
+    array_of(v, Value::as_f64)
+}
+
+/// A JSON array of whole numbers, each as `u64` (panics on anything else).
+pub fn u64s(v: &Value) -> Vec<u64> {
+    array_of(v, Value::as_u64)
+}
+
+fn array_of<'a, T>(v: &'a Value, each: impl Fn(&'a Value) -> Option<T>) -> Vec<T> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| each(x).unwrap())
+        .collect()
+}
+
+/// `trueaxis simulate ARGS… -o OUT --json`; returns its JSON.
+pub fn simulate(args: &[&str], out: &Path) -> Value {
+    let mut a = vec!["simulate"];
+    a.extend_from_slice(args);
+    a.extend_from_slice(&["-o", s(out), "--json"]);
+    json(&run(&a))
+}
+
 /// `trueaxis simulate --plan grid:100 --seed SEED -o DIR/NAME --json`: the
 /// preset mill on a 100 mm grid (9 × 6 × 6 = 324 points, ex ey ez),
 /// σ = 0.2 µm noise. Returns the CSV's path.
 pub fn simulate_grid(dir: &Path, name: &str, seed: u64) -> PathBuf {
     let csv = dir.join(name);
     let seed = seed.to_string();
-    json(&run(&[
-        "simulate",
-        "--plan",
-        "grid:100",
-        "--seed",
-        &seed,
-        "-o",
-        s(&csv),
-        "--json",
-    ]));
+    simulate(&["--plan", "grid:100", "--seed", &seed], &csv);
     csv
 }
 
@@ -205,6 +230,13 @@ pub fn export(model: &Path, args: &[&str], out: &Path) -> Value {
     json(&run(&a))
 }
 
+/// `trueaxis diagnose CSV --model MODEL --report DIR --json`; returns its
+/// JSON.
+pub fn diagnose_report(csv: &Path, model: &str, report: &Path) -> Value {
+    let args = ["diagnose", s(csv), "--model", model, "--report", s(report)];
+    json(&run(&[&args[..], &["--json"]].concat()))
+}
+
 /// `trueaxis compare CSV --model MODEL --json`; returns its JSON.
 pub fn compare(csv: &Path, model: &Path) -> Value {
     json(&run(&["compare", s(csv), "--model", s(model), "--json"]))
@@ -218,6 +250,56 @@ pub fn warning_codes(v: &Value) -> Vec<&str> {
         .iter()
         .filter_map(|w| w["code"].as_str())
         .collect()
+}
+
+/// `machine` measured with `plan` (random stream SEED, with noise), written
+/// to `DIR/NAME.csv`, then `trueaxis fit DIR/NAME.csv --model SPEC -o
+/// DIR/NAME.model.json EXTRA…`: (data, model, the fit's run).
+pub fn measured_fit(
+    dir: &Path,
+    name: &str,
+    machine: &Machine,
+    plan: &[Instrument],
+    seed: u64,
+    spec: &str,
+    extra: &[&str],
+) -> (PathBuf, PathBuf, Output) {
+    let data = measure(machine, plan, seed, true);
+    let csv = dir.join(format!("{name}.csv"));
+    import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();
+    let model = dir.join(format!("{name}.model.json"));
+    let mut args = vec!["fit", s(&csv), "--model", spec, "-o", s(&model)];
+    args.extend_from_slice(extra);
+    let out = run(&args);
+    (csv, model, out)
+}
+
+/// Writes `text` to `DIR/NAME`; returns its path.
+pub fn file_in(dir: &Path, name: &str, text: impl AsRef<[u8]>) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// The first line of `text` that passes `test`; panics, showing `text`,
+/// when none does.
+#[track_caller]
+pub fn line_where(text: &str, test: impl Fn(&str) -> bool) -> &str {
+    let found = text.lines().find(|l| test(l));
+    found.unwrap_or_else(|| panic!("no such line in\n{text}"))
+}
+
+/// Asserts that `text` contains every one of `needles`, showing it if not.
+#[track_caller]
+pub fn assert_has(text: &str, needles: &[&str]) {
+    assert!(needles.iter().all(|n| text.contains(n)), "{text}");
+}
+
+/// The first element of the JSON array `v` that passes `test`; panics,
+/// showing `v`, when none does.
+pub fn find_in(v: &Value, test: impl Fn(&Value) -> bool) -> &Value {
+    let found = v.as_array().unwrap().iter().find(|e| test(e));
+    found.unwrap_or_else(|| panic!("none found in {v}"))
 }
 
 /// The first of a JSON document's `warnings` with `code`, if any.
@@ -271,16 +353,7 @@ pub fn golden(name: &str, actual: &[u8]) {
 /// and the hidden answers (`truth.json`'s content).
 pub fn on_machine_campaign(dir: &Path) -> (PathBuf, Value) {
     let camp = dir.join("camp");
-    let doc = json(&run(&[
-        "simulate",
-        "--scenario",
-        "on-machine",
-        "--seed",
-        "7",
-        "-o",
-        s(&camp),
-        "--json",
-    ]));
+    let doc = simulate(&["--scenario", "on-machine", "--seed", "7"], &camp);
     (camp, doc["truth"].clone())
 }
 

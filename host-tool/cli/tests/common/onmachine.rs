@@ -127,3 +127,12 @@ pub fn ball_scan_dirs() -> Vec<[f64; 3]> {
     }
     dirs
 }
+
+/// The probe's form as a function of its contact direction (3-D): lobes
+/// around the stylus growing toward the equator and a term in the polar
+/// angle (~170 nm PV over the upper hemisphere).
+pub fn probe_form_3d_nm(n: [f64; 3]) -> f64 {
+    let s = (1.0 - n[2] * n[2]).max(0.0).sqrt();
+    let az = n[1].atan2(n[0]);
+    60.0 * s.powi(3) * (3.0 * az).cos() + 40.0 * n[2] * n[2] - 25.0 * s * s * (2.0 * az).sin()
+}

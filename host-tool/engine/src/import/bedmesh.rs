@@ -70,52 +70,39 @@ impl Grid {
     }
 }
 
-fn parse_num(
+/// The cell `s` (trimmed) as `read` reads it, or the error at
+/// FILE:LINE:COLUMN "WHAT: expected …, found `S`", with what `read` says it
+/// expected.
+fn parse_cell<T>(
     file: &str,
-    line: usize,
-    column: usize,
+    (line, column): (usize, usize),
     what: &str,
     s: &str,
-) -> Result<f64, ImportError> {
+    read: fn(&str) -> Result<T, &'static str>,
+) -> Result<T, ImportError> {
     let s = s.trim();
+    read(s).map_err(|expected| {
+        let msg = format!("{what}: expected {expected}, found `{}`", shown(s));
+        ImportError::at(file, line, Some(column), msg)
+    })
+}
+
+/// A finite number.
+fn read_num(s: &str) -> Result<f64, &'static str> {
     match s.parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v),
-        Ok(_) => Err(ImportError::at(
-            file,
-            line,
-            Some(column),
-            format!("{what}: expected a finite number, found `{}`", shown(s)),
-        )),
-        Err(_) => Err(ImportError::at(
-            file,
-            line,
-            Some(column),
-            format!("{what}: expected a number, found `{}`", shown(s)),
-        )),
+        Ok(_) => Err("a finite number"),
+        Err(_) => Err("a number"),
     }
 }
 
-fn parse_count(
-    file: &str,
-    line: usize,
-    column: usize,
-    what: &str,
-    s: &str,
-) -> Result<usize, ImportError> {
-    let s = s.trim();
-    // RepRapFirmware writes counts as integers; accept `8.0` too, refuse
-    // fractions and anything below 2 (a map needs two nodes per axis).
+/// A node count. RepRapFirmware writes counts as integers; accept `8.0`
+/// too, refuse fractions and anything below 2 (a map needs two nodes per
+/// axis).
+fn read_count(s: &str) -> Result<usize, &'static str> {
     match s.parse::<f64>() {
         Ok(v) if v.fract() == 0.0 && (2.0..=10_000.0).contains(&v) => Ok(v as usize),
-        _ => Err(ImportError::at(
-            file,
-            line,
-            Some(column),
-            format!(
-                "{what}: expected a whole number of nodes from 2 to 10000, found `{}`",
-                shown(s)
-            ),
-        )),
+        _ => Err("a whole number of nodes from 2 to 10000"),
     }
 }
 
@@ -258,11 +245,11 @@ pub fn read_rrf_heightmap(text: &str, name: &str) -> Result<Dataset, ImportError
     };
     let num = |key: &str| -> Result<f64, ImportError> {
         let (c, s) = get(key)?;
-        parse_num(name, values_ln, c, &format!("`{key}`"), s)
+        parse_cell(name, (values_ln, c), &format!("`{key}`"), s, read_num)
     };
     let count = |key: &str| -> Result<usize, ImportError> {
         let (c, s) = get(key)?;
-        parse_count(name, values_ln, c, &format!("`{key}`"), s)
+        parse_cell(name, (values_ln, c), &format!("`{key}`"), s, read_count)
     };
     let mut metadata = vec![(
         "format".to_string(),
@@ -373,7 +360,7 @@ pub fn read_rrf_heightmap(text: &str, name: &str) -> Result<Dataset, ImportError
             let height_mm = if c == "0" {
                 None
             } else {
-                Some(parse_num(name, ln, xi + 1, "height", c)?)
+                Some(parse_cell(name, (ln, xi + 1), "height", c, read_num)?)
             };
             nodes.push(Node {
                 line: ln,
@@ -517,11 +504,11 @@ pub fn read_klipper_mesh(
     };
     let num = |key: &str| -> Result<f64, ImportError> {
         let (ln, v) = get(key)?;
-        parse_num(name, ln, 1, &format!("`{key}`"), v)
+        parse_cell(name, (ln, 1), &format!("`{key}`"), v, read_num)
     };
     let count = |key: &str| -> Result<usize, ImportError> {
         let (ln, v) = get(key)?;
-        parse_count(name, ln, 1, &format!("`{key}`"), v)
+        parse_cell(name, (ln, 1), &format!("`{key}`"), v, read_count)
     };
     let count = [count("x_count")?, count("y_count")?];
     let (min, max) = (
@@ -574,7 +561,7 @@ pub fn read_klipper_mesh(
             ));
         }
         for (xi, c) in cells.into_iter().enumerate() {
-            let h = parse_num(name, ln, xi + 1, "point", c)?;
+            let h = parse_cell(name, (ln, xi + 1), "point", c, read_num)?;
             nodes.push(Node {
                 line: ln,
                 column: xi + 1,

@@ -80,6 +80,21 @@ fn parse_count(v: &str, file: &str, line: usize, key: &str) -> Result<usize, Imp
     }
 }
 
+/// `tok` parsed as a `T` and kept when `ok`; otherwise the error at `name`
+/// line `ln`, field `col`: "EXPECTED, found `TOK`".
+fn parse_field<T: std::str::FromStr>(
+    tok: &str,
+    ok: impl Fn(&T) -> bool,
+    name: &str,
+    ln: usize,
+    col: usize,
+    expected: &str,
+) -> Result<T, ImportError> {
+    let found = || format!("{expected}, found `{}`", shown(tok));
+    let v = tok.parse().ok().filter(|v| ok(v));
+    v.ok_or_else(|| ImportError::at(name, ln, Some(col), found()))
+}
+
 /// Parses `.rtl` text; `name` labels messages. `axis` (0 = x) overrides the
 /// `Axis:` line of `USER-TEXT::`.
 pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, ImportError> {
@@ -199,20 +214,15 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                 match list {
                     List::Targets => {
                         for (field, tok) in values.split_whitespace().enumerate() {
-                            let v: f64 = tok
-                                .parse()
-                                .ok()
-                                .filter(|v: &f64| v.is_finite())
-                                .ok_or_else(|| {
-                                    err(
-                                        ln,
-                                        Some(field + 1),
-                                        format!(
-                                            "Targets: expected a finite position in mm, found `{}`",
-                                            shown(tok)
-                                        ),
-                                    )
-                                })?;
+                            let expected = "Targets: expected a finite position in mm";
+                            let v: f64 = parse_field(
+                                tok,
+                                |v: &f64| v.is_finite(),
+                                name,
+                                ln,
+                                field + 1,
+                                expected,
+                            )?;
                             if v.abs() > POS_PLAUSIBLE_MM {
                                 return Err(err(ln, Some(field + 1), format!("Targets: expected a position in mm between -{POS_PLAUSIBLE_MM} and {POS_PLAUSIBLE_MM}, found `{}` — check the file's unit", shown(tok))));
                             }
@@ -291,49 +301,15 @@ pub fn read_rtl(text: &str, name: &str, axis: Option<usize>) -> Result<Dataset, 
                 let (count, _) = target_count
                     .ok_or_else(|| err(ln, None, "deviation before `Target-count:`".into()))?;
                 let runs = run_count.map(|r| r.0);
-                let run: usize = toks[0]
-                    .parse()
-                    .ok()
-                    .filter(|&r| r >= 1 && runs.is_none_or(|m| r <= m))
-                    .ok_or_else(|| {
-                        err(
-                            ln,
-                            Some(1),
-                            format!(
-                                "expected a run number 1..={}, found `{}`",
-                                runs.unwrap_or(usize::MAX),
-                                shown(toks[0])
-                            ),
-                        )
-                    })?;
-                let target: usize = toks[1]
-                    .parse()
-                    .ok()
-                    .filter(|&t| t >= 1 && t <= count)
-                    .ok_or_else(|| {
-                        err(
-                            ln,
-                            Some(2),
-                            format!(
-                                "expected a target number 1..={count}, found `{}`",
-                                shown(toks[1])
-                            ),
-                        )
-                    })?;
-                let dev: f64 = toks[2]
-                    .parse()
-                    .ok()
-                    .filter(|v: &f64| v.is_finite())
-                    .ok_or_else(|| {
-                        err(
-                            ln,
-                            Some(3),
-                            format!(
-                                "expected a finite deviation in µm, found `{}`",
-                                shown(toks[2])
-                            ),
-                        )
-                    })?;
+                let expected = format!("expected a run number 1..={}", runs.unwrap_or(usize::MAX));
+                let in_runs = |&r: &usize| r >= 1 && runs.is_none_or(|m| r <= m);
+                let run: usize = parse_field(toks[0], in_runs, name, ln, 1, &expected)?;
+                let expected = format!("expected a target number 1..={count}");
+                let in_targets = |&t: &usize| t >= 1 && t <= count;
+                let target: usize = parse_field(toks[1], in_targets, name, ln, 2, &expected)?;
+                let expected = "expected a finite deviation in µm";
+                let dev: f64 =
+                    parse_field(toks[2], |v: &f64| v.is_finite(), name, ln, 3, expected)?;
                 if dev.abs() >= PLACEHOLDER_ABS {
                     // No reading: kept through the order checks, its run
                     // left out below.

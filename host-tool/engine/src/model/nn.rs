@@ -91,19 +91,19 @@ pub(crate) fn check_nn(m: &NnModel) -> Check {
         check_len(v.len(), want, &at, of)?;
         check_finite(v, &at)?;
     }
-    for (k, (lo, hi)) in m.in_min_mm.iter().zip(&m.in_max_mm).enumerate() {
-        need(
-            lo <= hi,
-            || format!("model.in_max_mm[{k}]"),
-            || format!("{hi}, expected ≥ in_min_mm[{k}] = {lo}"),
-        )?;
-    }
-    for (k, (lo, hi)) in m.out_min_um.iter().zip(&m.out_max_um).enumerate() {
-        need(
-            lo <= hi,
-            || format!("model.out_max_um[{k}]"),
-            || format!("{hi}, expected ≥ out_min_um[{k}] = {lo}"),
-        )?;
+    // Each range's bounds in order: (name's stem and unit, lows, highs).
+    let ranges = [
+        ("in", "mm", &m.in_min_mm, &m.in_max_mm),
+        ("out", "um", &m.out_min_um, &m.out_max_um),
+    ];
+    for (side, unit, mins, maxs) in ranges {
+        for (k, (lo, hi)) in mins.iter().zip(maxs).enumerate() {
+            need(
+                lo <= hi,
+                || format!("model.{side}_max_{unit}[{k}]"),
+                || format!("{hi}, expected ≥ {side}_min_{unit}[{k}] = {lo}"),
+            )?;
+        }
     }
     Ok(())
 }

@@ -34,17 +34,11 @@ pub const COLUMNS: [&str; 15] = [
 ];
 
 /// Columns no small scan file has: any one of them makes a file a probe
-/// measurement CSV.
-const CAMPAIGN_ONLY: [&str; 8] = [
-    "session_id",
-    "orientation_deg",
-    "probe_no",
-    "probe_id",
-    "normal_x",
-    "normal_y",
-    "normal_z",
-    "contact_deg",
-];
+/// measurement CSV — `session_id` and [`COLUMNS`] from `orientation_deg` on.
+fn campaign_only() -> impl Iterator<Item = &'static str> {
+    let from_orientation = COLUMNS.iter().skip_while(|&&c| c != "orientation_deg");
+    std::iter::once(COLUMNS[0]).chain(from_orientation.copied())
+}
 
 /// Whether `text` is a measurement CSV with probe data, by its columns: a
 /// header with any of `session_id`, `orientation_deg`, `probe_no`,
@@ -59,7 +53,7 @@ pub fn is_probe_csv(text: &str) -> bool {
         .map(|l| l.split(',').map(str::trim).collect())
         .unwrap_or_default();
     let has = |c: &str| head.contains(&c);
-    CAMPAIGN_ONLY.iter().any(|c| has(c)) || (has("d_um") && (has("c_deg") || has("step_deg")))
+    campaign_only().any(has) || (has("d_um") && (has("c_deg") || has("step_deg")))
 }
 
 /// One row: the value of each of [`COLUMNS`] (`None`: no such column or an
@@ -526,6 +520,14 @@ impl ProbeTable {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_campaign_only_columns_are_the_ones_no_small_file_has() {
+        let names: Vec<&str> = campaign_only().collect();
+        assert_eq!(names.len(), 8, "{names:?}");
+        let ends = (names[0], names[1], names[7]);
+        assert_eq!(ends, ("session_id", "orientation_deg", "contact_deg"));
+    }
 
     #[test]
     fn a_session_is_read_as_its_small_file_and_bad_values_are_placed() {

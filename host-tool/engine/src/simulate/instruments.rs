@@ -226,19 +226,13 @@ pub fn measure(machine: &Machine, plan: &[Instrument], seed: u64, noise: bool) -
                     };
                     for c in 0..3 {
                         if c == *axis {
-                            let n = if noise {
-                                LASER_UM * normal(&mut nrng)
-                            } else {
-                                0.0
-                            };
-                            row.e[c] = Some(e[c] + z[c] + n);
+                            row.e[c] = Some(e[c] + z[c] + jitter(noise, LASER_UM, &mut nrng));
                         } else if *straightness {
-                            let n = if noise {
-                                STRAIGHTNESS_UM * normal(&mut nrng)
-                            } else {
-                                0.0
-                            };
-                            row.e[c] = Some(e[c] + z[c] + slope[c] * 1e-3 * pos[*axis] + n);
+                            row.e[c] = Some(
+                                e[c] + z[c]
+                                    + slope[c] * 1e-3 * pos[*axis]
+                                    + jitter(noise, STRAIGHTNESS_UM, &mut nrng),
+                            );
                         }
                     }
                     rows.push(row);
@@ -261,12 +255,7 @@ pub fn measure(machine: &Machine, plan: &[Instrument], seed: u64, noise: bool) -
                         ..Row::default()
                     };
                     for c in 0..3 {
-                        let n = if noise {
-                            ANGULAR_URAD * normal(&mut nrng)
-                        } else {
-                            0.0
-                        };
-                        row.a[c] = Some(w[c] + z[c] + n);
+                        row.a[c] = Some(w[c] + z[c] + jitter(noise, ANGULAR_URAD, &mut nrng));
                     }
                     rows.push(row);
                 }
@@ -285,11 +274,7 @@ pub fn measure(machine: &Machine, plan: &[Instrument], seed: u64, noise: bool) -
                     let pos = [0, 1, 2].map(|k| from_mm[k] + f * d[k]);
                     let e = machine.error_um(pos, 0.0);
                     let v: f64 = (0..3).map(|k| n_dir[k] * e[k]).sum();
-                    let n = if noise {
-                        DIAGONAL_UM * normal(&mut nrng)
-                    } else {
-                        0.0
-                    };
+                    let n = jitter(noise, DIAGONAL_UM, &mut nrng);
                     rows.push(Row {
                         pos,
                         setup,
@@ -359,12 +344,9 @@ pub fn measure(machine: &Machine, plan: &[Instrument], seed: u64, noise: bool) -
                                 ..Row::default()
                             };
                             for c in 0..3 {
-                                let n = if noise {
-                                    TRACKER_UM * normal(&mut nrng)
-                                } else {
-                                    0.0
-                                };
-                                row.e[c] = Some(e[c] + t[c] + wp[c] + n);
+                                row.e[c] = Some(
+                                    e[c] + t[c] + wp[c] + jitter(noise, TRACKER_UM, &mut nrng),
+                                );
                             }
                             rows.push(row);
                         }
@@ -401,6 +383,16 @@ pub fn measure(machine: &Machine, plan: &[Instrument], seed: u64, noise: bool) -
         ..Dataset::default()
     }
     .with_len_checked(n)
+}
+
+/// A reading's noise: σ·N(0, 1) from `rng` when `noise` (a draw), else 0
+/// (no draw).
+fn jitter(noise: bool, sigma: f64, rng: &mut ChaCha8Rng) -> f64 {
+    if noise {
+        sigma * normal(rng)
+    } else {
+        0.0
+    }
 }
 
 impl Dataset {

@@ -105,15 +105,26 @@ fn one_point(
     }
 }
 
+/// The rows' count and times: every `STEP_S` over `DUTY_DURATION_S`.
+fn duty_times() -> (usize, Vec<f64>) {
+    let n = (DUTY_DURATION_S / STEP_S) as usize + 1;
+    (n, (0..n).map(|i| i as f64 * STEP_S).collect())
+}
+
+/// Stream `k` of the generator seeded with `seed`.
+fn stream(seed: u64, k: u64) -> ChaCha8Rng {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(k);
+    rng
+}
+
 /// The spindle-duty look-alike (module docs); the same seed gives the same
 /// data bit for bit.
 pub fn spindle_duty(seed: u64) -> SimOutput {
-    let n = (DUTY_DURATION_S / STEP_S) as usize + 1;
-    let t_s: Vec<f64> = (0..n).map(|i| i as f64 * STEP_S).collect();
+    let (n, t_s) = duty_times();
     let power: Vec<f64> = t_s.iter().map(|&t| duty_power(t)).collect();
     let air: Vec<f64> = t_s.iter().map(|&t| ambient_c(t)).collect();
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    rng.set_stream(5);
+    let mut rng = stream(seed, 5);
     let mut temps = Vec::new();
     for (name, gain_k, tau_heat_s, tau_air_s) in SENSORS {
         let heat = lagged(&power, &t_s, None, tau_heat_s);
@@ -159,11 +170,9 @@ const DRIFT_STEP_UM: f64 = 0.15;
 
 /// The spindle-drift control (module docs).
 pub fn spindle_drift(seed: u64) -> SimOutput {
-    let n = (DUTY_DURATION_S / STEP_S) as usize + 1;
-    let t_s: Vec<f64> = (0..n).map(|i| i as f64 * STEP_S).collect();
+    let (n, t_s) = duty_times();
     let air: Vec<f64> = t_s.iter().map(|&t| ambient_c(t)).collect();
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    rng.set_stream(6);
+    let mut rng = stream(seed, 6);
     let mut temps = Vec::new();
     for (name, gain_k, _, tau_air_s) in SENSORS {
         let room = lagged(&air, &t_s, None, tau_air_s);

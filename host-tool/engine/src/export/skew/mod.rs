@@ -267,7 +267,10 @@ fn written(v: f64, decimals: usize) -> (String, f64) {
     (s, back)
 }
 
-fn header(out: &mut String, comment: &str, sq: &BTreeMap<String, f64>) {
+/// The file's opening comment lines (COMMENT starts each): what it is, what
+/// it leaves out, then `first_note`.
+fn header(comment: &str, sq: &BTreeMap<String, f64>, first_note: &str) -> String {
+    let mut out = String::new();
     let list: Vec<String> = sq
         .iter()
         .map(|(n, v)| format!("{n} = {v:.3} µrad"))
@@ -281,6 +284,8 @@ fn header(out: &mut String, comment: &str, sq: &BTreeMap<String, f64>) {
         out,
         "{comment} only the squareness: positioning, straightness, angles and tilt are left out (the export reports how much: left_out_um)"
     );
+    let _ = writeln!(out, "{first_note}");
+    out
 }
 
 /// Klipper: a `[skew_correction NAME]` profile (the factors
@@ -298,11 +303,12 @@ fn write_klipper(
             "Klipper profile name `{profile}`: expected one word without `]` (SKEW_PROFILE LOAD= reads one word)"
         );
     }
-    let mut out = String::new();
-    header(&mut out, "#", sq);
-    let _ = writeln!(
-        out,
-        "# include below [skew_correction] in printer.cfg, then: SKEW_PROFILE LOAD={profile}"
+    let mut out = header(
+        "#",
+        sq,
+        &format!(
+            "# include below [skew_correction] in printer.cfg, then: SKEW_PROFILE LOAD={profile}"
+        ),
     );
     let mut set_skew = Vec::new();
     let mut from_lengths = [0.0; 3];
@@ -362,12 +368,7 @@ fn write_marlin(
     shear: &Shear,
     sq: &BTreeMap<String, f64>,
 ) -> (String, BTreeMap<String, f64>, Vec<Applied>) {
-    let mut out = String::new();
-    header(&mut out, ";", sq);
-    let _ = writeln!(
-        out,
-        "; needs SKEW_CORRECTION and SKEW_CORRECTION_GCODE (J, K: SKEW_CORRECTION_FOR_Z); in mm (G21); M500 keeps it"
-    );
+    let mut out = header(";", sq, "; needs SKEW_CORRECTION and SKEW_CORRECTION_GCODE (J, K: SKEW_CORRECTION_FOR_Z); in mm (G21); M500 keeps it");
     let mut words = Vec::new();
     let mut factors = BTreeMap::new();
     let mut k = [0.0; 3];
@@ -391,11 +392,10 @@ fn write_matrixkins(
 ) -> (String, BTreeMap<String, f64>, Vec<Applied>) {
     let [xy, xz, yz] = shear.map(|k| k.unwrap_or(0.0));
     let c = [[1.0, -xy, -xz + xy * yz], [0.0, 1.0, -yz], [0.0, 0.0, 1.0]];
-    let mut out = String::new();
-    header(&mut out, "#", sq);
-    let _ = writeln!(
-        out,
-        "# LinuxCNC matrixkins (INI: [KINS] KINEMATICS=matrixkins); joint = C · axis position"
+    let mut out = header(
+        "#",
+        sq,
+        "# LinuxCNC matrixkins (INI: [KINS] KINEMATICS=matrixkins); joint = C · axis position",
     );
     let names = ["x", "y", "z"];
     let mut factors = BTreeMap::new();

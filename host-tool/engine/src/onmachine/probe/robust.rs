@@ -180,6 +180,7 @@ pub(crate) fn quantum_warning(q: f64, raised: bool, residual_rms_nm: f64) -> Opt
 #[cfg(test)]
 mod tests {
     use super::*;
+    use trueaxis_test_support::assert_any;
 
     #[test]
     fn the_resolution_of_logged_coordinates() {
@@ -285,13 +286,7 @@ mod tests {
             cal.probe.probe_radius_ci95_mm
         );
         assert!(cal.probe.form_ci95_nm.iter().all(|&c| c >= 100.0));
-        assert!(
-            cal.warnings
-                .iter()
-                .any(|w| w.contains("multiples of 0.0001 mm")),
-            "{:?}",
-            cal.warnings
-        );
+        assert_any(&cal.warnings, |w| w.contains("multiples of 0.0001 mm"));
         // Written to 0.1 nm: nothing said, nothing floored.
         let fine = crate::onmachine::probe::calibrate(&ball(2.0, 0.49715, 1e-7, 4), 2.0).unwrap();
         assert_eq!(fine.probe.quantum_mm, None);

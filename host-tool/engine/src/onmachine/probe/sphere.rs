@@ -549,7 +549,13 @@ pub fn read_scan_lines(text: &str, name: &str) -> Result<(Vec<[f64; 3]>, Vec<usi
 #[cfg(test)]
 mod tests {
     use super::*;
-    use trueaxis_test_support::SplitMix64;
+    use trueaxis_test_support::{assert_any, SplitMix64};
+
+    /// The largest |a − b| over pairs of `a` and `b`.
+    fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
+        let diffs = a.iter().zip(b).map(|(a, b)| (a - b).abs());
+        diffs.fold(0.0f64, f64::max)
+    }
 
     /// A 0.49715 mm probe with lobing (3 lobes around the stylus and a
     /// term that grows toward the equator, ~170 nm PV) on a 2 mm master
@@ -623,11 +629,7 @@ mod tests {
             "form PV {} vs {pv_true}",
             pr.form_pv_nm
         );
-        let worst = fitted
-            .iter()
-            .zip(&true_perp)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0f64, f64::max);
+        let worst = max_abs_diff(&fitted, &true_perp);
         assert!(worst < 10.0, "form recovered to {worst} nm");
         assert!(
             pr.degree >= 3,
@@ -671,13 +673,7 @@ mod tests {
         assert!(cal.probe.form_pv_nm < 15.0, "{}", cal.probe.form_pv_nm);
         assert!((cal.probe.probe_radius_mm - 0.5).abs() < 3e-6);
         let cap = calibrate(&hemisphere(4, 30.0), 2.0).unwrap();
-        assert!(
-            cap.warnings
-                .iter()
-                .any(|w| w.contains("scan at least a hemisphere")),
-            "{:?}",
-            cap.warnings
-        );
+        assert_any(&cap.warnings, |w| w.contains("scan at least a hemisphere"));
         let e = calibrate(&p, 3.0).unwrap_err();
         assert!(format!("{e}").contains("not above the master ball"), "{e}");
     }
@@ -708,11 +704,7 @@ mod tests {
         let s: Vec<[f64; 2]> = c.iter().map(|k| k.surface_mm).collect();
         let dev = crate::onmachine::probe::form_deviation_nm(&s, true).unwrap();
         let dev_true = crate::onmachine::probe::form_deviation_nm(&truth, true).unwrap();
-        let worst = dev
-            .iter()
-            .zip(&dev_true)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0f64, f64::max);
+        let worst = max_abs_diff(&dev, &dev_true);
         // With the radius only, what of the probe's form a circle does not
         // absorb along this arc (measured: 17 nm; corrected: 1.4 nm) would
         // be in the part.
@@ -725,11 +717,7 @@ mod tests {
             })
             .collect();
         let dev0 = crate::onmachine::probe::form_deviation_nm(&radius_only, true).unwrap();
-        let worst0 = dev0
-            .iter()
-            .zip(&dev_true)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0f64, f64::max);
+        let worst0 = max_abs_diff(&dev0, &dev_true);
         assert!(worst < 5.0, "part form recovered to {worst} nm");
         assert!(worst0 > 10.0, "radius only: {worst0} nm");
         // Below the equator (probed from underneath) nothing was calibrated.

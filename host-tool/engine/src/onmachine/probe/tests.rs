@@ -28,7 +28,7 @@ fn nominal_normals_place_a_coarse_scans_contacts_exactly() {
 }
 
 use super::*;
-use trueaxis_test_support::SplitMix64;
+use trueaxis_test_support::{assert_any, SplitMix64};
 
 /// The seed's case: a 0.49715 mm probe with ~175 nm PV of form error
 /// on a 2 mm master ball, 401 contacts over 10°…170°, 5 nm noise.
@@ -124,13 +124,7 @@ fn a_short_arc_is_warned_and_a_wrong_ball_refused() {
     let (p, _) = ball_scan(2);
     let short: Vec<[f64; 2]> = p[..150].to_vec(); // 10°…70°
     let cal = calibrate(&short, 2.0).unwrap();
-    assert!(
-        cal.warnings
-            .iter()
-            .any(|w| w.contains("scan at least 120°")),
-        "{:?}",
-        cal.warnings
-    );
+    assert_any(&cal.warnings, |w| w.contains("scan at least 120°"));
     let e = calibrate(&p, 3.0).unwrap_err();
     assert!(format!("{e}").contains("not above the master ball"), "{e}");
 }
