@@ -301,11 +301,7 @@ pub fn measure(machine: &Machine, plan: &[Instrument], seed: u64, noise: bool) -
                     let pos = [0, 1, 2].map(|k| centre_mm[k] + radius_mm * n_dir[k]);
                     let e = machine.error_at_um(pos, *tool_mm, [0.0, 0.0]);
                     let v: f64 = (0..3).map(|k| n_dir[k] * (e[k] - e_c[k])).sum();
-                    let n = if noise {
-                        BALLBAR_UM * normal(&mut nrng)
-                    } else {
-                        0.0
-                    };
+                    let n = jitter(noise, BALLBAR_UM, &mut nrng);
                     rows.push(Row {
                         pos,
                         tool: *tool_mm,
