@@ -100,7 +100,7 @@ pub struct Rigid21Diagnosis {
 }
 
 /// A lead-error column's effect at a tool point.
-type Wave = dyn Fn(&ToolPoint) -> Prediction;
+type Wave = dyn Fn(usize, &ToolPoint) -> Prediction;
 
 /// A candidate: its columns, the (axis, period mm) of a lead error (none
 /// for a function's higher degrees), and the error it belongs to.
@@ -214,7 +214,7 @@ pub fn diagnose(data: &Dataset, degree: usize) -> anyhow::Result<Rigid21Diagnosi
         .iter()
         .flat_map(|&(k, period)| {
             [0.0, std::f64::consts::FRAC_PI_2].map(|phase| {
-                Box::new(move |pt: &ToolPoint| {
+                Box::new(move |_: usize, pt: &ToolPoint| {
                     let mut out = Prediction::default();
                     out.e_um[k] = (TAU * pt.pos_mm[k] / period + phase).sin();
                     out
