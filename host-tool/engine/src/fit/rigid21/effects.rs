@@ -117,9 +117,14 @@ pub(crate) fn refuse_unseen(
         } else {
             names.join(", ")
         };
+        let spec = &adds[c.effect].spec;
+        let why = if spec.period_mm().is_some() {
+            "a period not well inside the travel is a smooth shape the error functions already hold"
+        } else {
+            "on these rows its shape is one the error functions and each set-up's own zero and alignment already hold"
+        };
         bail!(
-            "effect `{}`: these data cannot tell its {} column from {with} (a periodic error whose period is not well inside the travel is a smooth shape the error functions already hold); leave it out or measure where it differs",
-            adds[c.effect].spec,
+            "effect `{spec}`: these data cannot tell its {} column from {with} ({why}); leave it out or measure where it differs",
             c.feature
         );
     }
@@ -277,59 +282,116 @@ mod tests {
 
     #[test]
     fn a_period_longer_than_the_travel_is_refused_not_absorbed() {
-        // 20 m on 800 mm of X: a smooth shape EXX's polynomial holds.
+        // 1.6 m on 800 mm of X: a smooth shape EXX's polynomial holds.
         let data = lead_lines(3.0, 100.0, 11);
-        let e = fit_with(
-            &data,
-            4,
-            &[add("periodic:target=ex,axis=x,period_mm=20000")],
-        )
-        .unwrap_err()
-        .to_string();
+        let e = fit_with(&data, 4, &[add("periodic:target=ex,axis=x,period_mm=1600")])
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("cannot tell") && e.contains("EXX"), "{e}");
     }
 
-    #[test]
-    fn a_reversal_on_top_reads_the_backlash() {
-        let mut data: Dataset = lead_lines(0.0, 100.0, 5);
-        // A bidirectional run: the rows alternate their approach on X,
-        // the simulator's reversal adds ±backlash/2 to ex.
-        let dir: Vec<i8> = (0..data.len())
-            .map(|r| if r % 2 == 0 { 1 } else { -1 })
-            .collect();
-        data.dir[0] = Some(dir.clone());
-        let (_, kv) = Pairs::of_effect("reversal:axis=x,backlash_um=8", "").unwrap();
-        let sim = (Family::Reversal.info().simulate.unwrap())(&kv).unwrap();
+    /// Adds the simulator's form of `spec` (`simulate --effect`) to the
+    /// ex/ey/ez readings of `data`, which is read as one run in row order,
+    /// 10 s apart, X approached from alternating sides (a bidirectional
+    /// run); the form's sensor, if any, is recorded as its `T_*_C` column.
+    fn add_simulated(data: &mut Dataset, spec: &str) {
+        let (family, kv) = Pairs::of_effect(spec, "").unwrap();
+        let family: Family = family.parse().unwrap();
+        let sim = (family.info().simulate.unwrap())(&kv).unwrap();
         let n = data.len();
+        let t_s: Vec<f64> = (0..n).map(|r| 10.0 * r as f64).collect();
+        let dir: Vec<i8> = (0..n).map(|r| if r % 2 == 0 { 1 } else { -1 }).collect();
+        if let Some(sensor) = sim.sensor() {
+            data.temps.push(crate::data::TempChannel {
+                name: sensor.name().to_string(),
+                temp_c: t_s.iter().map(|&t| sensor.temp_c(t)).collect(),
+            });
+        }
+        data.t_s = Some(t_s.clone());
+        data.dir[0] = Some(dir.clone());
         let pos = [0, 1, 2].map(|a| (0..n).map(|r| data.pos(a, r)).collect::<Vec<_>>());
-        let dirs = [dir, vec![0; n], vec![0; n]];
-        let zeros = vec![0.0; n];
         let mut truth = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
         sim.add_error(
             &SimRows {
                 pos_mm: &pos,
-                dir: &dirs,
-                t_s: &zeros,
+                dir: &[dir, vec![0; n], vec![0; n]],
+                t_s: &t_s,
                 session: &vec![0; n],
-                tool_mm: &zeros,
-                temps: &[],
+                tool_mm: &vec![0.0; n],
+                temps: &data.temps,
             },
             &mut truth,
         );
-        if let Some(col) = data.err_um[0].as_mut() {
-            for (v, t) in col.iter_mut().zip(&truth[0]) {
+        for (col, t) in data.err_um.iter_mut().zip(&truth) {
+            for (v, t) in col.iter_mut().flatten().zip(t) {
                 if let Some(v) = v {
                     *v += t;
                 }
             }
         }
+    }
+
+    /// Fits `add` on top of `rigid21` to the lines plus the simulated
+    /// `sim`: the effect's physical parameter and its σ (from coefficient
+    /// `k`, times `per`), and the ex RMS without and with it.
+    fn read_back(sim: &str, add_spec: &str, k: usize, per: f64) -> (f64, f64, f64, f64) {
+        let mut data: Dataset = lead_lines(0.0, 100.0, 5);
+        add_simulated(&mut data, sim);
         let (_, _, before) = fit(&data, 4).unwrap();
-        let (_, id, after) = fit_with(&data, 4, &[add("reversal:target=ex,axis=x")]).unwrap();
+        let (_, id, after) = fit_with(&data, 4, &[add(add_spec)]).unwrap();
         let a = &id.effects[0];
-        assert_eq!(a.physical.as_deref(), Some("backlash"));
-        let (b, sd) = (a.value.unwrap(), 2.0 * a.coef_sd_um[0]);
+        (
+            a.value.unwrap(),
+            per * a.coef_sd_um[k],
+            rms(&before, "ex"),
+            rms(&after, "ex"),
+        )
+    }
+
+    #[test]
+    fn a_reversal_on_top_reads_the_backlash() {
+        let (b, sd, before, after) = read_back(
+            "reversal:axis=x,backlash_um=8",
+            "reversal:target=ex,axis=x",
+            0,
+            2.0,
+        );
         assert!((b - 8.0).abs() < 4.0 * sd + 0.02, "{b} ± {sd}");
-        assert!(rms(&before, "ex") > 2.0 && rms(&after, "ex") < 0.3);
+        assert!(before > 2.0 && after < 0.3, "ex RMS {before} → {after}");
+    }
+
+    /// A bed warming by 3 K (τ 1 h) over the ≈ 2.3 h run; X's scale grows
+    /// 11.5 µm/m/K about the travel's centre (400 mm: −4.6 µm/K at X = 0).
+    const WARMING: &str =
+        "thermal:channel=bed,target=ex,times=x,cte_um_per_m_k=11.5,offset_um_per_k=-4.6";
+
+    #[test]
+    fn a_thermal_growth_on_top_reads_its_cte() {
+        let (cte, sd, before, after) = read_back(
+            WARMING,
+            "thermal:target=ex,channel=bed,times=x",
+            0,
+            1000.0 / 400.0,
+        );
+        assert!((cte - 11.5).abs() < 4.0 * sd + 0.05, "{cte} ± {sd}");
+        assert!(after < before, "ex RMS {before} → {after}");
+    }
+
+    #[test]
+    fn a_growth_the_lines_zeros_take_is_refused() {
+        // The plain ΔT on ex: within each laser line the temperature is a
+        // smooth function of X (the line moves X as time passes), so the
+        // line's zero and EXX hold it: refused, not fitted.
+        let mut data: Dataset = lead_lines(0.0, 100.0, 5);
+        add_simulated(&mut data, WARMING);
+        let e = fit_with(
+            &data,
+            4,
+            &[add("thermal:target=ex,channel=bed,times=x,offset=1")],
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("cannot tell") && e.contains("ΔT_bed"), "{e}");
     }
 
     #[test]
