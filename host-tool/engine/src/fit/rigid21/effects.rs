@@ -13,7 +13,7 @@ use anyhow::{bail, Context, Result};
 use nalgebra::DMatrix;
 
 use super::{Param, REACH, SIZE_TRANSLATION_UM};
-use crate::effect::{Effect, Reading as PhysicalReading, Scale};
+use crate::effect::{Effect, Family, Reading as PhysicalReading, Scale};
 use crate::features::{Feature, Norm};
 use crate::model::rigid21::{EffectAnswer, Prediction, Rigid21Model, ToolPoint};
 use crate::model::{LinearModel, LinearOutput};
@@ -52,6 +52,19 @@ pub(crate) fn columns(
 ) -> Result<Vec<EffectColumn>> {
     let mut out = Vec::new();
     for (i, e) in adds.iter().enumerate() {
+        // Families that are geometry — an angle times the tool arm, a
+        // squareness, a higher polynomial degree — are what the 21 errors
+        // themselves are: a second copy would only trade with them.
+        if matches!(
+            e.spec.family(),
+            Family::Abbe | Family::Squareness | Family::HigherOrder
+        ) {
+            bail!(
+                "effect `{}`: a rigid21 model holds {} in its own error functions (the angles through their arms, the squarenesses, the degree); on top of it go periodic, reversal, thermal and drift",
+                e.spec,
+                e.spec.family()
+            );
+        }
         for f in &e.features {
             let raw = f
                 .column(data, norm)
@@ -227,7 +240,7 @@ mod tests {
     use super::super::{fit, fit_with};
     use super::*;
     use crate::data::Dataset;
-    use crate::effect::{Family, Pairs, SimRows};
+    use crate::effect::{Pairs, SimRows};
 
     fn rms(kinds: &[(String, f64, usize)], key: &str) -> f64 {
         kinds.iter().find(|k| k.0 == key).expect("a kind").1
@@ -392,6 +405,18 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("cannot tell") && e.contains("ΔT_bed"), "{e}");
+    }
+
+    #[test]
+    fn a_geometric_family_is_refused_on_top_of_the_errors() {
+        let data = lead_lines(0.0, 100.0, 5);
+        let e = fit_with(&data, 4, &[add("abbe:target=ex,times=y")])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("abbe") && e.contains("periodic, reversal"),
+            "{e}"
+        );
     }
 
     #[test]
