@@ -23,8 +23,9 @@ use serde::Serialize;
 use crate::data::Dataset;
 use std::f64::consts::TAU;
 
+use crate::effect::{periodic::Periodic, Axis, Effect, EffectSpec, Target};
 use crate::fit::rigid21::{
-    params_of, projected_with, skeleton, ExtraColumn, Param, NEAR_NULL, REACH,
+    effects, params_of, projected_with, skeleton, ExtraColumn, Param, NEAR_NULL, REACH,
 };
 use crate::model::rigid21::{legendre, words, ErrorKind, Prediction, ToolPoint, MAX_DEGREE};
 
@@ -56,6 +57,10 @@ pub struct Missing {
     /// A periodic (lead) error's period, mm; the amplitude is `peak`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub period_mm: Option<f64>,
+    /// A lead error as the effect `fit --add` takes on top of the model
+    /// (`periodic:target=ex,axis=x,period_mm=98.77`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub add: Option<String>,
     /// Largest |value| of the added shape over the travel (µm or µrad);
     /// null when not identifiable.
     pub peak: Option<f64>,
@@ -172,6 +177,17 @@ fn reached(g: &DMatrix<f64>, cols: &[usize]) -> Vec<usize> {
 /// Diagnoses `rigid21:<degree>` on `data`: the error functions whose
 /// higher-degree shape the readings show.
 pub fn diagnose(data: &Dataset, degree: usize) -> anyhow::Result<Rigid21Diagnosis> {
+    diagnose_with(data, degree, &[])
+}
+
+/// [`diagnose`] of the model with the named effects `adds` on top (docs/volumetric.md
+/// § Effects on top): their columns are part of the model every candidate
+/// is scored against, so a lead already fitted is not found again.
+pub fn diagnose_with(
+    data: &Dataset,
+    degree: usize,
+    adds: &[Effect],
+) -> anyhow::Result<Rigid21Diagnosis> {
     let top = (degree + EXTRA_DEGREES).min(MAX_DEGREE);
     if top == degree {
         anyhow::bail!(
@@ -222,7 +238,15 @@ pub fn diagnose(data: &Dataset, degree: usize) -> anyhow::Result<Rigid21Diagnosi
             })
         })
         .collect();
-    let extra: Vec<ExtraColumn> = waves.iter().map(|b| b.as_ref() as ExtraColumn).collect();
+    // The model's own effects, after the waves.
+    let fx = effects::columns(data, adds, &model.travel_norm())?;
+    let first_effect = params.len() + waves.len();
+    let fx_cols = effects::as_columns(&fx);
+    let extra: Vec<ExtraColumn> = waves
+        .iter()
+        .map(|b| b.as_ref() as ExtraColumn)
+        .chain(fx_cols.iter().map(|b| b.as_ref() as ExtraColumn))
+        .collect();
     let pr = projected_with(data, &model, &params, &extra);
     let n = pr.b.len();
     if n <= pr.nuisance + 1 {
@@ -278,16 +302,26 @@ pub fn diagnose(data: &Dataset, degree: usize) -> anyhow::Result<Rigid21Diagnosi
     // The model as fitted: degree ≤ `degree`, minus what the data cannot see.
     let base_all: Vec<usize> = (0..params.len())
         .filter(|&j| params[j].degree <= degree)
+        .chain(first_effect..first_effect + fx.len())
         .collect();
     let lost: Vec<usize> = reached(&total.g, &base_all);
     let mut cannot = vec![false; model.errors.len()];
     for &i in &lost {
-        cannot[params[base_all[i]].term] = true;
+        match params.get(base_all[i]) {
+            Some(p) => cannot[p.term] = true,
+            None => anyhow::bail!(
+                "rigid21:{degree}: these data cannot tell an effect of the model ({}) from its errors; fit it to see which",
+                adds.iter()
+                    .map(|e| e.spec.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        }
     }
     let mut base: Vec<usize> = base_all
         .iter()
         .copied()
-        .filter(|&j| !cannot[params[j].term])
+        .filter(|&j| params.get(j).is_none_or(|p| !cannot[p.term]))
         .collect();
     let dof = |k: usize| (n - pr.nuisance).saturating_sub(k).max(1) as f64;
     let (rss0, held0) = score(&folds, &total, &base, cv);
@@ -352,6 +386,7 @@ pub fn diagnose(data: &Dataset, degree: usize) -> anyhow::Result<Rigid21Diagnosi
             unit: e.kind.unit().into(),
             degrees: degrees.clone(),
             period_mm: wave.map(|w| w.1),
+            add: wave.and_then(|(k, period)| lead_effect(k, period)),
             peak,
             identifiable: peak.is_some(),
             delta_bic,
@@ -471,6 +506,24 @@ pub fn diagnose(data: &Dataset, degree: usize) -> anyhow::Result<Rigid21Diagnosi
     })
 }
 
+/// The lead error of axis `k` at `period_mm` as the effect `fit --add`
+/// takes: a periodic error of e_k along k, the period to 4 significant
+/// figures (the periods tried are ≈ 3 % apart).
+fn lead_effect(k: usize, period_mm: f64) -> Option<String> {
+    let digits = 3 - period_mm.abs().log10().floor() as i32;
+    let scale = 10f64.powi(digits);
+    let period_mm = (period_mm * scale).round() / scale;
+    let spec = EffectSpec::new(
+        Target::from_index(k)?,
+        Periodic {
+            axis: Axis::from_index(k)?,
+            period_mm,
+            harmonics: 1,
+        },
+    );
+    Some(spec.to_string())
+}
+
 /// Three significant figures, as the pages write a value (28.4, 1.23).
 fn sig3(v: f64) -> String {
     if v == 0.0 || !v.is_finite() {
@@ -586,5 +639,37 @@ mod tests {
         assert!((amp - 3.0).abs() < 0.3, "{amp}");
         assert!(f.text.contains("at least"), "{}", f.text);
         assert!(f.text.contains("periodic"), "{}", f.text);
+    }
+
+    #[test]
+    fn a_lead_finding_names_the_effect_to_fit_on_top_and_then_is_gone() {
+        use crate::fit::rigid21::effects::lead_lines;
+        use crate::fit::rigid21::fit_with;
+        let data = lead_lines(3.0, 100.0, 11);
+        let d = diagnose(&data, 4).unwrap();
+        let f = d.findings.first().expect("a finding");
+        let add = f.add.clone().expect("an effect to add");
+        assert!(
+            add.starts_with("periodic:target=ex,axis=x,period_mm="),
+            "{add}"
+        );
+        // The effect fits: most of the lead's 3 µm at the period tried.
+        let effect = Effect::parse(&add).unwrap();
+        let (_, id, _) = fit_with(&data, 4, std::slice::from_ref(&effect)).unwrap();
+        let amp = id.effects[0].value.unwrap();
+        assert!((amp - 3.0).abs() < 0.3, "{amp}");
+        // With it on top the lead is no longer missing.
+        let again = diagnose_with(&data, 4, &[effect]).unwrap();
+        assert!(
+            again.findings.iter().all(|f| f.period_mm.is_none()),
+            "{:#?}",
+            again.findings
+        );
+        assert!(
+            again.rms_sigma < d.rms_sigma,
+            "{} → {}",
+            d.rms_sigma,
+            again.rms_sigma
+        );
     }
 }

@@ -26,7 +26,7 @@ use crate::model::rigid21::{
 use crate::simulate::instruments::{self, Instrument};
 use crate::simulate::Machine;
 
-mod effects;
+pub(crate) mod effects;
 
 /// Realistic size of a translation error (positioning, straightness), µm.
 pub const SIZE_TRANSLATION_UM: f64 = 10.0;
@@ -503,11 +503,7 @@ pub fn fit_with(data: &Dataset, degree: usize, adds: &[Effect]) -> Result<Fitted
     let params = params_of(&model);
     let norm = model.travel_norm();
     let fx = effects::columns(data, adds, &norm)?;
-    type Column<'a> = Box<dyn Fn(usize, &ToolPoint) -> Prediction + 'a>;
-    let boxed: Vec<Column> = fx
-        .iter()
-        .map(|c| Box::new(move |r, pt: &ToolPoint| c.at(r, pt)) as Column)
-        .collect();
+    let boxed = effects::as_columns(&fx);
     let extra: Vec<ExtraColumn> = boxed.iter().map(|b| b.as_ref() as ExtraColumn).collect();
     let pr = projected_with(data, &model, &params, &extra);
     if pr.b.len() <= pr.nuisance {

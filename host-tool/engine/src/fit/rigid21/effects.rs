@@ -42,6 +42,17 @@ impl EffectColumn {
     }
 }
 
+/// A column of the joint design beyond the error functions' (an
+/// [`super::ExtraColumn`] boxed with the data it reads).
+pub(crate) type Column<'a> = Box<dyn Fn(usize, &ToolPoint) -> Prediction + 'a>;
+
+/// The effect columns as design columns.
+pub(crate) fn as_columns(cols: &[EffectColumn]) -> Vec<Column<'_>> {
+    cols.iter()
+        .map(|c| Box::new(move |r, pt: &ToolPoint| c.at(r, pt)) as Column)
+        .collect()
+}
+
 /// The columns of `adds` on `data`, in order (effect by effect, feature by
 /// feature); `norm` the monomials' normalisation. Err when the data lack a
 /// column an effect reads or a column is zero on every row.
