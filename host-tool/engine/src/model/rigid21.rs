@@ -18,6 +18,8 @@ use crate::data::{Dataset, AXES};
 
 mod effects;
 
+pub use effects::EffectAnswer;
+
 /// Default degree of each error function (`rigid21` = `rigid21:4`).
 pub const DEFAULT_DEGREE: usize = 4;
 
@@ -610,29 +612,6 @@ pub struct Identifiability {
     /// empty (the key absent) without effects.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub effects: Vec<EffectAnswer>,
-}
-
-/// A named effect's fitted coefficients (`fit --json` `effects`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct EffectAnswer {
-    /// The effect as recorded in `adds`.
-    pub effect: String,
-    /// Its columns (`sin(2π·1·x/100mm)`), in order.
-    pub features: Vec<String>,
-    /// One coefficient per column, µm per unit of the column.
-    pub coef_um: Vec<f64>,
-    /// Their standard uncertainties.
-    pub coef_sd_um: Vec<f64>,
-    /// Its physical parameter's name (`amplitude`, `backlash`, `cte`), when
-    /// it is read off the coefficients directly.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub physical: Option<String>,
-    /// That parameter's value.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub value: Option<f64>,
-    /// Its unit.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub unit: Option<String>,
 }
 
 /// A measurement to add.

@@ -246,12 +246,54 @@ pub(crate) fn lead_lines(amp_um: f64, period_mm: f64, seed: u64) -> crate::data:
     measure(&m, &plan, seed, true)
 }
 
+/// Adds the simulator's form of `spec` (`simulate --effect`) to the
+/// ex/ey/ez readings of `data`, which is read as one run in row order,
+/// 10 s apart, X approached from alternating sides (a bidirectional
+/// run); the form's sensor, if any, is recorded as its `T_*_C` column.
+#[cfg(test)]
+pub(crate) fn add_simulated(data: &mut crate::data::Dataset, spec: &str) {
+    use crate::effect::{Pairs, SimRows};
+    let (family, kv) = Pairs::of_effect(spec, "").unwrap();
+    let family: Family = family.parse().unwrap();
+    let sim = (family.info().simulate.unwrap())(&kv).unwrap();
+    let n = data.len();
+    let t_s: Vec<f64> = (0..n).map(|r| 10.0 * r as f64).collect();
+    let dir: Vec<i8> = (0..n).map(|r| if r % 2 == 0 { 1 } else { -1 }).collect();
+    if let Some(sensor) = sim.sensor() {
+        data.temps.push(crate::data::TempChannel {
+            name: sensor.name().to_string(),
+            temp_c: t_s.iter().map(|&t| sensor.temp_c(t)).collect(),
+        });
+    }
+    data.t_s = Some(t_s.clone());
+    data.dir[0] = Some(dir.clone());
+    let pos = [0, 1, 2].map(|a| (0..n).map(|r| data.pos(a, r)).collect::<Vec<_>>());
+    let mut truth = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+    sim.add_error(
+        &SimRows {
+            pos_mm: &pos,
+            dir: &[dir, vec![0; n], vec![0; n]],
+            t_s: &t_s,
+            session: &vec![0; n],
+            tool_mm: &vec![0.0; n],
+            temps: &data.temps,
+        },
+        &mut truth,
+    );
+    for (col, t) in data.err_um.iter_mut().zip(&truth) {
+        for (v, t) in col.iter_mut().flatten().zip(t) {
+            if let Some(v) = v {
+                *v += t;
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::{fit, fit_with};
     use super::*;
     use crate::data::Dataset;
-    use crate::effect::{Pairs, SimRows};
 
     fn rms(kinds: &[(String, f64, usize)], key: &str) -> f64 {
         kinds.iter().find(|k| k.0 == key).expect("a kind").1
@@ -312,47 +354,6 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("cannot tell") && e.contains("EXX"), "{e}");
-    }
-
-    /// Adds the simulator's form of `spec` (`simulate --effect`) to the
-    /// ex/ey/ez readings of `data`, which is read as one run in row order,
-    /// 10 s apart, X approached from alternating sides (a bidirectional
-    /// run); the form's sensor, if any, is recorded as its `T_*_C` column.
-    fn add_simulated(data: &mut Dataset, spec: &str) {
-        let (family, kv) = Pairs::of_effect(spec, "").unwrap();
-        let family: Family = family.parse().unwrap();
-        let sim = (family.info().simulate.unwrap())(&kv).unwrap();
-        let n = data.len();
-        let t_s: Vec<f64> = (0..n).map(|r| 10.0 * r as f64).collect();
-        let dir: Vec<i8> = (0..n).map(|r| if r % 2 == 0 { 1 } else { -1 }).collect();
-        if let Some(sensor) = sim.sensor() {
-            data.temps.push(crate::data::TempChannel {
-                name: sensor.name().to_string(),
-                temp_c: t_s.iter().map(|&t| sensor.temp_c(t)).collect(),
-            });
-        }
-        data.t_s = Some(t_s.clone());
-        data.dir[0] = Some(dir.clone());
-        let pos = [0, 1, 2].map(|a| (0..n).map(|r| data.pos(a, r)).collect::<Vec<_>>());
-        let mut truth = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
-        sim.add_error(
-            &SimRows {
-                pos_mm: &pos,
-                dir: &[dir, vec![0; n], vec![0; n]],
-                t_s: &t_s,
-                session: &vec![0; n],
-                tool_mm: &vec![0.0; n],
-                temps: &data.temps,
-            },
-            &mut truth,
-        );
-        for (col, t) in data.err_um.iter_mut().zip(&truth) {
-            for (v, t) in col.iter_mut().flatten().zip(t) {
-                if let Some(v) = v {
-                    *v += t;
-                }
-            }
-        }
     }
 
     /// Fits `add` on top of `rigid21` to the lines plus the simulated

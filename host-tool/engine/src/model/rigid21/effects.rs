@@ -7,6 +7,7 @@
 //! so every prediction that includes them reads a data set.
 
 use anyhow::Result;
+use serde::{Deserialize, Serialize};
 
 use super::{Prediction, Rigid21Model, ToolPoint};
 use crate::data::Dataset;
@@ -72,4 +73,27 @@ impl Rigid21Model {
         check_norm(norm, "model.effects.norm")?;
         check_linear_outputs(outputs, "model.effects.outputs")
     }
+}
+
+/// A named effect's fitted coefficients (`fit --json` `effects`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EffectAnswer {
+    /// The effect as recorded in `adds`.
+    pub effect: String,
+    /// Its columns (`sin(2π·1·x/100mm)`), in order.
+    pub features: Vec<String>,
+    /// One coefficient per column, µm per unit of the column.
+    pub coef_um: Vec<f64>,
+    /// Their standard uncertainties.
+    pub coef_sd_um: Vec<f64>,
+    /// Its physical parameter's name (`amplitude`, `backlash`, `cte`), when
+    /// it is read off the coefficients directly.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub physical: Option<String>,
+    /// That parameter's value.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub value: Option<f64>,
+    /// Its unit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
 }
