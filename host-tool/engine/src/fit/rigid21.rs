@@ -759,6 +759,10 @@ fn solve_kept(pr: &Projected, keep: &[usize]) -> (DVector<f64>, DVector<f64>, DM
     (x, resid, cov)
 }
 
+/// What [`reading_residuals`] returns: the model plus set-up value per
+/// row for ex, ey, ez, and the residual per reading kind.
+pub type Compared = ([Option<Vec<f64>>; 3], Vec<ReadingResidual>);
+
 /// `model` evaluated at each row's tool point and compared with every
 /// reading of `data` (docs/volumetric.md): each set-up's unknowns (zeros,
 /// alignment slopes, frames) are fitted to what the model leaves, as the
@@ -766,10 +770,7 @@ fn solve_kept(pr: &Projected, keep: &[usize]) -> (DVector<f64>, DVector<f64>, DM
 /// model plus set-up value per row for ex, ey, ez (what `compare`'s
 /// statistics use) and the residual per reading kind. Err when the data
 /// lack a column one of the model's effects reads.
-pub fn reading_residuals(
-    model: &Rigid21Model,
-    data: &Dataset,
-) -> Result<([Option<Vec<f64>>; 3], Vec<ReadingResidual>)> {
+pub fn reading_residuals(model: &Rigid21Model, data: &Dataset) -> Result<Compared> {
     let mut left = data.clone();
     // The named effects on top read the row's data (docs/volumetric.md).
     let preds: Vec<Prediction> = model.predict_readings(data)?;
