@@ -14,27 +14,16 @@ mod common;
 use common::{json, paste, run, s, tmp_dir};
 use trueaxis_engine::import;
 use trueaxis_engine::model::{FittedModel, ModelFile};
-use trueaxis_engine::simulate::instruments::{laser_lines, measure, Instrument};
-use trueaxis_engine::simulate::{Machine, Wave};
+use trueaxis_engine::simulate::instruments::{laser_lines_along, measure};
+use trueaxis_engine::simulate::Machine;
 
 #[test]
 fn diagnose_proposes_the_lead_on_top_and_the_loop_reaches_the_board() {
     let dir = tmp_dir("rigid21-effects", "lead");
-    let mut m = Machine::preset("mill800-21").unwrap();
-    m.axes[0].trans_um[0].waves.push(Wave {
-        amp: 3.0,
-        period_mm: 100.0,
-        phase_rad: 0.3,
-    });
-    let mut plan = laser_lines(m.travel_mm, &[0.0, 150.0]);
-    for inst in &mut plan {
-        if let Instrument::Line {
-            axis: 0, points, ..
-        } = inst
-        {
-            *points = 161;
-        }
-    }
+    let m = Machine::preset("mill800-21")
+        .unwrap()
+        .with_lead(0, 3.0, 100.0, 0.3);
+    let plan = laser_lines_along(m.travel_mm, &[0.0, 150.0], 0, 161);
     let data = measure(&m, &plan, 11, true);
     let csv = dir.join("lines.csv");
     import::write_csv(&data, std::fs::File::create(&csv).unwrap()).unwrap();

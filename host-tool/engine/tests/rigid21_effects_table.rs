@@ -12,26 +12,15 @@ use trueaxis_engine::effect::Effect;
 use trueaxis_engine::export::table::{export, TableOptions};
 use trueaxis_engine::fit::{fit, FitOptions};
 use trueaxis_engine::model::FittedModel;
-use trueaxis_engine::simulate::instruments::{laser_lines, measure, Instrument};
-use trueaxis_engine::simulate::{Machine, Wave};
+use trueaxis_engine::simulate::instruments::{laser_lines_along, measure};
+use trueaxis_engine::simulate::Machine;
 
 #[test]
 fn a_rigid21_table_carries_the_effects_on_top() {
-    let mut m = Machine::preset("mill800-21").unwrap();
-    m.axes[0].trans_um[0].waves.push(Wave {
-        amp: 3.0,
-        period_mm: 100.0,
-        phase_rad: 0.3,
-    });
-    let mut plan = laser_lines(m.travel_mm, &[0.0, 150.0]);
-    for inst in &mut plan {
-        if let Instrument::Line {
-            axis: 0, points, ..
-        } = inst
-        {
-            *points = 161;
-        }
-    }
+    let m = Machine::preset("mill800-21")
+        .unwrap()
+        .with_lead(0, 3.0, 100.0, 0.3);
+    let plan = laser_lines_along(m.travel_mm, &[0.0, 150.0], 0, 161);
     let mut data = measure(&m, &plan, 11, true);
     // A bidirectional run: rows alternate their approach on X, the
     // backlash shifts ex by ±3 µm.

@@ -698,24 +698,10 @@ mod tests {
 
     #[test]
     fn a_lead_error_on_top_is_named_with_its_period() {
-        use crate::simulate::instruments::Instrument;
-        use crate::simulate::Wave;
-        let mut m = machine(0.0);
-        m.axes[0].trans_um[0].waves.push(Wave {
-            amp: 3.0,
-            period_mm: 100.0,
-            phase_rad: 0.3,
-        });
+        use crate::simulate::instruments::laser_lines_along;
+        let m = machine(0.0).with_lead(0, 3.0, 100.0, 0.3);
         // The X lines dense enough to see a 100 mm lead (5 mm steps).
-        let mut plan = laser_lines(m.travel_mm, &[0.0, 150.0]);
-        for inst in &mut plan {
-            if let Instrument::Line {
-                axis: 0, points, ..
-            } = inst
-            {
-                *points = 161;
-            }
-        }
+        let plan = laser_lines_along(m.travel_mm, &[0.0, 150.0], 0, 161);
         let data = measure(&m, &plan, 11, true);
         let d = diagnose(&data, 2).unwrap();
         let f = d.findings.first().expect("a finding");

@@ -224,26 +224,16 @@ pub(crate) fn saved(
 /// 150 mm, X's dense enough (5 mm steps) to see the lead. Seeded noise.
 #[cfg(test)]
 pub(crate) fn lead_lines(amp_um: f64, period_mm: f64, seed: u64) -> crate::data::Dataset {
-    use crate::simulate::instruments::{laser_lines, measure, Instrument};
-    use crate::simulate::{Machine, Wave};
-    let mut m = Machine::preset("mill800-21").expect("a preset");
-    if amp_um != 0.0 {
-        m.axes[0].trans_um[0].waves.push(Wave {
-            amp: amp_um,
-            period_mm,
-            phase_rad: 0.3,
-        });
-    }
-    let mut plan = laser_lines(m.travel_mm, &[0.0, 150.0]);
-    for inst in &mut plan {
-        if let Instrument::Line {
-            axis: 0, points, ..
-        } = inst
-        {
-            *points = 161;
-        }
-    }
-    measure(&m, &plan, seed, true)
+    use crate::simulate::instruments::{laser_lines_along, measure};
+    let m = crate::simulate::Machine::preset("mill800-21")
+        .expect("a preset")
+        .with_lead(0, amp_um, period_mm, 0.3);
+    measure(
+        &m,
+        &laser_lines_along(m.travel_mm, &[0.0, 150.0], 0, 161),
+        seed,
+        true,
+    )
 }
 
 /// Adds the simulator's form of `spec` (`simulate --effect`) to the
