@@ -6,7 +6,8 @@
 //! function the next two Legendre degrees; per moving axis a periodic
 //! lead error on its positioning, and a reversal when the data have both
 //! approach directions (`dir_*`) — a lead or a reversal as the named effect
-//! `fit --add` puts on top (`add`). The model's own effects on top are
+//! `fit --add` puts on top (`add`; a lead finding's period refined between
+//! the periods tried). The model's own effects on top are
 //! part of the model every candidate is scored against. Each is scored on the joint
 //! design of every reading with the set-ups' unknowns projected out (the
 //! fit's own design, so an angle is judged through its arms and every
@@ -422,36 +423,29 @@ pub fn diagnose_with(
         };
         let name = |peak: Option<f64>| {
             match (peak, wave) {
-            (Some(v), Shape::Degrees) => format!(
-                "{} {}, {} {} over the travel beyond degree {degree}",
-                words(e),
-                e.name,
-                sig3(v),
-                e.kind.unit()
-            ),
-            // The period is the nearest one tried; between two tried
-            // periods the fitted amplitude reads low, so it is a lower bound.
-            (Some(v), Shape::Lead(_, period)) => format!(
-                "{} {}: a periodic (lead) error of at least {} µm amplitude, period ≈ {} mm (periods tried {:.1} % apart)",
-                words(e),
-                e.name,
-                sig3(v),
-                sig3(*period),
-                100.0 * (spacing - 1.0)
-            ),
-            (Some(v), Shape::Effect(i)) => format!(
-                "{} {}: {}, {} µm at most over these readings",
-                words(e),
-                e.name,
-                tried[*i].0.spec.describe(),
-                sig3(v)
-            ),
-            (None, _) => format!(
-                "{} {}: cannot be told from the model's other errors",
-                words(e),
-                e.name
-            ),
-        }
+                (Some(v), Shape::Degrees) => format!(
+                    "{} {}, {} {} over the travel beyond degree {degree}",
+                    words(e),
+                    e.name,
+                    sig3(v),
+                    e.kind.unit()
+                ),
+                // The period is the nearest one tried; between two tried
+                // periods the fitted amplitude reads low, so it is a lower bound.
+                (Some(v), Shape::Lead(_, period)) => lead_text(e, v, *period, spacing),
+                (Some(v), Shape::Effect(i)) => format!(
+                    "{} {}: {}, {} µm at most over these readings",
+                    words(e),
+                    e.name,
+                    tried[*i].0.spec.describe(),
+                    sig3(v)
+                ),
+                (None, _) => format!(
+                    "{} {}: cannot be told from the model's other errors",
+                    words(e),
+                    e.name
+                ),
+            }
         };
         let missing = |peak: Option<f64>, delta_bic, held_out_gain| Missing {
             error: e.name.clone(),
@@ -546,9 +540,20 @@ pub fn diagnose_with(
     let mut findings: Vec<Missing> = Vec::new();
     let mut round = candidates.clone();
     while findings.len() < MAX_FINDINGS {
-        let Some(best) = round.first().filter(|m| passes(m)).cloned() else {
+        let Some(mut best) = round.first().filter(|m| passes(m)).cloned() else {
             break;
         };
+        // A lead's period refined between the periods tried, its amplitude
+        // and effect read there (the next fit puts that period on top).
+        if let Shape::Lead(k, period) = cands[best.index].1 {
+            let (p, amp) = refine_lead(&pr, &total, &base, k, period, spacing, &|w| {
+                projected_with(data, &model, &[], w).m
+            });
+            best.period_mm = Some(p);
+            best.peak = Some(amp);
+            best.add = lead_effect(k, p);
+            best.text = lead_text(&model.errors[cands[best.index].2], amp, p, spacing);
+        }
         base.extend(&cands[best.index].0);
         // A function's degrees once; an axis' lead error once; an effect once.
         let (_, wave, t) = &cands[best.index];
@@ -593,6 +598,99 @@ pub fn diagnose_with(
         verdict,
         warnings,
     })
+}
+
+/// A lead finding in words. The period is the nearest one tried (a
+/// candidate's) or refined between them (a finding's); at a period tried
+/// the fitted amplitude reads low, so it is said as a lower bound.
+fn lead_text(e: &crate::model::rigid21::ErrorTerm, amp: f64, period: f64, spacing: f64) -> String {
+    format!(
+        "{} {}: a periodic (lead) error of at least {} µm amplitude, period ≈ {} mm (periods tried {:.1} % apart, refined between them)",
+        words(e),
+        e.name,
+        sig3(amp),
+        sig3(period),
+        100.0 * (spacing - 1.0)
+    )
+}
+
+/// The period of a lead on axis `k` between `period / spacing` and
+/// `period · spacing` that leaves the least weighted RSS with the model
+/// columns `base` (golden-section search on ln P; the period tried is
+/// kept when the search finds nothing better), and the amplitude there.
+/// `project` gives the projected design of extra columns.
+fn refine_lead(
+    pr: &crate::fit::rigid21::Projected,
+    total: &Fold,
+    base: &[usize],
+    k: usize,
+    period: f64,
+    spacing: f64,
+    project: &dyn Fn(&[ExtraColumn]) -> DMatrix<f64>,
+) -> (f64, f64) {
+    let nb = base.len();
+    let b_cols = pr.m.select_columns(base);
+    let fit_at = |p: f64| -> (f64, f64) {
+        let wave = |phase: f64| {
+            move |_: usize, pt: &ToolPoint| {
+                let mut o = Prediction::default();
+                o.e_um[k] = (TAU * pt.pos_mm[k] / p + phase).sin();
+                o
+            }
+        };
+        let (sin, cos) = (wave(0.0), wave(std::f64::consts::FRAC_PI_2));
+        let w = project(&[&sin as ExtraColumn, &cos as ExtraColumn]);
+        let mut g = DMatrix::zeros(nb + 2, nb + 2);
+        let mut h = DVector::zeros(nb + 2);
+        for i in 0..nb {
+            h[i] = total.h[base[i]];
+            for j in 0..nb {
+                g[(i, j)] = total.g[(base[i], base[j])];
+            }
+        }
+        let bw = b_cols.transpose() * &w;
+        let ww = w.transpose() * &w;
+        let wb = w.transpose() * &pr.b;
+        for c in 0..2 {
+            h[nb + c] = wb[c];
+            for i in 0..nb {
+                g[(i, nb + c)] = bw[(i, c)];
+                g[(nb + c, i)] = bw[(i, c)];
+            }
+            for d in 0..2 {
+                g[(nb + c, nb + d)] = ww[(c, d)];
+            }
+        }
+        match g.cholesky() {
+            Some(ch) => {
+                let x = ch.solve(&h);
+                (total.bb - x.dot(&h), x[nb].hypot(x[nb + 1]))
+            }
+            None => (f64::INFINITY, 0.0),
+        }
+    };
+    let r = (5f64.sqrt() - 1.0) / 2.0;
+    let (mut a, mut b) = ((period / spacing).ln(), (period * spacing).ln());
+    let (mut c, mut d) = (b - r * (b - a), a + r * (b - a));
+    let (mut fc, mut fd) = (fit_at(c.exp()).0, fit_at(d.exp()).0);
+    for _ in 0..16 {
+        if fc < fd {
+            (b, d, fd) = (d, c, fc);
+            c = b - r * (b - a);
+            fc = fit_at(c.exp()).0;
+        } else {
+            (a, c, fc) = (c, d, fd);
+            d = a + r * (b - a);
+            fd = fit_at(d.exp()).0;
+        }
+    }
+    let p = (0.5 * (a + b)).exp();
+    let (at_p, at_tried) = (fit_at(p), fit_at(period));
+    if at_p.0 < at_tried.0 {
+        (p, at_p.1)
+    } else {
+        (period, at_tried.1)
+    }
 }
 
 /// The lead error of axis `k` at `period_mm` as the effect `fit --add`
@@ -728,6 +826,9 @@ mod tests {
             add.starts_with("periodic:target=ex,axis=x,period_mm="),
             "{add}"
         );
+        // The period refined between those tried (3 % apart): the lead's.
+        let period = f.period_mm.unwrap();
+        assert!((period - 100.0).abs() < 0.5, "{period}");
         // The effect fits: most of the lead's 3 µm at the period tried.
         let effect = Effect::parse(&add).unwrap();
         let (_, id, _) = fit_with(&data, 4, std::slice::from_ref(&effect)).unwrap();
