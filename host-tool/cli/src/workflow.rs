@@ -90,7 +90,8 @@ pub fn run_compare(
     // zeros, alignment and frame (docs/volumetric.md).
     let (predicted, readings) = match &model.model {
         trueaxis_engine::model::FittedModel::Rigid21(m) => {
-            let (fitted, kinds) = trueaxis_engine::fit::rigid21::reading_residuals(m, data);
+            let (fitted, kinds) = trueaxis_engine::fit::rigid21::reading_residuals(m, data)
+                .with_context(|| format!("{}: the model cannot be evaluated on it", data.source))?;
             (fitted, Some(kinds))
         }
         _ => (predicted, None),

@@ -12,7 +12,7 @@ use crate::cmd::out::{self, outln};
 use crate::input;
 use crate::workflow::model_spec;
 use trueaxis_engine::diagnose::{self, Diagnosis, Options, Verdict};
-use trueaxis_engine::effect::EffectSpec;
+use trueaxis_engine::effect::{Effect, EffectSpec};
 
 /// Arguments of `trueaxis diagnose`.
 #[derive(clap::Args, Debug)]
@@ -44,8 +44,8 @@ pub struct Args {
 
 impl Args {
     pub fn run(self) -> Result<()> {
-        if let Some(degree) = rigid21_degree(&self.model)? {
-            return self.run_rigid21(degree);
+        if let Some((degree, adds)) = rigid21_degree(&self.model)? {
+            return self.run_rigid21(degree, adds);
         }
         let (seed, mut adds) = model_spec(&self.model)?;
         for a in &self.add {
@@ -119,40 +119,54 @@ impl Args {
 impl Args {
     /// `diagnose` on a rigid21 model (docs/volumetric.md § Diagnose): the
     /// error function it is missing, in ISO 230-1 words.
-    fn run_rigid21(self, degree: usize) -> Result<()> {
-        if !self.add.is_empty() {
-            bail!("diagnose --model rigid21: --add is not supported yet (named effects on a rigid21 model are not fitted yet)");
-        }
+    fn run_rigid21(self, degree: usize, mut adds: Vec<EffectSpec>) -> Result<()> {
         if self.report.is_some() {
             bail!("diagnose --model rigid21: --report is not supported yet; `compare DATA --model MODEL.json --report DIR` draws the model's error functions");
         }
+        // The effects on top: the model file's and those given with --add.
+        let in_file = adds.len();
+        for a in &self.add {
+            let spec: EffectSpec = a.parse()?;
+            if !adds.contains(&spec) {
+                adds.push(spec);
+            }
+        }
+        let effects: Vec<Effect> = adds.iter().cloned().map(Effect::new).collect();
         let data = input::load_data(&self.data, None)?;
-        let d = trueaxis_engine::diagnose::rigid21::diagnose(&data, degree)
+        let d = trueaxis_engine::diagnose::rigid21::diagnose_with(&data, degree, &effects)
             .with_context(|| format!("{}: cannot diagnose", self.data.display()))?;
         let model_out = next_model_path(&self.model, &self.data);
-        // A higher degree holds a function's missing shape; a lead error on
-        // top is no degree (named effects on rigid21 are not fitted yet), so
-        // it gets no command. Nothing missing: the model goes to the board
-        // (a model file as it is; a seed name is fitted first).
+        // A higher degree holds a function's missing shape, a lead error is
+        // a periodic effect on top: the next fit has both, with the
+        // model's own effects kept. Nothing missing: the model goes to the
+        // board (a model file as it is; a seed name is fitted first).
         use crate::report::diagnose::shell_word;
         let word = |p: &Path| shell_word(&p.display().to_string());
-        let next = if d.findings.iter().any(|f| f.period_mm.is_none()) {
-            Some(format!(
-                "trueaxis fit {} --model rigid21:{} -o {}",
+        let fit = |degree: usize, more: &[String]| {
+            let add: String = adds
+                .iter()
+                .map(ToString::to_string)
+                .chain(more.iter().cloned())
+                .map(|a| format!(" --add {}", shell_word(&a)))
+                .collect();
+            format!(
+                "trueaxis fit {} --model rigid21:{degree}{add} -o {}",
                 word(&self.data),
-                (degree + 2).min(trueaxis_engine::model::rigid21::MAX_DEGREE),
                 word(&model_out)
-            ))
-        } else if !d.findings.is_empty() {
-            None
-        } else if Path::new(&self.model).is_file() {
+            )
+        };
+        let next = if !d.findings.is_empty() {
+            let next_degree = if d.findings.iter().any(|f| f.period_mm.is_none()) {
+                (degree + 2).min(trueaxis_engine::model::rigid21::MAX_DEGREE)
+            } else {
+                degree
+            };
+            let leads: Vec<String> = d.findings.iter().filter_map(|f| f.add.clone()).collect();
+            Some(fit(next_degree, &leads))
+        } else if Path::new(&self.model).is_file() && adds.len() == in_file {
             Some(format!("trueaxis export {} -o table.bin", word(&model_out)))
         } else {
-            Some(format!(
-                "trueaxis fit {} --model rigid21:{degree} -o {}",
-                word(&self.data),
-                word(&model_out)
-            ))
+            Some(fit(degree, &[]))
         };
         if self.json {
             let mut doc = serde_json::to_value(&d)?;
@@ -194,18 +208,27 @@ fn fmt3(v: f64) -> String {
     crate::report::plot::format_value(v)
 }
 
-/// The degree when `--model` is a rigid21 spec or a rigid21 MODEL.json.
-fn rigid21_degree(model: &str) -> Result<Option<usize>> {
-    let seed = if model.ends_with(".json") || Path::new(model).is_file() {
-        input::load_model(Path::new(model))?.seed
+/// The degree and the effects on top when `--model` is a rigid21 spec
+/// (no effects) or a rigid21 MODEL.json (its `adds`).
+fn rigid21_degree(model: &str) -> Result<Option<(usize, Vec<EffectSpec>)>> {
+    let (seed, adds) = if model.ends_with(".json") || Path::new(model).is_file() {
+        let m = input::load_model(Path::new(model))?;
+        (m.seed, m.adds)
     } else {
-        model.to_string()
+        (model.to_string(), Vec::new())
     };
     if !seed.starts_with("rigid21") {
         return Ok(None);
     }
     match seed.parse::<trueaxis_engine::model::Seed>()? {
-        trueaxis_engine::model::Seed::Rigid21 { degree } => Ok(Some(degree)),
+        trueaxis_engine::model::Seed::Rigid21 { degree } => {
+            // The file's effects were checked when it was loaded.
+            let adds = adds
+                .iter()
+                .map(|a| a.parse())
+                .collect::<Result<Vec<EffectSpec>>>()?;
+            Ok(Some((degree, adds)))
+        }
         _ => Ok(None),
     }
 }

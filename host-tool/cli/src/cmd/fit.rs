@@ -210,6 +210,15 @@ impl Args {
             )?;
         }
         outln!("  hold-out: {}", s.holdout)?;
+        // A rigid21 model's effects on top, by their physical parameter.
+        for e in s.volumetric.iter().flat_map(|v| &v.effects) {
+            match (&e.physical, e.value, &e.unit) {
+                (Some(name), Some(v), Some(unit)) => {
+                    outln!("  on top: {}: {name} {v:.4} {unit}", e.effect)?
+                }
+                _ => outln!("  on top: {}", e.effect)?,
+            }
+        }
         if !found.is_empty() {
             outln!(
                 "  outliers ({}, left out; --keep-outliers keeps them):",

@@ -45,7 +45,7 @@ fn words(e: &(dyn std::error::Error + 'static)) -> Option<String> {
                     .to_string()
             }
             FitError::NotPolynomial { seed } => format!(
-                "--local and --add apply to the polynomial seeds (cubic19, kinematic), not to {seed}"
+                "--local applies to the polynomial seeds (cubic19, kinematic), --add to those and rigid21, not to {seed}"
             ),
             FitError::Local(why) => format!("--local: {why}"),
         });
@@ -162,7 +162,7 @@ mod tests {
         );
         assert_eq!(
             fit_err("nn:4", &[], true),
-            "d.csv: cannot fit: --local and --add apply to the polynomial seeds (cubic19, kinematic), not to nn:4"
+            "d.csv: cannot fit: --local applies to the polynomial seeds (cubic19, kinematic), --add to those and rigid21, not to nn:4"
         );
         let e = render(&anyhow::Error::new(FitError::Local(
             fit::LocalRefusal::NoTravel,

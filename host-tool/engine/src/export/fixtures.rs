@@ -70,5 +70,6 @@ pub(crate) fn rigid21(degree: usize) -> crate::model::Rigid21Model {
         chain,
         travel_mm: [Some([0.0, 800.0]), Some([0.0, 500.0]), Some([0.0, 400.0])],
         errors,
+        effects: None,
     }
 }

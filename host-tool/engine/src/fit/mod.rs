@@ -57,8 +57,9 @@ pub enum FitError {
     /// Effects added to a local fit.
     #[error("a local fit takes no added effects (the local patches use the seed's own terms)")]
     LocalWithEffects,
-    /// A local fit or added effects asked of a seed that is no polynomial.
-    #[error("local fits and added effects apply to the polynomial seeds (cubic19, kinematic), not to {seed}")]
+    /// A local fit or added effects asked of a seed that is no polynomial
+    /// (added effects: nor rigid21).
+    #[error("local fits and added effects apply to the polynomial seeds (cubic19, kinematic; added effects also to rigid21), not to {seed}")]
     NotPolynomial {
         /// The seed as given (`nn:8`, `grid:10`).
         seed: String,
@@ -144,7 +145,9 @@ pub fn fit_recorded(
         }
     }
     let polynomial = matches!(parsed, Seed::Cubic19 | Seed::Kinematic);
-    if !polynomial && (opts.local || !adds.is_empty()) {
+    // rigid21 takes added effects on top (docs/volumetric.md), no local fit.
+    let takes_adds = polynomial || matches!(parsed, Seed::Rigid21 { .. });
+    if (!polynomial && opts.local) || (!takes_adds && !adds.is_empty()) {
         return Err(FitError::NotPolynomial {
             seed: seed.to_string(),
         }
@@ -176,9 +179,10 @@ pub fn fit_recorded(
             (m, s, seed.to_string())
         }
         Seed::Rigid21 { degree } => {
-            let (m, id, kinds) = rigid21::fit(data, degree)?;
+            let (m, id, kinds) = rigid21::fit_with(data, degree, adds)?;
             let mut stats = FitStats {
-                terms: m.errors.iter().map(|e| e.degrees.len()).sum(),
+                terms: m.errors.iter().map(|e| e.degrees.len()).sum::<usize>()
+                    + adds.iter().map(|e| e.features.len()).sum::<usize>(),
                 holdout: "none (rigid21: hold-out by set-up is not built yet)".into(),
                 ..FitStats::default()
             };

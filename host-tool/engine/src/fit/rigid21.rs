@@ -18,12 +18,15 @@ use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
 
 use crate::data::{Dataset, ANGLES, TARGETS};
+use crate::effect::Effect;
 use crate::model::rigid21::{
     Chain, ErrorAnswer, ErrorKind, Identifiability, Measure, Prediction, ReadingResidual,
     Rigid21Model, Status, ToolPoint,
 };
 use crate::simulate::instruments::{self, Instrument};
 use crate::simulate::Machine;
+
+pub(crate) mod effects;
 
 /// Realistic size of a translation error (positioning, straightness), µm.
 pub const SIZE_TRANSLATION_UM: f64 = 10.0;
@@ -94,6 +97,7 @@ pub fn skeleton(data: &Dataset, degree: usize) -> Result<Rigid21Model> {
     Ok(Rigid21Model {
         degree,
         errors: Rigid21Model::layout(&chain, degree),
+        effects: None,
         chain,
         travel_mm,
     })
@@ -125,9 +129,10 @@ pub(crate) fn projected(data: &Dataset, model: &Rigid21Model, params: &[Param]) 
     projected_with(data, model, params, &[])
 }
 
-/// A column beyond the model's: its effect at a tool point (diagnose's
-/// candidates — a periodic lead error — scored on the same design).
-pub(crate) type ExtraColumn<'a> = &'a dyn Fn(&ToolPoint) -> Prediction;
+/// A column beyond the model's: its effect at row `r`'s tool point
+/// (diagnose's candidates — a periodic lead error — scored on the same
+/// design; a named effect on top, which reads the row's data).
+pub(crate) type ExtraColumn<'a> = &'a dyn Fn(usize, &ToolPoint) -> Prediction;
 
 /// [`projected`] with `extra` columns (unit size) after the parameters'.
 pub(crate) fn projected_with(
@@ -188,7 +193,7 @@ pub(crate) fn projected_with(
         let resp: Vec<Prediction> = params
             .iter()
             .map(|p| model.unit_response(&model.errors[p.term], p.degree, &pt))
-            .chain(extra.iter().map(|f| f(&pt)))
+            .chain(extra.iter().map(|f| f(r, &pt)))
             .collect();
         let u = data.u_um.as_ref().map_or(1.0, |v| v[r]);
         let w = 1.0 / u;
@@ -506,13 +511,28 @@ pub type Fitted = (Rigid21Model, Identifiability, Vec<(String, f64, usize)>);
 /// without coefficients), the answer per error, and the RMS of the
 /// weighted-back residuals per reading kind (`ex`, `ea_urad`, `e_beam`, …).
 pub fn fit(data: &Dataset, degree: usize) -> Result<Fitted> {
+    fit_with(data, degree, &[])
+}
+
+/// [`fit`] with the named effects `adds` on top, fitted jointly
+/// (docs/volumetric.md § Effects on top). Refused when the data lack a
+/// column an effect reads or cannot tell an effect from the errors.
+pub fn fit_with(data: &Dataset, degree: usize, adds: &[Effect]) -> Result<Fitted> {
     let mut model = skeleton(data, degree)?;
     let params = params_of(&model);
-    let pr = projected(data, &model, &params);
+    let norm = model.travel_norm();
+    let fx = effects::columns(data, adds, &norm)?;
+    let boxed = effects::as_columns(&fx);
+    let extra: Vec<ExtraColumn> = boxed.iter().map(|b| b.as_ref() as ExtraColumn).collect();
+    let pr = projected_with(data, &model, &params, &extra);
     if pr.b.len() <= pr.nuisance {
         bail!("rigid21: no readings left once each set-up's own zeros and frames are taken out");
     }
-    let nulls = null_directions(&pr.m);
+    let all_nulls = null_directions(&pr.m);
+    effects::refuse_unseen(&model, &params, adds, &fx, &all_nulls)?;
+    // The effects are seen: the model's near-null directions are those of
+    // its own parameters.
+    let nulls = all_nulls.rows(0, params.len()).into_owned();
     // Errors a null direction reaches.
     // Per coefficient: an error is cannot_know when a null direction
     // reaches any of its coefficients; the solve leaves out only the
@@ -530,7 +550,22 @@ pub fn fit(data: &Dataset, degree: usize) -> Result<Fitted> {
             keep.push(j);
         }
     }
+    let kept_model = keep.len();
+    keep.extend(params.len()..params.len() + fx.len());
     let (x, resid, cov) = solve_kept(&pr, &keep);
+    let keep = &keep[..kept_model];
+    let (saved, effect_answers) = effects::saved(
+        adds,
+        &fx,
+        &x.as_slice()[kept_model..],
+        &(kept_model..x.len())
+            .map(|k| cov[(k, k)])
+            .collect::<Vec<_>>(),
+        norm,
+    );
+    if !adds.is_empty() {
+        model.effects = Some(saved);
+    }
     for (i, e) in model.errors.iter_mut().enumerate() {
         if cannot[i] {
             e.status = Status::CannotKnow;
@@ -659,7 +694,8 @@ pub fn fit(data: &Dataset, degree: usize) -> Result<Fitted> {
             }
             let pe = projected(&extra, &model, &params);
             let mut both = DMatrix::zeros(pr.m.nrows() + pe.m.nrows(), params.len());
-            both.rows_mut(0, pr.m.nrows()).copy_from(&pr.m);
+            both.rows_mut(0, pr.m.nrows())
+                .copy_from(&pr.m.columns(0, params.len()));
             both.rows_mut(pr.m.nrows(), pe.m.nrows()).copy_from(&pe.m);
             let n2 = null_directions(&both);
             let (h2, _, _) = hidden(&model, &params, &n2, &points);
@@ -699,6 +735,7 @@ pub fn fit(data: &Dataset, degree: usize) -> Result<Fitted> {
             hidden_from,
             hidden_at_tool_mm: h_tool,
             measure,
+            effects: effect_answers,
         },
         stats,
     ))
@@ -741,20 +778,21 @@ fn solve_kept(pr: &Projected, keep: &[usize]) -> (DVector<f64>, DVector<f64>, DM
     (x, resid, cov)
 }
 
+/// What [`reading_residuals`] returns: the model plus set-up value per
+/// row for ex, ey, ez, and the residual per reading kind.
+pub type Compared = ([Option<Vec<f64>>; 3], Vec<ReadingResidual>);
+
 /// `model` evaluated at each row's tool point and compared with every
 /// reading of `data` (docs/volumetric.md): each set-up's unknowns (zeros,
 /// alignment slopes, frames) are fitted to what the model leaves, as the
 /// instrument's own placement, never as the machine's error. Returns the
 /// model plus set-up value per row for ex, ey, ez (what `compare`'s
-/// statistics use) and the residual per reading kind.
-pub fn reading_residuals(
-    model: &Rigid21Model,
-    data: &Dataset,
-) -> ([Option<Vec<f64>>; 3], Vec<ReadingResidual>) {
+/// statistics use) and the residual per reading kind. Err when the data
+/// lack a column one of the model's effects reads.
+pub fn reading_residuals(model: &Rigid21Model, data: &Dataset) -> Result<Compared> {
     let mut left = data.clone();
-    let preds: Vec<Prediction> = (0..data.len())
-        .map(|r| model.predict(&ToolPoint::of_row(data, r)))
-        .collect();
+    // The named effects on top read the row's data (docs/volumetric.md).
+    let preds: Vec<Prediction> = model.predict_readings(data)?;
     for c in 0..3 {
         if let Some(col) = left.err_um[c].as_mut() {
             for (r, v) in col.iter_mut().enumerate() {
@@ -819,7 +857,7 @@ pub fn reading_residuals(
     for o in &mut out {
         o.rms = (o.rms / o.count as f64).sqrt();
     }
-    (fitted, out)
+    Ok((fitted, out))
 }
 
 /// The ex/ey/ez column of an `E` reading (0 for the others, unused).
@@ -981,7 +1019,7 @@ mod tests {
         assert!(id.errors.iter().all(|e| e.status == Status::Estimated));
         // On a fresh station (another seed: other points, frame, noise).
         let fresh = measure(&m, &plan, 8, true);
-        let (fitted, kinds) = reading_residuals(&model, &fresh);
+        let (fitted, kinds) = reading_residuals(&model, &fresh).unwrap();
         for k in &kinds {
             assert!(k.rms < 1.0, "{k:?}");
         }
@@ -993,7 +1031,7 @@ mod tests {
                 c.iter_mut().for_each(|v| *v = 0.0);
             }
         }
-        let (_, kinds0) = reading_residuals(&zero, &fresh);
+        let (_, kinds0) = reading_residuals(&zero, &fresh).unwrap();
         assert!(kinds0.iter().any(|k| k.rms > 2.0), "{kinds0:?}");
     }
 

@@ -186,7 +186,7 @@ impl FittedModel {
                 }
             }
             FittedModel::Local(m) => out = m.predict(data)?,
-            FittedModel::Rigid21(m) => out = m.predict_rows(data).map(Some),
+            FittedModel::Rigid21(m) => out = m.predict_rows(data)?.map(Some),
         }
         Ok(out)
     }
@@ -371,7 +371,7 @@ impl ModelFile {
                 *step_mm == m.step_mm && self.adds.is_empty()
             }
             (FittedModel::Rigid21(m), Seed::Rigid21 { degree }) => {
-                *degree == m.degree && !seed.local && self.adds.is_empty()
+                *degree == m.degree && !seed.local && self.adds.is_empty() == m.effects.is_none()
             }
             _ => false,
         };

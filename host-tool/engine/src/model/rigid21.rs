@@ -16,6 +16,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::{Dataset, AXES};
 
+mod effects;
+
+pub use effects::EffectAnswer;
+
 /// Default degree of each error function (`rigid21` = `rigid21:4`).
 pub const DEFAULT_DEGREE: usize = 4;
 
@@ -238,6 +242,12 @@ pub struct Rigid21Model {
     pub travel_mm: [Option<[f64; 2]>; 3],
     /// The errors, in the order of [`Rigid21Model::layout`].
     pub errors: Vec<ErrorTerm>,
+    /// The named effects on top (`adds`; docs/volumetric.md § Effects on
+    /// top): per target Σ coef · feature of the rows' data, in the linear
+    /// models' terms and their normalisation (the travel's centre and
+    /// half-span); absent without effects.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub effects: Option<super::LinearModel>,
 }
 
 /// Legendre polynomials P_0 … P_n at s, by the three-term recurrence.
@@ -462,18 +472,6 @@ impl Rigid21Model {
         out
     }
 
-    /// The error vector (µm) at every row of `data`, per component.
-    pub fn predict_rows(&self, data: &Dataset) -> [Vec<f64>; 3] {
-        let mut out: [Vec<f64>; 3] = Default::default();
-        for row in 0..data.len() {
-            let p = self.predict(&ToolPoint::of_row(data, row));
-            for (col, v) in out.iter_mut().zip(p.e_um) {
-                col.push(v);
-            }
-        }
-        out
-    }
-
     /// Checks the fields the types do not: the chain, travels for exactly
     /// the chain's axes, the layout of the errors for the chain and degree,
     /// coefficients present (one per degree, finite) exactly when
@@ -538,7 +536,7 @@ impl Rigid21Model {
                 }
             }
         }
-        Ok(())
+        self.check_effects()
     }
 }
 
@@ -610,6 +608,10 @@ pub struct Identifiability {
     /// nothing is hidden.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub measure: Option<Measure>,
+    /// The named effects on top (`adds`), fitted jointly with the errors;
+    /// empty (the key absent) without effects.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub effects: Vec<EffectAnswer>,
 }
 
 /// A measurement to add.
@@ -655,6 +657,7 @@ mod tests {
             chain,
             travel_mm: travel.map(|t| Some([0.0, t])),
             errors,
+            effects: None,
         }
     }
 
@@ -851,6 +854,7 @@ mod tests {
             chain,
             travel_mm: [Some([0.0, 800.0]), Some([0.0, 500.0]), Some([0.0, 500.0])],
             errors,
+            effects: None,
         };
         set(&mut m, "ECX", 1, 10.0);
         let pt = ToolPoint {

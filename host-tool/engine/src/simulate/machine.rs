@@ -142,6 +142,24 @@ pub const REALISTIC: Realistic = Realistic {
 pub const PRESETS: [&str; 4] = ["mill800", "mill800-wavy", "perfect800", "mill800-21"];
 
 impl Machine {
+    /// The machine with a lead (periodic) error of `amp_um` with period
+    /// `period_mm` and phase `phase_rad` on top of `axis`' positioning (a
+    /// screw's cyclic error, as tests and examples put one on a preset).
+    pub fn with_lead(
+        mut self,
+        axis: usize,
+        amp_um: f64,
+        period_mm: f64,
+        phase_rad: f64,
+    ) -> Machine {
+        self.axes[axis].trans_um[axis].waves.push(Wave {
+            amp: amp_um,
+            period_mm,
+            phase_rad,
+        });
+        self
+    }
+
     /// A machine with the seed's travels (800 × 500 × 500 mm) and no error
     /// at all: the base for tests that switch on one error at a time.
     pub fn perfect(travel_mm: [f64; 3]) -> Machine {

@@ -255,6 +255,7 @@ fn a_model_without_z_writes_only_the_xy_skew_and_says_so() {
         chain,
         travel_mm: [Some([0.0, 300.0]), Some([0.0, 300.0]), None],
         errors,
+        effects: None,
     };
     m.check().unwrap();
     let k = export_of(&m, SkewFormat::Klipper, 0.0);

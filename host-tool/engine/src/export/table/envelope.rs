@@ -206,7 +206,7 @@ pub(super) fn max_slew_nm_per_ms(
         }
     }
     if has_rev && transition_nm > 0 {
-        if let FittedModel::Linear(m) = model {
+        if let Some(m) = super::mapping::linear_part(model) {
             for o in &m.outputs {
                 for (f, c) in o.features.iter().zip(&o.coef_um) {
                     if matches!(f, Feature::Reversal { .. }) {

@@ -16,7 +16,7 @@ use model_core::MAX_TEMPS;
 use super::{mc, nm, TableError, Warning};
 use crate::data::{AXES, TARGETS};
 use crate::features::{Feature, Phase};
-use crate::model::FittedModel;
+use crate::model::{FittedModel, LinearModel, LinearOutput};
 
 /// The model as model-core terms, its channels, and warnings. Thermal lags
 /// are refused unless `drop_lag`, local models always — as a
@@ -31,190 +31,27 @@ pub(super) fn terms_of(
     let mut terms = Vec::new();
     let mut channels: Vec<String> = Vec::new();
     match model {
-        FittedModel::Rigid21(m) => terms.extend(rigid21_terms(m)?),
-        FittedModel::Linear(m) => {
-            for o in &m.outputs {
-                let out = o.target as u8;
-                let mut poly: Vec<PolyCoef> = Vec::new();
-                let mut abbe: Vec<PolyCoef> = Vec::new();
-                // (axis, period_mm) → (sin, cos) by harmonic.
-                let mut periodic: Vec<(usize, f64, Vec<f64>, Vec<f64>)> = Vec::new();
-                // (channel, t_ref_c) → coefficients nm/K.
-                let mut thermal: Vec<(String, f64, Vec<PolyCoef>)> = Vec::new();
-                let mut reversal: Vec<(usize, f64)> = Vec::new();
-                let add = |v: &mut Vec<PolyCoef>, exp: [u8; 3], c: f64| match v
-                    .iter_mut()
-                    .find(|(e, _)| *e == exp)
-                {
-                    Some((_, acc)) => *acc += c,
-                    None => v.push((exp, c)),
-                };
-                let degree_ok = |exp: [u8; 3]| {
-                    exp.iter().map(|&e| u32::from(e)).sum::<u32>() <= u32::from(MAX_DEGREE)
-                };
-                for (f, &c_um) in o.features.iter().zip(&o.coef_um) {
-                    let c_nm = -1000.0 * c_um; // correction = −error
-                    match f {
-                        Feature::Monomial { exp } => {
-                            if !degree_ok(*exp) {
-                                bail!("{}: monomial {f} has degree above {MAX_DEGREE}, which the table cannot hold", TARGETS[o.target]);
-                            }
-                            add(&mut poly, *exp, c_nm);
-                        }
-                        Feature::Abbe { exp } => {
-                            if !degree_ok(*exp) {
-                                bail!(
-                                    "{}: Abbe term {f} has degree above {MAX_DEGREE}",
-                                    TARGETS[o.target]
-                                );
-                            }
-                            // µm per mm of arm → nm per nm: ×1e-3 (and the sign).
-                            add(&mut abbe, *exp, -1e-3 * c_um);
-                        }
-                        Feature::Periodic {
-                            axis,
-                            period_mm,
-                            harmonic,
-                            phase,
-                        } => {
-                            let k = usize::from(*harmonic);
-                            if k == 0 || k > model_core::table::MAX_HARMONICS {
-                                bail!(
-                                    "{f}: harmonic {k} outside 1..={}",
-                                    model_core::table::MAX_HARMONICS
-                                );
-                            }
-                            let idx = match periodic
-                                .iter()
-                                .position(|p| p.0 == *axis && p.1 == *period_mm)
-                            {
-                                Some(i) => i,
-                                None => {
-                                    periodic.push((*axis, *period_mm, Vec::new(), Vec::new()));
-                                    periodic.len() - 1
-                                }
-                            };
-                            let p = &mut periodic[idx];
-                            if p.2.len() < k {
-                                p.2.resize(k, 0.0);
-                                p.3.resize(k, 0.0);
-                            }
-                            match phase {
-                                Phase::Sin => p.2[k - 1] += c_nm,
-                                Phase::Cos => p.3[k - 1] += c_nm,
-                            }
-                        }
-                        Feature::Thermal {
-                            channel,
-                            t_ref_c,
-                            lag_s,
-                            exp,
-                        } => {
-                            if *lag_s > 0.0 {
-                                if !drop_lag {
-                                    return Err(TableError::Lag {
-                                        target: o.target,
-                                        term: f.to_string(),
-                                        lag_s: *lag_s,
-                                    }
-                                    .into());
-                                }
-                                warnings.push(Warning::new(
-                                    "lag_dropped",
-                                    format!("{}: {f} exported without its {lag_s} s lag: right in steady state, wrong while the temperature changes", TARGETS[o.target]),
-                                ));
-                            }
-                            if !degree_ok(*exp) {
-                                bail!(
-                                    "{}: thermal term {f} has degree above {MAX_DEGREE}",
-                                    TARGETS[o.target]
-                                );
-                            }
-                            if !channels.contains(channel) {
-                                channels.push(channel.clone());
-                            }
-                            let idx = match thermal
-                                .iter()
-                                .position(|t| &t.0 == channel && t.1 == *t_ref_c)
-                            {
-                                Some(i) => i,
-                                None => {
-                                    thermal.push((channel.clone(), *t_ref_c, Vec::new()));
-                                    thermal.len() - 1
-                                }
-                            };
-                            add(&mut thermal[idx].2, *exp, c_nm);
-                        }
-                        Feature::Reversal { axis } => {
-                            match reversal.iter_mut().find(|r| r.0 == *axis) {
-                                Some(r) => r.1 += c_nm,
-                                None => reversal.push((*axis, c_nm)),
-                            }
-                        }
-                        Feature::Drift { .. } => {
-                            warnings.push(Warning::new(
-                                "drift_left_out",
-                                format!(
-                                    "{}: {f} ({c_um:+.4} µm per h^p) left out: drift describes the measurement session, not the machine",
-                                    TARGETS[o.target]
-                                ),
-                            ));
-                        }
-                    }
-                }
-                if !poly.is_empty() {
-                    terms.push(TermSpec::Poly {
-                        output: out,
-                        coefs: poly,
-                    });
-                }
-                for (axis, period_mm, sin_nm, cos_nm) in periodic {
-                    let period_nm = nm(period_mm).context("periodic period")?;
-                    if period_nm <= 0 {
-                        bail!(
-                            "periodic term on {}: period {period_mm} mm rounds to 0 nm",
-                            AXES[axis]
-                        );
-                    }
-                    if ((period_nm as f64) * 1e-6 - period_mm).abs() > 1e-9 {
-                        warnings.push(Warning::new(
-                            "period_rounded",
-                            format!("period {period_mm} mm stored as {period_nm} nm"),
-                        ));
-                    }
-                    terms.push(TermSpec::Periodic {
-                        output: out,
-                        axis: axis as u8,
-                        period_nm,
-                        sin_nm,
-                        cos_nm,
-                    });
-                }
-                for (channel, t_ref_c, coefs) in thermal {
-                    let ch = channels.iter().position(|c| *c == channel).unwrap_or(0);
-                    terms.push(TermSpec::Thermal {
-                        output: out,
-                        channel: ch as u8,
-                        t_ref_mc: mc(t_ref_c)?,
-                        coefs_nm_per_k: coefs,
-                    });
-                }
-                for (axis, amplitude_nm) in reversal {
-                    terms.push(TermSpec::Reversal {
-                        output: out,
-                        axis: axis as u8,
-                        transition_nm,
-                        amplitude_nm,
-                    });
-                }
-                if !abbe.is_empty() {
-                    terms.push(TermSpec::Abbe {
-                        output: out,
-                        coefs: abbe,
-                    });
-                }
+        FittedModel::Rigid21(m) => {
+            terms.extend(rigid21_terms(m)?);
+            // The named effects on top (docs/volumetric.md § Effects on
+            // top): the linear models' terms, in the same scaled u.
+            if let Some(fx) = &m.effects {
+                terms.extend(linear_terms(
+                    &fx.outputs,
+                    drop_lag,
+                    transition_nm,
+                    &mut channels,
+                    &mut warnings,
+                )?);
             }
         }
+        FittedModel::Linear(m) => terms.extend(linear_terms(
+            &m.outputs,
+            drop_lag,
+            transition_nm,
+            &mut channels,
+            &mut warnings,
+        )?),
         FittedModel::Nn(m) => {
             let n_in = m.inputs.len();
             let inputs = (0..n_in)
@@ -304,6 +141,200 @@ pub(super) fn terms_of(
         );
     }
     Ok((terms, channels, warnings))
+}
+
+/// A linear model's outputs (a linear model's, or a rigid21 model's
+/// effects) as table terms: per target its monomials as a `Poly` term, its
+/// periodic, thermal and reversal columns grouped into their terms, its
+/// Abbe columns as an `Abbe` term; the channels the thermal terms read are
+/// added to `channels`. Drift is left out with a warning.
+fn linear_terms(
+    outputs: &[LinearOutput],
+    drop_lag: bool,
+    transition_nm: i32,
+    channels: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
+) -> Result<Vec<TermSpec>> {
+    let mut terms = Vec::new();
+    for o in outputs {
+        let out = o.target as u8;
+        let mut poly: Vec<PolyCoef> = Vec::new();
+        let mut abbe: Vec<PolyCoef> = Vec::new();
+        // (axis, period_mm) → (sin, cos) by harmonic.
+        let mut periodic: Vec<(usize, f64, Vec<f64>, Vec<f64>)> = Vec::new();
+        // (channel, t_ref_c) → coefficients nm/K.
+        let mut thermal: Vec<(String, f64, Vec<PolyCoef>)> = Vec::new();
+        let mut reversal: Vec<(usize, f64)> = Vec::new();
+        let add = |v: &mut Vec<PolyCoef>, exp: [u8; 3], c: f64| match v
+            .iter_mut()
+            .find(|(e, _)| *e == exp)
+        {
+            Some((_, acc)) => *acc += c,
+            None => v.push((exp, c)),
+        };
+        let degree_ok =
+            |exp: [u8; 3]| exp.iter().map(|&e| u32::from(e)).sum::<u32>() <= u32::from(MAX_DEGREE);
+        for (f, &c_um) in o.features.iter().zip(&o.coef_um) {
+            let c_nm = -1000.0 * c_um; // correction = −error
+            match f {
+                Feature::Monomial { exp } => {
+                    if !degree_ok(*exp) {
+                        bail!("{}: monomial {f} has degree above {MAX_DEGREE}, which the table cannot hold", TARGETS[o.target]);
+                    }
+                    add(&mut poly, *exp, c_nm);
+                }
+                Feature::Abbe { exp } => {
+                    if !degree_ok(*exp) {
+                        bail!(
+                            "{}: Abbe term {f} has degree above {MAX_DEGREE}",
+                            TARGETS[o.target]
+                        );
+                    }
+                    // µm per mm of arm → nm per nm: ×1e-3 (and the sign).
+                    add(&mut abbe, *exp, -1e-3 * c_um);
+                }
+                Feature::Periodic {
+                    axis,
+                    period_mm,
+                    harmonic,
+                    phase,
+                } => {
+                    let k = usize::from(*harmonic);
+                    if k == 0 || k > model_core::table::MAX_HARMONICS {
+                        bail!(
+                            "{f}: harmonic {k} outside 1..={}",
+                            model_core::table::MAX_HARMONICS
+                        );
+                    }
+                    let idx = match periodic
+                        .iter()
+                        .position(|p| p.0 == *axis && p.1 == *period_mm)
+                    {
+                        Some(i) => i,
+                        None => {
+                            periodic.push((*axis, *period_mm, Vec::new(), Vec::new()));
+                            periodic.len() - 1
+                        }
+                    };
+                    let p = &mut periodic[idx];
+                    if p.2.len() < k {
+                        p.2.resize(k, 0.0);
+                        p.3.resize(k, 0.0);
+                    }
+                    match phase {
+                        Phase::Sin => p.2[k - 1] += c_nm,
+                        Phase::Cos => p.3[k - 1] += c_nm,
+                    }
+                }
+                Feature::Thermal {
+                    channel,
+                    t_ref_c,
+                    lag_s,
+                    exp,
+                } => {
+                    if *lag_s > 0.0 {
+                        if !drop_lag {
+                            return Err(TableError::Lag {
+                                target: o.target,
+                                term: f.to_string(),
+                                lag_s: *lag_s,
+                            }
+                            .into());
+                        }
+                        warnings.push(Warning::new(
+                            "lag_dropped",
+                            format!("{}: {f} exported without its {lag_s} s lag: right in steady state, wrong while the temperature changes", TARGETS[o.target]),
+                        ));
+                    }
+                    if !degree_ok(*exp) {
+                        bail!(
+                            "{}: thermal term {f} has degree above {MAX_DEGREE}",
+                            TARGETS[o.target]
+                        );
+                    }
+                    if !channels.contains(channel) {
+                        channels.push(channel.clone());
+                    }
+                    let idx = match thermal
+                        .iter()
+                        .position(|t| &t.0 == channel && t.1 == *t_ref_c)
+                    {
+                        Some(i) => i,
+                        None => {
+                            thermal.push((channel.clone(), *t_ref_c, Vec::new()));
+                            thermal.len() - 1
+                        }
+                    };
+                    add(&mut thermal[idx].2, *exp, c_nm);
+                }
+                Feature::Reversal { axis } => match reversal.iter_mut().find(|r| r.0 == *axis) {
+                    Some(r) => r.1 += c_nm,
+                    None => reversal.push((*axis, c_nm)),
+                },
+                Feature::Drift { .. } => {
+                    warnings.push(Warning::new(
+                        "drift_left_out",
+                        format!(
+                            "{}: {f} ({c_um:+.4} µm per h^p) left out: drift describes the measurement session, not the machine",
+                            TARGETS[o.target]
+                        ),
+                    ));
+                }
+            }
+        }
+        if !poly.is_empty() {
+            terms.push(TermSpec::Poly {
+                output: out,
+                coefs: poly,
+            });
+        }
+        for (axis, period_mm, sin_nm, cos_nm) in periodic {
+            let period_nm = nm(period_mm).context("periodic period")?;
+            if period_nm <= 0 {
+                bail!(
+                    "periodic term on {}: period {period_mm} mm rounds to 0 nm",
+                    AXES[axis]
+                );
+            }
+            if ((period_nm as f64) * 1e-6 - period_mm).abs() > 1e-9 {
+                warnings.push(Warning::new(
+                    "period_rounded",
+                    format!("period {period_mm} mm stored as {period_nm} nm"),
+                ));
+            }
+            terms.push(TermSpec::Periodic {
+                output: out,
+                axis: axis as u8,
+                period_nm,
+                sin_nm,
+                cos_nm,
+            });
+        }
+        for (channel, t_ref_c, coefs) in thermal {
+            let ch = channels.iter().position(|c| *c == channel).unwrap_or(0);
+            terms.push(TermSpec::Thermal {
+                output: out,
+                channel: ch as u8,
+                t_ref_mc: mc(t_ref_c)?,
+                coefs_nm_per_k: coefs,
+            });
+        }
+        for (axis, amplitude_nm) in reversal {
+            terms.push(TermSpec::Reversal {
+                output: out,
+                axis: axis as u8,
+                transition_nm,
+                amplitude_nm,
+            });
+        }
+        if !abbe.is_empty() {
+            terms.push(TermSpec::Abbe {
+                output: out,
+                coefs: abbe,
+            });
+        }
+    }
+    Ok(terms)
 }
 
 /// A rigid21 model on the spindle axis (no lateral offset) at tool length
@@ -442,20 +473,25 @@ fn rigid21_terms(m: &crate::model::Rigid21Model) -> Result<Vec<TermSpec>> {
     Ok(terms)
 }
 
+/// The model's part that is linear in features: a linear model, or a
+/// rigid21 model's effects on top; `None` for the others.
+pub(super) fn linear_part(model: &FittedModel) -> Option<&LinearModel> {
+    match model {
+        FittedModel::Linear(m) => Some(m),
+        FittedModel::Rigid21(m) => m.effects.as_ref(),
+        _ => None,
+    }
+}
+
 /// True when the model has a term of this kind (for the sweep's states).
 pub(super) fn has(model: &FittedModel, pred: impl Fn(&Feature) -> bool) -> bool {
-    match model {
-        FittedModel::Linear(m) => m.outputs.iter().flat_map(|o| &o.features).any(pred),
-        _ => false,
-    }
+    linear_part(model).is_some_and(|m| m.outputs.iter().flat_map(|o| &o.features).any(pred))
 }
 
 /// Shortest period on `axis` among the model's periodic terms, mm.
 pub(in crate::export) fn shortest_period_mm(model: &FittedModel, axis: usize) -> Option<f64> {
-    let FittedModel::Linear(m) = model else {
-        return None;
-    };
-    m.outputs
+    linear_part(model)?
+        .outputs
         .iter()
         .flat_map(|o| &o.features)
         .filter_map(|f| match f {
@@ -474,7 +510,12 @@ pub(in crate::export) fn shortest_period_mm(model: &FittedModel, axis: usize) ->
 /// holds when `drop_lag` is used).
 pub(super) fn without_lag(model: &FittedModel) -> FittedModel {
     let mut m = model.clone();
-    if let FittedModel::Linear(l) = &mut m {
+    let part = match &mut m {
+        FittedModel::Linear(l) => Some(l),
+        FittedModel::Rigid21(r) => r.effects.as_mut(),
+        _ => None,
+    };
+    if let Some(l) = part {
         for o in &mut l.outputs {
             for f in &mut o.features {
                 if let Feature::Thermal { lag_s, .. } = f {
