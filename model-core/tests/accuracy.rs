@@ -60,30 +60,12 @@ proptest! {
         let spec = random_spec(seed, &kinds);
         let model = load(&spec);
         let mut rng = Rng(in_seed);
-        // Temperatures and the tool arm are held and flagged only when the
-        // table reads them.
-        let reads_temp = spec.terms.iter().any(|t| match t {
-            model_core::TermSpec::Thermal { .. } => true,
-            model_core::TermSpec::Mlp(m) => m.inputs.iter().any(|i| matches!(i.source, model_core::MlpSource::Temp(_))),
-            _ => false,
-        });
-        let reads_tool = spec.terms.iter().any(|t| matches!(t, model_core::TermSpec::Abbe { .. }));
         for _ in 0..100 {
             let inp = random_inputs_beyond(&mut rng, &spec);
             let held = held_inputs(&spec, &inp);
-            let mut expect = Flags::empty();
-            for a in 0..3 {
-                if held.pos_nm[a] != inp.pos_nm[a] {
-                    expect.insert(Flags::out_of_travel(a));
-                }
-            }
-            if reads_temp && held.temp_mc != inp.temp_mc {
-                expect.insert(Flags::TEMP_OUT_OF_RANGE);
-            }
-            let tool_outside = held.tool_nm != inp.tool_nm;
-            if reads_tool && tool_outside {
-                expect.insert(Flags::TOOL_OUT_OF_RANGE);
-            }
+            // Temperatures and the tool arm are held and flagged only when
+            // the table reads them.
+            let expect = expected_edge_flags(&spec, &inp);
             let edge_flags = Flags::TEMP_OUT_OF_RANGE | Flags::TOOL_OUT_OF_RANGE
                 | Flags::out_of_travel(0) | Flags::out_of_travel(1) | Flags::out_of_travel(2);
             for (out, out_held) in [(model.eval_f32(&inp), model.eval_f32(&held)), (model.eval_fixed(&inp), model.eval_fixed(&held))] {

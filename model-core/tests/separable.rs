@@ -13,7 +13,7 @@ use common::Rng;
 use common::*;
 use model_core::cost::Features;
 use model_core::eval::MONO_EXPS;
-use model_core::{parse, Flags, Inputs, InputsF64, LargeModel, TableSpec, TermSpec};
+use model_core::{parse, Inputs, InputsF64, LargeModel, TableSpec, TermSpec};
 use proptest::prelude::*;
 
 /// Whether `m` is u_a^n or u_a^n·u_b (n ≥ 1).
@@ -142,24 +142,11 @@ proptest! {
     fn separable_tables_held_at_edge_and_flagged(seed in any::<u64>(), in_seed in any::<u64>()) {
         let spec = separable_spec(seed);
         let (model, _) = load(&spec);
-        let reads_temp = spec.terms.iter().any(|t| matches!(t, TermSpec::Thermal { .. }));
-        let reads_tool = spec.terms.iter().any(|t| matches!(t, TermSpec::Abbe { .. }));
         let mut rng = Rng(in_seed);
         for _ in 0..100 {
             let inp = random_inputs_beyond(&mut rng, &spec);
             let held = held_inputs(&spec, &inp);
-            let mut expect = Flags::empty();
-            for a in 0..3 {
-                if held.pos_nm[a] != inp.pos_nm[a] {
-                    expect.insert(Flags::out_of_travel(a));
-                }
-            }
-            if reads_temp && held.temp_mc != inp.temp_mc {
-                expect.insert(Flags::TEMP_OUT_OF_RANGE);
-            }
-            if reads_tool && held.tool_nm != inp.tool_nm {
-                expect.insert(Flags::TOOL_OUT_OF_RANGE);
-            }
+            let expect = expected_edge_flags(&spec, &inp);
             let (out, out_held) = (model.eval_fixed(&inp), model.eval_fixed(&held));
             prop_assert_eq!(out.corr_nm, out_held.corr_nm);
             prop_assert_eq!(out.flags, expect, "{:?}", inp);

@@ -133,28 +133,24 @@ fn a_probe_calibrated_on_a_master_ball_corrects_a_part_scan() {
 fn bad_probe_input_is_refused_with_its_place() {
     let dir = tmp_dir("probe", "bad");
     let scan = common::file_in(&dir, "bad.csv", "x_mm,z_mm\n1.0,2.0\n1.5,abc\n");
-    let out = run(&[
-        "probe",
-        "calibrate",
-        s(&scan),
-        "--ball-diameter-mm",
-        "4",
-        "-o",
-        s(&dir.join("p.json")),
-    ]);
+    let out_json = dir.join("p.json");
+    let calibrate = || {
+        run(&[
+            "probe",
+            "calibrate",
+            s(&scan),
+            "--ball-diameter-mm",
+            "4",
+            "-o",
+            s(&out_json),
+        ])
+    };
+    let out = calibrate();
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("bad.csv:3:2: `z_mm`"), "{err}");
     std::fs::write(&scan, "x_mm,y_mm\n1.0,2.0\n").unwrap();
-    let out = run(&[
-        "probe",
-        "calibrate",
-        s(&scan),
-        "--ball-diameter-mm",
-        "4",
-        "-o",
-        s(&dir.join("p.json")),
-    ]);
+    let out = calibrate();
     assert!(String::from_utf8_lossy(&out.stderr).contains("needs `x_mm` and `z_mm`"));
     let probe = common::file_in(&dir, "probe.json", "{\"format\": \"something else\"}");
     let out = run(&[

@@ -9,6 +9,7 @@
 mod common;
 
 use common::{json, run, s, tmp_dir};
+use std::path::Path;
 
 #[test]
 fn a_thermal_test_at_one_point_is_fitted_and_its_temperature_named() {
@@ -69,12 +70,13 @@ fn a_thermal_test_at_one_point_is_fitted_and_its_temperature_named() {
         .iter()
         .all(|c| c["effect"] != "drift" || c["significant"] == false));
     // improve: the loop adds the two temperatures, never drift.
-    let imp = json(&common::cubic19(
-        "improve",
-        &csv,
-        &dir.join("imp.json"),
-        &[],
-    ));
+    improve_adds_the_two_temperatures_never_drift(&csv, &dir.join("imp.json"));
+}
+
+/// `improve` on `csv` (cubic19, model written to `model`) adds the two
+/// temperatures of the thermal test, and no drift in time.
+fn improve_adds_the_two_temperatures_never_drift(csv: &Path, model: &Path) {
+    let imp = json(&common::cubic19("improve", csv, model, &[]));
     let model = imp["model"].as_str().unwrap();
     assert!(
         model.contains("thermal:target=ez,channel=column_front+spindle_housing"),
@@ -113,13 +115,7 @@ fn in_model_span_is_one_line_in_text_and_every_one_in_json_and_verbose() {
 fn a_thermal_model_at_one_point_compares_and_exports() {
     let dir = tmp_dir("timeseries", "export");
     let csv = dir.join("spindle.csv");
-    common::assert_success(&run(&[
-        "simulate",
-        "--scenario",
-        "spindle-thermal",
-        "-o",
-        s(&csv),
-    ]));
+    common::simulate(&["--scenario", "spindle-thermal"], &csv);
     let model = dir.join("m.json");
     let add = "thermal:target=ez,channel=spindle_housing";
     json(&run(&[
@@ -177,13 +173,7 @@ fn a_thermal_model_at_one_point_compares_and_exports() {
 fn with_a_fake_travel_improve_still_picks_the_temperatures_not_drift() {
     let dir = tmp_dir("timeseries", "fake_travel");
     let csv = dir.join("spindle.csv");
-    common::assert_success(&run(&[
-        "simulate",
-        "--scenario",
-        "spindle-thermal",
-        "-o",
-        s(&csv),
-    ]));
+    common::simulate(&["--scenario", "spindle-thermal"], &csv);
     let mut row = 0usize;
     let text: Vec<String> = std::fs::read_to_string(&csv)
         .unwrap()
@@ -198,13 +188,7 @@ fn with_a_fake_travel_improve_still_picks_the_temperatures_not_drift() {
         })
         .collect();
     let fake = common::file_in(&dir, "fake.csv", text.join("\n") + "\n");
-    let imp = json(&common::cubic19("improve", &fake, &dir.join("m.json"), &[]));
-    let model = imp["model"].as_str().unwrap();
-    assert!(
-        model.contains("thermal:target=ez,channel=column_front+spindle_housing"),
-        "{model}"
-    );
-    assert!(!model.contains("drift"), "{model}");
+    improve_adds_the_two_temperatures_never_drift(&fake, &dir.join("m.json"));
 }
 
 /// A warm-up read at one point for 30 min (`point:` plan, one spindle

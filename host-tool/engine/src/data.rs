@@ -156,6 +156,40 @@ pub fn grid_positions(counts: [usize; 3], step_mm: [f64; 3]) -> [Vec<f64>; 3] {
 }
 
 impl Dataset {
+    /// The fields in which `self` and `other` differ, by name: everything
+    /// a data file holds — its metadata and every column — and not where
+    /// it came from (`source`, file lines, skipped rows). Empty: what a
+    /// write and read back must give.
+    pub fn columns_differing(&self, other: &Dataset) -> Vec<&'static str> {
+        let mut out = Vec::new();
+        macro_rules! compare {
+            ($($field:ident),*) => {
+                $(if self.$field != other.$field {
+                    out.push(stringify!($field));
+                })*
+            };
+        }
+        compare!(
+            metadata,
+            pos_mm,
+            err_um,
+            t_s,
+            dir,
+            temps,
+            tool_mm,
+            pass_id,
+            session_id,
+            u_um,
+            aux,
+            setup_id,
+            tool_lat_mm,
+            angle_urad,
+            beam_dir,
+            beam_um
+        );
+        out
+    }
+
     /// Number of rows.
     pub fn len(&self) -> usize {
         self.pos_mm

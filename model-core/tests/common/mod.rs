@@ -432,6 +432,40 @@ pub fn held_inputs(spec: &TableSpec, inp: &Inputs) -> Inputs {
     held
 }
 
+/// The edge flags an evaluation of `inp` must raise: each position held
+/// to the travel, and the temperatures and the tool arm held only where
+/// the table reads them (a thermal term or an MLP temperature input; an
+/// Abbe term).
+pub fn expected_edge_flags(spec: &TableSpec, inp: &Inputs) -> model_core::Flags {
+    use model_core::Flags;
+    let held = held_inputs(spec, inp);
+    let reads_temp = spec.terms.iter().any(|t| match t {
+        TermSpec::Thermal { .. } => true,
+        TermSpec::Mlp(m) => m
+            .inputs
+            .iter()
+            .any(|i| matches!(i.source, MlpSource::Temp(_))),
+        _ => false,
+    });
+    let reads_tool = spec
+        .terms
+        .iter()
+        .any(|t| matches!(t, TermSpec::Abbe { .. }));
+    let mut expect = Flags::empty();
+    for a in 0..3 {
+        if held.pos_nm[a] != inp.pos_nm[a] {
+            expect.insert(Flags::out_of_travel(a));
+        }
+    }
+    if reads_temp && held.temp_mc != inp.temp_mc {
+        expect.insert(Flags::TEMP_OUT_OF_RANGE);
+    }
+    if reads_tool && held.tool_nm != inp.tool_nm {
+        expect.insert(Flags::TOOL_OUT_OF_RANGE);
+    }
+    expect
+}
+
 /// The 800 × 500 × 500 mm vertical mill of the seed (X ±400, Y ±250, Z ±250 mm).
 pub fn mill_spec(n_channels: usize) -> TableSpec {
     let mut env = Envelope::default();

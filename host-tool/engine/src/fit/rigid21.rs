@@ -982,27 +982,10 @@ mod tests {
     /// plan's noise-free fit (the truth in the gauge): no confident wrong
     /// answer. Returns the noisy answer.
     fn honest(m: &Machine, plan: &[Instrument], keep_axes: &[usize], seed: u64) -> Identifiability {
-        let cut = |mut d: Dataset| {
-            for a in 0..3 {
-                if !keep_axes.contains(&a) {
-                    d.pos_mm[a] = None;
-                }
-            }
-            d
-        };
-        let (_, id, _) = fit(&cut(measure(m, plan, seed, true)), 4).unwrap();
-        let (_, exact, _) = fit(&cut(measure(m, plan, seed, false)), 4).unwrap();
-        for (e, t) in id.errors.iter().zip(&exact.errors) {
-            if e.status == Status::Estimated {
-                let (v, s) = (e.peak.unwrap(), e.sigma.unwrap());
-                let tv = t.peak.expect("estimated without noise too");
-                assert!(
-                    (v - tv).abs() <= 4.0 * s + 1e-6,
-                    "{}: {v} ± {s}, truth {tv}",
-                    e.name
-                );
-            }
-        }
+        let ((_, id, _), wrong) =
+            super::super::volumetric_check::against_noise_free(m, plan, keep_axes, 4, seed)
+                .unwrap();
+        assert!(wrong.is_empty(), "{wrong:?}");
         id
     }
 

@@ -18,6 +18,41 @@ use crate::model::rigid21::{Rigid21Model, ToolPoint};
 use crate::simulate::instruments::{measure, Instrument};
 use crate::simulate::Machine;
 
+/// `plan` measured on `machine` with noise (`seed`), restricted to the
+/// axes `keep_axes`, fitted at `degree`, and judged against the same
+/// plan's noise-free fit — the truth in the gauge when the degree holds
+/// the machine: the noisy fit and every estimated error further than 4σ
+/// from the noise-free value, in words (empty: no confident wrong
+/// answer).
+pub fn against_noise_free(
+    machine: &Machine,
+    plan: &[Instrument],
+    keep_axes: &[usize],
+    degree: usize,
+    seed: u64,
+) -> anyhow::Result<(super::rigid21::Fitted, Vec<String>)> {
+    let cut = |mut d: crate::data::Dataset| {
+        for a in 0..3 {
+            if !keep_axes.contains(&a) {
+                d.pos_mm[a] = None;
+            }
+        }
+        d
+    };
+    let noisy = super::rigid21::fit(&cut(measure(machine, plan, seed, true)), degree)?;
+    let (_, exact, _) = super::rigid21::fit(&cut(measure(machine, plan, seed, false)), degree)?;
+    let mut wrong = Vec::new();
+    for (e, t) in noisy.1.errors.iter().zip(&exact.errors) {
+        if let (Some(v), Some(s)) = (e.peak, e.sigma) {
+            match t.peak {
+                Some(tv) if (v - tv).abs() <= 4.0 * s + 1e-6 => {}
+                tv => wrong.push(format!("{}: {v} ± {s}, noise-free {tv:?}", e.name)),
+            }
+        }
+    }
+    Ok((noisy, wrong))
+}
+
 /// The error at one tool length's check points, µm (vector lengths).
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct ToolCheck {

@@ -409,6 +409,32 @@ fn source_hash(file: &ModelFile) -> [u8; 32] {
     source_hash
 }
 
+/// How far a rigid21 table's f64 definition is from its model at
+/// `pos_nm` with the tool at `tool_mm` on the spindle axis: per target the
+/// table's correction plus the model's error (nm; the table holds the
+/// negated error), and the model's error there (µm).
+pub fn rigid21_gap_nm(
+    table: &model_core::Table<'_>,
+    model: &crate::model::Rigid21Model,
+    pos_nm: [i32; 3],
+    tool_mm: f64,
+) -> ([f64; 3], [f64; 3]) {
+    let inp = model_core::Inputs {
+        pos_nm,
+        tool_nm: (tool_mm * 1e6) as i32,
+        ..model_core::Inputs::default()
+    };
+    let got = model_core::definition::eval_f64(table, &inp);
+    let want = model
+        .predict(&crate::model::rigid21::ToolPoint {
+            pos_mm: pos_nm.map(|p| f64::from(p) * 1e-6),
+            tool_mm,
+            tool_lat_mm: [0.0; 2],
+        })
+        .e_um;
+    ([0, 1, 2].map(|k| got[k] + 1000.0 * want[k]), want)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -675,7 +701,6 @@ mod tests {
 
     #[test]
     fn a_rigid21_model_exports_as_poly_and_abbe_terms() {
-        use crate::model::rigid21::ToolPoint;
         let m = rigid21_model(4);
         let e = export(
             &file(FittedModel::Rigid21(m.clone())),
@@ -705,21 +730,9 @@ mod tests {
         for _ in 0..200 {
             let pos_nm = [800.0, 500.0, 400.0].map(|h| (next() * h * 1e6).round() as i32);
             for tool_mm in [0.0, 250.0] {
-                let inp = Inputs {
-                    pos_nm,
-                    tool_nm: (tool_mm * 1e6) as i32,
-                    ..Inputs::default()
-                };
-                let got = model_core::definition::eval_f64(&t, &inp);
-                let want = m
-                    .predict(&ToolPoint {
-                        pos_mm: pos_nm.map(|p| f64::from(p) * 1e-6),
-                        tool_mm,
-                        tool_lat_mm: [0.0; 2],
-                    })
-                    .e_um;
+                let (gap, want) = rigid21_gap_nm(&t, &m, pos_nm, tool_mm);
                 for k in 0..3 {
-                    worst = worst.max((got[k] + 1000.0 * want[k]).abs());
+                    worst = worst.max(gap[k].abs());
                     largest = largest.max(want[k].abs());
                 }
             }
