@@ -17,7 +17,7 @@ use std::path::PathBuf;
 
 use trueaxis_engine::export::table::{export, rigid21_gap_nm, TableOptions};
 use trueaxis_engine::fit::{fit, FitOptions};
-use trueaxis_engine::model::rigid21::{Status, ToolPoint};
+use trueaxis_engine::model::rigid21::Status;
 use trueaxis_engine::model::FittedModel;
 use trueaxis_engine::simulate::instruments::{measure, Instrument};
 use trueaxis_engine::simulate::Machine;
