@@ -98,6 +98,37 @@ pub fn run_compare(
     };
     let mut c = compare::compare(data, &model.spec(), &predicted, held_out);
     c.readings = readings;
+    if let trueaxis_engine::model::FittedModel::Rigid21(m) = &model.model {
+        // "Before" is the machine's error the readings show once their
+        // set-ups are placed (a model of zeros), not the raw readings,
+        // whose arbitrary zeros and frames no compensation is about.
+        let mut zero = m.clone();
+        for e in &mut zero.errors {
+            if let Some(coef) = e.coef.as_mut() {
+                coef.iter_mut().for_each(|v| *v = 0.0);
+            }
+        }
+        zero.effects = None;
+        let (placed, _) = trueaxis_engine::fit::rigid21::reading_residuals(&zero, data)
+            .with_context(|| format!("{}: the model cannot be evaluated on it", data.source))?;
+        for t in data.targets() {
+            let (Some(p), Some(r)) = (
+                placed[t].as_ref(),
+                c.targets.get_mut(trueaxis_engine::data::TARGETS[t]),
+            ) else {
+                continue;
+            };
+            let v: Vec<f64> = data.measured(t).map(|(row, v)| v - p[row]).collect();
+            if let Some(stats) = compare::ErrorStats::of(&v) {
+                r.before = stats;
+                r.improvement = if r.after.rms_um > 0.0 {
+                    stats.rms_um / r.after.rms_um
+                } else {
+                    f64::INFINITY
+                };
+            }
+        }
+    }
     let hash = trueaxis_engine::import::content_hash(data);
     if !model.data.sha256.is_empty() && hash != model.data.sha256 {
         c.warnings.push(Warning {
