@@ -102,14 +102,7 @@ pub fn run_compare(
         // "Before" is the machine's error the readings show once their
         // set-ups are placed (a model of zeros), not the raw readings,
         // whose arbitrary zeros and frames no compensation is about.
-        let mut zero = m.clone();
-        for e in &mut zero.errors {
-            if let Some(coef) = e.coef.as_mut() {
-                coef.iter_mut().for_each(|v| *v = 0.0);
-            }
-        }
-        zero.effects = None;
-        let (placed, _) = trueaxis_engine::fit::rigid21::reading_residuals(&zero, data)
+        let (placed, _) = trueaxis_engine::fit::rigid21::reading_residuals(&m.zeroed(), data)
             .with_context(|| format!("{}: the model cannot be evaluated on it", data.source))?;
         for t in data.targets() {
             let (Some(p), Some(r)) = (

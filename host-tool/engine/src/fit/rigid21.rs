@@ -1008,13 +1008,7 @@ mod tests {
         }
         assert!(fitted[0].as_ref().unwrap().iter().all(|v| v.is_finite()));
         // A model that is all zero leaves the machine's error.
-        let mut zero = model.clone();
-        for e in &mut zero.errors {
-            if let Some(c) = e.coef.as_mut() {
-                c.iter_mut().for_each(|v| *v = 0.0);
-            }
-        }
-        let (_, kinds0) = reading_residuals(&zero, &fresh).unwrap();
+        let (_, kinds0) = reading_residuals(&model.zeroed(), &fresh).unwrap();
         assert!(kinds0.iter().any(|k| k.rms > 2.0), "{kinds0:?}");
     }
 

@@ -316,6 +316,20 @@ pub fn squareness_of(earlier: usize, later: usize) -> (String, usize) {
 }
 
 impl Rigid21Model {
+    /// The same model with no machine error: every error function and
+    /// constant zero and no effects on top — the uncompensated machine, as
+    /// `compare` reads "before" (each set-up still placed).
+    pub fn zeroed(&self) -> Rigid21Model {
+        let mut zero = self.clone();
+        for e in &mut zero.errors {
+            if let Some(c) = e.coef.as_mut() {
+                c.iter_mut().for_each(|v| *v = 0.0);
+            }
+        }
+        zero.effects = None;
+        zero
+    }
+
     /// The errors a model of `degree` on `chain` has, in their fixed order
     /// (per axis in index order: the three translations, the three angles;
     /// then the squarenesses; then the tilt when a carriage carries the
